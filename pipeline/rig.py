@@ -1,0 +1,178 @@
+"""Geometry of the tilted-VLP-16-on-a-turntable rig: sensor frame -> turntable -> station.
+
+This module is part of the scan-format contract (the simulator in ``visibility`` uses it to
+cast rays; the pipeline uses it to synthesise and calibrate), so both sides agree on every
+convention.
+
+Frames
+------
+sensor (S)
+    The VLP-16's own frame: origin at the optical centre, z along the spin axis. A return
+    of laser elevation ``omega`` at spin azimuth ``alpha`` (clockwise from +y) and range
+    ``r`` lies at ``(r cos(omega) sin(alpha), r cos(omega) cos(alpha), r sin(omega))``
+    (Velodyne VLP-16 user manual, section 9).
+turntable (T)
+    Rotates with the turntable. z is the turntable axis (up); origin on that axis at the
+    nominal LiDAR-centre height. The LiDAR is tilted 90 deg on an L-bracket: nominally
+    S.x -> T.y, S.y -> T.z, S.z -> T.x, so the spin sweeps the vertical T y-z plane and the
+    16 beams fan out horizontally (+-15 deg about T.x's normal plane).
+station (P)
+    Fixed to the rover: ``p_P = Rz(theta) p_T`` for a frame taken at turntable angle
+    ``theta``. Same origin as T, z up, x along T.x at ``theta = 0``.
+site (W)
+    Local metres of the survey site; ``p_W = position + Rz(heading) Ry(pitch) Rx(roll) p_P``.
+
+Mounting offsets (the three errors the pipeline self-calibrates)
+---------------------------------------------------------------
+vertical_axis_error_rad
+    Rotation of the LiDAR about its own spin axis (S.z): its optical zero direction is off
+    the true vertical. A frame and the frame 180 deg later see it with opposite signs.
+lframe_tilt_rad
+    Tilt of the L-bracket: rotation about T.y, so the spin axis leaves the horizontal and the
+    spin plane leans off vertical.
+axis_offset_m
+    ``(dx, dy)``: the LiDAR centre's offset from the turntable axis in T's horizontal plane.
+    Translation along the turntable axis is unobservable and not modelled.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+#: Nominal rotation sensor -> turntable (columns are S.x, S.y, S.z in T coordinates).
+NOMINAL_SENSOR_TO_TURNTABLE = np.array(
+    [[0.0, 0.0, 1.0],
+     [1.0, 0.0, 0.0],
+     [0.0, 1.0, 0.0]]
+)
+
+
+@dataclass(frozen=True)
+class MountingOffsets:
+    """The three mounting errors of the rig (true values in simulation, estimates in processing).
+
+    Attributes
+    ----------
+    vertical_axis_error_rad : float
+        Rotation about the spin axis S.z, radians.
+    lframe_tilt_rad : float
+        Rotation of the bracket about T.y, radians.
+    axis_offset_m : tuple of float
+        ``(dx, dy)`` offset of the LiDAR centre from the turntable axis, metres, turntable frame.
+    """
+
+    vertical_axis_error_rad: float = 0.0
+    lframe_tilt_rad: float = 0.0
+    axis_offset_m: tuple[float, float] = (0.0, 0.0)
+
+    def to_dict(self) -> dict:
+        d = asdict(self)
+        d["axis_offset_m"] = [float(v) for v in self.axis_offset_m]
+        return d
+
+    @classmethod
+    def from_dict(cls, d: dict) -> MountingOffsets:
+        return cls(
+            vertical_axis_error_rad=float(d.get("vertical_axis_error_rad", 0.0)),
+            lframe_tilt_rad=float(d.get("lframe_tilt_rad", 0.0)),
+            axis_offset_m=tuple(float(v) for v in d.get("axis_offset_m", (0.0, 0.0))),
+        )
+
+
+def rot_x(a: float | np.ndarray) -> np.ndarray:
+    """Rotation matrices about x. ``a`` scalar -> (3, 3); ``a`` (n,) -> (n, 3, 3)."""
+    a = np.asarray(a, dtype=float)
+    c, s = np.cos(a), np.sin(a)
+    o, z = np.ones_like(a), np.zeros_like(a)
+    return np.stack([np.stack([o, z, z], -1), np.stack([z, c, -s], -1),
+                     np.stack([z, s, c], -1)], -2)
+
+
+def rot_y(a: float | np.ndarray) -> np.ndarray:
+    """Rotation matrices about y. ``a`` scalar -> (3, 3); ``a`` (n,) -> (n, 3, 3)."""
+    a = np.asarray(a, dtype=float)
+    c, s = np.cos(a), np.sin(a)
+    o, z = np.ones_like(a), np.zeros_like(a)
+    return np.stack([np.stack([c, z, s], -1), np.stack([z, o, z], -1),
+                     np.stack([-s, z, c], -1)], -2)
+
+
+def rot_z(a: float | np.ndarray) -> np.ndarray:
+    """Rotation matrices about z. ``a`` scalar -> (3, 3); ``a`` (n,) -> (n, 3, 3)."""
+    a = np.asarray(a, dtype=float)
+    c, s = np.cos(a), np.sin(a)
+    o, z = np.ones_like(a), np.zeros_like(a)
+    return np.stack([np.stack([c, -s, z], -1), np.stack([s, c, z], -1),
+                     np.stack([z, z, o], -1)], -2)
+
+
+def sensor_to_turntable_rotation(offsets: MountingOffsets) -> np.ndarray:
+    """Rotation S -> T including the vertical-axis error and the L-frame tilt.
+
+    Returns
+    -------
+    R : (3, 3) float
+        ``p_T = R @ p_S + [dx, dy, 0]``.
+    """
+    return (rot_y(offsets.lframe_tilt_rad) @ NOMINAL_SENSOR_TO_TURNTABLE
+            @ rot_z(offsets.vertical_axis_error_rad))
+
+
+def frame_poses(turntable_angle_rad: np.ndarray, offsets: MountingOffsets
+                ) -> tuple[np.ndarray, np.ndarray]:
+    """Pose of the sensor in the station frame for each frame.
+
+    Parameters
+    ----------
+    turntable_angle_rad : (F,) float
+        Turntable angle of each frame, radians.
+    offsets : MountingOffsets
+        Mounting errors.
+
+    Returns
+    -------
+    rotation : (F, 3, 3) float
+        ``R_f`` with ``p_P = R_f @ p_S + t_f``.
+    translation : (F, 3) float
+        ``t_f``, the LiDAR centre in the station frame, metres.
+    """
+    theta = np.asarray(turntable_angle_rad, dtype=float).reshape(-1)
+    rz = rot_z(theta)
+    rotation = rz @ sensor_to_turntable_rotation(offsets)
+    d = np.array([offsets.axis_offset_m[0], offsets.axis_offset_m[1], 0.0])
+    translation = rz @ d
+    return rotation, translation
+
+
+def sensor_to_station(xyz_sensor_m: np.ndarray, frame_index: np.ndarray,
+                      turntable_angle_rad: np.ndarray, offsets: MountingOffsets) -> np.ndarray:
+    """Merge sensor-frame points of many frames into the station frame.
+
+    Parameters
+    ----------
+    xyz_sensor_m : (N, 3) float
+        Points in the sensor frame, metres.
+    frame_index : (N,) int
+        Frame of each point, indexing ``turntable_angle_rad``.
+    turntable_angle_rad : (F,) float
+        Turntable angle per frame, radians.
+    offsets : MountingOffsets
+        Mounting errors to apply.
+
+    Returns
+    -------
+    xyz_station_m : (N, 3) float64
+        Points in the station frame, metres.
+    """
+    rotation, translation = frame_poses(turntable_angle_rad, offsets)
+    p = np.asarray(xyz_sensor_m, dtype=float)
+    idx = np.asarray(frame_index)
+    return np.einsum("nij,nj->ni", rotation[idx], p) + translation[idx]
+
+
+def station_to_site_matrix(heading_rad: float, roll_rad: float = 0.0,
+                           pitch_rad: float = 0.0) -> np.ndarray:
+    """Rotation P -> W: ``Rz(heading) @ Ry(pitch) @ Rx(roll)``, shape (3, 3)."""
+    return rot_z(heading_rad) @ rot_y(pitch_rad) @ rot_x(roll_rad)

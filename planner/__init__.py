@@ -1,0 +1,1 @@
+"""Planning: candidate sites, the integer program, station accuracy, reduction studies, the CLI."""
