@@ -194,8 +194,8 @@ def read_scan(path: str | Path) -> StationScan:
             required = {"metadata", "turntable_angle_rad", "xyz_sensor_m", *_POINT_FIELDS}
             missing = sorted(required - members)
             if missing:
-                raise InputFileError(f"{path} is not a markerplan scan: missing {', '.join(missing)}"
-                                     f" (expected format {SCAN_FORMAT})")
+                raise InputFileError(f"{path} is not a markerplan scan: missing "
+                                     f"{', '.join(missing)} (expected format {SCAN_FORMAT})")
             data = {k: z[k] for k in members}
     except InputFileError:
         raise

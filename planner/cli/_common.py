@@ -113,5 +113,6 @@ def parse_triplet(text: str | None, name: str) -> tuple[float, float, float] | N
     except ValueError:
         values = ()
     if len(values) != 3:
-        raise ConfigError(f"{name} must be three comma-separated numbers like 0,0,1.0; got {text!r}")
+        raise ConfigError(f"{name} must be three comma-separated numbers like 0,0,1.0; "
+                          f"got {text!r}")
     return values  # type: ignore[return-value]
