@@ -1,0 +1,125 @@
+"""The region of predictor space a model was fitted on; queries outside it are flagged.
+
+Distance: the fitted range. Elevation: per distance band (edges at distance quantiles) the
+fitted elevation range (signed, station frame, z up) widened by a margin. Optional
+predictors: their fitted ranges.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from markerplan.errors import InputFileError
+
+
+@dataclass(frozen=True)
+class Domain:
+    """Fitted predictor ranges.
+
+    Attributes
+    ----------
+    band_edges_m : (b + 1,) float
+        Distance band edges, metres; ``[0]`` and ``[-1]`` are the fitted distance range.
+    elevation_lo_rad, elevation_hi_rad : (b,) float
+        Elevation range per band including the margin, radians.
+    extras : dict of str -> (lo, hi)
+        Fitted range of each optional predictor used.
+    """
+
+    band_edges_m: tuple[float, ...]
+    elevation_lo_rad: tuple[float, ...]
+    elevation_hi_rad: tuple[float, ...]
+    extras: dict[str, tuple[float, float]] = field(default_factory=dict)
+
+    @classmethod
+    def from_data(cls, distance_m: np.ndarray, elevation_rad: np.ndarray,
+                  extras: Mapping[str, np.ndarray], n_bands: int,
+                  margin_rad: float) -> Domain:
+        """Record the ranges of the fitted rows.
+
+        Parameters
+        ----------
+        distance_m, elevation_rad : (n,) float
+        extras : mapping of str -> (n,) float
+        n_bands : int
+            Wanted distance bands (fewer when distances repeat).
+        margin_rad : float
+            Widening of each band's elevation range, radians.
+        """
+        edges = np.unique(np.quantile(distance_m, np.linspace(0, 1, n_bands + 1),
+                                      method="inverted_cdf"))
+        if edges.size == 1:
+            edges = np.r_[edges, edges]
+        band = np.clip(np.searchsorted(edges, distance_m, side="right") - 1, 0, edges.size - 2)
+        lo, hi = [], []
+        for i in range(edges.size - 1):
+            e = elevation_rad[band == i]
+            if e.size == 0:  # band without rows: fall back to its neighbours' union below
+                lo.append(np.nan)
+                hi.append(np.nan)
+            else:
+                lo.append(max(float(e.min()) - margin_rad, -np.pi / 2))
+                hi.append(min(float(e.max()) + margin_rad, np.pi / 2))
+        lo_a, hi_a = _fill_empty(np.asarray(lo)), _fill_empty(np.asarray(hi))
+        return cls(band_edges_m=tuple(float(v) for v in edges),
+                   elevation_lo_rad=tuple(float(v) for v in lo_a),
+                   elevation_hi_rad=tuple(float(v) for v in hi_a),
+                   extras={k: (float(np.min(v)), float(np.max(v))) for k, v in extras.items()})
+
+    @property
+    def distance_range_m(self) -> tuple[float, float]:
+        return self.band_edges_m[0], self.band_edges_m[-1]
+
+    def contains(self, distance_m: np.ndarray, elevation_rad: np.ndarray,
+                 extras: Mapping[str, np.ndarray] | None = None) -> np.ndarray:
+        """Boolean mask (broadcast shape of the inputs): inside the fitted domain."""
+        d, e = np.broadcast_arrays(np.asarray(distance_m, float), np.asarray(elevation_rad,
+                                                                              float))
+        edges = np.asarray(self.band_edges_m)
+        inside = (d >= edges[0]) & (d <= edges[-1])
+        band = np.clip(np.searchsorted(edges, d, side="right") - 1, 0, edges.size - 2)
+        lo = np.asarray(self.elevation_lo_rad)[band]
+        hi = np.asarray(self.elevation_hi_rad)[band]
+        inside &= (e >= lo) & (e <= hi)
+        for name, (vlo, vhi) in self.extras.items():
+            v = np.asarray((extras or {})[name], float)
+            inside &= (v >= vlo) & (v <= vhi)
+        return inside
+
+    def to_dict(self) -> dict:
+        return {"distance_range_m": list(self.distance_range_m),
+                "band_edges_m": list(self.band_edges_m),
+                "elevation_lo_rad": list(self.elevation_lo_rad),
+                "elevation_hi_rad": list(self.elevation_hi_rad),
+                "elevation_lo_deg": [float(np.rad2deg(v)) for v in self.elevation_lo_rad],
+                "elevation_hi_deg": [float(np.rad2deg(v)) for v in self.elevation_hi_rad],
+                "extras": {k: list(v) for k, v in self.extras.items()}}
+
+    @classmethod
+    def from_dict(cls, d: Mapping) -> Domain:
+        try:
+            dom = cls(band_edges_m=tuple(float(v) for v in d["band_edges_m"]),
+                      elevation_lo_rad=tuple(float(v) for v in d["elevation_lo_rad"]),
+                      elevation_hi_rad=tuple(float(v) for v in d["elevation_hi_rad"]),
+                      extras={str(k): (float(v[0]), float(v[1]))
+                              for k, v in d["extras"].items()})
+        except (KeyError, TypeError, ValueError, IndexError, AttributeError) as exc:
+            raise InputFileError(f"error-model domain is malformed ({exc!r}); regenerate the "
+                                 "model with `markerplan fit-error-model`") from None
+        n = len(dom.band_edges_m) - 1
+        if n < 1 or len(dom.elevation_lo_rad) != n or len(dom.elevation_hi_rad) != n:
+            raise InputFileError(f"error-model domain has {len(dom.band_edges_m)} band edges but "
+                                 f"{len(dom.elevation_lo_rad)} elevation ranges; regenerate "
+                                 "the model")
+        return dom
+
+
+def _fill_empty(values: np.ndarray) -> np.ndarray:
+    """Replace NaN bands by the nearest non-empty band's value."""
+    ok = np.flatnonzero(np.isfinite(values))
+    idx = np.arange(values.size)
+    nearest = ok[np.abs(idx[:, None] - ok[None, :]).argmin(axis=1)]
+    return values[nearest]

@@ -1,0 +1,307 @@
+"""Self-calibration of the three mounting offsets from direct/reverse observations.
+
+The tilted VLP-16 sweeps a vertical circle; the half of the circle on the turntable's +y side
+("direct" face, sensor ``x >= 0``) and the half on its -y side ("reverse" face) see every
+azimuth once per turn: a location seen directly by the frame at turntable angle ``theta`` is
+seen in reverse by the frame at ``theta + pi``, as in direct/reverse theodolite observations.
+With the correct offsets the two half-clouds coincide; each offset breaks them apart in its
+own way (station frame):
+
+- vertical-axis error ``e``: the direct face turns by ``+e`` and the reverse face by ``-e``
+  about the horizontal axis normal to the scan plane -> the ground seen by the two faces tilts
+  apart by ``2e`` (large lever arm);
+- L-frame tilt ``t``: the faces turn by ``+-t`` about the horizontal axis in the scan plane ->
+  the fanned-out lasers see the ground tilt apart sideways;
+- axis offset ``d``: the faces shift by ``+-Rz(theta) d`` horizontally -> invisible on level
+  ground, but the known-diameter spheres seen by the two faces give two centres ``2 Rz d``
+  apart.
+
+So (:func:`estimate_rotation_offsets`) ``e`` and ``t`` are found by a point-to-plane ICP
+between the faces whose unknowns are the two angles themselves (not a generic 6-DoF pose),
+and (:func:`estimate_axis_offset`) ``d`` by making the per-face fixed-radius sphere centres
+agree. Both are Gauss-Newton least squares with numeric Jacobians of the exact rig model
+(:mod:`pipeline.rig`); uncertainties are the formal ``s^2 (J^T J)^-1`` of the final step.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from markerplan.errors import ConfigError, DataError
+from pipeline.rig import MountingOffsets
+from pipeline.scan_format import StationScan
+from pipeline.sphere_fit import lsq_fixed_radius
+from pipeline.synthesis import frames_to_station
+
+
+@dataclass(frozen=True)
+class CalibrationConfig:
+    """Settings of the self-calibration.
+
+    Attributes
+    ----------
+    sample_points : int
+        Direct-face points used as ICP queries.
+    reference_points : int
+        Reverse-face points the planes are fitted to.
+    neighbours : int
+        Reverse-face neighbours per local plane.
+    min_range_m, max_range_m : float
+        Only points in this range band (metres) take part in the ICP.
+    iterations : int
+        Maximum ICP / sphere Gauss-Newton iterations.
+    min_face_points : int
+        Points each face must have on a sphere for it to count in the axis-offset fit.
+    seed : int
+        Seed of the point subsampling.
+    """
+
+    sample_points: int = 20000
+    reference_points: int = 300000
+    neighbours: int = 10
+    min_range_m: float = 1.5
+    max_range_m: float = 25.0
+    iterations: int = 10
+    min_face_points: int = 8
+    seed: int = 0
+
+    def validate(self) -> CalibrationConfig:
+        for name in ("sample_points", "reference_points", "neighbours", "iterations",
+                     "min_face_points"):
+            if int(getattr(self, name)) < 1:
+                raise ConfigError(f"calibration `{name}` must be >= 1, got {getattr(self, name)}")
+        if self.neighbours < 3:
+            raise ConfigError(f"calibration `neighbours` must be >= 3, got {self.neighbours}")
+        if not 0 <= self.min_range_m < self.max_range_m:
+            raise ConfigError("calibration needs 0 <= min_range_m < max_range_m, got "
+                              f"{self.min_range_m}, {self.max_range_m}")
+        return self
+
+
+@dataclass(frozen=True)
+class CalibrationResult:
+    """Estimated mounting offsets with their formal 1-sigma uncertainties.
+
+    Attributes
+    ----------
+    offsets : MountingOffsets
+        The estimate.
+    sigma_vertical_axis_error_rad, sigma_lframe_tilt_rad : float
+        1-sigma of the two angles, radians.
+    sigma_axis_offset_m : tuple of float
+        1-sigma of ``(dx, dy)``, metres.
+    n_plane_pairs : int
+        Direct-face points matched to a reverse-face plane in the final ICP step.
+    icp_rms_m : float
+        RMS point-to-plane residual, metres.
+    n_spheres : int
+        Spheres used for the axis offset (0: offset not estimated, left at its start value).
+    sphere_rms_m : float
+        RMS of the direct-minus-reverse horizontal centre differences, metres (NaN if none).
+    """
+
+    offsets: MountingOffsets
+    sigma_vertical_axis_error_rad: float
+    sigma_lframe_tilt_rad: float
+    sigma_axis_offset_m: tuple[float, float]
+    n_plane_pairs: int
+    icp_rms_m: float
+    n_spheres: int
+    sphere_rms_m: float
+
+    def to_dict(self) -> dict:
+        return {"offsets": self.offsets.to_dict(),
+                "sigma_vertical_axis_error_rad": self.sigma_vertical_axis_error_rad,
+                "sigma_lframe_tilt_rad": self.sigma_lframe_tilt_rad,
+                "sigma_axis_offset_m": [float(v) for v in self.sigma_axis_offset_m],
+                "n_plane_pairs": self.n_plane_pairs, "icp_rms_m": self.icp_rms_m,
+                "n_spheres": self.n_spheres, "sphere_rms_m": self.sphere_rms_m}
+
+
+def direct_face(scan: StationScan) -> np.ndarray:
+    """Mask of points seen by the direct face (sensor ``x >= 0``, turntable +y side)."""
+    return scan.xyz_sensor_m[:, 0] >= 0
+
+
+def _with_angles(offsets: MountingOffsets, p: np.ndarray) -> MountingOffsets:
+    return replace(offsets, vertical_axis_error_rad=float(p[0]), lframe_tilt_rad=float(p[1]))
+
+
+def _positions(scan: StationScan, idx: np.ndarray, offsets: MountingOffsets) -> np.ndarray:
+    return frames_to_station(scan.xyz_sensor_m[idx], scan.frame_index[idx],
+                             scan.turntable_angle_rad, offsets)
+
+
+def estimate_rotation_offsets(scan: StationScan, offsets: MountingOffsets | None = None,
+                              config: CalibrationConfig | None = None
+                              ) -> tuple[MountingOffsets, np.ndarray, int, float]:
+    """Vertical-axis error and L-frame tilt by direct/reverse point-to-plane ICP.
+
+    Parameters
+    ----------
+    scan : StationScan
+        One station; frames must cover a full turn so both faces see the scene.
+    offsets : MountingOffsets, optional
+        Start values (the axis offset is held fixed at its value here).
+    config : CalibrationConfig, optional
+
+    Returns
+    -------
+    offsets : MountingOffsets
+        With the two angles estimated.
+    covariance : (2, 2) float
+        Formal covariance of (vertical_axis_error_rad, lframe_tilt_rad), rad^2.
+    n_pairs : int
+        Plane pairs in the final step.
+    rms_m : float
+        RMS point-to-plane residual, metres.
+
+    Raises
+    ------
+    DataError
+        If either face has too few points in the range band for a plane fit.
+    """
+    cfg = (config or CalibrationConfig()).validate()
+    offsets = MountingOffsets() if offsets is None else offsets
+    face = direct_face(scan)
+    band = (scan.range_m >= cfg.min_range_m) & (scan.range_m <= cfg.max_range_m)
+    idx_a = np.flatnonzero(band & face)
+    idx_b = np.flatnonzero(band & ~face)
+    if idx_a.size < 100 or idx_b.size < 100:
+        raise DataError(f"scan {scan.station_id}: only {idx_a.size} direct and {idx_b.size} "
+                        "reverse points in the calibration range band; self-calibration needs "
+                        "frames over a full turn (or pass known offsets)")
+    gen = np.random.default_rng(cfg.seed)
+    a = np.sort(gen.choice(idx_a, min(idx_a.size, cfg.sample_points), replace=False))
+    b = np.sort(gen.choice(idx_b, min(idx_b.size, cfg.reference_points), replace=False))
+    p = np.array([offsets.vertical_axis_error_rad, offsets.lframe_tilt_rad], dtype=float)
+    h = 1e-5
+    cov = np.full((2, 2), np.nan)
+    n_pairs, rms = 0, float("nan")
+    for _ in range(cfg.iterations):
+        off = _with_angles(offsets, p)
+        pa, pb = _positions(scan, a, off), _positions(scan, b, off)
+        dist, nn = cKDTree(pb).query(pa, k=cfg.neighbours, workers=-1)
+        normal, ok = _local_planes(pb[nn], dist)
+        r0 = _plane_residuals(pa, pb, nn, normal)
+        ok &= _inliers(r0, ok)
+        if ok.sum() < 50:
+            raise DataError(f"scan {scan.station_id}: only {int(ok.sum())} direct/reverse plane "
+                            "pairs; the scene is too sparse for self-calibration")
+        jac = np.empty((int(ok.sum()), 2))
+        for k in range(2):
+            pk = p.copy()
+            pk[k] += h
+            offk = _with_angles(offsets, pk)
+            rk = _plane_residuals(_positions(scan, a[ok], offk), _positions(scan, b, offk),
+                                  nn[ok], normal[ok])
+            jac[:, k] = (rk - r0[ok]) / h
+        step, *_ = np.linalg.lstsq(jac, -r0[ok], rcond=None)
+        p = p + step
+        res = r0[ok] + jac @ step
+        n_pairs = int(ok.sum())
+        rms = float(np.sqrt(np.mean(res ** 2)))
+        cov = rms ** 2 * np.linalg.pinv(jac.T @ jac)
+        if np.max(np.abs(step)) < 1e-7:
+            break
+    return _with_angles(offsets, p), cov, n_pairs, rms
+
+
+def _local_planes(neigh: np.ndarray, dist: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Normals of the planes through each neighbourhood (m, k, 3) and a usability mask."""
+    centred = neigh - neigh.mean(axis=1, keepdims=True)
+    cov = np.einsum("mki,mkj->mij", centred, centred)
+    w, v = np.linalg.eigh(cov)
+    normal = v[:, :, 0]
+    spread = np.sqrt(np.maximum(w[:, 2], 0) / neigh.shape[1])
+    planar = w[:, 0] < 0.05 * w[:, 1]
+    near = dist[:, -1] < np.maximum(0.3, 2 * spread)
+    return normal, planar & near & np.isfinite(dist[:, -1])
+
+
+def _plane_residuals(pa: np.ndarray, pb: np.ndarray, nn: np.ndarray, normal: np.ndarray
+                     ) -> np.ndarray:
+    centroid = pb[nn].mean(axis=1)
+    return np.einsum("mi,mi->m", pa - centroid, normal)
+
+
+def _inliers(r: np.ndarray, ok: np.ndarray) -> np.ndarray:
+    med = np.median(r[ok])
+    mad = 1.4826 * np.median(np.abs(r[ok] - med))
+    return np.abs(r - med) < 3 * max(mad, 1e-6)
+
+
+def estimate_axis_offset(scan: StationScan, offsets: MountingOffsets,
+                         sphere_members: list[np.ndarray], radius_m: float,
+                         centres_m: np.ndarray, config: CalibrationConfig | None = None
+                         ) -> tuple[MountingOffsets, np.ndarray, int, float]:
+    """Horizontal axis offset from the consistency of known-diameter spheres.
+
+    Each sphere is fitted (radius fixed) twice, from its direct-face and from its reverse-face
+    points; the offset ``(dx, dy)`` is chosen so the two centres agree horizontally.
+
+    Parameters
+    ----------
+    scan : StationScan
+    offsets : MountingOffsets
+        Current estimate (angles are held fixed).
+    sphere_members : list of (n_k,) int arrays
+        Scan point indices of each accepted sphere (inliers of its centre fit).
+    radius_m : float
+        Known sphere radius, metres.
+    centres_m : (K, 3) float
+        Current centre of each sphere (start of the per-face fits), station frame.
+    config : CalibrationConfig, optional
+
+    Returns
+    -------
+    offsets : MountingOffsets
+        With ``axis_offset_m`` estimated (unchanged when no sphere qualifies).
+    covariance : (2, 2) float
+        Formal covariance of (dx, dy), m^2 (NaN when no sphere qualifies).
+    n_spheres : int
+    rms_m : float
+        RMS horizontal centre difference after the fit, metres.
+    """
+    cfg = (config or CalibrationConfig()).validate()
+    face = direct_face(scan)
+    spheres = []
+    for members, c in zip(sphere_members, np.asarray(centres_m).reshape(-1, 3), strict=True):
+        fa, fb = members[face[members]], members[~face[members]]
+        if fa.size >= cfg.min_face_points and fb.size >= cfg.min_face_points:
+            spheres.append((fa, fb, c))
+    if not spheres:
+        return offsets, np.full((2, 2), np.nan), 0, float("nan")
+    all_idx = np.concatenate([np.r_[fa, fb] for fa, fb, _ in spheres])
+
+    def residuals(d: np.ndarray) -> np.ndarray:
+        off = replace(offsets, axis_offset_m=(float(d[0]), float(d[1])))
+        pos = _positions(scan, all_idx, off)
+        out, start = [], 0
+        for fa, fb, c in spheres:
+            pa = pos[start:start + fa.size]
+            pb = pos[start + fa.size:start + fa.size + fb.size]
+            start += fa.size + fb.size
+            diff = lsq_fixed_radius(pa, radius_m, c) - lsq_fixed_radius(pb, radius_m, c)
+            out.append(diff[:2])
+        return np.concatenate(out)
+
+    d = np.asarray(offsets.axis_offset_m, dtype=float)
+    h = 1e-4
+    cov = np.full((2, 2), np.nan)
+    rms = float("nan")
+    for _ in range(cfg.iterations):
+        r0 = residuals(d)
+        jac = np.column_stack([(residuals(d + h * e) - r0) / h for e in np.eye(2)])
+        step, *_ = np.linalg.lstsq(jac, -r0, rcond=None)
+        d = d + step
+        res = r0 + jac @ step
+        dof = max(res.size - 2, 1)
+        rms = float(np.sqrt(np.mean(res ** 2)))
+        cov = (res @ res / dof) * np.linalg.pinv(jac.T @ jac)
+        if np.max(np.abs(step)) < 1e-6:
+            break
+    return (replace(offsets, axis_offset_m=(float(d[0]), float(d[1]))), cov, len(spheres), rms)

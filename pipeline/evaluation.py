@@ -1,0 +1,240 @@
+"""Evaluation against reference marker coordinates.
+
+A reference is either simulation truth (marker centres already in each station's frame) or a
+total-station CSV ``id,x_m,y_m,z_m`` in some other frame. Station-frame references are matched
+to detections by nearest centre (one-to-one, gated); an external CSV is first aligned by a
+best-fit rigid registration found from edge-length-consistent marker triplets (RANSAC-like),
+then matched the same way. Errors are estimate minus (registered) reference, station frame.
+Edge residuals (|estimated edge| - |reference edge| for every pair of matched, accepted
+markers) need no common frame at all.
+"""
+
+from __future__ import annotations
+
+import csv
+import itertools
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from scipy.optimize import linear_sum_assignment
+
+from markerplan.errors import DataError, InputFileError
+from pipeline.scan_format import read_truth
+
+REFERENCE_CSV_COLUMNS = ("id", "x_m", "y_m", "z_m")
+
+
+@dataclass(frozen=True)
+class Reference:
+    """Reference marker centres.
+
+    Attributes
+    ----------
+    ids : tuple of str
+    centres_m : (M, 3) float
+        Metres; station frame when ``station_id`` is set, else an external frame.
+    station_id : str or None
+        The station whose frame ``centres_m`` is in (simulation truth), None for a CSV.
+    source : str
+        File it came from.
+    """
+
+    ids: tuple[str, ...]
+    centres_m: np.ndarray
+    station_id: str | None
+    source: str
+
+
+def read_reference(path: str | Path) -> Reference:
+    """Read a truth JSON (``*.json``) or a total-station CSV ``id,x_m,y_m,z_m``.
+
+    Raises
+    ------
+    InputFileError
+        Missing/unreadable file, missing columns or keys, non-numeric coordinates.
+    DataError
+        No markers in the file.
+    """
+    path = Path(path)
+    if path.suffix.lower() == ".json":
+        truth = read_truth(path)
+        try:
+            ids = tuple(str(m["id"]) for m in truth["markers"])
+            centres = np.array([m["centre_station_m"] for m in truth["markers"]],
+                               dtype=float).reshape(-1, 3)
+        except (KeyError, TypeError, ValueError) as exc:
+            raise InputFileError(f"{path}: every marker needs 'id' and a 3-element "
+                                 f"'centre_station_m' ({exc})") from exc
+        ref = Reference(ids, centres, str(truth["station_id"]), str(path))
+    else:
+        ref = _read_reference_csv(path)
+    if not ref.ids:
+        raise DataError(f"reference {path} lists no markers")
+    return ref
+
+
+def _read_reference_csv(path: Path) -> Reference:
+    if not path.is_file():
+        raise InputFileError(f"reference file {path} does not exist; check the path")
+    try:
+        with path.open(newline="") as fh:
+            reader = csv.DictReader(fh)
+            header = [h.strip() for h in (reader.fieldnames or [])]
+            missing = [c for c in REFERENCE_CSV_COLUMNS if c not in header]
+            if missing:
+                raise InputFileError(f"reference CSV {path} lacks column(s) {', '.join(missing)};"
+                                     f" expected a header {','.join(REFERENCE_CSV_COLUMNS)}")
+            rows = [{k.strip(): v for k, v in row.items() if k} for row in reader]
+    except (OSError, UnicodeDecodeError, csv.Error) as exc:
+        raise InputFileError(f"reference CSV {path} is not readable ({exc})") from exc
+    try:
+        centres = np.array([[float(r["x_m"]), float(r["y_m"]), float(r["z_m"])] for r in rows],
+                           dtype=float).reshape(-1, 3)
+    except (TypeError, ValueError) as exc:
+        raise InputFileError(f"reference CSV {path}: x_m, y_m, z_m must be numbers ({exc})"
+                             ) from exc
+    return Reference(tuple(r["id"].strip() for r in rows), centres, None, str(path))
+
+
+def match_nearest(centres_m: np.ndarray, reference_m: np.ndarray, max_distance_m: float = 0.5
+                  ) -> np.ndarray:
+    """One-to-one matching of detections to references by distance (Hungarian, gated).
+
+    Parameters
+    ----------
+    centres_m : (K, 3) float
+    reference_m : (M, 3) float
+        Same frame, metres.
+    max_distance_m : float
+        Pairs farther apart never match.
+
+    Returns
+    -------
+    match : (K,) int
+        Reference index of each detection, -1 if unmatched.
+    """
+    k = centres_m.shape[0]
+    match = np.full(k, -1, dtype=np.int64)
+    if k == 0 or reference_m.shape[0] == 0:
+        return match
+    d = np.linalg.norm(centres_m[:, None, :] - reference_m[None, :, :], axis=2)
+    cost = np.where(d <= max_distance_m, d, 1e6)
+    rows, cols = linear_sum_assignment(cost)
+    ok = cost[rows, cols] < 1e6
+    match[rows[ok]] = cols[ok]
+    return match
+
+
+def kabsch(src_m: np.ndarray, dst_m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Rigid transform minimising ``sum |R src + t - dst|^2``; returns ``(R (3,3), t (3,))``."""
+    cs, cd = src_m.mean(axis=0), dst_m.mean(axis=0)
+    h = (src_m - cs).T @ (dst_m - cd)
+    u, _, vt = np.linalg.svd(h)
+    s = np.diag([1.0, 1.0, np.sign(np.linalg.det(vt.T @ u.T))])
+    rot = vt.T @ s @ u.T
+    return rot, cd - rot @ cs
+
+
+def register_reference(centres_m: np.ndarray, reference_m: np.ndarray, tol_m: float = 0.15
+                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Find the rigid transform of an external reference into the station frame.
+
+    Hypotheses come from triplets whose three edge lengths agree within ``tol_m``; the one
+    that brings most detections within ``tol_m`` of a reference wins, then it is refined on
+    all its matches.
+
+    Parameters
+    ----------
+    centres_m : (K, 3) float
+        Accepted detections, station frame.
+    reference_m : (M, 3) float
+        Reference centres, external frame.
+    tol_m : float
+        Edge-length and match tolerance, metres.
+
+    Returns
+    -------
+    match : (K,) int
+        Reference index per detection, -1 unmatched.
+    rotation : (3, 3) float
+    translation : (3,) float
+        ``station = rotation @ reference + translation``.
+
+    Raises
+    ------
+    DataError
+        Fewer than three detections or references, or no consistent triplet.
+    """
+    k, m = centres_m.shape[0], reference_m.shape[0]
+    if k < 3 or m < 3:
+        raise DataError(f"registering a reference CSV needs >= 3 accepted markers and >= 3 "
+                        f"reference points, got {k} and {m}")
+    dd = np.linalg.norm(centres_m[:, None] - centres_m[None], axis=2)
+    dm = np.linalg.norm(reference_m[:, None] - reference_m[None], axis=2)
+    best = (0, np.inf, None)
+    for i, j in itertools.combinations(range(k), 2):
+        ab = np.argwhere(np.abs(dm - dd[i, j]) < tol_m)
+        for a, b in ab:
+            if a == b:
+                continue
+            for c_det in range(k):
+                if c_det in (i, j):
+                    continue
+                cs = np.flatnonzero((np.abs(dm[a] - dd[i, c_det]) < tol_m)
+                                    & (np.abs(dm[b] - dd[j, c_det]) < tol_m))
+                for c in cs:
+                    if c in (a, b):
+                        continue
+                    src = reference_m[[a, b, c]]
+                    if np.linalg.norm(np.cross(src[1] - src[0], src[2] - src[0])) < 1e-3:
+                        continue
+                    rot, t = kabsch(src, centres_m[[i, j, c_det]])
+                    match = match_nearest(centres_m, reference_m @ rot.T + t, tol_m)
+                    n = int((match >= 0).sum())
+                    if n < 3:
+                        continue
+                    ok = match >= 0
+                    err = np.linalg.norm(centres_m[ok] - (reference_m[match[ok]] @ rot.T + t),
+                                         axis=1)
+                    score = (n, float(np.mean(err ** 2)))
+                    if score[0] > best[0] or (score[0] == best[0] and score[1] < best[1]):
+                        best = (n, score[1], (rot, t))
+            if best[0] == min(k, m):
+                break
+        if best[0] == min(k, m):
+            break
+    if best[2] is None:
+        raise DataError("no three detected markers match the reference CSV's edge lengths "
+                        f"within {tol_m} m; check the reference or the marker ids")
+    rot, t = best[2]
+    for _ in range(3):
+        match = match_nearest(centres_m, reference_m @ rot.T + t, tol_m)
+        ok = match >= 0
+        rot, t = kabsch(reference_m[match[ok]], centres_m[ok])
+    return match_nearest(centres_m, reference_m @ rot.T + t, tol_m), rot, t
+
+
+def edge_residuals(ids: list[str], estimated_m: np.ndarray, reference_m: np.ndarray
+                   ) -> list[dict]:
+    """Length residual of every marker-to-marker edge.
+
+    Parameters
+    ----------
+    ids : list of str
+        Marker ids, one per row of the two arrays.
+    estimated_m, reference_m : (K, 3) float
+        Estimated and reference centres (each in its own frame), metres.
+
+    Returns
+    -------
+    edges : list of dict
+        ``{"marker_a", "marker_b", "reference_length_m", "estimated_length_m", "residual_m"}``.
+    """
+    out = []
+    for a, b in itertools.combinations(range(len(ids)), 2):
+        le = float(np.linalg.norm(estimated_m[a] - estimated_m[b]))
+        lr = float(np.linalg.norm(reference_m[a] - reference_m[b]))
+        out.append({"marker_a": ids[a], "marker_b": ids[b], "reference_length_m": lr,
+                    "estimated_length_m": le, "residual_m": le - lr})
+    return out

@@ -1,0 +1,150 @@
+"""The two-box gate and the re-search around each candidate.
+
+Two-box gate: a cluster is a marker candidate when its axis-aligned bounding box fits inside
+the large cube (default 0.30 m: a 0.20 m sphere with noise) but not inside the small one
+(default 0.05 m: noise specks). Re-search: ground removal and clustering may cut marker points
+away, so all points of the full cloud (ground included) within ``radius_m`` of each candidate's
+centroid are taken again.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from markerplan.errors import ConfigError
+
+
+def two_box_gate(xyz_m: np.ndarray, labels: np.ndarray, max_box_m: float = 0.30,
+                 min_box_m: float = 0.05) -> tuple[np.ndarray, np.ndarray]:
+    """Clusters passing the two-box gate.
+
+    Parameters
+    ----------
+    xyz_m : (N, 3) float
+        Clustered points, metres.
+    labels : (N,) int
+        Cluster labels from :func:`pipeline.clustering.euclidean_clusters` (-1 = noise).
+    max_box_m, min_box_m : float
+        Edge of the large and the small cube, metres.
+
+    Returns
+    -------
+    cluster_ids : (K,) int
+        Labels of the passing clusters.
+    centroids_m : (K, 3) float
+        Their centroids, metres.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> pts = np.array([[0, 0, 0], [0.1, 0.1, 0], [3, 0, 0], [3.01, 0, 0], [6, 0, 0], [7, 0, 0.]])
+    >>> ids, c = two_box_gate(pts, np.array([0, 0, 1, 1, 2, 2]))
+    >>> ids.tolist()
+    [0]
+    """
+    if not 0 < min_box_m < max_box_m:
+        raise ConfigError(f"gate boxes must satisfy 0 < min_box_m < max_box_m, got "
+                          f"{min_box_m}, {max_box_m}")
+    ok = labels >= 0
+    if not ok.any():
+        return np.zeros(0, dtype=np.int64), np.zeros((0, 3))
+    lab = labels[ok]
+    p = xyz_m[ok]
+    k = int(lab.max()) + 1
+    lo = np.full((k, 3), np.inf)
+    hi = np.full((k, 3), -np.inf)
+    np.minimum.at(lo, lab, p)
+    np.maximum.at(hi, lab, p)
+    counts = np.bincount(lab, minlength=k)
+    sums = np.zeros((k, 3))
+    np.add.at(sums, lab, p)
+    extent = (hi - lo).max(axis=1)
+    passing = (counts > 0) & (extent <= max_box_m) & (extent > min_box_m)
+    ids = np.flatnonzero(passing)
+    return ids, sums[ids] / counts[ids, None]
+
+
+class RangeIndex:
+    """Points bucketed by range and azimuth about the station origin, for radius searches.
+
+    Each point gets a bucket ``range_bin * n_sectors + azimuth_sector`` (16-bit), sorted with a
+    linear-time radix sort, so indexing ten million points costs a fraction of a second; a
+    query scans only the buckets its sphere can touch.
+
+    Parameters
+    ----------
+    xyz_m : (N, 3) float
+        The full cloud, station frame, metres.
+    range_m : (N,) float, optional
+        ``|xyz_m|`` if already known.
+    bin_m : float
+        Range bin width, metres (ranges beyond ``bin_m * 32767 / n_sectors`` share one bin).
+    n_sectors : int
+        Azimuth sectors.
+    """
+
+    def __init__(self, xyz_m: np.ndarray, range_m: np.ndarray | None = None,
+                 bin_m: float = 0.1, n_sectors: int = 32):
+        rng = np.sqrt(np.einsum("ij,ij->i", xyz_m, xyz_m)) if range_m is None else range_m
+        self.bin_m = float(bin_m)
+        self.n_sectors = int(n_sectors)
+        self.max_bin = np.iinfo(np.int16).max // self.n_sectors - 1
+        rbin = np.minimum(rng / self.bin_m, self.max_bin).astype(np.int16)
+        sector = self._sector(np.arctan2(xyz_m[:, 1], xyz_m[:, 0]))
+        keys = rbin * np.int16(self.n_sectors) + sector.astype(np.int16)
+        self.order = np.argsort(keys, kind="stable")
+        counts = np.bincount(keys, minlength=(self.max_bin + 1) * self.n_sectors)
+        self.starts = np.concatenate([[0], np.cumsum(counts)])
+        self.xyz_m = xyz_m
+
+    def _sector(self, azimuth_rad: np.ndarray) -> np.ndarray:
+        s = np.floor((azimuth_rad + np.pi) / (2 * np.pi) * self.n_sectors).astype(np.int64)
+        return np.clip(s, 0, self.n_sectors - 1)
+
+    def within(self, centre_m: np.ndarray, radius_m: float) -> np.ndarray:
+        """Indices (into the cloud, ascending) of points within ``radius_m`` of ``centre_m``."""
+        centre_m = np.asarray(centre_m, dtype=float)
+        r = float(np.linalg.norm(centre_m))
+        lo = int(min(np.floor(max(r - radius_m, 0.0) / self.bin_m), self.max_bin))
+        hi = int(min(np.floor((r + radius_m) / self.bin_m), self.max_bin))
+        horiz = float(np.hypot(centre_m[0], centre_m[1]))
+        if horiz <= radius_m:
+            sectors = np.arange(self.n_sectors)
+        else:
+            half = np.arcsin(radius_m / horiz)
+            az = np.arctan2(centre_m[1], centre_m[0])
+            ends = np.array([az - half, az + half])
+            ends = (ends + np.pi) % (2 * np.pi) - np.pi
+            s0, s1 = self._sector(ends)
+            sectors = (np.arange(s0, s0 + (s1 - s0) % self.n_sectors + 1) % self.n_sectors)
+        chunks = []
+        for b in range(lo, hi + 1):
+            for s in sectors:
+                key = b * self.n_sectors + int(s)
+                chunks.append(self.order[self.starts[key]:self.starts[key + 1]])
+        idx = np.concatenate(chunks) if chunks else np.zeros(0, dtype=np.int64)
+        d2 = ((self.xyz_m[idx] - centre_m) ** 2).sum(axis=1)
+        return np.sort(idx[d2 <= radius_m ** 2])
+
+
+def research(index: RangeIndex, centroids_m: np.ndarray, radius_m: float = 0.3
+             ) -> list[np.ndarray]:
+    """Re-extract all points within ``radius_m`` of each centroid (ground included).
+
+    Parameters
+    ----------
+    index : RangeIndex
+        The full cloud.
+    centroids_m : (K, 3) float
+        Candidate centroids, metres.
+    radius_m : float
+        Search radius, metres.
+
+    Returns
+    -------
+    members : list of (n_k,) int arrays
+        Cloud indices per candidate.
+    """
+    if not radius_m > 0:
+        raise ConfigError(f"re-search `radius_m` must be > 0 metres, got {radius_m}")
+    return [index.within(c, radius_m) for c in np.asarray(centroids_m).reshape(-1, 3)]

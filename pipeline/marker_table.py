@@ -1,0 +1,141 @@
+"""The marker table: one row per candidate marker per station (the error model's input).
+
+Columns, in this order (station frame = origin at the nominal LiDAR centre, z up):
+
+- ``station_id``: station the scan belongs to.
+- ``marker_id``: reference marker matched to this detection; empty when unmatched.
+- ``x_m, y_m, z_m``: estimated centre, station frame, metres.
+- ``distance_m``: LiDAR centre to marker centre, metres.
+- ``elevation_deg``: angle of the marker centre above the horizontal seen from the LiDAR
+  centre, degrees (negative below).
+- ``azimuth_deg``: ``atan2(y, x)`` of the centre in the station frame, degrees in [0, 360).
+- ``n_points``: points used by the centre fit.
+- ``point_density_per_m2``: ``n_points / (pi R^2)``, points per m^2 of the projected
+  sensor-facing hemisphere.
+- ``visible_fraction``: fraction of the projected disc covered by points
+  (:mod:`pipeline.quality`).
+- ``fit_rms_m``: RMS of the fixed-radius residuals of the points used, metres.
+- ``radius_fit_m``: radius of a free-radius fit to the same points, metres.
+- ``estimator``: ``fixed-radius`` or ``hemisphere-icp``.
+- ``accepted``: ``true`` / ``false`` (quality gate).
+- ``reason``: empty when accepted, else ``too_few_points``, ``high_rms``, ``radius_mismatch`` or
+  ``incomplete_cloud``.
+- ``error_m``: ``|estimate - reference|``, metres; empty without a reference.
+- ``error_x_m, error_y_m, error_z_m``: the components (estimate - reference), station frame.
+- ``replicate``: replicate number (range study), 0 otherwise.
+- ``seed``: simulation seed when known, else empty.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+from dataclasses import asdict, dataclass, fields
+from pathlib import Path
+
+import numpy as np
+
+from markerplan.errors import InputFileError
+
+COLUMNS = ("station_id", "marker_id", "x_m", "y_m", "z_m", "distance_m", "elevation_deg",
+           "azimuth_deg", "n_points", "point_density_per_m2", "visible_fraction", "fit_rms_m",
+           "radius_fit_m", "estimator", "accepted", "reason", "error_m", "error_x_m",
+           "error_y_m", "error_z_m", "replicate", "seed")
+
+
+@dataclass
+class MarkerRow:
+    """One row of the marker table (fields = :data:`COLUMNS`)."""
+
+    station_id: str
+    marker_id: str
+    x_m: float
+    y_m: float
+    z_m: float
+    distance_m: float
+    elevation_deg: float
+    azimuth_deg: float
+    n_points: int
+    point_density_per_m2: float
+    visible_fraction: float
+    fit_rms_m: float
+    radius_fit_m: float
+    estimator: str
+    accepted: bool
+    reason: str
+    error_m: float | None = None
+    error_x_m: float | None = None
+    error_y_m: float | None = None
+    error_z_m: float | None = None
+    replicate: int = 0
+    seed: int | None = None
+
+    @property
+    def centre_m(self) -> np.ndarray:
+        return np.array([self.x_m, self.y_m, self.z_m])
+
+    def set_error(self, reference_m: np.ndarray | None) -> None:
+        """Fill the error columns from a reference centre (same frame), or clear them."""
+        if reference_m is None:
+            self.error_m = self.error_x_m = self.error_y_m = self.error_z_m = None
+            return
+        e = self.centre_m - np.asarray(reference_m, dtype=float)
+        self.error_m = float(np.linalg.norm(e))
+        self.error_x_m, self.error_y_m, self.error_z_m = (float(v) for v in e)
+
+
+assert tuple(f.name for f in fields(MarkerRow)) == COLUMNS
+
+
+def line_of_sight(centre_m: np.ndarray, sensor_m=(0.0, 0.0, 0.0)) -> tuple[float, float, float]:
+    """Distance (m), elevation (deg, + up) and azimuth (deg, [0, 360)) of a centre.
+
+    Examples
+    --------
+    >>> [round(v, 3) for v in line_of_sight([3.0, 3.0, -1.0])]
+    [4.359, -13.263, 45.0]
+    """
+    d = np.asarray(centre_m, dtype=float) - np.asarray(sensor_m, dtype=float)
+    dist = float(np.linalg.norm(d))
+    elev = math.degrees(math.atan2(d[2], math.hypot(d[0], d[1])))
+    az = math.degrees(math.atan2(d[1], d[0])) % 360.0
+    return dist, elev, az
+
+
+def _fmt(v) -> str:
+    if v is None:
+        return ""
+    if isinstance(v, bool | np.bool_):
+        return "true" if v else "false"
+    if isinstance(v, float | np.floating):
+        return f"{float(v):.6f}" if np.isfinite(v) else ""
+    return str(v)
+
+
+def write_marker_table(path: str | Path, rows: list[MarkerRow]) -> Path:
+    """Write rows as CSV with the header :data:`COLUMNS` (deterministic formatting)."""
+    path = Path(path)
+    with path.open("w", newline="") as fh:
+        w = csv.writer(fh, lineterminator="\n")
+        w.writerow(COLUMNS)
+        for r in rows:
+            d = asdict(r)
+            w.writerow([_fmt(d[c]) for c in COLUMNS])
+    return path
+
+
+def read_marker_table(path: str | Path) -> list[dict[str, str]]:
+    """Read a marker table back as dicts of strings, checking the header."""
+    path = Path(path)
+    try:
+        with path.open(newline="") as fh:
+            reader = csv.DictReader(fh)
+            header = tuple(reader.fieldnames or ())
+            rows = list(reader)
+    except OSError as exc:
+        raise InputFileError(f"marker table {path} is not readable ({exc})") from exc
+    if header != COLUMNS:
+        missing = [c for c in COLUMNS if c not in header]
+        raise InputFileError(f"marker table {path} has columns {list(header)}; missing "
+                             f"{missing} (expected exactly {list(COLUMNS)})")
+    return rows

@@ -1,0 +1,196 @@
+"""The range study (processing and aggregation side): centre error and point density against
+distance, for both estimators.
+
+The published experiment places 0.20 m markers from 1 m to 50 m from the LiDAR (every 1 m from
+1 to 15 m, every 2 m from 15 to 25 m, every 5 m from 25 to 50 m) and scans them with 800
+frames. The scans themselves come from the simulator (``visibility``); this module lays the
+markers out, extracts and fits each one, and aggregates the marker tables of the replicates.
+
+Extraction: each marker's points are re-searched within ``research_radius_m`` of its known
+position (as a total station would guide it); the start of the fit is computed from the points
+above the marker's equator only (:func:`pipeline.sphere_fit.cap_start`), so the estimators see
+the same input as in :mod:`pipeline.process` and do not start from the truth.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from markerplan.errors import ConfigError
+from pipeline.gate import RangeIndex
+from pipeline.marker_table import MarkerRow, line_of_sight
+from pipeline.quality import QualityConfig, marker_metrics, quality_gate
+from pipeline.rig import MountingOffsets
+from pipeline.scan_format import StationScan
+from pipeline.sphere_fit import METHODS, cap_start, fit_sphere
+from pipeline.synthesis import synthesize
+
+#: Horizontal LiDAR-to-marker distances of the published range experiment, metres.
+RANGE_STUDY_DISTANCES_M = np.r_[np.arange(1.0, 16.0, 1.0), np.arange(17.0, 26.0, 2.0),
+                                np.arange(30.0, 51.0, 5.0)]
+_GOLDEN_ANGLE = np.pi * (3 - np.sqrt(5))
+
+SUMMARY_COLUMNS = ("estimator", "distance_m", "n_rows", "n_fitted", "n_accepted",
+                   "median_n_points", "median_point_density_per_m2", "median_error_m",
+                   "p95_error_m", "median_error_accepted_m")
+
+
+def marker_layout(distances_m: np.ndarray = RANGE_STUDY_DISTANCES_M, radius_m: float = 0.1,
+                  lidar_height_m: float = 1.0) -> np.ndarray:
+    """Marker centres in the station frame on level ground, one per distance.
+
+    Marker ``k`` sits at horizontal distance ``distances_m[k]`` and azimuth ``k`` times the
+    golden angle (137.5 deg), so no marker hides another; its centre is ``radius_m`` above the
+    ground, which lies ``lidar_height_m`` below the LiDAR centre.
+
+    Returns
+    -------
+    centres_m : (n, 3) float
+        Station frame, metres.
+
+    Examples
+    --------
+    >>> c = marker_layout(np.array([1.0, 2.0]))
+    >>> np.round(np.hypot(c[:, 0], c[:, 1]), 6).tolist(), c[:, 2].tolist()
+    ([1.0, 2.0], [-0.9, -0.9])
+    """
+    d = np.asarray(distances_m, dtype=float)
+    if d.ndim != 1 or d.size == 0 or np.any(d <= 2 * radius_m):
+        raise ConfigError(f"`distances_m` must be a non-empty list of distances > 2 * radius, "
+                          f"got {d}")
+    az = _GOLDEN_ANGLE * np.arange(d.size)
+    return np.column_stack([d * np.cos(az), d * np.sin(az),
+                            np.full(d.size, radius_m - lidar_height_m)])
+
+
+def measure_markers(scan: StationScan, centres_m: np.ndarray, ids: list[str],
+                    radius_m: float = 0.1, methods: tuple[str, ...] = METHODS,
+                    offsets: MountingOffsets | None = None, research_radius_m: float = 0.3,
+                    quality: QualityConfig | None = None, replicate: int = 0,
+                    seed: int | None = None) -> list[MarkerRow]:
+    """Fit every known marker of a scan with each estimator.
+
+    Parameters
+    ----------
+    scan : StationScan
+    centres_m : (n, 3) float
+        True marker centres, station frame, metres.
+    ids : list of str
+        Marker ids.
+    radius_m : float
+    methods : tuple of str
+        Estimators to run.
+    offsets : MountingOffsets, optional
+        Known mounting offsets (default none).
+    research_radius_m : float
+    quality : QualityConfig, optional
+    replicate, seed : int
+        Written into the rows.
+
+    Returns
+    -------
+    rows : list of MarkerRow
+        One per marker and estimator; a marker with fewer than 4 points gets a row with
+        ``n_points = 0``, ``accepted = false``, ``reason = too_few_points`` and no error.
+    """
+    quality = (quality or QualityConfig()).validate()
+    bad = [m for m in methods if m not in METHODS]
+    if bad or not methods:
+        raise ConfigError(f"`methods` must be a non-empty subset of {METHODS}, got {methods}")
+    cloud = synthesize(scan, offsets)
+    index = RangeIndex(cloud.xyz_m, cloud.range_m)
+    rows = []
+    for mid, truth in zip(ids, np.asarray(centres_m, dtype=float), strict=True):
+        members = index.within(truth, research_radius_m)
+        pts = cloud.xyz_m[members]
+        cap = pts[pts[:, 2] >= truth[2]]
+        for method in methods:
+            if cap.shape[0] < 4:
+                dist, elev, az = line_of_sight(truth)
+                rows.append(MarkerRow(scan.station_id, mid, *truth, dist, elev, az, 0, 0.0, 0.0,
+                                      float("nan"), float("nan"), method, False,
+                                      "too_few_points", replicate=replicate, seed=seed))
+                continue
+            fit = fit_sphere(pts, radius_m, method=method, centre0_m=cap_start(cap, radius_m))
+            metrics = marker_metrics(pts, fit)
+            ok, reason = quality_gate(fit, metrics, quality)
+            dist, elev, az = line_of_sight(fit.centre_m)
+            row = MarkerRow(scan.station_id, mid, *(float(v) for v in fit.centre_m), dist, elev,
+                            az, fit.n_used, metrics.point_density_per_m2,
+                            metrics.visible_fraction, fit.rms_m, metrics.radius_fit_m, method, ok,
+                            reason, replicate=replicate, seed=seed)
+            row.set_error(truth)
+            rows.append(row)
+    return rows
+
+
+def summarise(rows: list[MarkerRow], distances_m: dict[str, float]) -> list[dict]:
+    """Per estimator and distance: counts, median density, median / 95th-percentile error.
+
+    Parameters
+    ----------
+    rows : list of MarkerRow
+        All replicates.
+    distances_m : dict
+        Nominal horizontal distance of each marker id.
+
+    Returns
+    -------
+    summary : list of dict
+        Keys :data:`SUMMARY_COLUMNS`, sorted by estimator then distance; errors are NaN where
+        no marker could be fitted.
+    """
+    out = []
+    for method in sorted({r.estimator for r in rows}):
+        for d in sorted(set(distances_m.values())):
+            sel = [r for r in rows if r.estimator == method and distances_m[r.marker_id] == d]
+            fitted = [r for r in sel if r.error_m is not None]
+            err = np.array([r.error_m for r in fitted])
+            acc = np.array([r.error_m for r in fitted if r.accepted])
+            out.append({
+                "estimator": method, "distance_m": d, "n_rows": len(sel),
+                "n_fitted": len(fitted), "n_accepted": int(sum(r.accepted for r in sel)),
+                "median_n_points": float(np.median([r.n_points for r in sel])) if sel else 0.0,
+                "median_point_density_per_m2": float(np.median(
+                    [r.point_density_per_m2 for r in sel])) if sel else 0.0,
+                "median_error_m": float(np.median(err)) if err.size else float("nan"),
+                "p95_error_m": float(np.percentile(err, 95)) if err.size else float("nan"),
+                "median_error_accepted_m": float(np.median(acc)) if acc.size else float("nan"),
+            })
+    return out
+
+
+def plot(summary: list[dict], rows: list[MarkerRow], distances_m: dict[str, float], path
+         ) -> None:
+    """Two panels against distance: point density (log) and centre error per estimator."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(7, 7), sharex=True)
+    colours = {"fixed-radius": "tab:blue", "hemisphere-icp": "tab:orange"}
+    for method in sorted({s["estimator"] for s in summary}):
+        s = [x for x in summary if x["estimator"] == method]
+        d = np.array([x["distance_m"] for x in s])
+        c = colours.get(method, None)
+        pts = [r for r in rows if r.estimator == method and r.error_m is not None]
+        ax2.scatter([distances_m[r.marker_id] for r in pts], [r.error_m * 1e3 for r in pts],
+                    s=6, alpha=0.3, color=c)
+        ax2.plot(d, [x["median_error_m"] * 1e3 for x in s], "-o", ms=3, color=c,
+                 label=f"{method} median")
+        if method == "fixed-radius":
+            dens = np.array([x["median_point_density_per_m2"] for x in s])
+            ax1.plot(d, np.where(dens > 0, dens, np.nan), "-o", ms=3, color="k")
+    ax1.set_yscale("log")
+    ax1.set_ylabel("points per m$^2$ (projected disc)")
+    ax1.set_title("Range study: 0.20 m markers, VLP-16 turntable rig")
+    ax2.set_yscale("log")
+    ax2.set_ylabel("centre error (mm)")
+    ax2.set_xlabel("horizontal distance LiDAR - marker (m)")
+    ax2.legend()
+    for ax in (ax1, ax2):
+        ax.grid(True, which="both", alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120, metadata={"Software": None})
+    plt.close(fig)

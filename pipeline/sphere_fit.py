@@ -1,0 +1,370 @@
+"""Sphere-centre estimation from a point cloud of known radius: two estimators, one interface.
+
+Both estimators take the points of one candidate (any frame, e.g. station frame) and the
+position of the scanner in that same frame, and return a :class:`SphereFit`.
+
+``fixed-radius`` (default)
+    The line-of-sight procedure of ASTM E3125-17 as published by NIST (DMG_SphereFitting,
+    ``coneCylAlgoE57``): (1) *closest-point* initial estimate: the median range of the
+    ``min(500, 5 %)`` points nearest the scanner marks the front of the sphere; points within
+    half a radius behind it are fitted with the radius fixed; (2) keep the points inside the
+    cone of half-angle 60 deg about the centre->scanner line (apex at the centre) that also lie
+    within the cylinder of radius ``R sin 60 deg`` about the scanner->centre line; (3) fit with
+    the radius fixed, drop points whose residual exceeds 3 standard deviations, fit again;
+    repeat (2)-(3) from the new centre until the centre moves less than ``tol_m``.
+``hemisphere-icp``
+    The published marker method: point-to-point ICP of a known-radius hemisphere model (a
+    dense point cloud of the sphere's half that faces the scanner) to the points, solving a
+    translation only. Correspondences farther than ``max_correspondence_m`` are ignored.
+
+A free-radius least-squares fit (:func:`fit_free_radius`) serves the quality gate's radius check.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from markerplan.errors import ConfigError, DataError
+
+METHODS = ("fixed-radius", "hemisphere-icp")
+DEFAULT_METHOD = "fixed-radius"
+#: ASTM E3125-17 full cone angle about the scanner line of sight, degrees.
+ASTM_CONE_DEG = 120.0
+_MIN_POINTS = 4
+
+
+@dataclass(frozen=True)
+class SphereFit:
+    """Result of one sphere-centre estimate.
+
+    Attributes
+    ----------
+    centre_m : (3,) float
+        Estimated centre, metres, in the frame of the input points.
+    radius_m : float
+        The (fixed) radius used, metres.
+    rms_m : float
+        RMS of ``|p - centre| - radius`` over the points used, metres.
+    n_points : int
+        Points given.
+    n_used : int
+        Points used by the final fit (after trimming / correspondence rejection).
+    used : (n_points,) bool
+        Which input points the final fit used.
+    method : str
+        ``"fixed-radius"`` or ``"hemisphere-icp"``.
+    iterations : int
+        Outer iterations run.
+    converged : bool
+        Whether the centre moved less than the tolerance before the iteration cap.
+    """
+
+    centre_m: np.ndarray
+    radius_m: float
+    rms_m: float
+    n_points: int
+    n_used: int
+    used: np.ndarray
+    method: str
+    iterations: int
+    converged: bool
+
+    def to_dict(self) -> dict:
+        return {"centre_m": [float(v) for v in self.centre_m], "radius_m": self.radius_m,
+                "rms_m": self.rms_m, "n_points": self.n_points, "n_used": self.n_used,
+                "method": self.method, "iterations": self.iterations,
+                "converged": self.converged}
+
+
+def fit_sphere(points_m: np.ndarray, radius_m: float, sensor_m=(0.0, 0.0, 0.0),
+               method: str = DEFAULT_METHOD, *, tol_m: float = 1e-7, max_iter: int = 100,
+               max_correspondence_m: float | None = None,
+               centre0_m: np.ndarray | None = None) -> SphereFit:
+    """Estimate the centre of a sphere of known radius seen from ``sensor_m``.
+
+    Parameters
+    ----------
+    points_m : (n, 3) float
+        Points on (and near) the sphere, metres, any frame.
+    radius_m : float
+        Known sphere radius, metres, > 0.
+    sensor_m : (3,) float
+        Scanner origin in the same frame, metres.
+    method : {"fixed-radius", "hemisphere-icp"}
+        Estimator (see the module docstring).
+    tol_m : float
+        Convergence: stop when the centre moves less than this, metres.
+    max_iter : int
+        Iteration cap.
+    max_correspondence_m : float, optional
+        ``hemisphere-icp`` only: ignore pairs farther apart than this (default ``radius_m / 2``).
+    centre0_m : (3,) float, optional
+        Initial centre. Default: the ASTM closest-point estimate, which assumes the sphere is
+        the closest surface; give a start when ground in front of the sphere is included.
+
+    Returns
+    -------
+    SphereFit
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> u = np.array([[-1, 0, 0], [-0.8, 0.6, 0], [-0.8, 0, 0.6], [-0.8, -0.6, 0],
+    ...               [-0.8, 0, -0.6], [-0.6, 0.8, 0], [-0.6, 0, -0.8]])
+    >>> fit = fit_sphere(np.array([5.0, 0, 0]) + 0.1 * u, 0.1)
+    >>> bool(np.allclose(fit.centre_m, [5, 0, 0])), fit.n_used
+    (True, 7)
+    """
+    p, sensor = _fit_sphere_iv(points_m, radius_m, sensor_m, method, tol_m, max_iter,
+                               max_correspondence_m)
+    if centre0_m is None:
+        centre0, _ = _closest_point_start(p, float(radius_m), sensor)
+    else:
+        centre0 = np.asarray(centre0_m, dtype=float).reshape(3)
+    if method == "fixed-radius":
+        return _astm_e3125(p, float(radius_m), sensor, centre0, tol_m, max_iter)
+    corr = radius_m / 2 if max_correspondence_m is None else float(max_correspondence_m)
+    return _hemisphere_icp(p, float(radius_m), sensor, centre0, corr, tol_m, max_iter)
+
+
+def _fit_sphere_iv(points_m, radius_m, sensor_m, method, tol_m, max_iter, max_corr):
+    p = np.asarray(points_m, dtype=float)
+    if p.ndim != 2 or p.shape[1] != 3:
+        raise DataError(f"`points_m` must have shape (n, 3), got {p.shape}")
+    if p.shape[0] < _MIN_POINTS:
+        raise DataError(f"`points_m` needs at least {_MIN_POINTS} points to fit a sphere, "
+                        f"got {p.shape[0]}")
+    if not np.all(np.isfinite(p)):
+        raise DataError("`points_m` contains NaN or infinite coordinates; drop them first")
+    if not (np.isfinite(radius_m) and radius_m > 0):
+        raise ConfigError(f"`radius_m` must be a positive number of metres, got {radius_m!r}")
+    sensor = np.asarray(sensor_m, dtype=float).reshape(-1)
+    if sensor.shape != (3,) or not np.all(np.isfinite(sensor)):
+        raise ConfigError(f"`sensor_m` must be three finite numbers, got {sensor_m!r}")
+    if method not in METHODS:
+        raise ConfigError(f"`method` must be one of {', '.join(METHODS)}; got {method!r}")
+    if not tol_m > 0 or int(max_iter) < 1:
+        raise ConfigError(f"`tol_m` must be > 0 and `max_iter` >= 1, got {tol_m}, {max_iter}")
+    if max_corr is not None and not max_corr > 0:
+        raise ConfigError(f"`max_correspondence_m` must be > 0, got {max_corr!r}")
+    return p, sensor
+
+
+def lsq_fixed_radius(points_m: np.ndarray, radius_m: float, centre0_m: np.ndarray,
+                     max_iter: int = 50, tol_m: float = 1e-10) -> np.ndarray:
+    """Geometric least-squares sphere centre with the radius fixed (Gauss-Newton).
+
+    Minimises ``sum (|p_i - c| - R)^2`` over ``c`` from ``centre0_m``.
+
+    Parameters
+    ----------
+    points_m : (n, 3) float
+    radius_m : float
+    centre0_m : (3,) float
+        Start; must lie on the correct (far) side of the surface for a cap.
+
+    Returns
+    -------
+    centre_m : (3,) float
+    """
+    c = np.asarray(centre0_m, dtype=float).copy()
+    for _ in range(max_iter):
+        d = points_m - c
+        n = np.linalg.norm(d, axis=1)
+        u = d / np.maximum(n, 1e-12)[:, None]
+        r = n - radius_m
+        try:
+            step = np.linalg.solve(u.T @ u, u.T @ r)
+        except np.linalg.LinAlgError:
+            break
+        c = c + step
+        if np.linalg.norm(step) < tol_m:
+            break
+    return c
+
+
+def fit_free_radius(points_m: np.ndarray, centre0_m: np.ndarray, radius0_m: float,
+                    max_iter: int = 50) -> tuple[np.ndarray, float, float]:
+    """Geometric least-squares sphere with a free radius (Levenberg-style Gauss-Newton).
+
+    Parameters
+    ----------
+    points_m : (n, 3) float
+    centre0_m : (3,) float
+        Start centre.
+    radius0_m : float
+        Start radius.
+
+    Returns
+    -------
+    centre_m : (3,) float
+    radius_m : float
+    rms_m : float
+    """
+    x = np.append(np.asarray(centre0_m, dtype=float), float(radius0_m))
+    lam = 1e-6
+    for _ in range(max_iter):
+        d = points_m - x[:3]
+        n = np.maximum(np.linalg.norm(d, axis=1), 1e-12)
+        r = n - x[3]
+        jac = np.column_stack([-d / n[:, None], -np.ones_like(n)])
+        a = jac.T @ jac
+        try:
+            step = np.linalg.solve(a + lam * np.diag(np.diag(a) + 1e-12), -jac.T @ r)
+        except np.linalg.LinAlgError:
+            break
+        x = x + step
+        if np.linalg.norm(step) < 1e-10:
+            break
+    res = np.linalg.norm(points_m - x[:3], axis=1) - x[3]
+    return x[:3], float(abs(x[3])), float(np.sqrt(np.mean(res ** 2)))
+
+
+def _closest_point_start(p: np.ndarray, radius: float, sensor: np.ndarray
+                         ) -> tuple[np.ndarray, np.ndarray]:
+    """ASTM/NIST closest-point initial estimate; returns (centre, mask of points used)."""
+    rng = np.linalg.norm(p - sensor, axis=1)
+    n = p.shape[0]
+    k = int(np.floor(min(500, 0.05 * n)))
+    if k < 4:
+        k = max(4, int(np.ceil(0.1 * n)))
+    front = float(np.median(np.partition(rng, k - 1)[:k]))
+    near = rng < front + 0.5 * radius
+    if near.sum() < 3:
+        near = np.ones(n, dtype=bool)
+    centroid = p[near].mean(axis=0)
+    los = (centroid - sensor) / max(np.linalg.norm(centroid - sensor), 1e-12)
+    start = sensor + los * (front + radius)
+    return lsq_fixed_radius(p[near], radius, start), near
+
+
+def cap_start(points_m: np.ndarray, radius_m: float, sensor_m=(0.0, 0.0, 0.0)) -> np.ndarray:
+    """Initial centre from points known to lie on the sphere's sensor-facing cap.
+
+    The centroid is pushed half a radius away from the sensor, then refined by a fixed-radius
+    fit of those points.
+
+    Parameters
+    ----------
+    points_m : (n, 3) float
+        Cap points (e.g. the above-ground cluster of a candidate), metres.
+    radius_m : float
+    sensor_m : (3,) float
+
+    Returns
+    -------
+    centre_m : (3,) float
+    """
+    sensor = np.asarray(sensor_m, dtype=float)
+    centroid = points_m.mean(axis=0)
+    los = (centroid - sensor) / max(np.linalg.norm(centroid - sensor), 1e-12)
+    start = centroid + 0.5 * radius_m * los
+    if points_m.shape[0] < _MIN_POINTS:
+        return start
+    return lsq_fixed_radius(points_m, radius_m, start)
+
+
+def _cone_cylinder(p: np.ndarray, radius: float, sensor: np.ndarray, centre: np.ndarray,
+                   half_angle_rad: float) -> np.ndarray:
+    """Points inside the ASTM cone (apex at the centre, about centre->scanner) and cylinder."""
+    co = sensor - centre
+    axis = co / np.linalg.norm(co)
+    cp = p - centre
+    cos_angle = (cp @ axis) / np.maximum(np.linalg.norm(cp, axis=1), 1e-12)
+    in_cone = cos_angle > np.cos(half_angle_rad)
+    op = p - sensor
+    along = op @ -axis
+    perp2 = np.maximum(np.einsum("ij,ij->i", op, op) - along ** 2, 0.0)
+    in_cyl = perp2 < (radius * np.sin(half_angle_rad)) ** 2
+    return in_cone & in_cyl
+
+
+def _residuals(p: np.ndarray, centre: np.ndarray, radius: float) -> np.ndarray:
+    return np.linalg.norm(p - centre, axis=1) - radius
+
+
+def _astm_e3125(p, radius, sensor, centre, tol_m, max_iter) -> SphereFit:
+    half = np.radians(ASTM_CONE_DEG / 2)
+    used = np.ones(p.shape[0], dtype=bool)
+    converged = False
+    it = 0
+    for it in range(1, max_iter + 1):  # noqa: B007 - `it` is reported
+        sel = _cone_cylinder(p, radius, sensor, centre, half)
+        if sel.sum() < _MIN_POINTS:
+            break
+        c1 = lsq_fixed_radius(p[sel], radius, centre)
+        res = _residuals(p[sel], c1, radius)
+        keep = np.zeros_like(sel)
+        keep[np.flatnonzero(sel)[np.abs(res) < 3 * np.std(res)]] = True
+        if keep.sum() < _MIN_POINTS:
+            keep = sel
+        new = lsq_fixed_radius(p[keep], radius, c1)
+        moved = float(np.linalg.norm(new - centre))
+        centre, used = new, keep
+        if moved < tol_m:
+            converged = True
+            break
+    res = _residuals(p[used], centre, radius)
+    return SphereFit(centre, radius, float(np.sqrt(np.mean(res ** 2))), p.shape[0],
+                     int(used.sum()), used, "fixed-radius", it, converged)
+
+
+def hemisphere_model(radius_m: float, spacing_m: float | None = None) -> np.ndarray:
+    """Unit-centred hemisphere point model facing -x (Fibonacci lattice).
+
+    Parameters
+    ----------
+    radius_m : float
+    spacing_m : float, optional
+        Approximate point spacing (default ``radius_m / 40``).
+
+    Returns
+    -------
+    model : (m, 3) float
+        Points ``radius_m * u`` with ``u_x <= 0``, relative to the centre.
+    """
+    spacing = radius_m / 40 if spacing_m is None else spacing_m
+    n_full = int(np.ceil(4 * np.pi * radius_m ** 2 / spacing ** 2))
+    i = np.arange(n_full) + 0.5
+    x = 1 - 2 * i / n_full
+    phi = np.pi * (1 + 5 ** 0.5) * i
+    s = np.sqrt(1 - x ** 2)
+    u = np.column_stack([x, s * np.cos(phi), s * np.sin(phi)])
+    return radius_m * u[u[:, 0] <= 0]
+
+
+def _facing_rotation(los: np.ndarray) -> np.ndarray:
+    """Rotation taking +x to ``los`` (so the model's -x half faces the scanner)."""
+    a = np.array([1.0, 0.0, 0.0])
+    v = np.cross(a, los)
+    c = float(a @ los)
+    if np.linalg.norm(v) < 1e-12:
+        return np.eye(3) if c > 0 else np.diag([-1.0, -1.0, 1.0])
+    vx = np.array([[0, -v[2], v[1]], [v[2], 0, -v[0]], [-v[1], v[0], 0]])
+    return np.eye(3) + vx + vx @ vx / (1 + c)
+
+
+def _hemisphere_icp(p, radius, sensor, centre, max_corr, tol_m, max_iter) -> SphereFit:
+    model_local = hemisphere_model(radius)
+    converged = False
+    used = np.ones(p.shape[0], dtype=bool)
+    it = 0
+    for it in range(1, max_iter + 1):  # noqa: B007 - `it` is reported
+        los = (centre - sensor) / np.linalg.norm(centre - sensor)
+        model = model_local @ _facing_rotation(los).T + centre
+        dist, idx = cKDTree(model).query(p, k=1)
+        used = dist < max_corr
+        if used.sum() < _MIN_POINTS:
+            break
+        step = (p[used] - model[idx[used]]).mean(axis=0)
+        centre = centre + step
+        if np.linalg.norm(step) < tol_m:
+            converged = True
+            break
+    res = _residuals(p[used], centre, radius)
+    rms = float(np.sqrt(np.mean(res ** 2))) if used.any() else float("nan")
+    return SphereFit(centre, radius, rms, p.shape[0], int(used.sum()), used, "hemisphere-icp",
+                     it, converged)

@@ -1,0 +1,332 @@
+"""Predicted accuracy of a station registered to its markers by weighted least squares.
+
+Degrees of freedom
+------------------
+A station's pose in the site frame has six degrees of freedom. Roll and pitch come from the
+rover's inclinometer (1-sigma ``inclinometer_sigma_rad``) and are *not* estimated from the
+markers; the markers determine the other four: the translation ``t = (x, y, z)`` and the heading
+``psi`` (rotation about the vertical). A marker whose centre the station measures at ``p``
+(station frame, levelled) maps to the site frame as ``m = t + Rz(psi) p``. Linearised about the
+true pose, one marker contributes the 3 x 4 design block ``H = [I3 | (-dy, dx, 0)^T]``, where
+``(dx, dy)`` is the marker's horizontal offset from the station (the heading lever arm).
+Marker site coordinates are treated as known control.
+
+Each marker centre is observed with the error model's 1-sigma 3D error ``sigma`` for that
+station-site pair, i.e. per-axis variance ``sigma**2 / 3`` (isotropic). The information matrix is
+``J = sum_i (3 / sigma_i**2) H_i^T H_i`` and the pose covariance ``C = J^-1``.
+
+Predicted station error
+-----------------------
+A point of the station's cloud at horizontal offset ``q`` (``|q| <= R``, the working radius) is
+registered with error ``e = dt + dpsi * (-q_y, q_x, 0)`` plus the inclinometer's vertical error
+``|q| * inclinometer_sigma`` — so its covariance is ``Sigma(q) = G(q) C G(q)^T + diag(0, 0,
+|q|^2 s_incl^2)``. The reported figure is the conservative 95 % bound
+``sqrt(chi2_3(0.95) * lambda_max(Sigma(q)))`` maximised over the working disc. ``lambda_max`` of
+``Sigma(q)`` is convex in ``q``, so the maximum lies on the rim; it is evaluated at 72 bearings.
+
+Adding a marker adds a positive semi-definite term to ``J``, so the predicted error never grows
+when a marker is added (monotone in the marker set) — the integer program's cuts rely on this.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.stats import chi2
+
+from markerplan.errors import ConfigError
+
+#: chi-square 95 % quantile with 3 degrees of freedom (3D position error).
+CHI2_3_95 = float(chi2.ppf(0.95, 3))
+
+_N_RIM = 72
+
+
+def _design_blocks(offset_xy: np.ndarray) -> np.ndarray:
+    """(k, 3, 4) design blocks ``[I3 | (-dy, dx, 0)]`` for horizontal offsets (k, 2)."""
+    k = offset_xy.shape[0]
+    h = np.zeros((k, 3, 4))
+    h[:, 0, 0] = h[:, 1, 1] = h[:, 2, 2] = 1.0
+    h[:, 0, 3] = -offset_xy[:, 1]
+    h[:, 1, 3] = offset_xy[:, 0]
+    return h
+
+
+def _accuracy_iv(station_xy, marker_xy, sigma_m):
+    station_xy = np.asarray(station_xy, dtype=float)
+    marker_xy = np.asarray(marker_xy, dtype=float)
+    sigma_m = np.asarray(sigma_m, dtype=float)
+    if station_xy.shape[-1:] != (2,) and station_xy.shape[-1:] != (3,):
+        raise ConfigError(f"`station_xy` must have shape (2,) or (3,), got {station_xy.shape}")
+    if marker_xy.ndim != 2 or marker_xy.shape[1] not in (2, 3):
+        raise ConfigError(f"`marker_xy` must have shape (k, 2) or (k, 3), got {marker_xy.shape}")
+    if sigma_m.shape != (marker_xy.shape[0],):
+        raise ConfigError(f"`sigma_m` must have shape ({marker_xy.shape[0]},), "
+                          f"got {sigma_m.shape}")
+    if np.any(~np.isfinite(sigma_m)) or np.any(sigma_m <= 0):
+        raise ConfigError("`sigma_m` must be finite and > 0 for every marker")
+    return station_xy[:2], marker_xy[:, :2], sigma_m
+
+
+def information_matrix(station_xy, marker_xy, sigma_m) -> np.ndarray:
+    """Fisher information of the 4-DoF pose (x, y, z, heading) from a set of markers.
+
+    Parameters
+    ----------
+    station_xy : (2,) or (3,) float
+        Station position, site frame, m (only x, y are used).
+    marker_xy : (k, 2) or (k, 3) float
+        Marker centres, site frame, m.
+    sigma_m : (k,) float
+        1-sigma 3D centre error of each marker as seen from this station, m.
+
+    Returns
+    -------
+    J : (4, 4) float
+        Information matrix in units of 1/m^2 (translation) and 1/rad^2 (heading).
+
+    Examples
+    --------
+    >>> J = information_matrix([0, 0], [[10, 0], [0, 10], [-10, 0]], [0.01, 0.01, 0.01])
+    >>> round(J[0, 0])
+    90000
+    """
+    station_xy, marker_xy, sigma_m = _accuracy_iv(station_xy, marker_xy, sigma_m)
+    return _information(marker_xy - station_xy, 3.0 / sigma_m**2)
+
+
+def _information(offset_xy: np.ndarray, weight: np.ndarray) -> np.ndarray:
+    h = _design_blocks(offset_xy)
+    return np.einsum("k,kia,kib->ab", weight, h, h)
+
+
+def pose_covariance(station_xy, marker_xy, sigma_m) -> np.ndarray | None:
+    """Covariance of (x, y, z, heading), or ``None`` when the markers do not fix the pose."""
+    j = information_matrix(station_xy, marker_xy, sigma_m)
+    return _invert(j)
+
+
+def _invert(j: np.ndarray) -> np.ndarray | None:
+    w = np.linalg.eigvalsh(j)
+    if w[0] <= 1e-9 * max(w[-1], 1e-300):
+        return None
+    return np.linalg.inv(j)
+
+
+def _rim_blocks(working_radius_m: float) -> np.ndarray:
+    phi = np.linspace(0.0, 2.0 * np.pi, _N_RIM, endpoint=False)
+    q = working_radius_m * np.column_stack([np.cos(phi), np.sin(phi)])
+    return np.concatenate([_design_blocks(np.zeros((1, 2))), _design_blocks(q)])
+
+
+def errors_from_information(j: np.ndarray, working_radius_m: float,
+                            inclinometer_sigma_rad: float = 0.0) -> np.ndarray:
+    """Predicted 95 % error (see module doc) for a batch of information matrices, m.
+
+    Parameters
+    ----------
+    j : (k, 4, 4) float
+        Information matrices of the 4-DoF pose.
+    working_radius_m, inclinometer_sigma_rad : float
+
+    Returns
+    -------
+    error_m : (k,) float
+        ``inf`` where the pose is not determined (singular information).
+    """
+    j = np.asarray(j, dtype=float).reshape(-1, 4, 4)
+    w = np.linalg.eigvalsh(j)
+    ok = w[:, 0] > 1e-9 * np.maximum(w[:, -1], 1e-300)
+    out = np.full(j.shape[0], np.inf)
+    if not ok.any():
+        return out
+    cov = np.linalg.inv(j[ok])
+    g = _rim_blocks(working_radius_m)  # (r, 3, 4); row 0 is the station itself
+    sig = np.einsum("ria,kab,rjb->krij", g, cov, g)
+    radius = np.full(g.shape[0], working_radius_m)
+    radius[0] = 0.0
+    sig[:, :, 2, 2] += (radius * inclinometer_sigma_rad) ** 2
+    lam = np.linalg.eigvalsh(sig)[..., -1].max(axis=1)
+    out[ok] = np.sqrt(CHI2_3_95 * lam)
+    return out
+
+
+def error_from_covariance(cov: np.ndarray | None, working_radius_m: float,
+                          inclinometer_sigma_rad: float) -> float:
+    """95 % bound of the registered position error over the working disc, m (see module doc).
+
+    ``inf`` when ``cov`` is ``None`` (pose not determined).
+    """
+    if cov is None:
+        return float("inf")
+    return float(errors_from_information(np.linalg.inv(cov)[None], working_radius_m,
+                                         inclinometer_sigma_rad)[0])
+
+
+def pair_information(station_xy, marker_xy, sigma_m) -> np.ndarray:
+    """(k, 4, 4) information contributed by each marker separately (see
+    :func:`information_matrix`)."""
+    station_xy, marker_xy, sigma_m = _accuracy_iv(station_xy, marker_xy, sigma_m)
+    h = _design_blocks(marker_xy - station_xy)
+    return np.einsum("k,kia,kib->kab", 3.0 / sigma_m**2, h, h)
+
+
+def station_error(station_xy, marker_xy, sigma_m, working_radius_m: float,
+                  inclinometer_sigma_rad: float = 0.0) -> float:
+    """Predicted 95 % registered-position error of a station over its working radius, m.
+
+    Parameters
+    ----------
+    station_xy : (2,) or (3,) float
+        Station position, site frame, m.
+    marker_xy : (k, 2) or (k, 3) float
+        Centres of the markers the station uses, site frame, m.
+    sigma_m : (k,) float
+        Error-model 1-sigma 3D centre error for each (station, marker) pair, m.
+    working_radius_m : float
+        Radius of the station's working disc, m.
+    inclinometer_sigma_rad : float
+        1-sigma roll/pitch error, rad.
+
+    Returns
+    -------
+    error_m : float
+        ``inf`` when the markers cannot fix x, y, z and heading (fewer than two distinct
+        horizontal positions).
+
+    Examples
+    --------
+    >>> station_error([0, 0], [[10, 0]], [0.01], 10.0)
+    inf
+    >>> e = station_error([0, 0], [[10, 0], [0, 10], [-10, 0]], [0.01] * 3, 10.0)
+    >>> 0.005 < e < 0.05
+    True
+    """
+    station_xy, marker_xy, sigma_m = _accuracy_iv(station_xy, marker_xy, sigma_m)
+    if working_radius_m <= 0 or inclinometer_sigma_rad < 0:
+        raise ConfigError(f"`working_radius_m` must be > 0 and `inclinometer_sigma_rad` >= 0, "
+                          f"got {working_radius_m!r}, {inclinometer_sigma_rad!r}")
+    if marker_xy.shape[0] == 0:
+        return float("inf")
+    j = _information(marker_xy - station_xy, 3.0 / sigma_m**2)
+    return float(errors_from_information(j[None], working_radius_m, inclinometer_sigma_rad)[0])
+
+
+def information_lower_bound(requirement_m: float) -> float:
+    """Least translation information ``sum_i 3 / sigma_i**2`` any passing station needs, 1/m^2.
+
+    The translation block of ``C`` is at least ``(J_tt)^-1 = I / sum_i (3 / sigma_i**2)`` (Schur
+    complement), and the error at the station itself is ``sqrt(chi2_3(0.95) * lambda_max(C_tt))``,
+    so meeting ``requirement_m`` needs ``sum_i 3 / sigma_i**2 >= chi2_3(0.95) / requirement_m**2``.
+    A necessary (valid) linear cut for the integer program.
+    """
+    return CHI2_3_95 / requirement_m**2
+
+
+def heading_information_lower_bound(requirement_m: float, working_radius_m: float) -> float:
+    """Least heading information ``sum_i 3 |d_i|^2 / sigma_i**2`` a passing station needs.
+
+    ``d_i`` is marker ``i``'s horizontal offset from the station (m). For rim points ``q`` and
+    ``-q`` the lever-arm term flips sign, so ``Var(u.dt + R dpsi) + Var(u.dt - R dpsi) =
+    2 Var(u.dt) + 2 R^2 C_psipsi``: the larger of the two is at least ``R^2 C_psipsi >= R^2 /
+    J_psipsi``. Meeting ``requirement_m`` therefore needs
+    ``J_psipsi >= chi2_3(0.95) R^2 / requirement_m**2`` — a second valid linear cut.
+    """
+    return CHI2_3_95 * working_radius_m**2 / requirement_m**2
+
+
+def fit_pose(station_frame_xyz: np.ndarray, site_xyz: np.ndarray, sigma_m: np.ndarray,
+             heading0_rad: float = 0.0, iterations: int = 10) -> tuple[np.ndarray, float]:
+    """Weighted least-squares 4-DoF pose from marker correspondences (Gauss-Newton).
+
+    Parameters
+    ----------
+    station_frame_xyz : (k, 3) float
+        Marker centres measured in the levelled station frame (roll/pitch already removed), m.
+    site_xyz : (k, 3) float
+        The same markers' site-frame coordinates (control), m.
+    sigma_m : (k,) float
+        1-sigma 3D centre error of each measurement, m (weights ``3 / sigma**2``).
+    heading0_rad : float
+        Starting heading, rad.
+    iterations : int
+        Gauss-Newton iterations.
+
+    Returns
+    -------
+    translation_m : (3,) float
+        Station origin in the site frame, m.
+    heading_rad : float
+        Rotation about the vertical from the levelled station frame to the site frame, rad.
+    """
+    p = np.asarray(station_frame_xyz, dtype=float)
+    m = np.asarray(site_xyz, dtype=float)
+    w = 3.0 / np.asarray(sigma_m, dtype=float) ** 2
+    if p.shape != m.shape or p.ndim != 2 or p.shape[1] != 3 or w.shape != (p.shape[0],):
+        raise ConfigError(f"`station_frame_xyz` and `site_xyz` must both be (k, 3) and "
+                          f"`sigma_m` (k,), got {p.shape}, {m.shape}, {w.shape}")
+    if p.shape[0] < 2:
+        raise ConfigError(f"fit_pose needs at least 2 markers, got {p.shape[0]}")
+    psi = float(heading0_rad)
+    t = np.average(m - _rz(psi, p), axis=0, weights=w)
+    for _ in range(iterations):
+        rp = _rz(psi, p)
+        r = (m - (t + rp)).reshape(-1)
+        h = _design_blocks(rp[:, :2]).reshape(-1, 4)
+        ww = np.repeat(w, 3)
+        step = np.linalg.solve(h.T @ (h * ww[:, None]), h.T @ (ww * r))
+        t = t + step[:3]
+        psi += step[3]
+        if np.abs(step).max() < 1e-12:
+            break
+    return t, psi
+
+
+def _rz(psi: float, p: np.ndarray) -> np.ndarray:
+    c, s = np.cos(psi), np.sin(psi)
+    return np.column_stack([c * p[:, 0] - s * p[:, 1], s * p[:, 0] + c * p[:, 1], p[:, 2]])
+
+
+def registration_error(translation_est_m, heading_est_rad: float, translation_true_m,
+                       heading_true_rad: float, working_radius_m: float) -> float:
+    """Largest 3D error over the working disc of a station registered with an estimated pose, m.
+
+    The levelled station-frame points ``p`` with ``|p_xy| <= working_radius_m`` at the station's
+    own height map to ``t + Rz(psi) p``; the error is the largest difference between the estimated
+    and true mapping (a rigid-motion difference, so the maximum lies on the rim).
+    """
+    phi = np.linspace(0.0, 2.0 * np.pi, 360, endpoint=False)
+    p = working_radius_m * np.column_stack([np.cos(phi), np.sin(phi), np.zeros_like(phi)])
+    p = np.vstack([np.zeros((1, 3)), p])
+    est = np.asarray(translation_est_m, float) + _rz(heading_est_rad, p)
+    tru = np.asarray(translation_true_m, float) + _rz(heading_true_rad, p)
+    return float(np.linalg.norm(est - tru, axis=1).max())
+
+
+def station_errors(problem, selected, working_radius_m: float,
+                   inclinometer_sigma_rad: float = 0.0) -> np.ndarray:
+    """Predicted error of every station of a :class:`~planner.usability.PlanProblem`, m.
+
+    Parameters
+    ----------
+    problem : PlanProblem
+    selected : (n,) bool
+        Which candidate sites hold a marker; each station uses its usable selected ones.
+    working_radius_m, inclinometer_sigma_rad : float
+        As in :func:`station_error`.
+
+    Returns
+    -------
+    error_m : (s,) float
+        ``inf`` for a station whose markers cannot fix its pose.
+    """
+    selected = np.asarray(selected, dtype=bool)
+    if selected.shape != (problem.n_sites,):
+        raise ConfigError(f"`selected` must have shape ({problem.n_sites},), got {selected.shape}")
+    out = np.empty(problem.n_stations)
+    for s in range(problem.n_stations):
+        idx = problem.usable_pairs(s)
+        idx = idx[selected[problem.pair_site[idx]]]
+        out[s] = station_error(problem.station_xyz[s], problem.site_xyz[problem.pair_site[idx]],
+                               problem.pair_sigma_m[idx], working_radius_m,
+                               inclinometer_sigma_rad) if idx.size else float("inf")
+    return out

@@ -1,0 +1,158 @@
+"""Baseline layouts the integer program is compared with, on the same problem.
+
+- :func:`greedy_cover`: repeatedly add the site that removes the most unmet requirement
+  (missing markers, missing sectors, failing accuracy) over all stations.
+- :func:`regular_grid`: markers on a square grid, each grid point moved to the nearest
+  candidate site; the widest spacing whose layout meets the requirement at every station.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from markerplan.errors import InfeasiblePlanError
+from planner import accuracy
+from planner.program import _resolve_ids, evaluate_layout, station_infos
+from planner.usability import PlanProblem, sector_index
+
+
+#: Grid phases tried at each spacing (fraction of the spacing from the bounds' lower corner).
+_PHASES = (0.5, 0.0, 0.25, 0.75)
+
+
+@dataclass(frozen=True)
+class Baseline:
+    """A baseline layout.
+
+    Attributes
+    ----------
+    name : str
+    selected : (n,) bool
+    meets_requirement : bool
+    spacing_m : float or None
+        Grid spacing (regular grid only), m.
+    """
+
+    name: str
+    selected: np.ndarray
+    meets_requirement: bool
+    spacing_m: float | None = None
+
+    @property
+    def n_markers(self) -> int:
+        return int(self.selected.sum())
+
+
+def greedy_cover(problem: PlanProblem, config) -> Baseline:
+    """Greedy cover: add one site at a time until every station meets the requirement.
+
+    The score of a site is the sum over stations of what it fixes: one missing marker (1), one
+    missing sector (1), and for a station whose directions are met but accuracy fails, the
+    relative reduction of its predicted error (1 when it then passes). Ties go to the site with
+    more information; existing markers start selected, forbidden sites are never used.
+
+    Raises
+    ------
+    InfeasiblePlanError
+        When no remaining site improves a station that still fails.
+    """
+    infos = station_infos(problem, config)
+    forbidden = _resolve_ids(problem, config.forbidden, "forbidden")
+    selected = problem.site_existing | _resolve_ids(problem, config.existing, "existing")
+    min_count = config.min_markers + (1 if config.redundant else 0)
+    sec = [sector_index(problem.pair_bearing_rad[problem.usable_pairs(s)], config.n_sectors)
+           for s in range(problem.n_stations)]
+    while True:
+        check = evaluate_layout(problem, selected, config, infos)
+        if check.all_ok:
+            return Baseline("greedy", selected, True)
+        score = np.zeros(problem.n_sites)
+        for s in np.flatnonzero(~check.ok):
+            info = infos[s]
+            free = ~selected[info.sites] & ~forbidden[info.sites]
+            if not free.any():
+                continue
+            sites = info.sites[free]
+            gain = np.zeros(sites.size)
+            if check.count[s] < min_count:
+                gain += 1.0
+            occupied = np.zeros(config.n_sectors, bool)
+            occupied[sec[s][selected[info.sites]]] = True
+            if check.sectors[s] < config.min_sectors:
+                gain += ~occupied[sec[s][free]]
+            elif config.redundant and check.worst_loss_sectors[s] < config.min_sectors:
+                per = np.bincount(sec[s][selected[info.sites]], minlength=config.n_sectors)
+                gain += per[sec[s][free]] == 1
+            if check.count[s] >= min_count and check.sectors[s] >= config.min_sectors:
+                base = info.info[selected[info.sites]].sum(axis=0)
+                err = accuracy.errors_from_information(base[None] + info.info[free],
+                                                       info.radius, info.incl)
+                before = max(check.error_m[s], check.worst_loss_error_m[s]
+                             if config.redundant else 0.0)
+                rel = np.where(np.isfinite(before), (before - err) / before, 1.0)
+                gain += np.where(err <= config.requirement_m, 1.0, np.clip(rel, 0.0, 1.0))
+            # tie-break: information the site brings (small, never outweighs a fix)
+            gain += 1e-6 * np.trace(info.info[free][:, :3, :3], axis1=1, axis2=2) \
+                / np.trace(info.info[free][:, :3, :3], axis1=1, axis2=2).max()
+            np.add.at(score, sites, gain)
+        if score.max() <= 0:
+            names = [problem.station_ids[s] for s in np.flatnonzero(~check.ok)]
+            raise InfeasiblePlanError(f"greedy cover cannot satisfy station(s) "
+                                      f"{', '.join(names)}: no remaining site helps")
+        selected = selected.copy()
+        selected[int(np.argmax(score))] = True
+
+
+def regular_grid(problem: PlanProblem, config, bounds_xy: tuple[float, float, float, float],
+                 spacings_m: np.ndarray | None = None) -> Baseline:
+    """Widest square-grid layout that meets the requirement at every station.
+
+    At each spacing four grid phases per axis are tried (the grid is not favoured or
+    penalised by where its corner happens to fall); the passing phase with fewest markers wins.
+
+    Parameters
+    ----------
+    problem : PlanProblem
+    config : PlanConfig
+    bounds_xy : (xmin, ymin, xmax, ymax)
+        Rectangle the grid covers (site frame, m); grid points start half a spacing inside.
+    spacings_m : (k,) float, optional
+        Spacings to try, widest first (default: ``max_range_m`` down to ``grid_spacing_m`` in
+        0.5 m steps).
+
+    Returns
+    -------
+    baseline : Baseline
+        ``meets_requirement`` is False (and ``selected`` the densest grid tried) when no
+        spacing works.
+    """
+    infos = station_infos(problem, config)
+    forbidden = _resolve_ids(problem, config.forbidden, "forbidden")
+    existing = problem.site_existing | _resolve_ids(problem, config.existing, "existing")
+    pool = np.flatnonzero(~forbidden & ~problem.site_existing)
+    tree = cKDTree(problem.site_xyz[pool, :2])
+    if spacings_m is None:
+        spacings_m = np.arange(config.max_range_m, config.grid_spacing_m - 1e-9, -0.5)
+    x0, y0, x1, y1 = bounds_xy
+    selected = existing
+    for a in spacings_m:
+        best = None
+        for fx in _PHASES:
+            for fy in _PHASES:
+                gx = np.arange(x0 + fx * a, x1 + 1e-9, a)
+                gy = np.arange(y0 + fy * a, y1 + 1e-9, a)
+                xx, yy = np.meshgrid(gx, gy)
+                pts = np.column_stack([xx.ravel(), yy.ravel()])
+                d, k = tree.query(pts)
+                trial = existing.copy()
+                trial[pool[k[d <= a / 2]]] = True
+                if (best is None or trial.sum() < best.sum()) and \
+                        evaluate_layout(problem, trial, config, infos).all_ok:
+                    best = trial
+                selected = trial
+        if best is not None:
+            return Baseline("regular grid", best, True, float(a))
+    return Baseline("regular grid", selected, False, None)

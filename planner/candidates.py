@@ -1,0 +1,221 @@
+"""Candidate marker sites: a grid inside the site boundary, minus what a marker cannot use.
+
+All coordinates are in the site frame (local metres). A candidate's marker centre is the ground
+height under it plus the marker radius (the sphere rests on the ground).
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import shapely
+from shapely.geometry import MultiPolygon, Polygon, shape
+
+from markerplan.errors import ConfigError, DataError, InputFileError
+
+#: Baseline for the slope under a marker, m (a 0.20 m sphere's footprint, not DEM micro-relief).
+SLOPE_BASELINE_M = 0.25
+
+
+@dataclass(frozen=True)
+class Candidates:
+    """Candidate marker sites, site frame.
+
+    Attributes
+    ----------
+    ids : tuple of str, (n,)
+    centre_m : (n, 3) float
+        Marker centre at each site (ground + radius), m.
+    dropped : dict
+        Number of grid points dropped per reason (outside boundary, excluded, slope, crater,
+        near station).
+    """
+
+    ids: tuple[str, ...]
+    centre_m: np.ndarray
+    dropped: dict = field(default_factory=dict)
+
+    @property
+    def xy_m(self) -> np.ndarray:
+        return self.centre_m[:, :2]
+
+    def __len__(self) -> int:
+        return len(self.ids)
+
+
+def load_polygons(path: str | Path, option: str = "--exclude") -> list[Polygon]:
+    """Read polygons (site frame, metres) from a GeoJSON file.
+
+    Accepts a FeatureCollection, a Feature or a bare geometry of type Polygon or MultiPolygon.
+
+    Raises
+    ------
+    InputFileError
+        Missing or unreadable file, no polygons, or an invalid polygon (self-intersecting, too few
+        points), naming the file and the feature.
+    """
+    path = Path(path)
+    try:
+        data = json.loads(path.read_text())
+    except FileNotFoundError as exc:
+        raise InputFileError(f"{option} {path}: file not found; give an existing GeoJSON file") \
+            from exc
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise InputFileError(f"{option} {path}: not valid JSON ({exc}); give a GeoJSON file") \
+            from exc
+    if not isinstance(data, dict):
+        raise InputFileError(f"{option} {path}: expected a GeoJSON object, got "
+                             f"{type(data).__name__}")
+    if data.get("type") == "FeatureCollection":
+        geoms = [f.get("geometry") if isinstance(f, dict) else None
+                 for f in data.get("features", [])]
+    elif data.get("type") == "Feature":
+        geoms = [data.get("geometry")]
+    else:
+        geoms = [data]
+    polys: list[Polygon] = []
+    for k, g in enumerate(geoms):
+        where = f"{option} {path}: feature {k}"
+        if not isinstance(g, dict) or g.get("type") not in ("Polygon", "MultiPolygon"):
+            got = g.get("type") if isinstance(g, dict) else type(g).__name__
+            raise InputFileError(f"{where}: geometry must be a Polygon or MultiPolygon, got {got}")
+        try:
+            geom = shape(g)
+        except (ValueError, TypeError, AttributeError, IndexError, KeyError) as exc:
+            raise InputFileError(f"{where}: malformed polygon coordinates ({exc}); give "
+                                 "closed rings of [x, y] pairs in metres") from exc
+        parts = list(geom.geoms) if isinstance(geom, MultiPolygon) else [geom]
+        for p in parts:
+            polys.append(_valid_polygon(p, where))
+    if not polys:
+        raise InputFileError(f"{option} {path}: no polygons found; give a GeoJSON Polygon")
+    return polys
+
+
+def _valid_polygon(p: Polygon, where: str) -> Polygon:
+    if p.is_empty or p.convex_hull.area <= 0:
+        raise InputFileError(f"{where}: polygon is empty or has zero area; give at least "
+                             "three distinct, non-collinear corners")
+    if not p.is_valid:
+        raise InputFileError(f"{where}: invalid polygon ({shapely.is_valid_reason(p)}); fix the "
+                             "ring so it does not cross itself")
+    return p
+
+
+def as_polygon(boundary, name: str = "boundary") -> Polygon:
+    """A valid shapely Polygon from a Polygon or an (k, 2) array of corners (site frame, m)."""
+    if isinstance(boundary, Polygon):
+        return _valid_polygon(boundary, name)
+    arr = np.asarray(boundary, dtype=float)
+    if arr.ndim != 2 or arr.shape[1] != 2 or arr.shape[0] < 3:
+        raise ConfigError(f"`{name}` must be a polygon or (k >= 3, 2) corners, got {arr.shape}")
+    return _valid_polygon(Polygon(arr), name)
+
+
+def _candidates_iv(dem, boundary, exclusions, station_xy, config):
+    xmin, xmax, ymin, ymax = dem.extent()
+    dem_box = shapely.box(xmin, ymin, xmax, ymax)
+    region = dem_box if boundary is None else as_polygon(boundary).intersection(dem_box)
+    if region.is_empty:
+        raise DataError("the site boundary does not overlap the DEM "
+                        f"[{xmin:.1f}, {xmax:.1f}] x [{ymin:.1f}, {ymax:.1f}] m; "
+                        "give a boundary in the DEM's site frame")
+    excl = [as_polygon(e, "exclusion") for e in exclusions]
+    st = np.zeros((0, 2)) if station_xy is None else np.asarray(station_xy, float)
+    if st.ndim != 2 or st.shape[1] < 2:
+        raise ConfigError(f"`station_xy` must have shape (s, 2) or (s, 3), got {st.shape}")
+    return region, excl, st[:, :2]
+
+
+def candidate_sites(dem, config, boundary=None, exclusions=(), station_xy=None, craters=(),
+                    marker_radius_m: float = 0.10) -> Candidates:
+    """Grid of candidate marker sites.
+
+    Parameters
+    ----------
+    dem : visibility.dem.DEM
+        Terrain, site frame.
+    config : PlanConfig
+        Uses ``grid_spacing_m``, ``max_slope_deg``, ``exclude_crater_interiors``,
+        ``min_station_distance_m``.
+    boundary : Polygon or (k, 2) float, optional
+        Site boundary; default the DEM's rectangle.
+    exclusions : sequence of Polygon or (k, 2) float
+        Areas where no marker may go (work zones, rover paths).
+    station_xy : (s, 2) or (s, 3) float, optional
+        Stations; sites closer than ``min_station_distance_m`` are dropped.
+    craters : sequence
+        Objects with ``centre_xy_m`` and ``diameter_m``; their interiors (within the rim crest)
+        are dropped when ``config.exclude_crater_interiors``.
+    marker_radius_m : float
+        Marker radius, m (centre = ground + radius).
+
+    Returns
+    -------
+    candidates : Candidates
+
+    Raises
+    ------
+    DataError
+        When no site survives, with the count dropped for each reason.
+    """
+    region, excl, st = _candidates_iv(dem, boundary, exclusions, station_xy, config)
+    s = config.grid_spacing_m
+    x0, y0, x1, y1 = region.bounds
+    gx = np.arange(x0 + s / 2, x1, s)
+    gy = np.arange(y0 + s / 2, y1, s)
+    xx, yy = np.meshgrid(gx, gy)
+    xy = np.column_stack([xx.ravel(), yy.ravel()])
+    dropped = {}
+
+    def drop(mask, reason):
+        nonlocal xy
+        dropped[reason] = int(mask.sum())
+        xy = xy[~mask]
+
+    # keep a slope baseline's margin inside the DEM so height_at never leaves it
+    h = max(SLOPE_BASELINE_M, dem.cell_size_m)
+    inner = shapely.box(dem.extent()[0] + h, dem.extent()[2] + h, dem.extent()[1] - h,
+                        dem.extent()[3] - h)
+    drop(~shapely.contains_xy(region.intersection(inner), xy[:, 0], xy[:, 1]),
+         "outside boundary")
+    if excl:
+        union = shapely.union_all(excl)
+        drop(shapely.intersects_xy(union, xy[:, 0], xy[:, 1]), "excluded zone")
+    if len(st) and len(xy):
+        d = np.min(np.linalg.norm(xy[:, None, :] - st[None, :, :], axis=2), axis=1)
+        drop(d < config.min_station_distance_m, "near station")
+    if config.exclude_crater_interiors and len(craters) and len(xy):
+        inside = np.zeros(len(xy), bool)
+        for c in craters:
+            cx, cy = c.centre_xy_m
+            inside |= np.hypot(xy[:, 0] - cx, xy[:, 1] - cy) < 0.5 * c.diameter_m
+        drop(inside, "crater interior")
+    if len(xy):
+        drop(ground_slope_rad(dem, xy, h) > config.max_slope_rad, "too steep")
+    if len(xy) == 0:
+        raise DataError("no candidate marker site is left (dropped: "
+                        + ", ".join(f"{v} {k}" for k, v in dropped.items())
+                        + "); enlarge the boundary, shrink exclusions or relax max_slope_deg")
+    z = dem.height_at(xy) + marker_radius_m
+    ids = tuple(f"C{k:05d}" for k in range(len(xy)))
+    return Candidates(ids=ids, centre_m=np.column_stack([xy, z]), dropped=dropped)
+
+
+def ground_slope_rad(dem, xy: np.ndarray, baseline_m: float = SLOPE_BASELINE_M) -> np.ndarray:
+    """Ground slope at points from central differences of the DEM over ``baseline_m``, rad.
+
+    Parameters
+    ----------
+    dem : visibility.dem.DEM
+    xy : (n, 2) float
+        Site-frame points at least ``baseline_m`` inside the DEM, m.
+    """
+    e = np.array([[baseline_m, 0.0]])
+    n = np.array([[0.0, baseline_m]])
+    gx = (dem.height_at(xy + e) - dem.height_at(xy - e)) / (2 * baseline_m)
+    gy = (dem.height_at(xy + n) - dem.height_at(xy - n)) / (2 * baseline_m)
+    return np.arctan(np.hypot(gx, gy))

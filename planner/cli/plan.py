@@ -1,0 +1,116 @@
+"""``markerplan plan``: the fewest marker sites meeting the requirement; map, report, GeoJSON."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import click
+
+from planner.cli._common import (
+    emit_summary,
+    json_option,
+    out_option,
+    overwrite_option,
+    staged_output,
+)
+
+_FILE = click.Path(dir_okay=False, path_type=Path)
+
+
+@click.command("plan")
+@click.option("--site", "site_name", default="default", show_default=True,
+              help="Site preset: default (40 m crater field, 7 stations) or large (300 m).")
+@click.option("--seed", type=int, default=None,
+              help="Seed of the preset's synthetic terrain (default: the preset's own).")
+@click.option("--dem", "dem_path", type=_FILE,
+              help="DEM (.tif/.tiff/.npz, site-frame metres) instead of the preset terrain.")
+@click.option("--stations", "stations_path", type=_FILE,
+              help="Stations CSV (id,x_m,y_m[,z_m][,heading_deg]) or GeoJSON Points.")
+@click.option("--boundary", "boundary_path", type=_FILE,
+              help="GeoJSON polygon: where markers may go (default: the preset's, or the DEM).")
+@click.option("--exclude", "exclude_paths", type=_FILE, multiple=True,
+              help="GeoJSON polygon(s) where no marker may go (repeatable).")
+@click.option("--error-model", "error_model_path", type=_FILE,
+              help="Error-model JSON from fit-error-model (default: the shipped model).")
+@click.option("--config", "config_path", type=_FILE,
+              help="TOML file of plan settings (requirement_m, n_sectors, ...).")
+@click.option("--visibility", "visibility_path", type=_FILE,
+              help="Plan from a visibility table CSV (station,site,usable,bearing_deg,sigma_m,"
+                   "site_x_m,site_y_m,site_z_m) instead of ray casting.")
+@click.option("--redundant", is_flag=True, default=None,
+              help="Every station must survive the loss of any one marker.")
+@click.option("--existing",
+              help="Markers already in the field, fixed: 'as-built' or a CSV (id,x_m,y_m[,z_m]).")
+@click.option("--budget", type=int, help="Largest number of markers allowed.")
+@click.option("--time-limit", "time_limit_s", type=float,
+              help="Solver time limit for the whole plan, seconds (default 60).")
+@out_option(default="markerplan-out")
+@overwrite_option
+@json_option
+def command(site_name, seed, dem_path, stations_path, boundary_path, exclude_paths,
+            error_model_path, config_path, visibility_path, redundant, existing, budget,
+            time_limit_s, out, overwrite, as_json):
+    """Plan the fewest marker sites so that every station meets the accuracy requirement.
+
+    Writes plan.json, markers.csv, markers.geojson (site frame, local metres), map.png and
+    report.md under --out. With no arguments: the default site, into ./markerplan-out/.
+
+    \b
+    Examples:
+      markerplan plan
+      markerplan plan --site default --redundant --out plan-redundant/
+      markerplan plan --dem site.tif --stations stations.csv --exclude paths.geojson --out p/
+    """
+    from markerplan.errors import ConfigError
+    from planner.config import PlanConfig, load_config
+    from planner.planning import load_inputs, make_plan
+    from planner.plan_map import draw_plan_map
+    from planner.report import summary, write_plan_files
+
+    config = load_config(config_path) if config_path else PlanConfig()
+    overrides = {}
+    if redundant:
+        overrides["redundant"] = True
+    if budget is not None:
+        overrides["budget"] = budget
+    if time_limit_s is not None:
+        overrides["time_limit_s"] = time_limit_s
+    try:
+        config = config.replace(**overrides)
+    except ConfigError as exc:
+        raise ConfigError(f"{exc} (from the command-line options)") from exc
+    inputs = load_inputs(site_name, seed, dem_path=dem_path, stations_path=stations_path,
+                         boundary_path=boundary_path, exclude_paths=exclude_paths,
+                         existing=existing)
+    if inputs.existing_ids:
+        config = config.replace(existing=tuple(inputs.existing_ids))
+    problem = None
+    if visibility_path is not None:
+        from planner.visibility_io import read_visibility_table
+
+        problem = read_visibility_table(visibility_path, inputs.station_ids, inputs.station_xyz)
+        if inputs.existing_ids:
+            raise ConfigError("--existing cannot be combined with --visibility; list the "
+                              "existing markers as sites in the visibility table instead")
+        model, model_name = None, f"from visibility table {visibility_path}"
+    elif error_model_path is not None:
+        from error_model.model import ErrorModel
+
+        model, model_name = ErrorModel.load(error_model_path), str(error_model_path)
+    else:
+        from error_model import default_model
+
+        model, model_name = default_model(), "default (shipped with markerplan)"
+    outcome = make_plan(inputs, config, model, model_name, problem=problem,
+                        progress=not as_json or sys.stderr.isatty())
+    with staged_output(out, overwrite) as stage:
+        doc = write_plan_files(outcome, stage)
+        draw_plan_map(outcome, stage / "map.png")
+    info = summary(doc, out)
+    human = (f"{doc['n_markers']} markers ({doc['solver']['status']}); worst station "
+             f"{info['worst_station_error_m']:.3f} m <= {config.requirement_m:g} m; "
+             + "; ".join(f"{k.replace('_', ' ')}: {v['n_markers']}"
+                         for k, v in doc["baselines"].items())
+             + f" -> {out}/")
+    emit_summary(info, as_json, human)

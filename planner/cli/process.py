@@ -1,0 +1,144 @@
+"""``markerplan process``: scans -> marker table, per-station summary, edge residuals."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import click
+
+from planner.cli._common import (
+    emit_summary,
+    json_option,
+    out_option,
+    overwrite_option,
+    staged_output,
+)
+
+_METHODS = ("fixed-radius", "hemisphere-icp")
+
+
+def _parse_stage_options(items: tuple[str, ...]) -> dict[str, dict[str, object]]:
+    """``STAGE.OPTION=VALUE`` strings -> nested dict (values parsed as JSON when possible)."""
+    import json
+
+    from markerplan.errors import ConfigError
+
+    out: dict[str, dict[str, object]] = {}
+    for item in items:
+        key, sep, value = item.partition("=")
+        stage, dot, option = key.partition(".")
+        if not sep or not dot or not stage or not option:
+            raise ConfigError(f"--set expects STAGE.OPTION=VALUE like quality.min_points=30, "
+                              f"got {item!r}")
+        try:
+            parsed = json.loads(value)
+        except json.JSONDecodeError:
+            parsed = value
+        out.setdefault(stage.strip(), {})[option.strip()] = parsed
+    return out
+
+
+def _parse_offsets(text: str):
+    from markerplan.errors import ConfigError
+    from pipeline.rig import MountingOffsets
+
+    try:
+        v = [float(p) for p in text.split(",")]
+    except ValueError:
+        v = []
+    if len(v) != 4:
+        raise ConfigError("--offsets must be VERTICAL_AXIS_DEG,LFRAME_TILT_DEG,DX_M,DY_M like "
+                          f"0.3,0.3,0.015,0; got {text!r}")
+    import math
+
+    return MountingOffsets(math.radians(v[0]), math.radians(v[1]), (v[2], v[3]))
+
+
+@click.command("process")
+@click.argument("scans", nargs=-1, required=True,
+                type=click.Path(dir_okay=False, path_type=Path))
+@out_option(required=True)
+@overwrite_option
+@click.option("--reference", "references", multiple=True,
+              type=click.Path(dir_okay=False, path_type=Path),
+              help="Reference coordinates: a simulator truth JSON (per station; repeat the "
+                   "option) or one total-station CSV id,x_m,y_m,z_m in any frame.")
+@click.option("--method", type=click.Choice(_METHODS), default="fixed-radius",
+              show_default=True, help="Sphere-centre estimator.")
+@click.option("--radius", "radius_m", type=float, default=0.1, show_default=True,
+              help="Marker radius, metres.")
+@click.option("--no-calibrate", is_flag=True,
+              help="Skip self-calibration; apply --offsets (default zero) as known values.")
+@click.option("--offsets", "offsets_text",
+              help="Known (with --no-calibrate) or starting mounting offsets "
+                   "VERTICAL_AXIS_DEG,LFRAME_TILT_DEG,DX_M,DY_M.")
+@click.option("--min-points", type=int, help="Quality gate: minimum points per marker.")
+@click.option("--max-rms", "max_rms_m", type=float, help="Quality gate: maximum fit RMS, m.")
+@click.option("--min-visible-fraction", type=float,
+              help="Quality gate: minimum visible fraction.")
+@click.option("--set", "stage_options", multiple=True, metavar="STAGE.OPTION=VALUE",
+              help="Any stage option, e.g. --set ground.min_height_m=0.1 "
+                   "--set gate.max_box_m=0.3 (unknown names are refused).")
+@json_option
+def command(scans, out, overwrite, references, method, radius_m, no_calibrate, offsets_text,
+            min_points, max_rms_m, min_visible_fraction, stage_options, as_json) -> None:
+    """Process station scans into a marker table.
+
+    Writes markers.csv (one row per candidate; columns in docs/pipeline.md), stations.csv
+    (per-station summary with calibration estimates), edges.csv (edge-length residuals when a
+    reference is given) and summary.json (configuration and provenance).
+
+    \b
+    Example:
+      markerplan process scans/station_*.scan.npz \\
+          --reference scans/station_S1.truth.json --out tables/
+    """
+    from tqdm import tqdm
+
+    from markerplan.provenance import fingerprint_arrays, provenance
+    from pipeline.evaluation import read_reference
+    from pipeline.process import (
+        build_config,
+        check_references,
+        pick_reference,
+        process_station,
+        with_offsets,
+        write_results,
+    )
+    from pipeline.rig import MountingOffsets
+    from pipeline.scan_format import read_scan
+
+    options = _parse_stage_options(stage_options)
+    options.setdefault("fit", {}).update(method=method, radius_m=radius_m)
+    quality = {"min_points": min_points, "max_rms_m": max_rms_m,
+               "min_visible_fraction": min_visible_fraction}
+    options.setdefault("quality", {}).update({k: v for k, v in quality.items() if v is not None})
+    cfg = build_config(options)
+    offsets = _parse_offsets(offsets_text) if offsets_text else MountingOffsets()
+    cfg = with_offsets(cfg, offsets, enabled=not no_calibrate)
+    refs = [read_reference(p) for p in references]
+    check_references(refs)
+    for p in scans:
+        if not p.is_file():
+            from markerplan.errors import InputFileError
+
+            raise InputFileError(f"scan file {p} does not exist; check the path")
+    with staged_output(out, overwrite) as stage:
+        results, inputs = [], []
+        for path in tqdm(scans, desc="stations", file=sys.stderr, disable=None):
+            scan = read_scan(path)
+            inputs.append({"scan": str(path), "station_id": scan.station_id,
+                           "sha256": fingerprint_arrays(scan.xyz_sensor_m, scan.frame_index,
+                                                        scan.turntable_angle_rad)})
+            results.append(process_station(scan, cfg, pick_reference(refs, scan.station_id)))
+            del scan
+        prov = provenance(cfg.to_dict(), inputs=inputs,
+                          references=[r.source for r in refs], command="process")
+        summary = write_results(stage, results, prov)
+    summary["out"] = str(out)
+    human = "\n".join(
+        f"{s['station_id']}: {s['n_accepted']}/{s['n_candidates']} accepted"
+        + (f", mean error {s['mean_error_m'] * 1e3:.1f} mm" if s.get("mean_error_m") else "")
+        for s in summary["stations"]) + f"\nwrote {out}"
+    emit_summary(summary, as_json, human)

@@ -1,0 +1,67 @@
+"""``markerplan verify``: simulate and process a plan, compare achieved with predicted error."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import click
+
+from planner.cli._common import (
+    emit_summary,
+    json_option,
+    out_option,
+    overwrite_option,
+    staged_output,
+)
+
+
+@click.command("verify")
+@click.argument("plan_path", metavar="PLAN", type=click.Path(dir_okay=False, path_type=Path))
+@click.option("--error-model", "error_model_path", type=click.Path(dir_okay=False,
+                                                                  path_type=Path),
+              help="Error-model JSON for the registration weights (default: the shipped model).")
+@click.option("--seed", type=int, default=0, show_default=True, help="Simulation noise seed.")
+@out_option(required=True)
+@overwrite_option
+@json_option
+def command(plan_path, error_model_path, seed, out, overwrite, as_json):
+    """Check a plan by simulation: scan each station with the planned markers, process the
+    scans, register each station to its detected markers, and compare achieved with predicted
+    error. Exit code 1 when any station's achieved error exceeds the requirement.
+
+    \b
+    Example:
+      markerplan plan --out plan/
+      markerplan verify plan/plan.json --out verify/
+    """
+    import json
+
+    from markerplan.errors import InfeasiblePlanError
+    from planner.verify import read_plan, verify_markdown, verify_plan, verify_record
+
+    doc = read_plan(plan_path)
+    if error_model_path is not None:
+        from error_model.model import ErrorModel
+
+        model, model_name = ErrorModel.load(error_model_path), str(error_model_path)
+    else:
+        from error_model import default_model
+
+        model, model_name = default_model(), "default"
+    checks = verify_plan(doc, model, seed=seed, progress=not as_json or sys.stderr.isatty())
+    rec = verify_record(doc, checks, seed, model_name)
+    with staged_output(out, overwrite) as stage:
+        (stage / "verify.json").write_text(json.dumps(rec, indent=2) + "\n")
+        (stage / "verify.md").write_text(verify_markdown(rec))
+    summary = {"out": str(out), "passed": rec["passed"], "requirement_m": rec["requirement_m"],
+               "stations": {s["id"]: {"predicted_error_m": s["predicted_error_m"],
+                                      "achieved_error_m": s["achieved_error_m"],
+                                      "passed": s["passed"]} for s in rec["stations"]}}
+    worst = max((s["achieved_error_m"] if s["achieved_error_m"] is not None else float("inf"))
+                for s in rec["stations"])
+    emit_summary(summary, as_json, f"{'PASSED' if rec['passed'] else 'FAILED'}: worst achieved "
+                 f"error {worst:.4f} m (requirement {rec['requirement_m']:g} m) -> {out}/")
+    if not rec["passed"]:
+        failing = [f"{s['id']}: {s['reason']}" for s in rec["stations"] if not s["passed"]]
+        raise InfeasiblePlanError("verification failed at " + "; ".join(failing))

@@ -1,0 +1,132 @@
+"""The placement map (``map.png``): hillshaded terrain, craters, stations coloured by predicted
+error, chosen markers, the lines of sight each station uses, legend and scale bar.
+
+Site frame, local metres (x to the right, y up).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+
+def draw_plan_map(outcome, path: Path, dpi: int = 150) -> Path:
+    """Draw the map of a :class:`~planner.planning.PlanOutcome` into ``path`` (PNG)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.colors import LightSource, Normalize
+    from matplotlib.lines import Line2D
+    from matplotlib.patches import Circle, Polygon
+    from mpl_toolkits.axes_grid1.anchored_artists import AnchoredSizeBar
+
+    inp, prob, res, cfg = outcome.inputs, outcome.problem, outcome.result, outcome.config
+    dem = inp.dem
+    xmin, xmax, ymin, ymax = _view(inp, prob)
+    fig, ax = plt.subplots(figsize=(9.0, 8.0), constrained_layout=True)
+    # hillshade of the DEM, cropped to the view
+    gx, gy = dem.grid_xy()
+    ci = (gx >= xmin - 1) & (gx <= xmax + 1)
+    cj = (gy >= ymin - 1) & (gy <= ymax + 1)
+    h = dem.heights_m[np.ix_(cj, ci)]
+    step = max(1, int(np.ceil(max(h.shape) / 1200)))
+    h = h[::step, ::step]
+    ls = LightSource(azdeg=315, altdeg=35)
+    # LightSource expects row 0 at the top (north); our rows run along +y, so flip and back
+    shade = ls.hillshade(h[::-1], vert_exag=3.0, dx=dem.cell_size_m * step,
+                         dy=dem.cell_size_m * step)[::-1]
+    extent = (gx[ci][0], gx[ci][-1], gy[cj][0], gy[cj][-1])
+    ax.imshow(shade, cmap="gray", origin="lower", extent=extent, vmin=0, vmax=1,
+              interpolation="bilinear")
+    for c in inp.craters:
+        ax.add_patch(Circle(c.centre_xy_m, 0.5 * c.diameter_m, fill=False, ec="#8c6d31",
+                            lw=1.0, ls="--", alpha=0.9))
+    if inp.boundary_xy is not None:
+        ax.add_patch(Polygon(np.asarray(inp.boundary_xy), closed=True, fill=False, ec="#1f77b4",
+                             lw=1.2, ls=":"))
+    for poly in inp.exclusions:
+        ax.add_patch(Polygon(np.asarray(poly.exterior.coords), closed=True, fc="#d62728",
+                             alpha=0.15, ec="#d62728", lw=0.8))
+    # lines of sight each station uses
+    for s in range(prob.n_stations):
+        idx = prob.usable_pairs(s)
+        idx = idx[res.selected[prob.pair_site[idx]]]
+        for j in prob.pair_site[idx]:
+            ax.plot([prob.station_xyz[s, 0], prob.site_xyz[j, 0]],
+                    [prob.station_xyz[s, 1], prob.site_xyz[j, 1]], color="#ffbf00", lw=0.9,
+                    alpha=0.8, zorder=3)
+    if len(inp.as_built_ids):
+        ax.scatter(inp.as_built_xyz[:, 0], inp.as_built_xyz[:, 1], marker="x", s=30,
+                   c="#444444", lw=1.0, zorder=4)
+    sel = np.flatnonzero(res.selected)
+    ax.scatter(prob.site_xyz[sel, 0], prob.site_xyz[sel, 1], s=90, c="#e41a1c",
+               edgecolors="white", linewidths=1.2, zorder=6)
+    for j in sel:
+        ax.annotate(prob.site_ids[j], prob.site_xyz[j, :2], xytext=(6, 6),
+                    textcoords="offset points", fontsize=8, color="#e41a1c", weight="bold",
+                    zorder=7)
+    err = np.where(np.isfinite(res.check.error_m), res.check.error_m, cfg.requirement_m * 2)
+    norm = Normalize(vmin=0.0, vmax=cfg.requirement_m)
+    sc = ax.scatter(prob.station_xyz[:, 0], prob.station_xyz[:, 1], c=err, cmap="viridis",
+                    norm=norm, marker="^", s=140, edgecolors="black", linewidths=0.8, zorder=8)
+    for s in range(prob.n_stations):
+        ax.annotate(prob.station_ids[s], prob.station_xyz[s, :2], xytext=(7, -12),
+                    textcoords="offset points", fontsize=8, weight="bold", zorder=9,
+                    bbox={"boxstyle": "round,pad=0.15", "fc": "white", "alpha": 0.7, "lw": 0})
+    cb = fig.colorbar(sc, ax=ax, shrink=0.8, pad=0.01)
+    cb.set_label(f"predicted station error, 95 % (m); requirement {cfg.requirement_m:g} m")
+    ax.set_xlim(xmin, xmax)
+    ax.set_ylim(ymin, ymax)
+    ax.set_aspect("equal")
+    ax.set_xlabel("x (m, site frame — local metres)")
+    ax.set_ylabel("y (m, site frame — local metres)")
+    bar = _nice_length((xmax - xmin) / 5)
+    ax.add_artist(AnchoredSizeBar(ax.transData, bar, f"{bar:g} m", "lower right", pad=0.5,
+                                  color="black", frameon=True, size_vertical=(ymax - ymin) / 200))
+    handles = [
+        Line2D([], [], marker="^", ls="", mfc="#3b528b", mec="black", ms=10,
+               label="station (colour: predicted error)"),
+        Line2D([], [], marker="o", ls="", mfc="#e41a1c", mec="white", ms=10,
+               label=f"planned marker ({len(sel)})"),
+        Line2D([], [], color="#ffbf00", lw=1.2, label="line of sight used"),
+    ]
+    if len(inp.as_built_ids):
+        handles.append(Line2D([], [], marker="x", ls="", color="#444444", ms=7,
+                              label=f"as-built marker ({len(inp.as_built_ids)})"))
+    if inp.craters:
+        handles.append(Line2D([], [], color="#8c6d31", ls="--", label="crater rim"))
+    if inp.boundary_xy is not None:
+        handles.append(Line2D([], [], color="#1f77b4", ls=":", label="site boundary"))
+    ax.legend(handles=handles, loc="upper left", fontsize=8, framealpha=0.85)
+    sol = res.solution
+    ax.set_title(f"markerplan — site '{inp.site_name}': {len(sel)} markers, "
+                 f"{int(res.check.ok.sum())}/{prob.n_stations} stations ≤ "
+                 f"{cfg.requirement_m:g} m ({sol.status})", fontsize=11)
+    path = Path(path)
+    fig.savefig(path, dpi=dpi, metadata={"Software": None})
+    plt.close(fig)
+    return path
+
+
+def _view(inp, prob) -> tuple[float, float, float, float]:
+    pts = [prob.station_xyz[:, :2]]
+    if inp.boundary_xy is not None:
+        pts.append(np.asarray(inp.boundary_xy))
+    else:
+        pts.append(prob.site_xyz[:, :2])
+    p = np.vstack(pts)
+    pad = 0.05 * max(np.ptp(p[:, 0]), np.ptp(p[:, 1]), 1.0)
+    xmin, xmax, ymin, ymax = inp.dem.extent()
+    return (max(p[:, 0].min() - pad, xmin), min(p[:, 0].max() + pad, xmax),
+            max(p[:, 1].min() - pad, ymin), min(p[:, 1].max() + pad, ymax))
+
+
+def _nice_length(x: float) -> float:
+    """Largest 1-2-5 x 10^k not above ``x``."""
+    k = 10 ** np.floor(np.log10(x))
+    for m in (5, 2, 1):
+        if m * k <= x:
+            return float(m * k)
+    return float(k)

@@ -1,0 +1,659 @@
+"""The integer program: fewest (cheapest) marker sites meeting directions and accuracy.
+
+Build, solve and check are separate steps:
+
+- :func:`build_model` turns a :class:`~planner.usability.PlanProblem` into a :class:`Model`
+  (plain data: ``c``, sparse ``A``, row and variable bounds, index maps);
+- :func:`solve` runs ``scipy.optimize.milp`` (HiGHS) once -> :class:`Solution`;
+- :func:`plan_sites` is the accuracy-cut loop: solve, check every station's predicted accuracy
+  exactly (:func:`planner.accuracy.station_errors`), add valid cuts for stations that fail and
+  re-solve until all pass.
+
+Models are immutable: :meth:`Model.with_rows` and :meth:`Model.with_bounds` return new models, so
+what-if studies re-use one model with a changed bound or an added constraint.
+
+Formulation
+-----------
+Variables: ``x_j`` in {0, 1} for every candidate site usable by at least one station (or
+existing); ``y_sk`` in {0, 1} "station s has a selected usable marker in sector k"; in redundant
+mode also ``z_sk`` "... at least two". For every station ``s`` with usable sites ``U_s``:
+
+- count: ``sum_{j in U_s} x_j >= min_markers`` (``+ 1`` in redundant mode);
+- sectors: ``y_sk <= sum_{j in U_s, sector(j) = k} x_j`` and ``sum_k y_sk >= min_sectors``;
+  redundant: ``2 z_sk <= sum_{...} x_j``, ``z_sk <= y_sk`` and for every sector ``k'``:
+  ``sum_k y_sk - y_sk' + z_sk' >= min_sectors`` (losing one marker of sector ``k'`` empties it
+  only if it held one);
+- information (necessary, valid): ``sum_j (3 / sigma_sj^2) x_j >= chi2_3(0.95) / requirement^2``
+  (:func:`planner.accuracy.information_lower_bound`);
+- accuracy cuts (added lazily): the predicted error is monotone in the marker set, so when
+  station ``s`` fails with a set ``T`` every subset of ``T`` fails too. ``T`` is first grown
+  greedily to a larger failing set ``T'`` (a stronger cut), then
+  ``sum_{j in U_s \\ T'} x_j >= 1``. In redundant mode, when losing marker ``m`` leaves a failing
+  set ``T`` (grown to ``T'`` without ``m``): ``sum_{j in U_s \\ T', j != m} x_j - x_m >= 0``.
+
+Options: existing markers (lower bound 1, cost 0), forbidden sites (upper bound 0), a budget
+row ``sum_j x_j <= budget``.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.optimize import Bounds, LinearConstraint, milp
+
+from markerplan.errors import ConfigError, InfeasiblePlanError
+from planner import accuracy
+from planner.usability import (
+    OCCLUDED,
+    OUT_OF_DOMAIN,
+    TOO_INACCURATE,
+    PlanProblem,
+    direction_status,
+    sector_index,
+)
+
+
+@dataclass(frozen=True)
+class Model:
+    """A mixed-integer linear program ``min c x  s.t.  row_lb <= A x <= row_ub, lb <= x <= ub``.
+
+    Attributes
+    ----------
+    c : (v,) float
+    A : (m, v) scipy.sparse.csr_array
+    row_lb, row_ub : (m,) float
+    lb, ub : (v,) float
+    integrality : (v,) int
+    var_site : (nx,) int
+        Candidate-site index of each ``x`` variable (the first ``nx`` variables).
+    site_var : (n,) int
+        Variable index of each candidate site, -1 when the site is not in the model.
+    row_kind : tuple of str, (m,)
+        Label of every row ("count:S1", "sector:S1", "info:S1", "cut:S1", "budget", ...).
+    """
+
+    c: np.ndarray
+    A: sp.csr_array
+    row_lb: np.ndarray
+    row_ub: np.ndarray
+    lb: np.ndarray
+    ub: np.ndarray
+    integrality: np.ndarray
+    var_site: np.ndarray
+    site_var: np.ndarray
+    row_kind: tuple[str, ...]
+
+    @property
+    def n_vars(self) -> int:
+        return self.c.shape[0]
+
+    def with_rows(self, rows: sp.sparray, row_lb, row_ub, kinds) -> Model:
+        """A new model with rows appended (this one is unchanged)."""
+        rows = sp.csr_array(rows)
+        if rows.shape[1] != self.n_vars:
+            raise ConfigError(f"`rows` must have {self.n_vars} columns, got {rows.shape[1]}")
+        return replace(self, A=sp.csr_array(sp.vstack([self.A, rows])),
+                       row_lb=np.concatenate([self.row_lb, np.asarray(row_lb, float)]),
+                       row_ub=np.concatenate([self.row_ub, np.asarray(row_ub, float)]),
+                       row_kind=self.row_kind + tuple(kinds))
+
+    def with_bounds(self, var_index, lb=None, ub=None) -> Model:
+        """A new model with some variable bounds changed (this one is unchanged)."""
+        new_lb, new_ub = self.lb.copy(), self.ub.copy()
+        if lb is not None:
+            new_lb[var_index] = lb
+        if ub is not None:
+            new_ub[var_index] = ub
+        return replace(self, lb=new_lb, ub=new_ub)
+
+    def site_row(self, site_index, coef=1.0) -> sp.csr_array:
+        """One sparse row with ``coef`` on the ``x`` variables of the given candidate sites."""
+        site_index = np.atleast_1d(np.asarray(site_index, dtype=np.int64))
+        var = self.site_var[site_index]
+        if np.any(var < 0):
+            raise ConfigError("site_row: some sites are not variables of this model")
+        data = np.broadcast_to(np.asarray(coef, float), var.shape)
+        return sp.csr_array((data, (np.zeros_like(var), var)), shape=(1, self.n_vars))
+
+
+@dataclass(frozen=True)
+class Solution:
+    """One ``milp`` solve.
+
+    Attributes
+    ----------
+    status : str
+        "optimal", "time_limit" (a feasible answer, not proven optimal), "infeasible",
+        "no_solution" (time limit with no feasible answer) or "error".
+    selected : (n,) bool or None
+        Candidate sites holding a marker.
+    objective, dual_bound, gap : float
+        Objective, HiGHS dual bound and relative gap (nan when unknown).
+    solve_time_s : float
+    message : str
+    x : (v,) float or None
+    """
+
+    status: str
+    selected: np.ndarray | None
+    objective: float
+    dual_bound: float
+    gap: float
+    solve_time_s: float
+    message: str
+    x: np.ndarray | None = None
+
+
+@dataclass(frozen=True)
+class PlanResult:
+    """Result of the accuracy-cut loop.
+
+    Attributes
+    ----------
+    selected : (n,) bool
+    check : LayoutCheck
+        Per-station directions and predicted errors of the selected layout.
+    solution : Solution
+        The final solve (status, objective, dual bound, gap).
+    iterations : int
+    n_cuts : int
+    solve_time_s : float
+        Total time in the solver over all iterations.
+    model : Model
+        The final model including every cut.
+    """
+
+    selected: np.ndarray
+    check: LayoutCheck
+    solution: Solution
+    iterations: int
+    n_cuts: int
+    solve_time_s: float
+    model: Model
+    history: list = field(default_factory=list)
+
+    @property
+    def status(self) -> str:
+        return self.solution.status
+
+
+def build_model(problem: PlanProblem, config) -> Model:
+    """Build the integer program for a problem and a :class:`~planner.config.PlanConfig`.
+
+    Parameters
+    ----------
+    problem : PlanProblem
+    config : PlanConfig
+        Uses ``min_markers``, ``n_sectors``, ``min_sectors``, ``requirement_m``, ``redundant``,
+        ``budget``, ``existing``, ``forbidden``.
+
+    Returns
+    -------
+    model : Model
+    """
+    usable = problem.pair_usable
+    existing = _resolve_ids(problem, config.existing, "existing") | problem.site_existing
+    forbidden = _resolve_ids(problem, config.forbidden, "forbidden")
+    in_model = existing.copy()
+    in_model[problem.pair_site[usable]] = True
+    var_site = np.flatnonzero(in_model)
+    site_var = np.full(problem.n_sites, -1, dtype=np.int64)
+    site_var[var_site] = np.arange(var_site.size)
+    nx = var_site.size
+
+    rows_i, rows_j, rows_v = [], [], []
+    row_lb, row_ub, kinds = [], [], []
+    n_vars = nx
+
+    def add_row(cols, vals, lo, hi, kind):
+        r = len(row_lb)
+        rows_i.append(np.full(len(cols), r, dtype=np.int64))
+        rows_j.append(np.asarray(cols, dtype=np.int64))
+        rows_v.append(np.asarray(vals, dtype=float))
+        row_lb.append(lo)
+        row_ub.append(hi)
+        kinds.append(kind)
+
+    min_count = config.min_markers + (1 if config.redundant else 0)
+    for s in range(problem.n_stations):
+        sid = problem.station_ids[s]
+        idx = problem.usable_pairs(s)
+        cols = site_var[problem.pair_site[idx]]
+        add_row(cols, np.ones(cols.size), min_count, np.inf, f"count:{sid}")
+        w_t, w_h = info_weights(problem, idx, config)
+        add_row(cols, w_t, 1.0, np.inf, f"info:{sid}")
+        add_row(cols, w_h, 1.0, np.inf, f"heading:{sid}")
+        sec = sector_index(problem.pair_bearing_rad[idx], config.n_sectors)
+        present = np.unique(sec)
+        y = {}
+        z = {}
+        for k in present:
+            y[k] = n_vars
+            n_vars += 1
+            in_k = cols[sec == k]
+            add_row(np.r_[y[k], in_k], np.r_[1.0, -np.ones(in_k.size)], -np.inf, 0.0,
+                    f"sector:{sid}:{k}")
+            if config.redundant:
+                z[k] = n_vars
+                n_vars += 1
+                add_row(np.r_[z[k], in_k], np.r_[2.0, -np.ones(in_k.size)], -np.inf, 0.0,
+                        f"sector2:{sid}:{k}")
+                add_row([z[k], y[k]], [1.0, -1.0], -np.inf, 0.0, f"sector21:{sid}:{k}")
+        ycols = [y[k] for k in present]
+        add_row(ycols, np.ones(len(ycols)), config.min_sectors, np.inf, f"directions:{sid}")
+        if config.redundant:
+            for k in present:
+                vals = [1.0 if kk != k else 0.0 for kk in present]
+                add_row(ycols + [z[k]], vals + [1.0], config.min_sectors, np.inf,
+                        f"directions-loss:{sid}:{k}")
+    if config.budget is not None:
+        add_row(np.arange(nx), np.ones(nx), -np.inf, float(config.budget), "budget")
+
+    a = sp.csr_array((np.concatenate(rows_v) if rows_v else np.zeros(0),
+                      (np.concatenate(rows_i) if rows_i else np.zeros(0, np.int64),
+                       np.concatenate(rows_j) if rows_j else np.zeros(0, np.int64))),
+                     shape=(len(row_lb), n_vars))
+    c = np.zeros(n_vars)
+    c[:nx] = problem.site_cost[var_site]
+    lb = np.zeros(n_vars)
+    ub = np.ones(n_vars)
+    lb[:nx][existing[var_site]] = 1.0
+    ub[:nx][forbidden[var_site]] = 0.0
+    return Model(c=c, A=a, row_lb=np.asarray(row_lb, float), row_ub=np.asarray(row_ub, float),
+                 lb=lb, ub=ub, integrality=np.ones(n_vars, dtype=np.int64), var_site=var_site,
+                 site_var=site_var, row_kind=tuple(kinds))
+
+
+def info_weights(problem: PlanProblem, pairs: np.ndarray, config
+                 ) -> tuple[np.ndarray, np.ndarray]:
+    """Coefficients of the two necessary information cuts for some pairs of one station.
+
+    Returns ``(w_t, w_h)``, each scaled so that a passing station needs ``sum w x >= 1``
+    (:func:`planner.accuracy.information_lower_bound` and
+    :func:`planner.accuracy.heading_information_lower_bound`).
+    """
+    w = 3.0 / problem.pair_sigma_m[pairs] ** 2
+    d = problem.site_xyz[problem.pair_site[pairs], :2] \
+        - problem.station_xyz[problem.pair_station[pairs], :2]
+    w_t = w / accuracy.information_lower_bound(config.requirement_m)
+    w_h = w * np.sum(d**2, axis=1) / accuracy.heading_information_lower_bound(
+        config.requirement_m, config.working_radius_m)
+    return w_t, w_h
+
+
+def _resolve_ids(problem: PlanProblem, ids, name: str) -> np.ndarray:
+    pos = {sid: i for i, sid in enumerate(problem.site_ids)}
+    unknown = [i for i in ids if i not in pos]
+    if unknown:
+        raise ConfigError(f"`{name}` names unknown site id(s) {', '.join(unknown[:5])}; "
+                          "use ids from the candidate sites or the marker layout")
+    mask = np.zeros(problem.n_sites, dtype=bool)
+    mask[[pos[i] for i in ids]] = True
+    return mask
+
+
+def solve(model: Model, time_limit_s: float = 60.0, gap: float = 0.0) -> Solution:
+    """Solve ``model`` once with HiGHS through ``scipy.optimize.milp``.
+
+    Parameters
+    ----------
+    model : Model
+    time_limit_s : float
+        Wall-clock limit, s.
+    gap : float
+        Target relative MIP gap (0: prove optimality).
+
+    Returns
+    -------
+    solution : Solution
+        A time-limited answer has status ``"time_limit"``, never ``"optimal"``.
+    """
+    if not time_limit_s > 0:
+        raise ConfigError(f"`time_limit_s` must be > 0, got {time_limit_s!r}")
+    if not gap >= 0:
+        raise ConfigError(f"`gap` must be >= 0, got {gap!r}")
+    t0 = time.perf_counter()
+    constraints = [LinearConstraint(model.A, model.row_lb, model.row_ub)] if model.A.shape[0] \
+        else []
+    res = milp(model.c, integrality=model.integrality, bounds=Bounds(model.lb, model.ub),
+               constraints=constraints,
+               options={"time_limit": float(time_limit_s), "mip_rel_gap": float(gap),
+                        "disp": False})
+    elapsed = time.perf_counter() - t0
+    x = None if res.x is None else np.round(res.x)
+    if res.status == 0:
+        status = "optimal" if gap == 0 else "gap_reached"
+    elif res.status == 1:
+        status = "time_limit" if x is not None else "no_solution"
+    elif res.status == 2:
+        status = "infeasible"
+    else:
+        status = "error" if x is None else "time_limit"
+    selected = None
+    if x is not None:
+        selected = np.zeros(model.site_var.shape[0], dtype=bool)
+        selected[model.var_site[x[: model.var_site.size] > 0.5]] = True
+    dual = getattr(res, "mip_dual_bound", None)
+    mgap = getattr(res, "mip_gap", None)
+    return Solution(status=status, selected=selected,
+                    objective=float(res.fun) if res.fun is not None else float("nan"),
+                    dual_bound=float(dual) if dual is not None else float("nan"),
+                    gap=float(mgap) if mgap is not None else float("nan"),
+                    solve_time_s=elapsed, message=str(res.message), x=x)
+
+
+class StationInfo:
+    """Cached usable sites of one station and the information each contributes."""
+
+    def __init__(self, problem: PlanProblem, s: int, config) -> None:
+        idx = problem.usable_pairs(s)
+        self.pairs = idx
+        self.sites = problem.pair_site[idx]
+        self.sigma_m = problem.pair_sigma_m[idx]
+        self.info = (accuracy.pair_information(problem.station_xyz[s],
+                                               problem.site_xyz[self.sites], self.sigma_m)
+                     if idx.size else np.zeros((0, 4, 4)))
+        self.position = {int(j): k for k, j in enumerate(self.sites)}
+        self.radius = config.working_radius_m
+        self.incl = config.inclinometer_sigma_rad
+
+    def error(self, sites) -> float:
+        """Predicted error using the usable ones among ``sites`` (candidate-site indices), m."""
+        k = [self.position[int(j)] for j in np.atleast_1d(sites) if int(j) in self.position]
+        if not k:
+            return float("inf")
+        j = self.info[k].sum(axis=0)
+        return float(accuracy.errors_from_information(j[None], self.radius, self.incl)[0])
+
+    def grow_failing(self, failing, exclude: int | None, requirement_m: float,
+                     max_skips: int = 25) -> np.ndarray:
+        """Grow a failing site set, least informative sites first, while it keeps failing.
+
+        Monotonicity makes "the set plus the next ``m`` sites in order still fails" monotone in
+        ``m``, so each run of additions is found by bisection; a site whose addition would make
+        the station pass is skipped (at most ``max_skips`` times). ``exclude`` is never added.
+        Returns candidate-site indices of the grown (still failing) set.
+        """
+        in_set = np.zeros(self.sites.size, bool)
+        in_set[[self.position[int(j)] for j in np.atleast_1d(failing)
+                if int(j) in self.position]] = True
+        order = np.argsort(1.0 / self.sigma_m**2, kind="stable")
+        skip = in_set.copy()
+        if exclude is not None and int(exclude) in self.position:
+            skip[self.position[int(exclude)]] = True
+        order = order[~skip[order]]
+        total = self.info[in_set].sum(axis=0)
+        cum = np.concatenate([np.zeros((1, 4, 4)), np.cumsum(self.info[order], axis=0)])
+
+        def fails(a: int, b: int) -> bool:
+            trial = total + cum[b] - cum[a]
+            e = accuracy.errors_from_information(trial[None], self.radius, self.incl)[0]
+            return bool(e > requirement_m)
+
+        pos, skips = 0, 0
+        while pos < order.size and skips <= max_skips:
+            lo, hi = 0, order.size - pos  # largest m with fails(pos, pos + m)
+            while lo < hi:
+                mid = (lo + hi + 1) // 2
+                if fails(pos, pos + mid):
+                    lo = mid
+                else:
+                    hi = mid - 1
+            in_set[order[pos:pos + lo]] = True
+            total = total + cum[pos + lo] - cum[pos]
+            pos += lo + 1
+            skips += 1
+        return self.sites[in_set]
+
+
+def station_infos(problem: PlanProblem, config) -> list[StationInfo]:
+    """:class:`StationInfo` of every station (cache it across repeated checks)."""
+    return [StationInfo(problem, s, config) for s in range(problem.n_stations)]
+
+
+def diagnose(problem: PlanProblem, config, infos: list[StationInfo] | None = None
+             ) -> dict[str, str]:
+    """Stations that no layout can satisfy, with the reason (empty dict: none found).
+
+    Checks, per station and with every allowed usable site selected: any site in range, any
+    unoccluded, enough usable sites, enough sectors, accuracy reachable (and, in redundant mode,
+    reachable after losing any one site).
+    """
+    infos = infos or station_infos(problem, config)
+    forbidden = _resolve_ids(problem, config.forbidden, "forbidden")
+    allowed = ~forbidden
+    min_count = config.min_markers + (1 if config.redundant else 0)
+    out = {}
+    for s in range(problem.n_stations):
+        sid = problem.station_ids[s]
+        pairs = np.flatnonzero(problem.pair_station == s)
+        pairs = pairs[allowed[problem.pair_site[pairs]]]
+        if pairs.size == 0:
+            out[sid] = f"no candidate site within {config.max_range_m:g} m (no site in range)"
+            continue
+        reason = problem.pair_reason[pairs]
+        idx = pairs[reason == 0]
+        if idx.size == 0:
+            if np.all(reason == OCCLUDED):
+                out[sid] = f"all {pairs.size} sites in range are occluded"
+            else:
+                out[sid] = (f"no usable site: {np.sum(reason == OCCLUDED)} occluded, "
+                            f"{np.sum(reason == OUT_OF_DOMAIN)} outside the error model's "
+                            f"domain, {np.sum(reason == TOO_INACCURATE)} with 95 % centre error "
+                            f"above {config.requirement_m:g} m")
+            continue
+        sites = problem.pair_site[idx]
+        sel = np.zeros(problem.n_sites, bool)
+        sel[sites] = True
+        count, sectors = direction_status(problem, sel, config.n_sectors)
+        if count[s] < min_count:
+            out[sid] = f"too few usable sites: {count[s]} (needs {min_count})"
+            continue
+        if sectors[s] < config.min_sectors:
+            out[sid] = (f"too few directions: usable sites in {sectors[s]} of "
+                        f"{config.n_sectors} sectors (needs {config.min_sectors})")
+            continue
+        if config.redundant:
+            per = np.bincount(sector_index(problem.pair_bearing_rad[idx], config.n_sectors),
+                              minlength=config.n_sectors)
+            left = int((per > 0).sum()) - int(np.any(per == 1))
+            if left < config.min_sectors:
+                out[sid] = (f"too few directions after losing one marker: the usable sites "
+                            f"leave {left} of {config.n_sectors} sectors (needs "
+                            f"{config.min_sectors})")
+                continue
+        err = infos[s].error(sites)
+        if err > config.requirement_m:
+            out[sid] = (f"accuracy unreachable: all {sites.size} usable sites give "
+                        f"{err:.3f} m > {config.requirement_m:g} m")
+            continue
+        if config.redundant:
+            worst = max(infos[s].error(np.delete(sites, i)) for i in range(sites.size))
+            if worst > config.requirement_m:
+                out[sid] = (f"accuracy unreachable after losing one marker: {worst:.3f} m > "
+                            f"{config.requirement_m:g} m")
+    return out
+
+
+@dataclass(frozen=True)
+class LayoutCheck:
+    """Whether a marker layout meets the requirement at every station.
+
+    Attributes
+    ----------
+    count, sectors : (s,) int
+        Usable selected markers and occupied sectors per station.
+    error_m : (s,) float
+        Predicted error per station, m.
+    worst_loss_error_m : (s,) float or None
+        Redundant mode: worst predicted error after losing any one of the station's markers.
+    worst_loss_sectors : (s,) int or None
+        Redundant mode: fewest occupied sectors after losing any one marker.
+    ok : (s,) bool
+    """
+
+    count: np.ndarray
+    sectors: np.ndarray
+    error_m: np.ndarray
+    worst_loss_error_m: np.ndarray | None
+    worst_loss_sectors: np.ndarray | None
+    ok: np.ndarray
+
+    @property
+    def all_ok(self) -> bool:
+        return bool(self.ok.all())
+
+
+def evaluate_layout(problem: PlanProblem, selected: np.ndarray, config,
+                    infos: list[StationInfo] | None = None) -> LayoutCheck:
+    """Check directions and predicted accuracy of a layout at every station.
+
+    Parameters
+    ----------
+    problem : PlanProblem
+    selected : (n,) bool
+        Candidate sites holding a marker.
+    config : PlanConfig
+        In redundant mode the layout must also survive the loss of any one marker.
+    infos : list of StationInfo, optional
+        Cache from :func:`station_infos`.
+    """
+    infos = infos or station_infos(problem, config)
+    selected = np.asarray(selected, dtype=bool)
+    count, sectors = direction_status(problem, selected, config.n_sectors)
+    err = np.array([infos[s].error(infos[s].sites[selected[infos[s].sites]])
+                    for s in range(problem.n_stations)])
+    ok = (count >= config.min_markers) & (sectors >= config.min_sectors) \
+        & (err <= config.requirement_m)
+    worst_err = worst_sec = None
+    if config.redundant:
+        worst_err = err.copy()
+        worst_sec = sectors.copy()
+        for s in range(problem.n_stations):
+            chosen = infos[s].sites[selected[infos[s].sites]]
+            for m in chosen:
+                worst_err[s] = max(worst_err[s], infos[s].error(chosen[chosen != m]))
+            sel_pairs = problem.usable_pairs(s)
+            sel_pairs = sel_pairs[selected[problem.pair_site[sel_pairs]]]
+            sec = sector_index(problem.pair_bearing_rad[sel_pairs], config.n_sectors)
+            per = np.bincount(sec, minlength=config.n_sectors)
+            if chosen.size:
+                worst_sec[s] = int((per > 0).sum()) - int(np.any(per == 1))
+        ok &= (count >= config.min_markers + 1) & (worst_sec >= config.min_sectors) \
+            & (worst_err <= config.requirement_m)
+    return LayoutCheck(count=count, sectors=sectors, error_m=err, worst_loss_error_m=worst_err,
+                       worst_loss_sectors=worst_sec, ok=ok)
+
+
+def accuracy_cuts(problem: PlanProblem, model: Model, selected: np.ndarray, config,
+                  infos: list[StationInfo]) -> tuple[sp.csr_array | None, list[float],
+                                                     list[str]]:
+    """Valid cuts for every station whose predicted accuracy fails with ``selected``.
+
+    Returns
+    -------
+    rows : (c, v) sparse or None
+        ``None`` when every station passes.
+    lower : list of float
+        Row lower bounds (upper bounds are +inf).
+    kinds : list of str
+    """
+    rows, lower, kinds = [], [], []
+    for s in range(problem.n_stations):
+        sid = problem.station_ids[s]
+        info = infos[s]
+        chosen = info.sites[selected[info.sites]]
+        if info.error(chosen) > config.requirement_m:
+            grown = info.grow_failing(chosen, None, config.requirement_m)
+            rows.append(model.site_row(np.setdiff1d(info.sites, grown)))
+            lower.append(1.0)
+            kinds.append(f"cut:{sid}")
+            continue
+        if not config.redundant:
+            continue
+        for m in chosen:
+            left = chosen[chosen != m]
+            if info.error(left) > config.requirement_m:
+                grown = info.grow_failing(left, int(m), config.requirement_m)
+                rest = np.setdiff1d(info.sites, np.r_[grown, m])
+                rows.append(model.site_row(np.r_[rest, m], np.r_[np.ones(rest.size), -1.0]))
+                kinds.append(f"cut-loss:{sid}:{problem.site_ids[m]}")
+                # if m is selected, the others alone must carry the information cuts
+                others = np.flatnonzero(problem.pair_site[info.pairs] != m)
+                for w, name in zip(info_weights(problem, info.pairs[others], config),
+                                   ("info", "heading"), strict=True):
+                    rows.append(model.site_row(np.r_[info.sites[others], m], np.r_[w, -1.0]))
+                    kinds.append(f"{name}-loss:{sid}:{problem.site_ids[m]}")
+                lower += [0.0, 0.0, 0.0]
+    block = sp.csr_array(sp.vstack(rows)) if rows else None
+    return block, lower, kinds
+
+
+def plan_sites(problem: PlanProblem, config, model: Model | None = None) -> PlanResult:
+    """The accuracy-cut loop: solve, check stations exactly, cut, re-solve until all pass.
+
+    Parameters
+    ----------
+    problem : PlanProblem
+    config : PlanConfig
+        Also uses ``time_limit_s`` (for the whole loop) and ``mip_gap``.
+    model : Model, optional
+        A model built (and possibly modified) by the caller; default ``build_model``.
+
+    Returns
+    -------
+    result : PlanResult
+
+    Raises
+    ------
+    InfeasiblePlanError
+        Naming each station that cannot be satisfied and why, or the budget / time limit.
+    """
+    infos = station_infos(problem, config)
+    failing = diagnose(problem, config, infos)
+    if failing:
+        raise InfeasiblePlanError(
+            f"no layout meets the requirement ({config.requirement_m:g} m, "
+            f">= {config.min_markers} markers in >= {config.min_sectors} of {config.n_sectors} "
+            "sectors) at station(s): "
+            + "; ".join(f"{k}: {v}" for k, v in failing.items())
+            + "; relax the configuration or add candidate sites")
+    model = build_model(problem, config) if model is None else model
+    t0 = time.perf_counter()
+    solve_time = 0.0
+    n_cuts = 0
+    history = []
+    iteration = 0
+    while True:
+        iteration += 1
+        remaining = config.time_limit_s - (time.perf_counter() - t0)
+        if remaining <= 0:
+            raise InfeasiblePlanError(
+                f"time limit {config.time_limit_s:g} s reached after {iteration - 1} "
+                "iteration(s) before every station met the accuracy requirement; "
+                "raise --time-limit")
+        sol = solve(model, remaining, config.mip_gap)
+        solve_time += sol.solve_time_s
+        history.append({"iteration": iteration, "status": sol.status,
+                        "objective": sol.objective, "dual_bound": sol.dual_bound,
+                        "solve_time_s": sol.solve_time_s, "n_rows": int(model.A.shape[0])})
+        if sol.selected is None:
+            if sol.status == "infeasible":
+                why = (f"the marker budget ({config.budget}) is too small"
+                       if config.budget is not None else
+                       "the stations' direction and accuracy requirements conflict")
+                raise InfeasiblePlanError(f"no layout is feasible: {why}; "
+                                          "raise --budget or relax the configuration")
+            raise InfeasiblePlanError(f"solver found no layout ({sol.status}: {sol.message}); "
+                                      "raise --time-limit")
+        rows, lower, kinds = accuracy_cuts(problem, model, sol.selected, config, infos)
+        if rows is None:
+            check = evaluate_layout(problem, sol.selected, config, infos)
+            return PlanResult(selected=sol.selected, check=check, solution=sol,
+                              iterations=iteration, n_cuts=n_cuts, solve_time_s=solve_time,
+                              model=model, history=history)
+        n_cuts += rows.shape[0]
+        model = model.with_rows(rows, lower, np.full(len(lower), np.inf), kinds)

@@ -1,0 +1,509 @@
+"""What-if marker reduction: how few of a layout's markers still meet the requirement.
+
+For a :class:`~planner.usability.PlanProblem` whose candidate sites are the markers that may be
+kept (a layout, or with ``--free`` every candidate site), three studies:
+
+- :func:`tradeoff_curve`: for every count ``k``, the ``k`` markers that minimise the **worst
+  station's** predicted error (:mod:`planner.accuracy`), proven by integer programming;
+- :func:`drop_order`: remove one marker at a time, each time the one whose loss hurts least;
+- :func:`marker_losses`: for every marker, the layout without it (robustness).
+
+Exact minimax by bisection on one model
+---------------------------------------
+A station's predicted error never grows when a marker is added, so the worst-station error is
+monotone in the subset and "some ``k``-subset has worst error <= eps" is monotone in ``eps``.
+The planner's integer program (:func:`planner.program.build_model`: count and sector rows, the
+necessary information rows, lazily added accuracy cuts) with the requirement set to ``eps`` and a
+row ``sum_j x_j = k`` answers exactly that question. The least feasible ``eps`` is found by
+bisection, ending with a test just below the best subset found (``rel_tol``), which proves it
+optimal. One model is built and re-used: each query only changes row bounds —
+
+- the budget row: ``k <= sum_j x_j <= k`` (padding never hurts, so "= k" equals "<= k");
+- the information rows: ``sum_j (3 / sigma_sj^2) x_j >= chi2_3(0.95) / eps^2``;
+- each accuracy cut says "station ``s`` fails on the grown set ``T'``", i.e. it is valid for every
+  ``eps`` below the error of ``T'`` (its *threshold*): it is switched on (lower bound 1) for such
+  ``eps`` and off (lower bound 0, always satisfied) otherwise; cuts accumulate across queries.
+
+A solve that stops at its time limit without an answer cannot prove a bound infeasible; the
+point is then marked ``proven=False`` (never called optimal).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from markerplan.errors import ConfigError, InfeasiblePlanError
+from planner.program import (
+    Model,
+    accuracy_cuts,
+    build_model,
+    diagnose,
+    evaluate_layout,
+    solve,
+    station_infos,
+)
+from planner.usability import PlanProblem
+
+#: Final bisection step: a subset is proven optimal when nothing is feasible this far below it.
+REL_TOL = 1e-9
+
+
+@dataclass(frozen=True)
+class CurvePoint:
+    """The best ``k``-marker subset (site frame, metres).
+
+    Attributes
+    ----------
+    k : int
+        Number of markers kept.
+    selected : (n,) bool
+        Candidate sites kept.
+    error_m : (s,) float
+        Predicted error of every station with this subset, m.
+    count, sectors : (s,) int
+        Usable kept markers and occupied bearing sectors per station.
+    ok : (s,) bool
+        Station meets count, directions and the requirement.
+    lower_bound_m : float
+        Proven: no ``k``-subset has a worst-station error <= this, m (``-inf`` if nothing proven).
+    proven : bool
+        False when a solve hit its time limit, so the subset is not proven optimal.
+    n_solves : int
+        MILP solves spent on this point.
+    statuses : tuple of str
+        Status of each solve (``optimal``, ``infeasible``, ``time_limit``, ``no_solution``).
+    """
+
+    k: int
+    selected: np.ndarray
+    error_m: np.ndarray
+    count: np.ndarray
+    sectors: np.ndarray
+    ok: np.ndarray
+    lower_bound_m: float
+    proven: bool
+    n_solves: int
+    statuses: tuple[str, ...]
+
+    @property
+    def worst_error_m(self) -> float:
+        return float(self.error_m.max())
+
+    @property
+    def mean_error_m(self) -> float:
+        return float(self.error_m.mean())
+
+    @property
+    def meets_requirement(self) -> bool:
+        return bool(self.ok.all())
+
+
+@dataclass(frozen=True)
+class Curve:
+    """The trade-off curve, ``points`` ordered from the most markers to the fewest.
+
+    Attributes
+    ----------
+    points : list of CurvePoint
+    k_directions : int
+        Fewest markers meeting count and direction rows at every station (accuracy ignored).
+    k_feasible : int or None
+        Fewest markers meeting the requirement at every station (``None``: no point does).
+    n_cuts : int
+        Accuracy cuts generated over the whole study.
+    solve_time_s : float
+        Total time in the solver, s.
+    complete : bool
+        False when the time limit stopped the curve before ``k_min``.
+    """
+
+    points: list[CurvePoint]
+    k_directions: int
+    k_feasible: int | None
+    n_cuts: int
+    solve_time_s: float
+    complete: bool = True
+
+    @property
+    def proven(self) -> bool:
+        return self.complete and all(p.proven for p in self.points)
+
+    def at(self, k: int) -> CurvePoint:
+        """The point with ``k`` markers."""
+        for p in self.points:
+            if p.k == k:
+                return p
+        ks = [p.k for p in self.points]
+        raise ConfigError(f"k must be one of the curve's counts {min(ks)}..{max(ks)}, got {k}")
+
+
+@dataclass(frozen=True)
+class DropStep:
+    """One step of the drop order: ``removed`` goes, leaving ``k`` markers."""
+
+    k: int
+    removed: int
+    check: object  # planner.program.LayoutCheck of the remaining layout
+    selected: np.ndarray = field(repr=False)
+
+    @property
+    def worst_error_m(self) -> float:
+        return float(self.check.error_m.max())
+
+    @property
+    def mean_error_m(self) -> float:
+        return float(self.check.error_m.mean())
+
+
+@dataclass(frozen=True)
+class MarkerLoss:
+    """The layout without one marker: its check and the stations that then fail."""
+
+    marker: int
+    check: object  # planner.program.LayoutCheck
+    failing: tuple[int, ...]
+
+    @property
+    def worst_error_m(self) -> float:
+        return float(self.check.error_m.max())
+
+
+def _reduction_iv(problem: PlanProblem, config, layout: np.ndarray) -> np.ndarray:
+    layout = np.asarray(layout, dtype=bool)
+    if layout.shape != (problem.n_sites,):
+        raise ConfigError(f"`layout` must have shape ({problem.n_sites},), got {layout.shape}")
+    if not layout.any():
+        raise ConfigError("`layout` must hold at least one marker, got none")
+    if config.redundant:
+        raise ConfigError("reduction studies do not support `redundant = true`; set it to false "
+                          "(robustness to losing one marker is reported per marker instead)")
+    if config.budget is not None:
+        raise ConfigError(f"reduction studies set the marker count themselves; leave `budget` "
+                          f"unset, got {config.budget}")
+    if np.any(problem.site_existing):
+        raise ConfigError("reduction studies may drop any marker; the problem must mark no site "
+                          "as existing (fixed)")
+    return layout
+
+
+class _MinimaxModel:
+    """One integer program answering "is there a k-subset with every station <= eps?"."""
+
+    def __init__(self, problem: PlanProblem, config, deadline: float) -> None:
+        self.problem = problem
+        self.config = config
+        self.deadline = deadline
+        self.infos = station_infos(problem, config)
+        base = build_model(problem, config)
+        nx = base.var_site.size
+        self.nx = nx
+        self.model: Model = base.with_rows(base.site_row(base.var_site), [0.0], [float(nx)],
+                                           ["reduce:budget"])
+        self.budget_row = self.model.A.shape[0] - 1
+        self.info_rows = np.array([i for i, k in enumerate(self.model.row_kind)
+                                   if k.startswith("info:")], dtype=np.int64)
+        self.cut_rows: list[int] = []
+        self.cut_threshold: list[float] = []
+        self.station_index = {sid: s for s, sid in enumerate(problem.station_ids)}
+        self.solve_time_s = 0.0
+
+    def _bounded(self, k: int | None, eps: float, count_objective: bool) -> Model:
+        lb, ub = self.model.row_lb.copy(), self.model.row_ub.copy()
+        if k is not None:
+            lb[self.budget_row] = ub[self.budget_row] = float(min(k, self.nx))
+        lb[self.info_rows] = (self.config.requirement_m / eps) ** 2 if np.isfinite(eps) else 0.0
+        if self.cut_rows:
+            lb[self.cut_rows] = np.where(np.asarray(self.cut_threshold) > eps, 1.0, 0.0)
+        c = np.zeros(self.model.n_vars)
+        if count_objective:
+            c[: self.nx] = 1.0
+        return replace(self.model, row_lb=lb, row_ub=ub, c=c)
+
+    def _solve(self, model: Model):
+        remaining = self.deadline - time.perf_counter()
+        if remaining <= 0:
+            return None
+        sol = solve(model, remaining, 0.0)
+        self.solve_time_s += sol.solve_time_s
+        return sol
+
+    def min_count_directions(self) -> int | None:
+        """Fewest markers meeting every count and sector row (accuracy ignored); ``None`` when
+        infeasible."""
+        sol = self._solve(self._bounded(None, np.inf, count_objective=True))
+        if sol is None or sol.status not in ("optimal", "infeasible"):
+            raise InfeasiblePlanError(
+                "time limit reached before the fewest markers meeting the direction rows were "
+                "proven; raise --time-limit")
+        return None if sol.selected is None else int(sol.selected.sum())
+
+    def query(self, k: int, eps: float, statuses: list[str]):
+        """A ``k``-subset with every station error <= ``eps``, or ``None``.
+
+        Returns ``(selected, proven)``: ``selected`` is ``None`` when infeasible; ``proven`` is
+        False when a solve hit its time limit without an answer.
+        """
+        cfg = self.config.replace(requirement_m=eps) if np.isfinite(eps) else None
+        while True:
+            sol = self._solve(self._bounded(k, eps, count_objective=False))
+            if sol is None:
+                statuses.append("time_limit")
+                return None, False
+            statuses.append(sol.status)
+            if sol.selected is None:
+                return None, sol.status == "infeasible"
+            if cfg is None:
+                return sol.selected, True
+            rows, _, kinds = accuracy_cuts(self.problem, self.model, sol.selected, cfg,
+                                           self.infos)
+            if rows is None:
+                return sol.selected, True
+            # accuracy_cuts found each grown set failing at eps: its threshold is above eps
+            # even where a re-summed error rounds differently
+            thresholds = [max(self._threshold(rows[r:r + 1], kinds[r]), np.nextafter(eps, np.inf))
+                          for r in range(rows.shape[0])]
+            start = self.model.A.shape[0]
+            self.model = self.model.with_rows(rows, np.ones(len(kinds)),
+                                              np.full(len(kinds), np.inf), kinds)
+            self.cut_rows.extend(range(start, start + len(kinds)))
+            self.cut_threshold.extend(thresholds)
+
+    def _threshold(self, row, kind: str) -> float:
+        """Error of the failing set a cut row excludes: the cut is valid for eps below it."""
+        s = self.station_index[kind.split(":", 1)[1]]
+        info = self.infos[s]
+        support = self.model.var_site[row.indices[row.indices < self.nx]]
+        return info.error(np.setdiff1d(info.sites, support))
+
+    def pad(self, selected: np.ndarray, k: int, pool: np.ndarray) -> np.ndarray:
+        """Add unused ``pool`` sites (in order) until ``k`` are selected (never hurts)."""
+        out = selected.copy()
+        for j in np.flatnonzero(pool & ~out)[: max(0, k - int(out.sum()))]:
+            out[j] = True
+        return out
+
+
+def tradeoff_curve(problem: PlanProblem, config, k_max: int | None = None,
+                   k_min: int | None = None, time_limit_s: float | None = None,
+                   tol_m: float = 1e-4) -> Curve:
+    """Minimal worst-station predicted error for every marker count, by integer programming.
+
+    Parameters
+    ----------
+    problem : PlanProblem
+        Candidate sites are the markers that may be kept (a layout, or all candidate sites);
+        none may be ``site_existing``.
+    config : PlanConfig
+        Uses ``requirement_m`` (pass/fail and the information rows' scale), ``min_markers``,
+        ``n_sectors``, ``min_sectors``, ``working_radius_m``, ``inclinometer_sigma_deg``,
+        ``existing`` (markers always kept), ``forbidden`` (markers never kept) and
+        ``time_limit_s`` (the whole study, unless ``time_limit_s`` is given).
+    k_max : int, optional
+        Largest count (default: every candidate site not forbidden).
+    k_min : int, optional
+        Smallest count (default: the fewest markers that meet the count and direction rows).
+    time_limit_s : float, optional
+        Wall-clock limit of the whole curve, s.
+    tol_m : float
+        Bisection stops at this width before the final optimality test, m.
+
+    Returns
+    -------
+    curve : Curve
+        Points from ``k_max`` down to ``k_min``; ``worst_error_m`` never decreases as k falls.
+
+    Raises
+    ------
+    ConfigError
+        ``k_min`` / ``k_max`` out of range, redundant mode, a budget or existing sites.
+    InfeasiblePlanError
+        No subset meets the count and direction rows, naming the stations and why.
+    """
+    _reduction_iv(problem, config, np.ones(problem.n_sites, bool))
+    limit = config.time_limit_s if time_limit_s is None else float(time_limit_s)
+    mm = _MinimaxModel(problem, config, time.perf_counter() + limit)
+    k_dir = mm.min_count_directions()
+    if k_dir is None:
+        why = diagnose(problem, config.replace(requirement_m=1e9), mm.infos)
+        raise InfeasiblePlanError(
+            "no subset gives every station >= "
+            f"{config.min_markers} usable markers in >= {config.min_sectors} sectors"
+            + (": " + "; ".join(f"{k}: {v}" for k, v in why.items()) if why else "")
+            + "; add markers or relax min_markers / min_sectors")
+    n = problem.n_sites
+    pool = ~_id_mask(problem, config.forbidden)
+    k_max = int(pool.sum()) if k_max is None else k_max
+    k_min = k_dir if k_min is None else k_min
+    _k_range_iv(k_min, k_max, k_dir, int(pool.sum()))
+    points: list[CurvePoint] = []
+    complete = True
+    best_above = None  # proven optimum of the next larger k (a lower bound for this k)
+    for k in range(k_max, k_min - 1, -1):
+        statuses: list[str] = []
+        proven = True
+        if k >= mm.nx:  # every usable marker fits: keeping all is optimal (monotone)
+            best = mm.pad(np.isin(np.arange(n), mm.model.var_site) & pool, k, pool)
+            lo = _worst(mm, best) * (1 - REL_TOL)
+        else:
+            best, lo, proven = _minimax(mm, k, best_above, tol_m, statuses)
+            if best is None:  # the time limit ran out before any k-subset was found
+                complete = False
+                break
+        best = mm.pad(best, k, pool)
+        check = evaluate_layout(problem, best, config, mm.infos)
+        points.append(CurvePoint(k=k, selected=best, error_m=check.error_m, count=check.count,
+                                 sectors=check.sectors, ok=check.ok, lower_bound_m=float(lo),
+                                 proven=bool(proven), n_solves=len(statuses),
+                                 statuses=tuple(statuses)))
+        best_above = float(check.error_m.max()) if proven else None
+    feasible = [p.k for p in points if p.meets_requirement]
+    return Curve(points=points, k_directions=k_dir, k_feasible=min(feasible) if feasible else None,
+                 n_cuts=len(mm.cut_rows), solve_time_s=mm.solve_time_s, complete=complete)
+
+
+def _minimax(mm: _MinimaxModel, k: int, best_above: float | None, tol_m: float,
+             statuses: list[str]) -> tuple[np.ndarray | None, float, bool]:
+    """Bisection for one k: (best subset, proven lower bound, proven optimal)."""
+    best, proven = mm.query(k, np.inf, statuses)
+    if best is None:
+        return None, -np.inf, False
+    hi = _worst(mm, best)
+    # W*(k) >= W*(k+1): start just below the larger count's optimum and try it first
+    lo = -np.inf if best_above is None else best_above * (1 - REL_TOL)
+    if best_above is not None and hi > best_above:
+        sel, ok = mm.query(k, best_above, statuses)
+        proven &= ok
+        if sel is not None:
+            best, hi = sel, _worst(mm, sel)
+        else:
+            lo = best_above
+    width = tol_m
+    while True:
+        if not np.isfinite(lo):
+            eps = 0.5 * hi
+        elif hi - lo > width:
+            eps = 0.5 * (lo + hi)
+        else:  # final test just below the best: infeasible proves it optimal
+            eps = hi * (1 - REL_TOL)
+        if eps <= lo:
+            return best, lo, proven
+        if time.perf_counter() >= mm.deadline:
+            statuses.append("time_limit")
+            return best, lo, False
+        final = np.isfinite(lo) and hi - lo <= width
+        sel, ok = mm.query(k, eps, statuses)
+        proven &= ok
+        if sel is not None:
+            best, hi = sel, _worst(mm, sel)
+            if final:
+                width /= 16.0
+        else:
+            lo = eps
+
+
+def _worst(mm: _MinimaxModel, selected: np.ndarray) -> float:
+    return float(max(info.error(info.sites[selected[info.sites]]) for info in mm.infos))
+
+
+def _id_mask(problem: PlanProblem, ids) -> np.ndarray:
+    mask = np.zeros(problem.n_sites, dtype=bool)
+    mask[[problem.site_ids.index(i) for i in ids if i in problem.site_ids]] = True
+    return mask
+
+
+def _k_range_iv(k_min: int, k_max: int, k_dir: int, n: int) -> None:
+    for name, v in (("k_min", k_min), ("k_max", k_max)):
+        if not isinstance(v, (int, np.integer)) or isinstance(v, bool):
+            raise ConfigError(f"`{name}` must be an integer, got {v!r}")
+    if not 1 <= k_max <= n:
+        raise ConfigError(f"`k_max` must be in 1..{n} (the markers that may be kept), "
+                          f"got {k_max}")
+    if not k_dir <= k_min <= k_max:
+        raise ConfigError(f"`k_min` must be in {k_dir}..{k_max} (below {k_dir} markers no subset "
+                          f"meets the direction rows), got {k_min}")
+
+
+def drop_order(problem: PlanProblem, config, layout: np.ndarray) -> list[DropStep]:
+    """Remove markers one at a time, each time the one whose loss hurts least.
+
+    Markers in ``config.existing`` are kept; markers in ``config.forbidden`` are removed before
+    the first step. At every step each remaining marker is tried (exact, by enumeration); the
+    removal chosen
+    keeps every station's count and directions if possible, then gives the lowest worst-station
+    error, then the lowest mean error, then the lowest index. Stops when every removal would
+    break a station's count or directions. A nested sequence: compare it with
+    :func:`tradeoff_curve`, whose subsets need not be nested.
+
+    Parameters
+    ----------
+    problem : PlanProblem
+    config : PlanConfig
+    layout : (n,) bool
+        The markers in the field.
+
+    Returns
+    -------
+    steps : list of DropStep
+    """
+    current = _reduction_iv(problem, config, layout) & ~_id_mask(problem, config.forbidden)
+    kept = _id_mask(problem, config.existing)
+    infos = station_infos(problem, config)
+    steps = []
+    while (current & ~kept).any():
+        best = None
+        for m in np.flatnonzero(current & ~kept):
+            trial = current.copy()
+            trial[m] = False
+            chk = evaluate_layout(problem, trial, config, infos)
+            directions = bool(np.all((chk.count >= config.min_markers)
+                                     & (chk.sectors >= config.min_sectors)))
+            key = (not directions, float(chk.error_m.max()), float(chk.error_m.mean()), int(m))
+            if best is None or key < best[0]:
+                best = (key, m, trial, chk)
+        if best[0][0]:  # every removal breaks directions somewhere
+            break
+        _, m, current, chk = best
+        steps.append(DropStep(k=int(current.sum()), removed=int(m), check=chk,
+                              selected=current.copy()))
+    return steps
+
+
+def marker_losses(problem: PlanProblem, config, layout: np.ndarray) -> list[MarkerLoss]:
+    """For every marker of ``layout``: the layout without it and the stations that then fail.
+
+    Parameters
+    ----------
+    problem : PlanProblem
+    config : PlanConfig
+    layout : (n,) bool
+
+    Returns
+    -------
+    losses : list of MarkerLoss
+        In site order.
+    """
+    layout = _reduction_iv(problem, config, layout)
+    infos = station_infos(problem, config)
+    out = []
+    for m in np.flatnonzero(layout):
+        trial = layout.copy()
+        trial[m] = False
+        chk = evaluate_layout(problem, trial, config, infos)
+        out.append(MarkerLoss(marker=int(m), check=chk,
+                              failing=tuple(int(s) for s in np.flatnonzero(~chk.ok))))
+    return out
+
+
+def failure_reason(check, s: int, config) -> str:
+    """Why station ``s`` fails in a :class:`~planner.program.LayoutCheck` ("" when it passes)."""
+    why = []
+    if check.count[s] < config.min_markers:
+        why.append(f"{int(check.count[s])} usable markers < {config.min_markers}")
+    if check.sectors[s] < config.min_sectors:
+        why.append(f"{int(check.sectors[s])} directions < {config.min_sectors}")
+    if check.error_m[s] > config.requirement_m:
+        why.append(f"error {check.error_m[s]:.4f} m > {config.requirement_m:g} m")
+    return "; ".join(why)

@@ -1,0 +1,224 @@
+"""Outputs of ``markerplan reduce``: ``reduce.json``, ``tradeoff.csv``, ``per_station.csv``,
+``drop_order.csv``, ``marker_loss.csv``, ``report.md`` and the ``--json`` summary.
+
+``reduce.json`` schema ``markerplan-reduce`` version 1 (lengths in metres, site frame):
+
+- ``schema``, ``schema_version``, ``provenance`` (:func:`markerplan.provenance.provenance` of the
+  resolved configuration, with the error model, solver statuses and inputs), ``frame``;
+- ``layout``: source, mode (``layout`` or ``free``), marker ids;
+- ``requirement``: requirement_m, sectors, markers, working radius;
+- ``curve``: one record per count ``k`` (most markers first) — kept markers, worst and mean
+  predicted station error, proven lower bound, per-station errors and directions, whether every
+  station passes, whether the point is proven optimal and the status of every solve;
+- ``k_directions``, ``k_feasible``, ``markers_that_can_go``;
+- ``drop_order`` and ``marker_losses``;
+- ``verify`` (with ``--verify``): achieved against predicted errors at chosen counts;
+- ``timings_s`` (the only field that differs between identical runs).
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+from collections import Counter
+from pathlib import Path
+
+import numpy as np
+
+from markerplan.provenance import provenance
+from planner.reduction import failure_reason
+
+SCHEMA = "markerplan-reduce"
+SCHEMA_VERSION = 1
+FRAME_NOTE = "site frame: local metres (x, y horizontal, z up)"
+SOLVER = "HiGHS via scipy.optimize.milp (bisection on the worst-station error)"
+
+
+def _num(v):
+    v = float(v)
+    return v if math.isfinite(v) else None
+
+
+def _ids(problem, mask) -> list[str]:
+    return [problem.site_ids[j] for j in np.flatnonzero(mask)]
+
+
+def _stations(problem, check, config) -> list[dict]:
+    return [{"id": sid, "error_m": _num(check.error_m[s]), "n_markers": int(check.count[s]),
+             "n_sectors": int(check.sectors[s]), "meets_requirement": bool(check.ok[s]),
+             "reason": failure_reason(check, s, config)}
+            for s, sid in enumerate(problem.station_ids)]
+
+
+def reduce_record(study, layout, inputs, model_name: str, options: dict,
+                  verify: dict | None = None) -> dict:
+    """The ``reduce.json`` document of a :class:`~planner.reduction_study.ReductionStudy`."""
+    prob, cfg, curve = study.problem, study.config, study.curve
+    statuses = Counter(s for p in curve.points for s in p.statuses)
+    points = []
+    for p in curve.points:
+        points.append({
+            "k": p.k, "markers": _ids(prob, p.selected), "worst_error_m": _num(p.worst_error_m),
+            "mean_error_m": _num(p.mean_error_m), "lower_bound_m": _num(p.lower_bound_m),
+            "meets_requirement": p.meets_requirement,
+            "directions_ok": bool(np.all((p.count >= cfg.min_markers)
+                                         & (p.sectors >= cfg.min_sectors))),
+            "proven_optimal": p.proven, "n_solves": p.n_solves,
+            "statuses": dict(Counter(p.statuses)),
+            "stations": _stations(prob, p, cfg)})
+    drop = []
+    for i, s in enumerate(study.drop, start=1):
+        best = next((p for p in curve.points if p.k == s.k), None)
+        drop.append({"step": i, "removed": prob.site_ids[s.removed], "k": s.k,
+                     "worst_error_m": _num(s.worst_error_m), "mean_error_m": _num(s.mean_error_m),
+                     "meets_requirement": bool(s.check.all_ok),
+                     "optimal_worst_error_m": _num(best.worst_error_m) if best else None,
+                     "failing": {prob.station_ids[t]: failure_reason(s.check, t, cfg)
+                                 for t in np.flatnonzero(~s.check.ok)}})
+    losses = [{"marker": prob.site_ids[m.marker], "worst_error_m": _num(m.worst_error_m),
+               "mean_error_m": _num(m.check.error_m.mean()),
+               "failing": {prob.station_ids[t]: failure_reason(m.check, t, cfg)
+                           for t in m.failing}} for m in study.losses]
+    solver = {"name": SOLVER, "statuses": dict(statuses), "proven_optimal": curve.proven,
+              "complete": curve.complete, "time_limit_s": cfg.time_limit_s,
+              "n_solves": int(sum(p.n_solves for p in curve.points)),
+              "accuracy_cuts": curve.n_cuts, "solve_time_s": round(curve.solve_time_s, 3)}
+    doc = {
+        "schema": SCHEMA, "schema_version": SCHEMA_VERSION,
+        "provenance": provenance({"plan": cfg.to_dict(), "reduce": options},
+                                 error_model=model_name,
+                                 solver={"name": SOLVER, "statuses": dict(statuses),
+                                         "proven_optimal": curve.proven},
+                                 inputs=dict(inputs.sources, layout=layout.source)),
+        "frame": FRAME_NOTE,
+        "site": {"name": inputs.site_name, "seed": inputs.seed},
+        "layout": {"source": layout.source, "mode": "free" if study.free else "layout",
+                   "n_markers": study.n_layout, "markers": _ids(prob, study.layout)},
+        "requirement": {"requirement_m": cfg.requirement_m, "n_sectors": cfg.n_sectors,
+                        "min_sectors": cfg.min_sectors, "min_markers": cfg.min_markers,
+                        "working_radius_m": cfg.working_radius_m},
+        "solver": solver,
+        "k_directions": curve.k_directions, "k_feasible": curve.k_feasible,
+        "markers_that_can_go": study.markers_that_can_go,
+        "curve": points, "drop_order": drop, "marker_losses": losses,
+        "timings_s": {k: round(v, 3) for k, v in study.timings_s.items()},
+    }
+    if verify is not None:
+        doc["verify"] = verify
+    return doc
+
+
+def write_reduce_files(doc: dict, folder: Path) -> None:
+    """Write reduce.json, the four CSV tables and report.md into ``folder``."""
+    folder = Path(folder)
+    (folder / "reduce.json").write_text(json.dumps(doc, indent=2) + "\n")
+    _csv(folder / "tradeoff.csv",
+         ["k", "worst_error_m", "mean_error_m", "lower_bound_m", "meets_requirement",
+          "directions_ok", "n_failing", "proven_optimal", "n_solves", "markers"],
+         [[p["k"], _f(p["worst_error_m"]), _f(p["mean_error_m"]), _f(p["lower_bound_m"]),
+           int(p["meets_requirement"]), int(p["directions_ok"]),
+           sum(not s["meets_requirement"] for s in p["stations"]), int(p["proven_optimal"]),
+           p["n_solves"], " ".join(p["markers"])] for p in doc["curve"]])
+    _csv(folder / "per_station.csv",
+         ["k", "station", "error_m", "n_markers", "n_sectors", "meets_requirement", "reason"],
+         [[p["k"], s["id"], _f(s["error_m"]), s["n_markers"], s["n_sectors"],
+           int(s["meets_requirement"]), s["reason"]] for p in doc["curve"] for s in p["stations"]])
+    _csv(folder / "drop_order.csv",
+         ["step", "removed", "k", "worst_error_m", "mean_error_m", "meets_requirement",
+          "optimal_worst_error_m", "failing"],
+         [[d["step"], d["removed"], d["k"], _f(d["worst_error_m"]), _f(d["mean_error_m"]),
+           int(d["meets_requirement"]), _f(d["optimal_worst_error_m"]), _failing(d["failing"])]
+          for d in doc["drop_order"]])
+    _csv(folder / "marker_loss.csv",
+         ["marker", "worst_error_m", "mean_error_m", "n_failing", "failing"],
+         [[m["marker"], _f(m["worst_error_m"]), _f(m["mean_error_m"]), len(m["failing"]),
+           _failing(m["failing"])] for m in doc["marker_losses"]])
+    (folder / "report.md").write_text(report_markdown(doc))
+
+
+def _f(v, digits: int = 6) -> str:
+    return "" if v is None else f"{v:.{digits}f}"
+
+
+def _failing(failing: dict) -> str:
+    return "; ".join(f"{k}: {v}" for k, v in failing.items())
+
+
+def _csv(path: Path, header: list[str], rows: list[list]) -> None:
+    with path.open("w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(header)
+        w.writerows(rows)
+
+
+def _cm(v) -> str:
+    return "n/a" if v is None else f"{100 * v:.2f} cm"
+
+
+def report_markdown(doc: dict) -> str:
+    """Human report of a ``reduce.json`` document (Markdown)."""
+    req, lay, sol = doc["requirement"], doc["layout"], doc["solver"]
+    kf, go = doc["k_feasible"], doc["markers_that_can_go"]
+    head = (f"**{go} of {lay['n_markers']} markers can go**: {kf} markers still give every "
+            f"station ≥ {req['min_markers']} markers in ≥ {req['min_sectors']} of "
+            f"{req['n_sectors']} directions and a predicted error ≤ "
+            f"{100 * req['requirement_m']:g} cm." if kf is not None else
+            "**No count meets the requirement at every station**, not even the full layout.")
+    lines = [f"# Marker reduction — site `{doc['site']['name']}`, layout `{lay['source']}`", "",
+             head, "",
+             "Mode: " + ("free (any candidate site)" if lay["mode"] == "free"
+                         else "subsets of the layout")
+             + f"; error: 95 % registered-position error over a {req['working_radius_m']:g} m "
+             "working radius, predicted from the error model and the station geometry.", "",
+             "## Trade-off curve (fewest-markers-first minimax subsets)", "",
+             "| markers | worst station | mean | meets requirement | proven optimal | kept |",
+             "|---:|---:|---:|---|---|---|"]
+    for p in doc["curve"]:
+        lines.append(f"| {p['k']} | {_cm(p['worst_error_m'])} | {_cm(p['mean_error_m'])} | "
+                     f"{'yes' if p['meets_requirement'] else 'no'} | "
+                     f"{'yes' if p['proven_optimal'] else 'NO (time limit)'} | "
+                     f"{', '.join(p['markers'])} |")
+    lines += ["", f"Solver: {sol['name']}; {sol['n_solves']} solves, {sol['accuracy_cuts']} "
+              f"accuracy cuts, statuses {sol['statuses']}"
+              + ("" if sol["proven_optimal"] else
+                 " — **some points hit the time limit and are not proven optimal**") + ".", "",
+              "## Drop order (remove the marker whose loss hurts least, one at a time)", "",
+              "| step | removed | left | worst station | best possible with as many | passes |",
+              "|---:|---|---:|---:|---:|---|"]
+    for d in doc["drop_order"]:
+        lines.append(f"| {d['step']} | {d['removed']} | {d['k']} | {_cm(d['worst_error_m'])} | "
+                     f"{_cm(d['optimal_worst_error_m'])} | "
+                     f"{'yes' if d['meets_requirement'] else 'no'} |")
+    lines += ["", "## Losing one marker (robustness of the full layout)", "",
+              "| marker lost | worst station | stations that fail |", "|---|---:|---|"]
+    for m in doc["marker_losses"]:
+        lines.append(f"| {m['marker']} | {_cm(m['worst_error_m'])} | "
+                     f"{_failing(m['failing']) or '—'} |")
+    if "verify" in doc:
+        lines += ["", "## Verification (simulator + pipeline)", "",
+                  "| markers | station | predicted | achieved |", "|---:|---|---:|---:|"]
+        for v in doc["verify"]["points"]:
+            for s in v["stations"]:
+                lines.append(f"| {v['k']} | {s['id']} | {_cm(s['predicted_error_m'])} | "
+                             f"{_cm(s['achieved_error_m'])} |")
+    lines += ["", f"markerplan {doc['provenance']['markerplan_version']}; error model "
+              f"{doc['provenance']['error_model']}; config sha256 "
+              f"`{doc['provenance']['config_sha256'][:12]}`; {FRAME_NOTE}.", ""]
+    return "\n".join(lines)
+
+
+def summary(doc: dict, out: Path) -> dict:
+    """The one-object ``--json`` summary."""
+    return {"out": str(out), "site": doc["site"]["name"], "layout": doc["layout"]["source"],
+            "mode": doc["layout"]["mode"], "n_markers": doc["layout"]["n_markers"],
+            "k_feasible": doc["k_feasible"], "k_directions": doc["k_directions"],
+            "markers_that_can_go": doc["markers_that_can_go"],
+            "proven_optimal": doc["solver"]["proven_optimal"],
+            "statuses": doc["solver"]["statuses"],
+            "curve": [{"k": p["k"], "worst_error_m": p["worst_error_m"],
+                       "mean_error_m": p["mean_error_m"],
+                       "meets_requirement": p["meets_requirement"], "markers": p["markers"]}
+                      for p in doc["curve"]],
+            "drop_order": [d["removed"] for d in doc["drop_order"]],
+            "verified_k": [v["k"] for v in doc.get("verify", {}).get("points", [])]}

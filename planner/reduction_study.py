@@ -1,0 +1,305 @@
+"""A marker-reduction study on a site: the layout, its integer-program input and the three studies.
+
+The layout comes from a plan (``plan.json``), a markers CSV (``id, x_m, y_m[, z_m]``, site
+frame) or the site preset's as-built layout (``"as-built"``). :func:`layout_problem` ray-casts the
+stations against the layout's markers (or, with ``free``, against every candidate site plus the
+layout) and judges each pair exactly as :mod:`planner.planning` does for a plan; the studies are
+:mod:`planner.reduction`.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+
+from markerplan.errors import ConfigError, DataError, InputFileError
+from planner.reduction import (
+    Curve,
+    DropStep,
+    MarkerLoss,
+    drop_order,
+    marker_losses,
+    tradeoff_curve,
+)
+from planner.usability import PlanProblem
+
+AS_BUILT = "as-built"
+
+
+@dataclass(frozen=True)
+class Layout:
+    """Markers in the field, site frame.
+
+    Attributes
+    ----------
+    ids : tuple of str, (m,)
+    xyz : (m, 3) float
+        Marker centres, m.
+    source : str
+        ``"as-built"``, or the file it was read from.
+    """
+
+    ids: tuple[str, ...]
+    xyz: np.ndarray
+    source: str
+
+
+@dataclass
+class ReductionStudy:
+    """Everything ``markerplan reduce`` reports.
+
+    Attributes
+    ----------
+    problem : PlanProblem
+        Candidate sites are the layout (or, with ``free``, every candidate site and the layout).
+    config : PlanConfig
+    layout : (n,) bool
+        Which candidate sites are the layout's markers.
+    free : bool
+    curve : Curve
+    drop : list of DropStep
+    losses : list of MarkerLoss
+    timings_s : dict
+    """
+
+    problem: PlanProblem
+    config: object
+    layout: np.ndarray
+    free: bool
+    curve: Curve
+    drop: list[DropStep]
+    losses: list[MarkerLoss]
+    timings_s: dict = field(default_factory=dict)
+
+    @property
+    def n_layout(self) -> int:
+        return int(self.layout.sum())
+
+    @property
+    def markers_that_can_go(self) -> int | None:
+        """Layout markers that can be removed with every station still passing."""
+        k = self.curve.k_feasible
+        return None if k is None else self.n_layout - k
+
+
+def read_layout(spec: str, inputs) -> Layout:
+    """The layout named by ``spec`` on a site.
+
+    Parameters
+    ----------
+    spec : str
+        ``"as-built"``, a ``plan.json`` written by ``markerplan plan`` or a markers CSV.
+    inputs : planner.planning.PlanInputs
+
+    Raises
+    ------
+    InputFileError, DataError
+        Missing or malformed file, duplicate ids, or a marker outside the site.
+    """
+    from planner.planning import read_markers
+
+    if spec == AS_BUILT:
+        if not len(inputs.as_built_ids):
+            raise InputFileError("INPUT as-built: this site has no as-built layout; give a plan "
+                                 "or a markers CSV")
+        layout = Layout(tuple(inputs.as_built_ids), np.asarray(inputs.as_built_xyz, float),
+                        AS_BUILT)
+    elif _is_plan(spec):
+        layout = _plan_layout(_read_plan(Path(spec)), spec)
+    else:
+        ids, xyz = read_markers(spec, inputs.dem, inputs.marker_radius_m)
+        layout = Layout(tuple(ids), xyz, str(spec))
+    _inside_site_iv(layout, inputs)
+    return layout
+
+
+def resolve_inputs(spec: str, site: str | None = None, seed: int | None = None,
+                   dem_path=None, stations_path=None, boundary_path=None, exclude_paths=(),
+                   config=None) -> tuple[object, Layout, object]:
+    """Site inputs, layout and plan configuration of a reduction study.
+
+    A ``plan.json`` supplies its own site, seed, DEM and stations files and configuration
+    unless they are given here. The plan-only settings ``budget``, ``existing``, ``forbidden``
+    and ``redundant`` are reset: the study decides which markers stay.
+
+    Parameters
+    ----------
+    spec : str
+        ``"as-built"``, a ``plan.json`` or a markers CSV (``id, x_m, y_m[, z_m]``).
+    site, seed, dem_path, stations_path, boundary_path, exclude_paths
+        As for :func:`planner.planning.load_inputs`.
+    config : PlanConfig, optional
+        Default: the plan's configuration, else ``PlanConfig()``.
+
+    Returns
+    -------
+    inputs : PlanInputs
+    layout : Layout
+    config : PlanConfig
+    """
+    from planner.config import PlanConfig, config_from_dict
+    from planner.planning import load_inputs
+
+    plan = _read_plan(Path(spec)) if _is_plan(spec) else None
+    if plan is not None:
+        recorded = plan.get("provenance", {}).get("inputs", {})
+        site = site or plan.get("site", {}).get("name") or "default"
+        seed = plan.get("site", {}).get("seed") if seed is None else seed
+        dem_path = dem_path or recorded.get("dem")
+        stations_path = stations_path or recorded.get("stations")
+        if config is None:
+            config = config_from_dict(plan.get("provenance", {}).get("config", {}),
+                                      where=f"INPUT {spec} (its configuration)")
+    config = (config or PlanConfig()).replace(budget=None, existing=(), forbidden=(),
+                                              redundant=False)
+    inputs = load_inputs(site or "default", seed, dem_path=dem_path,
+                         stations_path=stations_path, boundary_path=boundary_path,
+                         exclude_paths=exclude_paths)
+    if plan is None:
+        return inputs, read_layout(spec, inputs), config
+    layout = _plan_layout(plan, spec)
+    _inside_site_iv(layout, inputs)
+    return inputs, layout, config
+
+
+def _is_plan(spec: str) -> bool:
+    return spec != AS_BUILT and Path(spec).suffix.lower() == ".json"
+
+
+def _read_plan(path: Path) -> dict:
+    try:
+        data = json.loads(path.read_text())
+    except FileNotFoundError as exc:
+        raise InputFileError(f"INPUT {path}: file not found; give a plan.json, a markers CSV "
+                             "or 'as-built'") from exc
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise InputFileError(f"INPUT {path}: not valid JSON ({exc}); give a plan.json written "
+                             "by `markerplan plan`") from exc
+    if not isinstance(data, dict):
+        raise InputFileError(f"INPUT {path}: expected a JSON object; give a plan.json written "
+                             "by `markerplan plan`")
+    return data
+
+
+def _plan_layout(data: dict, path) -> Layout:
+    """The selected markers of a ``plan.json`` (``markers``: list of ``{id, x_m, y_m, z_m}``)."""
+    markers = data.get("markers")
+    if not isinstance(markers, list) or not markers:
+        raise InputFileError(f"INPUT {path}: no 'markers' list; give a plan.json written by "
+                             "`markerplan plan`")
+    try:
+        ids = tuple(str(m["id"]) for m in markers)
+        xyz = np.array([[float(m["x_m"]), float(m["y_m"]), float(m["z_m"])] for m in markers])
+    except (KeyError, TypeError, ValueError) as exc:
+        raise InputFileError(f"INPUT {path}: a marker lacks id, x_m, y_m or z_m ({exc}); give a "
+                             "plan.json written by `markerplan plan`") from exc
+    if len(set(ids)) != len(ids):
+        raise InputFileError(f"INPUT {path}: marker ids must be unique")
+    return Layout(ids, xyz, str(path))
+
+
+def _inside_site_iv(layout: Layout, inputs) -> None:
+    import shapely
+
+    xy = layout.xyz[:, :2]
+    inside = inputs.dem.contains(xy)
+    where = "the DEM"
+    if inputs.boundary_xy is not None:
+        poly = shapely.Polygon(np.asarray(inputs.boundary_xy, float))
+        inside &= shapely.intersects_xy(poly, xy[:, 0], xy[:, 1])
+        where = "the site boundary"
+    if not inside.all():
+        k = int(np.flatnonzero(~inside)[0])
+        raise DataError(f"marker {layout.ids[k]} at ({xy[k, 0]:.2f}, {xy[k, 1]:.2f}) m lies "
+                        f"outside {where}; give markers in the site frame inside the site")
+
+
+def marker_ids_iv(ids, layout: Layout, option: str) -> tuple[str, ...]:
+    """Check that every id names a layout marker; returns them as a tuple."""
+    ids = tuple(ids)
+    unknown = [i for i in ids if i not in layout.ids]
+    if unknown:
+        raise ConfigError(f"{option} names unknown marker id(s) {', '.join(unknown)}; the layout "
+                          f"has {', '.join(layout.ids)}")
+    return ids
+
+
+def layout_problem(inputs, layout: Layout, config, error_model, free: bool = False,
+                   progress: bool = True) -> tuple[PlanProblem, np.ndarray, dict]:
+    """The integer program's input for a reduction study.
+
+    Parameters
+    ----------
+    inputs : planner.planning.PlanInputs
+    layout : Layout
+    config : PlanConfig
+    error_model : ErrorModel
+    free : bool
+        Candidate sites are every candidate site of the planner plus the layout (else only
+        the layout).
+    progress : bool
+
+    Returns
+    -------
+    problem : PlanProblem
+        No site is marked existing: the study may drop any marker.
+    layout_mask : (n,) bool
+    timings_s : dict
+    """
+    from planner.planning import angular_sampling, build_problem
+    from planner.usability import problem_from_visibility
+    from visibility.scene import RayScene
+    from visibility.visibility_matrix import visibility_matrix
+
+    if free:
+        with_layout = replace(inputs, existing_ids=list(layout.ids), existing_xyz=layout.xyz)
+        problem, _, _, _, timings = build_problem(with_layout, config, error_model, progress)
+        problem = replace(problem, site_existing=np.zeros(problem.n_sites, bool),
+                          site_cost=np.ones(problem.n_sites))
+        mask = np.isin(np.asarray(problem.site_ids), layout.ids)
+        return problem, mask, timings
+    t = time.perf_counter()
+    scene = RayScene(inputs.dem)
+    timings = {"scene": time.perf_counter() - t}
+    vis = visibility_matrix(scene, inputs.station_xyz, layout.xyz, inputs.marker_radius_m,
+                            config.max_range_m, config.rays_per_marker, angular_sampling(),
+                            progress=progress)
+    timings["visibility"] = vis.elapsed_s
+    problem = problem_from_visibility(vis, error_model, config, inputs.station_ids,
+                                      inputs.station_xyz, layout.ids, layout.xyz)
+    return problem, np.ones(problem.n_sites, bool), timings
+
+
+def run_study(problem: PlanProblem, config, layout: np.ndarray, free: bool = False,
+              k_min: int | None = None, time_limit_s: float | None = None) -> ReductionStudy:
+    """Trade-off curve (from the layout's size down), drop order and per-marker losses.
+
+    Parameters
+    ----------
+    problem : PlanProblem
+    config : PlanConfig
+        ``existing``: markers always kept; ``forbidden``: markers never kept.
+    layout : (n,) bool
+    free : bool
+        Recorded; the curve picks from every candidate site of ``problem`` either way.
+    k_min : int, optional
+        Smallest count on the curve (default: the fewest meeting the direction rows).
+    time_limit_s : float, optional
+        Limit of the curve's integer programming, s (default ``config.time_limit_s``).
+    """
+    layout = np.asarray(layout, dtype=bool)
+    n_allowed = int(np.sum(layout & ~np.isin(np.asarray(problem.site_ids), config.forbidden)))
+    t = time.perf_counter()
+    curve = tradeoff_curve(problem, config, k_max=n_allowed, k_min=k_min,
+                           time_limit_s=time_limit_s)
+    timings = {"curve": time.perf_counter() - t}
+    t = time.perf_counter()
+    drop = drop_order(problem, config, layout)
+    losses = marker_losses(problem, config, layout)
+    timings["drop_order_and_losses"] = time.perf_counter() - t
+    return ReductionStudy(problem=problem, config=config, layout=layout, free=free, curve=curve,
+                          drop=drop, losses=losses, timings_s=timings)

@@ -1,0 +1,101 @@
+"""``markerplan reduce --verify``: simulate and process the stations at chosen points of the
+trade-off curve, with :func:`planner.verify.verify_plan` (simulator + pipeline + 4-DoF WLS
+registration), and set the achieved registration errors beside the predicted ones."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from markerplan.errors import ConfigError
+
+
+def default_counts(study) -> tuple[int, ...]:
+    """The full layout and the fewest markers meeting the requirement (or the curve's end)."""
+    ks = [study.curve.points[0].k]
+    last = study.curve.k_feasible or study.curve.points[-1].k
+    if last not in ks:
+        ks.append(last)
+    return tuple(ks)
+
+
+def _counts_iv(study, ks) -> tuple[int, ...]:
+    on_curve = [p.k for p in study.curve.points]
+    bad = [k for k in ks if k not in on_curve]
+    if bad:
+        raise ConfigError(f"--verify-k must be counts on the curve ({min(on_curve)}.."
+                          f"{max(on_curve)}), got {', '.join(map(str, bad))}")
+    return tuple(dict.fromkeys(ks))
+
+
+def point_plan(study, inputs, k: int) -> dict:
+    """A ``plan.json``-shaped document of the curve's ``k``-marker subset, for the verifier."""
+    prob, cfg = study.problem, study.config
+    p = study.curve.at(k)
+    sel = np.flatnonzero(p.selected)
+    stations = []
+    for s, sid in enumerate(prob.station_ids):
+        idx = prob.usable_pairs(s)
+        idx = idx[p.selected[prob.pair_site[idx]]]
+        stations.append({"id": sid, "x_m": float(prob.station_xyz[s, 0]),
+                         "y_m": float(prob.station_xyz[s, 1]),
+                         "z_m": float(prob.station_xyz[s, 2]),
+                         "heading_rad": float(inputs.station_heading_rad[s]),
+                         "predicted_error_m": float(p.error_m[s]),
+                         "markers": [prob.site_ids[j] for j in prob.pair_site[idx]]})
+    return {"markers": [{"id": prob.site_ids[j], "x_m": float(prob.site_xyz[j, 0]),
+                         "y_m": float(prob.site_xyz[j, 1]), "z_m": float(prob.site_xyz[j, 2])}
+                        for j in sel],
+            "stations": stations,
+            "site": {"name": inputs.site_name, "seed": inputs.seed,
+                     "marker_radius_m": inputs.marker_radius_m},
+            "requirement": {"requirement_m": cfg.requirement_m,
+                            "working_radius_m": cfg.working_radius_m},
+            "provenance": {"inputs": dict(inputs.sources)}}
+
+
+def verify_points(study, inputs, ks, error_model, seed: int = 0, progress: bool = True) -> dict:
+    """Verify the curve at the counts ``ks`` (default :func:`default_counts`).
+
+    Parameters
+    ----------
+    study : ReductionStudy
+    inputs : PlanInputs
+    ks : sequence of int or None
+        Counts on the curve.
+    error_model : ErrorModel
+        Registration weights.
+    seed : int
+        Simulation seed (the same for every count, so differences come from the markers).
+    progress : bool
+
+    Returns
+    -------
+    record : dict
+        ``{"seed", "points": [{"k", "markers", "predicted_worst_error_m",
+        "achieved_worst_error_m", "achieved_mean_error_m", "passed", "stations": [...]}]}``;
+        a station whose pose could not be registered has ``achieved_error_m`` None, and then
+        the point's ``achieved_worst_error_m`` is None too.
+    """
+    from planner.verify import verify_plan
+
+    ks = default_counts(study) if ks is None else _counts_iv(study, ks)
+    points = []
+    for k in ks:
+        doc = point_plan(study, inputs, k)
+        checks = verify_plan(doc, error_model, seed=seed, progress=progress)
+        achieved = [c.achieved_error_m for c in checks]
+        finite = [a for a in achieved if a is not None]
+        points.append({
+            "k": k, "markers": [m["id"] for m in doc["markers"]],
+            "predicted_worst_error_m": max(s["predicted_error_m"] for s in doc["stations"]),
+            "achieved_worst_error_m": (max(finite) if len(finite) == len(achieved)
+                                       else None),
+            "achieved_mean_error_m": float(np.mean(finite)) if finite else None,
+            "passed": all(c.passed for c in checks),
+            "stations": [{"id": c.station_id, "predicted_error_m": c.predicted_error_m,
+                          "achieved_error_m": c.achieved_error_m,
+                          "n_detected_markers": c.n_detected, "n_planned_markers": c.n_planned,
+                          "passed": c.passed, "reason": c.reason} for c in checks]})
+    return {"seed": seed, "method": "planner.verify.verify_plan (simulate_markers -> "
+            "process_station -> 4-DoF WLS -> registration error over the working radius)",
+            "points": points}

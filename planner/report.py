@@ -1,0 +1,231 @@
+"""Plan outputs: ``plan.json`` (versioned schema), ``markers.csv``, ``markers.geojson``,
+``report.md``, and the one-object JSON summary of ``markerplan plan --json``.
+
+``plan.json`` schema ``markerplan-plan`` version 1 (all lengths in metres, site frame):
+
+- ``schema``, ``schema_version``
+- ``provenance``: :func:`markerplan.provenance.provenance` of the resolved configuration, with
+  the error model, solver and inputs;
+- ``site``: name, seed, marker radius, boundary;
+- ``requirement``: requirement_m, sectors, markers, working radius, redundant;
+- ``solver``: name, status, objective, dual bound, gap, solve time, iterations, cuts;
+- ``markers``: id, x_m, y_m, z_m, existing, stations that use it;
+- ``stations``: id, position, heading, predicted error, markers used, occupied sectors,
+  (redundant mode) worst error after losing one marker, meets_requirement;
+- ``baselines``: greedy, regular grid, as-built — markers, meets_requirement, saved;
+- ``candidates`` and ``visibility``: counts and timings.
+
+Timings (``solve_time_s``, ``timings_s``) are the only fields that differ between identical runs.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+
+from markerplan.provenance import provenance
+from planner.usability import sector_index
+
+SCHEMA = "markerplan-plan"
+SCHEMA_VERSION = 1
+FRAME_NOTE = ("site frame: local metres (x, y horizontal, z up); not geographic coordinates, "
+              "not WGS84")
+
+
+def _num(v):
+    """JSON-safe float (None for nan/inf)."""
+    v = float(v)
+    return v if math.isfinite(v) else None
+
+
+def plan_record(outcome) -> dict:
+    """The ``plan.json`` document of a :class:`~planner.planning.PlanOutcome`."""
+    inp, cfg, prob, res = outcome.inputs, outcome.config, outcome.problem, outcome.result
+    sol = res.solution
+    sel = np.flatnonzero(res.selected)
+    used_by: dict[int, list[str]] = {int(j): [] for j in sel}
+    stations = []
+    for s in range(prob.n_stations):
+        idx = prob.usable_pairs(s)
+        idx = idx[res.selected[prob.pair_site[idx]]]
+        for j in prob.pair_site[idx]:
+            used_by[int(j)].append(prob.station_ids[s])
+        rec = {"id": prob.station_ids[s],
+               "x_m": _num(prob.station_xyz[s, 0]), "y_m": _num(prob.station_xyz[s, 1]),
+               "z_m": _num(prob.station_xyz[s, 2]),
+               "heading_rad": _num(inp.station_heading_rad[s]),
+               "predicted_error_m": _num(res.check.error_m[s]),
+               "n_markers": int(res.check.count[s]), "n_sectors": int(res.check.sectors[s]),
+               "markers": [prob.site_ids[j] for j in prob.pair_site[idx]],
+               "sectors": sorted({int(k) for k in sector_index(prob.pair_bearing_rad[idx],
+                                                                 cfg.n_sectors)}),
+               "meets_requirement": bool(res.check.ok[s])}
+        if res.check.worst_loss_error_m is not None:
+            rec["worst_loss_error_m"] = _num(res.check.worst_loss_error_m[s])
+            rec["worst_loss_sectors"] = int(res.check.worst_loss_sectors[s])
+        stations.append(rec)
+    markers = [{"id": prob.site_ids[j], "x_m": _num(prob.site_xyz[j, 0]),
+                "y_m": _num(prob.site_xyz[j, 1]), "z_m": _num(prob.site_xyz[j, 2]),
+                "existing": bool(prob.site_existing[j]), "stations": used_by[int(j)]}
+               for j in sel]
+    n_plan = len(sel)
+    baselines = {}
+    for b in outcome.baselines:
+        key = b.name.replace(" ", "_")
+        baselines[key] = {"n_markers": b.n_markers, "meets_requirement": b.meets_requirement,
+                          "saved_by_plan": b.n_markers - n_plan if b.meets_requirement else None,
+                          "marker_ids": [prob.site_ids[j] for j in np.flatnonzero(b.selected)]}
+        if b.spacing_m is not None:
+            baselines[key]["spacing_m"] = b.spacing_m
+    if outcome.as_built is not None:
+        ab = outcome.as_built
+        baselines["as_built"] = {
+            "n_markers": len(inp.as_built_ids), "meets_requirement": ab.all_ok,
+            "saved_by_plan": len(inp.as_built_ids) - n_plan,
+            "station_error_m": [_num(v) for v in ab.error_m],
+            "station_sectors": [int(v) for v in ab.sectors]}
+    solver = {"name": "HiGHS via scipy.optimize.milp", "status": sol.status,
+              "objective": _num(sol.objective), "dual_bound": _num(sol.dual_bound),
+              "gap": _num(sol.gap), "solve_time_s": round(res.solve_time_s, 3),
+              "iterations": res.iterations, "accuracy_cuts": res.n_cuts,
+              "time_limit_s": cfg.time_limit_s, "target_gap": cfg.mip_gap,
+              "proven_optimal": sol.status == "optimal"}
+    vis = outcome.visibility
+    doc = {
+        "schema": SCHEMA, "schema_version": SCHEMA_VERSION,
+        "provenance": provenance(cfg.to_dict(), error_model=outcome.model_name,
+                                 solver={"name": solver["name"], "status": sol.status},
+                                 inputs=inp.sources),
+        "frame": FRAME_NOTE,
+        "site": {"name": inp.site_name, "seed": inp.seed, "marker_radius_m": inp.marker_radius_m,
+                 "boundary_xy_m": None if inp.boundary_xy is None
+                 else np.asarray(inp.boundary_xy).tolist()},
+        "requirement": {"requirement_m": cfg.requirement_m, "n_sectors": cfg.n_sectors,
+                        "min_sectors": cfg.min_sectors, "min_markers": cfg.min_markers,
+                        "working_radius_m": cfg.working_radius_m, "redundant": cfg.redundant},
+        "solver": solver,
+        "n_markers": n_plan,
+        "meets_requirement": bool(res.check.all_ok),
+        "markers": markers,
+        "stations": stations,
+        "baselines": baselines,
+        "candidates": {"n_sites": prob.n_sites,
+                       "dropped": outcome.candidates.dropped if outcome.candidates else None},
+        "visibility": {"n_pairs": int(prob.pair_station.size),
+                       "n_usable": int(prob.pair_usable.sum()),
+                       "n_rays": int(vis.n_rays) if vis is not None else 0,
+                       "rays_per_s": round(vis.rays_per_s) if vis is not None
+                       and vis.elapsed_s > 0 else None},
+        "timings_s": {k: round(v, 3) for k, v in outcome.timings_s.items()},
+    }
+    return doc
+
+
+def write_plan_files(outcome, folder: Path) -> dict:
+    """Write plan.json, markers.csv, markers.geojson and report.md into ``folder``.
+
+    Returns the ``plan.json`` document.
+    """
+    folder = Path(folder)
+    doc = plan_record(outcome)
+    (folder / "plan.json").write_text(json.dumps(doc, indent=2) + "\n")
+    _write_markers_csv(doc, folder / "markers.csv")
+    _write_geojson(doc, folder / "markers.geojson")
+    (folder / "report.md").write_text(report_markdown(doc))
+    return doc
+
+
+def _write_markers_csv(doc: dict, path: Path) -> None:
+    with path.open("w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(["# markerplan plan markers; " + FRAME_NOTE])
+        w.writerow(["id", "x_m", "y_m", "z_m", "existing", "n_stations", "stations"])
+        for m in doc["markers"]:
+            w.writerow([m["id"], f"{m['x_m']:.3f}", f"{m['y_m']:.3f}", f"{m['z_m']:.3f}",
+                        int(m["existing"]), len(m["stations"]), " ".join(m["stations"])])
+
+
+def _write_geojson(doc: dict, path: Path) -> None:
+    feats = [{"type": "Feature",
+              "geometry": {"type": "Point", "coordinates": [m["x_m"], m["y_m"], m["z_m"]]},
+              "properties": {"id": m["id"], "kind": "marker", "existing": m["existing"],
+                             "stations": m["stations"]}} for m in doc["markers"]]
+    feats += [{"type": "Feature",
+               "geometry": {"type": "Point", "coordinates": [s["x_m"], s["y_m"], s["z_m"]]},
+               "properties": {"id": s["id"], "kind": "station",
+                              "predicted_error_m": s["predicted_error_m"]}}
+              for s in doc["stations"]]
+    gj = {"type": "FeatureCollection", "name": f"markerplan plan ({doc['site']['name']})",
+          "coordinate_frame": FRAME_NOTE, "units": "m", "features": feats}
+    path.write_text(json.dumps(gj, indent=2) + "\n")
+
+
+def _fmt(v, unit="m", digits=3):
+    return "n/a" if v is None else f"{v:.{digits}f} {unit}"
+
+
+def report_markdown(doc: dict) -> str:
+    """Human report of a ``plan.json`` document (Markdown)."""
+    req, sol = doc["requirement"], doc["solver"]
+    lines = [f"# Marker plan — site `{doc['site']['name']}`", "",
+             f"**{doc['n_markers']} markers** meet the requirement at "
+             f"{sum(s['meets_requirement'] for s in doc['stations'])} of "
+             f"{len(doc['stations'])} stations: predicted 95 % registered-position error "
+             f"≤ {req['requirement_m']:g} m over a {req['working_radius_m']:g} m working radius, "
+             f"≥ {req['min_markers']} markers in ≥ {req['min_sectors']} of {req['n_sectors']} "
+             f"sectors" + (", surviving the loss of any one marker" if req["redundant"] else "")
+             + ".", "",
+             "## Solver", "",
+             f"- HiGHS (scipy.optimize.milp) status **{sol['status']}**"
+             + (" (proven optimal)" if sol["proven_optimal"] else
+                " — not proven optimal"),
+             f"- objective {sol['objective']}, dual bound {sol['dual_bound']}, gap {sol['gap']}",
+             f"- {sol['iterations']} solve(s), {sol['accuracy_cuts']} accuracy cut(s), "
+             f"{sol['solve_time_s']:.2f} s in the solver (limit {sol['time_limit_s']:g} s)", "",
+             "## Compared with", "", "| layout | markers | meets requirement | plan saves |",
+             "|---|---:|---|---:|"]
+    for name, b in doc["baselines"].items():
+        label = name.replace("_", " ")
+        if "spacing_m" in b:
+            label += f" ({b['spacing_m']:g} m)"
+        saved = b.get("saved_by_plan")
+        lines.append(f"| {label} | {b['n_markers']} | {'yes' if b['meets_requirement'] else 'no'}"
+                     f" | {saved if saved is not None else '—'} |")
+    lines += ["", "## Stations", "",
+              "| station | predicted error | markers | sectors | markers used |",
+              "|---|---:|---:|---:|---|"]
+    for s in doc["stations"]:
+        lines.append(f"| {s['id']} | {_fmt(s['predicted_error_m'])} | {s['n_markers']} | "
+                     f"{s['n_sectors']} | {', '.join(s['markers'])} |")
+    lines += ["", "## Markers (" + FRAME_NOTE + ")", "", "| id | x | y | z | used by |",
+              "|---|---:|---:|---:|---|"]
+    for m in doc["markers"]:
+        lines.append(f"| {m['id']}{' (existing)' if m['existing'] else ''} | {m['x_m']:.2f} | "
+                     f"{m['y_m']:.2f} | {m['z_m']:.2f} | {', '.join(m['stations'])} |")
+    vis = doc["visibility"]
+    lines += ["", "## Inputs", "",
+              f"- {doc['candidates']['n_sites']} candidate sites; "
+              f"{vis['n_pairs']} station-site pairs in range, {vis['n_usable']} usable",
+              f"- error model: {doc['provenance']['error_model']}; markerplan "
+              f"{doc['provenance']['markerplan_version']}; config sha256 "
+              f"`{doc['provenance']['config_sha256'][:12]}`", ""]
+    return "\n".join(lines)
+
+
+def summary(doc: dict, out: Path) -> dict:
+    """The one-object ``--json`` summary of a plan."""
+    return {"out": str(out), "site": doc["site"]["name"], "n_markers": doc["n_markers"],
+            "meets_requirement": doc["meets_requirement"],
+            "status": doc["solver"]["status"], "objective": doc["solver"]["objective"],
+            "dual_bound": doc["solver"]["dual_bound"], "gap": doc["solver"]["gap"],
+            "solve_time_s": doc["solver"]["solve_time_s"],
+            "worst_station_error_m": max((s["predicted_error_m"] or math.inf)
+                                         for s in doc["stations"]),
+            "baselines": {k: {"n_markers": v["n_markers"],
+                              "meets_requirement": v["meets_requirement"]}
+                          for k, v in doc["baselines"].items()},
+            "markers": [m["id"] for m in doc["markers"]]}

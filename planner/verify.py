@@ -1,0 +1,190 @@
+"""Verify a plan by simulation: scan every station with the planned markers, process the scans
+with the pipeline, register each station to its detected markers, and compare the achieved
+registration error with the plan's prediction.
+
+Per station:
+
+1. ``visibility.simulate.simulate_markers`` — a full turntable scan of the site's terrain with
+   only the planned markers, at the planned station pose;
+2. ``pipeline.process.process_station`` — the published chain; detections are matched to the
+   planned markers projected into the station frame with the *planned* (nominal) pose;
+3. weighted least squares (:func:`planner.accuracy.fit_pose`, 4 DoF: x, y, z, heading; roll and
+   pitch are known, as from the inclinometer) from the accepted, matched markers, each weighted
+   by the error model's sigma at its measured distance and elevation;
+4. achieved error = the largest 3D difference, over the working radius, between the registered
+   and the true mapping of the station frame into the site frame
+   (:func:`planner.accuracy.registration_error`).
+
+The plan passes only if every station's achieved error is within the requirement.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from markerplan.errors import InputFileError
+from planner import accuracy
+from planner.report import SCHEMA
+
+#: Smallest number of matched markers that can fix x, y, z and heading.
+MIN_MATCHED = 2
+
+
+@dataclass
+class StationCheck:
+    """Verification of one station."""
+
+    station_id: str
+    predicted_error_m: float | None
+    achieved_error_m: float | None
+    n_planned: int
+    n_detected: int
+    passed: bool
+    reason: str
+    marker_errors_m: dict
+
+
+def read_plan(path) -> dict:
+    """Read and check a ``plan.json`` (schema ``markerplan-plan``)."""
+    path = Path(path)
+    try:
+        doc = json.loads(path.read_text())
+    except FileNotFoundError as exc:
+        raise InputFileError(f"PLAN {path}: file not found; give the plan.json written by "
+                             "`markerplan plan`") from exc
+    except (json.JSONDecodeError, UnicodeDecodeError, IsADirectoryError) as exc:
+        raise InputFileError(f"PLAN {path}: not a JSON file ({exc}); give plan.json") from exc
+    if not isinstance(doc, dict) or doc.get("schema") != SCHEMA:
+        raise InputFileError(f"PLAN {path}: not a markerplan plan (schema "
+                             f"{doc.get('schema') if isinstance(doc, dict) else None!r}, "
+                             f"expected {SCHEMA!r})")
+    for key in ("markers", "stations", "site", "requirement"):
+        if key not in doc:
+            raise InputFileError(f"PLAN {path}: missing {key!r}; regenerate it with "
+                                 "`markerplan plan`")
+    return doc
+
+
+def plan_dem(doc: dict):
+    """The DEM the plan was made on (the preset's, or the ``--dem`` file it names)."""
+    from visibility.dem import read_dem
+    from visibility.sites import load_site
+
+    inputs = doc.get("provenance", {}).get("inputs", {})
+    if "dem" in inputs:
+        return read_dem(inputs["dem"])
+    return load_site(doc["site"]["name"], doc["site"].get("seed")).dem
+
+
+def verify_plan(doc: dict, error_model, seed: int = 0, progress: bool = True
+                ) -> list[StationCheck]:
+    """Simulate, process and register every station of a plan (see module docstring).
+
+    Parameters
+    ----------
+    doc : dict
+        A ``plan.json`` document.
+    error_model : ErrorModel
+        Gives the registration weights.
+    seed : int
+        Simulation seed (each station's noise stream derives from it and the station id).
+    progress : bool
+        Progress bar on stderr.
+
+    Returns
+    -------
+    checks : list of StationCheck
+    """
+    from tqdm import tqdm
+
+    from pipeline.evaluation import Reference
+    from pipeline.process import build_config, process_station
+    from visibility.simulate import simulate_markers
+    from pipeline.rig import station_to_site_matrix
+
+    dem = plan_dem(doc)
+    req = float(doc["requirement"]["requirement_m"])
+    radius_wr = float(doc["requirement"]["working_radius_m"])
+    r_marker = float(doc["site"].get("marker_radius_m", 0.10))
+    ids = [m["id"] for m in doc["markers"]]
+    centres = np.array([[m["x_m"], m["y_m"], m["z_m"]] for m in doc["markers"]], float)
+    cfg = build_config()
+    checks = []
+    for k, st in enumerate(tqdm(doc["stations"], desc="verify", unit="station",
+                                file=sys.stderr, disable=None if progress else True)):
+        pos = np.array([st["x_m"], st["y_m"], st["z_m"]], float)
+        heading = float(st.get("heading_rad") or 0.0)
+        scan, truth = simulate_markers(dem, pos, heading, centres, seed=seed + k,
+                                       marker_radius_m=r_marker, marker_ids=ids,
+                                       station_id=st["id"])
+        rot = station_to_site_matrix(heading)
+        nominal = (centres - pos) @ rot  # planned markers in the planned station frame
+        ref = Reference(tuple(ids), nominal, st["id"], "plan (nominal pose)")
+        result = process_station(scan, cfg, ref, seed=seed)
+        rows = [r for r in result.rows if r.accepted and r.marker_id]
+        planned = st.get("markers", [])
+        marker_err = {r.marker_id: r.error_m for r in rows}
+        pred = st.get("predicted_error_m")
+        if len(rows) < MIN_MATCHED:
+            checks.append(StationCheck(st["id"], pred, None, len(planned), len(rows), False,
+                                       f"only {len(rows)} planned marker(s) detected and "
+                                       f"accepted (needs {MIN_MATCHED})", marker_err))
+            continue
+        p = np.array([r.centre_m for r in rows])
+        site_xyz = centres[[ids.index(r.marker_id) for r in rows]]
+        sigma = np.asarray(error_model.predict(np.array([r.distance_m for r in rows]),
+                                               np.radians([r.elevation_deg for r in rows]))
+                           .sigma_m, float)
+        sigma = np.maximum(sigma, 1e-4)
+        t, psi = accuracy.fit_pose(p, site_xyz, sigma, heading0_rad=heading)
+        true_pose = truth["station_pose"]
+        achieved = accuracy.registration_error(t, psi, true_pose["position_m"],
+                                               true_pose["heading_rad"], radius_wr)
+        ok = achieved <= req
+        missing = sorted(set(planned) - {r.marker_id for r in rows})
+        reason = "ok" if ok else f"achieved {achieved:.3f} m > requirement {req:g} m"
+        if missing:
+            reason += f" (planned markers not detected: {', '.join(missing)})"
+        checks.append(StationCheck(st["id"], pred, achieved, len(planned), len(rows), ok,
+                                   reason, marker_err))
+    return checks
+
+
+def verify_record(doc: dict, checks: list[StationCheck], seed: int, model_name: str) -> dict:
+    """The ``verify.json`` document."""
+    from markerplan.provenance import provenance
+
+    req = float(doc["requirement"]["requirement_m"])
+    return {
+        "schema": "markerplan-verify", "schema_version": 1,
+        "provenance": provenance({"seed": seed, "error_model": model_name,
+                                  "plan_config_sha256": doc["provenance"]["config_sha256"]},
+                                 plan=doc["provenance"]),
+        "requirement_m": req,
+        "passed": all(c.passed for c in checks),
+        "stations": [{"id": c.station_id, "predicted_error_m": c.predicted_error_m,
+                      "achieved_error_m": c.achieved_error_m, "n_planned_markers": c.n_planned,
+                      "n_detected_markers": c.n_detected, "passed": c.passed,
+                      "reason": c.reason, "marker_centre_errors_m": c.marker_errors_m}
+                     for c in checks],
+    }
+
+
+def verify_markdown(rec: dict) -> str:
+    """Human report of a verification."""
+    lines = [f"# Plan verification — {'PASSED' if rec['passed'] else 'FAILED'}", "",
+             f"Requirement: achieved registration error ≤ {rec['requirement_m']:g} m at every "
+             "station (simulated scans, processed by the pipeline, 4-DoF WLS registration).", "",
+             "| station | predicted | achieved | markers detected / planned | result |",
+             "|---|---:|---:|---:|---|"]
+    for s in rec["stations"]:
+        pred = "—" if s["predicted_error_m"] is None else f"{s['predicted_error_m']:.4f} m"
+        ach = "—" if s["achieved_error_m"] is None else f"{s['achieved_error_m']:.4f} m"
+        lines.append(f"| {s['id']} | {pred} | {ach} | {s['n_detected_markers']} / "
+                     f"{s['n_planned_markers']} | {s['reason']} |")
+    return "\n".join(lines) + "\n"

@@ -1,0 +1,141 @@
+"""The visibility table: plan from station-site pairs computed elsewhere (``--visibility FILE``).
+
+A CSV with one row per station-site pair and the columns
+
+==================  =========================================================================
+``station``         station id (must match the plan's stations)
+``site``            candidate-site id
+``usable``          1/0 (or true/false): whether the pair may be counted on
+``bearing_deg``     bearing of the site from the station, site frame, degrees counter-clockwise
+                    from +x
+``sigma_m``         1-sigma 3D marker-centre error for the pair, metres
+``site_x_m``        site-frame marker centre x, metres
+``site_y_m``        site-frame marker centre y, metres
+``site_z_m``        site-frame marker centre z, metres
+``distance_m``      optional: LiDAR-centre-to-marker distance, metres (computed when absent)
+==================  =========================================================================
+
+The marker coordinates are needed for the heading lever arm in the accuracy model and for the
+output files. A site's coordinates must agree on every row that names it.
+"""
+
+from __future__ import annotations
+
+import csv
+from pathlib import Path
+
+import numpy as np
+
+from markerplan.errors import InputFileError
+from planner.usability import OCCLUDED, USABLE, PlanProblem
+
+REQUIRED = ("station", "site", "usable", "bearing_deg", "sigma_m", "site_x_m", "site_y_m",
+            "site_z_m")
+_TRUE = {"1", "true", "yes", "y", "t"}
+_FALSE = {"0", "false", "no", "n", "f"}
+
+
+def read_visibility_table(path: str | Path, station_ids, station_xyz) -> PlanProblem:
+    """Read a visibility table into a :class:`~planner.usability.PlanProblem`.
+
+    Parameters
+    ----------
+    path : str or Path
+        The CSV file (columns above).
+    station_ids : sequence of str, (s,)
+        The plan's stations.
+    station_xyz : (s, 3) float
+        Their LiDAR centres, site frame, m.
+
+    Raises
+    ------
+    InputFileError
+        Missing file or columns, unknown station, bad numbers, inconsistent site coordinates,
+        or no rows — naming the file, the row and the fix.
+    """
+    path = Path(path)
+    where = f"--visibility {path}"
+    try:
+        with path.open(newline="") as fh:
+            reader = csv.DictReader(fh)
+            missing = [c for c in REQUIRED if c not in (reader.fieldnames or [])]
+            if missing:
+                raise InputFileError(f"{where}: missing column(s) {', '.join(missing)}; "
+                                     f"required: {', '.join(REQUIRED)}")
+            rows = list(reader)
+    except FileNotFoundError as exc:
+        raise InputFileError(f"{where}: file not found; give an existing CSV file") from exc
+    except (UnicodeDecodeError, csv.Error) as exc:
+        raise InputFileError(f"{where}: not a readable CSV ({exc})") from exc
+    if not rows:
+        raise InputFileError(f"{where}: no rows; give at least one station-site pair")
+    st_pos = {sid: k for k, sid in enumerate(station_ids)}
+    site_pos: dict[str, int] = {}
+    site_xyz: list[tuple[float, float, float]] = []
+    ps, pj, bearing, sigma, usable, dist = [], [], [], [], [], []
+    for n, row in enumerate(rows, start=2):
+        sid = row["station"].strip()
+        if sid not in st_pos:
+            raise InputFileError(f"{where} line {n}: unknown station {sid!r}; the plan's stations "
+                                 f"are {', '.join(station_ids)}")
+        try:
+            xyz = (float(row["site_x_m"]), float(row["site_y_m"]), float(row["site_z_m"]))
+            b = np.radians(float(row["bearing_deg"]))
+            s = float(row["sigma_m"])
+            d = float(row["distance_m"]) if row.get("distance_m") not in (None, "") else None
+        except (TypeError, ValueError) as exc:
+            raise InputFileError(f"{where} line {n}: bad number ({exc}); give plain decimal "
+                                 "numbers") from exc
+        u = str(row["usable"]).strip().lower()
+        if u not in _TRUE | _FALSE:
+            raise InputFileError(f"{where} line {n}: usable must be 1/0 or true/false, got "
+                                 f"{row['usable']!r}")
+        if not (np.all(np.isfinite(xyz)) and np.isfinite(b) and np.isfinite(s) and s > 0):
+            raise InputFileError(f"{where} line {n}: coordinates, bearing and sigma_m must be "
+                                 "finite and sigma_m > 0")
+        site = row["site"].strip()
+        if site not in site_pos:
+            site_pos[site] = len(site_xyz)
+            site_xyz.append(xyz)
+        elif not np.allclose(site_xyz[site_pos[site]], xyz, atol=1e-6):
+            raise InputFileError(f"{where} line {n}: site {site!r} has coordinates {xyz} here "
+                                 f"but {site_xyz[site_pos[site]]} earlier; one site, one place")
+        k = st_pos[sid]
+        ps.append(k)
+        pj.append(site_pos[site])
+        bearing.append(b)
+        sigma.append(s)
+        usable.append(u in _TRUE)
+        dist.append(d if d is not None
+                    else float(np.linalg.norm(np.subtract(xyz, station_xyz[k]))))
+    pairs = set(zip(ps, pj, strict=True))
+    if len(pairs) != len(ps):
+        raise InputFileError(f"{where}: some station-site pair appears twice; keep one row each")
+    n_sites = len(site_xyz)
+    return PlanProblem(
+        station_ids=tuple(station_ids), station_xyz=np.asarray(station_xyz, float),
+        site_ids=tuple(site_pos), site_xyz=np.asarray(site_xyz, float),
+        site_existing=np.zeros(n_sites, bool), site_cost=np.ones(n_sites),
+        pair_station=np.asarray(ps, np.int64), pair_site=np.asarray(pj, np.int64),
+        pair_distance_m=np.asarray(dist, float), pair_bearing_rad=np.asarray(bearing, float),
+        pair_sigma_m=np.asarray(sigma, float),
+        pair_reason=np.where(usable, USABLE, OCCLUDED).astype(np.int8))
+
+
+def write_visibility_table(path: str | Path, problem: PlanProblem) -> Path:
+    """Write a problem's pairs in the same format (round-trips through
+    :func:`read_visibility_table`; non-usable reasons collapse to ``usable = 0``)."""
+    path = Path(path)
+    with path.open("w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow([*REQUIRED, "distance_m"])
+        for k in range(problem.pair_station.size):
+            j = problem.pair_site[k]
+            x, y, z = problem.site_xyz[j]
+            w.writerow([problem.station_ids[problem.pair_station[k]], problem.site_ids[j],
+                        int(problem.pair_reason[k] == USABLE),
+                        f"{np.degrees(problem.pair_bearing_rad[k]):.6f}",
+                        f"{problem.pair_sigma_m[k]:.6g}" if np.isfinite(problem.pair_sigma_m[k])
+                        else "1", f"{x:.4f}", f"{y:.4f}", f"{z:.4f}",
+                        f"{problem.pair_distance_m[k]:.4f}"])
+    return path

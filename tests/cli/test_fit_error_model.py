@@ -1,0 +1,90 @@
+"""``markerplan fit-error-model``: JSON summary, files written, refusals, one-line errors."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from error_model.model import ErrorModel
+from planner.cli import main
+from tests.error_model.synthetic import synthetic_table, write_csv
+
+
+def _run(capsys, args):
+    with pytest.raises(SystemExit) as exc:
+        main(args)
+        raise SystemExit(0)
+    out, err = capsys.readouterr()
+    return exc.value.code, out, err
+
+
+@pytest.fixture(scope="module")
+def tables(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("tables")
+    write_csv(folder / "a.csv", synthetic_table(700, seed=31))
+    write_csv(folder / "b.csv", synthetic_table(500, seed=32))
+    return folder
+
+
+def test_fit_writes_model_and_plot_and_prints_one_json_object(tables, tmp_path, capsys):
+    out_model, out_png = tmp_path / "model.json", tmp_path / "model.png"
+    code, out, err = _run(capsys, ["fit-error-model", str(tables / "a.csv"), str(tables / "b.csv"),
+                                   "-o", str(out_model), "--plot", str(out_png), "--seed", "3",
+                                   "--bootstrap", "5", "--json"])
+    assert code == 0, err
+    summary = json.loads(out)
+    assert summary["rows_used"] > 1000
+    assert summary["predictors"][:2] == ["distance_m", "elevation_rad"]
+    assert 0.9 < summary["envelope_cv_coverage"] < 0.99
+    model = ErrorModel.load(out_model)
+    assert model.info["data"]["sources"] == ["a.csv", "b.csv"]
+    assert model.info["provenance"]["seed"] == 3
+    assert out_png.read_bytes()[:4] == b"\x89PNG"
+    p = model.predict([5.0, 40.0], np.deg2rad(-10))
+    assert p.sigma_m[1] > p.sigma_m[0] and p.in_domain.all()
+    assert sorted(x.name for x in tmp_path.iterdir()) == ["model.json", "model.png"]
+
+
+def test_existing_output_is_refused_without_overwrite(tables, tmp_path, capsys):
+    target = tmp_path / "model.json"
+    target.write_text("keep me")
+    code, _, err = _run(capsys, ["fit-error-model", str(tables / "a.csv"), "-o", str(target),
+                                 "--bootstrap", "0"])
+    assert code == 1 and "--overwrite" in err and err.count("\n") == 1
+    assert target.read_text() == "keep me"
+    code, _, err = _run(capsys, ["fit-error-model", str(tables / "a.csv"), "-o", str(target),
+                                 "--bootstrap", "0", "--overwrite"])
+    assert code == 0, err
+    assert ErrorModel.load(target).info["data"]["rows_used"] > 500
+
+
+@pytest.mark.parametrize("make, match", [
+    (lambda t: t.pop("error_m"), "missing column"),
+    (lambda t: [t[k].__setitem__(slice(None), np.nan) for k in ["elevation_deg"]],
+     "all NaN"),
+    (lambda t: t["accepted"].__setitem__(slice(20, None), False), "usable rows"),
+])
+def test_bad_tables_give_one_line_errors_and_no_output(tmp_path, capsys, make, match):
+    table = synthetic_table(300, seed=1)
+    make(table)
+    write_csv(tmp_path / "bad.csv", table)
+    target = tmp_path / "model.json"
+    code, out, err = _run(capsys, ["fit-error-model", str(tmp_path / "bad.csv"), "-o",
+                                   str(target), "--json"])
+    assert code == 1
+    assert out == ""
+    assert err.startswith("error: ") and err.count("\n") == 1 and match in err
+    assert sorted(x.name for x in tmp_path.iterdir()) == ["bad.csv"]
+
+
+def test_missing_table_file_is_an_error(tmp_path, capsys):
+    code, _, err = _run(capsys, ["fit-error-model", str(tmp_path / "none.csv"), "-o",
+                                 str(tmp_path / "m.json")])
+    assert code == 1 and "cannot be read" in err
+
+
+def test_help_has_an_example(capsys):
+    code, out, _ = _run(capsys, ["fit-error-model", "--help"])
+    assert code == 0 and "markerplan fit-error-model tables/markers.csv -o model.json" in out

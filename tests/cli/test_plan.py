@@ -1,0 +1,144 @@
+"""``markerplan plan``: the no-argument default run, its outputs, and one-line errors."""
+
+import json
+
+import numpy as np
+import pytest
+
+from planner.cli import main
+
+
+def _run(args, capsys):
+    try:
+        main(args)
+        code = 0
+    except SystemExit as exc:
+        code = exc.code
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+@pytest.fixture(scope="module")
+def default_plan(tmp_path_factory):
+    """``markerplan plan --json`` with no other argument, run in an empty folder."""
+    import contextlib
+    import io
+    import os
+
+    cwd = tmp_path_factory.mktemp("plan-default")
+    old = os.getcwd()
+    os.chdir(cwd)
+    buf = io.StringIO()
+    try:
+        with contextlib.redirect_stdout(buf):
+            main(["plan", "--json"])
+    finally:
+        os.chdir(old)
+    return cwd / "markerplan-out", json.loads(buf.getvalue())
+
+
+def test_default_plan_meets_the_requirement_with_fewer_markers(default_plan):
+    out, summary = default_plan
+    assert sorted(p.name for p in out.iterdir()) == [
+        "map.png", "markers.csv", "markers.geojson", "plan.json", "report.md"]
+    doc = json.loads((out / "plan.json").read_text())
+    assert doc["schema"] == "markerplan-plan" and doc["schema_version"] == 1
+    assert summary["status"] == "optimal" and summary["meets_requirement"]
+    assert len(doc["stations"]) == 7
+    for s in doc["stations"]:
+        assert s["predicted_error_m"] <= 0.10 and s["n_sectors"] >= 3 and s["n_markers"] >= 3
+    n = doc["n_markers"]
+    assert n < doc["baselines"]["as_built"]["n_markers"] == 11
+    for b in ("greedy", "regular_grid"):
+        assert doc["baselines"][b]["meets_requirement"]
+        assert n <= doc["baselines"][b]["n_markers"]
+    assert doc["solver"]["dual_bound"] == pytest.approx(n)
+    prov = doc["provenance"]
+    assert prov["config"]["requirement_m"] == 0.10 and prov["markerplan_version"]
+    csv_lines = (out / "markers.csv").read_text().splitlines()
+    assert "local metres" in csv_lines[0] and len(csv_lines) == 2 + n
+    gj = json.loads((out / "markers.geojson").read_text())
+    assert "local metres" in gj["coordinate_frame"]
+    assert sum(f["properties"]["kind"] == "marker" for f in gj["features"]) == n
+    assert "Compared with" in (out / "report.md").read_text()
+    assert (out / "map.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_existing_output_is_refused(default_plan, capsys, monkeypatch):
+    out, _ = default_plan
+    monkeypatch.chdir(out.parent)
+    code, _, err = _run(["plan"], capsys)
+    assert code == 1 and "already exists" in err and err.count("\n") == 1
+
+
+def _write(path, text):
+    path.write_text(text)
+    return path
+
+
+def _assert_one_line_error(code, err, out_dir, *needles):
+    assert code == 1
+    assert err.startswith("error: ") and err.count("\n") == 1, err
+    for n in needles:
+        assert n in err, err
+    assert not out_dir.exists()
+    assert not list(out_dir.parent.glob(f".{out_dir.name}.partial-*"))
+
+
+def test_infeasible_requirement_names_each_station(tmp_path, capsys):
+    cfg = _write(tmp_path / "c.toml", "requirement_m = 0.012\n")
+    out = tmp_path / "o"
+    code, _, err = _run(["plan", "--config", str(cfg), "--out", str(out)], capsys)
+    _assert_one_line_error(code, err, out, "S1:", "S7:", "accuracy unreachable")
+
+
+def test_too_few_directions_from_a_tight_boundary(tmp_path, capsys):
+    # markers only allowed in a strip east of S2 (12, 0): S2 sees them in one or two sectors
+    b = _write(tmp_path / "b.geojson", json.dumps(
+        {"type": "Polygon", "coordinates": [[[14, -1], [19, -1], [19, 1], [14, 1], [14, -1]]]}))
+    out = tmp_path / "o"
+    code, _, err = _run(["plan", "--boundary", str(b), "--out", str(out)], capsys)
+    _assert_one_line_error(code, err, out, "S2: too few")
+
+
+@pytest.mark.parametrize("case", ["outside", "empty", "bowtie", "unknown-key", "budget"])
+def test_bad_input_gives_one_line_errors_and_no_output(tmp_path, capsys, case):
+    out = tmp_path / "o"
+    if case == "outside":
+        st = _write(tmp_path / "s.csv", "id,x_m,y_m\nA,0,0\nB,100,100\n")
+        args, needle = ["--stations", str(st)], "station B at (100.00, 100.00) m lies outside"
+    elif case == "empty":
+        ex = _write(tmp_path / "x.geojson", json.dumps(
+            {"type": "Polygon",
+             "coordinates": [[[-40, -40], [40, -40], [40, 40], [-40, 40], [-40, -40]]]}))
+        args, needle = ["--exclude", str(ex)], "no candidate marker site"
+    elif case == "bowtie":
+        ex = _write(tmp_path / "x.geojson", json.dumps(
+            {"type": "Polygon", "coordinates": [[[0, 0], [1, 1], [1, 0], [0, 1], [0, 0]]]}))
+        args, needle = ["--exclude", str(ex)], "invalid polygon"
+    elif case == "unknown-key":
+        cfg = _write(tmp_path / "c.toml", "sectors = 4\n")
+        args, needle = ["--config", str(cfg)], "unknown key(s) sectors"
+    else:
+        args, needle = ["--budget", "2"], "budget"
+    code, _, err = _run(["plan", *args, "--out", str(out)], capsys)
+    _assert_one_line_error(code, err, out, needle)
+
+
+def test_plan_from_a_visibility_table(tmp_path, capsys):
+    from visibility.sites import load_site
+
+    site = load_site("default")
+    rows = ["station,site,usable,bearing_deg,sigma_m,site_x_m,site_y_m,site_z_m"]
+    for sid, (x, y) in zip(site.station_ids, site.station_xy_m, strict=True):
+        for k, b in enumerate(range(30, 360, 60)):
+            sx, sy = x + 5 * np.cos(np.radians(b)), y + 5 * np.sin(np.radians(b))
+            rows.append(f"{sid},{sid}-{k},{int(k != 0)},{b},0.008,{sx:.3f},{sy:.3f},0.1")
+    vis = _write(tmp_path / "vis.csv", "\n".join(rows) + "\n")
+    out = tmp_path / "o"
+    code, stdout, _ = _run(["plan", "--visibility", str(vis), "--out", str(out), "--json"],
+                           capsys)
+    assert code == 0
+    summary = json.loads(stdout)
+    assert summary["n_markers"] == 21 and summary["meets_requirement"]
+    assert not any(m.endswith("-0") for m in summary["markers"])  # unusable sites unused

@@ -1,0 +1,126 @@
+import csv
+import json
+
+import numpy as np
+import pytest
+
+from pipeline.marker_table import COLUMNS, read_marker_table
+from pipeline.rig import MountingOffsets, rot_z
+from pipeline.scan_format import SCAN_FORMAT, _write_npz, write_scan, write_truth
+from planner.cli import main
+from tests.pipeline.test_synthesis import synthetic_scan
+
+MARKERS = np.array([[3.0, 1.0, -0.9], [-2.5, 2.0, -0.9], [0.5, -4.0, -0.9], [-3.0, -2.5, -0.9]])
+
+
+@pytest.fixture(scope="module")
+def station(tmp_path_factory):
+    d = tmp_path_factory.mktemp("scans")
+    scan = synthetic_scan(MountingOffsets(), n_frames=240, azimuth_step_deg=0.4,
+                          spheres=[(c, 0.1) for c in MARKERS], noise_m=0.01, max_range_m=8.0,
+                          seed=4)
+    write_scan(d / "station_S1.scan.npz", scan)
+    write_truth(d / "station_S1.truth.json", {
+        "station_id": "S1", "mounting_offsets": MountingOffsets().to_dict(),
+        "station_pose": {"position_m": [0, 0, 1], "heading_rad": 0.0},
+        "marker_radius_m": 0.1,
+        "markers": [{"id": f"M{k}", "centre_station_m": c.tolist()}
+                    for k, c in enumerate(MARKERS)]})
+    return d
+
+
+def _run(capsys, args):
+    with pytest.raises(SystemExit) as exc:
+        main(args)
+        raise SystemExit(0)
+    out, err = capsys.readouterr()
+    return exc.value.code, out, err
+
+
+def test_process_with_truth_writes_all_outputs(station, tmp_path, capsys):
+    out = tmp_path / "tables"
+    code, stdout, _ = _run(capsys, ["process", str(station / "station_S1.scan.npz"),
+                                    "--reference", str(station / "station_S1.truth.json"),
+                                    "--no-calibrate", "--out", str(out), "--json"])
+    assert code == 0
+    summary = json.loads(stdout)
+    st = summary["stations"][0]
+    assert st["n_accepted"] == 4 and st["n_matched_accepted"] == 4
+    assert st["mean_error_m"] < 0.005
+    assert summary["provenance"]["config"]["fit"]["method"] == "fixed-radius"
+    rows = read_marker_table(out / "markers.csv")
+    assert list(rows[0]) == list(COLUMNS)
+    assert sorted(r["marker_id"] for r in rows if r["accepted"] == "true") == [
+        "M0", "M1", "M2", "M3"]
+    stations = list(csv.DictReader((out / "stations.csv").open()))
+    assert stations[0]["calibrated"] == "false"
+    assert len(list(csv.DictReader((out / "edges.csv").open()))) == 6
+    assert json.loads((out / "summary.json").read_text())["provenance"]["inputs"][0]["sha256"]
+
+
+def test_process_with_total_station_csv_in_another_frame(station, tmp_path, capsys):
+    ts = tmp_path / "ts.csv"
+    world = MARKERS @ rot_z(1.1).T + [500.0, -200.0, 30.0]
+    ts.write_text("id,x_m,y_m,z_m\n" + "".join(f"T{k},{x},{y},{z}\n"
+                                                 for k, (x, y, z) in enumerate(world)))
+    out = tmp_path / "o"
+    code, stdout, _ = _run(capsys, ["process", str(station / "station_S1.scan.npz"),
+                                    "--reference", str(ts), "--no-calibrate",
+                                    "--method", "hemisphere-icp", "--out", str(out), "--json"])
+    assert code == 0
+    st = json.loads(stdout)["stations"][0]
+    assert st["registered"] and st["n_matched_accepted"] == 4
+    assert st["mean_abs_edge_residual_m"] < 0.01
+
+
+def test_unknown_stage_option_refused(station, tmp_path, capsys):
+    code, _, err = _run(capsys, ["process", str(station / "station_S1.scan.npz"),
+                                 "--set", "gate.max_box=0.3", "--out", str(tmp_path / "o")])
+    assert code == 1 and "has no option 'max_box'" in err
+    assert not (tmp_path / "o").exists()
+
+
+def _raw_scan(path, n_points, angles):
+    meta = {"format": SCAN_FORMAT, "station_id": "S9"}
+    _write_npz(path, {
+        "metadata": np.array(json.dumps(meta)),
+        "turntable_angle_rad": np.asarray(angles, dtype=float),
+        "xyz_sensor_m": np.ones((n_points, 3), np.float32),
+        "frame_index": np.zeros(n_points, np.uint32), "laser_id": np.zeros(n_points, np.uint8),
+        "spin_azimuth_rad": np.zeros(n_points, np.float32),
+        "range_m": np.ones(n_points, np.float32)})
+
+
+@pytest.mark.parametrize("case, needle", [
+    ("empty", "empty"), ("no_angles", "turntable angle"), ("garbage", "not a readable scan"),
+    ("missing", "does not exist"), ("bad_csv", "lacks column"), ("radius", "radius_m"),
+])
+def test_bad_input_one_line_no_output(station, tmp_path, capsys, case, needle):
+    scan = station / "station_S1.scan.npz"
+    args = ["process"]
+    if case == "empty":
+        p = tmp_path / "e.scan.npz"
+        _raw_scan(p, 0, [0.0])
+        args += [str(p)]
+    elif case == "no_angles":
+        p = tmp_path / "n.scan.npz"
+        _raw_scan(p, 5, [np.nan])
+        args += [str(p)]
+    elif case == "garbage":
+        p = tmp_path / "g.scan.npz"
+        p.write_bytes(b"not a zip file at all")
+        args += [str(p)]
+    elif case == "missing":
+        args += [str(tmp_path / "nope.scan.npz")]
+    elif case == "bad_csv":
+        ref = tmp_path / "ref.csv"
+        ref.write_text("id,x_m,y_m\nA,1,2\n")
+        args += [str(scan), "--reference", str(ref)]
+    else:
+        args += [str(scan), "--radius", "0"]
+    out = tmp_path / "out"
+    code, stdout, err = _run(capsys, [*args, "--out", str(out)])
+    assert code == 1 and stdout == ""
+    assert err.startswith("error:") and err.count("\n") == 1 and needle in err
+    assert not out.exists()
+    assert not any(p.name.startswith(".out.partial") for p in tmp_path.iterdir())

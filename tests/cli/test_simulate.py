@@ -1,0 +1,122 @@
+"""``markerplan simulate``: small runs, JSON summary, and one-line errors without partial files."""
+
+import json
+
+import numpy as np
+import pytest
+
+from pipeline.scan_format import read_scan, read_truth
+from planner.cli import main
+
+
+def _run(args, capsys):
+    try:
+        main(args)
+        code = 0
+    except SystemExit as exc:
+        code = exc.code
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def test_simulate_writes_scans_and_truth(tmp_path, capsys):
+    out = tmp_path / "scans"
+    code, stdout, _ = _run(["simulate", "--site", "default", "--stations", "S1,S3", "--frames",
+                            "8", "--seed", "2", "--axis-offset-mm", "5,-3",
+                            "--vertical-axis-error-deg", "0.2", "--lframe-tilt-deg", "-0.1",
+                            "--range-noise-mm", "10", "--out", str(out), "--json"], capsys)
+    assert code == 0
+    summary = json.loads(stdout)
+    assert [s["station_id"] for s in summary["stations"]] == ["S1", "S3"]
+    assert sorted(p.name for p in out.iterdir()) == [
+        "site.json", "station_S1.scan.npz", "station_S1.truth.json",
+        "station_S3.scan.npz", "station_S3.truth.json"]
+    scan = read_scan(out / "station_S1.scan.npz")
+    assert scan.n_frames == 8 and scan.n_points == summary["stations"][0]["n_points"]
+    meta = scan.metadata
+    assert meta["source"] == "simulated" and meta["station_id"] == "S1"
+    assert len(meta["sensor"]["laser_elevation_rad"]) == 16 and meta["sensor"]["rpm"] == 600
+    assert meta["sensor"]["range_noise_m"] == pytest.approx(0.01)
+    assert meta["rig"] == {"lidar_height_m": 1.0, "frames_per_turn": 8}
+    assert "mounting_offsets" not in json.dumps(meta)
+    truth = read_truth(out / "station_S1.truth.json")
+    assert truth["mounting_offsets"]["axis_offset_m"] == pytest.approx([0.005, -0.003])
+    assert truth["mounting_offsets"]["vertical_axis_error_rad"] == pytest.approx(
+        np.radians(0.2))
+    assert len(truth["markers"]) == 11 and len(truth["rocks"]) >= 3
+    site = json.loads((out / "site.json").read_text())
+    assert len(site["stations"]) == 7
+
+
+def test_station_count_and_overwrite(tmp_path, capsys):
+    out = tmp_path / "o"
+    args = ["simulate", "--stations", "1", "--frames", "2", "--out", str(out), "--json"]
+    assert _run(args, capsys)[0] == 0
+    code, _, err = _run(args, capsys)
+    assert code == 1 and "--overwrite" in err
+    assert _run([*args, "--overwrite"], capsys)[0] == 0
+
+
+def _assert_clean_failure(tmp_path, code, stdout, err, fix):
+    assert code not in (0, None)
+    lines = [ln for ln in err.strip().splitlines() if ln]
+    assert len(lines) == 1 and lines[0].startswith("error:"), err
+    assert fix in err
+    assert stdout == ""
+    leftovers = [p.name for p in tmp_path.rglob("*") if "partial" in p.name or p.name == "out"]
+    assert leftovers == []
+
+
+def test_nan_dem_refused(tmp_path, capsys):
+    h = np.zeros((61, 61))
+    h[5, 5] = np.nan
+    np.savez(tmp_path / "nan.npz", heights_m=h, origin_m=np.array([-30.0, -30.0]),
+             cell_size_m=np.array(1.0), crs=np.array(""))
+    code, stdout, err = _run(["simulate", "--dem", str(tmp_path / "nan.npz"), "--frames", "2",
+                              "--out", str(tmp_path / "out")], capsys)
+    _assert_clean_failure(tmp_path, code, stdout, err, "--dem-fill nearest")
+
+
+def test_station_outside_dem_refused(tmp_path, capsys):
+    np.savez(tmp_path / "small.npz", heights_m=np.zeros((11, 11)),
+             origin_m=np.array([-5.0, -5.0]), cell_size_m=np.array(1.0), crs=np.array(""))
+    code, stdout, err = _run(["simulate", "--dem", str(tmp_path / "small.npz"), "--frames", "2",
+                              "--out", str(tmp_path / "out")], capsys)
+    _assert_clean_failure(tmp_path, code, stdout, err, "outside the DEM")
+
+
+def test_unwritable_out_refused(tmp_path, capsys):
+    blocker = tmp_path / "file"
+    blocker.write_text("not a folder")
+    code, stdout, err = _run(["simulate", "--frames", "2", "--stations", "1",
+                              "--out", str(blocker / "out")], capsys)
+    _assert_clean_failure(tmp_path, code, stdout, err, "writable")
+
+
+@pytest.mark.parametrize("frames", ["0", "-5"])
+def test_nonpositive_frames_refused(tmp_path, capsys, frames):
+    code, stdout, err = _run(["simulate", "--frames", frames, "--out", str(tmp_path / "out")],
+                             capsys)
+    _assert_clean_failure(tmp_path, code, stdout, err, "--frames must be a positive")
+
+
+def test_unknown_preset_refused(tmp_path, capsys):
+    code, stdout, err = _run(["simulate", "--site", "mars", "--out", str(tmp_path / "out")],
+                             capsys)
+    _assert_clean_failure(tmp_path, code, stdout, err, "default, large")
+
+
+@pytest.mark.parametrize(("option", "value", "fix"), [
+    ("--axis-offset-mm", "5", "two comma-separated"),
+    ("--stations", "S9", "valid ids are"),
+    ("--rpm", "610", "steps of 60"),
+])
+def test_bad_options_refused(tmp_path, capsys, option, value, fix):
+    code, stdout, err = _run(["simulate", option, value, "--frames", "2",
+                              "--out", str(tmp_path / "out")], capsys)
+    _assert_clean_failure(tmp_path, code, stdout, err, fix)
+
+
+def test_help_has_an_example(capsys):
+    code, stdout, _ = _run(["simulate", "--help"], capsys)
+    assert code == 0 and "markerplan simulate --site default --out" in stdout

@@ -1,0 +1,41 @@
+"""The shipped default model."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from error_model import ErrorModel, default_model
+from error_model.default import DEFAULT_MODEL_PATH
+
+
+def test_default_model_loads_and_says_what_it_was_fitted_on():
+    model = default_model()
+    assert isinstance(model, ErrorModel)
+    assert model is default_model()  # cached
+    assert model.predictors[:2] == ("distance_m", "elevation_rad")
+    description = model.info["data"]["description"]
+    # either the range-study simulation of the default rig, or an interim placeholder that
+    # says plainly that it is not simulation-based
+    assert "range study" in description.lower()
+    assert "NOT simulation-based" in description or "simulat" in description.lower()
+    assert len(model.info["data"]["fingerprint"]) == 64
+    assert model.info["provenance"]["markerplan_version"]
+
+
+def test_default_model_is_monotone_non_negative_and_flags_its_domain():
+    model = default_model()
+    lo, hi = model.domain.distance_range_m
+    d = np.linspace(lo, hi, 50)
+    dom = model.domain
+    e = np.full_like(d, 0.5 * (dom.elevation_lo_rad[0] + dom.elevation_hi_rad[0]))
+    extras = {k: np.full_like(d, np.mean(v)) for k, v in model.domain.extras.items()}
+    p = model.predict(d, e, **extras)
+    assert (np.diff(p.sigma_m) >= -1e-12).all() and (np.diff(p.q95_m) >= -1e-12).all()
+    assert (p.sigma_m > 0).all() and (p.q95_m >= p.sigma_m).all()
+    assert not model.in_domain(hi + 10.0, 0.0, **{k: v[0] for k, v in extras.items()})
+
+
+def test_default_model_file_is_shipped_as_package_data():
+    assert DEFAULT_MODEL_PATH.name == "default_model.json"
+    assert DEFAULT_MODEL_PATH.parent.name == "data"
+    assert DEFAULT_MODEL_PATH.read_text().endswith("}\n")

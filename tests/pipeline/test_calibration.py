@@ -1,0 +1,70 @@
+import numpy as np
+import pytest
+
+from markerplan.errors import ConfigError, DataError
+from pipeline.calibration import (
+    CalibrationConfig,
+    direct_face,
+    estimate_axis_offset,
+    estimate_rotation_offsets,
+)
+from pipeline.gate import RangeIndex
+from pipeline.rig import MountingOffsets
+from pipeline.sphere_fit import fit_sphere
+from pipeline.synthesis import synthesize
+from tests.pipeline.test_synthesis import synthetic_scan
+
+TRUE = MountingOffsets(np.radians(0.3), np.radians(0.3), (0.015, 0.0))
+SPHERES = [(np.array([2.5 * np.cos(a), 2.5 * np.sin(a), -0.9]), 0.1)
+           for a in np.radians(np.arange(10, 360, 45))]
+
+
+@pytest.fixture(scope="module")
+def scan():
+    return synthetic_scan(TRUE, n_frames=400, azimuth_step_deg=0.4, spheres=SPHERES,
+                          ground_tilt=(0.02, -0.01), noise_m=0.01, max_range_m=12.0, seed=5)
+
+
+def test_faces_split_the_scan(scan):
+    face = direct_face(scan)
+    assert 0.4 < face.mean() < 0.6
+
+
+def test_rotation_offsets_recovered_with_unknown_axis_offset(scan):
+    off, cov, n, rms = estimate_rotation_offsets(scan, MountingOffsets())
+    assert abs(np.degrees(off.vertical_axis_error_rad) - 0.3) < 0.02
+    assert abs(np.degrees(off.lframe_tilt_rad) - 0.3) < 0.02
+    assert n > 1000 and rms < 0.01
+    assert np.all(np.sqrt(np.diag(cov)) < np.radians(0.01))
+
+
+def test_axis_offset_from_sphere_consistency(scan):
+    start = MountingOffsets(TRUE.vertical_axis_error_rad, TRUE.lframe_tilt_rad, (0.0, 0.0))
+    offsets = start
+    for _ in range(2):  # re-fit the spheres (new inlier sets) with the new offset
+        cloud = synthesize(scan, offsets)
+        index = RangeIndex(cloud.xyz_m)
+        members, centres = [], []
+        for c, r in SPHERES:
+            m = index.within(c, 0.3)
+            fit = fit_sphere(cloud.xyz_m[m], r, centre0_m=c)
+            members.append(m[fit.used])
+            centres.append(fit.centre_m)
+        offsets, cov, n, rms = estimate_axis_offset(scan, offsets, members, 0.1,
+                                                    np.array(centres))
+    assert n == len(SPHERES)
+    np.testing.assert_allclose(offsets.axis_offset_m, TRUE.axis_offset_m, atol=0.002)
+    assert np.all(np.sqrt(np.diag(cov)) < 0.002)
+
+
+def test_no_spheres_leaves_offset_unchanged(scan):
+    off, cov, n, _ = estimate_axis_offset(scan, TRUE, [], 0.1, np.zeros((0, 3)))
+    assert off == TRUE and n == 0 and np.isnan(cov).all()
+
+
+def test_config_and_data_errors(scan):
+    with pytest.raises(ConfigError, match="neighbours"):
+        CalibrationConfig(neighbours=2).validate()
+    with pytest.raises(DataError, match="calibration range band"):
+        estimate_rotation_offsets(scan, config=CalibrationConfig(min_range_m=50,
+                                                                 max_range_m=60))

@@ -1,0 +1,16 @@
+"""Run the docstring examples of the pipeline modules this suite owns."""
+
+import doctest
+import importlib
+
+import pytest
+
+MODULES = ["pipeline.sphere_fit", "pipeline.clustering", "pipeline.gate", "pipeline.ground",
+           "pipeline.quality", "pipeline.marker_table", "pipeline.process",
+           "pipeline.range_study"]
+
+
+@pytest.mark.parametrize("name", MODULES)
+def test_docstring_examples(name):
+    result = doctest.testmod(importlib.import_module(name))
+    assert result.failed == 0

@@ -1,0 +1,77 @@
+"""The processing chain on scans from the simulator (``visibility``), default site."""
+
+import numpy as np
+import pytest
+
+from pipeline.evaluation import Reference
+from pipeline.process import build_config, process_station, with_offsets
+from pipeline.rig import MountingOffsets
+
+sites = pytest.importorskip("visibility.sites")
+simulate = pytest.importorskip("visibility.simulate")
+sensor_mod = pytest.importorskip("visibility.sensor")
+
+OFFSETS = MountingOffsets(np.radians(0.3), np.radians(0.3), (0.015, 0.0))
+
+
+@pytest.fixture(scope="module")
+def site_and_scene():
+    site = sites.load_site("default")
+    return site, simulate.site_scene(site)
+
+
+def _station(site_and_scene, index, offsets=None, frames=None, seed=0):
+    site, scene = site_and_scene
+    rig = sensor_mod.RigConfig(offsets=offsets or MountingOffsets())
+    scan, truth = simulate.simulate_station(site, index, rig=rig, seed=seed, frames=frames,
+                                            scene=scene)
+    ref = Reference(tuple(m["id"] for m in truth["markers"]),
+                    np.array([m["centre_station_m"] for m in truth["markers"]]),
+                    truth["station_id"], "truth")
+    return scan, truth, ref
+
+
+def _check_detection(res, truth, min_truth_points):
+    rows = res.rows
+    # rocks and terrain never pass: every accepted candidate is a real marker
+    assert all(r.marker_id for r in rows if r.accepted)
+    # every marker with a usable cloud is found; rejected ones carry a reason
+    found = {r.marker_id for r in rows if r.marker_id}
+    usable = {m["id"] for m in truth["markers"] if m["n_points"] >= min_truth_points}
+    assert usable <= found, usable - found
+    assert all(r.reason for r in rows if not r.accepted)
+
+
+def test_default_site_station_quick(site_and_scene):
+    """100 of 800 frames (every 8th), no offsets: the inner markers are found and accurate."""
+    scan, truth, ref = _station(site_and_scene, 0, frames=range(0, 800, 8))
+    res = process_station(scan, build_config(), ref)
+    _check_detection(res, truth, min_truth_points=60)
+    inner = [r for r in res.rows if r.accepted and r.distance_m < 10]
+    assert len(inner) >= 5
+    assert max(r.error_m for r in inner) < 0.01
+
+
+@pytest.mark.slow
+def test_calibration_on_full_station_with_injected_offsets(site_and_scene):
+    scan, truth, ref = _station(site_and_scene, 0, offsets=OFFSETS, seed=3)
+    res = process_station(scan, build_config(), ref)
+    o, c = res.offsets, res.calibration
+    assert abs(np.degrees(o.vertical_axis_error_rad - OFFSETS.vertical_axis_error_rad)) < 0.02
+    assert abs(np.degrees(o.lframe_tilt_rad - OFFSETS.lframe_tilt_rad)) < 0.02
+    assert np.linalg.norm(np.subtract(o.axis_offset_m, OFFSETS.axis_offset_m)) < 0.002
+    assert c["n_spheres"] >= 5 and np.isfinite(c["sigma_axis_offset_m"]).all()
+    _check_detection(res, truth, min_truth_points=40)
+    corrected = np.mean([r.error_m for r in res.rows if r.accepted])
+    raw = process_station(scan, with_offsets(build_config(), MountingOffsets(), False), ref)
+    uncorrected = [r.error_m for r in raw.rows if r.accepted]
+    assert corrected < 0.006
+    assert not uncorrected or np.mean(uncorrected) > 3 * corrected
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("index", range(7))
+def test_detection_at_every_default_station(site_and_scene, index):
+    scan, truth, ref = _station(site_and_scene, index, seed=index)
+    res = process_station(scan, build_config(), ref)
+    _check_detection(res, truth, min_truth_points=40)

@@ -1,0 +1,78 @@
+import json
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from markerplan.errors import DataError, InputFileError
+from planner.candidates import candidate_sites, ground_slope_rad, load_polygons
+from planner.config import PlanConfig
+from visibility.dem import DEM
+
+
+def _dem():
+    # 20 m x 20 m, flat except a 45-degree ramp for x > 5 (rising 1 m per m)
+    x = np.arange(-10.0, 10.0 + 1e-9, 0.1)
+    xx, yy = np.meshgrid(x, x)
+    return DEM(np.where(xx > 5.0, xx - 5.0, 0.0), (-10.0, -10.0), 0.1)
+
+
+def test_grid_boundary_exclusion_slope_stations_and_craters():
+    dem = _dem()
+    cfg = PlanConfig(grid_spacing_m=1.0, max_slope_deg=20.0, min_station_distance_m=2.0,
+                     exclude_crater_interiors=True)
+    boundary = [[-8, -8], [8, -8], [8, 8], [-8, 8]]
+    exclusion = [[-8, -8], [-4, -8], [-4, 8], [-8, 8]]
+    crater = SimpleNamespace(centre_xy_m=(0.0, -5.0), diameter_m=2.0)
+    c = candidate_sites(dem, cfg, boundary=boundary, exclusions=[exclusion],
+                        station_xy=[[0.0, 5.0]], craters=[crater], marker_radius_m=0.1)
+    xy = c.xy_m
+    assert np.all((xy >= -8) & (xy <= 8))
+    assert np.all(xy[:, 0] > -4)  # exclusion zone
+    assert np.all(xy[:, 0] < 5)  # the 45-degree ramp is too steep
+    assert np.all(np.hypot(xy[:, 0], xy[:, 1] - 5.0) >= 2.0)
+    assert np.all(np.hypot(xy[:, 0], xy[:, 1] + 5.0) >= 1.0)
+    assert np.allclose(c.centre_m[:, 2], dem.height_at(xy) + 0.1)
+    assert set(c.dropped) == {"outside boundary", "excluded zone", "near station",
+                              "crater interior", "too steep"}
+    assert len(set(c.ids)) == len(c)
+    # grid spacing: neighbours 1 m apart
+    assert np.isclose(np.min(np.diff(np.unique(xy[:, 0]))), 1.0)
+
+
+def test_slope_of_a_ramp():
+    assert np.allclose(ground_slope_rad(_dem(), np.array([[7.0, 0.0], [0.0, 0.0]])),
+                       [np.pi / 4, 0.0], atol=1e-9)
+
+
+def test_empty_candidate_set_is_a_one_line_error():
+    with pytest.raises(DataError, match="no candidate marker site") as exc:
+        candidate_sites(_dem(), PlanConfig(), exclusions=[[[-11, -11], [11, -11], [11, 11],
+                                                          [-11, 11]]])
+    assert "\n" not in str(exc.value)
+    with pytest.raises(DataError, match="does not overlap"):
+        candidate_sites(_dem(), PlanConfig(), boundary=[[50, 50], [60, 50], [60, 60]])
+
+
+def test_geojson_polygons_and_malformed_ones(tmp_path):
+    good = {"type": "FeatureCollection", "features": [
+        {"type": "Feature", "properties": {},
+         "geometry": {"type": "Polygon", "coordinates": [[[0, 0], [1, 0], [1, 1], [0, 0]]]}}]}
+    p = tmp_path / "ok.geojson"
+    p.write_text(json.dumps(good))
+    assert load_polygons(p)[0].area == pytest.approx(0.5)
+    bowtie = {"type": "Polygon", "coordinates": [[[0, 0], [1, 1], [1, 0], [0, 1], [0, 0]]]}
+    cases = {"bowtie": (bowtie, "invalid polygon"),
+             "point": ({"type": "Point", "coordinates": [0, 0]}, "Polygon or MultiPolygon"),
+             "flat": ({"type": "Polygon", "coordinates": [[[0, 0], [1, 0], [2, 0], [0, 0]]]},
+                      "zero area"),
+             "short": ({"type": "Polygon", "coordinates": [[[0, 0], [1, 0]]]}, "malformed")}
+    for name, (geom, msg) in cases.items():
+        f = tmp_path / f"{name}.geojson"
+        f.write_text(json.dumps(geom))
+        with pytest.raises(InputFileError, match=msg):
+            load_polygons(f)
+    bad = tmp_path / "bad.geojson"
+    bad.write_text("{not json")
+    with pytest.raises(InputFileError, match="not valid JSON"):
+        load_polygons(bad)

@@ -1,0 +1,132 @@
+import itertools
+
+import numpy as np
+import pytest
+
+from markerplan.errors import ConfigError, InfeasiblePlanError
+from planner.config import PlanConfig
+from planner.program import build_model, evaluate_layout, plan_sites, solve, station_infos
+from tests.planner.instances import make_problem, ring
+
+LOOSE = PlanConfig(requirement_m=0.10, working_radius_m=10.0, max_range_m=30.0)
+
+
+def brute_force_optimum(problem, config):
+    infos = station_infos(problem, config)
+    for k in range(1, problem.n_sites + 1):
+        for combo in itertools.combinations(range(problem.n_sites), k):
+            sel = np.zeros(problem.n_sites, bool)
+            sel[list(combo)] = True
+            if evaluate_layout(problem, sel, config, infos).all_ok:
+                return k
+    return None
+
+
+def test_one_station_six_sectors_needs_exactly_three():
+    p = make_problem([[0, 0]], ring([0, 0], 8.0, [30, 90, 150, 210, 270, 330]))
+    r = plan_sites(p, LOOSE)
+    assert r.selected.sum() == 3 and r.status == "optimal"
+    assert r.solution.dual_bound == pytest.approx(3.0)
+    assert r.check.sectors[0] == 3
+
+
+def test_two_stations_sharing_a_lens_need_four():
+    # sites within 12 m of both stations lie within +-40 deg of the baseline: at most two
+    # sectors, so each station needs one private site -> optimum 4
+    sites = [[10, 6], [10, -6], [10, 0], [-5, 0], [0, -8], [0, 8], [25, 0], [20, 8], [20, -8]]
+    p = make_problem([[0, 0], [20, 0]], sites, max_range_m=12.0)
+    cfg = LOOSE.replace(max_range_m=12.0)
+    r = plan_sites(p, cfg)
+    assert r.selected.sum() == 4 and r.status == "optimal"
+    assert r.selected[0] and r.selected[1]
+    assert brute_force_optimum(p, cfg) == 4
+
+
+@pytest.mark.parametrize("seed", [0, 1, 3])
+def test_accuracy_binding_instances_match_brute_force(seed):
+    rng = np.random.default_rng(seed)
+    p = make_problem(rng.uniform(5, 25, (3, 2)), rng.uniform(0, 30, (11, 2)), max_range_m=25)
+    cfg = PlanConfig(requirement_m=0.04, working_radius_m=10, max_range_m=25)
+    r = plan_sites(p, cfg)
+    assert r.n_cuts > 0  # the accuracy check had to cut off a direction-feasible layout
+    assert r.selected.sum() == brute_force_optimum(p, cfg)
+    assert r.check.all_ok and np.all(r.check.error_m <= 0.04)
+
+
+def _grid_instance(seed=4, spacing=3.0):
+    rng = np.random.default_rng(seed)
+    g = np.arange(1.5, 30, spacing)
+    xx, yy = np.meshgrid(g, g)
+    return make_problem(rng.uniform(5, 25, (4, 2)), np.column_stack([xx.ravel(), yy.ravel()]),
+                        max_range_m=20)
+
+
+def test_accuracy_cuts_are_needed_and_the_plan_is_minimal():
+    p = _grid_instance()
+    cfg = PlanConfig(requirement_m=0.03, working_radius_m=10, max_range_m=20)
+    r = plan_sites(p, cfg)
+    assert r.check.all_ok
+    assert r.n_cuts > 0  # directions and information cuts alone were not enough
+    for j in np.flatnonzero(r.selected):
+        fewer = r.selected.copy()
+        fewer[j] = False
+        assert not evaluate_layout(p, fewer, cfg).all_ok, f"marker {p.site_ids[j]} is spare"
+
+
+def test_redundant_plan_survives_every_single_loss():
+    p = _grid_instance(seed=5, spacing=4.0)
+    cfg = PlanConfig(requirement_m=0.05, working_radius_m=10, max_range_m=20, redundant=True,
+                     time_limit_s=60)
+    r = plan_sites(p, cfg)
+    normal = cfg.replace(redundant=False)
+    assert r.check.all_ok
+    for j in np.flatnonzero(r.selected):
+        fewer = r.selected.copy()
+        fewer[j] = False
+        assert evaluate_layout(p, fewer, normal).all_ok, f"losing {p.site_ids[j]} breaks it"
+    assert r.selected.sum() > plan_sites(p, normal).selected.sum()
+
+
+def test_infeasible_requirement_names_each_station_and_why():
+    sites = ring([0, 0], 8.0, [30, 90, 150, 210, 270, 330])
+    sites = np.vstack([sites, [[40, 0], [44, 2]]])  # only two sectors for S3
+    stations = [[0, 0], [200, 0], [40, 5], [0, 1]]
+    occluded = [(3, j) for j in range(8)]
+    p = make_problem(stations, sites, max_range_m=30, occluded=occluded)
+    with pytest.raises(InfeasiblePlanError) as exc:
+        plan_sites(p, LOOSE)
+    msg = str(exc.value)
+    assert "\n" not in msg
+    assert "S2: no candidate site within" in msg
+    assert "S3: too few" in msg
+    assert "S4: all" in msg and "occluded" in msg
+    assert "S1:" not in msg  # S1 is satisfiable
+    with pytest.raises(InfeasiblePlanError, match="accuracy unreachable"):
+        plan_sites(make_problem([[0, 0]], sites[:6]), LOOSE.replace(requirement_m=0.001))
+
+
+def test_budget_existing_and_forbidden():
+    p = make_problem([[0, 0]], ring([0, 0], 8.0, [30, 90, 150, 210, 270, 330]))
+    with pytest.raises(InfeasiblePlanError, match="budget"):
+        plan_sites(p, LOOSE.replace(budget=2))
+    r = plan_sites(p, LOOSE.replace(existing=("C000", "C001"), forbidden=("C002", "C003")))
+    assert r.selected[0] and r.selected[1] and not r.selected[2] and not r.selected[3]
+    assert r.selected.sum() == 3
+    with pytest.raises(ConfigError, match="unknown site"):
+        plan_sites(p, LOOSE.replace(forbidden=("nope",)))
+
+
+def test_models_and_inputs_are_never_mutated():
+    p = _grid_instance()
+    before = {k: np.copy(getattr(p, k)) for k in ("pair_reason", "pair_sigma_m", "site_xyz")}
+    model = build_model(p, LOOSE)
+    rows = model.site_row([0, 1])
+    bigger = model.with_rows(rows, [1.0], [np.inf], ["extra"])
+    tighter = model.with_bounds(0, ub=0.0)
+    assert model.A.shape[0] + 1 == bigger.A.shape[0]
+    assert model.ub[0] == 1.0 and tighter.ub[0] == 0.0
+    plan_sites(p, LOOSE)
+    for k, v in before.items():
+        assert np.array_equal(getattr(p, k), v)
+    sol = solve(model, 10.0)
+    assert sol.status == "optimal" and sol.gap == pytest.approx(0.0)

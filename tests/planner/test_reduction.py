@@ -1,0 +1,152 @@
+"""Marker-reduction studies: exact minimax curve, drop order, per-marker losses."""
+
+from __future__ import annotations
+
+import itertools
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from markerplan.errors import ConfigError, InfeasiblePlanError
+from planner.config import PlanConfig
+from planner.program import evaluate_layout, plan_sites, station_infos
+from planner.reduction import drop_order, failure_reason, marker_losses, tradeoff_curve
+from tests.planner.instances import make_problem, ring
+
+CONFIG = PlanConfig(requirement_m=0.03, working_radius_m=10.0)
+
+
+def _brute_force(problem, config, k):
+    """Least worst-station error over all k-subsets meeting count and directions."""
+    infos = station_infos(problem, config)
+    best = np.inf
+    for sub in itertools.combinations(range(problem.n_sites), k):
+        sel = np.zeros(problem.n_sites, bool)
+        sel[list(sub)] = True
+        chk = evaluate_layout(problem, sel, config, infos)
+        if np.all((chk.count >= config.min_markers) & (chk.sectors >= config.min_sectors)):
+            best = min(best, float(chk.error_m.max()))
+    return best
+
+
+def _random_problem(seed, n_stations=3, n_sites=8):
+    rng = np.random.default_rng(seed)
+    return make_problem(rng.uniform(-12, 12, (n_stations, 2)), rng.uniform(-18, 18, (n_sites, 2)))
+
+
+@pytest.fixture(scope="module")
+def tiny():
+    """Two stations, eight sites on rings around them: small enough to enumerate."""
+    stations = [[0.0, 0.0], [14.0, 0.0]]
+    sites = np.vstack([ring([0, 0], 6.0, [20, 100, 200, 290]),
+                       ring([14, 0], 9.0, [0, 80, 170, 260])])
+    return make_problem(stations, sites, occluded=[(0, 7), (1, 2)])
+
+
+def test_curve_matches_brute_force_on_tiny_instance(tiny):
+    curve = tradeoff_curve(tiny, CONFIG)
+    assert curve.proven
+    assert [p.k for p in curve.points] == list(range(8, curve.k_directions - 1, -1))
+    for p in curve.points:
+        assert p.selected.sum() == p.k
+        assert p.worst_error_m == pytest.approx(_brute_force(tiny, CONFIG, p.k), rel=1e-9)
+        # the reported errors are those of the reported subset
+        chk = evaluate_layout(tiny, p.selected, CONFIG)
+        np.testing.assert_allclose(p.error_m, chk.error_m)
+        assert p.lower_bound_m <= p.worst_error_m
+
+
+@pytest.mark.parametrize("seed", [3, 11])
+def test_curve_matches_brute_force_on_random_instances(seed):
+    problem = _random_problem(seed, n_stations=4, n_sites=9)
+    try:
+        curve = tradeoff_curve(problem, CONFIG)
+    except InfeasiblePlanError:
+        pytest.skip("instance has no direction-feasible subset")
+    for p in curve.points:
+        assert p.worst_error_m == pytest.approx(_brute_force(problem, CONFIG, p.k), rel=1e-9)
+
+
+@settings(max_examples=12, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(seed=st.integers(0, 10_000), n_sites=st.integers(5, 8),
+       requirement=st.sampled_from([0.025, 0.03, 0.05]))
+def test_curve_is_monotone_and_its_smallest_feasible_k_is_the_plan(seed, n_sites, requirement):
+    problem = _random_problem(seed, n_sites=n_sites)
+    config = CONFIG.replace(requirement_m=requirement)
+    try:
+        curve = tradeoff_curve(problem, config)
+    except InfeasiblePlanError:
+        with pytest.raises(InfeasiblePlanError):
+            plan_sites(problem, config)
+        return
+    worst = [p.worst_error_m for p in curve.points]  # k decreasing
+    assert all(b >= a * (1 - 1e-9) for a, b in zip(worst, worst[1:], strict=False))
+    assert curve.points[-1].k == curve.k_directions
+    try:
+        plan = plan_sites(problem, config)
+    except InfeasiblePlanError:
+        assert curve.k_feasible is None
+    else:
+        assert curve.k_feasible == int(plan.selected.sum())
+        # meeting the requirement is monotone in k too
+        ok = [p.meets_requirement for p in curve.points]
+        assert ok == sorted(ok, reverse=True)
+
+
+def test_drop_order_is_nested_and_never_beats_the_curve(tiny):
+    layout = np.ones(tiny.n_sites, bool)
+    steps = drop_order(tiny, CONFIG, layout)
+    curve = tradeoff_curve(tiny, CONFIG)
+    prev = layout
+    for s in steps:
+        assert prev[s.removed] and not s.selected[s.removed]
+        assert (s.selected <= prev).all() and s.selected.sum() == s.k
+        assert s.worst_error_m >= curve.at(s.k).worst_error_m * (1 - 1e-9)
+        prev = s.selected
+    assert steps[-1].k >= curve.k_directions  # a nested order may stop above the optimum
+
+
+def test_marker_losses_name_the_stations_that_fail(tiny):
+    layout = np.zeros(tiny.n_sites, bool)
+    layout[[0, 1, 2, 3, 4, 5, 6]] = True
+    losses = marker_losses(tiny, CONFIG, layout)
+    assert [m.marker for m in losses] == [0, 1, 2, 3, 4, 5, 6]
+    for m in losses:
+        trial = layout.copy()
+        trial[m.marker] = False
+        chk = evaluate_layout(tiny, trial, CONFIG)
+        assert m.failing == tuple(np.flatnonzero(~chk.ok))
+        np.testing.assert_allclose(m.check.error_m, chk.error_m)
+
+
+def test_losing_any_marker_of_a_minimal_layout_fails_a_station_with_a_reason(tiny):
+    curve = tradeoff_curve(tiny, CONFIG)
+    minimal = curve.at(curve.k_directions).selected  # 3 markers: count rows are tight
+    for m in marker_losses(tiny, CONFIG, minimal):
+        assert m.failing
+        for s in m.failing:
+            assert "usable markers < 3" in failure_reason(m.check, s, CONFIG)
+
+
+def test_k_out_of_range_is_refused(tiny):
+    with pytest.raises(ConfigError, match="k_max"):
+        tradeoff_curve(tiny, CONFIG, k_max=99)
+    with pytest.raises(ConfigError, match="k_min"):
+        tradeoff_curve(tiny, CONFIG, k_min=1)
+
+
+def test_redundant_mode_and_existing_markers_are_refused(tiny):
+    with pytest.raises(ConfigError, match="redundant"):
+        tradeoff_curve(tiny, CONFIG.replace(redundant=True))
+    fixed = make_problem([[0.0, 0.0]], ring([0, 0], 6.0, [0, 120, 240]),
+                         existing=[True, False, False])
+    with pytest.raises(ConfigError, match="existing"):
+        tradeoff_curve(fixed, CONFIG)
+
+
+def test_no_direction_feasible_subset_names_the_station():
+    problem = make_problem([[0.0, 0.0]], ring([0, 0], 6.0, [0, 10]))
+    with pytest.raises(InfeasiblePlanError, match="S1"):
+        tradeoff_curve(problem, CONFIG)

@@ -1,0 +1,245 @@
+"""The station x candidate-site visibility matrix (sparse), ray-cast through the terrain.
+
+For every station-site pair within range it gives the distance, elevation angle and bearing of
+the marker centre from the LiDAR centre, the **visible fraction** of the marker sphere and the
+**expected number of points** the rig's angular sampling puts on it. Site frame, metres,
+radians; bearings counter-clockwise from +x, elevation positive upwards.
+
+Visible fraction
+----------------
+A bundle of ``rays_per_marker`` rays goes from the LiDAR centre to sample points on the marker's
+sensor-facing hemisphere. The sample points are a sunflower (Vogel) pattern, uniform over the
+sphere's projected disc as the sensor sees it, lifted onto the front surface — so each ray
+stands for an equal share of the returns the LiDAR would get. They are cast through a
+terrain-only scene; a sample point counts as visible when the first terrain hit is not nearer
+than the point itself (less ``HIT_TOLERANCE_M``). Parts of the sphere buried in the ground are
+behind the terrain surface, so they count as occluded automatically.
+
+Expected points
+---------------
+The tilted VLP-16 on a turntable draws, per frame, each laser's cone around the horizontal
+spin axis; near the horizon every laser crosses the horizontal on both sides of the rig, so a
+full turn of ``frames_per_turn`` frames lays ``2 * n_lasers * frames_per_turn`` lines over
+``2 pi`` of azimuth, each sampled every ``azimuth_step_rad`` along the spin. The density of
+returns per steradian at elevation ``e`` is therefore
+``L / (azimuth_step_rad * cos e)`` with ``L = 2 n_lasers frames_per_turn / (2 pi)``, and
+``expected_points = visible_fraction * solid_angle * density`` with the marker's solid angle
+``2 pi (1 - sqrt(1 - r^2 / d^2))``.
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from markerplan.errors import ConfigError
+
+#: A terrain hit this much before a sample point still counts the point as visible, m.
+HIT_TOLERANCE_M = 0.01
+
+_GOLDEN_ANGLE = np.pi * (3.0 - np.sqrt(5.0))
+
+
+@dataclass(frozen=True)
+class AngularSampling:
+    """The rig's angular sampling (VLP-16 tilted 90 deg on a turntable), for point counts.
+
+    Attributes
+    ----------
+    azimuth_step_rad : float
+        Spin-azimuth step between firings (0.2 deg at 10 Hz), rad.
+    frames_per_turn : int
+        Frames (LiDAR revolutions) in one full turntable turn.
+    n_lasers : int
+    """
+
+    azimuth_step_rad: float = float(np.radians(0.2))
+    frames_per_turn: int = 800
+    n_lasers: int = 16
+
+    def density_per_sr(self, elevation_rad) -> np.ndarray:
+        """Returns per steradian at the given elevations (see module docstring)."""
+        lines_per_rad = 2.0 * self.n_lasers * self.frames_per_turn / (2.0 * np.pi)
+        cos_e = np.maximum(np.cos(np.asarray(elevation_rad, float)), 0.05)
+        return lines_per_rad / (self.azimuth_step_rad * cos_e)
+
+
+@dataclass(frozen=True)
+class VisibilityMatrix:
+    """Sparse station x site pairs (site frame).
+
+    Attributes
+    ----------
+    station, site : (p,) int
+        Station and site index of each pair.
+    distance_m : (p,) float
+        LiDAR centre to marker centre, m.
+    elevation_rad : (p,) float
+        Elevation of the marker centre seen from the LiDAR centre, rad (positive up).
+    bearing_rad : (p,) float
+        Bearing of the marker from the station, counter-clockwise from +x, rad in (-pi, pi].
+    visible_fraction : (p,) float
+        Unoccluded fraction of the sensor-facing hemisphere, 0..1.
+    expected_points : (p,) float
+        Expected returns on the marker from one full station scan.
+    n_rays : int
+        Rays cast.
+    elapsed_s : float
+        Wall-clock time of the ray casting, s.
+    """
+
+    station: np.ndarray
+    site: np.ndarray
+    distance_m: np.ndarray
+    elevation_rad: np.ndarray
+    bearing_rad: np.ndarray
+    visible_fraction: np.ndarray
+    expected_points: np.ndarray
+    n_rays: int = 0
+    elapsed_s: float = 0.0
+
+    def __len__(self) -> int:
+        return int(self.station.shape[0])
+
+    @property
+    def rays_per_s(self) -> float:
+        return self.n_rays / self.elapsed_s if self.elapsed_s > 0 else float("nan")
+
+
+def disc_pattern(n: int) -> np.ndarray:
+    """(n, 2) sunflower points uniform over the unit disc (equal-area cells).
+
+    Examples
+    --------
+    >>> p = disc_pattern(24)
+    >>> p.shape, bool(np.all(np.hypot(p[:, 0], p[:, 1]) < 1))
+    ((24, 2), True)
+    """
+    k = np.arange(n) + 0.5
+    r = np.sqrt(k / n)
+    a = k * _GOLDEN_ANGLE
+    return np.column_stack([r * np.cos(a), r * np.sin(a)])
+
+
+def _pairs_in_range(station_xyz, site_xyz, max_range_m):
+    tree = cKDTree(site_xyz)
+    lists = tree.query_ball_point(station_xyz, r=max_range_m)
+    st = np.concatenate([np.full(len(li), s, dtype=np.int64) for s, li in enumerate(lists)])
+    si = np.concatenate([np.sort(np.asarray(li, dtype=np.int64)) for li in lists])
+    return st, si
+
+
+def _vm_iv(station_xyz, site_xyz, marker_radius_m, max_range_m, rays_per_marker):
+    st = np.asarray(station_xyz, dtype=float)
+    si = np.asarray(site_xyz, dtype=float)
+    if st.ndim != 2 or st.shape[1] != 3:
+        raise ConfigError(f"`station_position_m` must have shape (s, 3), got {st.shape}")
+    if si.ndim != 2 or si.shape[1] != 3:
+        raise ConfigError(f"`site_centre_m` must have shape (n, 3), got {si.shape}")
+    if not np.all(np.isfinite(st)) or not np.all(np.isfinite(si)):
+        raise ConfigError("station and site coordinates must be finite")
+    if not marker_radius_m > 0 or not max_range_m > 0:
+        raise ConfigError(f"`marker_radius_m` and `max_range_m` must be > 0, got "
+                          f"{marker_radius_m!r}, {max_range_m!r}")
+    if not isinstance(rays_per_marker, (int, np.integer)) or rays_per_marker < 1:
+        raise ConfigError(f"`rays_per_marker` must be an integer >= 1, got {rays_per_marker!r}")
+    return st, si
+
+
+def visibility_matrix(scene, station_position_m, site_centre_m, marker_radius_m: float = 0.10,
+                      max_range_m: float = 30.0, rays_per_marker: int = 24,
+                      sampling: AngularSampling | None = None, batch_rays: int = 1 << 20,
+                      progress: bool = True) -> VisibilityMatrix:
+    """Visibility of every candidate site from every station within range.
+
+    Parameters
+    ----------
+    scene : visibility.scene.RayScene
+        Terrain-only scene (no marker spheres), site frame.
+    station_position_m : (s, 3) float
+        LiDAR centres, site frame, m.
+    site_centre_m : (n, 3) float
+        Marker centres at the candidate sites, site frame, m.
+    marker_radius_m : float
+        Marker radius, m.
+    max_range_m : float
+        Pairs farther apart (3D) are left out, m.
+    rays_per_marker : int
+        Rays in each marker's bundle.
+    sampling : AngularSampling, optional
+        The rig's angular sampling, for ``expected_points``.
+    batch_rays : int
+        Rays per ``scene.intersect`` call (many pairs per call keep all cores busy).
+    progress : bool
+        Show a progress bar on stderr.
+
+    Returns
+    -------
+    vis : VisibilityMatrix
+        Pairs ordered by station, then site; a pair whose marker would contain the LiDAR centre
+        is dropped.
+    """
+    st, si = _vm_iv(station_position_m, site_centre_m, marker_radius_m, max_range_m,
+                    rays_per_marker)
+    sampling = sampling or AngularSampling()
+    from tqdm import tqdm
+
+    ps, pj = _pairs_in_range(st, si, max_range_m) if len(st) and len(si) else (
+        np.zeros(0, np.int64), np.zeros(0, np.int64))
+    diff = si[pj] - st[ps]
+    dist = np.linalg.norm(diff, axis=1)
+    keep = dist > 2.0 * marker_radius_m
+    ps, pj, diff, dist = ps[keep], pj[keep], diff[keep], dist[keep]
+    horiz = np.hypot(diff[:, 0], diff[:, 1])
+    elevation = np.arctan2(diff[:, 2], horiz)
+    bearing = np.arctan2(diff[:, 1], diff[:, 0])
+
+    disc = disc_pattern(rays_per_marker)
+    frac = np.zeros(ps.size)
+    per_batch = max(1, batch_rays // rays_per_marker)
+    t0 = time.perf_counter()
+    n_rays = 0
+    with tqdm(total=ps.size, desc="visibility", unit="pair", file=sys.stderr,
+              disable=None if progress else True) as bar:
+        for a in range(0, ps.size, per_batch):
+            b = min(ps.size, a + per_batch)
+            frac[a:b] = _visible_fraction(scene, st[ps[a:b]], si[pj[a:b]], marker_radius_m, disc)
+            n_rays += (b - a) * rays_per_marker
+            bar.update(b - a)
+    elapsed = time.perf_counter() - t0
+    r2 = (marker_radius_m / dist) ** 2
+    solid = 2.0 * np.pi * (1.0 - np.sqrt(1.0 - r2))
+    expected = frac * solid * sampling.density_per_sr(elevation)
+    return VisibilityMatrix(station=ps, site=pj, distance_m=dist, elevation_rad=elevation,
+                            bearing_rad=bearing, visible_fraction=frac,
+                            expected_points=expected, n_rays=n_rays, elapsed_s=elapsed)
+
+
+def _visible_fraction(scene, origin: np.ndarray, centre: np.ndarray, radius: float,
+                      disc: np.ndarray) -> np.ndarray:
+    """Visible fraction for a batch of pairs: origins (b, 3), centres (b, 3) -> (b,)."""
+    view = centre - origin
+    view /= np.linalg.norm(view, axis=1, keepdims=True)
+    # orthonormal basis (e1, e2) perpendicular to the line of sight
+    helper = np.where(np.abs(view[:, 2:3]) < 0.9, [[0.0, 0.0, 1.0]], [[1.0, 0.0, 0.0]])
+    e1 = np.cross(view, helper)
+    e1 /= np.linalg.norm(e1, axis=1, keepdims=True)
+    e2 = np.cross(view, e1)
+    u, w = disc[:, 0], disc[:, 1]
+    depth = np.sqrt(np.clip(1.0 - u**2 - w**2, 0.0, None))
+    pts = centre[:, None, :] + radius * (u[None, :, None] * e1[:, None, :]
+                                         + w[None, :, None] * e2[:, None, :]
+                                         - depth[None, :, None] * view[:, None, :])
+    rays = pts - origin[:, None, :]
+    length = np.linalg.norm(rays, axis=2)
+    dirs = rays / length[..., None]
+    k = disc.shape[0]
+    orig = np.repeat(origin, k, axis=0)
+    hits = scene.intersect(orig, dirs.reshape(-1, 3), float(length.max()) + 1.0)
+    hit_d = np.asarray(hits.distance_m, dtype=float).reshape(-1, k)
+    visible = ~(hit_d < length - HIT_TOLERANCE_M)  # a miss is inf (or nan): visible
+    return visible.mean(axis=1)
