@@ -46,8 +46,8 @@ def main() -> None:
     sol = result.solution
     print(f"MILP: {int(result.selected.sum())} markers, status {sol.status}, objective "
           f"{sol.objective:g}, dual bound {sol.dual_bound:g}, gap {sol.gap:.3g}, "
-          f"{result.iterations} solve(s), {result.n_cuts} cut(s), solver {result.solve_time_s:.2f} s,"
-          f" loop total {t_plan:.2f} s")
+          f"{result.iterations} solve(s), {result.n_cuts} cut(s), solver "
+          f"{result.solve_time_s:.2f} s, loop total {t_plan:.2f} s")
     t = time.perf_counter()
     greedy = greedy_cover(problem, config)
     t_greedy = time.perf_counter() - t

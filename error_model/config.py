@@ -43,6 +43,9 @@ class FitConfig:
         Elevation margin, degrees, added on each side of a band's fitted elevation range.
     solver : str
         cvxpy solver name for both fits.
+    estimator : str or None
+        Fit only rows of this centre estimator (table column ``estimator``, e.g.
+        ``fixed-radius``); required when a table mixes estimators.
     """
 
     quantile: float = 0.95
@@ -58,6 +61,7 @@ class FitConfig:
     domain_bands: int = 8
     domain_elevation_margin_deg: float = 2.0
     solver: str = "CLARABEL"
+    estimator: str | None = None
 
     def __post_init__(self) -> None:
         _fit_config_iv(self)

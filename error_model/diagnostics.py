@@ -84,7 +84,8 @@ def plot_diagnostics(model: ErrorModel, table: MarkerTable, path: str | Path) ->
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    data = fit_data(table, 1, model.basis.extras)
+    data = fit_data(table, 1, model.basis.extras,
+                    model.info.get("provenance", {}).get("config", {}).get("estimator"))
     d, e, err = data.distance_m, data.elevation_rad, data.error_m
     fig, ax = plt.subplots(figsize=(8, 5), dpi=120)
     sc = ax.scatter(d, 1e3 * err, c=np.rad2deg(np.abs(e)), s=6, alpha=0.5, cmap="viridis",

@@ -75,7 +75,7 @@ def fit_error_model(table: MarkerTable | Mapping[str, Any],
     """
     config, rng = _fit_iv(config, seed)
     table = as_marker_table(table)
-    data = fit_data(table, config.min_rows, config.extra_candidates)
+    data = fit_data(table, config.min_rows, config.extra_candidates, config.estimator)
     y = data.error_m
 
     labels = fold_labels(data.groups, config.cv_folds, rng)
@@ -112,14 +112,16 @@ def fit_error_model(table: MarkerTable | Mapping[str, Any],
     effects = effect_vectors(basis, data.distance_m, data.elevation_rad, data.extras)
     boot = None
     if config.n_bootstrap > 0:
-        boot = bootstrap(refit, data.groups, config.n_bootstrap, config.bootstrap_max_rows, rng)
+        grouping = _grouping(data.groups, config.cv_folds)
+        groups = data.groups if grouping != "rows" else np.arange(y.size)
+        boot = bootstrap(refit, groups, config.n_bootstrap, config.bootstrap_max_rows, rng)
         for key, sl in (("sigma", slice(0, p)), ("envelope", slice(p, 2 * p))):
             lo, hi = boot.interval(full[sl], boot.samples[:, sl])
             info[key].update({"ci95_lo": lo.tolist(), "ci95_hi": hi.tolist()})
         info["bootstrap"] = {"replicates": config.n_bootstrap,
                              "rows_per_replicate": boot.rows_per_replicate,
                              "shrink": boot.shrink,
-                             "resampling": f"{_grouping(data.groups, 1)}, with replacement"}
+                             "resampling": f"{grouping}, with replacement"}
     info["effects"] = _effects_summary(effects, sigma_coef, q_coef, boot, p)
 
     domain = Domain.from_data(data.distance_m, data.elevation_rad,
@@ -153,6 +155,7 @@ def _fit_iv(config: FitConfig | Mapping[str, Any] | None, seed: int
 
 
 def _grouping(groups: np.ndarray, k: int) -> str:
+    """Unit of resampling: whole scans when there are at least ``k`` of them, else rows."""
     n_groups = np.unique(groups).size
     return "rows" if n_groups < k or n_groups == groups.size else "station x replicate"
 

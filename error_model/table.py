@@ -185,7 +185,8 @@ def as_marker_table(table: MarkerTable | Mapping[str, object]) -> MarkerTable:
     return MarkerTable(columns=columns)
 
 
-def fit_data(table: MarkerTable, min_rows: int, extra_names: Iterable[str] = ()) -> FitData:
+def fit_data(table: MarkerTable, min_rows: int, extra_names: Iterable[str] = (),
+             estimator: str | None = None) -> FitData:
     """Select the rows a fit uses and convert them to SI units.
 
     Parameters
@@ -195,6 +196,9 @@ def fit_data(table: MarkerTable, min_rows: int, extra_names: Iterable[str] = ())
         Fewest usable rows accepted.
     extra_names : iterable of str
         Optional predictors to extract (keys of :data:`EXTRA_COLUMNS`).
+    estimator : str, optional
+        Keep only rows of this centre estimator; required when the table mixes several
+        (their errors differ, one model describes one estimator).
 
     Returns
     -------
@@ -215,11 +219,27 @@ def fit_data(table: MarkerTable, min_rows: int, extra_names: Iterable[str] = ())
             raise DataError(f"{where}: column {name!r} is all NaN; it must hold values for the "
                             "accepted markers (was the table evaluated against a reference?)")
     accepted = table["accepted"].astype(bool)
+    chosen = np.ones(table.n_rows, bool)
+    if "estimator" in table.columns:
+        names = sorted(set(table["estimator"].astype(str).tolist()))
+        if estimator is not None and estimator not in names:
+            raise DataError(f"{where}: no rows with estimator {estimator!r}; the table has "
+                            f"{names}")
+        if estimator is None and len(names) > 1:
+            raise DataError(f"{where}: rows come from several estimators {names}; choose one "
+                            "(config `estimator`, CLI --estimator)")
+        if estimator is not None:
+            chosen = table["estimator"].astype(str) == estimator
+    elif estimator is not None:
+        raise DataError(f"{where}: estimator {estimator!r} requested but the table has no "
+                        "'estimator' column")
     finite = (np.isfinite(table["error_m"]) & np.isfinite(table["distance_m"])
               & np.isfinite(table["elevation_deg"]))
-    keep = accepted & finite
-    counts = {"rows_in": table.n_rows, "dropped_not_accepted": int((~accepted).sum()),
-              "dropped_non_finite": int((accepted & ~finite).sum()), "rows_used": int(keep.sum())}
+    keep = chosen & accepted & finite
+    counts = {"rows_in": table.n_rows, "dropped_other_estimator": int((~chosen).sum()),
+              "dropped_not_accepted": int((chosen & ~accepted).sum()),
+              "dropped_non_finite": int((chosen & accepted & ~finite).sum()),
+              "rows_used": int(keep.sum())}
     if counts["rows_used"] < min_rows:
         raise DataError(f"{where}: only {counts['rows_used']} usable rows (accepted, finite "
                         f"error_m/distance_m/elevation_deg) of {table.n_rows}; a fit needs at "

@@ -205,7 +205,7 @@ def estimate_rotation_offsets(scan: StationScan, offsets: MountingOffsets | None
         n_pairs = int(ok.sum())
         rms = float(np.sqrt(np.mean(res ** 2)))
         cov = rms ** 2 * np.linalg.pinv(jac.T @ jac)
-        if np.max(np.abs(step)) < 1e-7:
+        if np.max(np.abs(step)) < 1e-6:
             break
     return _with_angles(offsets, p), cov, n_pairs, rms
 
@@ -234,6 +234,16 @@ def _inliers(r: np.ndarray, ok: np.ndarray) -> np.ndarray:
     return np.abs(r - med) < 3 * max(mad, 1e-6)
 
 
+def _centre_covariance(points_m: np.ndarray, centre_m: np.ndarray, radius_m: float
+                       ) -> np.ndarray:
+    """Formal covariance (3, 3) of a fixed-radius centre fit: ``s^2 (U^T U)^-1``."""
+    d = points_m - centre_m
+    u = d / np.linalg.norm(d, axis=1)[:, None]
+    r = np.linalg.norm(d, axis=1) - radius_m
+    s2 = float(r @ r) / max(r.size - 3, 1)
+    return s2 * np.linalg.pinv(u.T @ u) + 1e-12 * np.eye(3)
+
+
 def estimate_axis_offset(scan: StationScan, offsets: MountingOffsets,
                          sphere_members: list[np.ndarray], radius_m: float,
                          centres_m: np.ndarray, config: CalibrationConfig | None = None
@@ -241,7 +251,9 @@ def estimate_axis_offset(scan: StationScan, offsets: MountingOffsets,
     """Horizontal axis offset from the consistency of known-diameter spheres.
 
     Each sphere is fitted (radius fixed) twice, from its direct-face and from its reverse-face
-    points; the offset ``(dx, dy)`` is chosen so the two centres agree horizontally.
+    points; the offset ``(dx, dy)`` is chosen so the two centres agree horizontally, each
+    sphere's difference weighted by the inverse of its formal covariance. The returned
+    covariance is scaled by the reduced chi-square when that exceeds 1.
 
     Parameters
     ----------
@@ -277,7 +289,7 @@ def estimate_axis_offset(scan: StationScan, offsets: MountingOffsets,
         return offsets, np.full((2, 2), np.nan), 0, float("nan")
     all_idx = np.concatenate([np.r_[fa, fb] for fa, fb, _ in spheres])
 
-    def residuals(d: np.ndarray) -> np.ndarray:
+    def face_fits(d: np.ndarray) -> list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]]:
         off = replace(offsets, axis_offset_m=(float(d[0]), float(d[1])))
         pos = _positions(scan, all_idx, off)
         out, start = [], 0
@@ -285,14 +297,24 @@ def estimate_axis_offset(scan: StationScan, offsets: MountingOffsets,
             pa = pos[start:start + fa.size]
             pb = pos[start + fa.size:start + fa.size + fb.size]
             start += fa.size + fb.size
-            diff = lsq_fixed_radius(pa, radius_m, c) - lsq_fixed_radius(pb, radius_m, c)
-            out.append(diff[:2])
-        return np.concatenate(out)
+            out.append((pa, lsq_fixed_radius(pa, radius_m, c), pb,
+                        lsq_fixed_radius(pb, radius_m, c)))
+        return out
+
+    # weights: inverse covariance of each horizontal centre difference (near, dense markers
+    # count more than far, sparse ones), computed once at the start values
+    whiten = []
+    for pa, ca, pb, cb in face_fits(np.asarray(offsets.axis_offset_m, dtype=float)):
+        cov_diff = (_centre_covariance(pa, ca, radius_m) + _centre_covariance(pb, cb, radius_m))
+        whiten.append(np.linalg.cholesky(np.linalg.inv(cov_diff[:2, :2])).T)
+
+    def residuals(d: np.ndarray) -> np.ndarray:
+        return np.concatenate([w @ (ca - cb)[:2] for w, (_, ca, _, cb)
+                               in zip(whiten, face_fits(d), strict=True)])
 
     d = np.asarray(offsets.axis_offset_m, dtype=float)
     h = 1e-4
     cov = np.full((2, 2), np.nan)
-    rms = float("nan")
     for _ in range(cfg.iterations):
         r0 = residuals(d)
         jac = np.column_stack([(residuals(d + h * e) - r0) / h for e in np.eye(2)])
@@ -300,8 +322,9 @@ def estimate_axis_offset(scan: StationScan, offsets: MountingOffsets,
         d = d + step
         res = r0 + jac @ step
         dof = max(res.size - 2, 1)
-        rms = float(np.sqrt(np.mean(res ** 2)))
-        cov = (res @ res / dof) * np.linalg.pinv(jac.T @ jac)
+        cov = max(res @ res / dof, 1.0) * np.linalg.pinv(jac.T @ jac)
         if np.max(np.abs(step)) < 1e-6:
             break
+    diffs = np.array([(ca - cb)[:2] for _, ca, _, cb in face_fits(d)])
+    rms = float(np.sqrt(np.mean(diffs ** 2)))
     return (replace(offsets, axis_offset_m=(float(d[0]), float(d[1]))), cov, len(spheres), rms)

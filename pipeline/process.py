@@ -60,8 +60,8 @@ class CalibrateStage(CalibrationConfig):
     """``calibrate``: self-calibration settings plus the start / known offsets.
 
     With ``enabled = False`` the given offsets are applied as known values.
-    ``axis_offset_rounds``: estimate the axis offset, re-fit the spheres with it (new inlier
-    sets), and repeat this many times.
+    ``axis_offset_rounds``: estimate the axis offset, (first round) re-estimate the angles with
+    it, re-fit the spheres (new inlier sets); repeat this many times.
     """
 
     enabled: bool = True
@@ -274,8 +274,8 @@ class Candidate:
 
     start_m: np.ndarray
     members: np.ndarray
-    fit: SphereFit | None
-    metrics: MarkerMetrics | None
+    fit: SphereFit
+    metrics: MarkerMetrics
     accepted: bool
     reason: str
 
@@ -371,8 +371,7 @@ def measure_candidates(xyz_m: np.ndarray, index: RangeIndex, starts_m: np.ndarra
     fit_cfg = cfg.fit
     for start, members in zip(starts_m, research(index, starts_m, cfg.research.radius_m),
                               strict=True):
-        if members.size < 4:
-            out.append(Candidate(start, members, None, None, False, "too_few_points"))
+        if members.size < 4:  # nothing to fit: noise, not listed
             continue
         pts = xyz_m[members]
         fit = fit_sphere(pts, fit_cfg.radius_m, method=fit_cfg.method,
@@ -385,8 +384,7 @@ def measure_candidates(xyz_m: np.ndarray, index: RangeIndex, starts_m: np.ndarra
 
 def _merge_duplicates(cands: list[Candidate], radius_m: float) -> list[Candidate]:
     """Keep one candidate per sphere: accepted first, then most points used."""
-    fitted = [c for c in cands if c.fit is not None]
-    order = sorted(fitted, key=lambda c: (not c.accepted, -c.fit.n_used))
+    order = sorted(cands, key=lambda c: (not c.accepted, -c.fit.n_used))
     kept: list[Candidate] = []
     for c in order:
         if all(np.linalg.norm(c.fit.centre_m - k.fit.centre_m) > radius_m for k in kept):
@@ -442,8 +440,10 @@ def process_station(scan: StationScan, config: ProcessConfig | None = None,
     timer.lap("research+fit+quality")
     del cloud, index
     if cal.enabled:
-        # the inlier sets depend on the offsets: estimate, re-fit, estimate again
-        for _ in range(cal.axis_offset_rounds):
+        # The sphere inlier sets depend on the offsets and the angle ICP is biased by an
+        # unknown axis offset: estimate d, re-estimate the angles with it (first round only),
+        # re-fit the markers; repeat.
+        for round_ in range(cal.axis_offset_rounds):
             good = [c for c in cands if c.accepted]
             offsets, cov_d, n_sph, sph_rms = estimate_axis_offset(
                 scan, offsets, [c.members[c.fit.used] for c in good], cfg.fit.radius_m,
@@ -454,6 +454,13 @@ def process_station(scan: StationScan, config: ProcessConfig | None = None,
             timer.lap("calibrate_axis_offset")
             if not (n_sph and cands):
                 break
+            if round_ == 0:
+                offsets, cov, n_pairs, icp_rms = estimate_rotation_offsets(
+                    scan, offsets, cal.calibration())
+                calib.update(sigma_vertical_axis_error_rad=float(np.sqrt(cov[0, 0])),
+                             sigma_lframe_tilt_rad=float(np.sqrt(cov[1, 1])),
+                             n_plane_pairs=n_pairs, icp_rms_m=icp_rms)
+                timer.lap("calibrate_angles")
             cands = _remeasure(scan, offsets, cands, cfg)
             timer.lap("research+fit+quality")
     calib["offsets"] = offsets.to_dict()

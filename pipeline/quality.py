@@ -31,7 +31,9 @@ from pipeline.sphere_fit import SphereFit, fit_free_radius
 _POINTS_PER_CELL = 6
 _INNER = 0.8
 
-REASONS = ("too_few_points", "high_rms", "radius_mismatch", "incomplete_cloud")
+#: Checks in the order they are applied (an occluded marker also fails the radius check, but
+#: its cause is the missing part, so ``incomplete_cloud`` comes first).
+REASONS = ("too_few_points", "incomplete_cloud", "high_rms", "radius_mismatch")
 
 
 @dataclass(frozen=True)
@@ -159,10 +161,10 @@ def quality_gate(fit: SphereFit, metrics: MarkerMetrics, config: QualityConfig
     """
     if fit.n_used < config.min_points:
         return False, "too_few_points"
+    if metrics.visible_fraction < config.min_visible_fraction:
+        return False, "incomplete_cloud"
     if not fit.rms_m <= config.max_rms_m:
         return False, "high_rms"
     if not abs(metrics.radius_fit_m - fit.radius_m) <= config.radius_tolerance * fit.radius_m:
         return False, "radius_mismatch"
-    if metrics.visible_fraction < config.min_visible_fraction:
-        return False, "incomplete_cloud"
     return True, ""

@@ -150,6 +150,59 @@ def errors_from_information(j: np.ndarray, working_radius_m: float,
     return out
 
 
+def linearisation(j: np.ndarray, working_radius_m: float, inclinometer_sigma_rad: float,
+                  requirement_m: float, rim: str = "worst") -> list[tuple[np.ndarray, float]]:
+    """Outer-approximation cuts of the accuracy requirement at the information matrix ``j``.
+
+    The worst-case variance ``h(J) = max_{u, q} u^T G(q) J^-1 G(q)^T u`` is convex in ``J``
+    (a maximum of convex functions, since ``J -> J^-1`` is operator convex), so its tangent at
+    ``J0`` (direction ``u``, rim point ``q``, ``v = J0^-1 G(q)^T u``) is a valid lower bound:
+    ``h(J) >= 2 h0 - v^T J v``. With ``J = sum_j x_j J_j`` the requirement ``h(J) + c <= b``
+    (``b = requirement^2 / chi2_3(0.95)``, ``c`` the inclinometer term at ``q``) therefore
+    implies the linear cut ``sum_j (v^T J_j v) x_j >= 2 h0 - (b - c)``.
+
+    Parameters
+    ----------
+    j : (4, 4) float
+        Information matrix to linearise at.
+    working_radius_m, inclinometer_sigma_rad, requirement_m : float
+    rim : {"worst", "spread"}
+        Tangent at the worst rim point only, or at the station and 8 rim points spread around
+        the circle (each with its own worst direction ``u``).
+
+    Returns
+    -------
+    cuts : list of ((4,) float, float)
+        ``(v, rhs)`` pairs; the cut is ``sum_j (v^T J_j v) x_j >= rhs``. Empty when ``j`` is
+        singular.
+    """
+    j = np.asarray(j, dtype=float)
+    w = np.linalg.eigvalsh(j)
+    if w[0] <= 1e-9 * max(w[-1], 1e-300):
+        return []
+    cov = np.linalg.inv(j)
+    g = _rim_blocks(working_radius_m)
+    sig = np.einsum("ria,ab,rjb->rij", g, cov, g)
+    radius = np.full(g.shape[0], working_radius_m)
+    radius[0] = 0.0
+    incl = (radius * inclinometer_sigma_rad) ** 2
+    sig_tot = sig.copy()
+    sig_tot[:, 2, 2] += incl
+    lam, vec = np.linalg.eigh(sig_tot)
+    if rim == "worst":
+        points = [int(np.argmax(lam[:, -1]))]
+    else:
+        points = [0, *range(1, g.shape[0], max(1, (g.shape[0] - 1) // 8))]
+    b = requirement_m**2 / CHI2_3_95
+    cuts = []
+    for r in points:
+        u = vec[r, :, -1]
+        h0 = float(u @ sig[r] @ u)
+        c = float(u[2] ** 2 * incl[r])
+        cuts.append((cov @ g[r].T @ u, 2.0 * h0 - (b - c)))
+    return cuts
+
+
 def error_from_covariance(cov: np.ndarray | None, working_radius_m: float,
                           inclinometer_sigma_rad: float) -> float:
     """95 % bound of the registered position error over the working disc, m (see module doc).

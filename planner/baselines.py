@@ -18,7 +18,6 @@ from planner import accuracy
 from planner.program import _resolve_ids, evaluate_layout, station_infos
 from planner.usability import PlanProblem, sector_index
 
-
 #: Grid phases tried at each spacing (fraction of the spacing from the bounds' lower corner).
 _PHASES = (0.5, 0.0, 0.25, 0.75)
 

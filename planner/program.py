@@ -24,12 +24,19 @@ mode also ``z_sk`` "... at least two". For every station ``s`` with usable sites
   ``sum_k y_sk - y_sk' + z_sk' >= min_sectors`` (losing one marker of sector ``k'`` empties it
   only if it held one);
 - information (necessary, valid): ``sum_j (3 / sigma_sj^2) x_j >= chi2_3(0.95) / requirement^2``
-  (:func:`planner.accuracy.information_lower_bound`);
+  (:func:`planner.accuracy.information_lower_bound`); its coefficients are scaled so the row
+  reads ``>= 1`` and a what-if study can move the requirement by changing that bound alone;
+- tightening rows added by :func:`plan_sites` (:func:`tightening_rows`, valid for the configured
+  requirement only): heading information ``sum_j (3 |d_sj|^2 / sigma_sj^2) x_j >= chi2_3(0.95)
+  R^2 / requirement^2`` and outer-approximation tangents at 9 rim points;
 - accuracy cuts (added lazily): the predicted error is monotone in the marker set, so when
   station ``s`` fails with a set ``T`` every subset of ``T`` fails too. ``T`` is first grown
   greedily to a larger failing set ``T'`` (a stronger cut), then
   ``sum_{j in U_s \\ T'} x_j >= 1``. In redundant mode, when losing marker ``m`` leaves a failing
   set ``T`` (grown to ``T'`` without ``m``): ``sum_{j in U_s \\ T', j != m} x_j - x_m >= 0``.
+  Each failing set also yields an outer-approximation cut (the tangent of the convex worst-case
+  variance, :func:`planner.accuracy.linearisation`), which carries the geometry — which sites
+  would fix the failing direction — and makes the loop converge in a few rounds.
 
 Options: existing markers (lower bound 1, cost 0), forbidden sites (upper bound 0), a budget
 row ``sum_j x_j <= budget``.
@@ -223,9 +230,8 @@ def build_model(problem: PlanProblem, config) -> Model:
         idx = problem.usable_pairs(s)
         cols = site_var[problem.pair_site[idx]]
         add_row(cols, np.ones(cols.size), min_count, np.inf, f"count:{sid}")
-        w_t, w_h = info_weights(problem, idx, config)
+        w_t, _ = info_weights(problem, idx, config)
         add_row(cols, w_t, 1.0, np.inf, f"info:{sid}")
-        add_row(cols, w_h, 1.0, np.inf, f"heading:{sid}")
         sec = sector_index(problem.pair_bearing_rad[idx], config.n_sectors)
         present = np.unique(sec)
         y = {}
@@ -265,6 +271,46 @@ def build_model(problem: PlanProblem, config) -> Model:
     return Model(c=c, A=a, row_lb=np.asarray(row_lb, float), row_ub=np.asarray(row_ub, float),
                  lb=lb, ub=ub, integrality=np.ones(n_vars, dtype=np.int64), var_site=var_site,
                  site_var=site_var, row_kind=tuple(kinds))
+
+
+def _boundary_oa_cuts(problem: PlanProblem, s: int, config) -> list:
+    """Initial outer-approximation cuts of station ``s``: tangents at the information of all its
+    usable sites scaled down onto the requirement's boundary, at 9 rim points."""
+    info = StationInfo(problem, s, config)
+    if info.sites.size == 0:
+        return []
+    e_all = info.error(info.sites)
+    if not np.isfinite(e_all) or e_all >= config.requirement_m:
+        return []
+    return info.oa_cuts(info.sites, config.requirement_m, scale=(e_all / config.requirement_m)
+                        ** 2, rim="spread")
+
+
+def tightening_rows(problem: PlanProblem, model: Model, config
+                    ) -> tuple[sp.csr_array | None, list[float], list[str]]:
+    """Valid rows that tighten the model for ``config.requirement_m`` before the first solve.
+
+    Per station: the heading-information row
+    (:func:`planner.accuracy.heading_information_lower_bound`) and outer-approximation tangents
+    at 9 rim points (``"heading:S"``, ``"oa0:S"``). Unlike the ``info:`` rows of
+    :func:`build_model` they do not rescale with the requirement, so a model re-used for another
+    requirement level must leave them out. Returns ``(rows, lower, kinds)``.
+    """
+    rows, lower, kinds = [], [], []
+    for s in range(problem.n_stations):
+        sid = problem.station_ids[s]
+        idx = problem.usable_pairs(s)
+        if idx.size == 0:
+            continue
+        _, w_h = info_weights(problem, idx, config)
+        rows.append(model.site_row(problem.pair_site[idx], w_h))
+        lower.append(1.0)
+        kinds.append(f"heading:{sid}")
+        for sites, coef, rhs in _boundary_oa_cuts(problem, s, config):
+            rows.append(model.site_row(sites, coef))
+            lower.append(rhs)
+            kinds.append(f"oa0:{sid}")
+    return (sp.csr_array(sp.vstack(rows)) if rows else None), lower, kinds
 
 
 def info_weights(problem: PlanProblem, pairs: np.ndarray, config
@@ -367,6 +413,26 @@ class StationInfo:
             return float("inf")
         j = self.info[k].sum(axis=0)
         return float(accuracy.errors_from_information(j[None], self.radius, self.incl)[0])
+
+    def oa_cuts(self, sites, requirement_m: float, exclude: int | None = None,
+                scale: float = 1.0, rim: str = "worst") -> list:
+        """Outer-approximation cuts linearised at ``scale`` x the information of ``sites``
+        (:func:`planner.accuracy.linearisation`), as ``(sites, coefficients, rhs)`` with the cut
+        ``sum coef * x >= rhs``; only cuts with a positive right-hand side. ``exclude`` gets no
+        coefficient (the cut then holds for the others alone)."""
+        k = [self.position[int(j)] for j in np.atleast_1d(sites) if int(j) in self.position]
+        if not k:
+            return []
+        keep = np.ones(self.sites.size, bool)
+        if exclude is not None and int(exclude) in self.position:
+            keep[self.position[int(exclude)]] = False
+        out = []
+        for v, rhs in accuracy.linearisation(scale * self.info[k].sum(axis=0), self.radius,
+                                             self.incl, requirement_m, rim):
+            if rhs > 0:
+                coef = np.einsum("a,kab,b->k", v, self.info[keep], v)
+                out.append((self.sites[keep], coef / rhs, 1.0))
+        return out
 
     def grow_failing(self, failing, exclude: int | None, requirement_m: float,
                      max_skips: int = 25) -> np.ndarray:
@@ -549,9 +615,13 @@ def evaluate_layout(problem: PlanProblem, selected: np.ndarray, config,
 
 
 def accuracy_cuts(problem: PlanProblem, model: Model, selected: np.ndarray, config,
-                  infos: list[StationInfo]) -> tuple[sp.csr_array | None, list[float],
-                                                     list[str]]:
+                  infos: list[StationInfo], outer_approximation: bool = False
+                  ) -> tuple[sp.csr_array | None, list[float], list[str]]:
     """Valid cuts for every station whose predicted accuracy fails with ``selected``.
+
+    By default only the combinatorial (no-good) cuts, which stay valid for any looser
+    requirement; with ``outer_approximation`` also the tangent cuts (``"oa:"``, ``"oa-loss:"``,
+    ``"info-loss:"``, ``"heading-loss:"`` rows), valid for ``config.requirement_m`` only.
 
     Returns
     -------
@@ -571,6 +641,11 @@ def accuracy_cuts(problem: PlanProblem, model: Model, selected: np.ndarray, conf
             rows.append(model.site_row(np.setdiff1d(info.sites, grown)))
             lower.append(1.0)
             kinds.append(f"cut:{sid}")
+            for at in (chosen, grown) if outer_approximation else ():
+                for oa in info.oa_cuts(at, config.requirement_m, rim="spread"):
+                    rows.append(model.site_row(oa[0], oa[1]))
+                    lower.append(oa[2])
+                    kinds.append(f"oa:{sid}")
             continue
         if not config.redundant:
             continue
@@ -580,14 +655,22 @@ def accuracy_cuts(problem: PlanProblem, model: Model, selected: np.ndarray, conf
                 grown = info.grow_failing(left, int(m), config.requirement_m)
                 rest = np.setdiff1d(info.sites, np.r_[grown, m])
                 rows.append(model.site_row(np.r_[rest, m], np.r_[np.ones(rest.size), -1.0]))
+                lower.append(0.0)
                 kinds.append(f"cut-loss:{sid}:{problem.site_ids[m]}")
+                if not outer_approximation:
+                    continue
+                for oa in info.oa_cuts(left, config.requirement_m, exclude=int(m)):
+                    # if m is selected, the others alone must pass
+                    rows.append(model.site_row(np.r_[oa[0], m], np.r_[oa[1], -oa[2]]))
+                    lower.append(0.0)
+                    kinds.append(f"oa-loss:{sid}:{problem.site_ids[m]}")
                 # if m is selected, the others alone must carry the information cuts
                 others = np.flatnonzero(problem.pair_site[info.pairs] != m)
                 for w, name in zip(info_weights(problem, info.pairs[others], config),
                                    ("info", "heading"), strict=True):
                     rows.append(model.site_row(np.r_[info.sites[others], m], np.r_[w, -1.0]))
+                    lower.append(0.0)
                     kinds.append(f"{name}-loss:{sid}:{problem.site_ids[m]}")
-                lower += [0.0, 0.0, 0.0]
     block = sp.csr_array(sp.vstack(rows)) if rows else None
     return block, lower, kinds
 
@@ -621,7 +704,11 @@ def plan_sites(problem: PlanProblem, config, model: Model | None = None) -> Plan
             "sectors) at station(s): "
             + "; ".join(f"{k}: {v}" for k, v in failing.items())
             + "; relax the configuration or add candidate sites")
-    model = build_model(problem, config) if model is None else model
+    if model is None:
+        model = build_model(problem, config)
+        rows, lower, kinds = tightening_rows(problem, model, config)
+        if rows is not None:
+            model = model.with_rows(rows, lower, np.full(len(lower), np.inf), kinds)
     t0 = time.perf_counter()
     solve_time = 0.0
     n_cuts = 0
@@ -649,7 +736,8 @@ def plan_sites(problem: PlanProblem, config, model: Model | None = None) -> Plan
                                           "raise --budget or relax the configuration")
             raise InfeasiblePlanError(f"solver found no layout ({sol.status}: {sol.message}); "
                                       "raise --time-limit")
-        rows, lower, kinds = accuracy_cuts(problem, model, sol.selected, config, infos)
+        rows, lower, kinds = accuracy_cuts(problem, model, sol.selected, config, infos,
+                                           outer_approximation=True)
         if rows is None:
             check = evaluate_layout(problem, sol.selected, config, infos)
             return PlanResult(selected=sol.selected, check=check, solution=sol,

@@ -37,6 +37,7 @@ import numpy as np
 
 from markerplan.errors import ConfigError, InfeasiblePlanError
 from planner.program import (
+    LayoutCheck,
     Model,
     accuracy_cuts,
     build_model,
@@ -45,7 +46,7 @@ from planner.program import (
     solve,
     station_infos,
 )
-from planner.usability import PlanProblem
+from planner.usability import PlanProblem, directions_ok
 
 #: Final bisection step: a subset is proven optimal when nothing is feasible this far below it.
 REL_TOL = 1e-9
@@ -111,7 +112,11 @@ class Curve:
     k_directions : int
         Fewest markers meeting count and direction rows at every station (accuracy ignored).
     k_feasible : int or None
-        Fewest markers meeting the requirement at every station (``None``: no point does).
+        Fewest markers on the curve meeting the requirement at every station (``None``: no
+        point does).
+    k_feasible_minimal : bool
+        Proven that no smaller count meets it (False when a smaller count hit the time limit
+        or lies below ``k_min``).
     n_cuts : int
         Accuracy cuts generated over the whole study.
     solve_time_s : float
@@ -123,6 +128,7 @@ class Curve:
     points: list[CurvePoint]
     k_directions: int
     k_feasible: int | None
+    k_feasible_minimal: bool
     n_cuts: int
     solve_time_s: float
     complete: bool = True
@@ -136,17 +142,29 @@ class Curve:
         for p in self.points:
             if p.k == k:
                 return p
-        ks = [p.k for p in self.points]
+        ks = [p.k for p in self.points] or [0]
         raise ConfigError(f"k must be one of the curve's counts {min(ks)}..{max(ks)}, got {k}")
 
 
 @dataclass(frozen=True)
 class DropStep:
-    """One step of the drop order: ``removed`` goes, leaving ``k`` markers."""
+    """One step of the drop order.
+
+    Attributes
+    ----------
+    k : int
+        Markers left after the step.
+    removed : int
+        Candidate-site index of the marker removed.
+    check : LayoutCheck
+        Per-station count, sectors, predicted error and verdict of the remaining layout.
+    selected : (n,) bool
+        The remaining layout.
+    """
 
     k: int
     removed: int
-    check: object  # planner.program.LayoutCheck of the remaining layout
+    check: LayoutCheck
     selected: np.ndarray = field(repr=False)
 
     @property
@@ -160,10 +178,20 @@ class DropStep:
 
 @dataclass(frozen=True)
 class MarkerLoss:
-    """The layout without one marker: its check and the stations that then fail."""
+    """The full layout without one marker.
+
+    Attributes
+    ----------
+    marker : int
+        Candidate-site index of the marker lost.
+    check : LayoutCheck
+        The layout without it.
+    failing : tuple of int
+        Stations that then fail (count, directions or accuracy).
+    """
 
     marker: int
-    check: object  # planner.program.LayoutCheck
+    check: LayoutCheck
     failing: tuple[int, ...]
 
     @property
@@ -288,7 +316,8 @@ class _MinimaxModel:
 
 def tradeoff_curve(problem: PlanProblem, config, k_max: int | None = None,
                    k_min: int | None = None, time_limit_s: float | None = None,
-                   tol_m: float = 1e-4) -> Curve:
+                   tol_m: float = 1e-4, exact: bool = True,
+                   start: np.ndarray | None = None) -> Curve:
     """Minimal worst-station predicted error for every marker count, by integer programming.
 
     Parameters
@@ -306,9 +335,15 @@ def tradeoff_curve(problem: PlanProblem, config, k_max: int | None = None,
     k_min : int, optional
         Smallest count (default: the fewest markers that meet the count and direction rows).
     time_limit_s : float, optional
-        Wall-clock limit of the whole curve, s.
+        Wall-clock limit of the whole curve, s, shared equally by the counts still to do.
     tol_m : float
-        Bisection stops at this width before the final optimality test, m.
+        Bisection stops at this width (worst error minus proven lower bound), m.
+    exact : bool
+        Then test just below the best subset until it is proven optimal (to ``REL_TOL``);
+        without it a point is optimal within ``tol_m``.
+    start : (n,) bool, optional
+        A ``k_max``-subset meeting the count and direction rows (e.g. the layout) to start from;
+        each count's search also starts from the best one-marker drop of the previous point.
 
     Returns
     -------
@@ -324,7 +359,8 @@ def tradeoff_curve(problem: PlanProblem, config, k_max: int | None = None,
     """
     _reduction_iv(problem, config, np.ones(problem.n_sites, bool))
     limit = config.time_limit_s if time_limit_s is None else float(time_limit_s)
-    mm = _MinimaxModel(problem, config, time.perf_counter() + limit)
+    deadline = time.perf_counter() + limit
+    mm = _MinimaxModel(problem, config, deadline)
     k_dir = mm.min_count_directions()
     if k_dir is None:
         why = diagnose(problem, config.replace(requirement_m=1e9), mm.infos)
@@ -338,17 +374,29 @@ def tradeoff_curve(problem: PlanProblem, config, k_max: int | None = None,
     k_max = int(pool.sum()) if k_max is None else k_max
     k_min = k_dir if k_min is None else k_min
     _k_range_iv(k_min, k_max, k_dir, int(pool.sum()))
+    start = _start_iv(start, n, k_max)
+    if start is not None and not directions_ok(problem, start, config).all():
+        start = None  # not a valid incumbent: some station lacks its count or directions
+    allowed = np.isin(np.arange(n), mm.model.var_site) & pool
+    floor = _worst(mm, allowed) * (1 - REL_TOL)  # no subset beats keeping every site
+    kept = _id_mask(problem, config.existing)
     points: list[CurvePoint] = []
     complete = True
     best_above = None  # proven optimum of the next larger k (a lower bound for this k)
+    previous = start
     for k in range(k_max, k_min - 1, -1):
         statuses: list[str] = []
         proven = True
+        # share the time left equally among the counts still to do
+        mm.deadline = time.perf_counter() + (deadline - time.perf_counter()) / (k - k_min + 1)
         if k >= mm.nx:  # every usable marker fits: keeping all is optimal (monotone)
-            best = mm.pad(np.isin(np.arange(n), mm.model.var_site) & pool, k, pool)
-            lo = _worst(mm, best) * (1 - REL_TOL)
+            best, lo = mm.pad(allowed, k, pool), floor
         else:
-            best, lo, proven = _minimax(mm, k, best_above, tol_m, statuses)
+            incumbent = previous if previous is not None and previous.sum() == k else \
+                _drop_one(mm, previous, kept)
+            lo = max(floor, -np.inf if best_above is None else best_above * (1 - REL_TOL))
+            best, lo, proven = _minimax(mm, k, incumbent, lo, best_above, tol_m, exact,
+                                        statuses)
             if best is None:  # the time limit ran out before any k-subset was found
                 complete = False
                 break
@@ -358,36 +406,84 @@ def tradeoff_curve(problem: PlanProblem, config, k_max: int | None = None,
                                  sectors=check.sectors, ok=check.ok, lower_bound_m=float(lo),
                                  proven=bool(proven), n_solves=len(statuses),
                                  statuses=tuple(statuses)))
-        best_above = float(check.error_m.max()) if proven else None
+        best_above = float(check.error_m.max()) if proven and exact else None
+        previous = best
     feasible = [p.k for p in points if p.meets_requirement]
-    return Curve(points=points, k_directions=k_dir, k_feasible=min(feasible) if feasible else None,
+    k_feasible = min(feasible) if feasible else None
+    return Curve(points=points, k_directions=k_dir, k_feasible=k_feasible,
+                 k_feasible_minimal=_minimal(points, k_feasible, k_dir, config.requirement_m),
                  n_cuts=len(mm.cut_rows), solve_time_s=mm.solve_time_s, complete=complete)
 
 
-def _minimax(mm: _MinimaxModel, k: int, best_above: float | None, tol_m: float,
-             statuses: list[str]) -> tuple[np.ndarray | None, float, bool]:
-    """Bisection for one k: (best subset, proven lower bound, proven optimal)."""
-    best, proven = mm.query(k, np.inf, statuses)
+def _start_iv(start, n: int, k_max: int) -> np.ndarray | None:
+    if start is None:
+        return None
+    start = np.asarray(start, dtype=bool)
+    if start.shape != (n,) or int(start.sum()) != k_max:
+        raise ConfigError(f"`start` must be (n,) bool with k_max = {k_max} sites selected, got "
+                          f"shape {start.shape} with {int(start.sum())} selected")
+    return start
+
+
+def _minimal(points: list[CurvePoint], k_feasible: int | None, k_dir: int,
+             requirement_m: float) -> bool:
+    """Whether no count below ``k_feasible`` can pass (proven)."""
+    if k_feasible is None:
+        return False
+    if k_feasible == k_dir:
+        return True
+    below = [p for p in points if p.k == k_feasible - 1]
+    return bool(below) and (below[0].proven or below[0].lower_bound_m >= requirement_m)
+
+
+def _drop_one(mm: _MinimaxModel, selected: np.ndarray | None, kept: np.ndarray
+              ) -> np.ndarray | None:
+    """The best subset one marker smaller that keeps every count and direction row, or None."""
+    if selected is None:
+        return None
+    best, best_key = None, None
+    for m in np.flatnonzero(selected & ~kept):
+        trial = selected.copy()
+        trial[m] = False
+        if directions_ok(mm.problem, trial, mm.config).all():
+            key = _worst(mm, trial)
+            if best_key is None or key < best_key:
+                best, best_key = trial, key
+    return best
+
+
+def _minimax(mm: _MinimaxModel, k: int, incumbent: np.ndarray | None, lo: float,
+             best_above: float | None, tol_m: float, exact: bool, statuses: list[str]
+             ) -> tuple[np.ndarray | None, float, bool]:
+    """Bisection for one k: (best subset, proven lower bound, proven optimal).
+
+    ``lo`` is a proven lower bound (W*(k) > lo); ``incumbent`` a feasible k-subset or None.
+    """
+    proven = True
+    best = incumbent
     if best is None:
-        return None, -np.inf, False
+        best, proven = mm.query(k, np.inf, statuses)
+        if best is None:
+            return None, lo, False
     hi = _worst(mm, best)
-    # W*(k) >= W*(k+1): start just below the larger count's optimum and try it first
-    lo = -np.inf if best_above is None else best_above * (1 - REL_TOL)
-    if best_above is not None and hi > best_above:
+    if best_above is not None and hi > best_above:  # W*(k) >= W*(k+1): try that first
         sel, ok = mm.query(k, best_above, statuses)
-        proven &= ok
         if sel is not None:
             best, hi = sel, _worst(mm, sel)
-        else:
+        elif ok:
             lo = best_above
+        else:
+            return best, lo, False
     width = tol_m
     while True:
         if not np.isfinite(lo):
             eps = 0.5 * hi
         elif hi - lo > width:
             eps = 0.5 * (lo + hi)
-        else:  # final test just below the best: infeasible proves it optimal
+        elif exact:  # final test just below the best: infeasible proves it optimal
             eps = hi * (1 - REL_TOL)
+        else:
+            return best, lo, proven
         if eps <= lo:
             return best, lo, proven
         if time.perf_counter() >= mm.deadline:
@@ -395,13 +491,14 @@ def _minimax(mm: _MinimaxModel, k: int, best_above: float | None, tol_m: float,
             return best, lo, False
         final = np.isfinite(lo) and hi - lo <= width
         sel, ok = mm.query(k, eps, statuses)
-        proven &= ok
         if sel is not None:
             best, hi = sel, _worst(mm, sel)
             if final:
                 width /= 16.0
-        else:
+        elif ok:
             lo = eps
+        else:  # time limit without an answer: eps is not proven infeasible
+            return best, lo, False
 
 
 def _worst(mm: _MinimaxModel, selected: np.ndarray) -> float:

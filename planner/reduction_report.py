@@ -81,6 +81,8 @@ def reduce_record(study, layout, inputs, model_name: str, options: dict,
                "failing": {prob.station_ids[t]: failure_reason(m.check, t, cfg)
                            for t in m.failing}} for m in study.losses]
     solver = {"name": SOLVER, "statuses": dict(statuses), "proven_optimal": curve.proven,
+              "optimality": ("within 0.1 mm (free mode)" if study.free
+                             else "exact (relative 1e-9)"),
               "complete": curve.complete, "time_limit_s": cfg.time_limit_s,
               "n_solves": int(sum(p.n_solves for p in curve.points)),
               "accuracy_cuts": curve.n_cuts, "solve_time_s": round(curve.solve_time_s, 3)}
@@ -100,6 +102,7 @@ def reduce_record(study, layout, inputs, model_name: str, options: dict,
                         "working_radius_m": cfg.working_radius_m},
         "solver": solver,
         "k_directions": curve.k_directions, "k_feasible": curve.k_feasible,
+        "k_feasible_minimal": curve.k_feasible_minimal,
         "markers_that_can_go": study.markers_that_can_go,
         "curve": points, "drop_order": drop, "marker_losses": losses,
         "timings_s": {k: round(v, 3) for k, v in study.timings_s.items()},
@@ -160,11 +163,16 @@ def report_markdown(doc: dict) -> str:
     """Human report of a ``reduce.json`` document (Markdown)."""
     req, lay, sol = doc["requirement"], doc["layout"], doc["solver"]
     kf, go = doc["k_feasible"], doc["markers_that_can_go"]
-    head = (f"**{go} of {lay['n_markers']} markers can go**: {kf} markers still give every "
+    least = "" if doc["k_feasible_minimal"] else "at least "
+    head = (f"**{least}{go} of {lay['n_markers']} markers can go**: {kf} markers still give "
+            "every "
             f"station ≥ {req['min_markers']} markers in ≥ {req['min_sectors']} of "
             f"{req['n_sectors']} directions and a predicted error ≤ "
             f"{100 * req['requirement_m']:g} cm." if kf is not None else
             "**No count meets the requirement at every station**, not even the full layout.")
+    if kf is not None and not doc["k_feasible_minimal"]:
+        head += (" Fewer markers were not ruled out: a smaller count hit the time limit or lies "
+                 "below --k-min.")
     lines = [f"# Marker reduction — site `{doc['site']['name']}`, layout `{lay['source']}`", "",
              head, "",
              "Mode: " + ("free (any candidate site)" if lay["mode"] == "free"
@@ -179,8 +187,8 @@ def report_markdown(doc: dict) -> str:
                      f"{'yes' if p['meets_requirement'] else 'no'} | "
                      f"{'yes' if p['proven_optimal'] else 'NO (time limit)'} | "
                      f"{', '.join(p['markers'])} |")
-    lines += ["", f"Solver: {sol['name']}; {sol['n_solves']} solves, {sol['accuracy_cuts']} "
-              f"accuracy cuts, statuses {sol['statuses']}"
+    lines += ["", f"Solver: {sol['name']}; optimality {sol['optimality']}; {sol['n_solves']} "
+              f"solves, {sol['accuracy_cuts']} accuracy cuts, statuses {sol['statuses']}"
               + ("" if sol["proven_optimal"] else
                  " — **some points hit the time limit and are not proven optimal**") + ".", "",
               "## Drop order (remove the marker whose loss hurts least, one at a time)", "",
@@ -212,7 +220,8 @@ def summary(doc: dict, out: Path) -> dict:
     """The one-object ``--json`` summary."""
     return {"out": str(out), "site": doc["site"]["name"], "layout": doc["layout"]["source"],
             "mode": doc["layout"]["mode"], "n_markers": doc["layout"]["n_markers"],
-            "k_feasible": doc["k_feasible"], "k_directions": doc["k_directions"],
+            "k_feasible": doc["k_feasible"], "k_feasible_minimal": doc["k_feasible_minimal"],
+            "k_directions": doc["k_directions"],
             "markers_that_can_go": doc["markers_that_can_go"],
             "proven_optimal": doc["solver"]["proven_optimal"],
             "statuses": doc["solver"]["statuses"],

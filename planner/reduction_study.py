@@ -285,7 +285,8 @@ def run_study(problem: PlanProblem, config, layout: np.ndarray, free: bool = Fal
         ``existing``: markers always kept; ``forbidden``: markers never kept.
     layout : (n,) bool
     free : bool
-        Recorded; the curve picks from every candidate site of ``problem`` either way.
+        ``problem`` holds every candidate site, not only the layout: the curve is then optimal
+        within ``tol_m`` (0.1 mm) instead of exactly, to keep the large programs tractable.
     k_min : int, optional
         Smallest count on the curve (default: the fewest meeting the direction rows).
     time_limit_s : float, optional
@@ -294,8 +295,9 @@ def run_study(problem: PlanProblem, config, layout: np.ndarray, free: bool = Fal
     layout = np.asarray(layout, dtype=bool)
     n_allowed = int(np.sum(layout & ~np.isin(np.asarray(problem.site_ids), config.forbidden)))
     t = time.perf_counter()
+    start = layout & ~np.isin(np.asarray(problem.site_ids), config.forbidden)
     curve = tradeoff_curve(problem, config, k_max=n_allowed, k_min=k_min,
-                           time_limit_s=time_limit_s)
+                           time_limit_s=time_limit_s, exact=not free, start=start)
     timings = {"curve": time.perf_counter() - t}
     t = time.perf_counter()
     drop = drop_order(problem, config, layout)

@@ -104,8 +104,8 @@ def verify_plan(doc: dict, error_model, seed: int = 0, progress: bool = True
 
     from pipeline.evaluation import Reference
     from pipeline.process import build_config, process_station
-    from visibility.simulate import simulate_markers
     from pipeline.rig import station_to_site_matrix
+    from visibility.simulate import simulate_markers
 
     dem = plan_dem(doc)
     req = float(doc["requirement"]["requirement_m"])

@@ -154,10 +154,7 @@ class RayScene:
 
         def work(ab: tuple[int, int]) -> None:
             a, b = ab
-            dist, sph, cosi = self._intersect_chunk(o[a:b], d[a:b], max_range_m, incidence)
-            out.distance_m[a:b], out.sphere_index[a:b] = dist, sph
-            if incidence:
-                out.cos_incidence[a:b] = cosi
+            self._intersect_chunk(o[a:b], d[a:b], max_range_m, out, slice(a, b))
 
         if threads == 1 or len(bounds) <= 1:
             for ab in bounds:
@@ -190,7 +187,8 @@ class RayScene:
         return hits.distance_m >= length - clearance_m
 
     def _intersect_chunk(self, o: np.ndarray, d: np.ndarray, max_range_m: float,
-                         incidence: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+                         out: RayHits, rows: slice) -> None:
+        """Cast rays ``o``/``d`` and write their hits into ``out[rows]``."""
         n = len(o)
         tmax = np.float32(max_range_m if np.isfinite(max_range_m) else 1e30)
         if o.strides[0] == 0:  # one origin for all rays (a broadcast view)
@@ -200,26 +198,29 @@ class RayScene:
         d32 = d.astype(np.float32)
         # embreex starts rays at tfar = 1e37 when no distances are given
         tfar = np.full(n, tmax, dtype=np.float32) if np.isfinite(max_range_m) else None
-        sph = np.full(n, -1, dtype=np.int64)
+        dist = out.distance_m[rows]
+        incidence = out.cos_incidence is not None
         if not incidence and not len(self.sphere_centres_m):
-            dist = self._scene.run(local, d32, dists=tfar, query="DISTANCE").astype(np.float64)
+            dist[:] = self._scene.run(local, d32, dists=tfar, query="DISTANCE")
             dist[dist >= tmax] = np.inf
-            return dist, sph, None
+            return
         res = self._scene.run(local, d32, dists=tfar, output=1)
         geom = res["geomID"]
-        dist = np.where(geom >= 0, res["tfar"].astype(np.float64), np.inf)
+        dist[:] = res["tfar"]
+        dist[geom < 0] = np.inf
         cosi = _cos_incidence(res["Ng"], d) if incidence else None
         on_sphere = np.flatnonzero(geom == _SPHERE_GEOM)
         if len(on_sphere):
             t, k, c = self._resolve_spheres(o[on_sphere], d[on_sphere], res, on_sphere,
                                             max_range_m)
-            dist[on_sphere], sph[on_sphere] = t, k
+            dist[on_sphere] = t
+            out.sphere_index[rows][on_sphere] = k
             if incidence:
                 cosi[on_sphere] = c
         dist[dist > max_range_m] = np.inf
         if incidence:
             cosi[~np.isfinite(dist)] = np.nan
-        return dist, sph, cosi
+            out.cos_incidence[rows] = cosi
 
     def _run(self, local_o: np.ndarray, d: np.ndarray, tfar: np.ndarray) -> dict:
         return self._scene.run(local_o.astype(np.float32), d.astype(np.float32),
@@ -318,10 +319,10 @@ def _rays_iv(origins_m: np.ndarray, directions: np.ndarray, max_range_m: float
     if not max_range_m > 0:
         raise ConfigError(f"max_range_m must be > 0, got {max_range_m}")
     norm2 = np.einsum("ij,ij->i", d, d)
+    if np.all(np.abs(norm2 - 1.0) < 1e-12):  # already unit (and so finite)
+        return o, d
     if not np.all(norm2 > 0) or not np.all(np.isfinite(norm2)):
         raise ConfigError("directions must be finite and non-zero; got a zero or NaN direction")
-    if np.all(np.abs(norm2 - 1.0) < 1e-12):
-        return o, d
     return o, d / np.sqrt(norm2)[:, None]
 
 

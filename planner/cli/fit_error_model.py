@@ -24,12 +24,16 @@ from planner.cli._common import emit_summary, json_option, overwrite_option
               help="Seed for cross-validation folds and the bootstrap.")
 @click.option("--bootstrap", "n_bootstrap", type=click.IntRange(min=0), default=None,
               help="Bootstrap replicates for the intervals (default 40; 0 disables).")
+@click.option("--estimator", default=None,
+              help="Fit only rows of this centre estimator (e.g. fixed-radius); required when "
+                   "the tables mix estimators, as range-study output does.")
 @click.option("--description", default=None,
               help="What the tables are (recorded in the model's provenance).")
 @overwrite_option
 @json_option
 def command(tables: tuple[Path, ...], output: Path, plot: Path | None, seed: int,
-            n_bootstrap: int | None, description: str | None, overwrite: bool,
+            n_bootstrap: int | None, estimator: str | None, description: str | None,
+            overwrite: bool,
             as_json: bool) -> None:
     """Fit the marker-centre error model from one or more marker tables (CSV).
 
@@ -39,6 +43,7 @@ def command(tables: tuple[Path, ...], output: Path, plot: Path | None, seed: int
     \b
     Example:
       markerplan fit-error-model tables/markers.csv -o model.json --plot model.png
+      markerplan fit-error-model range/markers.csv --estimator fixed-radius -o model.json
     """
     from error_model.config import FitConfig
     from error_model.diagnostics import plot_diagnostics, summary_text
@@ -51,7 +56,10 @@ def command(tables: tuple[Path, ...], output: Path, plot: Path | None, seed: int
     if plot is not None and plot.resolve() == output.resolve():
         raise OutputError(f"--plot {plot} is the same file as -o {output}; choose another name")
 
-    config = FitConfig() if n_bootstrap is None else FitConfig(n_bootstrap=n_bootstrap)
+    settings = {"estimator": estimator}
+    if n_bootstrap is not None:
+        settings["n_bootstrap"] = n_bootstrap
+    config = FitConfig(**settings)
     table = read_marker_tables(tables)
     model = fit_error_model(table, config, seed=seed, description=description)
 

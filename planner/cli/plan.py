@@ -64,8 +64,8 @@ def command(site_name, seed, dem_path, stations_path, boundary_path, exclude_pat
     """
     from markerplan.errors import ConfigError
     from planner.config import PlanConfig, load_config
-    from planner.planning import load_inputs, make_plan
     from planner.plan_map import draw_plan_map
+    from planner.planning import load_inputs, make_plan
     from planner.report import summary, write_plan_files
 
     config = load_config(config_path) if config_path else PlanConfig()

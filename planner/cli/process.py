@@ -40,6 +40,9 @@ def _parse_stage_options(items: tuple[str, ...]) -> dict[str, dict[str, object]]
 
 
 def _parse_offsets(text: str):
+    """``VERTICAL_AXIS_DEG,LFRAME_TILT_DEG,DX_M,DY_M`` -> MountingOffsets (SI inside)."""
+    import math
+
     from markerplan.errors import ConfigError
     from pipeline.rig import MountingOffsets
 
@@ -50,8 +53,6 @@ def _parse_offsets(text: str):
     if len(v) != 4:
         raise ConfigError("--offsets must be VERTICAL_AXIS_DEG,LFRAME_TILT_DEG,DX_M,DY_M like "
                           f"0.3,0.3,0.015,0; got {text!r}")
-    import math
-
     return MountingOffsets(math.radians(v[0]), math.radians(v[1]), (v[2], v[3]))
 
 

@@ -125,7 +125,9 @@ def command(layout_spec, site_name, seed, dem_path, stations_path, boundary_path
         plot_tradeoff(doc, stage / "tradeoff.png")
     info = summary(doc, out)
     kf = doc["k_feasible"]
-    human = (f"{doc['markers_that_can_go']} of {doc['layout']['n_markers']} markers can go: "
+    least = "" if doc["k_feasible_minimal"] else "at least "
+    human = (f"{least}{doc['markers_that_can_go']} of {doc['layout']['n_markers']} markers can "
+             f"go: "
              f"{kf} meet {config.requirement_m:g} m at every station"
              if kf is not None else "no count meets the requirement at every station")
     human += ("" if doc["solver"]["proven_optimal"] else " (time limit: not proven optimal)")

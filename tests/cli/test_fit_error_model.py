@@ -88,3 +88,18 @@ def test_missing_table_file_is_an_error(tmp_path, capsys):
 def test_help_has_an_example(capsys):
     code, out, _ = _run(capsys, ["fit-error-model", "--help"])
     assert code == 0 and "markerplan fit-error-model tables/markers.csv -o model.json" in out
+
+
+def test_mixed_estimators_need_a_choice(tmp_path, capsys):
+    table = synthetic_table(400, seed=2)
+    table["estimator"] = np.where(np.arange(400) % 2, "fixed-radius", "hemisphere-icp")
+    write_csv(tmp_path / "mixed.csv", table)
+    target = tmp_path / "m.json"
+    code, _, err = _run(capsys, ["fit-error-model", str(tmp_path / "mixed.csv"), "-o",
+                                 str(target), "--bootstrap", "0"])
+    assert code == 1 and "several estimators" in err and not target.exists()
+    code, _, err = _run(capsys, ["fit-error-model", str(tmp_path / "mixed.csv"), "-o",
+                                 str(target), "--bootstrap", "0", "--estimator", "fixed-radius"])
+    assert code == 0, err
+    counts = ErrorModel.load(target).info["data"]["counts"]
+    assert counts["dropped_other_estimator"] == 200

@@ -86,10 +86,14 @@ def _assert_one_line_error(code, err, out_dir, *needles):
 
 
 def test_infeasible_requirement_names_each_station(tmp_path, capsys):
-    cfg = _write(tmp_path / "c.toml", "requirement_m = 0.012\n")
+    cfg = _write(tmp_path / "c.toml", "requirement_m = 0.009\n")
     out = tmp_path / "o"
     code, _, err = _run(["plan", "--config", str(cfg), "--out", str(out)], capsys)
-    _assert_one_line_error(code, err, out, "S1:", "S7:", "accuracy unreachable")
+    _assert_one_line_error(code, err, out, *(f"S{k}: no usable site" for k in range(1, 8)),
+                           "95 % centre error above 0.009 m")
+    cfg.write_text("inclinometer_sigma_deg = 0.5\n")  # 87 mm vertical at 10 m (1 sigma)
+    code, _, err = _run(["plan", "--config", str(cfg), "--out", str(out)], capsys)
+    _assert_one_line_error(code, err, out, "S1: accuracy unreachable", "S7: accuracy")
 
 
 def test_too_few_directions_from_a_tight_boundary(tmp_path, capsys):

@@ -75,3 +75,24 @@ def test_detection_at_every_default_station(site_and_scene, index):
     scan, truth, ref = _station(site_and_scene, index, seed=index)
     res = process_station(scan, build_config(), ref)
     _check_detection(res, truth, min_truth_points=40)
+
+
+def test_marker_half_hidden_by_a_ridge_is_rejected_as_incomplete():
+    dem_mod = pytest.importorskip("visibility.dem")
+    cell = 0.05
+    n = int(16 / cell) + 1
+    x = -8 + cell * np.arange(n)
+    gx, gy = np.meshgrid(x, x)
+    heights = np.where((np.abs(gx - 3.0) <= 0.1) & (np.abs(gy) <= 0.2), 0.55, 0.0)
+    dem = dem_mod.DEM(heights, (-8.0, -8.0), cell)
+    centres = np.array([[6.0, 0.0, 0.1], [0.0, 6.0, 0.1], [-4.0, -4.0, 0.1]])
+    scan, truth = simulate.simulate_markers(dem, [0, 0, 1.0], 0.0, centres,
+                                            frames=range(0, 800, 4), seed=1)
+    ref = Reference(("hidden", "clear1", "clear2"),
+                    np.array([m["centre_station_m"] for m in truth["markers"]]), "S1", "truth")
+    res = process_station(scan, build_config({"calibrate": {"enabled": False}}), ref)
+    by_id = {r.marker_id: r for r in res.rows if r.marker_id}
+    assert by_id["clear1"].accepted and by_id["clear2"].accepted
+    hidden = by_id["hidden"]
+    assert not hidden.accepted and hidden.reason == "incomplete_cloud"
+    assert hidden.visible_fraction < 0.6

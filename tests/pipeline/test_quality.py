@@ -45,6 +45,7 @@ def test_reasons_in_order():
     fit = fit_sphere(pts, 0.1, centre0_m=CENTRE)
     m = marker_metrics(pts, fit)
     assert quality_gate(fit, m, QualityConfig(min_points=10_000))[1] == "too_few_points"
+    assert quality_gate(fit, m, QualityConfig(min_visible_fraction=1.01))[1] == "incomplete_cloud"
     assert quality_gate(fit, m, QualityConfig(max_rms_m=1e-4))[1] == "high_rms"
     # a 0.3 m boulder cap fitted as a 0.1 m marker fails the radius check
     boulder = noisy_cap([6.0, 0, -0.7], 0.3, (0, 0, 0), 800, 0.005, np.random.default_rng(1),

@@ -13,6 +13,7 @@ from markerplan.errors import ConfigError, InfeasiblePlanError
 from planner.config import PlanConfig
 from planner.program import evaluate_layout, plan_sites, station_infos
 from planner.reduction import drop_order, failure_reason, marker_losses, tradeoff_curve
+from planner.usability import PlanProblem
 from tests.planner.instances import make_problem, ring
 
 CONFIG = PlanConfig(requirement_m=0.03, working_radius_m=10.0)
@@ -56,6 +57,11 @@ def test_curve_matches_brute_force_on_tiny_instance(tiny):
         chk = evaluate_layout(tiny, p.selected, CONFIG)
         np.testing.assert_allclose(p.error_m, chk.error_m)
         assert p.lower_bound_m <= p.worst_error_m
+    assert curve.k_feasible_minimal
+    # starting from the full layout (as the CLI does) gives the same optimum
+    started = tradeoff_curve(tiny, CONFIG, start=np.ones(tiny.n_sites, bool))
+    np.testing.assert_allclose([p.worst_error_m for p in started.points],
+                               [p.worst_error_m for p in curve.points], rtol=1e-9)
 
 
 @pytest.mark.parametrize("seed", [3, 11])
@@ -150,3 +156,64 @@ def test_no_direction_feasible_subset_names_the_station():
     problem = make_problem([[0.0, 0.0]], ring([0, 0], 6.0, [0, 10]))
     with pytest.raises(InfeasiblePlanError, match="S1"):
         tradeoff_curve(problem, CONFIG)
+
+
+def test_kept_and_dropped_markers_are_honoured(tiny):
+    config = CONFIG.replace(existing=("C005",), forbidden=("C001",))
+    curve = tradeoff_curve(tiny, config)
+    assert curve.points[0].k == 7  # C001 must go
+    for p in curve.points:
+        assert p.selected[5] and not p.selected[1]
+        assert p.worst_error_m == pytest.approx(
+            _brute_force_with(tiny, config, p.k, keep=5, drop=1), rel=1e-9)
+    steps = drop_order(tiny, config, np.ones(tiny.n_sites, bool))
+    assert all(s.removed != 5 and not s.selected[1] for s in steps)
+
+
+def _brute_force_with(problem, config, k, keep, drop):
+    infos = station_infos(problem, config)
+    best = np.inf
+    for sub in itertools.combinations(range(problem.n_sites), k):
+        if keep not in sub or drop in sub:
+            continue
+        sel = np.zeros(problem.n_sites, bool)
+        sel[list(sub)] = True
+        chk = evaluate_layout(problem, sel, config, infos)
+        if np.all((chk.count >= config.min_markers) & (chk.sectors >= config.min_sectors)):
+            best = min(best, float(chk.error_m.max()))
+    return best
+
+
+def test_free_choice_is_never_worse_than_the_layout(tiny):
+    from planner.reduction_study import run_study
+
+    layout = np.zeros(tiny.n_sites, bool)
+    layout[[0, 1, 2, 4, 5, 6]] = True
+    sub = tiny_subproblem(tiny, layout)
+    fixed = run_study(sub, CONFIG, np.ones(sub.n_sites, bool))
+    free = run_study(tiny, CONFIG, layout, free=True)
+    assert free.n_layout == 6 and free.curve.points[0].k == 6
+    for p in free.curve.points:
+        try:
+            q = fixed.curve.at(p.k)
+        except ConfigError:
+            continue  # below the layout's own direction minimum
+        assert p.worst_error_m <= q.worst_error_m * (1 + 1e-9)
+    assert free.curve.k_directions <= fixed.curve.k_directions
+    assert len(free.losses) == 6
+
+
+def tiny_subproblem(problem, keep):
+    """The problem restricted to the sites in ``keep`` (same pairs, re-indexed)."""
+    idx = np.flatnonzero(keep)
+    new = -np.ones(problem.n_sites, np.int64)
+    new[idx] = np.arange(idx.size)
+    pairs = keep[problem.pair_site]
+    return PlanProblem(
+        station_ids=problem.station_ids, station_xyz=problem.station_xyz,
+        site_ids=tuple(problem.site_ids[j] for j in idx), site_xyz=problem.site_xyz[idx],
+        site_existing=problem.site_existing[idx], site_cost=problem.site_cost[idx],
+        pair_station=problem.pair_station[pairs], pair_site=new[problem.pair_site[pairs]],
+        pair_distance_m=problem.pair_distance_m[pairs],
+        pair_bearing_rad=problem.pair_bearing_rad[pairs],
+        pair_sigma_m=problem.pair_sigma_m[pairs], pair_reason=problem.pair_reason[pairs])

@@ -74,7 +74,8 @@ def test_a_wall_partly_hides_a_marker_and_batching_does_not_matter():
     a = visibility_matrix(scene, st, sites, progress=False)
     b = visibility_matrix(scene, st, sites, batch_rays=24, progress=False)
     assert np.array_equal(a.visible_fraction, b.visible_fraction)
-    frac = dict(zip(zip(a.station.tolist(), a.site.tolist()), a.visible_fraction))
+    pairs = zip(a.station.tolist(), a.site.tolist(), strict=True)
+    frac = dict(zip(pairs, a.visible_fraction, strict=True))
     assert frac[(0, 0)] == 0.0 and frac[(0, 2)] >= 0.9
     assert 0.0 < frac[(0, 1)] < 1.0  # sits on the wall top: its lower part is hidden
     assert a.n_rays == len(a) * 24 and a.rays_per_s > 0

@@ -1,0 +1,44 @@
+import csv
+import json
+
+import pytest
+
+from pipeline.marker_table import COLUMNS, read_marker_table
+from planner.cli import main
+
+pytest.importorskip("visibility.simulate")
+
+
+def _run(capsys, args):
+    with pytest.raises(SystemExit) as exc:
+        main(args)
+        raise SystemExit(0)
+    out, err = capsys.readouterr()
+    return exc.value.code, out, err
+
+
+def test_quick_range_study(tmp_path, capsys):
+    out = tmp_path / "rs"
+    code, stdout, _ = _run(capsys, ["range-study", "--out", str(out), "--frames", "40",
+                                    "--replicates", "2", "--max-distance", "4", "--json"])
+    assert code == 0
+    res = json.loads(stdout)
+    assert sorted(p.name for p in out.iterdir()) == ["markers.csv", "range_study.png",
+                                                     "summary.csv", "summary.json"]
+    rows = read_marker_table(out / "markers.csv")
+    assert list(rows[0]) == list(COLUMNS)
+    assert len(rows) == 4 * 2 * 2  # distances x estimators x replicates
+    assert {r["replicate"] for r in rows} == {"0", "1"} and {r["seed"] for r in rows} == {"0", "1"}
+    summary = list(csv.DictReader((out / "summary.csv").open()))
+    assert {s["estimator"] for s in summary} == {"fixed-radius", "hemisphere-icp"}
+    near = [s for s in res["summary"] if s["distance_m"] <= 3 and s["estimator"] == "fixed-radius"]
+    assert all(s["median_error_m"] < 0.02 for s in near)
+    dens = [s["median_point_density_per_m2"] for s in res["summary"]
+            if s["estimator"] == "fixed-radius"]
+    assert dens[0] > dens[-1]  # density falls with distance
+
+
+def test_bad_options(tmp_path, capsys):
+    code, _, err = _run(capsys, ["range-study", "--out", str(tmp_path / "o"), "--replicates",
+                                 "0"])
+    assert code == 1 and "--replicates" in err and not (tmp_path / "o").exists()
