@@ -251,6 +251,9 @@ def fit_data(table: MarkerTable, min_rows: int, extra_names: Iterable[str] = (),
         raise DataError(f"{where}: distance_m must be > 0, error_m >= 0 and |elevation_deg| <= "
                         f"90; got distance min {d.min():.3g}, error min {err.min():.3g}, "
                         f"|elevation| max {np.rad2deg(np.abs(e)).max():.3g} deg")
+    if not (err > 0).any():
+        raise DataError(f"{where}: error_m is 0 for every usable row; errors must come from an "
+                        "independent reference, not from the estimates themselves")
     extras, unavailable = {}, {}
     for name in extra_names:
         col_name = EXTRA_COLUMNS[name]

@@ -139,15 +139,49 @@ def errors_from_information(j: np.ndarray, working_radius_m: float,
     out = np.full(j.shape[0], np.inf)
     if not ok.any():
         return out
-    cov = np.linalg.inv(j[ok])
-    g = _rim_blocks(working_radius_m)  # (r, 3, 4); row 0 is the station itself
-    sig = np.einsum("ria,kab,rjb->krij", g, cov, g)
+    out[ok] = np.sqrt(CHI2_3_95 * _worst_variance(np.linalg.inv(j[ok]), working_radius_m,
+                                                  inclinometer_sigma_rad))
+    return out
+
+
+def _worst_variance(cov: np.ndarray, working_radius_m: float,
+                    inclinometer_sigma_rad: float) -> np.ndarray:
+    """max over the station and the rim of lambda_max(Sigma(q)), for (k, 4, 4) covariances."""
+    g = _rim_blocks(working_radius_m)
+    h = g[:, :, 3]  # (r, 3) heading columns (-q_y, q_x, 0)
     radius = np.full(g.shape[0], working_radius_m)
     radius[0] = 0.0
-    sig[:, :, 2, 2] += (radius * inclinometer_sigma_rad) ** 2
-    lam = np.linalg.eigvalsh(sig)[..., -1].max(axis=1)
-    out[ok] = np.sqrt(CHI2_3_95 * lam)
-    return out
+    c_tt = cov[:, None, :3, :3]
+    c = cov[:, None, :3, 3]  # (k, 1, 3)
+    cpp = cov[:, None, 3, 3, None, None]
+    hh = h[None]
+    sig = (c_tt + hh[..., :, None] * c[..., None, :] + c[..., :, None] * hh[..., None, :]
+           + cpp * hh[..., :, None] * hh[..., None, :])
+    sig[..., 2, 2] += (radius * inclinometer_sigma_rad) ** 2
+    return lambda_max_sym3(sig).max(axis=1)
+
+
+def lambda_max_sym3(a: np.ndarray) -> np.ndarray:
+    """Largest eigenvalue of symmetric 3 x 3 matrices (..., 3, 3), closed form (Smith 1961).
+
+    Examples
+    --------
+    >>> float(lambda_max_sym3(np.diag([1.0, 3.0, 2.0])))
+    3.0
+    """
+    a00, a11, a22 = a[..., 0, 0], a[..., 1, 1], a[..., 2, 2]
+    a01, a02, a12 = a[..., 0, 1], a[..., 0, 2], a[..., 1, 2]
+    q = (a00 + a11 + a22) / 3.0
+    p1 = a01**2 + a02**2 + a12**2
+    p2 = (a00 - q) ** 2 + (a11 - q) ** 2 + (a22 - q) ** 2 + 2.0 * p1
+    p = np.sqrt(p2 / 6.0)
+    safe = np.where(p > 0, p, 1.0)
+    b00, b11, b22 = (a00 - q) / safe, (a11 - q) / safe, (a22 - q) / safe
+    b01, b02, b12 = a01 / safe, a02 / safe, a12 / safe
+    det = (b00 * (b11 * b22 - b12 * b12) - b01 * (b01 * b22 - b12 * b02)
+           + b02 * (b01 * b12 - b11 * b02))
+    phi = np.arccos(np.clip(det / 2.0, -1.0, 1.0)) / 3.0
+    return np.where(p > 0, q + 2.0 * p * np.cos(phi), q)
 
 
 def linearisation(j: np.ndarray, working_radius_m: float, inclinometer_sigma_rad: float,

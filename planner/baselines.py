@@ -16,7 +16,7 @@ from scipy.spatial import cKDTree
 from markerplan.errors import InfeasiblePlanError
 from planner import accuracy
 from planner.program import _resolve_ids, evaluate_layout, station_infos
-from planner.usability import PlanProblem, sector_index
+from planner.usability import PlanProblem, direction_status, sector_index
 
 #: Grid phases tried at each spacing (fraction of the spacing from the bounds' lower corner).
 _PHASES = (0.5, 0.0, 0.25, 0.75)
@@ -136,6 +136,7 @@ def regular_grid(problem: PlanProblem, config, bounds_xy: tuple[float, float, fl
     if spacings_m is None:
         spacings_m = np.arange(config.max_range_m, config.grid_spacing_m - 1e-9, -0.5)
     x0, y0, x1, y1 = bounds_xy
+    min_count = config.min_markers + (1 if config.redundant else 0)
     selected = existing
     for a in spacings_m:
         best = None
@@ -148,7 +149,10 @@ def regular_grid(problem: PlanProblem, config, bounds_xy: tuple[float, float, fl
                 d, k = tree.query(pts)
                 trial = existing.copy()
                 trial[pool[k[d <= a / 2]]] = True
-                if (best is None or trial.sum() < best.sum()) and \
+                if best is not None and trial.sum() >= best.sum():
+                    continue
+                count, sectors = direction_status(problem, trial, config.n_sectors)
+                if np.all((count >= min_count) & (sectors >= config.min_sectors)) and \
                         evaluate_layout(problem, trial, config, infos).all_ok:
                     best = trial
                 selected = trial

@@ -599,9 +599,13 @@ def evaluate_layout(problem: PlanProblem, selected: np.ndarray, config,
         worst_err = err.copy()
         worst_sec = sectors.copy()
         for s in range(problem.n_stations):
-            chosen = infos[s].sites[selected[infos[s].sites]]
-            for m in chosen:
-                worst_err[s] = max(worst_err[s], infos[s].error(chosen[chosen != m]))
+            info = infos[s]
+            chosen = info.sites[selected[info.sites]]
+            if chosen.size:
+                parts = info.info[selected[info.sites]]
+                without = parts.sum(axis=0)[None] - parts  # J after losing each marker
+                worst_err[s] = max(worst_err[s], float(accuracy.errors_from_information(
+                    without, info.radius, info.incl).max()))
             sel_pairs = problem.usable_pairs(s)
             sel_pairs = sel_pairs[selected[problem.pair_site[sel_pairs]]]
             sec = sector_index(problem.pair_bearing_rad[sel_pairs], config.n_sectors)

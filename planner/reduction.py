@@ -237,6 +237,7 @@ class _MinimaxModel:
         self.cut_threshold: list[float] = []
         self.station_index = {sid: s for s, sid in enumerate(problem.station_ids)}
         self.solve_time_s = 0.0
+        self.solve_cap_s = np.inf  # longest single solve, s
 
     def _bounded(self, k: int | None, eps: float, count_objective: bool) -> Model:
         lb, ub = self.model.row_lb.copy(), self.model.row_ub.copy()
@@ -251,7 +252,7 @@ class _MinimaxModel:
         return replace(self.model, row_lb=lb, row_ub=ub, c=c)
 
     def _solve(self, model: Model):
-        remaining = self.deadline - time.perf_counter()
+        remaining = min(self.deadline - time.perf_counter(), self.solve_cap_s)
         if remaining <= 0:
             return None
         sol = solve(model, remaining, 0.0)
@@ -317,7 +318,8 @@ class _MinimaxModel:
 def tradeoff_curve(problem: PlanProblem, config, k_max: int | None = None,
                    k_min: int | None = None, time_limit_s: float | None = None,
                    tol_m: float = 1e-4, exact: bool = True,
-                   start: np.ndarray | None = None) -> Curve:
+                   start: np.ndarray | None = None,
+                   incumbents: dict[int, np.ndarray] | None = None) -> Curve:
     """Minimal worst-station predicted error for every marker count, by integer programming.
 
     Parameters
@@ -344,6 +346,9 @@ def tradeoff_curve(problem: PlanProblem, config, k_max: int | None = None,
     start : (n,) bool, optional
         A ``k_max``-subset meeting the count and direction rows (e.g. the layout) to start from;
         each count's search also starts from the best one-marker drop of the previous point.
+    incumbents : dict of int -> (n,) bool, optional
+        Known ``k``-subsets meeting the count and direction rows (e.g. the layout-only optimum
+        in free mode); the search starts from the best of these and the one-marker drop.
 
     Returns
     -------
@@ -392,8 +397,9 @@ def tradeoff_curve(problem: PlanProblem, config, k_max: int | None = None,
         if k >= mm.nx:  # every usable marker fits: keeping all is optimal (monotone)
             best, lo = mm.pad(allowed, k, pool), floor
         else:
-            incumbent = previous if previous is not None and previous.sum() == k else \
-                _drop_one(mm, previous, kept)
+            incumbent = _best_of(mm, [previous if previous is not None
+                                      and previous.sum() == k else _drop_one(mm, previous, kept),
+                                      (incumbents or {}).get(k)])
             lo = max(floor, -np.inf if best_above is None else best_above * (1 - REL_TOL))
             best, lo, proven = _minimax(mm, k, incumbent, lo, best_above, tol_m, exact,
                                         statuses)
@@ -436,6 +442,13 @@ def _minimal(points: list[CurvePoint], k_feasible: int | None, k_dir: int,
     return bool(below) and (below[0].proven or below[0].lower_bound_m >= requirement_m)
 
 
+def _best_of(mm: _MinimaxModel, subsets) -> np.ndarray | None:
+    """The subset with the lowest worst-station error among those meeting the direction rows."""
+    ok = [np.asarray(x, bool) for x in subsets
+          if x is not None and directions_ok(mm.problem, np.asarray(x, bool), mm.config).all()]
+    return min(ok, key=lambda x: _worst(mm, x)) if ok else None
+
+
 def _drop_one(mm: _MinimaxModel, selected: np.ndarray | None, kept: np.ndarray
               ) -> np.ndarray | None:
     """The best subset one marker smaller that keeps every count and direction row, or None."""
@@ -461,6 +474,7 @@ def _minimax(mm: _MinimaxModel, k: int, incumbent: np.ndarray | None, lo: float,
     """
     proven = True
     best = incumbent
+    mm.solve_cap_s = np.inf
     if best is None:
         best, proven = mm.query(k, np.inf, statuses)
         if best is None:
@@ -490,6 +504,9 @@ def _minimax(mm: _MinimaxModel, k: int, incumbent: np.ndarray | None, lo: float,
             statuses.append("time_limit")
             return best, lo, False
         final = np.isfinite(lo) and hi - lo <= width
+        # one solve may take a third of the time left for this count, so that a bound too
+        # hard to prove leaves time to try a less ambitious one
+        mm.solve_cap_s = (mm.deadline - time.perf_counter()) / 3.0
         sel, ok = mm.query(k, eps, statuses)
         if sel is not None:
             best, hi = sel, _worst(mm, sel)
@@ -497,7 +514,21 @@ def _minimax(mm: _MinimaxModel, k: int, incumbent: np.ndarray | None, lo: float,
                 width /= 16.0
         elif ok:
             lo = eps
-        else:  # time limit without an answer: eps is not proven infeasible
+        else:  # no answer in time: eps is not proven infeasible; try closer to the best
+            hard = eps
+            while time.perf_counter() < mm.deadline:
+                eps = 0.5 * (hard + hi)
+                if hi - eps <= width:
+                    break
+                mm.solve_cap_s = (mm.deadline - time.perf_counter()) / 3.0
+                sel, ok = mm.query(k, eps, statuses)
+                if sel is not None:
+                    best, hi = sel, _worst(mm, sel)
+                elif not ok:
+                    hard = eps
+                else:
+                    lo = eps
+                    break
             return best, lo, False
 
 
@@ -521,6 +552,36 @@ def _k_range_iv(k_min: int, k_max: int, k_dir: int, n: int) -> None:
     if not k_dir <= k_min <= k_max:
         raise ConfigError(f"`k_min` must be in {k_dir}..{k_max} (below {k_dir} markers no subset "
                           f"meets the direction rows), got {k_min}")
+
+
+def restrict(problem: PlanProblem, keep: np.ndarray) -> PlanProblem:
+    """The problem with only the candidate sites in ``keep`` (their pairs kept, re-indexed).
+
+    Parameters
+    ----------
+    problem : PlanProblem
+    keep : (n,) bool
+
+    Returns
+    -------
+    sub : PlanProblem
+        Sites in their original order.
+    """
+    keep = np.asarray(keep, dtype=bool)
+    if keep.shape != (problem.n_sites,):
+        raise ConfigError(f"`keep` must have shape ({problem.n_sites},), got {keep.shape}")
+    idx = np.flatnonzero(keep)
+    new = np.full(problem.n_sites, -1, dtype=np.int64)
+    new[idx] = np.arange(idx.size)
+    pairs = keep[problem.pair_site]
+    return replace(problem, site_ids=tuple(problem.site_ids[j] for j in idx),
+                   site_xyz=problem.site_xyz[idx], site_existing=problem.site_existing[idx],
+                   site_cost=problem.site_cost[idx], pair_station=problem.pair_station[pairs],
+                   pair_site=new[problem.pair_site[pairs]],
+                   pair_distance_m=problem.pair_distance_m[pairs],
+                   pair_bearing_rad=problem.pair_bearing_rad[pairs],
+                   pair_sigma_m=problem.pair_sigma_m[pairs],
+                   pair_reason=problem.pair_reason[pairs])
 
 
 def drop_order(problem: PlanProblem, config, layout: np.ndarray) -> list[DropStep]:

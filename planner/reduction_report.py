@@ -67,6 +67,10 @@ def reduce_record(study, layout, inputs, model_name: str, options: dict,
             "proven_optimal": p.proven, "n_solves": p.n_solves,
             "statuses": dict(Counter(p.statuses)),
             "stations": _stations(prob, p, cfg)})
+        if study.layout_curve is not None:
+            same = [q for q in study.layout_curve.points if q.k == p.k]
+            points[-1]["layout_only_worst_error_m"] = _num(same[0].worst_error_m) if same \
+                else None
     drop = []
     for i, s in enumerate(study.drop, start=1):
         best = next((p for p in curve.points if p.k == s.k), None)
@@ -187,6 +191,10 @@ def report_markdown(doc: dict) -> str:
                      f"{'yes' if p['meets_requirement'] else 'no'} | "
                      f"{'yes' if p['proven_optimal'] else 'NO (time limit)'} | "
                      f"{', '.join(p['markers'])} |")
+    if lay["mode"] == "free":
+        lines += ["", "Best with the layout's own markers only (exact): "
+                  + ", ".join(f"{p['k']}: {_cm(p.get('layout_only_worst_error_m'))}"
+                              for p in doc["curve"]) + "."]
     lines += ["", f"Solver: {sol['name']}; optimality {sol['optimality']}; {sol['n_solves']} "
               f"solves, {sol['accuracy_cuts']} accuracy cuts, statuses {sol['statuses']}"
               + ("" if sol["proven_optimal"] else

@@ -23,6 +23,7 @@ from planner.reduction import (
     MarkerLoss,
     drop_order,
     marker_losses,
+    restrict,
     tradeoff_curve,
 )
 from planner.usability import PlanProblem
@@ -64,6 +65,9 @@ class ReductionStudy:
     drop : list of DropStep
     losses : list of MarkerLoss
     timings_s : dict
+    layout_curve : Curve or None
+        With ``free``: the exact curve over the layout's own markers (the free curve starts
+        from it and is never worse).
     """
 
     problem: PlanProblem
@@ -74,6 +78,7 @@ class ReductionStudy:
     drop: list[DropStep]
     losses: list[MarkerLoss]
     timings_s: dict = field(default_factory=dict)
+    layout_curve: Curve | None = None
 
     @property
     def n_layout(self) -> int:
@@ -296,12 +301,25 @@ def run_study(problem: PlanProblem, config, layout: np.ndarray, free: bool = Fal
     n_allowed = int(np.sum(layout & ~np.isin(np.asarray(problem.site_ids), config.forbidden)))
     t = time.perf_counter()
     start = layout & ~np.isin(np.asarray(problem.site_ids), config.forbidden)
+    layout_curve = None
+    incumbents = None
+    limit = config.time_limit_s if time_limit_s is None else float(time_limit_s)
+    if free:  # the layout's own (exact, cheap) optimum is a valid start for every count
+        layout_curve = tradeoff_curve(restrict(problem, layout), config, time_limit_s=limit)
+        limit = max(limit - (time.perf_counter() - t), 1.0)
+        idx = np.flatnonzero(layout)
+        incumbents = {}
+        for p in layout_curve.points:
+            full = np.zeros(problem.n_sites, bool)
+            full[idx[p.selected]] = True
+            incumbents[p.k] = full
     curve = tradeoff_curve(problem, config, k_max=n_allowed, k_min=k_min,
-                           time_limit_s=time_limit_s, exact=not free, start=start)
+                           time_limit_s=limit, exact=not free, start=start,
+                           incumbents=incumbents)
     timings = {"curve": time.perf_counter() - t}
     t = time.perf_counter()
     drop = drop_order(problem, config, layout)
     losses = marker_losses(problem, config, layout)
     timings["drop_order_and_losses"] = time.perf_counter() - t
     return ReductionStudy(problem=problem, config=config, layout=layout, free=free, curve=curve,
-                          drop=drop, losses=losses, timings_s=timings)
+                          drop=drop, losses=losses, timings_s=timings, layout_curve=layout_curve)

@@ -13,7 +13,8 @@ Usage, from the project root:
     .venv/bin/python scripts/make_default_error_model.py --keep range/   # keep the study output
 
 Runtime: one range-study replicate is a full 800-frame station simulation and processing
-(about a minute or more on 2 cores); the default 6 replicates took about 30 min on 2 busy shared cores.
+(one to five minutes on 2 cores, depending on load); expect up to half an hour for the
+default 6 replicates.
 """
 
 from __future__ import annotations

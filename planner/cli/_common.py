@@ -88,6 +88,7 @@ def staged_output(out: Path, overwrite: bool) -> Iterator[Path]:
     except BaseException:
         shutil.rmtree(stage, ignore_errors=True)
         raise
+    os.chmod(stage, 0o755)  # mkdtemp creates 0700; outputs are meant to be shared
     if out.exists():
         shutil.rmtree(out)
     os.replace(stage, out)

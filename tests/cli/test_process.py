@@ -124,3 +124,16 @@ def test_bad_input_one_line_no_output(station, tmp_path, capsys, case, needle):
     assert err.startswith("error:") and err.count("\n") == 1 and needle in err
     assert not out.exists()
     assert not any(p.name.startswith(".out.partial") for p in tmp_path.iterdir())
+
+
+def test_known_offsets_option(station, tmp_path, capsys):
+    code, _, err = _run(capsys, ["process", str(station / "station_S1.scan.npz"),
+                                 "--no-calibrate", "--offsets", "0.3,0.3", "--out",
+                                 str(tmp_path / "o")])
+    assert code == 1 and "--offsets" in err and not (tmp_path / "o").exists()
+    code, stdout, _ = _run(capsys, ["process", str(station / "station_S1.scan.npz"),
+                                    "--no-calibrate", "--offsets", "0,0,0,0", "--out",
+                                    str(tmp_path / "k"), "--json"])
+    assert code == 0
+    cal = json.loads(stdout)["stations"][0]["calibration"]
+    assert cal["enabled"] is False and cal["offsets"]["axis_offset_m"] == [0.0, 0.0]

@@ -39,3 +39,23 @@ def test_default_model_file_is_shipped_as_package_data():
     assert DEFAULT_MODEL_PATH.name == "default_model.json"
     assert DEFAULT_MODEL_PATH.parent.name == "data"
     assert DEFAULT_MODEL_PATH.read_text().endswith("}\n")
+
+
+def test_regeneration_script_fits_only_the_fixed_radius_rows(tmp_path):
+    """The script's fitting step on a range-study-shaped table (both estimators' rows)."""
+    import importlib.util
+
+    from tests.error_model.synthetic import synthetic_table, write_csv
+
+    root = DEFAULT_MODEL_PATH.parents[2]
+    spec = importlib.util.spec_from_file_location(
+        "make_default_error_model", root / "scripts" / "make_default_error_model.py")
+    script = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(script)
+    table = synthetic_table(300, seed=4)
+    table["estimator"] = np.where(np.arange(300) % 3, "fixed-radius", "hemisphere-icp")
+    write_csv(tmp_path / "markers.csv", table)
+    model = script.build_model(tmp_path / "markers.csv", replicates=6, seed=0)
+    assert model.info["data"]["counts"]["dropped_other_estimator"] == 100
+    assert "range-study --replicates 6 --seed 0" in model.info["data"]["description"]
+    assert model.info["provenance"]["config"]["estimator"] == "fixed-radius"

@@ -136,6 +136,10 @@ def test_too_few_rows_and_all_nan_columns_are_one_line_data_errors():
     with pytest.raises(DataError, match="all NaN") as exc:
         fit_error_model(table)
     assert "\n" not in str(exc.value)
+    table = synthetic_table(200, seed=1)
+    table["error_m"] = np.zeros(200)
+    with pytest.raises(DataError, match="is 0 for every usable row"):
+        fit_error_model(table)
 
 
 def test_all_nan_optional_column_is_reported_unavailable_not_fatal():

@@ -63,3 +63,12 @@ def test_fit_pose_recovers_a_known_pose_and_registration_error():
     # a pure heading error of 1 mrad moves the rim by 10 mm at 10 m
     assert np.isclose(registration_error(t_true, psi_true + 1e-3, t_true, psi_true, 10.0),
                       10.0 * 2 * np.sin(0.5e-3), rtol=1e-6)
+
+
+def test_closed_form_largest_eigenvalue():
+    rng = np.random.default_rng(1)
+    m = rng.normal(size=(500, 3, 3))
+    s = m @ m.transpose(0, 2, 1)
+    s[0] = np.eye(3) * 2.0  # repeated eigenvalues
+    assert np.allclose(accuracy.lambda_max_sym3(s), np.linalg.eigvalsh(s)[:, -1], rtol=1e-9,
+                       atol=1e-12)

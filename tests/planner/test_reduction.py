@@ -12,8 +12,13 @@ from hypothesis import strategies as st
 from markerplan.errors import ConfigError, InfeasiblePlanError
 from planner.config import PlanConfig
 from planner.program import evaluate_layout, plan_sites, station_infos
-from planner.reduction import drop_order, failure_reason, marker_losses, tradeoff_curve
-from planner.usability import PlanProblem
+from planner.reduction import (
+    drop_order,
+    failure_reason,
+    marker_losses,
+    restrict,
+    tradeoff_curve,
+)
 from tests.planner.instances import make_problem, ring
 
 CONFIG = PlanConfig(requirement_m=0.03, working_radius_m=10.0)
@@ -189,7 +194,7 @@ def test_free_choice_is_never_worse_than_the_layout(tiny):
 
     layout = np.zeros(tiny.n_sites, bool)
     layout[[0, 1, 2, 4, 5, 6]] = True
-    sub = tiny_subproblem(tiny, layout)
+    sub = restrict(tiny, layout)
     fixed = run_study(sub, CONFIG, np.ones(sub.n_sites, bool))
     free = run_study(tiny, CONFIG, layout, free=True)
     assert free.n_layout == 6 and free.curve.points[0].k == 6
@@ -201,19 +206,5 @@ def test_free_choice_is_never_worse_than_the_layout(tiny):
         assert p.worst_error_m <= q.worst_error_m * (1 + 1e-9)
     assert free.curve.k_directions <= fixed.curve.k_directions
     assert len(free.losses) == 6
-
-
-def tiny_subproblem(problem, keep):
-    """The problem restricted to the sites in ``keep`` (same pairs, re-indexed)."""
-    idx = np.flatnonzero(keep)
-    new = -np.ones(problem.n_sites, np.int64)
-    new[idx] = np.arange(idx.size)
-    pairs = keep[problem.pair_site]
-    return PlanProblem(
-        station_ids=problem.station_ids, station_xyz=problem.station_xyz,
-        site_ids=tuple(problem.site_ids[j] for j in idx), site_xyz=problem.site_xyz[idx],
-        site_existing=problem.site_existing[idx], site_cost=problem.site_cost[idx],
-        pair_station=problem.pair_station[pairs], pair_site=new[problem.pair_site[pairs]],
-        pair_distance_m=problem.pair_distance_m[pairs],
-        pair_bearing_rad=problem.pair_bearing_rad[pairs],
-        pair_sigma_m=problem.pair_sigma_m[pairs], pair_reason=problem.pair_reason[pairs])
+    assert [p.k for p in free.layout_curve.points] == [p.k for p in fixed.curve.points]
+    assert sub.site_ids == tuple(tiny.site_ids[j] for j in (0, 1, 2, 4, 5, 6))
