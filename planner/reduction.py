@@ -24,8 +24,12 @@ optimal. One model is built and re-used: each query only changes row bounds —
   ``eps`` below the error of ``T'`` (its *threshold*): it is switched on (lower bound 1) for such
   ``eps`` and off (lower bound 0, always satisfied) otherwise; cuts accumulate across queries.
 
-A solve that stops at its time limit without an answer cannot prove a bound infeasible; the
-point is then marked ``proven=False`` (never called optimal).
+Each count starts from an incumbent (the best one-marker drop of the previous count's subset,
+or a subset the caller knows) and from the lower bound "no subset beats keeping every site"
+and, once proven, "no smaller set beats the next larger count's optimum". The time limit is
+shared equally by the counts still to do. A solve that stops at its time limit without an
+answer cannot prove a bound infeasible; the point is then marked ``proven=False`` (never called
+optimal) and keeps its best subset found.
 """
 
 from __future__ import annotations
@@ -490,9 +494,7 @@ def _minimax(mm: _MinimaxModel, k: int, incumbent: np.ndarray | None, lo: float,
             return best, lo, False
     width = tol_m
     while True:
-        if not np.isfinite(lo):
-            eps = 0.5 * hi
-        elif hi - lo > width:
+        if hi - lo > width:
             eps = 0.5 * (lo + hi)
         elif exact:  # final test just below the best: infeasible proves it optimal
             eps = hi * (1 - REL_TOL)
@@ -503,7 +505,7 @@ def _minimax(mm: _MinimaxModel, k: int, incumbent: np.ndarray | None, lo: float,
         if time.perf_counter() >= mm.deadline:
             statuses.append("time_limit")
             return best, lo, False
-        final = np.isfinite(lo) and hi - lo <= width
+        final = hi - lo <= width
         # one solve may take a third of the time left for this count, so that a bound too
         # hard to prove leaves time to try a less ambitious one
         mm.solve_cap_s = (mm.deadline - time.perf_counter()) / 3.0

@@ -61,10 +61,10 @@ def _parse_offsets(text: str):
                 type=click.Path(dir_okay=False, path_type=Path))
 @out_option(required=True)
 @overwrite_option
-@click.option("--reference", "references", multiple=True,
-              type=click.Path(dir_okay=False, path_type=Path),
+@click.option("--reference", "references", multiple=True, type=click.Path(path_type=Path),
               help="Reference coordinates: a simulator truth JSON (per station; repeat the "
-                   "option) or one total-station CSV id,x_m,y_m,z_m in any frame.")
+                   "option), a folder of *.truth.json, or one total-station CSV "
+                   "id,x_m,y_m,z_m in any frame.")
 @click.option("--method", type=click.Choice(_METHODS), default="fixed-radius",
               show_default=True, help="Sphere-centre estimator.")
 @click.option("--radius", "radius_m", type=float, default=0.1, show_default=True,
@@ -92,8 +92,8 @@ def command(scans, out, overwrite, references, method, radius_m, no_calibrate, o
 
     \b
     Example:
-      markerplan process scans/station_*.scan.npz \\
-          --reference scans/station_S1.truth.json --out tables/
+      markerplan process scans/station_*.scan.npz --reference scans/ --out tables/
+      markerplan process s1.scan.npz --reference total_station.csv --out t/
     """
     from tqdm import tqdm
 
@@ -118,7 +118,14 @@ def command(scans, out, overwrite, references, method, radius_m, no_calibrate, o
     cfg = build_config(options)
     offsets = _parse_offsets(offsets_text) if offsets_text else MountingOffsets()
     cfg = with_offsets(cfg, offsets, enabled=not no_calibrate)
-    refs = [read_reference(p) for p in references]
+    ref_files = [f for p in references
+                 for f in (sorted(p.glob("*.truth.json")) if p.is_dir() else [p])]
+    if any(p.is_dir() for p in references) and not ref_files:
+        from markerplan.errors import InputFileError
+
+        raise InputFileError(f"--reference folder(s) {', '.join(map(str, references))} hold no "
+                             "*.truth.json; give the truth files or a total-station CSV")
+    refs = [read_reference(p) for p in ref_files]
     check_references(refs)
     for p in scans:
         if not p.is_file():

@@ -40,7 +40,7 @@ def _run(capsys, args):
 def test_process_with_truth_writes_all_outputs(station, tmp_path, capsys):
     out = tmp_path / "tables"
     code, stdout, _ = _run(capsys, ["process", str(station / "station_S1.scan.npz"),
-                                    "--reference", str(station / "station_S1.truth.json"),
+                                    "--reference", str(station),  # folder of *.truth.json
                                     "--no-calibrate", "--out", str(out), "--json"])
     assert code == 0
     summary = json.loads(stdout)
