@@ -29,7 +29,8 @@ or a subset the caller knows) and from the lower bound "no subset beats keeping 
 and, once proven, "no smaller set beats the next larger count's optimum". The time limit is
 shared equally by the counts still to do. A solve that stops at its time limit without an
 answer cannot prove a bound infeasible; the point is then marked ``proven=False`` (never called
-optimal) and keeps its best subset found.
+optimal) and keeps its best subset found — or, if a smaller count's subset is better, that
+subset plus its best additions, so the curve stays monotone.
 """
 
 from __future__ import annotations
@@ -418,11 +419,35 @@ def tradeoff_curve(problem: PlanProblem, config, k_max: int | None = None,
                                  statuses=tuple(statuses)))
         best_above = float(check.error_m.max()) if proven and exact else None
         previous = best
+    points = _monotone(mm, points, allowed)
     feasible = [p.k for p in points if p.meets_requirement]
     k_feasible = min(feasible) if feasible else None
     return Curve(points=points, k_directions=k_dir, k_feasible=k_feasible,
                  k_feasible_minimal=_minimal(points, k_feasible, k_dir, config.requirement_m),
                  n_cuts=len(mm.cut_rows), solve_time_s=mm.solve_time_s, complete=complete)
+
+
+def _monotone(mm: _MinimaxModel, points: list[CurvePoint], allowed: np.ndarray
+              ) -> list[CurvePoint]:
+    """Adding markers never hurts: where a smaller count's subset beats a larger count's (only
+    possible when the larger one is not proven optimal), replace the larger one by the smaller
+    plus its best additions, from the fewest markers up."""
+    out = list(points)
+    for i in range(len(out) - 2, -1, -1):  # out[i + 1] has one marker fewer than out[i]
+        small, big = out[i + 1], out[i]
+        if not small.worst_error_m < big.worst_error_m * (1 - REL_TOL):
+            continue
+        sel = small.selected.copy()
+        while sel.sum() < big.k:
+            free = np.flatnonzero(allowed & ~sel)
+            if free.size == 0:
+                break
+            errs = [_worst(mm, np.where(np.arange(sel.size) == j, True, sel)) for j in free]
+            sel[free[int(np.argmin(errs))]] = True
+        chk = evaluate_layout(mm.problem, sel, mm.config, mm.infos)
+        out[i] = replace(big, selected=sel, error_m=chk.error_m, count=chk.count,
+                         sectors=chk.sectors, ok=chk.ok)
+    return out
 
 
 def _start_iv(start, n: int, k_max: int) -> np.ndarray | None:

@@ -49,7 +49,7 @@ def cli() -> None:
     \b
     Typical flow:
       markerplan simulate --site default --out scans/
-      markerplan process scans/station_S1.scan.npz --out tables/
+      markerplan process scans/station_*.scan.npz --reference scans/ --out tables/
       markerplan fit-error-model tables/markers.csv -o model.json --plot model.png
       markerplan plan --error-model model.json --out plan/
       markerplan verify plan/plan.json --out verify/

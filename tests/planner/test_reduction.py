@@ -208,3 +208,24 @@ def test_free_choice_is_never_worse_than_the_layout(tiny):
     assert len(free.losses) == 6
     assert [p.k for p in free.layout_curve.points] == [p.k for p in fixed.curve.points]
     assert sub.site_ids == tuple(tiny.site_ids[j] for j in (0, 1, 2, 4, 5, 6))
+
+
+def test_an_unproven_point_is_repaired_from_a_better_smaller_subset(tiny):
+    import time
+    from dataclasses import replace
+
+    from planner.reduction import _MinimaxModel, _monotone
+
+    curve = tradeoff_curve(tiny, CONFIG)
+    mm = _MinimaxModel(tiny, CONFIG, time.perf_counter() + 10)
+    # pretend the 6-marker search stopped early with the worst 6-subset meeting the directions
+    worst6 = max((np.isin(np.arange(8), sub) for sub in itertools.combinations(range(8), 6)),
+                 key=lambda sel: evaluate_layout(tiny, sel, CONFIG).error_m.max()
+                 if evaluate_layout(tiny, sel, CONFIG).sectors.min() >= 3 else -1)
+    chk = evaluate_layout(tiny, worst6, CONFIG)
+    points = [replace(p, selected=worst6, error_m=chk.error_m, proven=False) if p.k == 6 else p
+              for p in curve.points]
+    assert points[2].worst_error_m > points[3].worst_error_m  # k=6 worse than k=5
+    fixed = _monotone(mm, points, np.ones(8, bool))
+    assert fixed[2].selected.sum() == 6 and (fixed[2].selected >= points[3].selected).all()
+    assert fixed[2].worst_error_m == pytest.approx(curve.at(6).worst_error_m, rel=1e-9)
