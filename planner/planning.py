@@ -227,18 +227,19 @@ def read_stations(path, dem, lidar_height_m: float) -> tuple[list[str], np.ndarr
     return ids, np.column_stack([xy, z]), heading
 
 
-def read_markers(path, dem, marker_radius_m: float) -> tuple[list[str], np.ndarray]:
+def read_markers(path, dem, marker_radius_m: float, option: str = "--existing"
+                 ) -> tuple[list[str], np.ndarray]:
     """Markers CSV/GeoJSON (``id, x_m, y_m[, z_m]``) -> ids and centres (m, 3) m (default
-    ``z``: ground + radius)."""
-    rows = _read_points(path, "--existing")
+    ``z``: ground + radius). ``option`` names the argument in error messages."""
+    rows = _read_points(path, option)
     ids = [str(r["id"]).strip() for r in rows]
     if len(set(ids)) != len(ids):
-        raise InputFileError(f"--existing {path}: marker ids must be unique")
-    xy = np.array([[_float(r, "x_m", "--existing"), _float(r, "y_m", "--existing")]
+        raise InputFileError(f"{option} {path}: marker ids must be unique")
+    xy = np.array([[_float(r, "x_m", option), _float(r, "y_m", option)]
                    for r in rows])
     _check_inside(dem, xy, ids, "marker")
     ground = dem.height_at(xy)
-    z = np.array([_float(r, "z_m", "--existing", g + marker_radius_m)
+    z = np.array([_float(r, "z_m", option, g + marker_radius_m)
                   for r, g in zip(rows, ground, strict=True)])
     return ids, np.column_stack([xy, z])
 

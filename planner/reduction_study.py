@@ -116,7 +116,7 @@ def read_layout(spec: str, inputs) -> Layout:
     elif _is_plan(spec):
         layout = _plan_layout(_read_plan(Path(spec)), spec)
     else:
-        ids, xyz = read_markers(spec, inputs.dem, inputs.marker_radius_m)
+        ids, xyz = read_markers(spec, inputs.dem, inputs.marker_radius_m, option="INPUT")
         layout = Layout(tuple(ids), xyz, str(spec))
     _inside_site_iv(layout, inputs)
     return layout
