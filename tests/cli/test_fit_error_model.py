@@ -8,16 +8,8 @@ import numpy as np
 import pytest
 
 from error_model.model import ErrorModel
-from planner.cli import main
+from tests.cli.invoke import run_cli
 from tests.error_model.synthetic import synthetic_table, write_csv
-
-
-def _run(capsys, args):
-    with pytest.raises(SystemExit) as exc:
-        main(args)
-        raise SystemExit(0)
-    out, err = capsys.readouterr()
-    return exc.value.code, out, err
 
 
 @pytest.fixture(scope="module")
@@ -30,9 +22,10 @@ def tables(tmp_path_factory):
 
 def test_fit_writes_model_and_plot_and_prints_one_json_object(tables, tmp_path, capsys):
     out_model, out_png = tmp_path / "model.json", tmp_path / "model.png"
-    code, out, err = _run(capsys, ["fit-error-model", str(tables / "a.csv"), str(tables / "b.csv"),
-                                   "-o", str(out_model), "--plot", str(out_png), "--seed", "3",
-                                   "--bootstrap", "5", "--json"])
+    code, out, err = run_cli(capsys, ["fit-error-model", str(tables / "a.csv"),
+                                      str(tables / "b.csv"),
+                                      "-o", str(out_model), "--plot", str(out_png), "--seed", "3",
+                                      "--bootstrap", "5", "--json"])
     assert code == 0, err
     summary = json.loads(out)
     assert summary["rows_used"] > 1000
@@ -50,12 +43,12 @@ def test_fit_writes_model_and_plot_and_prints_one_json_object(tables, tmp_path, 
 def test_existing_output_is_refused_without_overwrite(tables, tmp_path, capsys):
     target = tmp_path / "model.json"
     target.write_text("keep me")
-    code, _, err = _run(capsys, ["fit-error-model", str(tables / "a.csv"), "-o", str(target),
-                                 "--bootstrap", "0"])
+    code, _, err = run_cli(capsys, ["fit-error-model", str(tables / "a.csv"), "-o", str(target),
+                                    "--bootstrap", "0"])
     assert code == 1 and "--overwrite" in err and err.count("\n") == 1
     assert target.read_text() == "keep me"
-    code, _, err = _run(capsys, ["fit-error-model", str(tables / "a.csv"), "-o", str(target),
-                                 "--bootstrap", "0", "--overwrite"])
+    code, _, err = run_cli(capsys, ["fit-error-model", str(tables / "a.csv"), "-o", str(target),
+                                    "--bootstrap", "0", "--overwrite"])
     assert code == 0, err
     assert ErrorModel.load(target).info["data"]["rows_used"] > 500
 
@@ -71,8 +64,8 @@ def test_bad_tables_give_one_line_errors_and_no_output(tmp_path, capsys, make, m
     make(table)
     write_csv(tmp_path / "bad.csv", table)
     target = tmp_path / "model.json"
-    code, out, err = _run(capsys, ["fit-error-model", str(tmp_path / "bad.csv"), "-o",
-                                   str(target), "--json"])
+    code, out, err = run_cli(capsys, ["fit-error-model", str(tmp_path / "bad.csv"), "-o",
+                                      str(target), "--json"])
     assert code == 1
     assert out == ""
     assert err.startswith("error: ") and err.count("\n") == 1 and match in err
@@ -80,13 +73,13 @@ def test_bad_tables_give_one_line_errors_and_no_output(tmp_path, capsys, make, m
 
 
 def test_missing_table_file_is_an_error(tmp_path, capsys):
-    code, _, err = _run(capsys, ["fit-error-model", str(tmp_path / "none.csv"), "-o",
-                                 str(tmp_path / "m.json")])
+    code, _, err = run_cli(capsys, ["fit-error-model", str(tmp_path / "none.csv"), "-o",
+                                    str(tmp_path / "m.json")])
     assert code == 1 and "cannot be read" in err
 
 
 def test_help_has_an_example(capsys):
-    code, out, _ = _run(capsys, ["fit-error-model", "--help"])
+    code, out, _ = run_cli(capsys, ["fit-error-model", "--help"])
     assert code == 0 and "markerplan fit-error-model tables/markers.csv -o model.json" in out
 
 
@@ -95,11 +88,11 @@ def test_mixed_estimators_need_a_choice(tmp_path, capsys):
     table["estimator"] = np.where(np.arange(400) % 2, "fixed-radius", "hemisphere-icp")
     write_csv(tmp_path / "mixed.csv", table)
     target = tmp_path / "m.json"
-    code, _, err = _run(capsys, ["fit-error-model", str(tmp_path / "mixed.csv"), "-o",
-                                 str(target), "--bootstrap", "0"])
+    code, _, err = run_cli(capsys, ["fit-error-model", str(tmp_path / "mixed.csv"), "-o",
+                                    str(target), "--bootstrap", "0"])
     assert code == 1 and "several estimators" in err and not target.exists()
-    code, _, err = _run(capsys, ["fit-error-model", str(tmp_path / "mixed.csv"), "-o",
-                                 str(target), "--bootstrap", "0", "--estimator", "fixed-radius"])
+    code, _, err = run_cli(capsys, ["fit-error-model", str(tmp_path / "mixed.csv"), "-o",
+                                    str(target), "--bootstrap", "0", "--estimator", "fixed-radius"])
     assert code == 0, err
     counts = ErrorModel.load(target).info["data"]["counts"]
     assert counts["dropped_other_estimator"] == 200

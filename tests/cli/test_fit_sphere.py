@@ -3,16 +3,8 @@ import json
 import numpy as np
 import pytest
 
-from planner.cli import main
+from tests.cli.invoke import run_cli
 from tests.pipeline.test_sphere_fit import _nist_reference, noisy_cap
-
-
-def _run(capsys, args):
-    with pytest.raises(SystemExit) as exc:
-        main(args)
-        raise SystemExit(0)
-    out, err = capsys.readouterr()
-    return exc.value.code, out, err
 
 
 @pytest.mark.parametrize("method", ["fixed-radius", "hemisphere-icp"])
@@ -20,8 +12,8 @@ def test_fit_sphere_json_on_synthetic_cap(tmp_path, capsys, method):
     pts = noisy_cap([1.0, 4.0, 0.5], 0.1, (1, 0, 0), 500, 0.002, np.random.default_rng(3))
     f = tmp_path / "cap.xyz"
     np.savetxt(f, pts, delimiter="\t")
-    code, out, _ = _run(capsys, ["fit-sphere", str(f), "--radius", "0.1", "--sensor", "1,0,0",
-                                 "--method", method, "--json"])
+    code, out, _ = run_cli(capsys, ["fit-sphere", str(f), "--radius", "0.1", "--sensor", "1,0,0",
+                                    "--method", method, "--json"])
     assert code == 0
     res = json.loads(out)
     assert np.linalg.norm(np.array(res["centre_m"]) - [1.0, 4.0, 0.5]) < 1.5e-3
@@ -33,7 +25,7 @@ def test_fit_sphere_on_all_nist_scans(real_data, capsys):
     files = sorted((real_data / "nist_spheres").glob("SPH*.xyz"))
     assert len(files) == 11
     for f in files:
-        code, out, _ = _run(capsys, ["fit-sphere", str(f), "--radius", "0.05", "--json"])
+        code, out, _ = run_cli(capsys, ["fit-sphere", str(f), "--radius", "0.05", "--json"])
         assert code == 0
         centre = np.array(json.loads(out)["centre_m"])
         ref = _nist_reference(np.loadtxt(f), 0.05)
@@ -50,11 +42,11 @@ def test_fit_sphere_on_all_nist_scans(real_data, capsys):
 def test_bad_input_one_line_error(tmp_path, capsys, args, content, needle):
     f = tmp_path / "p.xyz"
     f.write_text(content)
-    code, out, err = _run(capsys, ["fit-sphere", str(f), *args])
+    code, out, err = run_cli(capsys, ["fit-sphere", str(f), *args])
     assert code == 1 and out == ""
     assert err.startswith("error:") and err.count("\n") == 1 and needle in err
 
 
 def test_missing_file(tmp_path, capsys):
-    code, _, err = _run(capsys, ["fit-sphere", str(tmp_path / "none.xyz"), "--radius", "0.1"])
+    code, _, err = run_cli(capsys, ["fit-sphere", str(tmp_path / "none.xyz"), "--radius", "0.1"])
     assert code == 1 and "does not exist" in err

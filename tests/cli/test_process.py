@@ -7,7 +7,7 @@ import pytest
 from pipeline.marker_table import COLUMNS, read_marker_table
 from pipeline.rig import MountingOffsets, rot_z
 from pipeline.scan_format import SCAN_FORMAT, _write_npz, write_scan, write_truth
-from planner.cli import main
+from tests.cli.invoke import run_cli
 from tests.pipeline.test_synthesis import synthetic_scan
 
 MARKERS = np.array([[3.0, 1.0, -0.9], [-2.5, 2.0, -0.9], [0.5, -4.0, -0.9], [-3.0, -2.5, -0.9]])
@@ -29,19 +29,12 @@ def station(tmp_path_factory):
     return d
 
 
-def _run(capsys, args):
-    with pytest.raises(SystemExit) as exc:
-        main(args)
-        raise SystemExit(0)
-    out, err = capsys.readouterr()
-    return exc.value.code, out, err
-
 
 def test_process_with_truth_writes_all_outputs(station, tmp_path, capsys):
     out = tmp_path / "tables"
-    code, stdout, _ = _run(capsys, ["process", str(station / "station_S1.scan.npz"),
-                                    "--reference", str(station),  # folder of *.truth.json
-                                    "--no-calibrate", "--out", str(out), "--json"])
+    code, stdout, _ = run_cli(capsys, ["process", str(station / "station_S1.scan.npz"),
+                                       "--reference", str(station),  # folder of *.truth.json
+                                       "--no-calibrate", "--out", str(out), "--json"])
     assert code == 0
     summary = json.loads(stdout)
     st = summary["stations"][0]
@@ -64,9 +57,9 @@ def test_process_with_total_station_csv_in_another_frame(station, tmp_path, caps
     ts.write_text("id,x_m,y_m,z_m\n" + "".join(f"T{k},{x},{y},{z}\n"
                                                  for k, (x, y, z) in enumerate(world)))
     out = tmp_path / "o"
-    code, stdout, _ = _run(capsys, ["process", str(station / "station_S1.scan.npz"),
-                                    "--reference", str(ts), "--no-calibrate",
-                                    "--method", "hemisphere-icp", "--out", str(out), "--json"])
+    code, stdout, _ = run_cli(capsys, ["process", str(station / "station_S1.scan.npz"),
+                                       "--reference", str(ts), "--no-calibrate",
+                                       "--method", "hemisphere-icp", "--out", str(out), "--json"])
     assert code == 0
     st = json.loads(stdout)["stations"][0]
     assert st["registered"] and st["n_matched_accepted"] == 4
@@ -74,8 +67,8 @@ def test_process_with_total_station_csv_in_another_frame(station, tmp_path, caps
 
 
 def test_unknown_stage_option_refused(station, tmp_path, capsys):
-    code, _, err = _run(capsys, ["process", str(station / "station_S1.scan.npz"),
-                                 "--set", "gate.max_box=0.3", "--out", str(tmp_path / "o")])
+    code, _, err = run_cli(capsys, ["process", str(station / "station_S1.scan.npz"),
+                                    "--set", "gate.max_box=0.3", "--out", str(tmp_path / "o")])
     assert code == 1 and "has no option 'max_box'" in err
     assert not (tmp_path / "o").exists()
 
@@ -119,7 +112,7 @@ def test_bad_input_one_line_no_output(station, tmp_path, capsys, case, needle):
     else:
         args += [str(scan), "--radius", "0"]
     out = tmp_path / "out"
-    code, stdout, err = _run(capsys, [*args, "--out", str(out)])
+    code, stdout, err = run_cli(capsys, [*args, "--out", str(out)])
     assert code == 1 and stdout == ""
     assert err.startswith("error:") and err.count("\n") == 1 and needle in err
     assert not out.exists()
@@ -127,13 +120,13 @@ def test_bad_input_one_line_no_output(station, tmp_path, capsys, case, needle):
 
 
 def test_known_offsets_option(station, tmp_path, capsys):
-    code, _, err = _run(capsys, ["process", str(station / "station_S1.scan.npz"),
-                                 "--no-calibrate", "--offsets", "0.3,0.3", "--out",
-                                 str(tmp_path / "o")])
+    code, _, err = run_cli(capsys, ["process", str(station / "station_S1.scan.npz"),
+                                    "--no-calibrate", "--offsets", "0.3,0.3", "--out",
+                                    str(tmp_path / "o")])
     assert code == 1 and "--offsets" in err and not (tmp_path / "o").exists()
-    code, stdout, _ = _run(capsys, ["process", str(station / "station_S1.scan.npz"),
-                                    "--no-calibrate", "--offsets", "0,0,0,0", "--out",
-                                    str(tmp_path / "k"), "--json"])
+    code, stdout, _ = run_cli(capsys, ["process", str(station / "station_S1.scan.npz"),
+                                       "--no-calibrate", "--offsets", "0,0,0,0", "--out",
+                                       str(tmp_path / "k"), "--json"])
     assert code == 0
     cal = json.loads(stdout)["stations"][0]["calibration"]
     assert cal["enabled"] is False and cal["offsets"]["axis_offset_m"] == [0.0, 0.0]

@@ -4,23 +4,16 @@ import json
 import pytest
 
 from pipeline.marker_table import COLUMNS, read_marker_table
-from planner.cli import main
+from tests.cli.invoke import run_cli
 
 pytest.importorskip("visibility.simulate")
 
 
-def _run(capsys, args):
-    with pytest.raises(SystemExit) as exc:
-        main(args)
-        raise SystemExit(0)
-    out, err = capsys.readouterr()
-    return exc.value.code, out, err
-
 
 def test_quick_range_study(tmp_path, capsys):
     out = tmp_path / "rs"
-    code, stdout, _ = _run(capsys, ["range-study", "--out", str(out), "--frames", "40",
-                                    "--replicates", "2", "--max-distance", "4", "--json"])
+    code, stdout, _ = run_cli(capsys, ["range-study", "--out", str(out), "--frames", "40",
+                                       "--replicates", "2", "--max-distance", "4", "--json"])
     assert code == 0
     res = json.loads(stdout)
     assert sorted(p.name for p in out.iterdir()) == ["markers.csv", "range_study.png",
@@ -39,6 +32,6 @@ def test_quick_range_study(tmp_path, capsys):
 
 
 def test_bad_options(tmp_path, capsys):
-    code, _, err = _run(capsys, ["range-study", "--out", str(tmp_path / "o"), "--replicates",
-                                 "0"])
+    code, _, err = run_cli(capsys, ["range-study", "--out", str(tmp_path / "o"), "--replicates",
+                                    "0"])
     assert code == 1 and "--replicates" in err and not (tmp_path / "o").exists()

@@ -8,17 +8,8 @@ import numpy as np
 import pytest
 
 from planner.cli import main
+from tests.cli.invoke import run_cli
 from visibility.sites import load_site
-
-
-def _run(args, capsys):
-    try:
-        main(args)
-        code = 0
-    except SystemExit as exc:
-        code = exc.code
-    out, err = capsys.readouterr()
-    return code, out, err
 
 
 @pytest.fixture(scope="module")
@@ -68,8 +59,8 @@ def test_plan_json_input_uses_its_site_and_configuration(tmp_path, capsys):
                          "z_m": float(site.marker_centres_m[j, 2])} for j in keep]}
     path = tmp_path / "plan.json"
     path.write_text(json.dumps(plan))
-    code, stdout, _ = _run(["reduce", str(path), "--keep", "M01", "--out",
-                            str(tmp_path / "o"), "--json"], capsys)
+    code, stdout, _ = run_cli(capsys, ["reduce", str(path), "--keep", "M01", "--out",
+                                       str(tmp_path / "o"), "--json"])
     assert code == 0
     summary = json.loads(stdout)
     assert summary["n_markers"] == 8 and summary["curve"][0]["k"] == 8
@@ -102,8 +93,8 @@ def test_bad_input_is_one_line_without_output(tmp_path, capsys, extra, rows, fix
                                                          site.marker_centres_m, strict=True)]
     layout = _layout_csv(tmp_path / "layout.csv", rows)
     out = tmp_path / "o"
-    code, stdout, err = _run(["reduce", str(layout), "--out", str(out), "--json", *extra],
-                             capsys)
+    code, stdout, err = run_cli(capsys, ["reduce", str(layout), "--out", str(out), "--json",
+                                         *extra])
     assert code == 1 and stdout == ""
     assert err.startswith("error: ") and err.count("\n") == 1 and fix in err
     assert not out.exists()
@@ -113,8 +104,8 @@ def test_bad_input_is_one_line_without_output(tmp_path, capsys, extra, rows, fix
 @pytest.mark.slow
 def test_verify_runs_the_simulator_at_two_points(tmp_path, capsys):
     out = tmp_path / "v"
-    code, stdout, _ = _run(["reduce", "as-built", "--verify", "--out", str(out), "--json"],
-                           capsys)
+    code, stdout, _ = run_cli(capsys, ["reduce", "as-built", "--verify", "--out", str(out),
+                                       "--json"])
     assert code == 0
     summary = json.loads(stdout)
     assert summary["verified_k"] == [11, summary["k_feasible"]]

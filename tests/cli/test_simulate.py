@@ -6,25 +6,15 @@ import numpy as np
 import pytest
 
 from pipeline.scan_format import read_scan, read_truth
-from planner.cli import main
-
-
-def _run(args, capsys):
-    try:
-        main(args)
-        code = 0
-    except SystemExit as exc:
-        code = exc.code
-    out, err = capsys.readouterr()
-    return code, out, err
+from tests.cli.invoke import run_cli
 
 
 def test_simulate_writes_scans_and_truth(tmp_path, capsys):
     out = tmp_path / "scans"
-    code, stdout, _ = _run(["simulate", "--site", "default", "--stations", "S1,S3", "--frames",
-                            "8", "--seed", "2", "--axis-offset-mm", "5,-3",
-                            "--vertical-axis-error-deg", "0.2", "--lframe-tilt-deg", "-0.1",
-                            "--range-noise-mm", "10", "--out", str(out), "--json"], capsys)
+    code, stdout, _ = run_cli(capsys, [
+        "simulate", "--site", "default", "--stations", "S1,S3", "--frames", "8", "--seed", "2",
+        "--axis-offset-mm", "5,-3", "--vertical-axis-error-deg", "0.2", "--lframe-tilt-deg",
+        "-0.1", "--range-noise-mm", "10", "--out", str(out), "--json"])
     assert code == 0
     summary = json.loads(stdout)
     assert [s["station_id"] for s in summary["stations"]] == ["S1", "S3"]
@@ -51,10 +41,10 @@ def test_simulate_writes_scans_and_truth(tmp_path, capsys):
 def test_station_count_and_overwrite(tmp_path, capsys):
     out = tmp_path / "o"
     args = ["simulate", "--stations", "1", "--frames", "2", "--out", str(out), "--json"]
-    assert _run(args, capsys)[0] == 0
-    code, _, err = _run(args, capsys)
+    assert run_cli(capsys, args)[0] == 0
+    code, _, err = run_cli(capsys, args)
     assert code == 1 and "--overwrite" in err
-    assert _run([*args, "--overwrite"], capsys)[0] == 0
+    assert run_cli(capsys, [*args, "--overwrite"])[0] == 0
 
 
 def _assert_clean_failure(tmp_path, code, stdout, err, fix):
@@ -72,37 +62,39 @@ def test_nan_dem_refused(tmp_path, capsys):
     h[5, 5] = np.nan
     np.savez(tmp_path / "nan.npz", heights_m=h, origin_m=np.array([-30.0, -30.0]),
              cell_size_m=np.array(1.0), crs=np.array(""))
-    code, stdout, err = _run(["simulate", "--dem", str(tmp_path / "nan.npz"), "--frames", "2",
-                              "--out", str(tmp_path / "out")], capsys)
+    code, stdout, err = run_cli(capsys, ["simulate", "--dem", str(tmp_path / "nan.npz"),
+                                         "--frames", "2",
+                                         "--out", str(tmp_path / "out")])
     _assert_clean_failure(tmp_path, code, stdout, err, "--dem-fill nearest")
 
 
 def test_station_outside_dem_refused(tmp_path, capsys):
     np.savez(tmp_path / "small.npz", heights_m=np.zeros((11, 11)),
              origin_m=np.array([-5.0, -5.0]), cell_size_m=np.array(1.0), crs=np.array(""))
-    code, stdout, err = _run(["simulate", "--dem", str(tmp_path / "small.npz"), "--frames", "2",
-                              "--out", str(tmp_path / "out")], capsys)
+    code, stdout, err = run_cli(capsys, ["simulate", "--dem", str(tmp_path / "small.npz"),
+                                         "--frames", "2",
+                                         "--out", str(tmp_path / "out")])
     _assert_clean_failure(tmp_path, code, stdout, err, "outside the DEM")
 
 
 def test_unwritable_out_refused(tmp_path, capsys):
     blocker = tmp_path / "file"
     blocker.write_text("not a folder")
-    code, stdout, err = _run(["simulate", "--frames", "2", "--stations", "1",
-                              "--out", str(blocker / "out")], capsys)
+    code, stdout, err = run_cli(capsys, ["simulate", "--frames", "2", "--stations", "1",
+                                         "--out", str(blocker / "out")])
     _assert_clean_failure(tmp_path, code, stdout, err, "writable")
 
 
 @pytest.mark.parametrize("frames", ["0", "-5"])
 def test_nonpositive_frames_refused(tmp_path, capsys, frames):
-    code, stdout, err = _run(["simulate", "--frames", frames, "--out", str(tmp_path / "out")],
-                             capsys)
+    code, stdout, err = run_cli(capsys, ["simulate", "--frames", frames, "--out",
+                                         str(tmp_path / "out")])
     _assert_clean_failure(tmp_path, code, stdout, err, "--frames must be a positive")
 
 
 def test_unknown_preset_refused(tmp_path, capsys):
-    code, stdout, err = _run(["simulate", "--site", "mars", "--out", str(tmp_path / "out")],
-                             capsys)
+    code, stdout, err = run_cli(capsys, ["simulate", "--site", "mars", "--out",
+                                         str(tmp_path / "out")])
     _assert_clean_failure(tmp_path, code, stdout, err, "default, large")
 
 
@@ -112,11 +104,11 @@ def test_unknown_preset_refused(tmp_path, capsys):
     ("--rpm", "610", "steps of 60"),
 ])
 def test_bad_options_refused(tmp_path, capsys, option, value, fix):
-    code, stdout, err = _run(["simulate", option, value, "--frames", "2",
-                              "--out", str(tmp_path / "out")], capsys)
+    code, stdout, err = run_cli(capsys, ["simulate", option, value, "--frames", "2",
+                                         "--out", str(tmp_path / "out")])
     _assert_clean_failure(tmp_path, code, stdout, err, fix)
 
 
 def test_help_has_an_example(capsys):
-    code, stdout, _ = _run(["simulate", "--help"], capsys)
+    code, stdout, _ = run_cli(capsys, ["simulate", "--help"])
     assert code == 0 and "markerplan simulate --site default --out" in stdout

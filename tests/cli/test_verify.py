@@ -4,17 +4,7 @@ import json
 
 import pytest
 
-from planner.cli import main
-
-
-def _run(args, capsys):
-    try:
-        main(args)
-        code = 0
-    except SystemExit as exc:
-        code = exc.code
-    out, err = capsys.readouterr()
-    return code, out, err
+from tests.cli.invoke import run_cli
 
 
 @pytest.mark.parametrize("content,needle", [(None, "file not found"),
@@ -25,7 +15,7 @@ def test_bad_plan_files(tmp_path, capsys, content, needle):
     if content is not None:
         plan.write_text(content)
     out = tmp_path / "v"
-    code, _, err = _run(["verify", str(plan), "--out", str(out)], capsys)
+    code, _, err = run_cli(capsys, ["verify", str(plan), "--out", str(out)])
     assert code == 1 and needle in err and err.count("\n") == 1
     assert not out.exists()
 
@@ -33,20 +23,20 @@ def test_bad_plan_files(tmp_path, capsys, content, needle):
 @pytest.mark.slow
 def test_verify_passes_and_fails_with_the_reason(tmp_path, capsys):
     plan_dir = tmp_path / "plan"
-    code, _, _ = _run(["plan", "--out", str(plan_dir)], capsys)
+    code, _, _ = run_cli(capsys, ["plan", "--out", str(plan_dir)])
     assert code == 0
     doc = json.loads((plan_dir / "plan.json").read_text())
     doc["stations"] = doc["stations"][:1]  # one station keeps the test short
     one = tmp_path / "one.json"
     one.write_text(json.dumps(doc))
-    code, stdout, _ = _run(["verify", str(one), "--out", str(tmp_path / "v1"), "--json"], capsys)
+    code, stdout, _ = run_cli(capsys, ["verify", str(one), "--out", str(tmp_path / "v1"), "--json"])
     assert code == 0
     s = json.loads(stdout)["stations"]["S1"]
     assert s["passed"] and s["achieved_error_m"] <= 0.10
     doc["requirement"]["requirement_m"] = 1e-5  # no real registration is this good
     strict = tmp_path / "strict.json"
     strict.write_text(json.dumps(doc))
-    code, _, err = _run(["verify", str(strict), "--out", str(tmp_path / "v2")], capsys)
+    code, _, err = run_cli(capsys, ["verify", str(strict), "--out", str(tmp_path / "v2")])
     assert code == 1 and "verification failed at S1: achieved" in err
     rec = json.loads((tmp_path / "v2" / "verify.json").read_text())
     assert rec["passed"] is False
