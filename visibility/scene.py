@@ -138,14 +138,21 @@ class RayScene:
         hits : RayHits
         """
         o, d = _rays_iv(origins_m, directions, max_range_m)
-        return self.intersect_unit(o, d, max_range_m, threads, incidence)
+        return self._cast(o, d, max_range_m, threads, incidence, normalise=True)
 
     def intersect_unit(self, origins_m: np.ndarray, directions: np.ndarray,
                        max_range_m: float = np.inf, threads: int | None = None,
                        incidence: bool = False) -> RayHits:
         """:meth:`intersect` without input checks: ``directions`` must already be unit (n, 3)
         float arrays and ``origins_m`` (n, 3) (hot loops of the simulator)."""
-        o, d = origins_m, directions
+        return self._cast(origins_m, directions, max_range_m, threads, incidence,
+                          normalise=False)
+
+    def _cast(self, o: np.ndarray, d: np.ndarray, max_range_m: float, threads: int | None,
+              incidence: bool, normalise: bool) -> RayHits:
+        """Cast (n, 3) rays in chunks over the thread pool; ``normalise`` checks and scales
+        each chunk's directions to unit length inside its worker (so that work is parallel
+        too)."""
         n = len(o)
         out = RayHits(np.full(n, np.inf), np.full(n, -1, dtype=np.int64),
                       np.full(n, np.nan) if incidence else None)
@@ -154,7 +161,8 @@ class RayScene:
 
         def work(ab: tuple[int, int]) -> None:
             a, b = ab
-            self._intersect_chunk(o[a:b], d[a:b], max_range_m, out, slice(a, b))
+            dc = _unit_directions(d[a:b]) if normalise else d[a:b]
+            self._intersect_chunk(o[a:b], dc, max_range_m, out, slice(a, b))
 
         if threads == 1 or len(bounds) <= 1:
             for ab in bounds:
@@ -193,8 +201,9 @@ class RayScene:
         tmax = np.float32(max_range_m if np.isfinite(max_range_m) else 1e30)
         if o.strides[0] == 0:  # one origin for all rays (a broadcast view)
             local = np.broadcast_to((o[0] - self.origin_m).astype(np.float32), (n, 3))
-        else:
-            local = (o - self.origin_m).astype(np.float32)
+        else:  # recentre in float64, round once into float32
+            local = np.subtract(o, self.origin_m, out=np.empty((n, 3), np.float32),
+                                casting="unsafe")
         d32 = d.astype(np.float32)
         # embreex starts rays at tfar = 1e37 when no distances are given
         tfar = np.full(n, tmax, dtype=np.float32) if np.isfinite(max_range_m) else None
@@ -310,6 +319,8 @@ def _scene_iv(sphere_centres_m: np.ndarray | None, sphere_radius_m: float) -> np
 
 def _rays_iv(origins_m: np.ndarray, directions: np.ndarray, max_range_m: float
              ) -> tuple[np.ndarray, np.ndarray]:
+    """Shapes and range; the directions' values are checked chunk by chunk in
+    :func:`_unit_directions`."""
     o = np.asarray(origins_m, dtype=float)
     d = np.asarray(directions, dtype=float)
     if o.ndim != 2 or o.shape[1] != 3:
@@ -318,12 +329,17 @@ def _rays_iv(origins_m: np.ndarray, directions: np.ndarray, max_range_m: float
         raise ConfigError(f"directions must have shape {o.shape} like origins_m, got {d.shape}")
     if not max_range_m > 0:
         raise ConfigError(f"max_range_m must be > 0, got {max_range_m}")
-    norm2 = np.einsum("ij,ij->i", d, d)
-    if np.all(np.abs(norm2 - 1.0) < 1e-12):  # already unit (and so finite)
-        return o, d
+    return o, d
+
+
+def _unit_directions(d: np.ndarray) -> np.ndarray:
+    """(k, 3) directions scaled to unit length; zero or non-finite rows are refused."""
+    norm2 = np.square(d) @ np.ones(3)  # ~2x faster than einsum("ij,ij->i")
+    if len(d) == 0 or np.abs(norm2 - 1.0).max() < 1e-12:  # already unit (and so finite)
+        return d
     if not np.all(norm2 > 0) or not np.all(np.isfinite(norm2)):
         raise ConfigError("directions must be finite and non-zero; got a zero or NaN direction")
-    return o, d / np.sqrt(norm2)[:, None]
+    return d / np.sqrt(norm2)[:, None]
 
 
 class HorizonBound:

@@ -41,17 +41,22 @@ def test_default_model_file_is_shipped_as_package_data():
     assert DEFAULT_MODEL_PATH.read_text().endswith("}\n")
 
 
-def test_regeneration_script_fits_only_the_fixed_radius_rows(tmp_path):
-    """The script's fitting step on a range-study-shaped table (both estimators' rows)."""
+def _regeneration_script():
     import importlib.util
-
-    from tests.error_model.synthetic import synthetic_table, write_csv
 
     root = DEFAULT_MODEL_PATH.parents[2]
     spec = importlib.util.spec_from_file_location(
         "make_default_error_model", root / "scripts" / "make_default_error_model.py")
     script = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(script)
+    return script
+
+
+def test_regeneration_script_fits_only_the_fixed_radius_rows(tmp_path):
+    """The script's fitting step on a range-study-shaped table (both estimators' rows)."""
+    from tests.error_model.synthetic import synthetic_table, write_csv
+
+    script = _regeneration_script()
     table = synthetic_table(300, seed=4)
     table["estimator"] = np.where(np.arange(300) % 3, "fixed-radius", "hemisphere-icp")
     write_csv(tmp_path / "markers.csv", table)
@@ -59,3 +64,21 @@ def test_regeneration_script_fits_only_the_fixed_radius_rows(tmp_path):
     assert model.info["data"]["counts"]["dropped_other_estimator"] == 100
     assert "range-study --replicates 6 --seed 0" in model.info["data"]["description"]
     assert model.info["provenance"]["config"]["estimator"] == "fixed-radius"
+
+
+def test_check_tolerates_solver_last_digits_but_not_real_changes():
+    import copy
+    import json
+
+    differences = _regeneration_script()._differences
+    shipped = json.loads(DEFAULT_MODEL_PATH.read_text())
+    rerun = copy.deepcopy(shipped)
+    rerun["sigma"]["coefficients"] = [c * (1 + 3e-14) for c in rerun["sigma"]["coefficients"]]
+    rerun["sigma"]["ci95_lo"][0] += 5e-20  # a coefficient at its zero bound
+    assert list(differences(shipped, rerun, "")) == []
+    rerun["sigma"]["coefficients"][1] *= 1.0001
+    rerun["data"]["fingerprint"] = "0" * 64
+    rerun["predictors"] = rerun["predictors"][:1]
+    found = list(differences(shipped, rerun, ""))
+    assert [f.split(":")[0].split(" ")[0] for f in found] == [
+        "/data/fingerprint", "/predictors", "/sigma/coefficients[1]"]
