@@ -55,6 +55,11 @@ class CalibrationConfig:
         Maximum ICP / sphere Gauss-Newton iterations.
     min_face_points : int
         Points each face must have on a sphere for it to count in the axis-offset fit.
+    sphere_outlier_chi2 : float
+        A sphere whose whitened direct-minus-reverse centre difference exceeds this chi-square
+        (2 degrees of freedom; default 13.8 = the 99.9 % quantile), after scaling by the robust
+        reduced chi-square when that exceeds 1, is dropped from the axis-offset fit and the fit
+        repeated (a rock or a clipped marker that passed the quality gate on a smeared cloud).
     seed : int
         Seed of the point subsampling.
     """
@@ -66,6 +71,7 @@ class CalibrationConfig:
     max_range_m: float = 25.0
     iterations: int = 10
     min_face_points: int = 8
+    sphere_outlier_chi2: float = 13.8
     seed: int = 0
 
     def validate(self) -> CalibrationConfig:
@@ -78,6 +84,9 @@ class CalibrationConfig:
         if not 0 <= self.min_range_m < self.max_range_m:
             raise ConfigError("calibration needs 0 <= min_range_m < max_range_m, got "
                               f"{self.min_range_m}, {self.max_range_m}")
+        if not self.sphere_outlier_chi2 > 0:
+            raise ConfigError("calibration `sphere_outlier_chi2` must be > 0, got "
+                              f"{self.sphere_outlier_chi2}")
         return self
 
 
@@ -252,8 +261,10 @@ def estimate_axis_offset(scan: StationScan, offsets: MountingOffsets,
 
     Each sphere is fitted (radius fixed) twice, from its direct-face and from its reverse-face
     points; the offset ``(dx, dy)`` is chosen so the two centres agree horizontally, each
-    sphere's difference weighted by the inverse of its formal covariance. The returned
-    covariance is scaled by the reduced chi-square when that exceeds 1.
+    sphere's difference weighted by the inverse of its formal covariance. Spheres whose
+    difference stays inconsistent with that covariance (``config.sphere_outlier_chi2``) are
+    dropped and the fit repeated, keeping at least two. The returned covariance is scaled by
+    the reduced chi-square when that exceeds 1.
 
     Parameters
     ----------
@@ -275,8 +286,9 @@ def estimate_axis_offset(scan: StationScan, offsets: MountingOffsets,
     covariance : (2, 2) float
         Formal covariance of (dx, dy), m^2 (NaN when no sphere qualifies).
     n_spheres : int
+        Spheres used (after outlier rejection).
     rms_m : float
-        RMS horizontal centre difference after the fit, metres.
+        RMS horizontal centre difference of the spheres used, after the fit, metres.
     """
     cfg = (config or CalibrationConfig()).validate()
     face = direct_face(scan)
@@ -308,14 +320,38 @@ def estimate_axis_offset(scan: StationScan, offsets: MountingOffsets,
         cov_diff = (_centre_covariance(pa, ca, radius_m) + _centre_covariance(pb, cb, radius_m))
         whiten.append(np.linalg.cholesky(np.linalg.inv(cov_diff[:2, :2])).T)
 
-    def residuals(d: np.ndarray) -> np.ndarray:
-        return np.concatenate([w @ (ca - cb)[:2] for w, (_, ca, _, cb)
-                               in zip(whiten, face_fits(d), strict=True)])
+    def per_sphere(d: np.ndarray) -> np.ndarray:
+        """(K, 2) whitened horizontal centre differences."""
+        return np.array([w @ (ca - cb)[:2] for w, (_, ca, _, cb)
+                         in zip(whiten, face_fits(d), strict=True)])
 
     d = np.asarray(offsets.axis_offset_m, dtype=float)
+    keep = np.ones(len(spheres), dtype=bool)
+    while True:
+        d, cov = _gauss_newton_2d(lambda x, k=keep: per_sphere(x)[k].ravel(), d,
+                                  cfg.iterations)
+        chi2 = np.sum(per_sphere(d) ** 2, axis=1)
+        # robust reduced chi-square of the kept spheres (median of chi2_2 is 1.386)
+        scale = max(float(np.median(chi2[keep])) / 1.386, 1.0)
+        outliers = keep & (chi2 > cfg.sphere_outlier_chi2 * scale)
+        if not outliers.any() or keep.sum() - outliers.sum() < 2:
+            break
+        keep = keep & ~outliers
+    diffs = np.array([(ca - cb)[:2] for _, ca, _, cb in face_fits(d)])[keep]
+    rms = float(np.sqrt(np.mean(diffs ** 2)))
+    return (replace(offsets, axis_offset_m=(float(d[0]), float(d[1]))), cov, int(keep.sum()),
+            rms)
+
+
+def _gauss_newton_2d(residuals, d0: np.ndarray, iterations: int
+                     ) -> tuple[np.ndarray, np.ndarray]:
+    """Minimise ``|residuals(d)|^2`` over a 2-vector ``d`` by Gauss-Newton with a forward
+    difference Jacobian; returns ``d`` and its formal covariance, scaled by the reduced
+    chi-square when that exceeds 1."""
+    d = np.asarray(d0, dtype=float)
     h = 1e-4
     cov = np.full((2, 2), np.nan)
-    for _ in range(cfg.iterations):
+    for _ in range(iterations):
         r0 = residuals(d)
         jac = np.column_stack([(residuals(d + h * e) - r0) / h for e in np.eye(2)])
         step, *_ = np.linalg.lstsq(jac, -r0, rcond=None)
@@ -325,6 +361,4 @@ def estimate_axis_offset(scan: StationScan, offsets: MountingOffsets,
         cov = max(res @ res / dof, 1.0) * np.linalg.pinv(jac.T @ jac)
         if np.max(np.abs(step)) < 1e-6:
             break
-    diffs = np.array([(ca - cb)[:2] for _, ca, _, cb in face_fits(d)])
-    rms = float(np.sqrt(np.mean(diffs ** 2)))
-    return (replace(offsets, axis_offset_m=(float(d[0]), float(d[1]))), cov, len(spheres), rms)
+    return d, cov

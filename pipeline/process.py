@@ -62,10 +62,15 @@ class CalibrateStage(CalibrationConfig):
     With ``enabled = False`` the given offsets are applied as known values.
     ``axis_offset_rounds``: estimate the axis offset, (first round) re-estimate the angles with
     it, re-fit the spheres (new inlier sets); repeat this many times.
+    ``redetect_axis_offset_m``: the first detection runs before the axis offset is known, on a
+    cloud whose direct and reverse faces are ``2 |d|`` apart; when the first estimate of ``|d|``
+    exceeds this, the candidates are detected again on the corrected cloud (a marker on a crater
+    rim, smeared into the rim's ground points, can fail the two-box gate on the first pass).
     """
 
     enabled: bool = True
     axis_offset_rounds: int = 2
+    redetect_axis_offset_m: float = 0.005
     vertical_axis_error_rad: float = 0.0
     lframe_tilt_rad: float = 0.0
     axis_offset_x_m: float = 0.0
@@ -76,6 +81,9 @@ class CalibrateStage(CalibrationConfig):
         if int(self.axis_offset_rounds) < 1:
             raise ConfigError(f"calibrate `axis_offset_rounds` must be >= 1, got "
                               f"{self.axis_offset_rounds}")
+        if not self.redetect_axis_offset_m >= 0:
+            raise ConfigError(f"calibrate `redetect_axis_offset_m` must be >= 0 metres, got "
+                              f"{self.redetect_axis_offset_m}")
         return self
 
     def offsets(self) -> MountingOffsets:
@@ -429,16 +437,7 @@ def process_station(scan: StationScan, config: ProcessConfig | None = None,
                      sigma_lframe_tilt_rad=float(np.sqrt(cov[1, 1])), n_plane_pairs=n_pairs,
                      icp_rms_m=icp_rms)
         timer.lap("calibrate_angles")
-    cloud = synthesize(scan, offsets)
-    timer.lap("synthesis")
-    clusters = detect_candidates(cloud, cfg)
-    timer.lap("ground+cluster+gate")
-    starts = np.array([cap_start(cloud.xyz_m[m], cfg.fit.radius_m) for m in clusters])
-    index = RangeIndex(cloud.xyz_m, cloud.range_m)
-    timer.lap("index")
-    cands = measure_candidates(cloud.xyz_m, index, starts.reshape(-1, 3), cfg)
-    timer.lap("research+fit+quality")
-    del cloud, index
+    cands = _detect_and_measure(scan, offsets, cfg, timer)
     if cal.enabled:
         # The sphere inlier sets depend on the offsets and the angle ICP is biased by an
         # unknown axis offset: estimate d, re-estimate the angles with it (first round only),
@@ -461,6 +460,10 @@ def process_station(scan: StationScan, config: ProcessConfig | None = None,
                              sigma_lframe_tilt_rad=float(np.sqrt(cov[1, 1])),
                              n_plane_pairs=n_pairs, icp_rms_m=icp_rms)
                 timer.lap("calibrate_angles")
+                if np.hypot(*offsets.axis_offset_m) > cal.redetect_axis_offset_m:
+                    cands = _detect_and_measure(scan, offsets, cfg, timer)
+                    calib["redetected"] = True
+                    continue
             cands = _remeasure(scan, offsets, cands, cfg)
             timer.lap("research+fit+quality")
     calib["offsets"] = offsets.to_dict()
@@ -473,6 +476,21 @@ def process_station(scan: StationScan, config: ProcessConfig | None = None,
                "calibration": calib}
     return StationResult(scan.station_id, offsets, calib, cands, rows, edges, summary,
                          timer.times)
+
+
+def _detect_and_measure(scan: StationScan, offsets: MountingOffsets, cfg: ProcessConfig,
+                        timer: _Timer) -> list[Candidate]:
+    """Synthesise the cloud with ``offsets``, detect candidates, re-search and fit them."""
+    cloud = synthesize(scan, offsets)
+    timer.lap("synthesis")
+    clusters = detect_candidates(cloud, cfg)
+    timer.lap("ground+cluster+gate")
+    starts = np.array([cap_start(cloud.xyz_m[m], cfg.fit.radius_m) for m in clusters])
+    index = RangeIndex(cloud.xyz_m, cloud.range_m)
+    timer.lap("index")
+    cands = measure_candidates(cloud.xyz_m, index, starts.reshape(-1, 3), cfg)
+    timer.lap("research+fit+quality")
+    return cands
 
 
 def _remeasure(scan: StationScan, offsets: MountingOffsets, cands: list[Candidate],

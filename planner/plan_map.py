@@ -62,21 +62,34 @@ def draw_plan_map(outcome, path: Path, dpi: int = 150) -> Path:
                    c="#444444", lw=1.0, zorder=4)
     sel = np.flatnonzero(res.selected)
     ax.scatter(prob.site_xyz[sel, 0], prob.site_xyz[sel, 1], s=90, c="#e41a1c",
-               edgecolors="white", linewidths=1.2, zorder=6)
+               edgecolors="white", linewidths=1.2, zorder=10)  # above station labels
     for j in sel:
         ax.annotate(prob.site_ids[j], prob.site_xyz[j, :2], xytext=(6, 6),
                     textcoords="offset points", fontsize=8, color="#e41a1c", weight="bold",
-                    zorder=7)
-    err = np.where(np.isfinite(res.check.error_m), res.check.error_m, cfg.requirement_m * 2)
-    norm = Normalize(vmin=0.0, vmax=cfg.requirement_m)
-    sc = ax.scatter(prob.station_xyz[:, 0], prob.station_xyz[:, 1], c=err, cmap="viridis",
+                    zorder=11)
+    err_mm = 1e3 * res.check.error_m
+    req_mm = 1e3 * cfg.requirement_m
+    finite = err_mm[np.isfinite(err_mm)]
+    # colour range: up to the requirement, or tighter when every station is far inside it, so
+    # that stations stay distinguishable (their errors are also written beside them)
+    top = req_mm if not finite.size else min(req_mm, _nice_ceiling(1.2 * finite.max()))
+    norm = Normalize(vmin=0.0, vmax=top)
+    sc = ax.scatter(prob.station_xyz[:, 0], prob.station_xyz[:, 1],
+                    c=np.where(np.isfinite(err_mm), err_mm, 2 * req_mm), cmap="viridis",
                     norm=norm, marker="^", s=140, edgecolors="black", linewidths=0.8, zorder=8)
+    failing = ~res.check.ok
+    if failing.any():
+        ax.scatter(prob.station_xyz[failing, 0], prob.station_xyz[failing, 1], marker="^",
+                   s=320, facecolors="none", edgecolors="#d62728", linewidths=2.0, zorder=8)
     for s in range(prob.n_stations):
-        ax.annotate(prob.station_ids[s], prob.station_xyz[s, :2], xytext=(7, -12),
+        text = (f"{prob.station_ids[s]} {err_mm[s]:.0f} mm" if np.isfinite(err_mm[s])
+                else f"{prob.station_ids[s]} unregistrable")
+        ax.annotate(text, prob.station_xyz[s, :2], xytext=(7, -12),
                     textcoords="offset points", fontsize=8, weight="bold", zorder=9,
                     bbox={"boxstyle": "round,pad=0.15", "fc": "white", "alpha": 0.7, "lw": 0})
-    cb = fig.colorbar(sc, ax=ax, shrink=0.8, pad=0.01)
-    cb.set_label(f"predicted station error, 95 % (m); requirement {cfg.requirement_m:g} m")
+    cb = fig.colorbar(sc, ax=ax, shrink=0.8, pad=0.01,
+                      extend="max" if failing.any() else "neither")
+    cb.set_label(f"predicted station error, 95 % (mm); requirement {req_mm:g} mm")
     ax.set_xlim(xmin, xmax)
     ax.set_ylim(ymin, ymax)
     ax.set_aspect("equal")
@@ -92,6 +105,9 @@ def draw_plan_map(outcome, path: Path, dpi: int = 150) -> Path:
                label=f"planned marker ({len(sel)})"),
         Line2D([], [], color="#ffbf00", lw=1.2, label="line of sight used"),
     ]
+    if failing.any():
+        handles.append(Line2D([], [], marker="^", ls="", mfc="none", mec="#d62728", mew=2,
+                              ms=13, label="station failing the requirement"))
     if len(inp.as_built_ids):
         handles.append(Line2D([], [], marker="x", ls="", color="#444444", ms=7,
                               label=f"as-built marker ({len(inp.as_built_ids)})"))
@@ -121,6 +137,15 @@ def _view(inp, prob) -> tuple[float, float, float, float]:
     xmin, xmax, ymin, ymax = inp.dem.extent()
     return (max(p[:, 0].min() - pad, xmin), min(p[:, 0].max() + pad, xmax),
             max(p[:, 1].min() - pad, ymin), min(p[:, 1].max() + pad, ymax))
+
+
+def _nice_ceiling(x: float) -> float:
+    """Smallest 1-2-5 x 10^k not below ``x`` (> 0)."""
+    k = 10 ** np.floor(np.log10(x))
+    for m in (1, 2, 5, 10):
+        if m * k >= x:
+            return float(m * k)
+    return float(10 * k)
 
 
 def _nice_length(x: float) -> float:

@@ -6,6 +6,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
+
 
 def plot_tradeoff(doc: dict, path: str | Path) -> Path:
     """Write the trade-off figure of a ``reduce.json`` document.
@@ -59,7 +61,7 @@ def plot_tradeoff(doc: dict, path: str | Path) -> Path:
         ax.plot([v["k"] for v in done], [100 * v["achieved_worst_error_m"] for v in done], "D",
                 color="C1", ms=8, label="achieved worst (simulator + pipeline)")
     ax.set_xlabel("markers kept")
-    ax.set_ylabel("predicted 95 % station error (cm)")
+    _log_error_axis(ax, "predicted 95 % station error (cm, log scale)")
     ax.invert_xaxis()
     ax.set_xticks(k)
     ax.grid(alpha=0.3)
@@ -74,9 +76,19 @@ def plot_tradeoff(doc: dict, path: str | Path) -> Path:
     return path
 
 
-def _plot_verify(ax, verify: dict, req: float) -> None:
-    import numpy as np
+def _log_error_axis(ax, label: str) -> None:
+    """Log-scale error axis with plain-number ticks: errors of a few millimetres and the 10 cm
+    requirement line stay readable in one panel."""
+    from matplotlib.ticker import FuncFormatter
 
+    ax.set_yscale("log")
+    ax.yaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
+    ax.yaxis.set_minor_formatter(FuncFormatter(
+        lambda v, _: f"{v:g}" if round(v / 10 ** np.floor(np.log10(v))) in (2, 5) else ""))
+    ax.set_ylabel(label)
+
+
+def _plot_verify(ax, verify: dict, req: float) -> None:
     pts = verify["points"]
     stations = [s["id"] for s in pts[0]["stations"]]
     x = np.arange(len(stations))
@@ -92,7 +104,7 @@ def _plot_verify(ax, verify: dict, req: float) -> None:
                label=f"{v['k']} markers: achieved")
     ax.axhline(100 * req, color="k", lw=1.2, ls="-.")
     ax.set_xticks(x, stations)
-    ax.set_ylabel("station error (cm)")
+    _log_error_axis(ax, "station error (cm, log scale)")
     ax.set_title("verification: achieved beside predicted")
     ax.legend(fontsize=8)
     ax.grid(alpha=0.3, axis="y")

@@ -81,8 +81,8 @@ def plan_dem(doc: dict):
     return load_site(doc["site"]["name"], doc["site"].get("seed")).dem
 
 
-def verify_plan(doc: dict, error_model, seed: int = 0, progress: bool = True
-                ) -> list[StationCheck]:
+def verify_plan(doc: dict, error_model, seed: int = 0, progress: bool = True,
+                offsets=None) -> list[StationCheck]:
     """Simulate, process and register every station of a plan (see module docstring).
 
     Parameters
@@ -95,6 +95,9 @@ def verify_plan(doc: dict, error_model, seed: int = 0, progress: bool = True
         Simulation seed (each station's noise stream derives from it and the station id).
     progress : bool
         Progress bar on stderr.
+    offsets : pipeline.rig.MountingOffsets, optional
+        True mounting offsets of the simulated rig (default: none). The pipeline self-calibrates
+        them from each station's scan, as it would in the field.
 
     Returns
     -------
@@ -105,6 +108,7 @@ def verify_plan(doc: dict, error_model, seed: int = 0, progress: bool = True
     from pipeline.evaluation import Reference
     from pipeline.process import build_config, process_station
     from pipeline.rig import station_to_site_matrix
+    from visibility.sensor import RigConfig
     from visibility.simulate import simulate_markers
 
     dem = plan_dem(doc)
@@ -114,12 +118,13 @@ def verify_plan(doc: dict, error_model, seed: int = 0, progress: bool = True
     ids = [m["id"] for m in doc["markers"]]
     centres = np.array([[m["x_m"], m["y_m"], m["z_m"]] for m in doc["markers"]], float)
     cfg = build_config()
+    rig = RigConfig() if offsets is None else RigConfig(offsets=offsets)
     checks = []
     for k, st in enumerate(tqdm(doc["stations"], desc="verify", unit="station",
                                 file=sys.stderr, disable=None if progress else True)):
         pos = np.array([st["x_m"], st["y_m"], st["z_m"]], float)
         heading = float(st.get("heading_rad") or 0.0)
-        scan, truth = simulate_markers(dem, pos, heading, centres, seed=seed + k,
+        scan, truth = simulate_markers(dem, pos, heading, centres, rig=rig, seed=seed + k,
                                        marker_radius_m=r_marker, marker_ids=ids,
                                        station_id=st["id"])
         rot = station_to_site_matrix(heading)
@@ -155,14 +160,18 @@ def verify_plan(doc: dict, error_model, seed: int = 0, progress: bool = True
     return checks
 
 
-def verify_record(doc: dict, checks: list[StationCheck], seed: int, model_name: str) -> dict:
-    """The ``verify.json`` document."""
+def verify_record(doc: dict, checks: list[StationCheck], seed: int, model_name: str,
+                  offsets=None) -> dict:
+    """The ``verify.json`` document (``offsets``: the simulated rig's true mounting offsets)."""
     from markerplan.provenance import provenance
+    from pipeline.rig import MountingOffsets
 
     req = float(doc["requirement"]["requirement_m"])
+    true_offsets = (offsets or MountingOffsets()).to_dict()
     return {
         "schema": "markerplan-verify", "schema_version": 1,
         "provenance": provenance({"seed": seed, "error_model": model_name,
+                                  "mounting_offsets": true_offsets,
                                   "plan_config_sha256": doc["provenance"]["config_sha256"]},
                                  plan=doc["provenance"]),
         "requirement_m": req,

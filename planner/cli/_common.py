@@ -4,6 +4,8 @@
 - :func:`staged_output`: write into a hidden sibling folder, move it into place only on
   success, so a failing command never leaves half-written output.
 - :func:`emit_summary`: one JSON object on stdout with ``--json``, a short human summary otherwise.
+- :func:`mounting_offset_options` / :func:`mounting_offsets`: the three true mounting offsets of
+  a simulated rig (``simulate``, ``verify``).
 """
 
 from __future__ import annotations
@@ -116,4 +118,46 @@ def parse_triplet(text: str | None, name: str) -> tuple[float, float, float] | N
     if len(values) != 3:
         raise ConfigError(f"{name} must be three comma-separated numbers like 0,0,1.0; "
                           f"got {text!r}")
+    return values  # type: ignore[return-value]
+
+
+def mounting_offset_options(command):
+    """``--vertical-axis-error-deg``, ``--lframe-tilt-deg``, ``--axis-offset-mm``: the true
+    mounting offsets of a simulated rig (the pipeline self-calibrates them)."""
+    for option in reversed([
+        click.option("--vertical-axis-error-deg", type=float, default=0.0, show_default=True,
+                     help="True vertical-axis error (rotation about the spin axis), degrees."),
+        click.option("--lframe-tilt-deg", type=float, default=0.0, show_default=True,
+                     help="True L-frame tilt, degrees."),
+        click.option("--axis-offset-mm", default="0,0", show_default=True,
+                     help="True horizontal offset DX,DY of the LiDAR centre from the turntable "
+                          "axis, mm."),
+    ]):
+        command = option(command)
+    return command
+
+
+def mounting_offsets(vertical_axis_error_deg: float, lframe_tilt_deg: float,
+                     axis_offset_mm: str):
+    """The :class:`pipeline.rig.MountingOffsets` (SI units) of the three CLI options."""
+    import math
+
+    from pipeline.rig import MountingOffsets
+
+    dx, dy = parse_pair(axis_offset_mm, "--axis-offset-mm")
+    return MountingOffsets(math.radians(vertical_axis_error_deg), math.radians(lframe_tilt_deg),
+                           (dx / 1e3, dy / 1e3))
+
+
+def parse_pair(text: str, name: str) -> tuple[float, float]:
+    """Parse ``"a,b"`` into two floats, or raise a ConfigError naming the option."""
+    from markerplan.errors import ConfigError
+
+    parts = text.split(",")
+    try:
+        values = tuple(float(p) for p in parts)
+    except ValueError:
+        values = ()
+    if len(values) != 2:
+        raise ConfigError(f"{name} must be two comma-separated numbers like 5,-3; got {text!r}")
     return values  # type: ignore[return-value]

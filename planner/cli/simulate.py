@@ -10,23 +10,12 @@ import click
 from planner.cli._common import (
     emit_summary,
     json_option,
+    mounting_offset_options,
+    mounting_offsets,
     out_option,
     overwrite_option,
     staged_output,
 )
-
-
-def _parse_pair(text: str, name: str) -> tuple[float, float]:
-    from markerplan.errors import ConfigError
-
-    parts = text.split(",")
-    try:
-        values = tuple(float(p) for p in parts)
-    except ValueError:
-        values = ()
-    if len(values) != 2:
-        raise ConfigError(f"{name} must be two comma-separated numbers like 5,-3; got {text!r}")
-    return values  # type: ignore[return-value]
 
 
 def _select_stations(site_ids: list[str], text: str | None) -> list[str]:
@@ -67,12 +56,7 @@ def _select_stations(site_ids: list[str], text: str | None) -> list[str]:
 @click.option("--seed", type=int, default=0, show_default=True, help="Simulation noise seed.")
 @click.option("--lidar-height", "lidar_height_m", type=float, default=1.0, show_default=True,
               help="LiDAR centre above the ground, metres.")
-@click.option("--vertical-axis-error-deg", type=float, default=0.0, show_default=True,
-              help="True vertical-axis error (rotation about the spin axis), degrees.")
-@click.option("--lframe-tilt-deg", type=float, default=0.0, show_default=True,
-              help="True L-frame tilt, degrees.")
-@click.option("--axis-offset-mm", default="0,0", show_default=True,
-              help="True horizontal offset DX,DY of the LiDAR centre from the turntable axis, mm.")
+@mounting_offset_options
 @click.option("--range-noise-mm", type=float, default=15.0, show_default=True,
               help="1-sigma range noise, mm (datasheet +-3 cm read as 2 sigma).")
 @click.option("--incidence-noise-mm", type=float, default=0.0, show_default=True,
@@ -99,11 +83,9 @@ def command(site_name: str, site_seed: int, dem_path: Path | None, dem_fill: str
       markerplan simulate --site default --out scans/
       markerplan simulate --stations S1,S2 --frames 200 --axis-offset-mm 5,-3 --out scans/ --json
     """
-    import numpy as np
     from tqdm import tqdm
 
     from markerplan.errors import ConfigError
-    from pipeline.rig import MountingOffsets
     from visibility.dem import read_dem
     from visibility.sensor import RigConfig, SensorConfig
     from visibility.simulate import simulate_site, write_site_json
@@ -112,9 +94,7 @@ def command(site_name: str, site_seed: int, dem_path: Path | None, dem_fill: str
     if frames <= 0:
         raise ConfigError(f"--frames must be a positive number of frames per turn (e.g. 800), "
                           f"got {frames}")
-    dx, dy = _parse_pair(axis_offset_mm, "--axis-offset-mm")
-    offsets = MountingOffsets(float(np.radians(vertical_axis_error_deg)),
-                              float(np.radians(lframe_tilt_deg)), (dx / 1e3, dy / 1e3))
+    offsets = mounting_offsets(vertical_axis_error_deg, lframe_tilt_deg, axis_offset_mm)
     sensor = SensorConfig(rpm=rpm, range_noise_m=range_noise_mm / 1e3,
                           incidence_noise_m=incidence_noise_mm / 1e3,
                           beam_divergence=beam_divergence, dropout_prob=dropout_prob)

@@ -10,6 +10,8 @@ import click
 from planner.cli._common import (
     emit_summary,
     json_option,
+    mounting_offset_options,
+    mounting_offsets,
     out_option,
     overwrite_option,
     staged_output,
@@ -22,18 +24,25 @@ from planner.cli._common import (
                                                                   path_type=Path),
               help="Error-model JSON for the registration weights (default: the shipped model).")
 @click.option("--seed", type=int, default=0, show_default=True, help="Simulation noise seed.")
+@mounting_offset_options
 @out_option(required=True)
 @overwrite_option
 @json_option
-def command(plan_path, error_model_path, seed, out, overwrite, as_json):
+def command(plan_path, error_model_path, seed, vertical_axis_error_deg, lframe_tilt_deg,
+            axis_offset_mm, out, overwrite, as_json):
     """Check a plan by simulation: scan each station with the planned markers, process the
     scans, register each station to its detected markers, and compare achieved with predicted
     error. Exit code 1 when any station's achieved error exceeds the requirement.
+
+    With mounting offsets the simulated rig is mis-mounted and the pipeline self-calibrates
+    each station's scan before detecting the markers, as in the field.
 
     \b
     Example:
       markerplan plan --out plan/
       markerplan verify plan/plan.json --out verify/
+      markerplan verify plan/plan.json --vertical-axis-error-deg 0.3 --lframe-tilt-deg 0.3 \\
+          --axis-offset-mm 15,0 --out verify-offsets/
     """
     import json
 
@@ -41,6 +50,7 @@ def command(plan_path, error_model_path, seed, out, overwrite, as_json):
     from planner.verify import read_plan, verify_markdown, verify_plan, verify_record
 
     doc = read_plan(plan_path)
+    offsets = mounting_offsets(vertical_axis_error_deg, lframe_tilt_deg, axis_offset_mm)
     if error_model_path is not None:
         from error_model.model import ErrorModel
 
@@ -49,8 +59,9 @@ def command(plan_path, error_model_path, seed, out, overwrite, as_json):
         from error_model import default_model
 
         model, model_name = default_model(), "default"
-    checks = verify_plan(doc, model, seed=seed, progress=not as_json or sys.stderr.isatty())
-    rec = verify_record(doc, checks, seed, model_name)
+    checks = verify_plan(doc, model, seed=seed, progress=not as_json or sys.stderr.isatty(),
+                         offsets=offsets)
+    rec = verify_record(doc, checks, seed, model_name, offsets)
     with staged_output(out, overwrite) as stage:
         (stage / "verify.json").write_text(json.dumps(rec, indent=2) + "\n")
         (stage / "verify.md").write_text(verify_markdown(rec))

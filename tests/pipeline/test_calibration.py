@@ -38,23 +38,47 @@ def test_rotation_offsets_recovered_with_unknown_axis_offset(scan):
     assert np.all(np.sqrt(np.diag(cov)) < np.radians(0.01))
 
 
+def _sphere_members(scan, offsets):
+    """Inlier indices and centres of the known spheres in the cloud synthesised with offsets."""
+    cloud = synthesize(scan, offsets)
+    index = RangeIndex(cloud.xyz_m)
+    members, centres = [], []
+    for c, r in SPHERES:
+        m = index.within(c, 0.3)
+        fit = fit_sphere(cloud.xyz_m[m], r, centre0_m=c)
+        members.append(m[fit.used])
+        centres.append(fit.centre_m)
+    return members, np.array(centres)
+
+
 def test_axis_offset_from_sphere_consistency(scan):
     start = MountingOffsets(TRUE.vertical_axis_error_rad, TRUE.lframe_tilt_rad, (0.0, 0.0))
     offsets = start
     for _ in range(2):  # re-fit the spheres (new inlier sets) with the new offset
-        cloud = synthesize(scan, offsets)
-        index = RangeIndex(cloud.xyz_m)
-        members, centres = [], []
-        for c, r in SPHERES:
-            m = index.within(c, 0.3)
-            fit = fit_sphere(cloud.xyz_m[m], r, centre0_m=c)
-            members.append(m[fit.used])
-            centres.append(fit.centre_m)
-        offsets, cov, n, rms = estimate_axis_offset(scan, offsets, members, 0.1,
-                                                    np.array(centres))
+        members, centres = _sphere_members(scan, offsets)
+        offsets, cov, n, rms = estimate_axis_offset(scan, offsets, members, 0.1, centres)
     assert n == len(SPHERES)
     np.testing.assert_allclose(offsets.axis_offset_m, TRUE.axis_offset_m, atol=0.002)
     assert np.all(np.sqrt(np.diag(cov)) < 0.002)
+
+
+def test_a_false_sphere_is_dropped_from_the_axis_offset_fit(scan):
+    """A candidate whose direct and reverse faces belong to different objects (as a rock or a
+    clipped marker accepted on a smeared cloud can) is an outlier; without rejecting it the
+    offset is pulled far off."""
+    start = MountingOffsets(TRUE.vertical_axis_error_rad, TRUE.lframe_tilt_rad, (0.0, 0.0))
+    members, centres = _sphere_members(scan, TRUE)
+    face = direct_face(scan)
+    a, b = members[0], members[1]
+    false = np.r_[a[face[a]], b[~face[b]]]
+    members, centres = [*members, false], np.vstack([centres, centres[0]])
+    off, _, n, _ = estimate_axis_offset(scan, start, members, 0.1, centres)
+    assert n == len(SPHERES)
+    np.testing.assert_allclose(off.axis_offset_m, TRUE.axis_offset_m, atol=0.002)
+    naive, _, n_all, _ = estimate_axis_offset(scan, start, members, 0.1, centres,
+                                              CalibrationConfig(sphere_outlier_chi2=1e12))
+    assert n_all == len(SPHERES) + 1
+    assert np.linalg.norm(np.subtract(naive.axis_offset_m, TRUE.axis_offset_m)) > 0.004
 
 
 def test_no_spheres_leaves_offset_unchanged(scan):
@@ -65,6 +89,8 @@ def test_no_spheres_leaves_offset_unchanged(scan):
 def test_config_and_data_errors(scan):
     with pytest.raises(ConfigError, match="neighbours"):
         CalibrationConfig(neighbours=2).validate()
+    with pytest.raises(ConfigError, match="sphere_outlier_chi2"):
+        CalibrationConfig(sphere_outlier_chi2=0).validate()
     with pytest.raises(DataError, match="calibration range band"):
         estimate_rotation_offsets(scan, config=CalibrationConfig(min_range_m=50,
                                                                  max_range_m=60))
