@@ -6,6 +6,8 @@
 - :func:`emit_summary`: one JSON object on stdout with ``--json``, a short human summary otherwise.
 - :func:`mounting_offset_options` / :func:`mounting_offsets`: the three true mounting offsets of
   a simulated rig (``simulate``, ``verify``).
+- ``dem_option`` / ``stations_option`` / ``error_model_option``: the site inputs that ``plan``
+  and ``reduce`` share.
 """
 
 from __future__ import annotations
@@ -36,6 +38,20 @@ def out_option(default: str | None = None, required: bool = False):
         help="Output folder (created; refused if it exists unless --overwrite).",
     )
 
+
+FILE = click.Path(dir_okay=False, path_type=Path)
+
+dem_option = click.option(
+    "--dem", "dem_path", type=FILE,
+    help="DEM (.tif/.tiff/.npz, site-frame metres) instead of the preset terrain.")
+
+stations_option = click.option(
+    "--stations", "stations_path", type=FILE,
+    help="Stations CSV (id,x_m,y_m[,z_m][,heading_deg]) or GeoJSON Points.")
+
+error_model_option = click.option(
+    "--error-model", "error_model_path", type=FILE,
+    help="Error-model JSON from fit-error-model (default: the shipped model).")
 
 overwrite_option = click.option(
     "--overwrite", is_flag=True, help="Replace the output folder if it already exists."
@@ -104,21 +120,25 @@ def emit_summary(summary: dict[str, Any], as_json: bool, human: str | None = Non
         click.echo(human if human is not None else json.dumps(summary, indent=2, default=str))
 
 
-def parse_triplet(text: str | None, name: str) -> tuple[float, float, float] | None:
-    """Parse ``"x,y,z"`` into three floats, or raise a ConfigError naming the option."""
+def parse_numbers(text: str, name: str, example: str) -> tuple[float, ...]:
+    """Parse comma-separated numbers, as many as ``example`` has, or raise a ConfigError that
+    names the option and shows the example.
+
+    >>> parse_numbers("5,-3", "--axis-offset-mm", "5,-3")
+    (5.0, -3.0)
+    """
     from markerplan.errors import ConfigError
 
-    if text is None:
-        return None
-    parts = text.split(",")
+    count = len(example.split(","))
     try:
-        values = tuple(float(p) for p in parts)
+        values = tuple(float(p) for p in text.split(","))
     except ValueError:
         values = ()
-    if len(values) != 3:
-        raise ConfigError(f"{name} must be three comma-separated numbers like 0,0,1.0; "
+    if len(values) != count:
+        words = {2: "two", 3: "three"}.get(count, str(count))
+        raise ConfigError(f"{name} must be {words} comma-separated numbers like {example}; "
                           f"got {text!r}")
-    return values  # type: ignore[return-value]
+    return values
 
 
 def mounting_offset_options(command):
@@ -144,20 +164,6 @@ def mounting_offsets(vertical_axis_error_deg: float, lframe_tilt_deg: float,
 
     from pipeline.rig import MountingOffsets
 
-    dx, dy = parse_pair(axis_offset_mm, "--axis-offset-mm")
+    dx, dy = parse_numbers(axis_offset_mm, "--axis-offset-mm", "5,-3")
     return MountingOffsets(math.radians(vertical_axis_error_deg), math.radians(lframe_tilt_deg),
                            (dx / 1e3, dy / 1e3))
-
-
-def parse_pair(text: str, name: str) -> tuple[float, float]:
-    """Parse ``"a,b"`` into two floats, or raise a ConfigError naming the option."""
-    from markerplan.errors import ConfigError
-
-    parts = text.split(",")
-    try:
-        values = tuple(float(p) for p in parts)
-    except ValueError:
-        values = ()
-    if len(values) != 2:
-        raise ConfigError(f"{name} must be two comma-separated numbers like 5,-3; got {text!r}")
-    return values  # type: ignore[return-value]

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import click
 
-from planner.cli._common import emit_summary, json_option, parse_triplet
+from planner.cli._common import emit_summary, json_option, parse_numbers
 
 _METHODS = ("fixed-radius", "hemisphere-icp")
 
@@ -31,7 +31,7 @@ def command(file: str, radius_m: float, sensor: str, method: str, as_json: bool)
     from pipeline.pointsets import read_points
     from pipeline.sphere_fit import fit_sphere
 
-    sensor_m = parse_triplet(sensor, "--sensor")
+    sensor_m = None if sensor is None else parse_numbers(sensor, "--sensor", "0,0,1.0")
     points = read_points(file)
     fit = fit_sphere(points, radius_m, sensor_m=sensor_m, method=method)
     summary = {"file": file, "sensor_m": list(sensor_m), **fit.to_dict()}

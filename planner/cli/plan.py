@@ -3,19 +3,20 @@
 from __future__ import annotations
 
 import sys
-from pathlib import Path
 
 import click
 
 from planner.cli._common import (
+    FILE,
+    dem_option,
     emit_summary,
+    error_model_option,
     json_option,
     out_option,
     overwrite_option,
     staged_output,
+    stations_option,
 )
-
-_FILE = click.Path(dir_okay=False, path_type=Path)
 
 
 @click.command("plan")
@@ -23,19 +24,16 @@ _FILE = click.Path(dir_okay=False, path_type=Path)
               help="Site preset: default (40 m crater field, 7 stations) or large (300 m).")
 @click.option("--seed", type=int, default=None,
               help="Seed of the preset's synthetic terrain (default: the preset's own).")
-@click.option("--dem", "dem_path", type=_FILE,
-              help="DEM (.tif/.tiff/.npz, site-frame metres) instead of the preset terrain.")
-@click.option("--stations", "stations_path", type=_FILE,
-              help="Stations CSV (id,x_m,y_m[,z_m][,heading_deg]) or GeoJSON Points.")
-@click.option("--boundary", "boundary_path", type=_FILE,
+@dem_option
+@stations_option
+@click.option("--boundary", "boundary_path", type=FILE,
               help="GeoJSON polygon: where markers may go (default: the preset's, or the DEM).")
-@click.option("--exclude", "exclude_paths", type=_FILE, multiple=True,
+@click.option("--exclude", "exclude_paths", type=FILE, multiple=True,
               help="GeoJSON polygon(s) where no marker may go (repeatable).")
-@click.option("--error-model", "error_model_path", type=_FILE,
-              help="Error-model JSON from fit-error-model (default: the shipped model).")
-@click.option("--config", "config_path", type=_FILE,
+@error_model_option
+@click.option("--config", "config_path", type=FILE,
               help="TOML file of plan settings (requirement_m, n_sectors, ...).")
-@click.option("--visibility", "visibility_path", type=_FILE,
+@click.option("--visibility", "visibility_path", type=FILE,
               help="Plan from a visibility table CSV (station,site,usable,bearing_deg,sigma_m,"
                    "site_x_m,site_y_m,site_z_m) instead of ray casting.")
 @click.option("--redundant", is_flag=True, default=None,
