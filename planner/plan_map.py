@@ -10,6 +10,9 @@ from pathlib import Path
 
 import numpy as np
 
+#: Above this many stations (or markers) the map leaves out their text labels.
+MAX_LABELS = 30
+
 
 def draw_plan_map(outcome, path: Path, dpi: int = 150) -> Path:
     """Draw the map of a :class:`~planner.planning.PlanOutcome` into ``path`` (PNG)."""
@@ -25,7 +28,7 @@ def draw_plan_map(outcome, path: Path, dpi: int = 150) -> Path:
     inp, prob, res, cfg = outcome.inputs, outcome.problem, outcome.result, outcome.config
     dem = inp.dem
     xmin, xmax, ymin, ymax = _view(inp, prob)
-    fig, ax = plt.subplots(figsize=(9.0, 8.0), constrained_layout=True)
+    fig, ax = plt.subplots(figsize=(9.0, 8.6), layout="constrained")
     # hillshade of the DEM, cropped to the view
     gx, gy = dem.grid_xy()
     ci = (gx >= xmin - 1) & (gx <= xmax + 1)
@@ -63,7 +66,11 @@ def draw_plan_map(outcome, path: Path, dpi: int = 150) -> Path:
     sel = np.flatnonzero(res.selected)
     ax.scatter(prob.site_xyz[sel, 0], prob.site_xyz[sel, 1], s=90, c="#e41a1c",
                edgecolors="white", linewidths=1.2, zorder=10)  # above station labels
-    for j in sel:
+    # ids and errors beside every symbol read well up to a few dozen; beyond that they hide the
+    # map, and the colour (stations) and markers.csv (ids) carry the same information
+    label_markers = len(sel) <= MAX_LABELS
+    label_stations = prob.n_stations <= MAX_LABELS
+    for j in sel if label_markers else ():
         ax.annotate(prob.site_ids[j], prob.site_xyz[j, :2], xytext=(6, 6),
                     textcoords="offset points", fontsize=8, color="#e41a1c", weight="bold",
                     zorder=11)
@@ -81,7 +88,7 @@ def draw_plan_map(outcome, path: Path, dpi: int = 150) -> Path:
     if failing.any():
         ax.scatter(prob.station_xyz[failing, 0], prob.station_xyz[failing, 1], marker="^",
                    s=320, facecolors="none", edgecolors="#d62728", linewidths=2.0, zorder=8)
-    for s in range(prob.n_stations):
+    for s in range(prob.n_stations) if label_stations else ():
         text = (f"{prob.station_ids[s]} {err_mm[s]:.0f} mm" if np.isfinite(err_mm[s])
                 else f"{prob.station_ids[s]} unregistrable")
         ax.annotate(text, prob.station_xyz[s, :2], xytext=(7, -12),
@@ -115,7 +122,8 @@ def draw_plan_map(outcome, path: Path, dpi: int = 150) -> Path:
         handles.append(Line2D([], [], color="#8c6d31", ls="--", label="crater rim"))
     if inp.boundary_xy is not None:
         handles.append(Line2D([], [], color="#1f77b4", ls=":", label="site boundary"))
-    ax.legend(handles=handles, loc="upper left", fontsize=8, framealpha=0.85)
+    fig.legend(handles=handles, loc="outside lower center", ncols=min(len(handles), 4),
+               fontsize=8, frameon=False)
     sol = res.solution
     ax.set_title(f"markerplan — site '{inp.site_name}': {len(sel)} markers, "
                  f"{int(res.check.ok.sum())}/{prob.n_stations} stations ≤ "
