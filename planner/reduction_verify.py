@@ -53,7 +53,8 @@ def point_plan(study, inputs, k: int) -> dict:
             "provenance": {"inputs": dict(inputs.sources)}}
 
 
-def verify_points(study, inputs, ks, error_model, seed: int = 0, progress: bool = True) -> dict:
+def verify_points(study, inputs, ks, error_model, seed: int = 0, progress: bool = True,
+                  offsets=None) -> dict:
     """Verify the curve at the counts ``ks`` (default :func:`default_counts`).
 
     Parameters
@@ -67,6 +68,9 @@ def verify_points(study, inputs, ks, error_model, seed: int = 0, progress: bool 
     seed : int
         Simulation seed (the same for every count, so differences come from the markers).
     progress : bool
+    offsets : pipeline.rig.MountingOffsets, optional
+        True mounting offsets of the simulated rig (default: none); see
+        :func:`planner.verify.verify_plan`.
 
     Returns
     -------
@@ -82,7 +86,7 @@ def verify_points(study, inputs, ks, error_model, seed: int = 0, progress: bool 
     points = []
     for k in ks:
         doc = point_plan(study, inputs, k)
-        checks = verify_plan(doc, error_model, seed=seed, progress=progress)
+        checks = verify_plan(doc, error_model, seed=seed, progress=progress, offsets=offsets)
         achieved = [c.achieved_error_m for c in checks]
         finite = [a for a in achieved if a is not None]
         points.append({

@@ -12,6 +12,8 @@ from planner.cli._common import (
     emit_summary,
     error_model_option,
     json_option,
+    mounting_offset_options,
+    mounting_offsets,
     out_option,
     overwrite_option,
     staged_output,
@@ -53,12 +55,14 @@ def _id_list(text: str | None) -> tuple[str, ...]:
 @click.option("--verify-k", "verify_k",
               help="Counts to verify, comma-separated (default: the full layout and the "
                    "fewest meeting the requirement).")
+@mounting_offset_options
 @out_option(default="markerplan-reduce")
 @overwrite_option
 @json_option
 def command(layout_spec, site_name, seed, dem_path, stations_path, boundary_path, exclude_paths,
             error_model_path, config_path, free, keep_ids, drop_ids, k_min, time_limit_s,
-            verify, verify_seed, verify_k, out, overwrite, as_json):
+            verify, verify_seed, verify_k, vertical_axis_error_deg, lframe_tilt_deg,
+            axis_offset_mm, out, overwrite, as_json):
     """Trade-off between the number of markers and the worst station's predicted error.
 
     INPUT is a plan.json from `markerplan plan`, a markers CSV (id,x_m,y_m[,z_m], site frame)
@@ -72,8 +76,12 @@ def command(layout_spec, site_name, seed, dem_path, stations_path, boundary_path
       markerplan reduce as-built --site default --out reduce/
       markerplan reduce plan/plan.json --free --out reduce-free/
       markerplan reduce markers.csv --keep M01 --verify --verify-k 11,6 --out reduce/
+
+    The mounting-offset options mis-mount the rig simulated by --verify (the pipeline
+    self-calibrates it).
     """
     from markerplan.errors import ConfigError
+    from pipeline.rig import MountingOffsets
     from planner.config import load_config
     from planner.reduction_plot import plot_tradeoff
     from planner.reduction_report import reduce_record, summary, write_reduce_files
@@ -92,6 +100,10 @@ def command(layout_spec, site_name, seed, dem_path, stations_path, boundary_path
     except ConfigError as exc:
         raise ConfigError(f"{exc} (from the command-line options)") from exc
     ks = _verify_counts(verify_k, verify, len(layout.ids))
+    offsets = mounting_offsets(vertical_axis_error_deg, lframe_tilt_deg, axis_offset_mm)
+    if offsets != MountingOffsets() and not verify:
+        raise ConfigError("the mounting-offset options set the rig that --verify simulates; "
+                          "add --verify or drop them")
     if error_model_path is not None:
         from error_model.model import ErrorModel
 
@@ -112,10 +124,12 @@ def command(layout_spec, site_name, seed, dem_path, stations_path, boundary_path
         from planner.reduction_verify import verify_points
 
         t = time.perf_counter()
-        verified = verify_points(study, inputs, ks, model, seed=verify_seed, progress=progress)
+        verified = verify_points(study, inputs, ks, model, seed=verify_seed, progress=progress,
+                                 offsets=offsets)
         study.timings_s["verify"] = time.perf_counter() - t
     options = {"input": layout_spec, "free": free, "k_min": k_min,
                "verify": verify, "verify_seed": verify_seed if verify else None,
+               "verify_mounting_offsets": offsets.to_dict() if verify else None,
                "verify_k": None if ks is None else list(ks)}
     doc = reduce_record(study, layout, inputs, model_name, options, verified)
     with staged_output(out, overwrite) as stage:

@@ -85,6 +85,8 @@ def _layout_csv(path, rows):
     (["--k-min", "1"], None, "`k_min` must be in"),
     (["--verify", "--verify-k", "12"], None, "--verify-k must be comma-separated counts"),
     (["--verify-k", "5"], None, "--verify-k needs --verify"),
+    (["--axis-offset-mm", "15,0"], None, "add --verify or drop them"),
+    (["--verify", "--axis-offset-mm", "15"], None, "--axis-offset-mm must be two"),
 ])
 def test_bad_input_is_one_line_without_output(tmp_path, capsys, extra, rows, fix):
     site = load_site("default")
@@ -103,13 +105,17 @@ def test_bad_input_is_one_line_without_output(tmp_path, capsys, extra, rows, fix
 
 @pytest.mark.slow
 def test_verify_runs_the_simulator_at_two_points(tmp_path, capsys):
+    """On a mis-mounted rig (self-calibrated by the pipeline), as in the field."""
     out = tmp_path / "v"
-    code, stdout, _ = run_cli(capsys, ["reduce", "as-built", "--verify", "--out", str(out),
+    code, stdout, _ = run_cli(capsys, ["reduce", "as-built", "--verify", "--axis-offset-mm",
+                                       "15,0", "--lframe-tilt-deg", "0.3", "--out", str(out),
                                        "--json"])
     assert code == 0
     summary = json.loads(stdout)
     assert summary["verified_k"] == [11, summary["k_feasible"]]
     doc = json.loads((out / "reduce.json").read_text())
+    rig = doc["provenance"]["config"]["reduce"]["verify_mounting_offsets"]
+    assert rig["axis_offset_m"] == [0.015, 0.0]
     for v in doc["verify"]["points"]:
         assert len(v["stations"]) == 7
         assert all(s["achieved_error_m"] is not None for s in v["stations"])

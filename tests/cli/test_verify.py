@@ -33,6 +33,15 @@ def test_verify_passes_and_fails_with_the_reason(tmp_path, capsys):
     assert code == 0
     s = json.loads(stdout)["stations"]["S1"]
     assert s["passed"] and s["achieved_error_m"] <= 0.10
+    # a mis-mounted rig: the pipeline self-calibrates, the plan still passes, the truth is kept
+    code, stdout, _ = run_cli(capsys, ["verify", str(one), "--vertical-axis-error-deg", "0.3",
+                                       "--lframe-tilt-deg", "0.3", "--axis-offset-mm", "15,0",
+                                       "--out", str(tmp_path / "v3"), "--json"])
+    assert code == 0 and json.loads(stdout)["stations"]["S1"]["passed"]
+    rec = json.loads((tmp_path / "v3" / "verify.json").read_text())
+    truth = rec["provenance"]["config"]["mounting_offsets"]
+    assert truth["axis_offset_m"] == [0.015, 0.0]
+    assert truth["lframe_tilt_rad"] == pytest.approx(0.005236, abs=1e-6)
     doc["requirement"]["requirement_m"] = 1e-5  # no real registration is this good
     strict = tmp_path / "strict.json"
     strict.write_text(json.dumps(doc))
