@@ -47,7 +47,7 @@ def main() -> None:
 
     from error_model import default_model
     from error_model.model import ErrorModel
-    from pipeline.evaluation import Reference
+    from pipeline.evaluation import reference_from_truth
     from pipeline.process import build_config, process_station
     from pipeline.rig import MountingOffsets
     from visibility.sensor import RigConfig
@@ -64,10 +64,8 @@ def main() -> None:
     for i, k in np.ndindex(args.replicates, args.stations):
         scan, truth = simulate_station(site, k, rig=rig, seed=args.seed + 100 * i + k,
                                        scene=scene)
-        ref = Reference(tuple(m["id"] for m in truth["markers"]),
-                        np.array([m["centre_station_m"] for m in truth["markers"]]),
-                        truth["station_id"], "truth")
-        rows = [r for r in process_station(scan, build_config(), ref).rows
+        rows = [r for r in process_station(scan, build_config(),
+                                           reference_from_truth(truth)).rows
                 if r.accepted and r.error_m is not None]
         dist += [r.distance_m for r in rows]
         elev += [np.radians(r.elevation_deg) for r in rows]

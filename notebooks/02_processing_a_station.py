@@ -30,7 +30,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from pipeline.evaluation import Reference  # noqa: E402
+from pipeline.evaluation import reference_from_truth  # noqa: E402
 from pipeline.process import build_config, process_station  # noqa: E402
 from pipeline.rig import MountingOffsets  # noqa: E402
 from pipeline.synthesis import synthesize  # noqa: E402
@@ -52,9 +52,7 @@ true_offsets = MountingOffsets(vertical_axis_error_rad=np.radians(0.3),
 rig = RigConfig(offsets=true_offsets)
 frames = range(0, rig.frames_per_turn, 10)  # every 4.5 deg; frame f and f + 400 face each other
 scan, truth = simulate_station(site, 0, SensorConfig(), rig, seed=1, frames=frames)
-reference = Reference(tuple(m["id"] for m in truth["markers"]),
-                      np.array([m["centre_station_m"] for m in truth["markers"]]),
-                      truth["station_id"], "simulator truth")
+reference = reference_from_truth(truth)
 print(f"{scan.station_id}: {len(frames)} frames, {scan.n_points} points")
 
 # %% [markdown]

@@ -34,7 +34,7 @@ from error_model import default_model  # noqa: E402
 from error_model.diagnostics import plot_diagnostics, summary_text  # noqa: E402
 from error_model.fit import fit_error_model  # noqa: E402
 from error_model.table import EXTRA_COLUMNS, read_marker_table  # noqa: E402
-from pipeline.evaluation import Reference  # noqa: E402
+from pipeline.evaluation import reference_from_truth  # noqa: E402
 from pipeline.marker_table import write_marker_table  # noqa: E402
 from pipeline.process import build_config, process_station  # noqa: E402
 from visibility.dem import DEM  # noqa: E402
@@ -65,10 +65,7 @@ for rep in range(5):
     station = np.array([0.0, 0.0, dem.height_at(np.zeros((1, 2)))[0] + 1.0])
     scan, truth = simulate_markers(dem, station, 0.0, centres, seed=rep,
                                    frames=range(0, 800, 8), station_id=f"R{rep}")
-    ref = Reference(tuple(m["id"] for m in truth["markers"]),
-                    np.array([m["centre_station_m"] for m in truth["markers"]]),
-                    truth["station_id"], "simulator truth")
-    rows += process_station(scan, config, ref).rows
+    rows += process_station(scan, config, reference_from_truth(truth)).rows
 path = write_marker_table(OUT / "03_markers.csv", rows)
 table = read_marker_table(path)
 accepted = sum(r.accepted for r in rows)

@@ -58,20 +58,37 @@ def read_reference(path: str | Path) -> Reference:
     """
     path = Path(path)
     if path.suffix.lower() == ".json":
-        truth = read_truth(path)
-        try:
-            ids = tuple(str(m["id"]) for m in truth["markers"])
-            centres = np.array([m["centre_station_m"] for m in truth["markers"]],
-                               dtype=float).reshape(-1, 3)
-        except (KeyError, TypeError, ValueError) as exc:
-            raise InputFileError(f"{path}: every marker needs 'id' and a 3-element "
-                                 f"'centre_station_m' ({exc})") from exc
-        ref = Reference(ids, centres, str(truth["station_id"]), str(path))
+        ref = reference_from_truth(read_truth(path), str(path))
     else:
         ref = _read_reference_csv(path)
     if not ref.ids:
         raise DataError(f"reference {path} lists no markers")
     return ref
+
+
+def reference_from_truth(truth: dict, source: str = "simulator truth") -> Reference:
+    """The reference of a simulated station: its truth's marker ids and station-frame centres.
+
+    Parameters
+    ----------
+    truth : dict
+        A truth record (``read_truth`` / the simulator's second return value).
+    source : str
+        Where it came from, for messages and outputs.
+
+    Raises
+    ------
+    InputFileError
+        A marker without ``id`` or a 3-element ``centre_station_m``.
+    """
+    try:
+        ids = tuple(str(m["id"]) for m in truth["markers"])
+        centres = np.array([m["centre_station_m"] for m in truth["markers"]],
+                           dtype=float).reshape(-1, 3)
+    except (KeyError, TypeError, ValueError) as exc:
+        raise InputFileError(f"{source}: every marker needs 'id' and a 3-element "
+                             f"'centre_station_m' ({exc})") from exc
+    return Reference(ids, centres, str(truth["station_id"]), source)
 
 
 def _read_reference_csv(path: Path) -> Reference:

@@ -429,7 +429,7 @@ def process_station(scan: StationScan, config: ProcessConfig | None = None,
     timer = _Timer()
     cal = cfg.calibrate
     offsets = cal.offsets()
-    calib: dict[str, Any] = {"enabled": cal.enabled}
+    calib: dict[str, Any] = {"enabled": cal.enabled, "redetected": False}
     if cal.enabled:
         offsets, cov, n_pairs, icp_rms = estimate_rotation_offsets(scan, offsets,
                                                                    cal.calibration())

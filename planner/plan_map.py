@@ -79,7 +79,7 @@ def draw_plan_map(outcome, path: Path, dpi: int = 150) -> Path:
     finite = err_mm[np.isfinite(err_mm)]
     # colour range: up to the requirement, or tighter when every station is far inside it, so
     # that stations stay distinguishable (their errors are also written beside them)
-    top = req_mm if not finite.size else min(req_mm, _nice_ceiling(1.2 * finite.max()))
+    top = req_mm if not finite.size else min(req_mm, _nice_125(1.2 * finite.max(), up=True))
     norm = Normalize(vmin=0.0, vmax=top)
     sc = ax.scatter(prob.station_xyz[:, 0], prob.station_xyz[:, 1],
                     c=np.where(np.isfinite(err_mm), err_mm, 2 * req_mm), cmap="viridis",
@@ -102,7 +102,7 @@ def draw_plan_map(outcome, path: Path, dpi: int = 150) -> Path:
     ax.set_aspect("equal")
     ax.set_xlabel("x (m, site frame — local metres)")
     ax.set_ylabel("y (m, site frame — local metres)")
-    bar = _nice_length((xmax - xmin) / 5)
+    bar = _nice_125((xmax - xmin) / 5)
     ax.add_artist(AnchoredSizeBar(ax.transData, bar, f"{bar:g} m", "lower right", pad=0.5,
                                   color="black", frameon=True, size_vertical=(ymax - ymin) / 200))
     handles = [
@@ -147,19 +147,12 @@ def _view(inp, prob) -> tuple[float, float, float, float]:
             max(p[:, 1].min() - pad, ymin), min(p[:, 1].max() + pad, ymax))
 
 
-def _nice_ceiling(x: float) -> float:
-    """Smallest 1-2-5 x 10^k not below ``x`` (> 0)."""
-    k = 10 ** np.floor(np.log10(x))
-    for m in (1, 2, 5, 10):
-        if m * k >= x:
-            return float(m * k)
-    return float(10 * k)
+def _nice_125(x: float, up: bool = False) -> float:
+    """Largest 1-2-5 x 10^k not above ``x`` (> 0), or with ``up`` the smallest not below it.
 
-
-def _nice_length(x: float) -> float:
-    """Largest 1-2-5 x 10^k not above ``x``."""
+    >>> _nice_125(7.3), _nice_125(7.3, up=True), _nice_125(20.0), _nice_125(11.0, up=True)
+    (5.0, 10.0, 20.0, 20.0)
+    """
     k = 10 ** np.floor(np.log10(x))
-    for m in (5, 2, 1):
-        if m * k <= x:
-            return float(m * k)
-    return float(k)
+    steps = [m * k for m in (1, 2, 5, 10)]
+    return float(min(v for v in steps if v >= x) if up else max(v for v in steps if v <= x))

@@ -5,7 +5,7 @@
   success, so a failing command never leaves half-written output.
 - :func:`emit_summary`: one JSON object on stdout with ``--json``, a short human summary otherwise.
 - :func:`mounting_offset_options` / :func:`mounting_offsets`: the three true mounting offsets of
-  a simulated rig (``simulate``, ``verify``).
+  a simulated rig (``simulate``, ``verify``, ``reduce --verify``).
 - ``dem_option`` / ``stations_option`` / ``error_model_option``: the site inputs that ``plan``
   and ``reduce`` share.
 """

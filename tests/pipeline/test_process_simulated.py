@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from pipeline.evaluation import Reference
+from pipeline.evaluation import Reference, reference_from_truth
 from pipeline.process import build_config, process_station, with_offsets
 from pipeline.range_study import measure_markers
 from pipeline.rig import MountingOffsets
@@ -26,10 +26,7 @@ def _station(site_and_scene, index, offsets=None, frames=None, seed=0):
     rig = sensor_mod.RigConfig(offsets=offsets or MountingOffsets())
     scan, truth = simulate.simulate_station(site, index, rig=rig, seed=seed, frames=frames,
                                             scene=scene)
-    ref = Reference(tuple(m["id"] for m in truth["markers"]),
-                    np.array([m["centre_station_m"] for m in truth["markers"]]),
-                    truth["station_id"], "truth")
-    return scan, truth, ref
+    return scan, truth, reference_from_truth(truth, "truth")
 
 
 def _check_detection(res, truth, min_truth_points):
@@ -119,8 +116,7 @@ def test_marker_on_a_crater_rim_is_found_again_once_the_axis_offset_is_known(sit
     rig = sensor_mod.RigConfig(offsets=OFFSETS)
     scan, truth = simulate.simulate_markers(site.dem, station, heading, centres, rig=rig, seed=2,
                                             marker_ids=["rim", "far", "near"], station_id="S3")
-    ref = Reference(("rim", "far", "near"),
-                    np.array([m["centre_station_m"] for m in truth["markers"]]), "S3", "truth")
+    ref = reference_from_truth(truth, "truth")
     res = process_station(scan, build_config(), ref)
     assert res.calibration["redetected"]
     rim = [r for r in res.rows if r.marker_id == "rim"]
