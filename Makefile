@@ -17,6 +17,7 @@ plan: $(STAMP)
 	$(VENV)/bin/markerplan plan --overwrite
 
 test: $(STAMP)
+	$(VENV)/bin/ruff check .
 	$(VENV)/bin/python -m pytest
 
 lint: $(STAMP)

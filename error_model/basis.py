@@ -21,10 +21,17 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
 from markerplan.errors import ConfigError, InputFileError
+from markerplan.reading import (
+    MAX_ABS_COORDINATE_M,
+    finite_number,
+    require_keys,
+    require_type,
+)
 
 
 @dataclass(frozen=True)
@@ -127,23 +134,59 @@ class Basis:
                 "extras": list(self.extras), "feature_names": self.names}
 
     @classmethod
-    def from_dict(cls, d: Mapping) -> Basis:
-        try:
-            basis = cls(distance_knots_m=tuple(float(v) for v in d["distance_knots_m"]),
-                        elevation_knots_rad=tuple(float(v) for v in d["elevation_knots_rad"]),
-                        extras=tuple(str(v) for v in d["extras"]))
-        except (KeyError, TypeError, ValueError) as exc:
-            raise InputFileError(f"error-model basis is malformed ({exc!r}); regenerate the "
-                                 "model with `markerplan fit-error-model`") from None
-        for knots in (basis.distance_knots_m, basis.elevation_knots_rad):
+    def from_dict(cls, d: Any, what: str = "error-model basis") -> Basis:
+        """Rebuild from :meth:`to_dict` output (``feature_names`` is informational).
+
+        Raises
+        ------
+        InputFileError
+            Missing keys, wrong types, non-finite knots, knots not positive and increasing,
+            an ``|elevation|`` knot beyond 90 deg, unknown or repeated extra predictors.
+        """
+        require_type(d, dict, what)
+        require_keys(d, ["distance_knots_m", "elevation_knots_rad", "extras"], what, _REFIT)
+        dk = json_numbers(d["distance_knots_m"], f"{what} distance_knots_m")
+        ek = json_numbers(d["elevation_knots_rad"], f"{what} elevation_knots_rad")
+        extras = [require_type(x, str, f"{what} extras[{i}]")
+                  for i, x in enumerate(require_type(d["extras"], list, f"{what} extras"))]
+        for name, knots in (("distance_knots_m", dk), ("elevation_knots_rad", ek)):
             if any(k <= 0 for k in knots) or any(np.diff(knots) <= 0):
-                raise InputFileError(f"error-model basis knots must be positive and "
-                                     f"increasing, got {list(knots)}; regenerate the model")
-        bad = set(basis.extras) - set(_EXTRA_TRANSFORMS)
+                raise InputFileError(f"{what} {name}: knots must be positive and increasing, got "
+                                     f"{list(knots)}; {_REFIT}")
+        if ek and ek[-1] > np.pi / 2:
+            raise InputFileError(f"{what} elevation_knots_rad: |elevation| knots must be <= "
+                                 f"pi/2 (90 deg), got {ek[-1]:g}; {_REFIT}")
+        bad = sorted(set(extras) - set(_EXTRA_TRANSFORMS))
         if bad:
-            raise InputFileError(f"error-model basis names unknown extra predictor(s) "
-                                 f"{sorted(bad)}; regenerate the model")
-        return basis
+            raise InputFileError(f"{what}: unknown extra predictor(s) {bad} (known: "
+                                 f"{sorted(_EXTRA_TRANSFORMS)}); {_REFIT}")
+        if len(set(extras)) != len(extras):
+            raise InputFileError(f"{what}: extras {extras} name a predictor twice; {_REFIT}")
+        return cls(distance_knots_m=tuple(dk), elevation_knots_rad=tuple(ek),
+                   extras=tuple(extras))
+
+
+_REFIT = "regenerate the model with `markerplan fit-error-model`"
+
+
+def json_numbers(values: Any, what: str, max_abs: float = MAX_ABS_COORDINATE_M
+                 ) -> list[float]:
+    """A JSON list of finite numbers (strings and booleans refused), as floats.
+
+    >>> json_numbers([1, 2.5], "knots")
+    [1.0, 2.5]
+    >>> json_numbers([1, "2"], "knots")
+    Traceback (most recent call last):
+    ...
+    markerplan.errors.InputFileError: knots[1]: expected int or float, got a string ('2')
+    """
+    require_type(values, list, what)
+    return [json_number(v, f"{what}[{i}]", max_abs) for i, v in enumerate(values)]
+
+
+def json_number(value: Any, what: str, max_abs: float = MAX_ABS_COORDINATE_M) -> float:
+    """A finite JSON number (not a string, not a boolean) of magnitude at most ``max_abs``."""
+    return finite_number(require_type(value, (int, float), what), what, max_abs)
 
 
 _EXTRA_TRANSFORMS = {

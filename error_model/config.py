@@ -2,8 +2,12 @@
 
 from __future__ import annotations
 
+import math
+from collections.abc import Mapping
 from dataclasses import asdict, dataclass, fields
 from typing import Any
+
+import numpy as np
 
 from markerplan.errors import ConfigError
 
@@ -72,28 +76,65 @@ class FitConfig:
 
     @classmethod
     def from_dict(cls, d: dict[str, Any] | None) -> FitConfig:
-        """Build from a mapping; unknown keys are rejected by name."""
+        """Build from a mapping; unknown keys are rejected by name, wrong types refused.
+
+        Raises
+        ------
+        ConfigError
+            Not a mapping, unknown options, or any value :class:`FitConfig` refuses.
+        """
+        if d is not None and not isinstance(d, Mapping):
+            raise ConfigError(f"error-model config: expected a mapping of option -> value, got "
+                              f"{type(d).__name__}")
         d = dict(d or {})
         known = {f.name for f in fields(cls)}
-        unknown = sorted(set(d) - known)
+        unknown = sorted(map(str, set(d) - known))
         if unknown:
             raise ConfigError(f"error-model config: unknown option(s) {unknown}; "
                               f"known options are {sorted(known)}")
         for key in ("distance_segments", "elevation_segments", "extra_candidates"):
             if key in d:
+                if not isinstance(d[key], list | tuple):
+                    raise ConfigError(f"{key} must be a list, got {d[key]!r:.60}")
                 d[key] = tuple(d[key])
         return cls(**d)
 
 
+_INTS = ("cv_folds", "cv_quantile_max_rows", "n_bootstrap", "bootstrap_max_rows", "min_rows",
+         "domain_bands")
+_FLOATS = ("quantile", "extra_min_gain", "domain_elevation_margin_deg")
+
+
 def _fit_config_iv(c: FitConfig) -> None:
+    for name in _INTS:
+        v = getattr(c, name)
+        if isinstance(v, bool) or not isinstance(v, int | np.integer):
+            raise ConfigError(f"{name} must be an integer, got {v!r:.60}")
+    for name in _FLOATS:
+        v = getattr(c, name)
+        if isinstance(v, bool) or not isinstance(v, int | float | np.number) \
+                or not math.isfinite(v):
+            raise ConfigError(f"{name} must be a finite number, got {v!r:.60}")
+    for name in ("distance_segments", "elevation_segments"):
+        v = getattr(c, name)
+        if not isinstance(v, list | tuple) or not v or any(
+                isinstance(k, bool) or not isinstance(k, int | np.integer) or k < 1 for k in v):
+            raise ConfigError(f"{name} must be a non-empty list of integers >= 1, got "
+                              f"{v!r:.60}")
+    if not isinstance(c.extra_candidates, list | tuple) \
+            or any(not isinstance(x, str) for x in c.extra_candidates):
+        raise ConfigError(f"extra_candidates must be a list of names, got "
+                          f"{c.extra_candidates!r:.60}")
+    if not isinstance(c.solver, str) or not c.solver:
+        raise ConfigError(f"solver must be a cvxpy solver name like 'CLARABEL', got "
+                          f"{c.solver!r:.60}")
+    if c.estimator is not None and not isinstance(c.estimator, str):
+        raise ConfigError(f"estimator must be a name like 'fixed-radius' or None, got "
+                          f"{c.estimator!r:.60}")
     if not 0.5 < c.quantile < 1.0:
         raise ConfigError(f"quantile must lie in (0.5, 1), got {c.quantile}; use e.g. 0.95")
     if c.cv_folds < 2:
         raise ConfigError(f"cv_folds must be >= 2, got {c.cv_folds}")
-    for name in ("distance_segments", "elevation_segments"):
-        v = getattr(c, name)
-        if not v or any(int(k) != k or k < 1 for k in v):
-            raise ConfigError(f"{name} must be a non-empty list of integers >= 1, got {list(v)}")
     bad = sorted(set(c.extra_candidates) - set(EXTRA_PREDICTORS))
     if bad:
         raise ConfigError(f"extra_candidates may only contain {list(EXTRA_PREDICTORS)}, "

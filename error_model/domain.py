@@ -9,10 +9,13 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
+from error_model.basis import json_numbers
 from markerplan.errors import InputFileError
+from markerplan.reading import require_keys, require_type
 
 
 @dataclass(frozen=True)
@@ -99,22 +102,51 @@ class Domain:
                 "extras": {k: list(v) for k, v in self.extras.items()}}
 
     @classmethod
-    def from_dict(cls, d: Mapping) -> Domain:
-        try:
-            dom = cls(band_edges_m=tuple(float(v) for v in d["band_edges_m"]),
-                      elevation_lo_rad=tuple(float(v) for v in d["elevation_lo_rad"]),
-                      elevation_hi_rad=tuple(float(v) for v in d["elevation_hi_rad"]),
-                      extras={str(k): (float(v[0]), float(v[1]))
-                              for k, v in d["extras"].items()})
-        except (KeyError, TypeError, ValueError, IndexError, AttributeError) as exc:
-            raise InputFileError(f"error-model domain is malformed ({exc!r}); regenerate the "
-                                 "model with `markerplan fit-error-model`") from None
-        n = len(dom.band_edges_m) - 1
-        if n < 1 or len(dom.elevation_lo_rad) != n or len(dom.elevation_hi_rad) != n:
-            raise InputFileError(f"error-model domain has {len(dom.band_edges_m)} band edges but "
-                                 f"{len(dom.elevation_lo_rad)} elevation ranges; regenerate "
-                                 "the model")
-        return dom
+    def from_dict(cls, d: Any, what: str = "error-model domain") -> Domain:
+        """Rebuild from :meth:`to_dict` output (the ``*_deg`` and ``distance_range_m`` copies
+        are informational).
+
+        Raises
+        ------
+        InputFileError
+            Missing keys, wrong types, non-finite numbers, fewer than two band edges, edges
+            negative or decreasing, elevation ranges of the wrong length, inverted or beyond
+            +-90 deg, extra ranges that are not ``[lo, hi]`` with ``lo <= hi``.
+        """
+        require_type(d, dict, what)
+        require_keys(d, ["band_edges_m", "elevation_lo_rad", "elevation_hi_rad", "extras"],
+                     what, _REFIT)
+        edges = json_numbers(d["band_edges_m"], f"{what} band_edges_m")
+        lo = json_numbers(d["elevation_lo_rad"], f"{what} elevation_lo_rad")
+        hi = json_numbers(d["elevation_hi_rad"], f"{what} elevation_hi_rad")
+        n = len(edges) - 1
+        if n < 1 or len(lo) != n or len(hi) != n:
+            raise InputFileError(f"{what}: {len(edges)} band edges need {max(n, 1)} elevation "
+                                 f"ranges and at least 2 edges, got {len(lo)} lo and {len(hi)} "
+                                 f"hi; {_REFIT}")
+        if edges[0] < 0 or any(np.diff(edges) < 0):
+            raise InputFileError(f"{what} band_edges_m: distances must be >= 0 and "
+                                 f"non-decreasing, got {edges}; {_REFIT}")
+        for i, (a, b) in enumerate(zip(lo, hi, strict=True)):
+            if not -np.pi / 2 - 1e-9 <= a <= b <= np.pi / 2 + 1e-9:
+                raise InputFileError(f"{what}: band {i} elevation range [{a:g}, {b:g}] rad must "
+                                     f"satisfy -pi/2 <= lo <= hi <= pi/2; {_REFIT}")
+        extras = {}
+        require_type(d["extras"], dict, f"{what} extras")
+        for name, pair in d["extras"].items():
+            if not (isinstance(pair, list) and len(pair) == 2):
+                raise InputFileError(f"{what} extras {name}: expected a [lo, hi] list of two "
+                                     f"numbers, got {pair!r:.60}; {_REFIT}")
+            vlo, vhi = json_numbers(pair, f"{what} extras {name}")
+            if vlo > vhi:
+                raise InputFileError(f"{what} extras {name}: range [{vlo:g}, {vhi:g}] is "
+                                     f"inverted (lo > hi); {_REFIT}")
+            extras[str(name)] = (vlo, vhi)
+        return cls(band_edges_m=tuple(edges), elevation_lo_rad=tuple(lo),
+                   elevation_hi_rad=tuple(hi), extras=extras)
+
+
+_REFIT = "regenerate the model with `markerplan fit-error-model`"
 
 
 def _fill_empty(values: np.ndarray) -> np.ndarray:

@@ -17,10 +17,17 @@ from typing import Any
 
 import numpy as np
 
-from error_model.basis import Basis
+from error_model.basis import Basis, json_number, json_numbers
 from error_model.config import EXTRA_PREDICTORS
 from error_model.domain import Domain
 from markerplan.errors import ConfigError, InputFileError, OutputError
+from markerplan.reading import (
+    check_schema_version,
+    json_kind,
+    load_json,
+    require_keys,
+    require_type,
+)
 
 FORMAT = "markerplan-error-model"
 FORMAT_VERSION = 1
@@ -156,34 +163,24 @@ class ErrorModel:
 
     @classmethod
     def from_json(cls, d: Mapping[str, Any], source: str = "error model") -> ErrorModel:
-        """Rebuild from :meth:`to_json` output; malformed input raises InputFileError."""
-        if not isinstance(d, Mapping) or d.get("format") != FORMAT:
-            got = d.get("format") if isinstance(d, Mapping) else type(d).__name__
-            raise InputFileError(f"{source}: not a markerplan error model (format {got!r}, "
-                                 f"expected {FORMAT!r}); pass a file written by "
-                                 "`markerplan fit-error-model`")
-        if d.get("format_version") != FORMAT_VERSION:
-            raise InputFileError(f"{source}: format_version {d.get('format_version')!r} is not "
-                                 f"supported (expected {FORMAT_VERSION}); refit the model")
-        try:
-            basis = Basis.from_dict(d["basis"])
-            sigma = np.asarray(d["sigma"]["coefficients"], float)
-            q = np.asarray(d["envelope"]["coefficients"], float)
-            quantile = float(d["envelope"]["quantile"])
-            domain = Domain.from_dict(d["domain"])
-        except InputFileError as exc:
-            raise InputFileError(f"{source}: {exc}") from None
-        except (KeyError, TypeError, ValueError) as exc:
-            raise InputFileError(f"{source}: malformed error model (missing or bad field "
-                                 f"{exc!s}); regenerate it with `markerplan fit-error-model`") \
-                from None
-        for name, c in (("sigma", sigma), ("envelope", q)):
-            if c.shape != (basis.n_features,) or not np.isfinite(c).all():
-                raise InputFileError(f"{source}: {name} coefficients must be {basis.n_features} "
-                                     f"finite numbers, got shape {c.shape}; regenerate the model")
-        if set(domain.extras) != set(basis.extras):
-            raise InputFileError(f"{source}: domain extras {sorted(domain.extras)} differ from "
-                                 f"basis extras {list(basis.extras)}; regenerate the model")
+        """Rebuild from :meth:`to_json` output.
+
+        Parameters
+        ----------
+        d : mapping
+            The parsed JSON.
+        source : str
+            How messages name the input, e.g. ``"error model m.json"``.
+
+        Raises
+        ------
+        InputFileError
+            Not an error model, a newer ``format_version``, missing keys, wrong types,
+            non-finite or absurd numbers, a quantile outside (0, 1), an inverted or empty
+            domain, coefficients that break the fitted sign constraints, or a sigma or
+            envelope that is not positive somewhere in the fitted domain. One line.
+        """
+        basis, sigma, q, quantile, domain = _model_json_iv(d, source)
         skip = {"format", "format_version", "predictors", "sigma_definition", "basis", "domain"}
         info = {k: v for k, v in d.items() if k not in skip}
         info["sigma"] = {k: v for k, v in d["sigma"].items() if k != "coefficients"}
@@ -213,24 +210,119 @@ class ErrorModel:
 
     @classmethod
     def load(cls, path: str | Path) -> ErrorModel:
-        """Read a model JSON; a missing, unreadable or corrupted file raises InputFileError."""
+        """Read a model JSON written by :meth:`save`.
+
+        Raises
+        ------
+        InputFileError
+            Missing, unreadable or non-UTF-8 file, invalid JSON (``NaN``/``Infinity``
+            included), or any problem :meth:`from_json` refuses. One line.
+        """
         path = Path(path)
-        try:
-            d = json.loads(path.read_text())
-        except FileNotFoundError:
-            raise InputFileError(f"error model {path}: no such file; pass a JSON written by "
-                                 "`markerplan fit-error-model`") from None
-        except (OSError, UnicodeDecodeError) as exc:
-            raise InputFileError(f"error model {path}: cannot be read ({exc}); check the "
-                                 "path") from None
-        except json.JSONDecodeError as exc:
-            raise InputFileError(f"error model {path}: not valid JSON ({exc.msg} at line "
-                                 f"{exc.lineno}); the file is corrupted, regenerate it with "
-                                 "`markerplan fit-error-model`") from None
-        return cls.from_json(d, source=f"error model {path}")
+        what = f"error model {path}"
+        if not path.exists():
+            raise InputFileError(f"{what}: no such file; pass a JSON written by "
+                                 "`markerplan fit-error-model`")
+        # any top-level type: from_json says "not a markerplan error model" for a list
+        d = load_json(path, what, expect=object)
+        return cls.from_json(d, source=what)
 
 
 def _umask() -> int:
     mask = os.umask(0)
     os.umask(mask)
     return mask
+
+
+#: Largest coefficient magnitude accepted, metres per feature unit (a sigma of kilometres is a
+#: corrupt or hand-edited file, not a marker-centre error).
+MAX_ABS_COEFFICIENT = 1e3
+#: Solver round-off tolerated on coefficients the fit constrains to be >= 0.
+SIGN_TOLERANCE = 1e-9
+_REFIT = "regenerate it with `markerplan fit-error-model`"
+
+
+def _model_json_iv(d: Any, source: str) -> tuple[Basis, np.ndarray, np.ndarray, float, Domain]:
+    """Validate a parsed model JSON; return its basis, coefficients, quantile and domain."""
+    if not isinstance(d, Mapping) or d.get("format") != FORMAT:
+        got = (f"format {d.get('format')!r}" if isinstance(d, Mapping)
+               else f"a JSON object expected at the top level, got {json_kind(d)}")
+        raise InputFileError(f"{source}: not a markerplan error model ({got}, expected format "
+                             f"{FORMAT!r}); pass a file written by `markerplan fit-error-model`")
+    require_keys(d, ["format_version"], source, _REFIT)
+    _check_format_version(d["format_version"], source)
+    require_keys(d, ["basis", "sigma", "envelope", "domain"], source, _REFIT)
+    for key in ("basis", "sigma", "envelope", "domain"):
+        require_type(d[key], dict, f"{source}: {key}")
+    require_keys(d["sigma"], ["coefficients"], f"{source}: sigma", _REFIT)
+    require_keys(d["envelope"], ["coefficients", "quantile"], f"{source}: envelope", _REFIT)
+    basis = Basis.from_dict(d["basis"], f"{source}: basis")
+    domain = Domain.from_dict(d["domain"], f"{source}: domain")
+    quantile = json_number(d["envelope"]["quantile"], f"{source}: envelope quantile")
+    if not 0.0 < quantile < 1.0:
+        raise InputFileError(f"{source}: envelope quantile must lie in (0, 1), got "
+                             f"{quantile:g}; {_REFIT}")
+    if "predictors" in d:
+        want = ["distance_m", "elevation_rad", *basis.extras]
+        if d["predictors"] != want:
+            raise InputFileError(f"{source}: predictors {d['predictors']!r:.80} do not match the "
+                                 f"basis (expected {want}); {_REFIT}")
+    if set(domain.extras) != set(basis.extras):
+        raise InputFileError(f"{source}: domain extras {sorted(domain.extras)} differ from "
+                             f"basis extras {list(basis.extras)}; {_REFIT}")
+    sigma = _coefficients(d["sigma"]["coefficients"], basis, f"{source}: sigma coefficients")
+    q = _coefficients(d["envelope"]["coefficients"], basis,
+                      f"{source}: envelope coefficients")
+    for name, coef in (("sigma", sigma), ("envelope", q)):
+        low = _domain_minimum(basis, domain, coef)
+        if not low > 0.0:
+            raise InputFileError(f"{source}: {name} coefficients give {name} {low:.3g} m <= 0 "
+                                 "inside the fitted domain; a centre error is positive, "
+                                 f"{_REFIT}")
+    return basis, sigma, q, quantile, domain
+
+
+def _check_format_version(found: Any, source: str) -> int:
+    """:func:`~markerplan.reading.check_schema_version` for the model's ``format_version``."""
+    try:
+        return check_schema_version(found, FORMAT_VERSION, source)
+    except InputFileError as exc:
+        raise InputFileError(str(exc).replace("schema_version", "format_version")) from None
+
+
+def _coefficients(values: Any, basis: Basis, what: str) -> np.ndarray:
+    """``basis.n_features`` finite coefficients of sane size, signs as the fit constrains."""
+    if not isinstance(values, list) or len(values) != basis.n_features:
+        got = f"{len(values)}" if isinstance(values, list) else json_kind(values)
+        raise InputFileError(f"{what}: expected {basis.n_features} numbers (one per feature "
+                             f"{basis.names}), got {got}; {_REFIT}")
+    coef = np.array(json_numbers(values, what, MAX_ABS_COEFFICIENT))
+    negative = basis.nonneg & (coef < -SIGN_TOLERANCE)
+    if negative.any():
+        i = int(np.flatnonzero(negative)[0])
+        raise InputFileError(f"{what}: {basis.names[i]} must be >= 0 (error never decreases "
+                             f"with distance or a worse view), got {coef[i]:.3g}; {_REFIT}")
+    return coef
+
+
+def _domain_minimum(basis: Basis, domain: Domain, coef: np.ndarray) -> float:
+    """Smallest ``basis.design(...) @ coef`` over the fitted domain (exact for valid signs).
+
+    Non-negative distance and extra coefficients make the model non-decreasing in distance and
+    in the extra features, so the minimum is at each band's nearest edge, the best extra values,
+    and, the model being piecewise linear in ``|elevation|``, at the band's elevation bounds,
+    the knots inside them or zero.
+    """
+    edges = np.asarray(domain.band_edges_m)
+    d_list, e_list = [], []
+    for i in range(edges.size - 1):
+        lo, hi = domain.elevation_lo_rad[i], domain.elevation_hi_rad[i]
+        knots = np.r_[0.0, basis.elevation_knots_rad]
+        cand = np.r_[lo, hi, knots, -knots]
+        cand = cand[(cand >= lo) & (cand <= hi)]
+        d_list.append(np.full(cand.size, edges[i]))
+        e_list.append(cand)
+    d, e = np.concatenate(d_list), np.concatenate(e_list)
+    best = {"visible_fraction": 1, "expected_points": 1}  # index of (lo, hi): the best value
+    extras = {x: np.full(d.size, domain.extras[x][best[x]]) for x in basis.extras}
+    return float((basis.design(d, e, extras) @ coef).min())

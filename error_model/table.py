@@ -9,7 +9,7 @@ the reference (metres). Only accepted rows with a finite ``error_m`` are fitted.
 
 from __future__ import annotations
 
-import csv
+import math
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -18,6 +18,7 @@ import numpy as np
 
 from markerplan.errors import DataError, InputFileError
 from markerplan.provenance import fingerprint_arrays
+from markerplan.reading import MAX_ABS_COORDINATE_M, finite_number, read_csv
 
 #: The columns ``markerplan process`` / ``range-study`` write, in order.
 MARKER_TABLE_COLUMNS = (
@@ -123,34 +124,36 @@ def read_marker_table(path: str | Path) -> MarkerTable:
         Missing or unreadable file, missing columns, unparsable cells.
     """
     path = Path(path)
-    try:
-        with path.open(newline="") as fh:
-            reader = csv.reader(fh)
-            header = next(reader, None)
-            rows = list(reader)
-    except (OSError, UnicodeDecodeError, csv.Error) as exc:
-        raise InputFileError(f"marker table {path}: cannot be read ({exc}); pass a CSV written "
-                             "by `markerplan process` or `range-study`") from exc
-    if header is None:
-        raise InputFileError(f"marker table {path}: file is empty; expected a header row with "
-                             f"columns {list(REQUIRED_COLUMNS)}")
-    header = [h.strip() for h in header]
-    missing = [c for c in REQUIRED_COLUMNS if c not in header]
-    if missing:
-        raise InputFileError(f"marker table {path}: missing column(s) {missing}; got columns "
-                             f"{header}; write it with `markerplan process` or `range-study`")
-    for i, row in enumerate(rows):
-        if len(row) != len(header):
-            raise InputFileError(f"marker table {path}: line {i + 2} has {len(row)} cells, "
-                                 f"the header has {len(header)}; fix or regenerate the file")
+    what = f"marker table {path}"
+    if not path.exists():
+        raise InputFileError(f"{what}: cannot be read (no such file); check the path")
+    header, rows = read_csv(path, what, REQUIRED_COLUMNS,
+                            fix="write it with `markerplan process` or `range-study`")
     cells = list(zip(*rows, strict=True)) if rows else [()] * len(header)
     columns = {name: _parse_column(path, name, col) for name, col in zip(header, cells,
                                                                           strict=True)}
     return MarkerTable(columns=columns, sources=(str(path),))
 
 
-def read_marker_tables(paths: Iterable[str | Path]) -> MarkerTable:
-    """Read and concatenate several marker-table CSVs (columns common to all are kept)."""
+def read_marker_tables(paths: Iterable[str | Path] | str | Path) -> MarkerTable:
+    """Read and concatenate several marker-table CSVs (columns common to all are kept).
+
+    Parameters
+    ----------
+    paths : iterable of str or Path, or one str or Path
+        CSV files, each as :func:`read_marker_table` reads it.
+
+    Returns
+    -------
+    table : MarkerTable
+
+    Raises
+    ------
+    InputFileError
+        No file given, or any file :func:`read_marker_table` refuses.
+    """
+    if isinstance(paths, str | Path):
+        paths = [paths]
     tables = [read_marker_table(p) for p in paths]
     if not tables:
         raise InputFileError("marker tables: no file given; pass at least one CSV")
@@ -282,19 +285,34 @@ def _groups(table: MarkerTable, keep: np.ndarray) -> np.ndarray:
 
 
 def _parse_column(path: Path, name: str, cells: tuple[str, ...]) -> np.ndarray:
+    """One column as bool (``accepted``), str (text and unknown columns) or float.
+
+    Numeric cells: empty means no value (NaN, as ``markerplan process`` writes it); anything
+    else must be a finite number of sane magnitude (``nan``, ``inf``, ``1e300`` refused).
+    """
     if name == "accepted":
         return _parse_bool(str(path), np.asarray(cells, dtype=str))
     if name in TEXT_COLUMNS or name not in MARKER_TABLE_COLUMNS:
         return np.asarray(cells, dtype=str)
+    max_abs = _MAX_ABS.get(name, MAX_ABS_COORDINATE_M)
     out = np.empty(len(cells))
     for i, cell in enumerate(cells):
         cell = cell.strip()
+        if not cell:
+            out[i] = np.nan
+            continue
+        what = f"marker table {path}: column {name!r} line {i + 2}"
         try:
-            out[i] = float(cell) if cell else np.nan
-        except ValueError:
-            raise InputFileError(f"marker table {path}: column {name!r} line {i + 2} is "
-                                 f"{cell!r}, not a number; fix or regenerate the file") from None
+            value = finite_number(cell, what, math.inf)
+        except InputFileError as exc:
+            raise InputFileError(f"{exc}; leave the cell empty for no value, or regenerate the "
+                                 "file") from None
+        out[i] = finite_number(value, what, max_abs)
     return out
+
+
+#: Magnitude limits of numeric columns other than :data:`MAX_ABS_COORDINATE_M`.
+_MAX_ABS = {"seed": 2.0**64, "replicate": 2.0**64}
 
 
 def _parse_bool(where: str, cells: np.ndarray) -> np.ndarray:

@@ -11,7 +11,6 @@ markers) need no common frame at all.
 
 from __future__ import annotations
 
-import csv
 import itertools
 from dataclasses import dataclass
 from pathlib import Path
@@ -20,6 +19,7 @@ import numpy as np
 from scipy.optimize import linear_sum_assignment
 
 from markerplan.errors import DataError, InputFileError
+from markerplan.reading import MAX_ABS_COORDINATE_M, finite_number, read_csv, unique_ids
 from pipeline.scan_format import read_truth
 
 REFERENCE_CSV_COLUMNS = ("id", "x_m", "y_m", "z_m")
@@ -52,7 +52,10 @@ def read_reference(path: str | Path) -> Reference:
     Raises
     ------
     InputFileError
-        Missing/unreadable file, missing columns or keys, non-numeric coordinates.
+        Missing/unreadable/non-UTF-8 file, missing columns or keys, ragged rows, empty or
+        repeated ids, coordinates that are not finite numbers (or beyond
+        :data:`markerplan.reading.MAX_ABS_COORDINATE_M`); a truth JSON as in
+        :func:`pipeline.scan_format.read_truth`.
     DataError
         No markers in the file.
     """
@@ -79,39 +82,49 @@ def reference_from_truth(truth: dict, source: str = "simulator truth") -> Refere
     Raises
     ------
     InputFileError
-        A marker without ``id`` or a 3-element ``centre_station_m``.
+        A marker without ``id`` or a ``centre_station_m`` of 3 finite numbers, or a repeated
+        id.
     """
     try:
         ids = tuple(str(m["id"]) for m in truth["markers"])
         centres = np.array([m["centre_station_m"] for m in truth["markers"]],
                            dtype=float).reshape(-1, 3)
+        station = str(truth["station_id"])
     except (KeyError, TypeError, ValueError) as exc:
         raise InputFileError(f"{source}: every marker needs 'id' and a 3-element "
                              f"'centre_station_m' ({exc})") from exc
-    return Reference(ids, centres, str(truth["station_id"]), source)
+    if centres.shape[0] != len(ids) or not np.all(np.isfinite(centres)):
+        raise InputFileError(f"{source}: every marker needs a 'centre_station_m' of 3 finite "
+                             "numbers")
+    unique_ids(ids, f"{source}: markers")
+    return Reference(ids, centres, station, source)
 
 
 def _read_reference_csv(path: Path) -> Reference:
+    what = f"reference CSV {path}"
     if not path.is_file():
         raise InputFileError(f"reference file {path} does not exist; check the path")
+    header, rows = read_csv(path, what)
+    missing = [c for c in REFERENCE_CSV_COLUMNS if c not in header]
+    if missing:
+        raise InputFileError(f"{what} lacks column(s) {', '.join(missing)}; got "
+                             f"{','.join(header)[:80]!r}; expected a header "
+                             f"{','.join(REFERENCE_CSV_COLUMNS)}")
+    col = {c: header.index(c) for c in REFERENCE_CSV_COLUMNS}
+    ids = unique_ids([r[col["id"]].strip() for r in rows], what)
+    centres = np.array([[_coordinate(r[col[c]], c, i, what) for c in ("x_m", "y_m", "z_m")]
+                        for i, r in zip(ids, rows, strict=True)], dtype=float).reshape(-1, 3)
+    return Reference(tuple(ids), centres, None, str(path))
+
+
+def _coordinate(cell: str, column: str, marker: str, what: str) -> float:
+    """One coordinate cell as a finite float, or one line naming the marker and the rule."""
     try:
-        with path.open(newline="") as fh:
-            reader = csv.DictReader(fh)
-            header = [h.strip() for h in (reader.fieldnames or [])]
-            missing = [c for c in REFERENCE_CSV_COLUMNS if c not in header]
-            if missing:
-                raise InputFileError(f"reference CSV {path} lacks column(s) {', '.join(missing)};"
-                                     f" expected a header {','.join(REFERENCE_CSV_COLUMNS)}")
-            rows = [{k.strip(): v for k, v in row.items() if k} for row in reader]
-    except (OSError, UnicodeDecodeError, csv.Error) as exc:
-        raise InputFileError(f"reference CSV {path} is not readable ({exc})") from exc
-    try:
-        centres = np.array([[float(r["x_m"]), float(r["y_m"]), float(r["z_m"])] for r in rows],
-                           dtype=float).reshape(-1, 3)
-    except (TypeError, ValueError) as exc:
-        raise InputFileError(f"reference CSV {path}: x_m, y_m, z_m must be numbers ({exc})"
-                             ) from exc
-    return Reference(tuple(r["id"].strip() for r in rows), centres, None, str(path))
+        return finite_number(cell.strip(), f"{what}: {column} of {marker!r}")
+    except InputFileError as exc:
+        raise InputFileError(f"{what}: x_m, y_m, z_m must be finite numbers of magnitude at "
+                             f"most {MAX_ABS_COORDINATE_M:g} m; {column} of {marker!r} is "
+                             f"{cell.strip()!r:.40}") from exc
 
 
 def match_nearest(centres_m: np.ndarray, reference_m: np.ndarray, max_distance_m: float = 0.5

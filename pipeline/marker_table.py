@@ -36,6 +36,7 @@ from pathlib import Path
 import numpy as np
 
 from markerplan.errors import InputFileError
+from markerplan.reading import read_csv
 
 COLUMNS = ("station_id", "marker_id", "x_m", "y_m", "z_m", "distance_m", "elevation_deg",
            "azimuth_deg", "n_points", "point_density_per_m2", "visible_fraction", "fit_rms_m",
@@ -125,17 +126,29 @@ def write_marker_table(path: str | Path, rows: list[MarkerRow]) -> Path:
 
 
 def read_marker_table(path: str | Path) -> list[dict[str, str]]:
-    """Read a marker table back as dicts of strings, checking the header."""
+    """Read a marker table back as dicts of strings, checking the header.
+
+    Parameters
+    ----------
+    path : str or Path
+        A ``markers.csv`` written by :func:`write_marker_table`.
+
+    Returns
+    -------
+    rows : list of dict
+        Column name -> cell text, one dict per data row.
+
+    Raises
+    ------
+    InputFileError
+        Missing, unreadable or non-UTF-8 file, a header other than :data:`COLUMNS`, or a row
+        with more or fewer cells than the header.
+    """
     path = Path(path)
-    try:
-        with path.open(newline="") as fh:
-            reader = csv.DictReader(fh)
-            header = tuple(reader.fieldnames or ())
-            rows = list(reader)
-    except OSError as exc:
-        raise InputFileError(f"marker table {path} is not readable ({exc})") from exc
-    if header != COLUMNS:
-        missing = [c for c in COLUMNS if c not in header]
-        raise InputFileError(f"marker table {path} has columns {list(header)}; missing "
-                             f"{missing} (expected exactly {list(COLUMNS)})")
-    return rows
+    what = f"marker table {path}"
+    header, rows = read_csv(path, what, COLUMNS, "write it with markerplan process")
+    if tuple(header) != COLUMNS:
+        raise InputFileError(f"{what} has columns {list(header)}; missing "
+                             f"{[c for c in COLUMNS if c not in header]} (expected exactly "
+                             f"{list(COLUMNS)})")
+    return [dict(zip(COLUMNS, row, strict=True)) for row in rows]

@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from markerplan.errors import DataError, InputFileError
+from markerplan.reading import MAX_ABS_COORDINATE_M, finite_number, read_text
 
 _SPLIT = re.compile(r"[,\s;]+")
 
@@ -23,54 +24,62 @@ def read_points(path: str | Path) -> np.ndarray:
     Parameters
     ----------
     path : str or Path
-        Text file, one point per line.
+        UTF-8 text file, one point per line.
 
     Returns
     -------
     points_m : (n, 3) float64
-        Coordinates as stored (metres by convention), n >= 1.
+        Coordinates as stored (metres by convention), n >= 1, all finite and of magnitude at
+        most :data:`markerplan.reading.MAX_ABS_COORDINATE_M`.
 
     Raises
     ------
     InputFileError
-        Missing/unreadable file, or a line that is not at least three numbers.
+        Missing/unreadable/non-UTF-8 file, a line that is not at least three numbers, a line
+        with more or fewer cells than a header row, NaN/infinite or absurd coordinates.
     DataError
         No points in the file.
     """
     path = Path(path)
-    if not path.is_file():
-        raise InputFileError(f"point file {path} does not exist; check the path")
-    try:
-        text = path.read_text()
-    except (OSError, UnicodeDecodeError) as exc:
-        raise InputFileError(f"point file {path} is not readable text ({exc}); expected lines "
-                             "of 'x y z'") from exc
-    lines = [ln.strip() for ln in text.splitlines()]
-    lines = [ln for ln in lines if ln and not ln.startswith("#")]
+    what = f"point file {path}"
+    if not path.exists():
+        raise InputFileError(f"{what} does not exist; check the path")
+    text = read_text(path, what)
+    lines = [(k, ln.strip()) for k, ln in enumerate(text.splitlines(), start=1)]
+    lines = [(k, ln) for k, ln in lines if ln and not ln.startswith("#")]
     cols = (0, 1, 2)
-    if lines and not _is_numeric(_SPLIT.split(lines[0])[0]):
-        cols = _header_columns(_SPLIT.split(lines[0]), path)
+    n_header = None
+    if lines and not _is_numeric(_SPLIT.split(lines[0][1])[0]):
+        header = _SPLIT.split(lines[0][1])
+        cols = _header_columns(header, path)
+        n_header = len(header)
         lines = lines[1:]
     if not lines:
-        raise DataError(f"point file {path} holds no points; expected lines of 'x y z'")
+        raise DataError(f"{what} holds no points; expected lines of 'x y z'")
     rows = []
-    for lineno, ln in enumerate(lines, start=1):
+    for lineno, ln in lines:
         parts = _SPLIT.split(ln)
+        if n_header is not None and len(parts) != n_header:
+            raise InputFileError(f"{what}: line {lineno} has {len(parts)} cells, the header has "
+                                 f"{n_header}; fix the row")
         try:
             rows.append([float(parts[c]) for c in cols])
-        except (ValueError, IndexError) as exc:
-            raise InputFileError(f"point file {path}: data line {lineno} {ln[:60]!r} is not "
-                                 "three numbers x y z; fix or remove the line") from exc
+        except (ValueError, IndexError, OverflowError) as exc:
+            raise InputFileError(f"{what}: line {lineno} {ln[:60]!r} is not three numbers "
+                                 "x y z; fix or remove the line") from exc
     pts = np.asarray(rows, dtype=float)
-    if not np.all(np.isfinite(pts)):
-        raise InputFileError(f"point file {path} contains NaN or infinite coordinates")
+    ok = np.isfinite(pts) & (np.abs(pts) <= MAX_ABS_COORDINATE_M)
+    if not ok.all():
+        row, col = np.argwhere(~ok)[0]
+        lineno, ln = lines[row]
+        finite_number(_SPLIT.split(ln)[cols[col]], f"{what}: line {lineno} {'xyz'[col]}")
     return pts
 
 
 def _is_numeric(token: str) -> bool:
     try:
         float(token)
-    except ValueError:
+    except (ValueError, OverflowError):
         return False
     return True
 
@@ -87,4 +96,5 @@ def _header_columns(header: list[str], path: Path) -> tuple[int, int, int]:
         return tuple(found)  # type: ignore[return-value]
     if len(names) >= 3:
         return (0, 1, 2)
-    raise InputFileError(f"point file {path}: header {header} has fewer than three columns")
+    raise InputFileError(f"point file {path}: header {', '.join(header)[:80]!r} has fewer than "
+                         "three columns; give x, y and z columns")

@@ -382,8 +382,11 @@ def measure_candidates(xyz_m: np.ndarray, index: RangeIndex, starts_m: np.ndarra
         if members.size < 4:  # nothing to fit: noise, not listed
             continue
         pts = xyz_m[members]
-        fit = fit_sphere(pts, fit_cfg.radius_m, method=fit_cfg.method,
-                         max_correspondence_m=fit_cfg.max_correspondence_m, centre0_m=start)
+        try:
+            fit = fit_sphere(pts, fit_cfg.radius_m, method=fit_cfg.method,
+                             max_correspondence_m=fit_cfg.max_correspondence_m, centre0_m=start)
+        except DataError:  # no sphere in these points (degenerate, none used): not listed
+            continue
         metrics = marker_metrics(pts, fit)
         ok, reason = quality_gate(fit, metrics, cfg.quality)
         out.append(Candidate(start, members, fit, metrics, ok, reason))
@@ -662,7 +665,7 @@ def write_results(folder, results: list[StationResult], prov: dict[str, Any]) ->
         for res in results:
             for e in res.edges:
                 w.writerow([_cell(e[c]) for c in EDGE_COLUMNS])
-    summary = {"stations": [{**res.summary, "timings_s": res.timings_s} for res in results],
+    summary = {"stations": [res.summary for res in results],
                "files": ["markers.csv", "stations.csv", "edges.csv", "summary.json"],
                "provenance": prov}
     (folder / "summary.json").write_text(json.dumps(summary, indent=1, sort_keys=True,

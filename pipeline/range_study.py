@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from markerplan.errors import ConfigError
+from markerplan.errors import ConfigError, DataError
 from pipeline.gate import RangeIndex
 from pipeline.marker_table import MarkerRow, line_of_sight
 from pipeline.quality import QualityConfig, marker_metrics, quality_gate
@@ -105,13 +105,19 @@ def measure_markers(scan: StationScan, centres_m: np.ndarray, ids: list[str],
         pts = cloud.xyz_m[members]
         cap = pts[pts[:, 2] >= truth[2]]
         for method in methods:
-            if cap.shape[0] < 4:
+            fit = None
+            if cap.shape[0] >= 4:
+                try:
+                    fit = fit_sphere(pts, radius_m, method=method,
+                                     centre0_m=cap_start(cap, radius_m))
+                except DataError:  # degenerate points or none used: no fit
+                    fit = None
+            if fit is None:
                 dist, elev, az = line_of_sight(truth)
                 rows.append(MarkerRow(scan.station_id, mid, *truth, dist, elev, az, 0, 0.0, 0.0,
                                       float("nan"), float("nan"), method, False,
                                       "too_few_points", replicate=replicate, seed=seed))
                 continue
-            fit = fit_sphere(pts, radius_m, method=method, centre0_m=cap_start(cap, radius_m))
             metrics = marker_metrics(pts, fit)
             ok, reason = quality_gate(fit, metrics, quality)
             dist, elev, az = line_of_sight(fit.centre_m)

@@ -30,7 +30,10 @@ from __future__ import annotations
 
 import io
 import json
+import math
+import tokenize
 import zipfile
+import zlib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -38,9 +41,29 @@ from typing import Any
 import numpy as np
 
 from markerplan.errors import DataError, InputFileError
+from markerplan.reading import (
+    MAX_ABS_COORDINATE_M,
+    check_schema_version,
+    finite_number,
+    json_kind,
+    load_json,
+    parse_json,
+    require_keys,
+    require_type,
+    unique_ids,
+)
 
-SCAN_FORMAT = "markerplan-scan/1"
-TRUTH_FORMAT = "markerplan-truth/1"
+#: Version of the scan and truth formats this markerplan writes and reads (the ``/N`` suffix).
+FORMAT_VERSION = 1
+SCAN_FORMAT = f"markerplan-scan/{FORMAT_VERSION}"
+TRUTH_FORMAT = f"markerplan-truth/{FORMAT_VERSION}"
+#: Largest range or sensor-frame coordinate accepted, metres. No terrestrial LiDAR measures
+#: beyond a few km; a larger value is a corrupt file or a unit mistake.
+MAX_RANGE_M = 1e4
+#: Largest magnitude accepted for an angle, radians (about 160 turns).
+MAX_ABS_ANGLE_RAD = 1e3
+#: Laser channels of a VLP-16.
+N_LASERS = 16
 
 _POINT_FIELDS = {
     "frame_index": np.uint32,
@@ -97,15 +120,25 @@ class StationScan:
         return str(self.metadata.get("station_id", "station"))
 
     def validate(self, source: str = "scan") -> StationScan:
-        """Check shapes, dtypes and emptiness; return ``self`` (coerced to the file dtypes).
+        """Check shapes, dtypes, values and metadata; return ``self`` (coerced to file dtypes).
+
+        Parameters
+        ----------
+        source : str
+            How messages name the scan (usually its path).
 
         Raises
         ------
         DataError
             If the scan has no points, no frames, or frames without a turntable angle.
         InputFileError
-            If array shapes disagree.
+            If arrays are not numeric, shapes disagree, values are NaN/infinite or absurd
+            (ranges or coordinates beyond :data:`MAX_RANGE_M`, angles beyond
+            :data:`MAX_ABS_ANGLE_RAD`, laser ids outside 0-15, negative or fractional frame
+            indices), or the metadata has the wrong types.
         """
+        _scan_arrays_iv(self, source)
+        _metadata_iv(self.metadata, source)
         n = self.range_m.shape[0]
         if self.xyz_sensor_m.shape != (n, 3):
             raise InputFileError(f"{source}: xyz_sensor_m must have shape ({n}, 3), "
@@ -114,6 +147,9 @@ class StationScan:
             arr = getattr(self, name)
             if arr.shape != (n,):
                 raise InputFileError(f"{source}: {name} must have shape ({n},), got {arr.shape}")
+        if self.intensity is not None and self.intensity.shape != (n,):
+            raise InputFileError(f"{source}: intensity must have shape ({n},), "
+                                 f"got {self.intensity.shape}")
         if self.n_frames == 0:
             raise DataError(f"{source}: scan has no frames; record at least one frame")
         if n == 0:
@@ -123,6 +159,7 @@ class StationScan:
             bad = int(np.sum(~np.isfinite(self.turntable_angle_rad)))
             raise DataError(f"{source}: {bad} of {self.n_frames} frames have no turntable angle; "
                             "supply the angles (e.g. a turntable CSV) before processing")
+        _values_iv(self, source)
         if n and int(self.frame_index.max()) >= self.n_frames:
             raise InputFileError(f"{source}: frame_index refers to frame "
                                  f"{int(self.frame_index.max())} but only {self.n_frames} exist")
@@ -131,6 +168,109 @@ class StationScan:
             setattr(self, name, getattr(self, name).astype(dtype, copy=False))
         self.xyz_sensor_m = self.xyz_sensor_m.astype(np.float32, copy=False)
         return self
+
+
+_NUMERIC_KINDS = "iuf"
+
+
+def _scan_arrays_iv(scan: StationScan, source: str) -> None:
+    """Every array numeric (integer or float); the turntable angles one-dimensional."""
+    names = ["turntable_angle_rad", "xyz_sensor_m", *_POINT_FIELDS]
+    if scan.intensity is not None:
+        names.append("intensity")
+    for name in names:
+        arr = np.asarray(getattr(scan, name))
+        if arr.dtype.kind not in _NUMERIC_KINDS:
+            raise InputFileError(f"{source}: {name} must hold integer or float numbers, got "
+                                 f"dtype {arr.dtype}; write the scan with markerplan")
+        setattr(scan, name, arr)
+    if scan.turntable_angle_rad.ndim != 1:
+        raise InputFileError(f"{source}: turntable_angle_rad must have shape (F,), got "
+                             f"{scan.turntable_angle_rad.shape}")
+
+
+def _bad_count(ok: np.ndarray) -> int:
+    return int(ok.size - np.count_nonzero(ok))
+
+
+def _finite_iv(arr: np.ndarray, name: str, limit: float, unit: str, source: str) -> None:
+    """Refuse NaN/inf and magnitudes beyond ``limit`` (checked in float64, before any cast)."""
+    a = np.asarray(arr, dtype=np.float64)
+    finite = np.isfinite(a)
+    if not finite.all():
+        first = a[~finite].flat[0]
+        raise InputFileError(f"{source}: {name} holds {_bad_count(finite)} NaN or infinite "
+                             f"value(s) (first {first}); every value must be finite")
+    big = np.abs(a) <= limit
+    if not big.all():
+        first = a[~big].flat[0]
+        raise InputFileError(f"{source}: {name} holds {_bad_count(big)} value(s) beyond "
+                             f"{limit:g} {unit} (first {first:g}); check the file's units and "
+                             "content")
+
+
+def _integers_iv(arr: np.ndarray, name: str, lo: int, hi: int, source: str,
+                 hint: str = "check the file") -> None:
+    """Refuse values that are not whole numbers in ``[lo, hi]``."""
+    a = np.asarray(arr)
+    if a.dtype.kind == "f":
+        a64 = a.astype(np.float64)
+        ok = np.isfinite(a64) & (a64 == np.round(a64))
+        if not ok.all():
+            raise InputFileError(f"{source}: {name} must hold whole numbers, got "
+                                 f"{a64[~ok].flat[0]!r}; write the scan with markerplan")
+    inside = (a >= lo) & (a <= hi)
+    if not inside.all():
+        raise InputFileError(f"{source}: {name} must lie in {lo}..{hi}, got "
+                             f"{a[~inside].flat[0]} ({_bad_count(inside)} value(s)); {hint}")
+
+
+def _values_iv(scan: StationScan, source: str) -> None:
+    """Finite, plausible numbers in every array (shapes already checked)."""
+    _finite_iv(scan.turntable_angle_rad, "turntable_angle_rad", MAX_ABS_ANGLE_RAD, "rad",
+               source)
+    _finite_iv(scan.spin_azimuth_rad, "spin_azimuth_rad", MAX_ABS_ANGLE_RAD, "rad", source)
+    _finite_iv(scan.range_m, "range_m", MAX_RANGE_M, "m", source)
+    _finite_iv(scan.xyz_sensor_m, "xyz_sensor_m", MAX_RANGE_M, "m", source)
+    _integers_iv(scan.laser_id, "laser_id", 0, N_LASERS - 1, source,
+                 "VLP-16 channels are 0-15; check the file")
+    _integers_iv(scan.frame_index, "frame_index", 0, np.iinfo(np.uint32).max, source)
+    if scan.intensity is not None:
+        _integers_iv(scan.intensity, "intensity", 0, 255, source)
+
+
+#: Optional metadata keys and the JSON type each must have when present.
+_METADATA_TYPES: dict[str, type | tuple[type, ...]] = {
+    "format": str, "station_id": str, "source": str, "source_file": str, "sensor": dict,
+    "rig": dict, "provenance": dict,
+}
+
+
+def _metadata_iv(meta: Any, source: str) -> None:
+    """The metadata is an object whose known keys have the documented types."""
+    if not isinstance(meta, dict):
+        raise InputFileError(f"{source}: metadata must be a JSON object, got {json_kind(meta)}")
+    for key, kind in _METADATA_TYPES.items():
+        if key in meta:
+            require_type(meta[key], kind, f"{source}: metadata {key!r}")
+    if "station_id" in meta and not meta["station_id"].strip():
+        raise InputFileError(f"{source}: metadata 'station_id' is empty; name the station")
+    config = meta.get("provenance", {}).get("config")
+    if config is not None:
+        require_type(config, dict, f"{source}: metadata provenance 'config'")
+        if config.get("seed") is not None:
+            require_type(config["seed"], int, f"{source}: metadata provenance config 'seed'")
+
+
+def _format_version(found: Any, family: str, what: str) -> int:
+    """The ``N`` of a ``"<family>/N"`` format string, refusing other families and newer N."""
+    fix = f"expected {family}/{FORMAT_VERSION} written by markerplan"
+    if not isinstance(found, str) or not found.startswith(f"{family}/"):
+        raise InputFileError(f"{what}: format {found!r:.60} is not {family}/N; {fix}")
+    number = found[len(family) + 1:]
+    if not (number.isascii() and number.isdigit()):
+        raise InputFileError(f"{what}: format {found!r:.60} has no integer version; {fix}")
+    return check_schema_version(int(number), FORMAT_VERSION, what)
 
 
 def _write_npz(path: Path, arrays: dict[str, np.ndarray]) -> None:
@@ -178,36 +318,43 @@ def write_scan(path: str | Path, scan: StationScan) -> Path:
 def read_scan(path: str | Path) -> StationScan:
     """Read and validate a scan file.
 
+    Parameters
+    ----------
+    path : str or Path
+        A ``.scan.npz`` written by :func:`write_scan`.
+
+    Returns
+    -------
+    StationScan
+        Validated (:meth:`StationScan.validate`), arrays in the file dtypes.
+
     Raises
     ------
     InputFileError
-        Missing, unreadable or malformed file (names the missing member).
+        Missing, unreadable or malformed file (names the missing member), metadata that is
+        not a JSON object with ``format`` and ``station_id``, a format newer than
+        :data:`SCAN_FORMAT`, or bad values (see :meth:`StationScan.validate`).
     DataError
         Empty scan or frames without turntable angles.
     """
     path = Path(path)
     if not path.is_file():
         raise InputFileError(f"scan file {path} does not exist; check the path")
-    try:
-        with np.load(path, allow_pickle=False) as z:
-            members = set(z.files)
-            required = {"metadata", "turntable_angle_rad", "xyz_sensor_m", *_POINT_FIELDS}
-            missing = sorted(required - members)
-            if missing:
-                raise InputFileError(f"{path} is not a markerplan scan: missing "
-                                     f"{', '.join(missing)} (expected format {SCAN_FORMAT})")
-            data = {k: z[k] for k in members}
-    except InputFileError:
-        raise
-    except (OSError, ValueError, zipfile.BadZipFile, EOFError) as exc:
-        raise InputFileError(f"{path} is not a readable scan file ({exc}); expected a "
-                             f"{SCAN_FORMAT} .npz written by markerplan") from exc
-    try:
-        meta = json.loads(str(data["metadata"]))
-    except json.JSONDecodeError as exc:
-        raise InputFileError(f"{path}: metadata is not valid JSON ({exc})") from exc
-    if meta.get("format") != SCAN_FORMAT:
-        raise InputFileError(f"{path}: format {meta.get('format')!r} is not {SCAN_FORMAT!r}")
+    required = {"metadata", "turntable_angle_rad", "xyz_sensor_m", *_POINT_FIELDS}
+    data = _read_npz(path, required | {"intensity"})
+    missing = sorted(required - set(data))
+    if missing:
+        raise InputFileError(f"{path} is not a markerplan scan: missing "
+                             f"{', '.join(missing)} (expected format {SCAN_FORMAT})")
+    meta_arr = data["metadata"]
+    if meta_arr.shape != () or meta_arr.dtype.kind != "U":
+        raise InputFileError(f"{path}: metadata must be one JSON text, got an array of dtype "
+                             f"{meta_arr.dtype} and shape {meta_arr.shape}; write the scan "
+                             "with markerplan")
+    meta = parse_json(str(meta_arr), f"{path}: metadata")
+    require_keys(meta, ("format", "station_id"), f"{path}: metadata",
+                 f"expected {SCAN_FORMAT} metadata written by markerplan")
+    _format_version(meta["format"], SCAN_FORMAT.split("/")[0], f"{path}: metadata")
     scan = StationScan(
         turntable_angle_rad=data["turntable_angle_rad"],
         xyz_sensor_m=data["xyz_sensor_m"],
@@ -216,6 +363,51 @@ def read_scan(path: str | Path) -> StationScan:
         **{name: data[name] for name in _POINT_FIELDS},
     )
     return scan.validate(str(path))
+
+
+def _read_npz(path: Path, names: set[str]) -> dict[str, np.ndarray]:
+    """The members ``names`` (those present) of an ``.npz``, each checked before it is read.
+
+    A member whose header declares more data than it holds, or an object array, is refused
+    without allocating it, so a corrupt header cannot exhaust memory.
+    """
+    fix = f"expected a {SCAN_FORMAT} .npz written by markerplan"
+    out = {}
+    try:
+        with zipfile.ZipFile(path) as zf:
+            for info in zf.infolist():
+                name = info.filename.removesuffix(".npy")
+                if name in names and name not in out:
+                    out[name] = _read_npy(zf.read(info), f"{path} member {info.filename}", fix)
+    except InputFileError:
+        raise
+    except (OSError, EOFError, ValueError, zipfile.BadZipFile, zlib.error, NotImplementedError,
+            RuntimeError) as exc:
+        reason = " ".join(str(exc).split())[:120] or type(exc).__name__
+        raise InputFileError(f"{path} is not a readable scan file ({reason}); {fix}") from exc
+    return out
+
+
+def _read_npy(data: bytes, what: str, fix: str) -> np.ndarray:
+    """One ``.npy`` member from its bytes (version 1 or 2 header, no pickles)."""
+    fh = io.BytesIO(data)
+    version = np.lib.format.read_magic(fh)
+    if version not in ((1, 0), (2, 0)):
+        raise InputFileError(f"{what}: .npy version {version} is not 1.0 or 2.0; {fix}")
+    read_header = (np.lib.format.read_array_header_1_0 if version == (1, 0) else
+                   np.lib.format.read_array_header_2_0)
+    try:
+        shape, _, dtype = read_header(fh)
+    except (ValueError, SyntaxError, tokenize.TokenError, TypeError) as exc:
+        raise InputFileError(f"{what}: the .npy header is corrupt; {fix}") from exc
+    if dtype.hasobject:
+        raise InputFileError(f"{what}: holds Python objects, which are never loaded; {fix}")
+    expected = math.prod(shape) * dtype.itemsize
+    if len(data) - fh.tell() != expected:
+        raise InputFileError(f"{what}: header declares {expected} bytes of data but "
+                             f"{len(data) - fh.tell()} follow; the file is corrupt or truncated")
+    fh.seek(0)
+    return np.lib.format.read_array(fh, allow_pickle=False)
 
 
 def write_truth(path: str | Path, truth: dict[str, Any]) -> Path:
@@ -234,21 +426,83 @@ def write_truth(path: str | Path, truth: dict[str, Any]) -> Path:
 
 
 def read_truth(path: str | Path) -> dict[str, Any]:
-    """Read a truth file written by :func:`write_truth`, checking the required keys."""
+    """Read a truth file written by :func:`write_truth`, checking its keys and values.
+
+    Parameters
+    ----------
+    path : str or Path
+        A ``.truth.json``.
+
+    Returns
+    -------
+    truth : dict
+        The parsed file (see :func:`write_truth` for its keys).
+
+    Raises
+    ------
+    InputFileError
+        Missing file, not UTF-8, not a JSON object, a format other than or newer than
+        :data:`TRUTH_FORMAT`, missing keys, or values of the wrong type: ``markers`` must be a
+        list of objects with a unique string ``id`` and a ``centre_station_m`` of three
+        finite numbers; poses and offsets must be finite numbers.
+    """
     path = Path(path)
+    what = f"truth file {path}"
     if not path.is_file():
-        raise InputFileError(f"truth file {path} does not exist; check the path")
-    try:
-        body = json.loads(path.read_text())
-    except (OSError, json.JSONDecodeError) as exc:
-        raise InputFileError(f"{path} is not valid JSON ({exc})") from exc
-    if body.get("format") != TRUTH_FORMAT:
-        raise InputFileError(f"{path}: format {body.get('format')!r} is not {TRUTH_FORMAT!r}")
-    missing = [k for k in ("station_id", "station_pose", "markers", "mounting_offsets")
-               if k not in body]
-    if missing:
-        raise InputFileError(f"{path}: truth file lacks {', '.join(missing)}")
+        raise InputFileError(f"{what} does not exist; check the path")
+    body = load_json(path, what)
+    fix = f"expected a {TRUTH_FORMAT} file written by markerplan simulate"
+    require_keys(body, ("format",), what, fix)
+    _format_version(body["format"], TRUTH_FORMAT.split("/")[0], what)
+    require_keys(body, ("station_id", "station_pose", "markers", "mounting_offsets"), what, fix)
+    _truth_iv(body, what)
     return body
+
+
+def _numbers_iv(value: Any, n: int, what: str) -> list[float]:
+    """A list of exactly ``n`` finite numbers."""
+    if not isinstance(value, list) or len(value) != n:
+        shown = f"{len(value)} items" if isinstance(value, list) else json_kind(value)
+        raise InputFileError(f"{what}: must be a list of {n} numbers, got {shown}")
+    return [_json_number(v, f"{what}[{k}]") for k, v in enumerate(value)]
+
+
+def _json_number(value: Any, what: str, max_abs: float = MAX_ABS_COORDINATE_M) -> float:
+    """A finite JSON number (not a string, not a boolean) of magnitude at most ``max_abs``."""
+    return finite_number(require_type(value, (int, float), what), what, max_abs)
+
+
+def _truth_iv(body: dict[str, Any], what: str) -> None:
+    station = require_type(body["station_id"], str, f"{what}: 'station_id'")
+    if not station.strip():
+        raise InputFileError(f"{what}: 'station_id' is empty; name the station")
+    pose = require_type(body["station_pose"], dict, f"{what}: 'station_pose'")
+    if "position_m" in pose:
+        _numbers_iv(pose["position_m"], 3, f"{what}: station_pose 'position_m'")
+    for key in ("heading_rad", "roll_rad", "pitch_rad"):
+        if key in pose:
+            _json_number(pose[key], f"{what}: station_pose {key!r}", MAX_ABS_ANGLE_RAD)
+    offsets = require_type(body["mounting_offsets"], dict, f"{what}: 'mounting_offsets'")
+    for key in ("vertical_axis_error_rad", "lframe_tilt_rad"):
+        if key in offsets:
+            _json_number(offsets[key], f"{what}: mounting_offsets {key!r}", MAX_ABS_ANGLE_RAD)
+    if "axis_offset_m" in offsets:
+        _numbers_iv(offsets["axis_offset_m"], 2, f"{what}: mounting_offsets 'axis_offset_m'")
+    if "marker_radius_m" in body:
+        radius = _json_number(body["marker_radius_m"], f"{what}: 'marker_radius_m'")
+        if radius <= 0:
+            raise InputFileError(f"{what}: 'marker_radius_m' must be > 0, got {radius:g}")
+    markers = require_type(body["markers"], list, f"{what}: 'markers'")
+    ids = []
+    for k, m in enumerate(markers):
+        where = f"{what}: markers[{k}]"
+        require_type(m, dict, where)
+        require_keys(m, ("id", "centre_station_m"), where, "every marker needs both")
+        ids.append(require_type(m["id"], str, f"{where} 'id'"))
+        _numbers_iv(m["centre_station_m"], 3, f"{where} 'centre_station_m'")
+        if "centre_site_m" in m:
+            _numbers_iv(m["centre_site_m"], 3, f"{where} 'centre_site_m'")
+    unique_ids(ids, f"{what}: markers")
 
 
 def _json_default(obj: Any) -> Any:

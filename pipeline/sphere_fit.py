@@ -28,6 +28,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from markerplan.errors import ConfigError, DataError
+from markerplan.reading import MAX_ABS_COORDINATE_M
 
 METHODS = ("fixed-radius", "hemisphere-icp")
 DEFAULT_METHOD = "fixed-radius"
@@ -108,6 +109,17 @@ def fit_sphere(points_m: np.ndarray, radius_m: float, sensor_m=(0.0, 0.0, 0.0),
     Returns
     -------
     SphereFit
+        Centre and RMS always finite; at least one point used.
+
+    Raises
+    ------
+    DataError
+        Fewer than 4 points, NaN/infinite or absurd coordinates (beyond
+        :data:`markerplan.reading.MAX_ABS_COORDINATE_M`), all points identical or on one line,
+        or no sphere of the radius fits (no point used, or the fit diverged).
+    ConfigError
+        ``radius_m`` not a positive finite number, bad ``sensor_m``, ``method``, ``tol_m``,
+        ``max_iter``, ``max_correspondence_m`` or ``centre0_m``.
 
     Examples
     --------
@@ -123,15 +135,22 @@ def fit_sphere(points_m: np.ndarray, radius_m: float, sensor_m=(0.0, 0.0, 0.0),
     if centre0_m is None:
         centre0, _ = _closest_point_start(p, float(radius_m), sensor)
     else:
-        centre0 = np.asarray(centre0_m, dtype=float).reshape(3)
+        centre0 = np.asarray(centre0_m, dtype=float).reshape(-1)
+        if centre0.shape != (3,) or not np.all(np.isfinite(centre0)):
+            raise ConfigError(f"`centre0_m` must be three finite numbers, got {centre0_m!r}")
     if method == "fixed-radius":
-        return _astm_e3125(p, float(radius_m), sensor, centre0, tol_m, max_iter)
+        return _result_iv(_astm_e3125(p, float(radius_m), sensor, centre0, tol_m,
+                                      int(max_iter)))
     corr = radius_m / 2 if max_correspondence_m is None else float(max_correspondence_m)
-    return _hemisphere_icp(p, float(radius_m), sensor, centre0, corr, tol_m, max_iter)
+    return _result_iv(_hemisphere_icp(p, float(radius_m), sensor, centre0, corr, tol_m,
+                                      int(max_iter)))
 
 
 def _fit_sphere_iv(points_m, radius_m, sensor_m, method, tol_m, max_iter, max_corr):
-    p = np.asarray(points_m, dtype=float)
+    try:
+        p = np.asarray(points_m, dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise DataError(f"`points_m` must be an (n, 3) array of numbers ({exc})") from exc
     if p.ndim != 2 or p.shape[1] != 3:
         raise DataError(f"`points_m` must have shape (n, 3), got {p.shape}")
     if p.shape[0] < _MIN_POINTS:
@@ -139,18 +158,69 @@ def _fit_sphere_iv(points_m, radius_m, sensor_m, method, tol_m, max_iter, max_co
                         f"got {p.shape[0]}")
     if not np.all(np.isfinite(p)):
         raise DataError("`points_m` contains NaN or infinite coordinates; drop them first")
-    if not (np.isfinite(radius_m) and radius_m > 0):
+    biggest = float(np.max(np.abs(p)))
+    if biggest > MAX_ABS_COORDINATE_M:
+        raise DataError(f"`points_m` has a coordinate of {biggest:g}, beyond the accepted "
+                        f"magnitude {MAX_ABS_COORDINATE_M:g}; check the units")
+    radius = _number(radius_m, "radius_m")
+    if not (np.isfinite(radius) and 0 < radius <= MAX_ABS_COORDINATE_M):
         raise ConfigError(f"`radius_m` must be a positive number of metres, got {radius_m!r}")
-    sensor = np.asarray(sensor_m, dtype=float).reshape(-1)
-    if sensor.shape != (3,) or not np.all(np.isfinite(sensor)):
+    try:
+        sensor = np.asarray(sensor_m, dtype=float).reshape(-1)
+    except (TypeError, ValueError) as exc:
+        raise ConfigError(f"`sensor_m` must be three finite numbers, got {sensor_m!r}") from exc
+    if (sensor.shape != (3,) or not np.all(np.isfinite(sensor))
+            or np.max(np.abs(sensor)) > MAX_ABS_COORDINATE_M):
         raise ConfigError(f"`sensor_m` must be three finite numbers, got {sensor_m!r}")
     if method not in METHODS:
         raise ConfigError(f"`method` must be one of {', '.join(METHODS)}; got {method!r}")
-    if not tol_m > 0 or int(max_iter) < 1:
+    tol, iters = _number(tol_m, "tol_m"), _number(max_iter, "max_iter")
+    if not (tol > 0 and np.isfinite(tol)) or not (iters >= 1 and np.isfinite(iters)):
         raise ConfigError(f"`tol_m` must be > 0 and `max_iter` >= 1, got {tol_m}, {max_iter}")
-    if max_corr is not None and not max_corr > 0:
-        raise ConfigError(f"`max_correspondence_m` must be > 0, got {max_corr!r}")
+    if max_corr is not None:
+        corr = _number(max_corr, "max_correspondence_m")
+        if not (corr > 0 and np.isfinite(corr)):
+            raise ConfigError(f"`max_correspondence_m` must be > 0, got {max_corr!r}")
+    _spread_iv(p, radius)
     return p, sensor
+
+
+def _number(value, name: str) -> float:
+    """``value`` as a float, or a ConfigError naming ``name``."""
+    if isinstance(value, bool | np.bool_):
+        raise ConfigError(f"`{name}` must be a number, got {value!r}")
+    try:
+        return float(value)
+    except (TypeError, ValueError, OverflowError) as exc:
+        raise ConfigError(f"`{name}` must be a number, got {value!r:.40}") from exc
+
+
+def _spread_iv(p: np.ndarray, radius: float) -> None:
+    """Refuse point sets that cannot fix a centre: all identical, or all on one line.
+
+    The spread along the second principal axis must exceed ``1e-6 radius`` (plus the
+    float64 resolution of the coordinates): far below the noise of any scan, far above the
+    rounding of a synthetic line.
+    """
+    centred = p - p.mean(axis=0)
+    s = np.linalg.svd(centred, compute_uv=False) / np.sqrt(p.shape[0])
+    tol = 1e-6 * radius + 1e-12 * float(np.max(np.abs(p)))
+    if s[0] <= tol:
+        raise DataError(f"`points_m`: all {p.shape[0]} points are the same point (spread "
+                        f"{s[0]:.3g} m); a sphere needs points spread over its surface")
+    if s[1] <= tol:
+        raise DataError(f"`points_m`: all {p.shape[0]} points lie on one line (spread across "
+                        f"it {s[1]:.3g} m); a sphere needs points spread over its surface")
+
+
+def _result_iv(fit: SphereFit) -> SphereFit:
+    """Refuse a fit that used no points or diverged (never report NaN or infinity)."""
+    if fit.n_used == 0 or not (np.all(np.isfinite(fit.centre_m)) and np.isfinite(fit.rms_m)):
+        raise DataError(f"no sphere of radius {fit.radius_m:g} m fits the {fit.n_points} points "
+                        f"({fit.method}: {fit.n_used} points used, centre "
+                        f"{np.round(fit.centre_m, 6).tolist()}); check the radius, the sensor "
+                        "position and that the points are one sphere")
+    return fit
 
 
 def lsq_fixed_radius(points_m: np.ndarray, radius_m: float, centre0_m: np.ndarray,

@@ -6,18 +6,20 @@ height under it plus the marker radius (the sphere rests on the ground).
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 import shapely
-from shapely.geometry import MultiPolygon, Polygon, shape
+from shapely.geometry import Polygon
 
 from markerplan.errors import ConfigError, DataError, InputFileError
+from markerplan.reading import finite_number, json_kind, load_json
 
 #: Baseline for the slope under a marker, m (a 0.20 m sphere's footprint, not DEM micro-relief).
 SLOPE_BASELINE_M = 0.25
+#: Most candidate grid points one plan may ray cast (the large preset at 0.5 m has ~460 000).
+MAX_GRID_POINTS = 500_000
 
 
 @dataclass(frozen=True)
@@ -51,48 +53,90 @@ def load_polygons(path: str | Path, option: str = "--exclude") -> list[Polygon]:
 
     Accepts a FeatureCollection, a Feature or a bare geometry of type Polygon or MultiPolygon.
 
+    Parameters
+    ----------
+    path : str or Path
+        UTF-8 GeoJSON file.
+    option : str
+        How messages name the input (``"--boundary"``, ``"--exclude"``).
+
+    Returns
+    -------
+    polygons : list of shapely Polygon
+        At least one; each valid with positive area.
+
     Raises
     ------
     InputFileError
-        Missing or unreadable file, no polygons, or an invalid polygon (self-intersecting, too few
-        points), naming the file and the feature.
+        Missing, unreadable or non-UTF-8 file, not JSON, not a GeoJSON object, no polygons,
+        malformed coordinates (not ``[x, y]`` pairs, not finite, beyond
+        :data:`~markerplan.reading.MAX_ABS_COORDINATE_M`), more than :data:`MAX_POLYGON_VERTICES`
+        corners, or an invalid polygon (self-intersecting, too few points), naming the file and
+        the feature.
     """
-    path = Path(path)
-    try:
-        data = json.loads(path.read_text())
-    except FileNotFoundError as exc:
-        raise InputFileError(f"{option} {path}: file not found; give an existing GeoJSON file") \
-            from exc
-    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise InputFileError(f"{option} {path}: not valid JSON ({exc}); give a GeoJSON file") \
-            from exc
-    if not isinstance(data, dict):
-        raise InputFileError(f"{option} {path}: expected a GeoJSON object, got "
-                             f"{type(data).__name__}")
-    if data.get("type") == "FeatureCollection":
-        geoms = [f.get("geometry") if isinstance(f, dict) else None
-                 for f in data.get("features", [])]
-    elif data.get("type") == "Feature":
+    what = f"{option} {path}"
+    data = load_json(path, what)
+    kind = data.get("type")
+    if kind == "FeatureCollection":
+        features = data.get("features")
+        if not isinstance(features, list):
+            raise InputFileError(f"{what}: 'features' must be a list, got "
+                                 f"{json_kind(features)}; give a GeoJSON FeatureCollection")
+        geoms = [f.get("geometry") if isinstance(f, dict) else f for f in features]
+    elif kind == "Feature":
         geoms = [data.get("geometry")]
     else:
         geoms = [data]
     polys: list[Polygon] = []
+    n_vertices = 0
     for k, g in enumerate(geoms):
-        where = f"{option} {path}: feature {k}"
+        where = f"{what}: feature {k}"
         if not isinstance(g, dict) or g.get("type") not in ("Polygon", "MultiPolygon"):
-            got = g.get("type") if isinstance(g, dict) else type(g).__name__
-            raise InputFileError(f"{where}: geometry must be a Polygon or MultiPolygon, got {got}")
-        try:
-            geom = shape(g)
-        except (ValueError, TypeError, AttributeError, IndexError, KeyError) as exc:
-            raise InputFileError(f"{where}: malformed polygon coordinates ({exc}); give "
-                                 "closed rings of [x, y] pairs in metres") from exc
-        parts = list(geom.geoms) if isinstance(geom, MultiPolygon) else [geom]
-        for p in parts:
-            polys.append(_valid_polygon(p, where))
+            got = repr(g.get("type")) if isinstance(g, dict) else json_kind(g)
+            raise InputFileError(f"{where}: geometry must be a Polygon or MultiPolygon, got "
+                                 f"{got:.40}; give GeoJSON polygons")
+        coords = g.get("coordinates")
+        rings_of = [coords] if g["type"] == "Polygon" else coords
+        if not isinstance(rings_of, list):
+            raise InputFileError(f"{where}: malformed MultiPolygon: coordinates must be a "
+                                 f"list of polygons, got {json_kind(rings_of)}")
+        for rings in rings_of:
+            rings = _rings_iv(rings, where)
+            n_vertices += sum(len(r) for r in rings)
+            if n_vertices > MAX_POLYGON_VERTICES:
+                raise InputFileError(f"{what}: more than {MAX_POLYGON_VERTICES} polygon corners; "
+                                     "simplify the polygons")
+            polys.append(_valid_polygon(Polygon(rings[0], rings[1:]), where))
     if not polys:
-        raise InputFileError(f"{option} {path}: no polygons found; give a GeoJSON Polygon")
+        raise InputFileError(f"{what}: no polygons found; give a GeoJSON Polygon")
     return polys
+
+
+#: Most polygon corners accepted in one GeoJSON file (a site outline needs tens).
+MAX_POLYGON_VERTICES = 100_000
+
+
+def _rings_iv(rings, where: str) -> list[list[tuple[float, float]]]:
+    """Polygon coordinates -> rings of finite ``(x, y)`` corners, or an InputFileError."""
+    if not isinstance(rings, list) or not rings:
+        raise InputFileError(f"{where}: malformed polygon: coordinates must be a non-empty "
+                             f"list of rings, got {json_kind(rings)}; give closed rings of "
+                             "[x, y] pairs in metres")
+    out = []
+    for ring in rings:
+        if not isinstance(ring, list) or len(ring) < 4:
+            got = f"{len(ring)} corner(s)" if isinstance(ring, list) else json_kind(ring)
+            raise InputFileError(f"{where}: malformed ring: needs at least 4 [x, y] pairs "
+                                 f"(closed), got {got}; give closed rings in metres")
+        pts = []
+        for i, pt in enumerate(ring):
+            if not isinstance(pt, list) or len(pt) not in (2, 3):
+                raise InputFileError(f"{where}: malformed corner: must be [x, y] (or "
+                                     f"[x, y, z]), got {pt!r:.40}; give coordinates in metres")
+            pts.append((finite_number(pt[0], f"{where}: corner {i} x"),
+                        finite_number(pt[1], f"{where}: corner {i} y")))
+        out.append(pts)
+    return out
 
 
 def _valid_polygon(p: Polygon, where: str) -> Polygon:
@@ -159,12 +203,20 @@ def candidate_sites(dem, config, boundary=None, exclusions=(), station_xy=None, 
 
     Raises
     ------
+    ConfigError
+        When ``grid_spacing_m`` would give more than :data:`MAX_GRID_POINTS` grid points.
     DataError
         When no site survives, with the count dropped for each reason.
     """
     region, excl, st = _candidates_iv(dem, boundary, exclusions, station_xy, config)
     s = config.grid_spacing_m
     x0, y0, x1, y1 = region.bounds
+    n_grid = np.ceil((x1 - x0) / s) * np.ceil((y1 - y0) / s)
+    if n_grid > MAX_GRID_POINTS:
+        raise ConfigError(f"`grid_spacing_m` {s:g} m gives {n_grid:.3g} candidate grid points on "
+                          f"this {x1 - x0:.0f} x {y1 - y0:.0f} m site, more than the "
+                          f"{MAX_GRID_POINTS} accepted; raise grid_spacing_m or shrink the "
+                          "boundary")
     gx = np.arange(x0 + s / 2, x1, s)
     gy = np.arange(y0 + s / 2, y1, s)
     xx, yy = np.meshgrid(gx, gy)

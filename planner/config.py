@@ -14,52 +14,64 @@ from pathlib import Path
 from typing import Any
 
 from markerplan.errors import ConfigError, InputFileError
+from markerplan.reading import read_text
 
 
 @dataclass(frozen=True)
 class PlanConfig:
     """Everything that decides a plan besides the site and the error model.
 
+    Every numeric setting has documented bounds (:data:`BOUNDS`, repeated below); a value
+    outside them, of the wrong type, or not finite raises :class:`ConfigError` naming the
+    setting, the bounds and the value received.
+
     Attributes
     ----------
     requirement_m : float
-        Required 95 % bound of a station's registered position error over its working radius, m.
+        Required 95 % bound of a station's registered position error over its working radius, m;
+        finite, > 0.
     n_sectors : int
-        Number of equal bearing sectors around each station (site frame), default 6 x 60 deg.
+        Number of equal bearing sectors around each station (site frame), default 6 x 60 deg;
+        integer in [1, 36].
     min_sectors : int
-        Least number of distinct sectors that must hold a selected usable marker.
+        Least number of distinct sectors that must hold a selected usable marker; integer in
+        [1, n_sectors].
     min_markers : int
-        Least number of selected usable markers per station.
+        Least number of selected usable markers per station; integer in [1, 100].
     grid_spacing_m : float
-        Spacing of the candidate-site grid, m.
+        Spacing of the candidate-site grid, m; in [0.1, 100].
     max_slope_deg : float
-        Candidate sites on ground steeper than this are dropped, degrees.
+        Candidate sites on ground steeper than this are dropped, degrees; in (0, 90].
     min_station_distance_m : float
-        Candidate sites closer than this to any station are dropped (the rover needs room), m.
+        Candidate sites closer than this to any station are dropped (the rover needs room), m;
+        in [0, 100].
     exclude_crater_interiors : bool
         Drop candidate sites inside crater rims.
     max_range_m : float
-        Station-site pairs farther apart than this are not considered, m.
+        Station-site pairs farther apart than this are not considered, m; in (0, 100] (the
+        LiDAR's range).
     min_visible_fraction : float
         A pair is usable only if at least this fraction of the marker's sensor-facing
-        hemisphere is unoccluded (terrain and burial counted).
+        hemisphere is unoccluded (terrain and burial counted); in [0, 1].
     allow_out_of_domain : bool
         Accept pairs outside the error model's fitted domain (default: they are unusable).
     working_radius_m : float
-        Radius around a station over which its registered cloud must meet the requirement, m.
+        Radius around a station over which its registered cloud must meet the requirement, m;
+        in (0, 100].
     inclinometer_sigma_deg : float
         1-sigma roll/pitch error of the rover's inclinometer, degrees; roll and pitch are taken
-        from it, not estimated from markers.
+        from it, not estimated from markers; in [0, 10].
     rays_per_marker : int
-        Size of the ray bundle that samples each marker's visible hemisphere.
+        Size of the ray bundle that samples each marker's visible hemisphere; integer in
+        [1, 1024].
     redundant : bool
         Every station must still meet directions and accuracy after losing any one marker.
     budget : int or None
-        Largest number of markers allowed (``None``: no budget).
+        Largest number of markers allowed (``None``: no budget); integer in [1, 100000].
     time_limit_s : float
-        Wall-clock limit for the whole integer-programming loop, s.
+        Wall-clock limit for the whole integer-programming loop, s; in (0, 86400].
     mip_gap : float
-        Target relative gap; 0 asks for proven optimality.
+        Target relative gap; 0 asks for proven optimality; in [0, 1].
     existing : tuple of str
         Ids of markers that already exist (fixed in the plan).
     forbidden : tuple of str
@@ -122,45 +134,84 @@ def _reject_unknown(values: dict[str, Any], where: str) -> None:
                           f"known keys are {', '.join(_field_names())}")
 
 
+#: Documented bounds of every numeric setting: name -> (low, low_inclusive, high, unit). Values
+#: outside them are mistakes, or make the work explode (a 1e6 m range or a 1 mm grid would ray
+#: cast for hours): ``max_range_m`` stops at the LiDAR's own range (visibility.sensor, 100 m),
+#: ``grid_spacing_m`` at 0.1 m (finer than the DEM the markers sit on) and ``n_sectors`` at 36
+#: (10 degree sectors). ``requirement_m`` has no upper bound: a loose requirement costs nothing
+#: (the planner itself uses 1e9 m for "no requirement").
+BOUNDS: dict[str, tuple[float, bool, float, str]] = {
+    "requirement_m": (0.0, False, math.inf, " m"),
+    "n_sectors": (1, True, 36, ""),
+    "min_sectors": (1, True, 36, ""),
+    "min_markers": (1, True, 100, ""),
+    "grid_spacing_m": (0.1, True, 100.0, " m"),
+    "max_slope_deg": (0.0, False, 90.0, " deg"),
+    "min_station_distance_m": (0.0, True, 100.0, " m"),
+    "max_range_m": (0.0, False, 100.0, " m"),
+    "min_visible_fraction": (0.0, True, 1.0, ""),
+    "working_radius_m": (0.0, False, 100.0, " m"),
+    "inclinometer_sigma_deg": (0.0, True, 10.0, " deg"),
+    "rays_per_marker": (1, True, 1024, ""),
+    "budget": (1, True, 100_000, ""),
+    "time_limit_s": (0.0, False, 86_400.0, " s"),
+    "mip_gap": (0.0, True, 1.0, ""),
+}
+_INTEGERS = ("n_sectors", "min_sectors", "min_markers", "rays_per_marker", "budget")
+_FLAGS = ("exclude_crater_interiors", "allow_out_of_domain", "redundant")
+#: Most ids accepted in ``existing`` / ``forbidden``.
+MAX_IDS = 100_000
+
+
+def _bound_text(name: str) -> str:
+    lo, lo_in, hi, unit = BOUNDS[name]
+    if math.isinf(hi):
+        return f"{'>=' if lo_in else '>'} {lo:g}{unit}"
+    return f"{'[' if lo_in else '('}{lo:g}, {hi:g}]{unit}"
+
+
+def _number_iv(name: str, v: Any) -> None:
+    """Refuse a setting that is not a (finite) number of the right kind within its bounds."""
+    lo, lo_in, hi, _ = BOUNDS[name]
+    integer = name in _INTEGERS
+    kind = "an integer" if integer else "a finite number"
+    ok = (isinstance(v, int) if integer else isinstance(v, int | float)) \
+        and not isinstance(v, bool)
+    if ok and isinstance(v, float):
+        ok = math.isfinite(v)
+    if ok:
+        ok = (v >= lo if lo_in else v > lo) and v <= hi
+    if not ok:
+        raise ConfigError(f"`{name}` must be {kind} {'' if math.isinf(BOUNDS[name][2]) else 'in '}"
+                          f"{_bound_text(name)}, got {v!r:.40}; "
+                          "give a value within these bounds")
+
+
 def _plan_config_iv(c: PlanConfig) -> None:
-    positive = ["requirement_m", "grid_spacing_m", "max_range_m", "working_radius_m",
-                "time_limit_s"]
-    for name in positive:
+    """Check every field against its type and documented bounds (:data:`BOUNDS`)."""
+    for name in BOUNDS:
         v = getattr(c, name)
-        if not isinstance(v, (int, float)) or isinstance(v, bool) or not math.isfinite(v) \
-                or v <= 0:
-            raise ConfigError(f"`{name}` must be a finite number > 0, got {v!r}")
-    non_negative = ["min_station_distance_m", "inclinometer_sigma_deg", "mip_gap"]
-    for name in non_negative:
-        v = getattr(c, name)
-        if not isinstance(v, (int, float)) or isinstance(v, bool) or not math.isfinite(v) or v < 0:
-            raise ConfigError(f"`{name}` must be a finite number >= 0, got {v!r}")
-    for name in ["n_sectors", "min_sectors", "min_markers", "rays_per_marker"]:
-        v = getattr(c, name)
-        if not isinstance(v, int) or isinstance(v, bool) or v < 1:
-            raise ConfigError(f"`{name}` must be an integer >= 1, got {v!r}")
+        if name == "budget" and v is None:
+            continue
+        _number_iv(name, v)
     if c.min_sectors > c.n_sectors:
         raise ConfigError(f"`min_sectors` must be <= `n_sectors` ({c.n_sectors}), "
-                          f"got {c.min_sectors}")
-    if not 0.0 < c.max_slope_deg <= 90.0:
-        raise ConfigError(f"`max_slope_deg` must be in (0, 90], got {c.max_slope_deg!r}")
-    if not 0.0 <= c.min_visible_fraction <= 1.0:
-        raise ConfigError(f"`min_visible_fraction` must be in [0, 1], "
-                          f"got {c.min_visible_fraction!r}")
-    if c.budget is not None and (not isinstance(c.budget, int) or isinstance(c.budget, bool)
-                                 or c.budget < 1):
-        raise ConfigError(f"`budget` must be an integer >= 1 or None, got {c.budget!r}")
+                          f"got {c.min_sectors}; lower min_sectors or raise n_sectors")
     for name in ["existing", "forbidden"]:
         v = getattr(c, name)
-        if not isinstance(v, tuple) or not all(isinstance(s, str) for s in v):
-            raise ConfigError(f"`{name}` must be a list of site ids (strings), got {v!r}")
+        if not isinstance(v, tuple) or not all(isinstance(s, str) and s for s in v):
+            raise ConfigError(f"`{name}` must be a list of site ids (non-empty strings), "
+                              f"got {v!r:.60}")
+        if len(v) > MAX_IDS:
+            raise ConfigError(f"`{name}` lists {len(v)} ids, more than the {MAX_IDS} accepted; "
+                              "list only real marker sites")
     overlap = sorted(set(c.existing) & set(c.forbidden))
     if overlap:
         raise ConfigError(f"sites {', '.join(overlap)} are both `existing` and `forbidden`; "
                           "remove them from one list")
-    for name in ["exclude_crater_interiors", "allow_out_of_domain", "redundant"]:
+    for name in _FLAGS:
         if not isinstance(getattr(c, name), bool):
-            raise ConfigError(f"`{name}` must be true or false, got {getattr(c, name)!r}")
+            raise ConfigError(f"`{name}` must be true or false, got {getattr(c, name)!r:.40}")
 
 
 def config_from_dict(values: dict[str, Any], base: PlanConfig | None = None,
@@ -181,6 +232,8 @@ def config_from_dict(values: dict[str, Any], base: PlanConfig | None = None,
     >>> config_from_dict({"requirement_m": 0.05}).requirement_m
     0.05
     """
+    if not isinstance(values, dict):
+        raise ConfigError(f"{where}: expected a table of settings, got {type(values).__name__}")
     _reject_unknown(values, where)
     v = dict(values)
     for name in ("existing", "forbidden"):
@@ -188,6 +241,8 @@ def config_from_dict(values: dict[str, Any], base: PlanConfig | None = None,
             v[name] = tuple(v[name])
     try:
         return dataclasses.replace(base or PlanConfig(), **v)
+    except ConfigError as exc:
+        raise ConfigError(f"{where}: {exc}") from exc
     except TypeError as exc:  # pragma: no cover - names already checked
         raise ConfigError(f"{where}: {exc}") from exc
 
@@ -201,14 +256,20 @@ def load_config(path: str | Path, base: PlanConfig | None = None) -> PlanConfig:
         The ``.toml`` file.
     base : PlanConfig, optional
         Defaults for keys the file does not set.
+
+    Raises
+    ------
+    InputFileError
+        Missing, unreadable or non-UTF-8 file, or not valid TOML.
+    ConfigError
+        Unknown key, a value of the wrong type, not finite or outside its bounds
+        (:data:`BOUNDS`), each naming the file and the setting.
     """
     path = Path(path)
+    where = f"--config {path}"
+    text = read_text(path, where)
     try:
-        with path.open("rb") as fh:
-            values = tomllib.load(fh)
-    except FileNotFoundError as exc:
-        raise InputFileError(f"--config {path}: file not found; give an existing .toml file") \
-            from exc
+        values = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
-        raise InputFileError(f"--config {path}: not valid TOML ({exc}); fix the syntax") from exc
-    return config_from_dict(values, base=base, where=f"--config {path}")
+        raise InputFileError(f"{where}: not valid TOML ({exc}); fix the syntax") from exc
+    return config_from_dict(values, base=base, where=where)

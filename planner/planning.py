@@ -6,15 +6,22 @@ The CLI (``markerplan plan``), the benchmark and notebooks call :func:`load_inpu
 
 from __future__ import annotations
 
-import csv
-import json
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from markerplan.errors import DataError, InputFileError
+from markerplan.errors import ConfigError, DataError, InputFileError
+from markerplan.reading import (
+    MAX_ABS_COORDINATE_M,
+    finite_number,
+    json_kind,
+    load_json,
+    read_csv,
+    require_type,
+    unique_ids,
+)
 from planner.baselines import Baseline, greedy_cover, regular_grid
 from planner.candidates import Candidates, candidate_sites, load_polygons
 from planner.program import LayoutCheck, PlanResult, evaluate_layout, plan_sites
@@ -81,21 +88,34 @@ def load_inputs(site: str = "default", seed: int | None = None, dem_path=None,
         Preset seed.
     dem_path : path, optional
         GeoTIFF / npz DEM in the site frame (replaces the preset terrain; the preset's craters
-        and as-built layout are then dropped).
+        and as-built layout are then dropped). Needs ``stations_path``: the preset's stations
+        belong to the preset's terrain.
     stations_path : path, optional
         Stations CSV (``id, x_m, y_m[, z_m][, heading_deg]``; ``z_m`` is the LiDAR centre, default
         ground + rig height) or GeoJSON Points with an ``id`` property.
     boundary_path : path, optional
-        GeoJSON polygon: where markers may go.
+        GeoJSON with one polygon (no holes): where markers may go.
     exclude_paths : sequence of path
         GeoJSON polygons where no marker may go.
     existing : str, optional
         ``"as-built"`` (the preset's layout) or a markers CSV (``id, x_m, y_m[, z_m]``): markers
         already in the field, fixed in the plan.
+
+    Raises
+    ------
+    ConfigError
+        ``dem_path`` without ``stations_path``, or an unknown preset.
+    InputFileError, DataError
+        A malformed input file (see :func:`read_stations`, :func:`read_markers`,
+        :func:`planner.candidates.load_polygons`), or a point outside the DEM.
     """
     from visibility.dem import read_dem
     from visibility.sites import load_site
 
+    if dem_path is not None and stations_path is None:
+        raise ConfigError(f"--dem {dem_path} needs --stations: the preset's stations belong to "
+                          "its own terrain, not to this DEM; give --stations with the stations "
+                          "on this DEM")
     preset = load_site(site, seed)
     sources = {"site": site, "seed": preset.seed}
     dem = preset.dem
@@ -103,7 +123,9 @@ def load_inputs(site: str = "default", seed: int | None = None, dem_path=None,
     as_built_ids, as_built_xyz = list(preset.marker_ids), np.asarray(preset.marker_centres_m)
     boundary = np.asarray(preset.boundary_xy_m, float) if len(preset.boundary_xy_m) else None
     if dem_path is not None:
-        dem = read_dem(dem_path)
+        dem = read_dem(dem_path, what=f"--dem {dem_path}",
+                       nodata_fix="fill them (e.g. gdal_fillnodata.py) or crop the DEM to its "
+                                  "valid cells")
         sources["dem"] = str(dem_path)
         craters, boundary = [], None
         as_built_ids, as_built_xyz = [], np.zeros((0, 3))
@@ -119,7 +141,7 @@ def load_inputs(site: str = "default", seed: int | None = None, dem_path=None,
                                dem.height_at(preset.station_xy_m) + lidar_h])
         heading = np.asarray(preset.station_heading_rad, float)
     if boundary_path is not None:
-        boundary = np.asarray(load_polygons(boundary_path, "--boundary")[0].exterior.coords)
+        boundary = _boundary_iv(load_polygons(boundary_path, "--boundary"), boundary_path)
         sources["boundary"] = str(boundary_path)
     exclusions = []
     for p in exclude_paths:
@@ -144,6 +166,18 @@ def load_inputs(site: str = "default", seed: int | None = None, dem_path=None,
                       sources=sources)
 
 
+def _boundary_iv(polygons: list, path) -> np.ndarray:
+    """The corners (k, 2) of the one hole-free polygon a ``--boundary`` file must hold."""
+    if len(polygons) != 1:
+        raise InputFileError(f"--boundary {path}: holds {len(polygons)} polygons, the site "
+                             "boundary is one; give a single Polygon (exclude areas with "
+                             "--exclude)")
+    if len(polygons[0].interiors):
+        raise InputFileError(f"--boundary {path}: the polygon has holes; give its outline only "
+                             "and the holes with --exclude")
+    return np.asarray(polygons[0].exterior.coords, float)
+
+
 def _check_inside(dem, xy: np.ndarray, ids, label: str) -> None:
     inside = dem.contains(xy)
     if not inside.all():
@@ -154,93 +188,162 @@ def _check_inside(dem, xy: np.ndarray, ids, label: str) -> None:
                         "inside or use a DEM covering it")
 
 
-def _read_points(path, option: str) -> list[dict]:
-    path = Path(path)
-    if not path.is_file():
-        raise InputFileError(f"{option} {path}: file not found; give an existing CSV or GeoJSON")
-    try:
-        if path.suffix.lower() in (".geojson", ".json"):
-            data = json.loads(path.read_text())
-            feats = data.get("features", []) if isinstance(data, dict) else []
-            rows = []
-            for k, f in enumerate(feats):
-                g = f.get("geometry") or {}
-                if g.get("type") != "Point":
-                    raise InputFileError(f"{option} {path}: feature {k} must be a Point, got "
-                                         f"{g.get('type')}")
-                c = g["coordinates"]
-                props = f.get("properties") or {}
-                row = {"id": str(props.get("id", f"P{k + 1}")), "x_m": c[0], "y_m": c[1]}
-                if "heading_deg" in props:
-                    row["heading_deg"] = props["heading_deg"]
-                if len(c) > 2:
-                    row["z_m"] = c[2]
-                rows.append(row)
-        else:
-            with path.open(newline="") as fh:
-                rows = list(csv.DictReader(fh))
-    except (json.JSONDecodeError, UnicodeDecodeError, csv.Error, KeyError, TypeError,
-            AttributeError) as exc:
-        raise InputFileError(f"{option} {path}: unreadable ({exc}); give a CSV with columns "
-                             "id, x_m, y_m or a GeoJSON FeatureCollection of Points") from exc
+#: Most stations a ``--stations`` file may hold (each one ray casts every candidate site).
+MAX_STATIONS = 1_000
+#: Most markers a markers file (``--existing``, ``reduce INPUT``) may hold.
+MAX_MARKERS = 100_000
+#: Largest magnitude of a ``heading_deg``, degrees.
+MAX_ABS_HEADING_DEG = 360.0
+_POINT_COLUMNS = "id, x_m, y_m[, z_m][, heading_deg]"
+
+
+def _read_points(path, option: str, max_points: int = MAX_MARKERS) -> list[dict]:
+    """Points of a CSV (``id, x_m, y_m[, z_m][, heading_deg]``) or a GeoJSON FeatureCollection
+    of Points (``id`` and ``heading_deg`` properties, optional ``z`` coordinate).
+
+    Parameters
+    ----------
+    path : str or Path
+        ``.geojson`` / ``.json``: GeoJSON; anything else: CSV with a header row.
+    option : str
+        How messages name the input (``"--stations"``, ``"--existing"``, ``"INPUT"``).
+    max_points : int
+        Most points accepted.
+
+    Returns
+    -------
+    points : list of dict
+        ``id`` (str, unique, non-empty), ``x_m``, ``y_m`` (finite floats), ``z_m`` and
+        ``heading_deg`` (finite float or None when not given).
+
+    Raises
+    ------
+    InputFileError
+        Missing, unreadable or non-UTF-8 file; ragged CSV rows or missing columns; GeoJSON of
+        the wrong shape; no points or more than ``max_points``; a number that is not finite or
+        beyond :data:`~markerplan.reading.MAX_ABS_COORDINATE_M` (headings beyond
+        :data:`MAX_ABS_HEADING_DEG`); empty or repeated ids.
+    """
+    what = f"{option} {path}"
+    if Path(path).suffix.lower() in (".geojson", ".json"):
+        rows = _geojson_points(load_json(path, what), what)
+    else:
+        header, cells = read_csv(path, what, required=("id", "x_m", "y_m"),
+                                 fix=f"give a CSV with columns {_POINT_COLUMNS}")
+        rows = [dict(zip(header, (c.strip() for c in r), strict=True)) for r in cells]
     if not rows:
-        raise InputFileError(f"{option} {path}: no points found")
-    for c in ("id", "x_m", "y_m"):
-        if c not in rows[0]:
-            raise InputFileError(f"{option} {path}: missing column {c!r}; need id, x_m, y_m")
+        raise InputFileError(f"{what}: no points found; give at least one row "
+                             f"({_POINT_COLUMNS})")
+    if len(rows) > max_points:
+        raise InputFileError(f"{what}: {len(rows)} points, more than the {max_points} accepted; "
+                             "give only the real points")
+    ids = unique_ids([r["id"] for r in rows], what)
+    points = []
+    for pid, r in zip(ids, rows, strict=True):
+        p = {"id": pid}
+        for key in ("x_m", "y_m", "z_m", "heading_deg"):
+            v = r.get(key)
+            if key in ("z_m", "heading_deg") and (v is None or v == ""):
+                p[key] = None
+                continue
+            p[key] = finite_number(v, f"{what}: {key} of {pid!r}",
+                                   MAX_ABS_HEADING_DEG if key == "heading_deg"
+                                   else MAX_ABS_COORDINATE_M)
+        points.append(p)
+    return points
+
+
+def _geojson_points(doc: dict, what: str) -> list[dict]:
+    """Rows (``id``, ``x_m``, ``y_m``, optional ``z_m``, ``heading_deg``) of a FeatureCollection
+    of Points; refuses any other shape, naming the feature."""
+    fix = "give a GeoJSON FeatureCollection of Points with an 'id' property"
+    if doc.get("type") != "FeatureCollection":
+        raise InputFileError(f"{what}: expected a GeoJSON FeatureCollection, got type "
+                             f"{doc.get('type')!r:.40}; {fix}")
+    feats = doc.get("features")
+    if not isinstance(feats, list):
+        raise InputFileError(f"{what}: 'features' must be a list, got {json_kind(feats)}; {fix}")
+    rows = []
+    for k, f in enumerate(feats):
+        where = f"{what}: feature {k}"
+        require_type(f, dict, where)
+        g = f.get("geometry")
+        if not isinstance(g, dict) or g.get("type") != "Point":
+            got = repr(g.get("type")) if isinstance(g, dict) else json_kind(g)
+            raise InputFileError(f"{where}: geometry must be a Point, got {got:.40}; {fix}")
+        c = g.get("coordinates")
+        if not isinstance(c, list) or len(c) not in (2, 3):
+            raise InputFileError(f"{where}: Point coordinates must be [x, y] or [x, y, z], got "
+                                 f"{c!r:.40}; give site-frame metres")
+        props = f.get("properties")
+        props = {} if props is None else require_type(props, dict, f"{where}: properties")
+        pid = props.get("id", f"P{k + 1}")
+        require_type(pid, (str, int), f"{where}: property 'id'")
+        row = {"id": str(pid).strip(), "x_m": c[0], "y_m": c[1]}
+        if len(c) > 2:
+            row["z_m"] = c[2]
+        if props.get("heading_deg") is not None:
+            row["heading_deg"] = props["heading_deg"]
+        rows.append(row)
     return rows
-
-
-def _float(row: dict, key: str, option: str, default=None):
-    v = row.get(key)
-    if v in (None, ""):
-        return default
-    try:
-        out = float(v)
-    except (TypeError, ValueError) as exc:
-        raise InputFileError(f"{option}: {key} of {row.get('id')!r} is not a number: {v!r}") \
-            from exc
-    if not np.isfinite(out):
-        raise InputFileError(f"{option}: {key} of {row.get('id')!r} must be finite, got {v!r}")
-    return out
 
 
 def read_stations(path, dem, lidar_height_m: float) -> tuple[list[str], np.ndarray, np.ndarray]:
     """Stations from CSV/GeoJSON -> ids, LiDAR centres (s, 3) m, headings (s,) rad.
 
+    Parameters
+    ----------
+    path : str or Path
+        CSV ``id, x_m, y_m[, z_m][, heading_deg]`` or GeoJSON Points (see :func:`_read_points`);
+        at most :data:`MAX_STATIONS` stations.
+    dem : visibility.dem.DEM
+        Terrain; every station must lie on it.
+    lidar_height_m : float
+        LiDAR centre above the ground where ``z_m`` is not given, m.
+
     Raises
     ------
     InputFileError, DataError
-        Unreadable file, duplicate ids, or a station outside the DEM.
+        Unreadable or malformed file (see :func:`_read_points`), or a station outside the DEM.
     """
-    rows = _read_points(path, "--stations")
-    ids = [str(r["id"]).strip() for r in rows]
-    if len(set(ids)) != len(ids):
-        raise InputFileError(f"--stations {path}: station ids must be unique")
-    xy = np.array([[_float(r, "x_m", "--stations"), _float(r, "y_m", "--stations")]
-                   for r in rows])
+    pts = _read_points(path, "--stations", MAX_STATIONS)
+    ids = [p["id"] for p in pts]
+    xy = np.array([[p["x_m"], p["y_m"]] for p in pts], float)
     _check_inside(dem, xy, ids, "station")
     ground = dem.height_at(xy)
-    z = np.array([_float(r, "z_m", "--stations", g + lidar_height_m)
-                  for r, g in zip(rows, ground, strict=True)])
-    heading = np.radians([_float(r, "heading_deg", "--stations", 0.0) for r in rows])
+    z = np.array([g + lidar_height_m if p["z_m"] is None else p["z_m"]
+                  for p, g in zip(pts, ground, strict=True)], float)
+    heading = np.radians([p["heading_deg"] or 0.0 for p in pts])
     return ids, np.column_stack([xy, z]), heading
 
 
 def read_markers(path, dem, marker_radius_m: float, option: str = "--existing"
                  ) -> tuple[list[str], np.ndarray]:
-    """Markers CSV/GeoJSON (``id, x_m, y_m[, z_m]``) -> ids and centres (m, 3) m (default
-    ``z``: ground + radius). ``option`` names the argument in error messages."""
-    rows = _read_points(path, option)
-    ids = [str(r["id"]).strip() for r in rows]
-    if len(set(ids)) != len(ids):
-        raise InputFileError(f"{option} {path}: marker ids must be unique")
-    xy = np.array([[_float(r, "x_m", option), _float(r, "y_m", option)]
-                   for r in rows])
+    """Markers CSV/GeoJSON (``id, x_m, y_m[, z_m]``) -> ids and centres (m, 3) m.
+
+    Parameters
+    ----------
+    path : str or Path
+        See :func:`_read_points`; at most :data:`MAX_MARKERS` markers.
+    dem : visibility.dem.DEM
+        Terrain; every marker must lie on it.
+    marker_radius_m : float
+        Default ``z``: ground + this radius, m.
+    option : str
+        Names the argument in error messages.
+
+    Raises
+    ------
+    InputFileError, DataError
+        Unreadable or malformed file (see :func:`_read_points`), or a marker outside the DEM.
+    """
+    pts = _read_points(path, option, MAX_MARKERS)
+    ids = [p["id"] for p in pts]
+    xy = np.array([[p["x_m"], p["y_m"]] for p in pts], float)
     _check_inside(dem, xy, ids, "marker")
     ground = dem.height_at(xy)
-    z = np.array([_float(r, "z_m", option, g + marker_radius_m)
-                  for r, g in zip(rows, ground, strict=True)])
+    z = np.array([g + marker_radius_m if p["z_m"] is None else p["z_m"]
+                  for p, g in zip(pts, ground, strict=True)], float)
     return ids, np.column_stack([xy, z])
 
 

@@ -13,7 +13,9 @@
 - ``k_directions``, ``k_feasible``, ``markers_that_can_go``;
 - ``drop_order`` and ``marker_losses``;
 - ``verify`` (with ``--verify``): achieved against predicted errors at chosen counts;
-- ``timings_s`` (the only field that differs between identical runs).
+
+No file holds a timing (the same inputs give byte-identical files): :func:`reduce_timings`
+gives them to the command's stderr and ``--json`` summary.
 """
 
 from __future__ import annotations
@@ -89,7 +91,7 @@ def reduce_record(study, layout, inputs, model_name: str, options: dict,
                              else "exact (relative 1e-9)"),
               "complete": curve.complete, "time_limit_s": cfg.time_limit_s,
               "n_solves": int(sum(p.n_solves for p in curve.points)),
-              "accuracy_cuts": curve.n_cuts, "solve_time_s": round(curve.solve_time_s, 3)}
+              "accuracy_cuts": curve.n_cuts}
     doc = {
         "schema": SCHEMA, "schema_version": SCHEMA_VERSION,
         "provenance": provenance({"plan": cfg.to_dict(), "reduce": options},
@@ -109,7 +111,6 @@ def reduce_record(study, layout, inputs, model_name: str, options: dict,
         "k_feasible_minimal": curve.k_feasible_minimal,
         "markers_that_can_go": study.markers_that_can_go,
         "curve": points, "drop_order": drop, "marker_losses": losses,
-        "timings_s": {k: round(v, 3) for k, v in study.timings_s.items()},
     }
     if verify is not None:
         doc["verify"] = verify
@@ -222,6 +223,12 @@ def report_markdown(doc: dict) -> str:
               f"{doc['provenance']['error_model']}; config sha256 "
               f"`{doc['provenance']['config_sha256'][:12]}`; {FRAME_NOTE}.", ""]
     return "\n".join(lines)
+
+
+def reduce_timings(study) -> dict[str, float]:
+    """Wall-clock seconds of the study's steps, the solver's total among them."""
+    return {**{k: round(v, 3) for k, v in study.timings_s.items()},
+            "solver": round(study.curve.solve_time_s, 3)}
 
 
 def summary(doc: dict, out: Path) -> dict:

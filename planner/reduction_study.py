@@ -9,7 +9,6 @@ layout) and judges each pair exactly as :mod:`planner.planning` does for a plan;
 
 from __future__ import annotations
 
-import json
 import time
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -17,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from markerplan.errors import ConfigError, DataError, InputFileError
+from planner import plan_file
 from planner.reduction import (
     Curve,
     DropStep,
@@ -176,34 +176,16 @@ def _is_plan(spec: str) -> bool:
 
 
 def _read_plan(path: Path) -> dict:
-    try:
-        data = json.loads(path.read_text())
-    except FileNotFoundError as exc:
-        raise InputFileError(f"INPUT {path}: file not found; give a plan.json, a markers CSV "
-                             "or 'as-built'") from exc
-    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise InputFileError(f"INPUT {path}: not valid JSON ({exc}); give a plan.json written "
-                             "by `markerplan plan`") from exc
-    if not isinstance(data, dict):
-        raise InputFileError(f"INPUT {path}: expected a JSON object; give a plan.json written "
-                             "by `markerplan plan`")
-    return data
+    """A ``plan.json`` or a hand-written layout with ``schema`` and ``markers``
+    (:func:`planner.plan_file.read_plan`, ``INPUT``)."""
+    return plan_file.read_plan(path, "INPUT", full=False)
 
 
 def _plan_layout(data: dict, path) -> Layout:
-    """The selected markers of a ``plan.json`` (``markers``: list of ``{id, x_m, y_m, z_m}``)."""
-    markers = data.get("markers")
-    if not isinstance(markers, list) or not markers:
-        raise InputFileError(f"INPUT {path}: no 'markers' list; give a plan.json written by "
-                             "`markerplan plan`")
-    try:
-        ids = tuple(str(m["id"]) for m in markers)
-        xyz = np.array([[float(m["x_m"]), float(m["y_m"]), float(m["z_m"])] for m in markers])
-    except (KeyError, TypeError, ValueError) as exc:
-        raise InputFileError(f"INPUT {path}: a marker lacks id, x_m, y_m or z_m ({exc}); give a "
-                             "plan.json written by `markerplan plan`") from exc
-    if len(set(ids)) != len(ids):
-        raise InputFileError(f"INPUT {path}: marker ids must be unique")
+    """The selected markers of a checked ``plan.json`` (``markers``: ``{id, x_m, y_m, z_m}``)."""
+    markers = data["markers"]
+    ids = tuple(m["id"] for m in markers)
+    xyz = np.array([[m["x_m"], m["y_m"], m["z_m"]] for m in markers], float)
     return Layout(ids, xyz, str(path))
 
 

@@ -20,16 +20,12 @@ The plan passes only if every station's achieved error is within the requirement
 
 from __future__ import annotations
 
-import json
 import sys
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 
-from markerplan.errors import InputFileError
-from planner import accuracy
-from planner.report import SCHEMA
+from planner import accuracy, plan_file
 
 #: Smallest number of matched markers that can fix x, y, z and heading.
 MIN_MATCHED = 2
@@ -50,24 +46,14 @@ class StationCheck:
 
 
 def read_plan(path) -> dict:
-    """Read and check a ``plan.json`` (schema ``markerplan-plan``)."""
-    path = Path(path)
-    try:
-        doc = json.loads(path.read_text())
-    except FileNotFoundError as exc:
-        raise InputFileError(f"PLAN {path}: file not found; give the plan.json written by "
-                             "`markerplan plan`") from exc
-    except (json.JSONDecodeError, UnicodeDecodeError, IsADirectoryError) as exc:
-        raise InputFileError(f"PLAN {path}: not a JSON file ({exc}); give plan.json") from exc
-    if not isinstance(doc, dict) or doc.get("schema") != SCHEMA:
-        raise InputFileError(f"PLAN {path}: not a markerplan plan (schema "
-                             f"{doc.get('schema') if isinstance(doc, dict) else None!r}, "
-                             f"expected {SCHEMA!r})")
-    for key in ("markers", "stations", "site", "requirement"):
-        if key not in doc:
-            raise InputFileError(f"PLAN {path}: missing {key!r}; regenerate it with "
-                                 "`markerplan plan`")
-    return doc
+    """Read and check a whole ``plan.json`` (:func:`planner.plan_file.read_plan`, ``PLAN``).
+
+    Raises
+    ------
+    InputFileError
+        Anything verification cannot use, including a plan with no station or no marker.
+    """
+    return plan_file.read_plan(path, "PLAN", full=True)
 
 
 def plan_dem(doc: dict):
@@ -77,7 +63,8 @@ def plan_dem(doc: dict):
 
     inputs = doc.get("provenance", {}).get("inputs", {})
     if "dem" in inputs:
-        return read_dem(inputs["dem"])
+        return read_dem(inputs["dem"], what=f"DEM {inputs['dem']} (named by the plan)",
+                        nodata_fix="fix the DEM the plan names, or plan again on a filled DEM")
     return load_site(doc["site"]["name"], doc["site"].get("seed")).dem
 
 

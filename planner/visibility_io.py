@@ -27,12 +27,19 @@ from pathlib import Path
 import numpy as np
 
 from markerplan.errors import InputFileError
+from markerplan.reading import finite_number, read_csv
 from planner.usability import OCCLUDED, USABLE, PlanProblem
 
 REQUIRED = ("station", "site", "usable", "bearing_deg", "sigma_m", "site_x_m", "site_y_m",
             "site_z_m")
 _TRUE = {"1", "true", "yes", "y", "t"}
 _FALSE = {"0", "false", "no", "n", "f"}
+#: Most rows (station-site pairs) accepted.
+MAX_ROWS = 5_000_000
+#: Largest magnitude of ``bearing_deg``, degrees.
+MAX_ABS_BEARING_DEG = 720.0
+#: Largest ``sigma_m`` accepted, m (a marker known to worse than this is no marker).
+MAX_SIGMA_M = 10.0
 
 
 def read_visibility_table(path: str | Path, station_ids, station_xyz) -> PlanProblem:
@@ -50,55 +57,59 @@ def read_visibility_table(path: str | Path, station_ids, station_xyz) -> PlanPro
     Raises
     ------
     InputFileError
-        Missing file or columns, unknown station, bad numbers, inconsistent site coordinates,
-        or no rows — naming the file, the row and the fix.
+        Missing, unreadable or non-UTF-8 file, missing columns, ragged rows, unknown station,
+        empty site id, numbers that are not finite or beyond their bounds (coordinates and
+        ``distance_m``: :data:`~markerplan.reading.MAX_ABS_COORDINATE_M`; ``bearing_deg``:
+        :data:`MAX_ABS_BEARING_DEG`; ``sigma_m``: (0, :data:`MAX_SIGMA_M`]), a negative
+        distance, inconsistent site coordinates, a repeated pair, no rows or more than
+        :data:`MAX_ROWS` — naming the file, the line and the fix.
     """
-    path = Path(path)
     where = f"--visibility {path}"
-    try:
-        with path.open(newline="") as fh:
-            reader = csv.DictReader(fh)
-            missing = [c for c in REQUIRED if c not in (reader.fieldnames or [])]
-            if missing:
-                raise InputFileError(f"{where}: missing column(s) {', '.join(missing)}; "
-                                     f"required: {', '.join(REQUIRED)}")
-            rows = list(reader)
-    except FileNotFoundError as exc:
-        raise InputFileError(f"{where}: file not found; give an existing CSV file") from exc
-    except (UnicodeDecodeError, csv.Error) as exc:
-        raise InputFileError(f"{where}: not a readable CSV ({exc})") from exc
-    if not rows:
+    header, cells = read_csv(path, where, required=REQUIRED,
+                             fix=f"required: {', '.join(REQUIRED)}")
+    if not cells:
         raise InputFileError(f"{where}: no rows; give at least one station-site pair")
+    if len(cells) > MAX_ROWS:
+        raise InputFileError(f"{where}: {len(cells)} rows, more than the {MAX_ROWS} accepted; "
+                             "drop pairs beyond the LiDAR's range")
+    station_xyz = np.asarray(station_xyz, float)
     st_pos = {sid: k for k, sid in enumerate(station_ids)}
     site_pos: dict[str, int] = {}
     site_xyz: list[tuple[float, float, float]] = []
     ps, pj, bearing, sigma, usable, dist = [], [], [], [], [], []
-    for n, row in enumerate(rows, start=2):
-        sid = row["station"].strip()
+    for n, cells_n in enumerate(cells, start=2):
+        row = {h: c.strip() for h, c in zip(header, cells_n, strict=True)}
+        line = f"{where} line {n}"
+        sid = row["station"]
         if sid not in st_pos:
-            raise InputFileError(f"{where} line {n}: unknown station {sid!r}; the plan's stations "
+            raise InputFileError(f"{line}: unknown station {sid!r:.40}; the plan's stations "
                                  f"are {', '.join(station_ids)}")
-        try:
-            xyz = (float(row["site_x_m"]), float(row["site_y_m"]), float(row["site_z_m"]))
-            b = np.radians(float(row["bearing_deg"]))
-            s = float(row["sigma_m"])
-            d = float(row["distance_m"]) if row.get("distance_m") not in (None, "") else None
-        except (TypeError, ValueError) as exc:
-            raise InputFileError(f"{where} line {n}: bad number ({exc}); give plain decimal "
-                                 "numbers") from exc
-        u = str(row["usable"]).strip().lower()
+        site = row["site"]
+        if not site:
+            raise InputFileError(f"{line}: the site id is empty; give every row a site id")
+        xyz = tuple(finite_number(row[c], f"{line}: {c}") for c in
+                    ("site_x_m", "site_y_m", "site_z_m"))
+        b = np.radians(finite_number(row["bearing_deg"], f"{line}: bearing_deg",
+                                     MAX_ABS_BEARING_DEG))
+        s = finite_number(row["sigma_m"], f"{line}: sigma_m", MAX_SIGMA_M)
+        if s <= 0:
+            raise InputFileError(f"{line}: sigma_m must be > 0, got {row['sigma_m']!r:.40}; "
+                                 "give the pair's 1-sigma error in metres")
+        d = None
+        if row.get("distance_m", ""):
+            d = finite_number(row["distance_m"], f"{line}: distance_m")
+            if d < 0:
+                raise InputFileError(f"{line}: distance_m must be >= 0, got "
+                                     f"{row['distance_m']!r:.40}; give the distance in metres")
+        u = row["usable"].lower()
         if u not in _TRUE | _FALSE:
-            raise InputFileError(f"{where} line {n}: usable must be 1/0 or true/false, got "
-                                 f"{row['usable']!r}")
-        if not (np.all(np.isfinite(xyz)) and np.isfinite(b) and np.isfinite(s) and s > 0):
-            raise InputFileError(f"{where} line {n}: coordinates, bearing and sigma_m must be "
-                                 "finite and sigma_m > 0")
-        site = row["site"].strip()
+            raise InputFileError(f"{line}: usable must be 1/0 or true/false, got "
+                                 f"{row['usable']!r:.40}")
         if site not in site_pos:
             site_pos[site] = len(site_xyz)
             site_xyz.append(xyz)
         elif not np.allclose(site_xyz[site_pos[site]], xyz, atol=1e-6):
-            raise InputFileError(f"{where} line {n}: site {site!r} has coordinates {xyz} here "
+            raise InputFileError(f"{line}: site {site!r:.40} has coordinates {xyz} here "
                                  f"but {site_xyz[site_pos[site]]} earlier; one site, one place")
         k = st_pos[sid]
         ps.append(k)

@@ -10,12 +10,15 @@ Files: ``.tif``/``.tiff`` through rasterio (CRS kept as WKT), ``.npz`` with memb
 
 from __future__ import annotations
 
+import zipfile
+import zlib
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from markerplan.errors import ConfigError, DataError, InputFileError, OutputError
+from markerplan.reading import MAX_ABS_COORDINATE_M, finite_number
 
 FILL_POLICIES = ("nearest",)
 
@@ -127,12 +130,21 @@ class DEM:
         return np.arctan(np.hypot(gx, gy))
 
 
-def _refuse_nan(heights: np.ndarray, source: str) -> None:
+#: Fix named by :class:`DEM` for NaN cells (library users build DEMs from arrays).
+_ARRAY_NODATA_FIX = ("fill them (visibility.dem.fill_nodata, or read_dem(..., fill='nearest')) "
+                     "or crop the DEM")
+#: Fix :func:`read_dem` names for NaN/nodata cells unless its caller gives its own.
+DEFAULT_NODATA_FIX = ("fill them (e.g. gdal_fillnodata.py) or crop the DEM to its valid cells, "
+                      "or read it with fill='nearest'")
+#: Largest grid read (cells); 1e8 float64 heights are 800 MB.
+MAX_DEM_CELLS = 100_000_000
+
+
+def _refuse_nan(heights: np.ndarray, source: str, fix: str = _ARRAY_NODATA_FIX) -> None:
     bad = ~np.isfinite(heights)
     if bad.any():
         raise DataError(f"{source} has {int(bad.sum())} NaN/nodata cells of {heights.size}; "
-                        "fill them (read_dem(..., fill='nearest') or --dem-fill nearest) or crop "
-                        "the DEM")
+                        f"{fix}")
 
 
 def fill_nodata(heights: np.ndarray, policy: str) -> np.ndarray:
@@ -163,15 +175,23 @@ def fill_nodata(heights: np.ndarray, policy: str) -> np.ndarray:
     return heights[tuple(idx)]
 
 
-def read_dem(path: str | Path, fill: str | None = None) -> DEM:
-    """Read a DEM from a GeoTIFF (``.tif``/``.tiff``, first band) or ``.npz``.
+def read_dem(path: str | Path, fill: str | None = None, what: str | None = None,
+             nodata_fix: str | None = None) -> DEM:
+    """Read a DEM from a GeoTIFF (``.tif``/``.tiff``, one band) or ``.npz``.
 
     Parameters
     ----------
     path : str or Path
-        DEM file. GeoTIFF pixels must be square; the CRS is kept.
+        DEM file: heights in metres on square cells in a projected (metric) CRS or the site
+        frame; a GeoTIFF's CRS is kept.
     fill : {None, "nearest"}
-        Policy for NaN/nodata cells; ``None`` refuses them.
+        Policy for NaN/inf/nodata cells; ``None`` refuses them.
+    what : str, optional
+        How messages name the input (default ``"DEM <path>"``), e.g. ``"--dem dem.tif"``.
+    nodata_fix : str, optional
+        How the NaN/nodata message tells the user to fix it; a command passes the options
+        it really has (e.g. ``"pass --dem-fill nearest, or fill them ..."``). The default,
+        :data:`DEFAULT_NODATA_FIX`, names no command-line option.
 
     Returns
     -------
@@ -181,46 +201,149 @@ def read_dem(path: str | Path, fill: str | None = None) -> DEM:
     Raises
     ------
     InputFileError
-        Missing or unreadable file, unsupported suffix, non-square or rotated pixels.
+        Missing, empty, corrupt or unreadable file, unsupported suffix, several bands, a
+        non-numeric band, a geographic (degree) or non-metre CRS, no georeferencing,
+        rotated or non-square cells, ``.npz`` members missing or of the wrong shape or type,
+        non-finite or absurd origin or cell size.
     DataError
-        NaN/nodata cells and ``fill=None``.
+        NaN/inf/nodata cells and ``fill=None``, no valid cell at all, heights beyond
+        +-1e8 m, a grid smaller than 2 x 2 or larger than :data:`MAX_DEM_CELLS`.
+    ConfigError
+        Unknown ``fill``.
     """
     path = Path(path)
-    if fill is not None and fill not in FILL_POLICIES:
-        raise ConfigError(f"fill must be one of {', '.join(FILL_POLICIES)} or None, got {fill!r}")
-    if not path.is_file():
-        raise InputFileError(f"DEM file {path} does not exist; check the path")
-    suffix = path.suffix.lower()
-    if suffix in (".tif", ".tiff"):
-        heights, origin, cell, crs = _read_tif(path)
-    elif suffix == ".npz":
-        heights, origin, cell, crs = _read_npz(path)
+    what = what or f"DEM {path}"
+    _read_dem_iv(path, fill, what)
+    if path.suffix.lower() in (".tif", ".tiff"):
+        heights, origin, cell, crs = _read_tif(path, what)
     else:
-        raise InputFileError(f"DEM file {path} has suffix {suffix!r}; use .tif, .tiff or .npz")
+        heights, origin, cell, crs = _read_npz(path, what)
+    origin = (finite_number(origin[0], f"{what}: origin x"),
+              finite_number(origin[1], f"{what}: origin y"))
+    cell = finite_number(cell, f"{what}: cell size")
+    if cell <= 0:
+        raise InputFileError(f"{what}: cell size must be > 0 m, got {cell:g}; check the file's "
+                             "georeferencing")
+    _heights_iv(heights, what)
     if fill is None:
-        _refuse_nan(heights, f"DEM {path}")
+        _refuse_nan(heights, what, nodata_fix or DEFAULT_NODATA_FIX)
     else:
         heights = fill_nodata(heights, fill)
     return DEM(heights, origin, cell, crs)
 
 
-def _read_tif(path: Path) -> tuple[np.ndarray, tuple[float, float], float, str | None]:
+def _read_dem_iv(path: Path, fill: str | None, what: str) -> None:
+    if fill is not None and fill not in FILL_POLICIES:
+        raise ConfigError(f"fill must be one of {', '.join(FILL_POLICIES)} or None, got {fill!r}")
+    if not path.exists():
+        raise InputFileError(f"{what}: file does not exist; check the path")
+    if path.is_dir():
+        raise InputFileError(f"{what}: is a folder; give a .tif, .tiff or .npz file")
+    suffix = path.suffix.lower()
+    if suffix not in (".tif", ".tiff", ".npz"):
+        raise InputFileError(f"{what}: has suffix {suffix!r}; use .tif, .tiff or .npz")
+    if path.stat().st_size == 0:
+        raise InputFileError(f"{what}: file is empty; give a GeoTIFF or .npz DEM")
+
+
+def _heights_iv(heights: np.ndarray, what: str) -> None:
+    """Shape, size and magnitude of a height grid (NaN/nodata are the fill policy's)."""
+    if heights.ndim != 2 or min(heights.shape) < 2:
+        raise DataError(f"{what}: a DEM needs a 2-D grid of at least 2 x 2 cells, got shape "
+                        f"{heights.shape}")
+    finite = heights[np.isfinite(heights)]
+    if finite.size and np.abs(finite).max() > MAX_ABS_COORDINATE_M:
+        worst = finite[np.abs(finite).argmax()]
+        raise DataError(f"{what}: heights must lie within +-{MAX_ABS_COORDINATE_M:g} m, got "
+                        f"{worst:g}; check the units, and declare the nodata value if that is "
+                        "one (e.g. gdal_edit.py -a_nodata)")
+    if finite.size == 0:
+        raise DataError(f"{what}: no valid height at all (every cell is NaN/nodata); check the "
+                        "file")
+
+
+def _check_cells(ny: int, nx: int, what: str) -> None:
+    if ny * nx > MAX_DEM_CELLS:
+        raise DataError(f"{what}: {ny} x {nx} cells is more than the {MAX_DEM_CELLS:.0e} this "
+                        "reads; crop or coarsen it (e.g. gdalwarp -te ... or -tr ...)")
+
+
+def _check_crs(crs, what: str) -> None:
+    """Refuse a geographic (degree) or non-metre projected CRS (a rasterio ``CRS``)."""
+    from rasterio.errors import CRSError
+
+    if crs is None:
+        return
+    name = (crs.to_string() or "of the file")[:60]
+    if crs.is_geographic:
+        raise InputFileError(f"{what}: CRS {name} is geographic (degrees), but DEM cells and "
+                             "heights must be metres; reproject it to a projected CRS first, "
+                             "e.g. gdalwarp -t_srs EPSG:326NN in.tif out.tif (NN: your UTM "
+                             "zone)")
+    try:
+        unit, factor = crs.linear_units_factor
+    except CRSError:  # no linear unit to read (local or engineering CRS): taken as metres
+        return
+    if not np.isclose(factor, 1.0):
+        raise InputFileError(f"{what}: CRS {name} has units of {unit}, not metres; reproject it "
+                             "to a metric CRS first (gdalwarp -t_srs ...)")
+
+
+def _read_tif(path: Path, what: str
+              ) -> tuple[np.ndarray, tuple[float, float], float, str | None]:
+    import warnings
+
     import rasterio
+    from rasterio.errors import NotGeoreferencedWarning, RasterioError
+    from rasterio.transform import Affine
 
     try:
-        with rasterio.open(path) as src:
-            band = src.read(1, masked=True).astype(np.float64)
-            t = src.transform
-            crs = src.crs.to_wkt() if src.crs is not None else None
-    except rasterio.errors.RasterioError as exc:
-        raise InputFileError(f"DEM file {path} is not a readable GeoTIFF ({exc})") from exc
-    if t.b != 0 or t.d != 0 or not np.isclose(abs(t.a), abs(t.e), rtol=1e-9):
-        raise InputFileError(f"DEM {path}: pixels must be square and north-up, got transform "
-                             f"{tuple(t)[:6]}; resample it first (e.g. gdalwarp -tr)")
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", NotGeoreferencedWarning)
+            with rasterio.open(path) as src:
+                if src.count != 1:
+                    raise InputFileError(f"{what}: has {src.count} bands; a DEM is one band of "
+                                         "heights, extract it first (e.g. gdal_translate -b 1 "
+                                         "in.tif heights.tif)")
+                try:
+                    kind = np.dtype(src.dtypes[0]).kind
+                except TypeError:
+                    kind = "c"
+                if kind not in "iuf":
+                    raise InputFileError(f"{what}: band type {src.dtypes[0]} is not a real "
+                                         "number; heights must be integers or floats")
+                _check_crs(src.crs, what)
+                t = src.transform
+                if src.crs is None and t == Affine.identity() and not src.gcps[0]:
+                    raise InputFileError(f"{what}: has no georeferencing (no geotransform); "
+                                         "set it (e.g. gdal_translate -a_ullr) or write the DEM "
+                                         "with visibility.dem.write_dem")
+                _check_cells(src.height, src.width, what)
+                band = src.read(1, masked=True).astype(np.float64)
+                crs = src.crs.to_wkt() if src.crs is not None else None
+    except RasterioError as exc:
+        raise InputFileError(f"{what}: not a readable GeoTIFF ({_one_line(exc)}); check the "
+                             "file") from exc
+    except MemoryError:
+        raise DataError(f"{what}: too large to read into memory; crop or coarsen it") from None
+    if not all(np.isfinite(v) for v in tuple(t)[:6]):
+        raise InputFileError(f"{what}: geotransform {tuple(t)[:6]} is not finite; fix the "
+                             "file's georeferencing")
+    if t.b != 0 or t.d != 0:
+        raise InputFileError(f"{what}: cells must be north-up, got a rotated or sheared "
+                             f"transform {tuple(t)[:6]}; resample it first (e.g. gdalwarp)")
+    if not np.isclose(abs(t.a), abs(t.e), rtol=1e-9) or t.a == 0:
+        raise InputFileError(f"{what}: cells must be square, got {abs(t.a):g} x {abs(t.e):g}; "
+                             "resample to square cells first (e.g. gdalwarp -tr 1 1 in.tif "
+                             "out.tif)")
     heights = np.ma.filled(band, np.nan)
     cell = abs(t.a)
     ny, nx = heights.shape
-    x0 = t.c + 0.5 * t.a
+    if t.a > 0:
+        x0 = t.c + 0.5 * t.a
+    else:  # first column is the right edge (max x): flip so columns run along +x
+        heights = heights[:, ::-1]
+        x0 = t.c + (nx - 0.5) * t.a
     if t.e < 0:  # first row is the top (max y): flip so rows run along +y
         heights = heights[::-1]
         y0 = t.f + (ny - 0.5) * t.e
@@ -229,18 +352,67 @@ def _read_tif(path: Path) -> tuple[np.ndarray, tuple[float, float], float, str |
     return heights, (x0, y0), cell, crs
 
 
-def _read_npz(path: Path) -> tuple[np.ndarray, tuple[float, float], float, str | None]:
+#: Exceptions numpy and zipfile raise on a corrupt ``.npz``.
+_NPZ_ERRORS = (OSError, ValueError, EOFError, KeyError, TypeError, NotImplementedError,
+               zipfile.BadZipFile, zlib.error)
+_NPZ_MEMBERS = ("heights_m", "origin_m", "cell_size_m")
+
+
+def _read_npz(path: Path, what: str
+              ) -> tuple[np.ndarray, tuple[float, float], float, str | None]:
+    fix = "write it with visibility.dem.write_dem"
     try:
-        with np.load(path, allow_pickle=False) as z:
-            missing = [k for k in ("heights_m", "origin_m", "cell_size_m") if k not in z.files]
-            if missing:
-                raise InputFileError(f"DEM file {path} lacks {', '.join(missing)}; write it with "
-                                     "visibility.dem.write_dem")
-            crs = str(z["crs"]) if "crs" in z.files and str(z["crs"]) else None
-            return (z["heights_m"].astype(np.float64), tuple(z["origin_m"].tolist()),
-                    float(z["cell_size_m"]), crs)
-    except (OSError, ValueError) as exc:
-        raise InputFileError(f"DEM file {path} is not a readable .npz ({exc})") from exc
+        z = np.load(path, allow_pickle=False)
+    except _NPZ_ERRORS as exc:
+        raise InputFileError(f"{what}: not a readable .npz ({_one_line(exc)}); {fix}") from exc
+    if not isinstance(z, np.lib.npyio.NpzFile):
+        raise InputFileError(f"{what}: is a single .npy array, not an .npz archive with members "
+                             f"{', '.join(_NPZ_MEMBERS)}; {fix}")
+    with z:
+        missing = [k for k in _NPZ_MEMBERS if k not in z.files]
+        if missing:
+            raise InputFileError(f"{what}: lacks member(s) {', '.join(missing)} (has "
+                                 f"{', '.join(z.files)[:80] or 'none'}); {fix}")
+        try:
+            arrays = {k: z[k] for k in (*_NPZ_MEMBERS, "crs") if k in z.files}
+        except _NPZ_ERRORS as exc:
+            raise InputFileError(f"{what}: a member cannot be read ({_one_line(exc)}); "
+                                 f"{fix}") from exc
+    heights, origin, cell = (arrays[k] for k in _NPZ_MEMBERS)
+    if heights.ndim != 2 or heights.dtype.kind not in "iuf":
+        raise InputFileError(f"{what}: heights_m must be a 2-D array of numbers, got shape "
+                             f"{heights.shape} dtype {heights.dtype}; {fix}")
+    _check_cells(*heights.shape, what)
+    if origin.shape != (2,) or origin.dtype.kind not in "iuf":
+        raise InputFileError(f"{what}: origin_m must be 2 numbers (x0, y0), got shape "
+                             f"{origin.shape} dtype {origin.dtype}; {fix}")
+    if cell.size != 1 or cell.dtype.kind not in "iuf":
+        raise InputFileError(f"{what}: cell_size_m must be one number, got shape {cell.shape} "
+                             f"dtype {cell.dtype}; {fix}")
+    crs = None
+    if "crs" in arrays:
+        c = arrays["crs"]
+        if c.size != 1 or c.dtype.kind not in "US":
+            raise InputFileError(f"{what}: crs must be one string (WKT, or empty), got shape "
+                                 f"{c.shape} dtype {c.dtype}; {fix}")
+        crs = str(c.reshape(()).item().decode("utf-8", "replace") if c.dtype.kind == "S"
+                  else c.reshape(()).item()) or None
+    if crs is not None:
+        from rasterio.crs import CRS
+        from rasterio.errors import CRSError
+
+        try:
+            parsed = CRS.from_user_input(crs)
+        except CRSError as exc:
+            raise InputFileError(f"{what}: crs {crs[:40]!r} is not a CRS (give WKT, an EPSG "
+                                 f"code or an empty string); {fix}") from exc
+        _check_crs(parsed, what)
+    return (heights.astype(np.float64), (float(origin[0]), float(origin[1])),
+            float(cell.reshape(())), crs)
+
+
+def _one_line(exc: BaseException) -> str:
+    return " ".join(str(exc).split())[:200] or type(exc).__name__
 
 
 def write_dem(path: str | Path, dem: DEM) -> Path:

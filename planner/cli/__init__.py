@@ -13,6 +13,7 @@ import click
 
 from markerplan import __version__
 from markerplan.errors import MarkerPlanError
+from markerplan.output_folder import Terminated
 
 # name -> module under planner.cli that defines a click command called ``command``
 COMMANDS: dict[str, str] = {
@@ -50,16 +51,20 @@ def cli() -> None:
     Typical flow:
       markerplan simulate --site default --out scans/
       markerplan process scans/station_*.scan.npz --reference scans/ --out tables/
-      markerplan fit-error-model tables/markers.csv -o model.json --plot model.png
-      markerplan plan --error-model model.json --out plan/
+      markerplan fit-error-model tables/markers.csv --out model/ --plot
+      markerplan plan --error-model model/model.json --out plan/
       markerplan verify plan/plan.json --out verify/
     """
 
 
 def main(argv: list[str] | None = None) -> None:
-    """Entry point: run the CLI, turning our errors into one line and exit code 1."""
+    """Entry point: run the CLI, turning our errors into one line and exit code 1
+    (128 + the signal's number when SIGTERM or SIGHUP stopped it)."""
     try:
         cli.main(args=argv, prog_name="markerplan", standalone_mode=False)
+    except Terminated as exc:
+        click.echo(f"error: {exc}", err=True)
+        sys.exit(128 + exc.signum)
     except MarkerPlanError as exc:
         click.echo(f"error: {exc}", err=True)
         sys.exit(1)

@@ -1,9 +1,8 @@
 """Options and helpers shared by every sub-command (defined once, reused).
 
 - ``out_option`` / ``overwrite_option`` / ``json_option``: the fixed option names.
-- :func:`staged_output`: write into a hidden sibling folder, move it into place only on
-  success, so a failing command never leaves half-written output.
 - :func:`emit_summary`: one JSON object on stdout with ``--json``, a short human summary otherwise.
+- :func:`report_timings`: step timings on stderr (never in output files).
 - :func:`mounting_offset_options` / :func:`mounting_offsets`: the three true mounting offsets of
   a simulated rig (``simulate``, ``verify``, ``reduce --verify``).
 - ``dem_option`` / ``stations_option`` / ``error_model_option``: the site inputs that ``plan``
@@ -12,34 +11,54 @@
 
 from __future__ import annotations
 
-import contextlib
 import json
-import os
-import shutil
-import tempfile
-from collections.abc import Iterator
+import math
 from pathlib import Path
 from typing import Any
 
 import click
 
-from markerplan.errors import OutputError
-
 
 def out_option(default: str | None = None, required: bool = False):
     """``--out DIR``: the folder all output files go to."""
+    # click >= 8.3 counts an explicit ``default=None`` as a value, so a required option gets
+    # no ``default`` argument at all (else a missing --out reaches the command as None).
+    settings = {"default": default, "show_default": True} if default is not None else \
+        {"required": required}
     return click.option(
         "--out",
         "out",
         type=click.Path(file_okay=False, path_type=Path),
-        default=default,
-        required=required and default is None,
-        show_default=default is not None,
-        help="Output folder (created; refused if it exists unless --overwrite).",
+        help="Output folder (created; an existing one is replaced only with --overwrite and only "
+             "if markerplan wrote it).",
+        **settings,
     )
 
 
 FILE = click.Path(dir_okay=False, path_type=Path)
+
+class FiniteRange(click.FloatRange):
+    """``click.FloatRange`` that also refuses ``nan`` and ``inf`` (which pass its comparisons)."""
+
+    name = "finite float range"
+
+    def convert(self, value, param, ctx):
+        number = super().convert(value, param, ctx)
+        if not math.isfinite(number):
+            self.fail(f"{value!r} is not a finite number.", param, ctx)
+        return number
+
+
+# Documented bounds of numeric options (click shows them in --help and names the option and
+# the range in its message). Beyond them the work explodes or the physics stops making sense.
+#: Seeds: any non-negative 63-bit integer (numpy's SeedSequence takes no negative seed).
+SEED = click.IntRange(0, 2**63 - 1)
+#: Frames per turntable revolution: the rig takes ~800; 20 000 is 25 times that.
+FRAMES = click.IntRange(1, 20_000)
+#: 1-sigma range noise, mm: the VLP-16 datasheet gives +-30 mm; 500 mm is no longer a LiDAR.
+RANGE_NOISE_MM = FiniteRange(0.0, 500.0)
+#: Solver time limits, seconds (one day at most).
+TIME_LIMIT_S = FiniteRange(0.0, 86_400.0, min_open=True)
 
 dem_option = click.option(
     "--dem", "dem_path", type=FILE,
@@ -54,62 +73,13 @@ error_model_option = click.option(
     help="Error-model JSON from fit-error-model (default: the shipped model).")
 
 overwrite_option = click.option(
-    "--overwrite", is_flag=True, help="Replace the output folder if it already exists."
-)
+    "--overwrite", is_flag=True,
+    help="Replace the output folder if markerplan wrote it (its provenance.json lists every "
+         "file); anything else is never deleted.")
 
 json_option = click.option(
     "--json", "as_json", is_flag=True, help="Print one JSON summary object on stdout."
 )
-
-
-def _check_out(out: Path, overwrite: bool) -> None:
-    if out.exists() and not out.is_dir():
-        raise OutputError(f"--out {out} exists and is not a folder; choose another path")
-    if out.exists() and not overwrite:
-        raise OutputError(f"--out {out} already exists; pass --overwrite or choose another folder")
-    parent = out.resolve().parent
-    probe = parent
-    while not probe.exists():
-        probe = probe.parent
-    if not os.access(probe, os.W_OK | os.X_OK):
-        raise OutputError(f"--out {out} is not writable (no write permission in {probe}); "
-                          "choose a writable folder")
-
-
-@contextlib.contextmanager
-def staged_output(out: Path, overwrite: bool) -> Iterator[Path]:
-    """Yield a temporary folder next to ``out``; on success move it to ``out``.
-
-    Parameters
-    ----------
-    out : Path
-        Final output folder.
-    overwrite : bool
-        Whether an existing ``out`` may be replaced.
-
-    Yields
-    ------
-    stage : Path
-        Folder to write into. Removed if the body raises.
-    """
-    out = Path(out)
-    _check_out(out, overwrite)
-    parent = out.resolve().parent
-    try:
-        parent.mkdir(parents=True, exist_ok=True)
-        stage = Path(tempfile.mkdtemp(prefix=f".{out.name}.partial-", dir=parent))
-    except OSError as exc:
-        raise OutputError(f"--out {out} cannot be created ({exc.strerror}); "
-                          "choose a writable folder") from exc
-    try:
-        yield stage
-    except BaseException:
-        shutil.rmtree(stage, ignore_errors=True)
-        raise
-    os.chmod(stage, 0o755)  # mkdtemp creates 0700; outputs are meant to be shared
-    if out.exists():
-        shutil.rmtree(out)
-    os.replace(stage, out)
 
 
 def emit_summary(summary: dict[str, Any], as_json: bool, human: str | None = None) -> None:
@@ -118,6 +88,15 @@ def emit_summary(summary: dict[str, Any], as_json: bool, human: str | None = Non
         click.echo(json.dumps(summary, sort_keys=True, default=str))
     else:
         click.echo(human if human is not None else json.dumps(summary, indent=2, default=str))
+
+
+def report_timings(timings: dict[str, float]) -> None:
+    """Print the run's step timings (seconds) as one line on stderr.
+
+    Timings never go into output files, which must be byte-identical between identical runs;
+    commands also put them in their ``--json`` summary.
+    """
+    click.echo("timings: " + ", ".join(f"{k} {v:.2f} s" for k, v in timings.items()), err=True)
 
 
 def parse_numbers(text: str, name: str, example: str) -> tuple[float, ...]:
@@ -145,9 +124,11 @@ def mounting_offset_options(command):
     """``--vertical-axis-error-deg``, ``--lframe-tilt-deg``, ``--axis-offset-mm``: the true
     mounting offsets of a simulated rig (the pipeline self-calibrates them)."""
     for option in reversed([
-        click.option("--vertical-axis-error-deg", type=float, default=0.0, show_default=True,
+        click.option("--vertical-axis-error-deg", type=FiniteRange(-10.0, 10.0),
+                     default=0.0, show_default=True,
                      help="True vertical-axis error (rotation about the spin axis), degrees."),
-        click.option("--lframe-tilt-deg", type=float, default=0.0, show_default=True,
+        click.option("--lframe-tilt-deg", type=FiniteRange(-10.0, 10.0), default=0.0,
+                     show_default=True,
                      help="True L-frame tilt, degrees."),
         click.option("--axis-offset-mm", default="0,0", show_default=True,
                      help="True horizontal offset DX,DY of the LiDAR centre from the turntable "
@@ -160,8 +141,6 @@ def mounting_offset_options(command):
 def mounting_offsets(vertical_axis_error_deg: float, lframe_tilt_deg: float,
                      axis_offset_mm: str):
     """The :class:`pipeline.rig.MountingOffsets` (SI units) of the three CLI options."""
-    import math
-
     from pipeline.rig import MountingOffsets
 
     dx, dy = parse_numbers(axis_offset_mm, "--axis-offset-mm", "5,-3")

@@ -8,13 +8,15 @@ import click
 
 from planner.cli._common import (
     FILE,
+    SEED,
+    TIME_LIMIT_S,
     dem_option,
     emit_summary,
     error_model_option,
     json_option,
     out_option,
     overwrite_option,
-    staged_output,
+    report_timings,
     stations_option,
 )
 
@@ -22,7 +24,7 @@ from planner.cli._common import (
 @click.command("plan")
 @click.option("--site", "site_name", default="default", show_default=True,
               help="Site preset: default (40 m crater field, 7 stations) or large (300 m).")
-@click.option("--seed", type=int, default=None,
+@click.option("--seed", type=SEED, default=None,
               help="Seed of the preset's synthetic terrain (default: the preset's own).")
 @dem_option
 @stations_option
@@ -40,8 +42,9 @@ from planner.cli._common import (
               help="Every station must survive the loss of any one marker.")
 @click.option("--existing",
               help="Markers already in the field, fixed: 'as-built' or a CSV (id,x_m,y_m[,z_m]).")
-@click.option("--budget", type=int, help="Largest number of markers allowed.")
-@click.option("--time-limit", "time_limit_s", type=float,
+@click.option("--budget", type=click.IntRange(1, 100_000),
+              help="Largest number of markers allowed.")
+@click.option("--time-limit", "time_limit_s", type=TIME_LIMIT_S,
               help="Solver time limit for the whole plan, seconds (default 60).")
 @out_option(default="markerplan-out")
 @overwrite_option
@@ -60,11 +63,38 @@ def command(site_name, seed, dem_path, stations_path, boundary_path, exclude_pat
       markerplan plan --site default --redundant --out plan-redundant/
       markerplan plan --dem site.tif --stations stations.csv --exclude paths.geojson --out p/
     """
+    from markerplan.output_folder import output_folder
+    from planner.plan_map import draw_plan_map
+    from planner.report import plan_timings, summary, write_plan_files
+
+    inputs_given = [p for p in (dem_path, stations_path, boundary_path, error_model_path,
+                                config_path, visibility_path, *exclude_paths) if p is not None]
+    if existing not in (None, "as-built"):
+        inputs_given.append(existing)
+    with output_folder(out, overwrite, "plan", inputs=inputs_given) as stage:
+        outcome, config = _plan(site_name, seed, dem_path, stations_path, boundary_path,
+                                exclude_paths, error_model_path, config_path, visibility_path,
+                                redundant, existing, budget, time_limit_s, as_json)
+        doc = write_plan_files(outcome, stage)
+        draw_plan_map(outcome, stage / "map.png")
+    timings = plan_timings(outcome)
+    report_timings(timings)
+    info = {**summary(doc, out), "timings_s": timings}
+    human = (f"{doc['n_markers']} markers ({doc['solver']['status']}); worst station "
+             f"{info['worst_station_error_m']:.3f} m <= {config.requirement_m:g} m; "
+             + "; ".join(f"{k.replace('_', ' ')}: {v['n_markers']}"
+                         for k, v in doc["baselines"].items())
+             + f" -> {out}/")
+    emit_summary(info, as_json, human)
+
+
+def _plan(site_name, seed, dem_path, stations_path, boundary_path, exclude_paths,
+          error_model_path, config_path, visibility_path, redundant, existing, budget,
+          time_limit_s, as_json):
+    """Read the inputs and make the plan; return ``(outcome, config)``."""
     from markerplan.errors import ConfigError
     from planner.config import PlanConfig, load_config
-    from planner.plan_map import draw_plan_map
     from planner.planning import load_inputs, make_plan
-    from planner.report import summary, write_plan_files
 
     config = load_config(config_path) if config_path else PlanConfig()
     overrides = {}
@@ -102,13 +132,4 @@ def command(site_name, seed, dem_path, stations_path, boundary_path, exclude_pat
         model, model_name = default_model(), "default (shipped with markerplan)"
     outcome = make_plan(inputs, config, model, model_name, problem=problem,
                         progress=not as_json or sys.stderr.isatty())
-    with staged_output(out, overwrite) as stage:
-        doc = write_plan_files(outcome, stage)
-        draw_plan_map(outcome, stage / "map.png")
-    info = summary(doc, out)
-    human = (f"{doc['n_markers']} markers ({doc['solver']['status']}); worst station "
-             f"{info['worst_station_error_m']:.3f} m <= {config.requirement_m:g} m; "
-             + "; ".join(f"{k.replace('_', ' ')}: {v['n_markers']}"
-                         for k, v in doc["baselines"].items())
-             + f" -> {out}/")
-    emit_summary(info, as_json, human)
+    return outcome, config

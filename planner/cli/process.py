@@ -8,11 +8,12 @@ from pathlib import Path
 import click
 
 from planner.cli._common import (
+    FiniteRange,
     emit_summary,
     json_option,
     out_option,
     overwrite_option,
-    staged_output,
+    report_timings,
 )
 
 _METHODS = ("fixed-radius", "hemisphere-icp")
@@ -56,6 +57,21 @@ def _parse_offsets(text: str):
     return MountingOffsets(math.radians(v[0]), math.radians(v[1]), (v[2], v[3]))
 
 
+def _scan_files(paths: tuple[Path, ...]) -> list[Path]:
+    """The scan files named on the command line: each must exist, none twice."""
+    from markerplan.errors import InputFileError
+
+    seen: dict[Path, Path] = {}
+    for p in paths:
+        if not p.is_file():
+            raise InputFileError(f"scan file {p} does not exist; check the path")
+        first = seen.setdefault(p.resolve(), p)
+        if first is not p:
+            raise InputFileError(f"scan file {p} is given twice (also as {first}); give each "
+                                 "station's scan once")
+    return list(paths)
+
+
 @click.command("process")
 @click.argument("scans", nargs=-1, required=True,
                 type=click.Path(dir_okay=False, path_type=Path))
@@ -67,16 +83,19 @@ def _parse_offsets(text: str):
                    "id,x_m,y_m,z_m in any frame.")
 @click.option("--method", type=click.Choice(_METHODS), default="fixed-radius",
               show_default=True, help="Sphere-centre estimator.")
-@click.option("--radius", "radius_m", type=float, default=0.1, show_default=True,
+@click.option("--radius", "radius_m", type=FiniteRange(0.01, 1.0),
+              default=0.1, show_default=True,
               help="Marker radius, metres.")
 @click.option("--no-calibrate", is_flag=True,
               help="Skip self-calibration; apply --offsets (default zero) as known values.")
 @click.option("--offsets", "offsets_text",
               help="Known (with --no-calibrate) or starting mounting offsets "
                    "VERTICAL_AXIS_DEG,LFRAME_TILT_DEG,DX_M,DY_M.")
-@click.option("--min-points", type=int, help="Quality gate: minimum points per marker.")
-@click.option("--max-rms", "max_rms_m", type=float, help="Quality gate: maximum fit RMS, m.")
-@click.option("--min-visible-fraction", type=float,
+@click.option("--min-points", type=click.IntRange(1, 1_000_000),
+              help="Quality gate: minimum points per marker.")
+@click.option("--max-rms", "max_rms_m", type=FiniteRange(0.0, 1.0, min_open=True),
+              help="Quality gate: maximum fit RMS, m.")
+@click.option("--min-visible-fraction", type=FiniteRange(0.0, 1.0),
               help="Quality gate: minimum visible fraction.")
 @click.option("--set", "stage_options", multiple=True, metavar="STAGE.OPTION=VALUE",
               help="Any stage option, e.g. --set ground.min_height_m=0.1 "
@@ -97,6 +116,8 @@ def command(scans, out, overwrite, references, method, radius_m, no_calibrate, o
     """
     from tqdm import tqdm
 
+    from markerplan.errors import InputFileError
+    from markerplan.output_folder import output_folder
     from markerplan.provenance import fingerprint_arrays, provenance
     from pipeline.evaluation import read_reference
     from pipeline.process import (
@@ -121,18 +142,12 @@ def command(scans, out, overwrite, references, method, radius_m, no_calibrate, o
     ref_files = [f for p in references
                  for f in (sorted(p.glob("*.truth.json")) if p.is_dir() else [p])]
     if any(p.is_dir() for p in references) and not ref_files:
-        from markerplan.errors import InputFileError
-
         raise InputFileError(f"--reference folder(s) {', '.join(map(str, references))} hold no "
                              "*.truth.json; give the truth files or a total-station CSV")
     refs = [read_reference(p) for p in ref_files]
     check_references(refs)
-    for p in scans:
-        if not p.is_file():
-            from markerplan.errors import InputFileError
-
-            raise InputFileError(f"scan file {p} does not exist; check the path")
-    with staged_output(out, overwrite) as stage:
+    scans = _scan_files(scans)
+    with output_folder(out, overwrite, "process", inputs=[*scans, *references]) as stage:
         results, inputs = [], []
         for path in tqdm(scans, desc="stations", file=sys.stderr, disable=None):
             scan = read_scan(path)
@@ -144,7 +159,10 @@ def command(scans, out, overwrite, references, method, radius_m, no_calibrate, o
         prov = provenance(cfg.to_dict(), inputs=inputs,
                           references=[r.source for r in refs], command="process")
         summary = write_results(stage, results, prov)
-    summary["out"] = str(out)
+    timings = {f"{res.summary['station_id']} {step}": t
+               for res in results for step, t in res.timings_s.items()}
+    report_timings({"total": sum(timings.values())})
+    summary.update(out=str(out), timings_s=timings)
     human = "\n".join(
         f"{s['station_id']}: {s['n_accepted']}/{s['n_candidates']} accepted"
         + (f", mean error {s['mean_error_m'] * 1e3:.1f} mm" if s.get("mean_error_m") else "")

@@ -7,26 +7,31 @@ import sys
 import click
 
 from planner.cli._common import (
+    FRAMES,
+    RANGE_NOISE_MM,
+    SEED,
+    FiniteRange,
     emit_summary,
     json_option,
     out_option,
     overwrite_option,
-    staged_output,
 )
 
 
 @click.command("range-study")
 @out_option(required=True)
 @overwrite_option
-@click.option("--frames", type=int, default=800, show_default=True,
+@click.option("--frames", type=FRAMES, default=800, show_default=True,
               help="Frames per turntable revolution (fewer for a quick run).")
-@click.option("--replicates", type=int, default=3, show_default=True,
+@click.option("--replicates", type=click.IntRange(1, 100), default=3, show_default=True,
               help="Seeded replicates (seed, seed+1, ...).")
-@click.option("--seed", type=int, default=0, show_default=True, help="First simulation seed.")
-@click.option("--rpm", type=int, default=600, show_default=True, help="VLP-16 spin rate.")
-@click.option("--range-noise-mm", type=float, default=15.0, show_default=True,
+@click.option("--seed", type=SEED, default=0, show_default=True, help="First simulation seed.")
+@click.option("--rpm", type=click.IntRange(300, 1200),
+              default=600, show_default=True, help="VLP-16 spin rate.")
+@click.option("--range-noise-mm", type=RANGE_NOISE_MM, default=15.0, show_default=True,
               help="1-sigma range noise, mm.")
-@click.option("--max-distance", "max_distance_m", type=float, default=50.0, show_default=True,
+@click.option("--max-distance", "max_distance_m", type=FiniteRange(1.0, 100.0),
+              default=50.0, show_default=True,
               help="Drop the published distances beyond this, metres.")
 @json_option
 def command(out, overwrite, frames, replicates, seed, rpm, range_noise_mm, max_distance_m,
@@ -49,7 +54,7 @@ def command(out, overwrite, frames, replicates, seed, rpm, range_noise_mm, max_d
     import numpy as np
     from tqdm import tqdm
 
-    from markerplan.errors import ConfigError
+    from markerplan.output_folder import output_folder
     from markerplan.provenance import provenance
     from pipeline.marker_table import write_marker_table
     from pipeline.range_study import (
@@ -64,13 +69,7 @@ def command(out, overwrite, frames, replicates, seed, rpm, range_noise_mm, max_d
     from visibility.sensor import RigConfig, SensorConfig
     from visibility.simulate import simulate_markers
 
-    if replicates < 1:
-        raise ConfigError(f"--replicates must be >= 1, got {replicates}")
-    if frames < 1:
-        raise ConfigError(f"--frames must be a positive number of frames, got {frames}")
     distances = RANGE_STUDY_DISTANCES_M[RANGE_STUDY_DISTANCES_M <= max_distance_m]
-    if distances.size == 0:
-        raise ConfigError(f"--max-distance {max_distance_m} leaves no marker (first is 1 m)")
     sensor = SensorConfig(rpm=rpm, range_noise_m=range_noise_mm / 1e3)
     rig = RigConfig(frames_per_turn=frames)
     centres = marker_layout(distances, 0.1, rig.lidar_height_m)
@@ -81,7 +80,7 @@ def command(out, overwrite, frames, replicates, seed, rpm, range_noise_mm, max_d
     config = {"distances_m": distances.tolist(), "frames": frames, "replicates": replicates,
               "seed": seed, "sensor": {"rpm": rpm, "range_noise_m": range_noise_mm / 1e3},
               "terrain": "level ground", "marker_radius_m": 0.1}
-    with staged_output(out, overwrite) as stage:
+    with output_folder(out, overwrite, "range-study") as stage:
         rows = []
         for rep in tqdm(range(replicates), desc="replicates", file=sys.stderr, disable=None):
             scan, _ = simulate_markers(dem, [0.0, 0.0, rig.lidar_height_m], 0.0, site_centres,

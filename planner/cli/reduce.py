@@ -8,6 +8,8 @@ import click
 
 from planner.cli._common import (
     FILE,
+    SEED,
+    TIME_LIMIT_S,
     dem_option,
     emit_summary,
     error_model_option,
@@ -16,7 +18,7 @@ from planner.cli._common import (
     mounting_offsets,
     out_option,
     overwrite_option,
-    staged_output,
+    report_timings,
     stations_option,
 )
 
@@ -29,7 +31,7 @@ def _id_list(text: str | None) -> tuple[str, ...]:
 @click.argument("layout_spec", metavar="INPUT")
 @click.option("--site", "site_name", default=None,
               help="Site preset (default: the plan's site, else 'default').")
-@click.option("--seed", type=int, default=None,
+@click.option("--seed", type=SEED, default=None,
               help="Seed of the preset's synthetic terrain (default: the plan's / preset's).")
 @dem_option
 @stations_option
@@ -44,13 +46,13 @@ def _id_list(text: str | None) -> tuple[str, ...]:
               help="Choose the k markers from every candidate site, not only the layout.")
 @click.option("--keep", "keep_ids", help="Comma-separated marker ids that always stay.")
 @click.option("--drop", "drop_ids", help="Comma-separated marker ids that must go.")
-@click.option("--k-min", "k_min", type=int,
+@click.option("--k-min", "k_min", type=click.IntRange(1, 100_000),
               help="Fewest markers on the curve (default: the fewest meeting the directions).")
-@click.option("--time-limit", "time_limit_s", type=float,
+@click.option("--time-limit", "time_limit_s", type=TIME_LIMIT_S,
               help="Solver time limit for the whole curve, seconds (default 60).")
 @click.option("--verify", is_flag=True,
               help="Simulate + process the stations at chosen counts; achieved vs predicted.")
-@click.option("--verify-seed", "verify_seed", type=int, default=0, show_default=True,
+@click.option("--verify-seed", "verify_seed", type=SEED, default=0, show_default=True,
               help="Simulation noise seed of --verify.")
 @click.option("--verify-k", "verify_k",
               help="Counts to verify, comma-separated (default: the full layout and the "
@@ -80,11 +82,44 @@ def command(layout_spec, site_name, seed, dem_path, stations_path, boundary_path
     The mounting-offset options mis-mount the rig simulated by --verify (the pipeline
     self-calibrates it).
     """
+    from markerplan.output_folder import output_folder
+    from planner.reduction_plot import plot_tradeoff
+    from planner.reduction_report import reduce_timings, summary, write_reduce_files
+
+    inputs_given = [p for p in (dem_path, stations_path, boundary_path, error_model_path,
+                                config_path, *exclude_paths) if p is not None]
+    if layout_spec != "as-built":
+        inputs_given.append(layout_spec)
+    with output_folder(out, overwrite, "reduce", inputs=inputs_given) as stage:
+        study, doc, config = _study(
+            layout_spec, site_name, seed, dem_path, stations_path, boundary_path, exclude_paths,
+            error_model_path, config_path, free, keep_ids, drop_ids, k_min, time_limit_s,
+            verify, verify_seed, verify_k,
+            mounting_offsets(vertical_axis_error_deg, lframe_tilt_deg, axis_offset_mm),
+            progress=not as_json or sys.stderr.isatty())
+        write_reduce_files(doc, stage)
+        plot_tradeoff(doc, stage / "tradeoff.png")
+    timings = reduce_timings(study)
+    report_timings(timings)
+    info = {**summary(doc, out), "timings_s": timings}
+    kf = doc["k_feasible"]
+    least = "" if doc["k_feasible_minimal"] else "at least "
+    human = (f"{least}{doc['markers_that_can_go']} of {doc['layout']['n_markers']} markers can "
+             f"go: "
+             f"{kf} meet {config.requirement_m:g} m at every station"
+             if kf is not None else "no count meets the requirement at every station")
+    human += ("" if doc["solver"]["proven_optimal"] else " (time limit: not proven optimal)")
+    emit_summary(info, as_json, human + f" -> {out}/")
+
+
+def _study(layout_spec, site_name, seed, dem_path, stations_path, boundary_path, exclude_paths,
+           error_model_path, config_path, free, keep_ids, drop_ids, k_min, time_limit_s,
+           verify, verify_seed, verify_k, offsets, progress):
+    """Read the inputs, run the study (and ``--verify``); return ``(study, doc, config)``."""
     from markerplan.errors import ConfigError
     from pipeline.rig import MountingOffsets
     from planner.config import load_config
-    from planner.reduction_plot import plot_tradeoff
-    from planner.reduction_report import reduce_record, summary, write_reduce_files
+    from planner.reduction_report import reduce_record
     from planner.reduction_study import layout_problem, marker_ids_iv, resolve_inputs, run_study
 
     config = load_config(config_path) if config_path else None
@@ -100,7 +135,6 @@ def command(layout_spec, site_name, seed, dem_path, stations_path, boundary_path
     except ConfigError as exc:
         raise ConfigError(f"{exc} (from the command-line options)") from exc
     ks = _verify_counts(verify_k, verify, len(layout.ids))
-    offsets = mounting_offsets(vertical_axis_error_deg, lframe_tilt_deg, axis_offset_mm)
     if offsets != MountingOffsets() and not verify:
         raise ConfigError("the mounting-offset options set the rig that --verify simulates; "
                           "add --verify or drop them")
@@ -112,7 +146,6 @@ def command(layout_spec, site_name, seed, dem_path, stations_path, boundary_path
         from error_model import default_model
 
         model, model_name = default_model(), "default (shipped with markerplan)"
-    progress = not as_json or sys.stderr.isatty()
     problem, mask, timings = layout_problem(inputs, layout, config, model, free=free,
                                             progress=progress)
     study = run_study(problem, config, mask, free=free, k_min=k_min)
@@ -131,19 +164,7 @@ def command(layout_spec, site_name, seed, dem_path, stations_path, boundary_path
                "verify": verify, "verify_seed": verify_seed if verify else None,
                "verify_mounting_offsets": offsets.to_dict() if verify else None,
                "verify_k": None if ks is None else list(ks)}
-    doc = reduce_record(study, layout, inputs, model_name, options, verified)
-    with staged_output(out, overwrite) as stage:
-        write_reduce_files(doc, stage)
-        plot_tradeoff(doc, stage / "tradeoff.png")
-    info = summary(doc, out)
-    kf = doc["k_feasible"]
-    least = "" if doc["k_feasible_minimal"] else "at least "
-    human = (f"{least}{doc['markers_that_can_go']} of {doc['layout']['n_markers']} markers can "
-             f"go: "
-             f"{kf} meet {config.requirement_m:g} m at every station"
-             if kf is not None else "no count meets the requirement at every station")
-    human += ("" if doc["solver"]["proven_optimal"] else " (time limit: not proven optimal)")
-    emit_summary(info, as_json, human + f" -> {out}/")
+    return study, reduce_record(study, layout, inputs, model_name, options, verified), config
 
 
 def _verify_counts(text: str | None, verify: bool, n: int) -> tuple[int, ...] | None:

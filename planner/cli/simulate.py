@@ -8,13 +8,16 @@ from pathlib import Path
 import click
 
 from planner.cli._common import (
+    FRAMES,
+    RANGE_NOISE_MM,
+    SEED,
+    FiniteRange,
     emit_summary,
     json_option,
     mounting_offset_options,
     mounting_offsets,
     out_option,
     overwrite_option,
-    staged_output,
 )
 
 
@@ -41,7 +44,7 @@ def _select_stations(site_ids: list[str], text: str | None) -> list[str]:
 @click.command("simulate")
 @click.option("--site", "site_name", default="default", show_default=True,
               help="Site preset: default (40 m crater field) or large (300 m).")
-@click.option("--site-seed", type=int, default=0, show_default=True,
+@click.option("--site-seed", type=SEED, default=0, show_default=True,
               help="Seed of the synthetic terrain.")
 @click.option("--dem", "dem_path", type=click.Path(dir_okay=False, path_type=Path),
               help="Use this DEM (.tif/.tiff/.npz, site-frame metres) instead of the preset's "
@@ -49,21 +52,23 @@ def _select_stations(site_ids: list[str], text: str | None) -> list[str]:
 @click.option("--dem-fill", type=click.Choice(["nearest"]),
               help="Fill NaN/nodata DEM cells (default: refuse them).")
 @click.option("--stations", help="Station ids (S1,S3) or a count (first N). Default: all.")
-@click.option("--frames", type=int, default=800, show_default=True,
+@click.option("--frames", type=FRAMES, default=800, show_default=True,
               help="Frames per turntable revolution.")
-@click.option("--rpm", type=int, default=600, show_default=True,
+@click.option("--rpm", type=click.IntRange(300, 1200), default=600, show_default=True,
               help="VLP-16 spin rate, 300-1200 in steps of 60.")
-@click.option("--seed", type=int, default=0, show_default=True, help="Simulation noise seed.")
-@click.option("--lidar-height", "lidar_height_m", type=float, default=1.0, show_default=True,
+@click.option("--seed", type=SEED, default=0, show_default=True, help="Simulation noise seed.")
+@click.option("--lidar-height", "lidar_height_m", type=FiniteRange(0.1, 10.0),
+              default=1.0, show_default=True,
               help="LiDAR centre above the ground, metres.")
 @mounting_offset_options
-@click.option("--range-noise-mm", type=float, default=15.0, show_default=True,
+@click.option("--range-noise-mm", type=RANGE_NOISE_MM, default=15.0, show_default=True,
               help="1-sigma range noise, mm (datasheet +-3 cm read as 2 sigma).")
-@click.option("--incidence-noise-mm", type=float, default=0.0, show_default=True,
+@click.option("--incidence-noise-mm", type=RANGE_NOISE_MM, default=0.0, show_default=True,
               help="Extra noise x tan(incidence), mm.")
 @click.option("--beam-divergence", is_flag=True,
               help="Sample returns inside the 3 x 1.5 mrad beam footprint.")
-@click.option("--dropout", "dropout_prob", type=float, default=0.0, show_default=True,
+@click.option("--dropout", "dropout_prob", type=FiniteRange(0.0, 1.0, max_open=True),
+              default=0.0, show_default=True,
               help="Probability that a return is lost.")
 @out_option(required=True)
 @overwrite_option
@@ -85,26 +90,26 @@ def command(site_name: str, site_seed: int, dem_path: Path | None, dem_fill: str
     """
     from tqdm import tqdm
 
-    from markerplan.errors import ConfigError
+    from markerplan.output_folder import output_folder
     from visibility.dem import read_dem
     from visibility.sensor import RigConfig, SensorConfig
     from visibility.simulate import simulate_site, write_site_json
     from visibility.sites import load_site, site_with_dem
 
-    if frames <= 0:
-        raise ConfigError(f"--frames must be a positive number of frames per turn (e.g. 800), "
-                          f"got {frames}")
     offsets = mounting_offsets(vertical_axis_error_deg, lframe_tilt_deg, axis_offset_mm)
     sensor = SensorConfig(rpm=rpm, range_noise_m=range_noise_mm / 1e3,
                           incidence_noise_m=incidence_noise_mm / 1e3,
                           beam_divergence=beam_divergence, dropout_prob=dropout_prob)
     rig = RigConfig(lidar_height_m=lidar_height_m, frames_per_turn=frames, offsets=offsets)
-    site = load_site(site_name, seed=site_seed)
-    if dem_path is not None:
-        site = site_with_dem(site, read_dem(dem_path, fill=dem_fill))
-    ids = _select_stations(site.station_ids, stations)
-
-    with staged_output(out, overwrite) as stage:
+    with output_folder(out, overwrite, "simulate", inputs=[dem_path] if dem_path else []) \
+            as stage:
+        site = load_site(site_name, seed=site_seed)
+        if dem_path is not None:
+            site = site_with_dem(site, read_dem(
+                dem_path, fill=dem_fill, what=f"--dem {dem_path}",
+                nodata_fix="pass --dem-fill nearest, or fill them (e.g. gdal_fillnodata.py) "
+                           "or crop the DEM"))
+        ids = _select_stations(site.station_ids, stations)
         with tqdm(total=len(ids) * frames, unit="frame", file=sys.stderr, disable=None,
                   desc="simulate") as bar:
             per_station = simulate_site(site, stage, sensor, rig, seed, ids, progress=bar.update)

@@ -8,13 +8,13 @@ from pathlib import Path
 import click
 
 from planner.cli._common import (
+    SEED,
     emit_summary,
     json_option,
     mounting_offset_options,
     mounting_offsets,
     out_option,
     overwrite_option,
-    staged_output,
 )
 
 
@@ -23,7 +23,7 @@ from planner.cli._common import (
 @click.option("--error-model", "error_model_path", type=click.Path(dir_okay=False,
                                                                   path_type=Path),
               help="Error-model JSON for the registration weights (default: the shipped model).")
-@click.option("--seed", type=int, default=0, show_default=True, help="Simulation noise seed.")
+@click.option("--seed", type=SEED, default=0, show_default=True, help="Simulation noise seed.")
 @mounting_offset_options
 @out_option(required=True)
 @overwrite_option
@@ -47,22 +47,25 @@ def command(plan_path, error_model_path, seed, vertical_axis_error_deg, lframe_t
     import json
 
     from markerplan.errors import InfeasiblePlanError
+    from markerplan.output_folder import output_folder
     from planner.verify import read_plan, verify_markdown, verify_plan, verify_record
 
     doc = read_plan(plan_path)
     offsets = mounting_offsets(vertical_axis_error_deg, lframe_tilt_deg, axis_offset_mm)
-    if error_model_path is not None:
-        from error_model.model import ErrorModel
+    dem = doc.get("provenance", {}).get("inputs", {}).get("dem")  # the plan's --dem, if any
+    inputs = [p for p in (plan_path, dem, error_model_path) if p]
+    with output_folder(out, overwrite, "verify", inputs=inputs) as stage:
+        if error_model_path is not None:
+            from error_model.model import ErrorModel
 
-        model, model_name = ErrorModel.load(error_model_path), str(error_model_path)
-    else:
-        from error_model import default_model
+            model, model_name = ErrorModel.load(error_model_path), str(error_model_path)
+        else:
+            from error_model import default_model
 
-        model, model_name = default_model(), "default"
-    checks = verify_plan(doc, model, seed=seed, progress=not as_json or sys.stderr.isatty(),
-                         offsets=offsets)
-    rec = verify_record(doc, checks, seed, model_name, offsets)
-    with staged_output(out, overwrite) as stage:
+            model, model_name = default_model(), "default"
+        checks = verify_plan(doc, model, seed=seed, progress=not as_json or sys.stderr.isatty(),
+                             offsets=offsets)
+        rec = verify_record(doc, checks, seed, model_name, offsets)
         (stage / "verify.json").write_text(json.dumps(rec, indent=2) + "\n")
         (stage / "verify.md").write_text(verify_markdown(rec))
     summary = {"out": str(out), "passed": rec["passed"], "requirement_m": rec["requirement_m"],

@@ -21,10 +21,10 @@ def tables(tmp_path_factory):
 
 
 def test_fit_writes_model_and_plot_and_prints_one_json_object(tables, tmp_path, capsys):
-    out_model, out_png = tmp_path / "model.json", tmp_path / "model.png"
+    out_model, out_png = tmp_path / "m" / "model.json", tmp_path / "m" / "model.png"
     code, out, err = run_cli(capsys, ["fit-error-model", str(tables / "a.csv"),
                                       str(tables / "b.csv"),
-                                      "-o", str(out_model), "--plot", str(out_png), "--seed", "3",
+                                      "--out", str(tmp_path / "m"), "--plot", "--seed", "3",
                                       "--bootstrap", "5", "--json"])
     assert code == 0, err
     summary = json.loads(out)
@@ -37,20 +37,20 @@ def test_fit_writes_model_and_plot_and_prints_one_json_object(tables, tmp_path, 
     assert out_png.read_bytes()[:4] == b"\x89PNG"
     p = model.predict([5.0, 40.0], np.deg2rad(-10))
     assert p.sigma_m[1] > p.sigma_m[0] and p.in_domain.all()
-    assert sorted(x.name for x in tmp_path.iterdir()) == ["model.json", "model.png"]
+    assert sorted(x.name for x in tmp_path.iterdir()) == ["m"]
+    assert sorted(x.name for x in (tmp_path / "m").iterdir()) == ["model.json", "model.png",
+                                                                   "provenance.json"]
 
 
 def test_existing_output_is_refused_without_overwrite(tables, tmp_path, capsys):
-    target = tmp_path / "model.json"
-    target.write_text("keep me")
-    code, _, err = run_cli(capsys, ["fit-error-model", str(tables / "a.csv"), "-o", str(target),
-                                    "--bootstrap", "0"])
+    out = tmp_path / "model"
+    args = ["fit-error-model", str(tables / "a.csv"), "--out", str(out), "--bootstrap", "0"]
+    assert run_cli(capsys, args)[0] == 0
+    code, _, err = run_cli(capsys, args)
     assert code == 1 and "--overwrite" in err and err.count("\n") == 1
-    assert target.read_text() == "keep me"
-    code, _, err = run_cli(capsys, ["fit-error-model", str(tables / "a.csv"), "-o", str(target),
-                                    "--bootstrap", "0", "--overwrite"])
+    code, _, err = run_cli(capsys, args + ["--overwrite"])
     assert code == 0, err
-    assert ErrorModel.load(target).info["data"]["rows_used"] > 500
+    assert ErrorModel.load(out / "model.json").info["data"]["rows_used"] > 500
 
 
 @pytest.mark.parametrize("make, match", [
@@ -63,9 +63,8 @@ def test_bad_tables_give_one_line_errors_and_no_output(tmp_path, capsys, make, m
     table = synthetic_table(300, seed=1)
     make(table)
     write_csv(tmp_path / "bad.csv", table)
-    target = tmp_path / "model.json"
-    code, out, err = run_cli(capsys, ["fit-error-model", str(tmp_path / "bad.csv"), "-o",
-                                      str(target), "--json"])
+    code, out, err = run_cli(capsys, ["fit-error-model", str(tmp_path / "bad.csv"), "--out",
+                                      str(tmp_path / "model"), "--json"])
     assert code == 1
     assert out == ""
     assert err.startswith("error: ") and err.count("\n") == 1 and match in err
@@ -73,26 +72,26 @@ def test_bad_tables_give_one_line_errors_and_no_output(tmp_path, capsys, make, m
 
 
 def test_missing_table_file_is_an_error(tmp_path, capsys):
-    code, _, err = run_cli(capsys, ["fit-error-model", str(tmp_path / "none.csv"), "-o",
-                                    str(tmp_path / "m.json")])
-    assert code == 1 and "cannot be read" in err
+    code, _, err = run_cli(capsys, ["fit-error-model", str(tmp_path / "none.csv"), "--out",
+                                    str(tmp_path / "m")])
+    assert code == 1 and "none.csv" in err and not (tmp_path / "m").exists()
 
 
 def test_help_has_an_example(capsys):
     code, out, _ = run_cli(capsys, ["fit-error-model", "--help"])
-    assert code == 0 and "markerplan fit-error-model tables/markers.csv -o model.json" in out
+    assert code == 0 and "markerplan fit-error-model tables/markers.csv --out model/" in out
 
 
 def test_mixed_estimators_need_a_choice(tmp_path, capsys):
     table = synthetic_table(400, seed=2)
     table["estimator"] = np.where(np.arange(400) % 2, "fixed-radius", "hemisphere-icp")
     write_csv(tmp_path / "mixed.csv", table)
-    target = tmp_path / "m.json"
-    code, _, err = run_cli(capsys, ["fit-error-model", str(tmp_path / "mixed.csv"), "-o",
+    target = tmp_path / "m"
+    code, _, err = run_cli(capsys, ["fit-error-model", str(tmp_path / "mixed.csv"), "--out",
                                     str(target), "--bootstrap", "0"])
     assert code == 1 and "several estimators" in err and not target.exists()
-    code, _, err = run_cli(capsys, ["fit-error-model", str(tmp_path / "mixed.csv"), "-o",
+    code, _, err = run_cli(capsys, ["fit-error-model", str(tmp_path / "mixed.csv"), "--out",
                                     str(target), "--bootstrap", "0", "--estimator", "fixed-radius"])
     assert code == 0, err
-    counts = ErrorModel.load(target).info["data"]["counts"]
+    counts = ErrorModel.load(target / "model.json").info["data"]["counts"]
     assert counts["dropped_other_estimator"] == 200

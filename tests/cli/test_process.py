@@ -86,7 +86,7 @@ def _raw_scan(path, n_points, angles):
 
 @pytest.mark.parametrize("case, needle", [
     ("empty", "empty"), ("no_angles", "turntable angle"), ("garbage", "not a readable scan"),
-    ("missing", "does not exist"), ("bad_csv", "lacks column"), ("radius", "radius_m"),
+    ("missing", "does not exist"), ("bad_csv", "lacks column"),
 ])
 def test_bad_input_one_line_no_output(station, tmp_path, capsys, case, needle):
     scan = station / "station_S1.scan.npz"
@@ -105,12 +105,10 @@ def test_bad_input_one_line_no_output(station, tmp_path, capsys, case, needle):
         args += [str(p)]
     elif case == "missing":
         args += [str(tmp_path / "nope.scan.npz")]
-    elif case == "bad_csv":
+    else:
         ref = tmp_path / "ref.csv"
         ref.write_text("id,x_m,y_m\nA,1,2\n")
         args += [str(scan), "--reference", str(ref)]
-    else:
-        args += [str(scan), "--radius", "0"]
     out = tmp_path / "out"
     code, stdout, err = run_cli(capsys, [*args, "--out", str(out)])
     assert code == 1 and stdout == ""

@@ -16,8 +16,9 @@ def test_quick_range_study(tmp_path, capsys):
                                        "--replicates", "2", "--max-distance", "4", "--json"])
     assert code == 0
     res = json.loads(stdout)
-    assert sorted(p.name for p in out.iterdir()) == ["markers.csv", "range_study.png",
-                                                     "summary.csv", "summary.json"]
+    assert sorted(p.name for p in out.iterdir()) == ["markers.csv", "provenance.json",
+                                                     "range_study.png", "summary.csv",
+                                                     "summary.json"]
     rows = read_marker_table(out / "markers.csv")
     assert list(rows[0]) == list(COLUMNS)
     assert len(rows) == 4 * 2 * 2  # distances x estimators x replicates
@@ -34,4 +35,4 @@ def test_quick_range_study(tmp_path, capsys):
 def test_bad_options(tmp_path, capsys):
     code, _, err = run_cli(capsys, ["range-study", "--out", str(tmp_path / "o"), "--replicates",
                                     "0"])
-    assert code == 1 and "--replicates" in err and not (tmp_path / "o").exists()
+    assert code == 2 and "--replicates" in err and not (tmp_path / "o").exists()

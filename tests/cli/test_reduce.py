@@ -25,8 +25,8 @@ def as_built(tmp_path_factory):
 
 def test_as_built_writes_every_output(as_built):
     assert sorted(p.name for p in as_built.iterdir()) == [
-        "drop_order.csv", "marker_loss.csv", "per_station.csv", "reduce.json", "report.md",
-        "tradeoff.csv", "tradeoff.png"]
+        "drop_order.csv", "marker_loss.csv", "per_station.csv", "provenance.json", "reduce.json",
+        "report.md", "tradeoff.csv", "tradeoff.png"]
     doc = json.loads((as_built / "reduce.json").read_text())
     assert doc["schema"] == "markerplan-reduce" and doc["layout"]["n_markers"] == 11
     assert doc["provenance"]["solver"]["statuses"]

@@ -19,7 +19,7 @@ def test_simulate_writes_scans_and_truth(tmp_path, capsys):
     summary = json.loads(stdout)
     assert [s["station_id"] for s in summary["stations"]] == ["S1", "S3"]
     assert sorted(p.name for p in out.iterdir()) == [
-        "site.json", "station_S1.scan.npz", "station_S1.truth.json",
+        "provenance.json", "site.json", "station_S1.scan.npz", "station_S1.truth.json",
         "station_S3.scan.npz", "station_S3.truth.json"]
     scan = read_scan(out / "station_S1.scan.npz")
     assert scan.n_frames == 8 and scan.n_points == summary["stations"][0]["n_points"]
@@ -85,11 +85,12 @@ def test_unwritable_out_refused(tmp_path, capsys):
     _assert_clean_failure(tmp_path, code, stdout, err, "writable")
 
 
-@pytest.mark.parametrize("frames", ["0", "-5"])
-def test_nonpositive_frames_refused(tmp_path, capsys, frames):
-    code, stdout, err = run_cli(capsys, ["simulate", "--frames", frames, "--out",
-                                         str(tmp_path / "out")])
-    _assert_clean_failure(tmp_path, code, stdout, err, "--frames must be a positive")
+@pytest.mark.parametrize("frames", ["0", "-5", "2000000000"])
+def test_frames_out_of_bounds_refused(tmp_path, capsys, frames):
+    code, _, err = run_cli(capsys, ["simulate", "--frames", frames, "--out",
+                                    str(tmp_path / "out")])
+    assert code == 2 and "'--frames'" in err and "1<=x<=20000" in err
+    assert list(tmp_path.iterdir()) == []
 
 
 def test_unknown_preset_refused(tmp_path, capsys):

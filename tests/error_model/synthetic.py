@@ -75,4 +75,13 @@ def write_csv(path, table: dict[str, np.ndarray]) -> None:
         w = csv.writer(fh)
         w.writerow(list(table))
         for row in zip(*table.values(), strict=True):
-            w.writerow([str(v).lower() if isinstance(v, np.bool_ | bool) else v for v in row])
+            w.writerow([_cell(v) for v in row])
+
+
+def _cell(v) -> str:
+    """A CSV cell as ``markerplan process`` writes it: true/false, empty for no value."""
+    if isinstance(v, np.bool_ | bool):
+        return str(v).lower()
+    if isinstance(v, float | np.floating) and not np.isfinite(v):
+        return ""
+    return str(v)

@@ -1,0 +1,77 @@
+"""Options outside their documented bounds, and inputs given twice: refused before any work."""
+
+import pytest
+
+from tests.cli.bad_input import Case, check_refused
+
+SIM = ["simulate", "--stations", "S1", "--frames", "4", "--out", "out"]
+RANGE = ["range-study", "--frames", "4", "--replicates", "1", "--out", "out"]
+SCAN = "{inputs}/scan/station_S1.scan.npz"
+PROCESS = ["process", SCAN, "--out", "out"]
+
+
+def usage(name, args, option):
+    """A click usage error (exit code 2) that names ``option``."""
+    return Case(name, args, option, code=2)
+
+
+CASES = [
+    usage("simulate-negative-seed", SIM + ["--seed", "-1"], "--seed"),
+    usage("simulate-negative-site-seed", SIM + ["--site-seed", "-1"], "--site-seed"),
+    usage("simulate-float-seed", SIM + ["--seed", "1.5"], "--seed"),
+    usage("simulate-frames-2e9", SIM + ["--frames", "2000000000"], "--frames"),
+    usage("simulate-frames-2e9-float", SIM + ["--frames", "2e9"], "--frames"),
+    usage("simulate-frames-zero", SIM + ["--frames", "0"], "--frames"),
+    usage("simulate-range-noise-1e6", SIM + ["--range-noise-mm", "1e6"], "--range-noise-mm"),
+    usage("simulate-range-noise-negative", SIM + ["--range-noise-mm", "-1"], "--range-noise-mm"),
+    usage("simulate-range-noise-nan", SIM + ["--range-noise-mm", "nan"], "--range-noise-mm"),
+    usage("simulate-incidence-noise-1e6", SIM + ["--incidence-noise-mm", "1e6"],
+          "--incidence-noise-mm"),
+    usage("simulate-rpm-5000", SIM + ["--rpm", "5000"], "--rpm"),
+    usage("simulate-dropout-one", SIM + ["--dropout", "1"], "--dropout"),
+    usage("simulate-lidar-height-zero", SIM + ["--lidar-height", "0"], "--lidar-height"),
+    usage("simulate-lidar-height-inf", SIM + ["--lidar-height", "inf"], "--lidar-height"),
+    usage("simulate-axis-error-90", SIM + ["--vertical-axis-error-deg", "90"],
+          "--vertical-axis-error-deg"),
+    usage("simulate-lframe-tilt-nan", SIM + ["--lframe-tilt-deg", "nan"], "--lframe-tilt-deg"),
+    usage("range-study-replicates-zero", RANGE + ["--replicates", "0"], "--replicates"),
+    usage("range-study-replicates-1e6", RANGE + ["--replicates", "1000000"], "--replicates"),
+    usage("range-study-noise-1e6", RANGE + ["--range-noise-mm", "1e6"], "--range-noise-mm"),
+    usage("range-study-max-distance-1e6", RANGE + ["--max-distance", "1e6"], "--max-distance"),
+    usage("range-study-max-distance-zero", RANGE + ["--max-distance", "0"], "--max-distance"),
+    usage("range-study-negative-seed", RANGE + ["--seed", "-3"], "--seed"),
+    usage("verify-negative-seed", ["verify", "{inputs}/plan/plan.json", "--seed", "-1",
+                                   "--out", "out"], "--seed"),
+    usage("verify-without-out", ["verify", "{inputs}/plan/plan.json"], "--out"),
+    usage("plan-negative-seed", ["plan", "--seed", "-1", "--out", "out"], "--seed"),
+    usage("plan-budget-zero", ["plan", "--budget", "0", "--out", "out"], "--budget"),
+    usage("plan-time-limit-zero", ["plan", "--time-limit", "0", "--out", "out"], "--time-limit"),
+    usage("plan-time-limit-1e9", ["plan", "--time-limit", "1e9", "--out", "out"],
+          "--time-limit"),
+    usage("reduce-negative-verify-seed", ["reduce", "as-built", "--verify", "--verify-seed", "-1",
+                                          "--out", "out"], "--verify-seed"),
+    usage("reduce-k-min-zero", ["reduce", "as-built", "--k-min", "0", "--out", "out"],
+          "--k-min"),
+    usage("fit-error-model-negative-seed", ["fit-error-model", "{inputs}/markers.csv", "--seed",
+                                            "-1", "--out", "out"], "--seed"),
+    usage("fit-error-model-bootstrap-1e6", ["fit-error-model", "{inputs}/markers.csv",
+                                            "--bootstrap", "1000000", "--out", "out"],
+          "--bootstrap"),
+    usage("process-radius-zero", PROCESS + ["--radius", "0"], "--radius"),
+    usage("process-radius-nan", PROCESS + ["--radius", "nan"], "--radius"),
+    usage("process-min-points-zero", PROCESS + ["--min-points", "0"], "--min-points"),
+    usage("process-max-rms-zero", PROCESS + ["--max-rms", "0"], "--max-rms"),
+    usage("process-visible-fraction-2", PROCESS + ["--min-visible-fraction", "2"],
+          "--min-visible-fraction"),
+    Case("process-same-scan-twice", ["process", SCAN, SCAN, "--out", "out"], "given twice"),
+    Case("process-same-scan-twice-other-path",
+         ["process", SCAN, "{inputs}/scan/../scan/station_S1.scan.npz", "--out", "out"],
+         "given twice"),
+    Case("fit-sphere-radius-nan", ["fit-sphere", "p.xyz", "--radius", "nan"], "radius",
+         files={"p.xyz": "0 0 0.1\n0.1 0 0\n0 0.1 0\n-0.1 0 0\n0 -0.1 0\n"}),
+]
+
+
+@pytest.mark.parametrize("case", CASES, ids=str)
+def test_refused(case, capsys, monkeypatch, tmp_path, valid_inputs):
+    check_refused(case, capsys, monkeypatch, tmp_path, valid_inputs)
