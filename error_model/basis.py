@@ -27,8 +27,7 @@ import numpy as np
 
 from markerplan.errors import ConfigError, InputFileError
 from markerplan.reading import (
-    MAX_ABS_COORDINATE_M,
-    finite_number,
+    json_numbers,
     require_keys,
     require_type,
 )
@@ -167,26 +166,6 @@ class Basis:
 
 
 _REFIT = "regenerate the model with `markerplan fit-error-model`"
-
-
-def json_numbers(values: Any, what: str, max_abs: float = MAX_ABS_COORDINATE_M
-                 ) -> list[float]:
-    """A JSON list of finite numbers (strings and booleans refused), as floats.
-
-    >>> json_numbers([1, 2.5], "knots")
-    [1.0, 2.5]
-    >>> json_numbers([1, "2"], "knots")
-    Traceback (most recent call last):
-    ...
-    markerplan.errors.InputFileError: knots[1]: expected int or float, got a string ('2')
-    """
-    require_type(values, list, what)
-    return [json_number(v, f"{what}[{i}]", max_abs) for i, v in enumerate(values)]
-
-
-def json_number(value: Any, what: str, max_abs: float = MAX_ABS_COORDINATE_M) -> float:
-    """A finite JSON number (not a string, not a boolean) of magnitude at most ``max_abs``."""
-    return finite_number(require_type(value, (int, float), what), what, max_abs)
 
 
 _EXTRA_TRANSFORMS = {

@@ -13,9 +13,8 @@ from typing import Any
 
 import numpy as np
 
-from error_model.basis import json_numbers
 from markerplan.errors import InputFileError
-from markerplan.reading import require_keys, require_type
+from markerplan.reading import json_numbers, require_keys, require_type
 
 
 @dataclass(frozen=True)

@@ -17,13 +17,15 @@ from typing import Any
 
 import numpy as np
 
-from error_model.basis import Basis, json_number, json_numbers
+from error_model.basis import Basis
 from error_model.config import EXTRA_PREDICTORS
 from error_model.domain import Domain
 from markerplan.errors import ConfigError, InputFileError, OutputError
 from markerplan.reading import (
     check_schema_version,
     json_kind,
+    json_number,
+    json_numbers,
     load_json,
     require_keys,
     require_type,

@@ -63,9 +63,10 @@ def _forbidden_reason(out: Path, inputs: Iterable[Path]) -> str | None:
     if _is_within(cwd, out):
         return "is the current folder" if out == cwd else "holds the current folder"
     home = Path.home().resolve()
-    if _is_within(home, out) or out.parent == Path("/home"):
-        return "is a home folder" if out == home or out.parent == Path("/home") \
-            else "holds a home folder"
+    if out == home or out.parent == Path("/home"):
+        return "is a home folder"
+    if _is_within(home, out):
+        return "holds a home folder"
     for p in inputs:
         p = Path(p).resolve()
         if _is_within(p, out):

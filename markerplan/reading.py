@@ -172,6 +172,45 @@ def finite_number(value: Any, what: str, max_abs: float = MAX_ABS_COORDINATE_M) 
     return number
 
 
+def json_number(value: Any, what: str, max_abs: float = MAX_ABS_COORDINATE_M) -> float:
+    """A finite JSON number (not a string, not a boolean) of magnitude at most ``max_abs``."""
+    return finite_number(require_type(value, (int, float), what), what, max_abs)
+
+
+def json_numbers(values: Any, what: str, max_abs: float = MAX_ABS_COORDINATE_M,
+                 length: int | None = None) -> list[float]:
+    """A JSON list of finite numbers (strings and booleans refused), as floats.
+
+    Parameters
+    ----------
+    values : Any
+        The parsed JSON value.
+    what : str
+        How messages name it; items are named ``what[i]``.
+    max_abs : float
+        Largest magnitude accepted.
+    length : int, optional
+        The exact number of items required (e.g. 3 for a point).
+
+    >>> json_numbers([1, 2.5], "knots")
+    [1.0, 2.5]
+    >>> json_numbers([1, "2"], "knots")
+    Traceback (most recent call last):
+    ...
+    markerplan.errors.InputFileError: knots[1]: expected int or float, got a string ('2')
+    >>> json_numbers([1, 2], "centre_m", length=3)
+    Traceback (most recent call last):
+    ...
+    markerplan.errors.InputFileError: centre_m: must be a list of 3 numbers, got 2 items
+    """
+    if length is None:
+        require_type(values, list, what)
+    elif not isinstance(values, list) or len(values) != length:
+        shown = f"{len(values)} items" if isinstance(values, list) else json_kind(values)
+        raise InputFileError(f"{what}: must be a list of {length} numbers, got {shown}")
+    return [json_number(v, f"{what}[{i}]", max_abs) for i, v in enumerate(values)]
+
+
 def read_csv(path: str | Path, what: str, required: Iterable[str] = (),
              fix: str = "") -> tuple[list[str], list[list[str]]]:
     """Header and rows of a UTF-8 CSV; ragged rows and missing columns refused.

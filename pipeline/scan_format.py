@@ -42,10 +42,10 @@ import numpy as np
 
 from markerplan.errors import DataError, InputFileError
 from markerplan.reading import (
-    MAX_ABS_COORDINATE_M,
     check_schema_version,
-    finite_number,
     json_kind,
+    json_number,
+    json_numbers,
     load_json,
     parse_json,
     require_keys,
@@ -459,37 +459,25 @@ def read_truth(path: str | Path) -> dict[str, Any]:
     return body
 
 
-def _numbers_iv(value: Any, n: int, what: str) -> list[float]:
-    """A list of exactly ``n`` finite numbers."""
-    if not isinstance(value, list) or len(value) != n:
-        shown = f"{len(value)} items" if isinstance(value, list) else json_kind(value)
-        raise InputFileError(f"{what}: must be a list of {n} numbers, got {shown}")
-    return [_json_number(v, f"{what}[{k}]") for k, v in enumerate(value)]
-
-
-def _json_number(value: Any, what: str, max_abs: float = MAX_ABS_COORDINATE_M) -> float:
-    """A finite JSON number (not a string, not a boolean) of magnitude at most ``max_abs``."""
-    return finite_number(require_type(value, (int, float), what), what, max_abs)
-
-
 def _truth_iv(body: dict[str, Any], what: str) -> None:
     station = require_type(body["station_id"], str, f"{what}: 'station_id'")
     if not station.strip():
         raise InputFileError(f"{what}: 'station_id' is empty; name the station")
     pose = require_type(body["station_pose"], dict, f"{what}: 'station_pose'")
     if "position_m" in pose:
-        _numbers_iv(pose["position_m"], 3, f"{what}: station_pose 'position_m'")
+        json_numbers(pose["position_m"], f"{what}: station_pose 'position_m'", length=3)
     for key in ("heading_rad", "roll_rad", "pitch_rad"):
         if key in pose:
-            _json_number(pose[key], f"{what}: station_pose {key!r}", MAX_ABS_ANGLE_RAD)
+            json_number(pose[key], f"{what}: station_pose {key!r}", MAX_ABS_ANGLE_RAD)
     offsets = require_type(body["mounting_offsets"], dict, f"{what}: 'mounting_offsets'")
     for key in ("vertical_axis_error_rad", "lframe_tilt_rad"):
         if key in offsets:
-            _json_number(offsets[key], f"{what}: mounting_offsets {key!r}", MAX_ABS_ANGLE_RAD)
+            json_number(offsets[key], f"{what}: mounting_offsets {key!r}", MAX_ABS_ANGLE_RAD)
     if "axis_offset_m" in offsets:
-        _numbers_iv(offsets["axis_offset_m"], 2, f"{what}: mounting_offsets 'axis_offset_m'")
+        json_numbers(offsets["axis_offset_m"], f"{what}: mounting_offsets 'axis_offset_m'",
+                     length=2)
     if "marker_radius_m" in body:
-        radius = _json_number(body["marker_radius_m"], f"{what}: 'marker_radius_m'")
+        radius = json_number(body["marker_radius_m"], f"{what}: 'marker_radius_m'")
         if radius <= 0:
             raise InputFileError(f"{what}: 'marker_radius_m' must be > 0, got {radius:g}")
     markers = require_type(body["markers"], list, f"{what}: 'markers'")
@@ -499,9 +487,9 @@ def _truth_iv(body: dict[str, Any], what: str) -> None:
         require_type(m, dict, where)
         require_keys(m, ("id", "centre_station_m"), where, "every marker needs both")
         ids.append(require_type(m["id"], str, f"{where} 'id'"))
-        _numbers_iv(m["centre_station_m"], 3, f"{where} 'centre_station_m'")
+        json_numbers(m["centre_station_m"], f"{where} 'centre_station_m'", length=3)
         if "centre_site_m" in m:
-            _numbers_iv(m["centre_site_m"], 3, f"{where} 'centre_site_m'")
+            json_numbers(m["centre_site_m"], f"{where} 'centre_site_m'", length=3)
     unique_ids(ids, f"{what}: markers")
 
 

@@ -16,6 +16,12 @@ from typing import Any
 from markerplan.errors import ConfigError, InputFileError
 from markerplan.reading import read_text
 
+#: Most stations a site may hold: a ``--stations`` file or a plan (each station ray casts every
+#: candidate site).
+MAX_STATIONS = 1_000
+#: Most markers a layout may hold: a markers file (``--existing``, ``reduce INPUT``) or a plan.
+MAX_MARKERS = 100_000
+
 
 @dataclass(frozen=True)
 class PlanConfig:

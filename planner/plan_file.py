@@ -20,20 +20,17 @@ from markerplan.errors import InputFileError
 from markerplan.reading import (
     MAX_ABS_COORDINATE_M,
     check_schema_version,
-    finite_number,
     json_kind,
+    json_number,
     parse_json,
     read_text,
     require_keys,
     require_type,
     unique_ids,
 )
-from planner.config import BOUNDS
+from planner.config import BOUNDS, MAX_MARKERS, MAX_STATIONS
 from planner.report import SCHEMA, SCHEMA_VERSION
 
-#: Most markers and stations a plan may hold.
-MAX_MARKERS = 100_000
-MAX_STATIONS = 1_000
 #: Bounds of the requirement, m (those of :data:`planner.config.BOUNDS`).
 REQUIREMENT_BOUNDS_M = (0.0, BOUNDS["requirement_m"][2])
 WORKING_RADIUS_BOUNDS_M = (0.0, BOUNDS["working_radius_m"][2])
@@ -69,8 +66,9 @@ def read_plan(path: str | Path, option: str = "PLAN", full: bool = True) -> dict
         Missing, unreadable or non-UTF-8 file; not JSON (or NaN/Infinity in it); not a JSON
         object; another schema or a ``schema_version`` newer than :data:`SCHEMA_VERSION`;
         missing keys; a value of the wrong type at any depth read; numbers that are not finite
-        or beyond their bounds; zero markers or stations (or more than :data:`MAX_MARKERS` /
-        :data:`MAX_STATIONS`); repeated ids; a station naming a marker the plan lacks.
+        or beyond their bounds; zero markers or stations (or more than
+        :data:`~planner.config.MAX_MARKERS` / :data:`~planner.config.MAX_STATIONS`);
+        repeated ids; a station naming a marker the plan lacks.
 
     Examples
     --------
@@ -124,8 +122,7 @@ def _number(obj: dict, key: str, what: str, low: float | None = None,
     v = obj[key]
     if v is None and nullable:
         return
-    require_type(v, (int, float), f"{what} {key}")
-    x = finite_number(v, f"{what} {key}", max_abs)
+    x = json_number(v, f"{what} {key}", max_abs)
     too_low = low is not None and (x < low if low_inclusive else x <= low)
     if too_low or x > high:
         bounds = f"{'[' if low_inclusive else '('}{low:g}, {high:g}]"

@@ -24,6 +24,7 @@ from markerplan.reading import (
 )
 from planner.baselines import Baseline, greedy_cover, regular_grid
 from planner.candidates import Candidates, candidate_sites, load_polygons
+from planner.config import MAX_MARKERS, MAX_STATIONS
 from planner.program import LayoutCheck, PlanResult, evaluate_layout, plan_sites
 from planner.usability import PlanProblem, problem_from_visibility
 
@@ -188,10 +189,6 @@ def _check_inside(dem, xy: np.ndarray, ids, label: str) -> None:
                         "inside or use a DEM covering it")
 
 
-#: Most stations a ``--stations`` file may hold (each one ray casts every candidate site).
-MAX_STATIONS = 1_000
-#: Most markers a markers file (``--existing``, ``reduce INPUT``) may hold.
-MAX_MARKERS = 100_000
 #: Largest magnitude of a ``heading_deg``, degrees.
 MAX_ABS_HEADING_DEG = 360.0
 _POINT_COLUMNS = "id, x_m, y_m[, z_m][, heading_deg]"
@@ -295,7 +292,7 @@ def read_stations(path, dem, lidar_height_m: float) -> tuple[list[str], np.ndarr
     ----------
     path : str or Path
         CSV ``id, x_m, y_m[, z_m][, heading_deg]`` or GeoJSON Points (see :func:`_read_points`);
-        at most :data:`MAX_STATIONS` stations.
+        at most :data:`planner.config.MAX_STATIONS` stations.
     dem : visibility.dem.DEM
         Terrain; every station must lie on it.
     lidar_height_m : float
@@ -324,7 +321,7 @@ def read_markers(path, dem, marker_radius_m: float, option: str = "--existing"
     Parameters
     ----------
     path : str or Path
-        See :func:`_read_points`; at most :data:`MAX_MARKERS` markers.
+        See :func:`_read_points`; at most :data:`planner.config.MAX_MARKERS` markers.
     dem : visibility.dem.DEM
         Terrain; every marker must lie on it.
     marker_radius_m : float

@@ -61,11 +61,16 @@ def plan_dem(doc: dict):
     from visibility.dem import read_dem
     from visibility.sites import load_site
 
-    inputs = doc.get("provenance", {}).get("inputs", {})
-    if "dem" in inputs:
-        return read_dem(inputs["dem"], what=f"DEM {inputs['dem']} (named by the plan)",
+    path = plan_dem_path(doc)
+    if path is not None:
+        return read_dem(path, what=f"DEM {path} (named by the plan)",
                         nodata_fix="fix the DEM the plan names, or plan again on a filled DEM")
     return load_site(doc["site"]["name"], doc["site"].get("seed")).dem
+
+
+def plan_dem_path(doc: dict) -> str | None:
+    """The ``--dem`` file a plan was made on, or ``None`` for a preset's terrain."""
+    return doc.get("provenance", {}).get("inputs", {}).get("dem")
 
 
 def verify_plan(doc: dict, error_model, seed: int = 0, progress: bool = True,

@@ -37,6 +37,7 @@ def out_option(default: str | None = None, required: bool = False):
 
 FILE = click.Path(dir_okay=False, path_type=Path)
 
+
 class FiniteRange(click.FloatRange):
     """``click.FloatRange`` that also refuses ``nan`` and ``inf`` (which pass its comparisons)."""
 
@@ -57,6 +58,8 @@ SEED = click.IntRange(0, 2**63 - 1)
 FRAMES = click.IntRange(1, 20_000)
 #: 1-sigma range noise, mm: the VLP-16 datasheet gives +-30 mm; 500 mm is no longer a LiDAR.
 RANGE_NOISE_MM = FiniteRange(0.0, 500.0)
+#: VLP-16 spin rate, rpm (the sensor's own range; steps of 60 are checked by the sensor model).
+RPM = click.IntRange(300, 1200)
 #: Solver time limits, seconds (one day at most).
 TIME_LIMIT_S = FiniteRange(0.0, 86_400.0, min_open=True)
 
@@ -88,6 +91,16 @@ def emit_summary(summary: dict[str, Any], as_json: bool, human: str | None = Non
         click.echo(json.dumps(summary, sort_keys=True, default=str))
     else:
         click.echo(human if human is not None else json.dumps(summary, indent=2, default=str))
+
+
+def given_paths(*paths: str | Path | None) -> list[Path]:
+    """The input files and folders a command was given (``None`` left out), for
+    :func:`markerplan.output_folder.output_folder`'s ``inputs``.
+
+    >>> given_paths("a.csv", None, Path("b"))
+    [PosixPath('a.csv'), PosixPath('b')]
+    """
+    return [Path(p) for p in paths if p is not None]
 
 
 def report_timings(timings: dict[str, float]) -> None:

@@ -13,6 +13,7 @@ from planner.cli._common import (
     dem_option,
     emit_summary,
     error_model_option,
+    given_paths,
     json_option,
     out_option,
     overwrite_option,
@@ -67,10 +68,9 @@ def command(site_name, seed, dem_path, stations_path, boundary_path, exclude_pat
     from planner.plan_map import draw_plan_map
     from planner.report import plan_timings, summary, write_plan_files
 
-    inputs_given = [p for p in (dem_path, stations_path, boundary_path, error_model_path,
-                                config_path, visibility_path, *exclude_paths) if p is not None]
-    if existing not in (None, "as-built"):
-        inputs_given.append(existing)
+    inputs_given = given_paths(dem_path, stations_path, boundary_path, error_model_path,
+                               config_path, visibility_path, *exclude_paths,
+                               None if existing == "as-built" else existing)
     with output_folder(out, overwrite, "plan", inputs=inputs_given) as stage:
         outcome, config = _plan(site_name, seed, dem_path, stations_path, boundary_path,
                                 exclude_paths, error_model_path, config_path, visibility_path,

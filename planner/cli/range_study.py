@@ -9,6 +9,7 @@ import click
 from planner.cli._common import (
     FRAMES,
     RANGE_NOISE_MM,
+    RPM,
     SEED,
     FiniteRange,
     emit_summary,
@@ -26,7 +27,7 @@ from planner.cli._common import (
 @click.option("--replicates", type=click.IntRange(1, 100), default=3, show_default=True,
               help="Seeded replicates (seed, seed+1, ...).")
 @click.option("--seed", type=SEED, default=0, show_default=True, help="First simulation seed.")
-@click.option("--rpm", type=click.IntRange(300, 1200),
+@click.option("--rpm", type=RPM,
               default=600, show_default=True, help="VLP-16 spin rate.")
 @click.option("--range-noise-mm", type=RANGE_NOISE_MM, default=15.0, show_default=True,
               help="1-sigma range noise, mm.")

@@ -13,6 +13,7 @@ from planner.cli._common import (
     dem_option,
     emit_summary,
     error_model_option,
+    given_paths,
     json_option,
     mounting_offset_options,
     mounting_offsets,
@@ -86,10 +87,9 @@ def command(layout_spec, site_name, seed, dem_path, stations_path, boundary_path
     from planner.reduction_plot import plot_tradeoff
     from planner.reduction_report import reduce_timings, summary, write_reduce_files
 
-    inputs_given = [p for p in (dem_path, stations_path, boundary_path, error_model_path,
-                                config_path, *exclude_paths) if p is not None]
-    if layout_spec != "as-built":
-        inputs_given.append(layout_spec)
+    inputs_given = given_paths(dem_path, stations_path, boundary_path, error_model_path,
+                               config_path, *exclude_paths,
+                               None if layout_spec == "as-built" else layout_spec)
     with output_folder(out, overwrite, "reduce", inputs=inputs_given) as stage:
         study, doc, config = _study(
             layout_spec, site_name, seed, dem_path, stations_path, boundary_path, exclude_paths,

@@ -10,9 +10,11 @@ import click
 from planner.cli._common import (
     FRAMES,
     RANGE_NOISE_MM,
+    RPM,
     SEED,
     FiniteRange,
     emit_summary,
+    given_paths,
     json_option,
     mounting_offset_options,
     mounting_offsets,
@@ -54,7 +56,7 @@ def _select_stations(site_ids: list[str], text: str | None) -> list[str]:
 @click.option("--stations", help="Station ids (S1,S3) or a count (first N). Default: all.")
 @click.option("--frames", type=FRAMES, default=800, show_default=True,
               help="Frames per turntable revolution.")
-@click.option("--rpm", type=click.IntRange(300, 1200), default=600, show_default=True,
+@click.option("--rpm", type=RPM, default=600, show_default=True,
               help="VLP-16 spin rate, 300-1200 in steps of 60.")
 @click.option("--seed", type=SEED, default=0, show_default=True, help="Simulation noise seed.")
 @click.option("--lidar-height", "lidar_height_m", type=FiniteRange(0.1, 10.0),
@@ -101,8 +103,7 @@ def command(site_name: str, site_seed: int, dem_path: Path | None, dem_fill: str
                           incidence_noise_m=incidence_noise_mm / 1e3,
                           beam_divergence=beam_divergence, dropout_prob=dropout_prob)
     rig = RigConfig(lidar_height_m=lidar_height_m, frames_per_turn=frames, offsets=offsets)
-    with output_folder(out, overwrite, "simulate", inputs=[dem_path] if dem_path else []) \
-            as stage:
+    with output_folder(out, overwrite, "simulate", inputs=given_paths(dem_path)) as stage:
         site = load_site(site_name, seed=site_seed)
         if dem_path is not None:
             site = site_with_dem(site, read_dem(

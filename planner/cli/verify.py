@@ -10,6 +10,7 @@ import click
 from planner.cli._common import (
     SEED,
     emit_summary,
+    given_paths,
     json_option,
     mounting_offset_options,
     mounting_offsets,
@@ -48,12 +49,17 @@ def command(plan_path, error_model_path, seed, vertical_axis_error_deg, lframe_t
 
     from markerplan.errors import InfeasiblePlanError
     from markerplan.output_folder import output_folder
-    from planner.verify import read_plan, verify_markdown, verify_plan, verify_record
+    from planner.verify import (
+        plan_dem_path,
+        read_plan,
+        verify_markdown,
+        verify_plan,
+        verify_record,
+    )
 
     doc = read_plan(plan_path)
     offsets = mounting_offsets(vertical_axis_error_deg, lframe_tilt_deg, axis_offset_mm)
-    dem = doc.get("provenance", {}).get("inputs", {}).get("dem")  # the plan's --dem, if any
-    inputs = [p for p in (plan_path, dem, error_model_path) if p]
+    inputs = given_paths(plan_path, plan_dem_path(doc), error_model_path)
     with output_folder(out, overwrite, "verify", inputs=inputs) as stage:
         if error_model_path is not None:
             from error_model.model import ErrorModel

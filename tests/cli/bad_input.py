@@ -108,6 +108,25 @@ STATION_MARKERS = np.array([[3.0, 1.0, -0.9], [-2.5, 2.0, -0.9], [0.5, -4.0, -0.
                             [-3.0, -2.5, -0.9]])
 
 
+def write_synthetic_station(folder: Path, n_frames: int, azimuth_step_deg: float) -> None:
+    """Write ``station_S1.scan.npz`` and ``station_S1.truth.json`` into ``folder``: a level,
+    offset-free station seeing the four :data:`STATION_MARKERS` (0.10 m radius) out to 8 m."""
+    from pipeline.rig import MountingOffsets
+    from pipeline.scan_format import write_scan, write_truth
+    from tests.pipeline.test_synthesis import synthetic_scan
+
+    scan = synthetic_scan(MountingOffsets(), n_frames=n_frames, azimuth_step_deg=azimuth_step_deg,
+                          spheres=[(c, 0.1) for c in STATION_MARKERS], noise_m=0.01,
+                          max_range_m=8.0, seed=4)
+    write_scan(folder / "station_S1.scan.npz", scan)
+    write_truth(folder / "station_S1.truth.json", {
+        "station_id": "S1", "mounting_offsets": MountingOffsets().to_dict(),
+        "station_pose": {"position_m": [0, 0, 1], "heading_rad": 0.0},
+        "marker_radius_m": 0.1,
+        "markers": [{"id": f"M{k}", "centre_station_m": c.tolist()}
+                    for k, c in enumerate(STATION_MARKERS)]})
+
+
 def build_valid_inputs(root: Path) -> Path:
     """Write the valid inputs the cases corrupt or point at into ``root``; return ``root``.
 
@@ -116,30 +135,16 @@ def build_valid_inputs(root: Path) -> Path:
     ``markerplan process``), ``model.json`` (the shipped error model), ``plan/plan.json`` (the
     default plan) and ``stations.csv`` (the default site's stations).
     """
-    from pipeline.rig import MountingOffsets
-    from pipeline.scan_format import write_scan, write_truth
+    from error_model.default import DEFAULT_MODEL_PATH
     from planner.cli import main
-    from tests.pipeline.test_synthesis import synthetic_scan
 
     scan_dir = root / "scan"
     scan_dir.mkdir(parents=True)
-    scan = synthetic_scan(MountingOffsets(), n_frames=120, azimuth_step_deg=0.8,
-                          spheres=[(c, 0.1) for c in STATION_MARKERS], noise_m=0.01,
-                          max_range_m=8.0, seed=4)
-    write_scan(scan_dir / "station_S1.scan.npz", scan)
-    write_truth(scan_dir / "station_S1.truth.json", {
-        "station_id": "S1", "mounting_offsets": MountingOffsets().to_dict(),
-        "station_pose": {"position_m": [0, 0, 1], "heading_rad": 0.0},
-        "marker_radius_m": 0.1,
-        "markers": [{"id": f"M{k}", "centre_station_m": c.tolist()}
-                    for k, c in enumerate(STATION_MARKERS)]})
+    write_synthetic_station(scan_dir, n_frames=120, azimuth_step_deg=0.8)
     (root / "reference.csv").write_text(
         "id,x_m,y_m,z_m\n" + "".join(f"M{k},{x},{y},{z}\n"
                                      for k, (x, y, z) in enumerate(STATION_MARKERS)))
-    from error_model.model import ErrorModel  # noqa: F401  (the shipped file's package)
-
-    shutil.copy(Path(__import__("error_model").__file__).parent / "data" / "default_model.json",
-                root / "model.json")
+    shutil.copy(DEFAULT_MODEL_PATH, root / "model.json")
     for args in (["process", str(scan_dir / "station_S1.scan.npz"), "--reference",
                   str(scan_dir), "--out", str(root / "tables")],
                  ["plan", "--out", str(root / "plan")]):

@@ -5,29 +5,17 @@ import numpy as np
 import pytest
 
 from pipeline.marker_table import COLUMNS, read_marker_table
-from pipeline.rig import MountingOffsets, rot_z
-from pipeline.scan_format import SCAN_FORMAT, _write_npz, write_scan, write_truth
+from pipeline.rig import rot_z
+from pipeline.scan_format import SCAN_FORMAT, _write_npz
+from tests.cli.bad_input import STATION_MARKERS, write_synthetic_station
 from tests.cli.invoke import run_cli
-from tests.pipeline.test_synthesis import synthetic_scan
-
-MARKERS = np.array([[3.0, 1.0, -0.9], [-2.5, 2.0, -0.9], [0.5, -4.0, -0.9], [-3.0, -2.5, -0.9]])
 
 
 @pytest.fixture(scope="module")
 def station(tmp_path_factory):
     d = tmp_path_factory.mktemp("scans")
-    scan = synthetic_scan(MountingOffsets(), n_frames=240, azimuth_step_deg=0.4,
-                          spheres=[(c, 0.1) for c in MARKERS], noise_m=0.01, max_range_m=8.0,
-                          seed=4)
-    write_scan(d / "station_S1.scan.npz", scan)
-    write_truth(d / "station_S1.truth.json", {
-        "station_id": "S1", "mounting_offsets": MountingOffsets().to_dict(),
-        "station_pose": {"position_m": [0, 0, 1], "heading_rad": 0.0},
-        "marker_radius_m": 0.1,
-        "markers": [{"id": f"M{k}", "centre_station_m": c.tolist()}
-                    for k, c in enumerate(MARKERS)]})
+    write_synthetic_station(d, n_frames=240, azimuth_step_deg=0.4)
     return d
-
 
 
 def test_process_with_truth_writes_all_outputs(station, tmp_path, capsys):
@@ -53,7 +41,7 @@ def test_process_with_truth_writes_all_outputs(station, tmp_path, capsys):
 
 def test_process_with_total_station_csv_in_another_frame(station, tmp_path, capsys):
     ts = tmp_path / "ts.csv"
-    world = MARKERS @ rot_z(1.1).T + [500.0, -200.0, 30.0]
+    world = STATION_MARKERS @ rot_z(1.1).T + [500.0, -200.0, 30.0]
     ts.write_text("id,x_m,y_m,z_m\n" + "".join(f"T{k},{x},{y},{z}\n"
                                                  for k, (x, y, z) in enumerate(world)))
     out = tmp_path / "o"
