@@ -1,9 +1,10 @@
-"""Reading ``plan.json`` back: the one reader of ``markerplan verify`` and ``markerplan reduce``.
+"""``plan.json``: its one writer (:func:`write_plan`), its one reader (:func:`read_plan`) and
+the typed plan that verification works on (:class:`SurveyPlan`, from :func:`load_plan`).
 
-:func:`read_plan` checks every part of a plan the two commands read — the schema and its
-version, the site, the requirement, the provenance, every marker and every station — and
-refuses anything else with one :class:`~markerplan.errors.InputFileError` line that names the
-file and the entry, so neither command meets a ``KeyError``, a ``TypeError`` or a NaN later.
+:func:`read_plan` checks every part of a plan that ``verify`` and ``reduce`` read — the schema
+and its version, the site, the requirement, the provenance, every marker and every station —
+and refuses anything else with one :class:`~markerplan.errors.InputFileError` line that names
+the file and the entry, so neither command meets a ``KeyError``, a ``TypeError`` or a NaN later.
 
 ``verify`` needs a whole plan (``full=True``). ``reduce`` also takes a hand-written layout
 holding only ``schema`` and ``markers`` (``full=False``); the other parts are checked when
@@ -12,9 +13,13 @@ present.
 
 from __future__ import annotations
 
+import json
 import math
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
+
+import numpy as np
 
 from markerplan.errors import InputFileError
 from markerplan.reading import (
@@ -29,7 +34,11 @@ from markerplan.reading import (
     unique_ids,
 )
 from planner.config import BOUNDS, MAX_MARKERS, MAX_STATIONS
-from planner.report import SCHEMA, SCHEMA_VERSION
+from visibility.dem import DEM, read_dem
+from visibility.sites import MARKER_RADIUS_M, load_site
+
+SCHEMA = "markerplan-plan"
+SCHEMA_VERSION = 1
 
 #: Bounds of the requirement, m (those of :data:`planner.config.BOUNDS`).
 REQUIREMENT_BOUNDS_M = (0.0, BOUNDS["requirement_m"][2])
@@ -40,6 +49,78 @@ MAX_MARKER_RADIUS_M = 10.0
 MAX_ABS_HEADING_RAD = 100.0
 
 _FIX = "regenerate it with `markerplan plan`"
+
+
+@dataclass(frozen=True)
+class PlannedStation:
+    """One station of a plan."""
+
+    id: str
+    position_m: np.ndarray
+    """(3,) LiDAR centre, site frame, metres."""
+    heading_rad: float
+    predicted_error_m: float | None
+    marker_ids: tuple[str, ...]
+    """The planned markers this station uses."""
+
+
+@dataclass(frozen=True)
+class SurveyPlan:
+    """What verifying a plan needs: terrain, stations, markers and the requirement.
+
+    Built from a ``plan.json`` (:func:`load_plan`) or directly from a study
+    (:func:`planner.reduction.verify.point_plan`), so nothing is re-parsed.
+    """
+
+    dem: DEM
+    stations: tuple[PlannedStation, ...]
+    marker_ids: tuple[str, ...]
+    marker_xyz_m: np.ndarray
+    """(m, 3) marker centres, site frame, metres."""
+    marker_radius_m: float
+    requirement_m: float
+    working_radius_m: float
+    provenance: dict = field(default_factory=dict)
+    """The plan's provenance record (empty for a plan made in memory)."""
+
+    @property
+    def dem_path(self) -> str | None:
+        """The ``--dem`` file the plan was made on, or ``None`` for a preset's terrain."""
+        return self.provenance.get("inputs", {}).get("dem")
+
+
+def write_plan(doc: dict, path: Path) -> None:
+    """Write a ``plan.json`` document (:func:`planner.report.plan_record`) to ``path``."""
+    Path(path).write_text(json.dumps(doc, indent=2) + "\n")
+
+
+def load_plan(path: str | Path) -> SurveyPlan:
+    """Read, check (:func:`read_plan`) and type a whole ``plan.json``, with its terrain.
+
+    Raises
+    ------
+    InputFileError
+        As :func:`read_plan`, or the DEM the plan names cannot be read.
+    """
+    doc = read_plan(path, "PLAN", full=True)
+    site = doc["site"]
+    dem_path = doc["provenance"].get("inputs", {}).get("dem")
+    if dem_path is not None:
+        dem = read_dem(dem_path, what=f"DEM {dem_path} (named by the plan)",
+                       nodata_fix="fix the DEM the plan names, or plan again on a filled DEM")
+    else:
+        dem = load_site(site["name"], site.get("seed")).dem
+    stations = tuple(PlannedStation(
+        s["id"], np.array([s["x_m"], s["y_m"], s["z_m"]], float),
+        float(s.get("heading_rad") or 0.0), s.get("predicted_error_m"),
+        tuple(s.get("markers", ()))) for s in doc["stations"])
+    return SurveyPlan(
+        dem=dem, stations=stations, marker_ids=tuple(m["id"] for m in doc["markers"]),
+        marker_xyz_m=np.array([[m["x_m"], m["y_m"], m["z_m"]] for m in doc["markers"]], float),
+        marker_radius_m=float(site.get("marker_radius_m", MARKER_RADIUS_M)),
+        requirement_m=float(doc["requirement"]["requirement_m"]),
+        working_radius_m=float(doc["requirement"]["working_radius_m"]),
+        provenance=doc["provenance"])
 
 
 def read_plan(path: str | Path, option: str = "PLAN", full: bool = True) -> dict:

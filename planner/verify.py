@@ -24,8 +24,17 @@ import sys
 from dataclasses import dataclass
 
 import numpy as np
+from tqdm import tqdm
 
-from planner import accuracy, plan_file
+from markerplan.provenance import provenance
+from pipeline.evaluation import Reference
+from pipeline.process import process_station
+from pipeline.rig import MountingOffsets, station_to_site_matrix
+from pipeline.stages import config_for_marker
+from planner import accuracy
+from planner.plan_file import SurveyPlan
+from visibility.sensor import RigConfig
+from visibility.simulate import simulate_markers
 
 #: Smallest number of matched markers that can fix x, y, z and heading.
 MIN_MATCHED = 2
@@ -45,91 +54,54 @@ class StationCheck:
     marker_errors_m: dict
 
 
-def read_plan(path) -> dict:
-    """Read and check a whole ``plan.json`` (:func:`planner.plan_file.read_plan`, ``PLAN``).
-
-    Raises
-    ------
-    InputFileError
-        Anything verification cannot use, including a plan with no station or no marker.
-    """
-    return plan_file.read_plan(path, "PLAN", full=True)
-
-
-def plan_dem(doc: dict):
-    """The DEM the plan was made on (the preset's, or the ``--dem`` file it names)."""
-    from visibility.dem import read_dem
-    from visibility.sites import load_site
-
-    path = plan_dem_path(doc)
-    if path is not None:
-        return read_dem(path, what=f"DEM {path} (named by the plan)",
-                        nodata_fix="fix the DEM the plan names, or plan again on a filled DEM")
-    return load_site(doc["site"]["name"], doc["site"].get("seed")).dem
-
-
-def plan_dem_path(doc: dict) -> str | None:
-    """The ``--dem`` file a plan was made on, or ``None`` for a preset's terrain."""
-    return doc.get("provenance", {}).get("inputs", {}).get("dem")
-
-
-def verify_plan(doc: dict, error_model, seed: int = 0, progress: bool = True,
-                offsets=None) -> list[StationCheck]:
+def verify_plan(plan: SurveyPlan, error_model, seed: int = 0, progress: bool = True,
+                offsets: MountingOffsets | None = None,
+                station_ids: list[str] | None = None) -> list[StationCheck]:
     """Simulate, process and register every station of a plan (see module docstring).
 
     Parameters
     ----------
-    doc : dict
-        A ``plan.json`` document.
+    plan : SurveyPlan
+        Terrain, stations, markers (with their radius, which both the simulation and the
+        pipeline's fit use) and the requirement.
     error_model : ErrorModel
         Gives the registration weights.
     seed : int
-        Simulation seed (each station's noise stream derives from it and the station id).
+        Simulation seed (the plan's station ``k`` uses ``seed + k``, whichever are verified).
     progress : bool
         Progress bar on stderr.
     offsets : pipeline.rig.MountingOffsets, optional
         True mounting offsets of the simulated rig (default: none). The pipeline self-calibrates
         them from each station's scan, as it would in the field.
+    station_ids : list of str, optional
+        Verify only these stations (default: all), in the plan's order.
 
     Returns
     -------
     checks : list of StationCheck
     """
-    from tqdm import tqdm
-
-    from pipeline.evaluation import Reference
-    from pipeline.process import build_config, process_station
-    from pipeline.rig import station_to_site_matrix
-    from visibility.sensor import RigConfig
-    from visibility.simulate import simulate_markers
-
-    dem = plan_dem(doc)
-    req = float(doc["requirement"]["requirement_m"])
-    radius_wr = float(doc["requirement"]["working_radius_m"])
-    r_marker = float(doc["site"].get("marker_radius_m", 0.10))
-    ids = [m["id"] for m in doc["markers"]]
-    centres = np.array([[m["x_m"], m["y_m"], m["z_m"]] for m in doc["markers"]], float)
-    cfg = build_config()
+    ids = list(plan.marker_ids)
+    centres = plan.marker_xyz_m
+    cfg = config_for_marker(plan.marker_radius_m)
     rig = RigConfig() if offsets is None else RigConfig(offsets=offsets)
+    chosen = [(k, st) for k, st in enumerate(plan.stations)
+              if station_ids is None or st.id in station_ids]
     checks = []
-    for k, st in enumerate(tqdm(doc["stations"], desc="verify", unit="station",
-                                file=sys.stderr, disable=None if progress else True)):
-        pos = np.array([st["x_m"], st["y_m"], st["z_m"]], float)
-        heading = float(st.get("heading_rad") or 0.0)
-        scan, truth = simulate_markers(dem, pos, heading, centres, rig=rig, seed=seed + k,
-                                       marker_radius_m=r_marker, marker_ids=ids,
-                                       station_id=st["id"])
-        rot = station_to_site_matrix(heading)
-        nominal = (centres - pos) @ rot  # planned markers in the planned station frame
-        ref = Reference(tuple(ids), nominal, st["id"], "plan (nominal pose)")
+    for k, st in tqdm(chosen, desc="verify", unit="station", file=sys.stderr,
+                      disable=None if progress else True):
+        scan, truth = simulate_markers(plan.dem, st.position_m, st.heading_rad, centres, rig=rig,
+                                       seed=seed + k, marker_radius_m=plan.marker_radius_m,
+                                       marker_ids=ids, station_id=st.id)
+        rot = station_to_site_matrix(st.heading_rad)
+        nominal = (centres - st.position_m) @ rot  # planned markers in the planned station frame
+        ref = Reference(tuple(ids), nominal, st.id, "plan (nominal pose)")
         result = process_station(scan, cfg, ref, seed=seed)
         rows = [r for r in result.rows if r.accepted and r.marker_id]
-        planned = st.get("markers", [])
         marker_err = {r.marker_id: r.error_m for r in rows}
-        pred = st.get("predicted_error_m")
+        n_planned = len(st.marker_ids)
         if len(rows) < MIN_MATCHED:
-            checks.append(StationCheck(st["id"], pred, None, len(planned), len(rows), False,
-                                       f"only {len(rows)} planned marker(s) detected and "
+            checks.append(StationCheck(st.id, st.predicted_error_m, None, n_planned, len(rows),
+                                       False, f"only {len(rows)} planned marker(s) detected and "
                                        f"accepted (needs {MIN_MATCHED})", marker_err))
             continue
         p = np.array([r.centre_m for r in rows])
@@ -138,35 +110,32 @@ def verify_plan(doc: dict, error_model, seed: int = 0, progress: bool = True,
                                                np.radians([r.elevation_deg for r in rows]))
                            .sigma_m, float)
         sigma = np.maximum(sigma, 1e-4)
-        t, psi = accuracy.fit_pose(p, site_xyz, sigma, heading0_rad=heading)
+        t, psi = accuracy.fit_pose(p, site_xyz, sigma, heading0_rad=st.heading_rad)
         true_pose = truth["station_pose"]
         achieved = accuracy.registration_error(t, psi, true_pose["position_m"],
-                                               true_pose["heading_rad"], radius_wr)
-        ok = achieved <= req
-        missing = sorted(set(planned) - {r.marker_id for r in rows})
-        reason = "ok" if ok else f"achieved {achieved:.3f} m > requirement {req:g} m"
+                                               true_pose["heading_rad"], plan.working_radius_m)
+        ok = achieved <= plan.requirement_m
+        missing = sorted(set(st.marker_ids) - {r.marker_id for r in rows})
+        reason = ("ok" if ok else
+                  f"achieved {achieved:.3f} m > requirement {plan.requirement_m:g} m")
         if missing:
             reason += f" (planned markers not detected: {', '.join(missing)})"
-        checks.append(StationCheck(st["id"], pred, achieved, len(planned), len(rows), ok,
-                                   reason, marker_err))
+        checks.append(StationCheck(st.id, st.predicted_error_m, achieved, n_planned, len(rows),
+                                   ok, reason, marker_err))
     return checks
 
 
-def verify_record(doc: dict, checks: list[StationCheck], seed: int, model_name: str,
-                  offsets=None) -> dict:
+def verify_record(plan: SurveyPlan, checks: list[StationCheck], seed: int, model_name: str,
+                  offsets: MountingOffsets | None = None) -> dict:
     """The ``verify.json`` document (``offsets``: the simulated rig's true mounting offsets)."""
-    from markerplan.provenance import provenance
-    from pipeline.rig import MountingOffsets
-
-    req = float(doc["requirement"]["requirement_m"])
     true_offsets = (offsets or MountingOffsets()).to_dict()
     return {
         "schema": "markerplan-verify", "schema_version": 1,
         "provenance": provenance({"seed": seed, "error_model": model_name,
                                   "mounting_offsets": true_offsets,
-                                  "plan_config_sha256": doc["provenance"]["config_sha256"]},
-                                 plan=doc["provenance"]),
-        "requirement_m": req,
+                                  "plan_config_sha256": plan.provenance["config_sha256"]},
+                                 plan=plan.provenance),
+        "requirement_m": plan.requirement_m,
         "passed": all(c.passed for c in checks),
         "stations": [{"id": c.station_id, "predicted_error_m": c.predicted_error_m,
                       "achieved_error_m": c.achieved_error_m, "n_planned_markers": c.n_planned,

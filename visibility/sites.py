@@ -185,10 +185,29 @@ def site_with_dem(site: Site, dem: DEM) -> Site:
             raise DataError(f"{label} {ids[k]} at ({xy[k, 0]:.2f}, {xy[k, 1]:.2f}) m lies outside "
                             f"the DEM [{xmin:.1f}, {xmax:.1f}] x [{ymin:.1f}, {ymax:.1f}] m; use "
                             "a DEM covering the site (same site-frame coordinates)")
-    xy = site.marker_centres_m[:, :2]
-    centres = np.column_stack([xy, dem.height_at(xy) + site.marker_radius_m])
-    return replace(site, dem=dem, marker_centres_m=centres, craters=[],
-                   rock_centres_m=np.zeros((0, 3)), rock_radii_m=np.zeros(0))
+    return replace(site, dem=dem, marker_centres_m=_seated(site.marker_centres_m, dem,
+                                                          site.marker_radius_m),
+                   craters=[], rock_centres_m=np.zeros((0, 3)), rock_radii_m=np.zeros(0))
+
+
+def site_with_marker_radius(site: Site, radius_m: float) -> Site:
+    """The site with markers of another radius, re-seated on the ground (centre = ground +
+    ``radius_m``), metres."""
+    return replace(site, marker_radius_m=float(radius_m),
+                   marker_centres_m=_seated(site.marker_centres_m, site.dem, radius_m))
+
+
+def site_with_stations(site: Site, ids: list[str], xy_m: np.ndarray,
+                       heading_rad: np.ndarray) -> Site:
+    """The site with other stations: ids, (s, 2) positions (m) and (s,) headings (rad)."""
+    return replace(site, station_ids=list(ids), station_xy_m=np.asarray(xy_m, float)[:, :2],
+                   station_heading_rad=np.asarray(heading_rad, float))
+
+
+def _seated(centres_m: np.ndarray, dem: DEM, radius_m: float) -> np.ndarray:
+    """(m, 3) marker centres at the same x, y resting on ``dem``: z = ground + radius (m)."""
+    xy = centres_m[:, :2]
+    return np.column_stack([xy, dem.height_at(xy) + radius_m])
 
 
 PRESETS = {"default": _default_site, "large": _large_site}

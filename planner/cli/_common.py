@@ -1,22 +1,47 @@
-"""Options and helpers shared by every sub-command (defined once, reused).
+"""The CLI's vocabulary: every option that more than one command takes is defined here once,
+with one name and one meaning, and (rio-style) a click type or callback that hands the command a
+typed value rather than text to parse.
 
-- ``out_option`` / ``overwrite_option`` / ``json_option``: the fixed option names.
-- :func:`emit_summary`: one JSON object on stdout with ``--json``, a short human summary otherwise.
-- :func:`report_timings`: step timings on stderr (never in output files).
-- :func:`mounting_offset_options` / :func:`mounting_offsets`: the three true mounting offsets of
-  a simulated rig (``simulate``, ``verify``, ``reduce --verify``).
-- ``dem_option`` / ``stations_option`` / ``error_model_option``: the site inputs that ``plan``
-  and ``reduce`` share.
+==========================  =====================================================================
+option                      meaning (and the value the command receives)
+==========================  =====================================================================
+``--out DIR``               the folder all output files go to (``Path``)
+``--overwrite``             replace ``--out`` if markerplan wrote it
+``--json``                  one JSON summary object on stdout
+``--site NAME``             site preset (``default``, ``large``)
+``--site-seed N``           seed of the preset's synthetic terrain
+``--seed N``                seed of the random noise (simulation) or resampling of the command
+``--dem FILE``              DEM instead of the preset's terrain (``Path``)
+``--stations FILE``         stations CSV/GeoJSON (``Path``)
+``--station-ids S1,S3``     which stations to work on (``tuple[str, ...]``)
+``--marker-radius M``       marker (sphere) radius, metres (``float``)
+``--error-model FILE``      error model (:class:`ErrorModelChoice`, the shipped one by default)
+``--estimator NAME``        sphere-centre estimator, from :data:`pipeline.sphere_fit.METHODS`
+``--vertical-axis-error-deg``, ``--lframe-tilt-deg``, ``--axis-offset-mm``
+                            the rig's mounting offsets (one :class:`~pipeline.rig.MountingOffsets`
+                            argument ``offsets``)
+``--config FILE``           TOML plan settings; ``--boundary``, ``--exclude``: GeoJSON polygons
+``--time-limit S``          solver time limit, seconds
+==========================  =====================================================================
+
+Helpers: :func:`emit_summary` (JSON or human summary), :func:`report_timings` (step timings on
+stderr, never in files), :func:`given_paths` (the inputs an output folder must not contain),
+:func:`select_stations` (``--station-ids`` against the stations at hand).
 """
 
 from __future__ import annotations
 
+import functools
 import json
 import math
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import click
+
+from markerplan.errors import ConfigError
+from pipeline.rig import MountingOffsets
+from pipeline.sphere_fit import METHODS
 
 
 def out_option(default: str | None = None, required: bool = False):
@@ -63,18 +88,6 @@ RPM = click.IntRange(300, 1200)
 #: Solver time limits, seconds (one day at most).
 TIME_LIMIT_S = FiniteRange(0.0, 86_400.0, min_open=True)
 
-dem_option = click.option(
-    "--dem", "dem_path", type=FILE,
-    help="DEM (.tif/.tiff/.npz, site-frame metres) instead of the preset terrain.")
-
-stations_option = click.option(
-    "--stations", "stations_path", type=FILE,
-    help="Stations CSV (id,x_m,y_m[,z_m][,heading_deg]) or GeoJSON Points.")
-
-error_model_option = click.option(
-    "--error-model", "error_model_path", type=FILE,
-    help="Error-model JSON from fit-error-model (default: the shipped model).")
-
 overwrite_option = click.option(
     "--overwrite", is_flag=True,
     help="Replace the output folder if markerplan wrote it (its provenance.json lists every "
@@ -112,50 +125,190 @@ def report_timings(timings: dict[str, float]) -> None:
     click.echo("timings: " + ", ".join(f"{k} {v:.2f} s" for k, v in timings.items()), err=True)
 
 
-def parse_numbers(text: str, name: str, example: str) -> tuple[float, ...]:
-    """Parse comma-separated numbers, as many as ``example`` has, or raise a ConfigError that
-    names the option and shows the example.
+class ErrorModelChoice(NamedTuple):
+    """What ``--error-model`` resolves to."""
 
-    >>> parse_numbers("5,-3", "--axis-offset-mm", "5,-3")
-    (5.0, -3.0)
-    """
-    from markerplan.errors import ConfigError
+    model: Any
+    """The :class:`error_model.model.ErrorModel`."""
+    name: str
+    """How outputs name it: the file, or the shipped model."""
+    path: Path | None
+    """The file given, or ``None`` for the shipped model."""
 
-    count = len(example.split(","))
-    try:
-        values = tuple(float(p) for p in text.split(","))
-    except ValueError:
-        values = ()
-    if len(values) != count:
-        words = {2: "two", 3: "three"}.get(count, str(count))
-        raise ConfigError(f"{name} must be {words} comma-separated numbers like {example}; "
-                          f"got {text!r}")
-    return values
+
+def _load_error_model(ctx, param, path: Path | None) -> ErrorModelChoice:
+    from error_model import default_model
+    from error_model.model import ErrorModel
+
+    if path is None:
+        return ErrorModelChoice(default_model(), "default (shipped with markerplan)", None)
+    return ErrorModelChoice(ErrorModel.load(path), str(path), path)
+
+
+def id_list(ctx, param, text: str | None) -> tuple[str, ...] | None:
+    """Click callback: comma-separated ids -> a tuple without repeats (``None`` if absent)."""
+    if text is None:
+        return None
+    ids = tuple(dict.fromkeys(t.strip() for t in text.split(",") if t.strip()))
+    if not ids:
+        raise click.BadParameter(f"give comma-separated ids like {param.metavar}, got {text!r}",
+                                 ctx, param)
+    return ids
+
+
+def point_option(name: str, default: str, metavar: str, help_text: str):
+    """An option of as many comma-separated finite numbers as ``default`` has, handed to the
+    command as a tuple of floats."""
+    count = len(default.split(","))
+
+    def parse(ctx, param, text: str) -> tuple[float, ...]:
+        try:
+            values = tuple(float(p) for p in text.split(","))
+        except ValueError:
+            values = ()
+        if len(values) != count or not all(math.isfinite(v) for v in values):
+            words = {2: "two", 3: "three"}.get(count, str(count))
+            raise click.BadParameter(f"must be {words} comma-separated finite numbers like "
+                                     f"{metavar}, got {text!r}", ctx, param)
+        return values
+
+    return click.option(name, default=default, show_default=True, metavar=metavar,
+                        callback=parse, help=help_text)
+
+
+def site_option(default: str | None = "default"):
+    """``--site NAME``: the site preset (``None`` default: taken from the command's input)."""
+    settings = {"default": default, "show_default": True} if default else {}
+    return click.option(
+        "--site", "site_name", **settings,
+        help="Site preset: default (40 m crater field, 7 stations) or large (300 m, 100 "
+             "stations)." + ("" if default else " Default: the plan's site, else default."))
+
+
+site_seed_option = click.option(
+    "--site-seed", type=SEED, default=None,
+    help="Seed of the site preset's synthetic terrain (default 0, or the plan's).")
+
+
+def seed_option(help_text: str = "Seed of the simulated noise; the same seed gives the same "
+                                 "files."):
+    """``--seed N``: the seed of the command's random noise or resampling (default 0)."""
+    return click.option("--seed", type=SEED, default=0, show_default=True, help=help_text)
+
+
+frames_option = click.option(
+    "--frames", type=FRAMES, default=800, show_default=True,
+    help="Frames per turntable revolution (the rig takes about 800; fewer for a quick run).")
+
+rpm_option = click.option(
+    "--rpm", type=RPM, default=600, show_default=True,
+    help="VLP-16 spin rate, 300-1200 in steps of 60.")
+
+range_noise_option = click.option(
+    "--range-noise-mm", type=RANGE_NOISE_MM, default=15.0, show_default=True,
+    help="1-sigma range noise, mm (datasheet +-3 cm read as 2 sigma).")
+
+dem_option = click.option(
+    "--dem", "dem_path", type=FILE,
+    help="DEM (.tif/.tiff/.npz, site-frame metres) instead of the preset's terrain.")
+
+stations_option = click.option(
+    "--stations", "stations_path", type=FILE,
+    help="Stations CSV (id,x_m,y_m[,z_m][,heading_deg]; z_m the LiDAR centre) or GeoJSON "
+         "Points with an id property (default: the preset's).")
+
+station_ids_option = click.option(
+    "--station-ids", callback=id_list, metavar="S1,S3",
+    help="Work on these stations only, comma-separated ids (default: all).")
+
+
+def marker_radius_option(required: bool = False, default_help: str = ""):
+    """``--marker-radius M``: the marker (sphere) radius, metres."""
+    settings = {"required": True} if required else {}
+    return click.option(
+        "--marker-radius", "marker_radius_m", type=FiniteRange(0.01, 1.0), **settings,
+        help="Marker (sphere) radius, metres (a 0.20 m sphere has 0.1)." + default_help)
+
+
+error_model_option = click.option(
+    "--error-model", "error_model", type=FILE, callback=_load_error_model,
+    help="Error-model JSON from fit-error-model (default: the shipped model).")
+
+def estimator_option(default: str | None = METHODS[0], help_text: str = "Sphere-centre "
+                     "estimator: the ASTM E3125-17 line-of-sight fixed-radius fit, or the "
+                     "published hemisphere ICP."):
+    """``--estimator NAME``: a sphere-centre estimator of :data:`pipeline.sphere_fit.METHODS`."""
+    return click.option("--estimator", type=click.Choice(METHODS), default=default,
+                        show_default=default is not None, help=help_text)
+
+
+config_option = click.option(
+    "--config", "config_path", type=FILE,
+    help="TOML file of plan settings (requirement_m, n_sectors, ...).")
+
+boundary_option = click.option(
+    "--boundary", "boundary_path", type=FILE,
+    help="GeoJSON polygon: where markers may go (default: the preset's, or the DEM).")
+
+exclude_option = click.option(
+    "--exclude", "exclude_paths", type=FILE, multiple=True,
+    help="GeoJSON polygon(s) where no marker may go (repeatable).")
+
+time_limit_option = click.option(
+    "--time-limit", "time_limit_s", type=TIME_LIMIT_S,
+    help="Solver time limit for the whole run, seconds (default 60).")
 
 
 def mounting_offset_options(command):
-    """``--vertical-axis-error-deg``, ``--lframe-tilt-deg``, ``--axis-offset-mm``: the true
-    mounting offsets of a simulated rig (the pipeline self-calibrates them)."""
+    """Add ``--vertical-axis-error-deg``, ``--lframe-tilt-deg`` and ``--axis-offset-mm`` to a
+    command, which receives them as one ``offsets`` argument (:class:`MountingOffsets`, SI).
+
+    They are the rig's mounting offsets: the true ones of the rig that ``simulate``, ``verify``
+    and ``reduce --verify`` simulate (the pipeline self-calibrates them), and the known or
+    starting ones of the rig whose scans ``process`` reads.
+    """
+    @functools.wraps(command)
+    def with_offsets(*args, vertical_axis_error_deg, lframe_tilt_deg, axis_offset_mm, **kwargs):
+        dx, dy = axis_offset_mm
+        offsets = MountingOffsets(math.radians(vertical_axis_error_deg),
+                                  math.radians(lframe_tilt_deg), (dx / 1e3, dy / 1e3))
+        return command(*args, offsets=offsets, **kwargs)
+
     for option in reversed([
         click.option("--vertical-axis-error-deg", type=FiniteRange(-10.0, 10.0),
                      default=0.0, show_default=True,
-                     help="True vertical-axis error (rotation about the spin axis), degrees."),
+                     help="Mounting offset: vertical-axis error (rotation about the spin "
+                          "axis), degrees."),
         click.option("--lframe-tilt-deg", type=FiniteRange(-10.0, 10.0), default=0.0,
-                     show_default=True,
-                     help="True L-frame tilt, degrees."),
-        click.option("--axis-offset-mm", default="0,0", show_default=True,
-                     help="True horizontal offset DX,DY of the LiDAR centre from the turntable "
-                          "axis, mm."),
+                     show_default=True, help="Mounting offset: L-frame tilt, degrees."),
+        point_option("--axis-offset-mm", "0,0", "DX,DY",
+                     "Mounting offset: horizontal offset of the LiDAR centre from the "
+                     "turntable axis, mm."),
     ]):
-        command = option(command)
-    return command
+        with_offsets = option(with_offsets)
+    return with_offsets
 
 
-def mounting_offsets(vertical_axis_error_deg: float, lframe_tilt_deg: float,
-                     axis_offset_mm: str):
-    """The :class:`pipeline.rig.MountingOffsets` (SI units) of the three CLI options."""
-    from pipeline.rig import MountingOffsets
+def select_stations(available: list[str], wanted: tuple[str, ...] | None) -> list[str]:
+    """The ``--station-ids`` among ``available`` (all of them when ``wanted`` is ``None``).
 
-    dx, dy = parse_numbers(axis_offset_mm, "--axis-offset-mm", "5,-3")
-    return MountingOffsets(math.radians(vertical_axis_error_deg), math.radians(lframe_tilt_deg),
-                           (dx / 1e3, dy / 1e3))
+    Raises
+    ------
+    ConfigError
+        An id that is not among ``available``; the message lists the valid ones.
+
+    Examples
+    --------
+    >>> select_stations(["S1", "S2", "S3"], ("S3", "S1"))
+    ['S3', 'S1']
+    >>> select_stations(["S1"], None)
+    ['S1']
+    """
+    if wanted is None:
+        return list(available)
+    unknown = [s for s in wanted if s not in available]
+    if unknown:
+        shown = ", ".join(available[:20]) + (", ..." if len(available) > 20 else "")
+        raise ConfigError(f"--station-ids: unknown station id(s) {', '.join(unknown)}; valid ids "
+                          f"are {shown}")
+    return list(wanted)

@@ -7,7 +7,14 @@ from pathlib import Path
 
 import click
 
-from planner.cli._common import SEED, emit_summary, json_option, out_option, overwrite_option
+from planner.cli._common import (
+    emit_summary,
+    estimator_option,
+    json_option,
+    out_option,
+    overwrite_option,
+    seed_option,
+)
 
 
 @click.command("fit-error-model")
@@ -16,14 +23,12 @@ from planner.cli._common import SEED, emit_summary, json_option, out_option, ove
 @out_option(required=True)
 @click.option("--plot", is_flag=True,
               help="Also write model.png: errors against distance, sigma and the envelope.")
-@click.option("--seed", type=SEED, default=0, show_default=True,
-              help="Seed for cross-validation folds and the bootstrap.")
+@seed_option("Seed of the cross-validation folds and the bootstrap resampling.")
 @click.option("--bootstrap", "n_bootstrap", type=click.IntRange(0, 10_000),
               help="Bootstrap replicates for the intervals (default 40; 0 disables; at most "
                    "10000).")
-@click.option("--estimator", default=None,
-              help="Fit only rows of this centre estimator (e.g. fixed-radius); required when "
-                   "the tables mix estimators, as range-study output does.")
+@estimator_option(None, "Fit only rows of this sphere-centre estimator; required when the "
+                        "tables mix estimators, as range-study output does.")
 @click.option("--description", default=None,
               help="What the tables are (recorded in the model's provenance).")
 @overwrite_option

@@ -8,34 +8,37 @@ import click
 
 from planner.cli._common import (
     FILE,
-    SEED,
-    TIME_LIMIT_S,
+    boundary_option,
+    config_option,
     dem_option,
     emit_summary,
     error_model_option,
+    exclude_option,
     given_paths,
     json_option,
+    marker_radius_option,
     out_option,
     overwrite_option,
     report_timings,
+    site_option,
+    site_seed_option,
+    station_ids_option,
     stations_option,
+    time_limit_option,
 )
 
 
 @click.command("plan")
-@click.option("--site", "site_name", default="default", show_default=True,
-              help="Site preset: default (40 m crater field, 7 stations) or large (300 m).")
-@click.option("--seed", type=SEED, default=None,
-              help="Seed of the preset's synthetic terrain (default: the preset's own).")
+@site_option()
+@site_seed_option
 @dem_option
 @stations_option
-@click.option("--boundary", "boundary_path", type=FILE,
-              help="GeoJSON polygon: where markers may go (default: the preset's, or the DEM).")
-@click.option("--exclude", "exclude_paths", type=FILE, multiple=True,
-              help="GeoJSON polygon(s) where no marker may go (repeatable).")
+@station_ids_option
+@boundary_option
+@exclude_option
+@marker_radius_option(default_help=" Default: the preset's (0.1).")
 @error_model_option
-@click.option("--config", "config_path", type=FILE,
-              help="TOML file of plan settings (requirement_m, n_sectors, ...).")
+@config_option
 @click.option("--visibility", "visibility_path", type=FILE,
               help="Plan from a visibility table CSV (station,site,usable,bearing_deg,sigma_m,"
                    "site_x_m,site_y_m,site_z_m) instead of ray casting.")
@@ -45,14 +48,13 @@ from planner.cli._common import (
               help="Markers already in the field, fixed: 'as-built' or a CSV (id,x_m,y_m[,z_m]).")
 @click.option("--budget", type=click.IntRange(1, 100_000),
               help="Largest number of markers allowed.")
-@click.option("--time-limit", "time_limit_s", type=TIME_LIMIT_S,
-              help="Solver time limit for the whole plan, seconds (default 60).")
+@time_limit_option
 @out_option(default="markerplan-out")
 @overwrite_option
 @json_option
-def command(site_name, seed, dem_path, stations_path, boundary_path, exclude_paths,
-            error_model_path, config_path, visibility_path, redundant, existing, budget,
-            time_limit_s, out, overwrite, as_json):
+def command(site_name, site_seed, dem_path, stations_path, station_ids, boundary_path,
+            exclude_paths, marker_radius_m, error_model, config_path, visibility_path, redundant,
+            existing, budget, time_limit_s, out, overwrite, as_json):
     """Plan the fewest marker sites so that every station meets the accuracy requirement.
 
     Writes plan.json, markers.csv, markers.geojson (site frame, local metres), map.png and
@@ -62,19 +64,21 @@ def command(site_name, seed, dem_path, stations_path, boundary_path, exclude_pat
     Examples:
       markerplan plan
       markerplan plan --site default --redundant --out plan-redundant/
+      markerplan plan --site large --site-seed 3 --marker-radius 0.15 --out plan-large/
       markerplan plan --dem site.tif --stations stations.csv --exclude paths.geojson --out p/
     """
     from markerplan.output_folder import output_folder
     from planner.plan_map import draw_plan_map
     from planner.report import plan_timings, summary, write_plan_files
 
-    inputs_given = given_paths(dem_path, stations_path, boundary_path, error_model_path,
+    inputs_given = given_paths(dem_path, stations_path, boundary_path, error_model.path,
                                config_path, visibility_path, *exclude_paths,
                                None if existing == "as-built" else existing)
     with output_folder(out, overwrite, "plan", inputs=inputs_given) as stage:
-        outcome, config = _plan(site_name, seed, dem_path, stations_path, boundary_path,
-                                exclude_paths, error_model_path, config_path, visibility_path,
-                                redundant, existing, budget, time_limit_s, as_json)
+        outcome, config = _plan(site_name, site_seed, dem_path, stations_path, station_ids,
+                                boundary_path, exclude_paths, marker_radius_m, error_model,
+                                config_path, visibility_path, redundant, existing, budget,
+                                time_limit_s, as_json)
         doc = write_plan_files(outcome, stage)
         draw_plan_map(outcome, stage / "map.png")
     timings = plan_timings(outcome)
@@ -88,9 +92,9 @@ def command(site_name, seed, dem_path, stations_path, boundary_path, exclude_pat
     emit_summary(info, as_json, human)
 
 
-def _plan(site_name, seed, dem_path, stations_path, boundary_path, exclude_paths,
-          error_model_path, config_path, visibility_path, redundant, existing, budget,
-          time_limit_s, as_json):
+def _plan(site_name, site_seed, dem_path, stations_path, station_ids, boundary_path,
+          exclude_paths, marker_radius_m, error_model, config_path, visibility_path, redundant,
+          existing, budget, time_limit_s, as_json):
     """Read the inputs and make the plan; return ``(outcome, config)``."""
     from markerplan.errors import ConfigError
     from planner.config import PlanConfig, load_config
@@ -108,9 +112,10 @@ def _plan(site_name, seed, dem_path, stations_path, boundary_path, exclude_paths
         config = config.replace(**overrides)
     except ConfigError as exc:
         raise ConfigError(f"{exc} (from the command-line options)") from exc
-    inputs = load_inputs(site_name, seed, dem_path=dem_path, stations_path=stations_path,
-                         boundary_path=boundary_path, exclude_paths=exclude_paths,
-                         existing=existing)
+    inputs = load_inputs(site_name, site_seed, dem_path=dem_path, stations_path=stations_path,
+                         station_ids=station_ids, boundary_path=boundary_path,
+                         exclude_paths=exclude_paths, existing=existing,
+                         marker_radius_m=marker_radius_m)
     if inputs.existing_ids:
         config = config.replace(existing=tuple(inputs.existing_ids))
     problem = None
@@ -122,14 +127,8 @@ def _plan(site_name, seed, dem_path, stations_path, boundary_path, exclude_paths
             raise ConfigError("--existing cannot be combined with --visibility; list the "
                               "existing markers as sites in the visibility table instead")
         model, model_name = None, f"from visibility table {visibility_path}"
-    elif error_model_path is not None:
-        from error_model.model import ErrorModel
-
-        model, model_name = ErrorModel.load(error_model_path), str(error_model_path)
     else:
-        from error_model import default_model
-
-        model, model_name = default_model(), "default (shipped with markerplan)"
+        model, model_name = error_model.model, error_model.name
     outcome = make_plan(inputs, config, model, model_name, problem=problem,
                         progress=not as_json or sys.stderr.isatty())
     return outcome, config

@@ -10,13 +10,17 @@ import click
 from planner.cli._common import (
     FiniteRange,
     emit_summary,
+    estimator_option,
     json_option,
+    marker_radius_option,
+    mounting_offset_options,
     out_option,
     overwrite_option,
     report_timings,
 )
 
-_METHODS = ("fixed-radius", "hemisphere-icp")
+#: Marker radius when neither --marker-radius nor a simulator truth gives one, m.
+DEFAULT_MARKER_RADIUS_M = 0.1
 
 
 def _parse_stage_options(items: tuple[str, ...]) -> dict[str, dict[str, object]]:
@@ -40,57 +44,79 @@ def _parse_stage_options(items: tuple[str, ...]) -> dict[str, dict[str, object]]
     return out
 
 
-def _parse_offsets(text: str):
-    """``VERTICAL_AXIS_DEG,LFRAME_TILT_DEG,DX_M,DY_M`` -> MountingOffsets (SI inside)."""
-    import math
+def _scan_inputs(paths: tuple[Path, ...]) -> tuple[list[Path], list[Path]]:
+    """The scans and the simulator truths among SCANS (files, or folders ``simulate`` wrote).
 
-    from markerplan.errors import ConfigError
-    from pipeline.rig import MountingOffsets
-
-    try:
-        v = [float(p) for p in text.split(",")]
-    except ValueError:
-        v = []
-    if len(v) != 4:
-        raise ConfigError("--offsets must be VERTICAL_AXIS_DEG,LFRAME_TILT_DEG,DX_M,DY_M like "
-                          f"0.3,0.3,0.015,0; got {text!r}")
-    return MountingOffsets(math.radians(v[0]), math.radians(v[1]), (v[2], v[3]))
-
-
-def _scan_files(paths: tuple[Path, ...]) -> list[Path]:
-    """The scan files named on the command line: each must exist, none twice."""
+    In a folder, ``*.scan.npz`` are the scans and ``*.truth.json`` their truths; other files
+    are passed over with a note. Among named files, ``*.truth.json`` are truths, and the
+    ``site.json`` / ``provenance.json`` that ``simulate`` writes beside its scans are passed
+    over with a note; any other file is read as a scan. Every scan must exist, none twice.
+    """
     from markerplan.errors import InputFileError
 
-    seen: dict[Path, Path] = {}
+    scans, truths, passed_over = [], [], []
     for p in paths:
-        if not p.is_file():
+        if p.is_dir():
+            found = sorted(p.glob("*.scan.npz"))
+            if not found:
+                raise InputFileError(f"folder {p} holds no *.scan.npz; give the folder "
+                                     "`markerplan simulate` wrote, or the scan files")
+            truths += sorted(p.glob("*.truth.json"))
+            passed_over += [f for f in sorted(p.iterdir())
+                            if f not in found and f not in truths and not f.name.startswith(".")]
+            scans += found
+        elif p.name.endswith(".truth.json"):
+            truths.append(p)
+        elif p.name in ("site.json", "provenance.json"):
+            passed_over.append(p)
+        elif not p.is_file():
             raise InputFileError(f"scan file {p} does not exist; check the path")
+        else:
+            scans.append(p)
+    if passed_over:
+        click.echo("note: not scans, passed over: " + ", ".join(str(f) for f in passed_over),
+                   err=True)
+    if not scans:
+        raise InputFileError("no scan among SCANS; give *.scan.npz files or the folder "
+                             "`markerplan simulate` wrote")
+    seen: dict[Path, Path] = {}
+    for p in scans:
         first = seen.setdefault(p.resolve(), p)
         if first is not p:
             raise InputFileError(f"scan file {p} is given twice (also as {first}); give each "
                                  "station's scan once")
-    return list(paths)
+    return scans, truths
+
+
+def _marker_radius(given: float | None, truth_files: list[Path]) -> float:
+    """``--marker-radius``, else the one the simulator's truths record, else 0.1 m."""
+    from markerplan.errors import InputFileError
+    from pipeline.scan_format import read_truth
+
+    if given is not None:
+        return given
+    radii = {read_truth(f).get("marker_radius_m") for f in truth_files} - {None}
+    if len(radii) > 1:
+        raise InputFileError(f"the truth files record different marker radii "
+                             f"({', '.join(f'{r:g}' for r in sorted(radii))} m); process each "
+                             "marker size separately, or give --marker-radius")
+    return float(radii.pop()) if radii else DEFAULT_MARKER_RADIUS_M
 
 
 @click.command("process")
-@click.argument("scans", nargs=-1, required=True,
-                type=click.Path(dir_okay=False, path_type=Path))
+@click.argument("scans", nargs=-1, required=True, type=click.Path(path_type=Path))
 @out_option(required=True)
 @overwrite_option
 @click.option("--reference", "references", multiple=True, type=click.Path(path_type=Path),
               help="Reference coordinates: a simulator truth JSON (per station; repeat the "
                    "option), a folder of *.truth.json, or one total-station CSV "
-                   "id,x_m,y_m,z_m in any frame.")
-@click.option("--method", type=click.Choice(_METHODS), default="fixed-radius",
-              show_default=True, help="Sphere-centre estimator.")
-@click.option("--radius", "radius_m", type=FiniteRange(0.01, 1.0),
-              default=0.1, show_default=True,
-              help="Marker radius, metres.")
+                   "id,x_m,y_m,z_m in any frame. Default: the truths among SCANS.")
+@estimator_option()
+@marker_radius_option(default_help=" Default: the simulator truths', else 0.1.")
 @click.option("--no-calibrate", is_flag=True,
-              help="Skip self-calibration; apply --offsets (default zero) as known values.")
-@click.option("--offsets", "offsets_text",
-              help="Known (with --no-calibrate) or starting mounting offsets "
-                   "VERTICAL_AXIS_DEG,LFRAME_TILT_DEG,DX_M,DY_M.")
+              help="Skip self-calibration; apply the mounting offsets (default zero) as known "
+                   "values. Without it they are where the calibration starts.")
+@mounting_offset_options
 @click.option("--min-points", type=click.IntRange(1, 1_000_000),
               help="Quality gate: minimum points per marker.")
 @click.option("--max-rms", "max_rms_m", type=FiniteRange(0.0, 1.0, min_open=True),
@@ -101,17 +127,20 @@ def _scan_files(paths: tuple[Path, ...]) -> list[Path]:
               help="Any stage option, e.g. --set ground.min_height_m=0.1 "
                    "--set gate.max_box_m=0.3 (unknown names are refused).")
 @json_option
-def command(scans, out, overwrite, references, method, radius_m, no_calibrate, offsets_text,
+def command(scans, out, overwrite, references, estimator, marker_radius_m, no_calibrate, offsets,
             min_points, max_rms_m, min_visible_fraction, stage_options, as_json) -> None:
     """Process station scans into a marker table.
 
-    Writes markers.csv (one row per candidate; columns in docs/pipeline.md), stations.csv
-    (per-station summary with calibration estimates), edges.csv (edge-length residuals when a
-    reference is given) and summary.json (configuration and provenance).
+    SCANS are .scan.npz files or the folder `markerplan simulate` wrote (its scans, with
+    their truths as the reference). Writes markers.csv (one row per candidate; columns in
+    docs/pipeline.md), stations.csv (per-station summary with calibration estimates), edges.csv
+    (edge-length residuals when a reference is given) and summary.json (configuration and
+    provenance).
 
     \b
     Example:
-      markerplan process scans/station_*.scan.npz --reference scans/ --out tables/
+      markerplan process scans/ --out tables/
+      markerplan process scans/station_S1.scan.npz --reference scans/ --out tables/
       markerplan process s1.scan.npz --reference total_station.csv --out t/
     """
     from tqdm import tqdm
@@ -128,26 +157,28 @@ def command(scans, out, overwrite, references, method, radius_m, no_calibrate, o
         with_offsets,
         write_results,
     )
-    from pipeline.rig import MountingOffsets
     from pipeline.scan_format import read_scan
 
+    scans, truths = _scan_inputs(scans)
     options = _parse_stage_options(stage_options)
-    options.setdefault("fit", {}).update(method=method, radius_m=radius_m)
+    options.setdefault("fit", {}).update(method=estimator)
     quality = {"min_points": min_points, "max_rms_m": max_rms_m,
                "min_visible_fraction": min_visible_fraction}
     options.setdefault("quality", {}).update({k: v for k, v in quality.items() if v is not None})
-    cfg = build_config(options)
-    offsets = _parse_offsets(offsets_text) if offsets_text else MountingOffsets()
-    cfg = with_offsets(cfg, offsets, enabled=not no_calibrate)
     ref_files = [f for p in references
                  for f in (sorted(p.glob("*.truth.json")) if p.is_dir() else [p])]
     if any(p.is_dir() for p in references) and not ref_files:
         raise InputFileError(f"--reference folder(s) {', '.join(map(str, references))} hold no "
                              "*.truth.json; give the truth files or a total-station CSV")
+    if not references:
+        ref_files = truths
+    if marker_radius_m is not None or "radius_m" not in options["fit"]:
+        options["fit"]["radius_m"] = _marker_radius(
+            marker_radius_m, [f for f in ref_files if f.name.endswith(".json")])
+    cfg = with_offsets(build_config(options), offsets, enabled=not no_calibrate)
     refs = [read_reference(p) for p in ref_files]
     check_references(refs)
-    scans = _scan_files(scans)
-    with output_folder(out, overwrite, "process", inputs=[*scans, *references]) as stage:
+    with output_folder(out, overwrite, "process", inputs=[*scans, *truths, *references]) as stage:
         results, inputs = [], []
         for path in tqdm(scans, desc="stations", file=sys.stderr, disable=None):
             scan = read_scan(path)

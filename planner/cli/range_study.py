@@ -7,30 +7,27 @@ import sys
 import click
 
 from planner.cli._common import (
-    FRAMES,
-    RANGE_NOISE_MM,
-    RPM,
-    SEED,
     FiniteRange,
     emit_summary,
+    frames_option,
     json_option,
     out_option,
     overwrite_option,
+    range_noise_option,
+    rpm_option,
+    seed_option,
 )
 
 
 @click.command("range-study")
 @out_option(required=True)
 @overwrite_option
-@click.option("--frames", type=FRAMES, default=800, show_default=True,
-              help="Frames per turntable revolution (fewer for a quick run).")
+@frames_option
 @click.option("--replicates", type=click.IntRange(1, 100), default=3, show_default=True,
-              help="Seeded replicates (seed, seed+1, ...).")
-@click.option("--seed", type=SEED, default=0, show_default=True, help="First simulation seed.")
-@click.option("--rpm", type=RPM,
-              default=600, show_default=True, help="VLP-16 spin rate.")
-@click.option("--range-noise-mm", type=RANGE_NOISE_MM, default=15.0, show_default=True,
-              help="1-sigma range noise, mm.")
+              help="Replicates; replicate r is simulated with seed + r.")
+@seed_option()
+@rpm_option
+@range_noise_option
 @click.option("--max-distance", "max_distance_m", type=FiniteRange(1.0, 100.0),
               default=50.0, show_default=True,
               help="Drop the published distances beyond this, metres.")

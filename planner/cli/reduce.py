@@ -7,54 +7,53 @@ import sys
 import click
 
 from planner.cli._common import (
-    FILE,
-    SEED,
-    TIME_LIMIT_S,
+    boundary_option,
+    config_option,
     dem_option,
     emit_summary,
     error_model_option,
+    exclude_option,
     given_paths,
+    id_list,
     json_option,
+    marker_radius_option,
     mounting_offset_options,
-    mounting_offsets,
     out_option,
     overwrite_option,
     report_timings,
+    seed_option,
+    site_option,
+    site_seed_option,
+    station_ids_option,
     stations_option,
+    time_limit_option,
 )
-
-
-def _id_list(text: str | None) -> tuple[str, ...]:
-    return tuple(t.strip() for t in text.split(",") if t.strip()) if text else ()
 
 
 @click.command("reduce")
 @click.argument("layout_spec", metavar="INPUT")
-@click.option("--site", "site_name", default=None,
-              help="Site preset (default: the plan's site, else 'default').")
-@click.option("--seed", type=SEED, default=None,
-              help="Seed of the preset's synthetic terrain (default: the plan's / preset's).")
+@site_option(default=None)
+@site_seed_option
 @dem_option
 @stations_option
-@click.option("--boundary", "boundary_path", type=FILE,
-              help="GeoJSON polygon: where markers may go.")
-@click.option("--exclude", "exclude_paths", type=FILE, multiple=True,
-              help="GeoJSON polygon(s) where no marker may go (repeatable; with --free).")
+@station_ids_option
+@boundary_option
+@exclude_option
+@marker_radius_option(default_help=" Default: the plan's, else the preset's (0.1).")
 @error_model_option
-@click.option("--config", "config_path", type=FILE,
-              help="TOML file of plan settings (default: the plan's, else the defaults).")
+@config_option
 @click.option("--free", is_flag=True,
               help="Choose the k markers from every candidate site, not only the layout.")
-@click.option("--keep", "keep_ids", help="Comma-separated marker ids that always stay.")
-@click.option("--drop", "drop_ids", help="Comma-separated marker ids that must go.")
+@click.option("--keep", "keep_ids", callback=id_list, metavar="M01,M07",
+              help="Marker ids that always stay, comma-separated.")
+@click.option("--drop", "drop_ids", callback=id_list, metavar="M03",
+              help="Marker ids that must go, comma-separated.")
 @click.option("--k-min", "k_min", type=click.IntRange(1, 100_000),
               help="Fewest markers on the curve (default: the fewest meeting the directions).")
-@click.option("--time-limit", "time_limit_s", type=TIME_LIMIT_S,
-              help="Solver time limit for the whole curve, seconds (default 60).")
+@time_limit_option
 @click.option("--verify", is_flag=True,
               help="Simulate + process the stations at chosen counts; achieved vs predicted.")
-@click.option("--verify-seed", "verify_seed", type=SEED, default=0, show_default=True,
-              help="Simulation noise seed of --verify.")
+@seed_option()
 @click.option("--verify-k", "verify_k",
               help="Counts to verify, comma-separated (default: the full layout and the "
                    "fewest meeting the requirement).")
@@ -62,10 +61,10 @@ def _id_list(text: str | None) -> tuple[str, ...]:
 @out_option(default="markerplan-reduce")
 @overwrite_option
 @json_option
-def command(layout_spec, site_name, seed, dem_path, stations_path, boundary_path, exclude_paths,
-            error_model_path, config_path, free, keep_ids, drop_ids, k_min, time_limit_s,
-            verify, verify_seed, verify_k, vertical_axis_error_deg, lframe_tilt_deg,
-            axis_offset_mm, out, overwrite, as_json):
+def command(layout_spec, site_name, site_seed, dem_path, stations_path, station_ids,
+            boundary_path, exclude_paths, marker_radius_m, error_model, config_path, free,
+            keep_ids, drop_ids, k_min, time_limit_s, verify, seed, verify_k, offsets, out,
+            overwrite, as_json):
     """Trade-off between the number of markers and the worst station's predicted error.
 
     INPUT is a plan.json from `markerplan plan`, a markers CSV (id,x_m,y_m[,z_m], site frame)
@@ -80,22 +79,24 @@ def command(layout_spec, site_name, seed, dem_path, stations_path, boundary_path
       markerplan reduce plan/plan.json --free --out reduce-free/
       markerplan reduce markers.csv --keep M01 --verify --verify-k 11,6 --out reduce/
 
-    The mounting-offset options mis-mount the rig simulated by --verify (the pipeline
-    self-calibrates it).
+    --seed and the mounting-offset options set the noise and the mis-mounted rig that --verify
+    simulates (the pipeline self-calibrates it).
     """
     from markerplan.output_folder import output_folder
     from planner.reduction_plot import plot_tradeoff
     from planner.reduction_report import reduce_timings, summary, write_reduce_files
 
-    inputs_given = given_paths(dem_path, stations_path, boundary_path, error_model_path,
+    inputs_given = given_paths(dem_path, stations_path, boundary_path, error_model.path,
                                config_path, *exclude_paths,
                                None if layout_spec == "as-built" else layout_spec)
+    sources = {"site_name": site_name, "site_seed": site_seed, "dem_path": dem_path,
+               "stations_path": stations_path, "station_ids": station_ids,
+               "boundary_path": boundary_path, "exclude_paths": exclude_paths,
+               "marker_radius_m": marker_radius_m}
     with output_folder(out, overwrite, "reduce", inputs=inputs_given) as stage:
         study, doc, config = _study(
-            layout_spec, site_name, seed, dem_path, stations_path, boundary_path, exclude_paths,
-            error_model_path, config_path, free, keep_ids, drop_ids, k_min, time_limit_s,
-            verify, verify_seed, verify_k,
-            mounting_offsets(vertical_axis_error_deg, lframe_tilt_deg, axis_offset_mm),
+            layout_spec, sources, error_model, config_path, free, keep_ids, drop_ids, k_min,
+            time_limit_s, verify, seed, verify_k, offsets,
             progress=not as_json or sys.stderr.isatty())
         write_reduce_files(doc, stage)
         plot_tradeoff(doc, stage / "tradeoff.png")
@@ -112,10 +113,12 @@ def command(layout_spec, site_name, seed, dem_path, stations_path, boundary_path
     emit_summary(info, as_json, human + f" -> {out}/")
 
 
-def _study(layout_spec, site_name, seed, dem_path, stations_path, boundary_path, exclude_paths,
-           error_model_path, config_path, free, keep_ids, drop_ids, k_min, time_limit_s,
-           verify, verify_seed, verify_k, offsets, progress):
-    """Read the inputs, run the study (and ``--verify``); return ``(study, doc, config)``."""
+def _study(layout_spec, sources, error_model, config_path, free, keep_ids, drop_ids, k_min,
+           time_limit_s, verify, seed, verify_k, offsets, progress):
+    """Read the inputs, run the study (and ``--verify``); return ``(study, doc, config)``.
+
+    ``sources`` holds the site options as :func:`planner.reduction.study.resolve_inputs`
+    takes them."""
     from markerplan.errors import ConfigError
     from pipeline.rig import MountingOffsets
     from planner.config import load_config
@@ -123,11 +126,9 @@ def _study(layout_spec, site_name, seed, dem_path, stations_path, boundary_path,
     from planner.reduction_study import layout_problem, marker_ids_iv, resolve_inputs, run_study
 
     config = load_config(config_path) if config_path else None
-    inputs, layout, config = resolve_inputs(
-        layout_spec, site_name, seed, dem_path=dem_path, stations_path=stations_path,
-        boundary_path=boundary_path, exclude_paths=exclude_paths, config=config)
-    overrides = {"existing": marker_ids_iv(_id_list(keep_ids), layout, "--keep"),
-                 "forbidden": marker_ids_iv(_id_list(drop_ids), layout, "--drop")}
+    inputs, layout, config = resolve_inputs(layout_spec, config=config, **sources)
+    overrides = {"existing": marker_ids_iv(keep_ids or (), layout, "--keep"),
+                 "forbidden": marker_ids_iv(drop_ids or (), layout, "--drop")}
     if time_limit_s is not None:
         overrides["time_limit_s"] = time_limit_s
     try:
@@ -138,14 +139,7 @@ def _study(layout_spec, site_name, seed, dem_path, stations_path, boundary_path,
     if offsets != MountingOffsets() and not verify:
         raise ConfigError("the mounting-offset options set the rig that --verify simulates; "
                           "add --verify or drop them")
-    if error_model_path is not None:
-        from error_model.model import ErrorModel
-
-        model, model_name = ErrorModel.load(error_model_path), str(error_model_path)
-    else:
-        from error_model import default_model
-
-        model, model_name = default_model(), "default (shipped with markerplan)"
+    model, model_name = error_model.model, error_model.name
     problem, mask, timings = layout_problem(inputs, layout, config, model, free=free,
                                             progress=progress)
     study = run_study(problem, config, mask, free=free, k_min=k_min)
@@ -157,11 +151,11 @@ def _study(layout_spec, site_name, seed, dem_path, stations_path, boundary_path,
         from planner.reduction_verify import verify_points
 
         t = time.perf_counter()
-        verified = verify_points(study, inputs, ks, model, seed=verify_seed, progress=progress,
+        verified = verify_points(study, inputs, ks, model, seed=seed, progress=progress,
                                  offsets=offsets)
         study.timings_s["verify"] = time.perf_counter() - t
     options = {"input": layout_spec, "free": free, "k_min": k_min,
-               "verify": verify, "verify_seed": verify_seed if verify else None,
+               "verify": verify, "verify_seed": seed if verify else None,
                "verify_mounting_offsets": offsets.to_dict() if verify else None,
                "verify_k": None if ks is None else list(ks)}
     return study, reduce_record(study, layout, inputs, model_name, options, verified), config

@@ -8,32 +8,33 @@ from pathlib import Path
 import click
 
 from planner.cli._common import (
-    SEED,
     emit_summary,
+    error_model_option,
     given_paths,
     json_option,
     mounting_offset_options,
-    mounting_offsets,
     out_option,
     overwrite_option,
+    seed_option,
+    select_stations,
+    station_ids_option,
 )
 
 
 @click.command("verify")
 @click.argument("plan_path", metavar="PLAN", type=click.Path(dir_okay=False, path_type=Path))
-@click.option("--error-model", "error_model_path", type=click.Path(dir_okay=False,
-                                                                  path_type=Path),
-              help="Error-model JSON for the registration weights (default: the shipped model).")
-@click.option("--seed", type=SEED, default=0, show_default=True, help="Simulation noise seed.")
+@error_model_option
+@seed_option()
+@station_ids_option
 @mounting_offset_options
 @out_option(required=True)
 @overwrite_option
 @json_option
-def command(plan_path, error_model_path, seed, vertical_axis_error_deg, lframe_tilt_deg,
-            axis_offset_mm, out, overwrite, as_json):
+def command(plan_path, error_model, seed, station_ids, offsets, out, overwrite, as_json):
     """Check a plan by simulation: scan each station with the planned markers, process the
     scans, register each station to its detected markers, and compare achieved with predicted
-    error. Exit code 1 when any station's achieved error exceeds the requirement.
+    error. Exit code 1 when any station's achieved error exceeds the requirement. The plan's
+    marker radius is simulated and fitted; --station-ids verifies some stations only.
 
     With mounting offsets the simulated rig is mis-mounted and the pipeline self-calibrates
     each station's scan before detecting the markers, as in the field.
@@ -49,29 +50,17 @@ def command(plan_path, error_model_path, seed, vertical_axis_error_deg, lframe_t
 
     from markerplan.errors import InfeasiblePlanError
     from markerplan.output_folder import output_folder
-    from planner.verify import (
-        plan_dem_path,
-        read_plan,
-        verify_markdown,
-        verify_plan,
-        verify_record,
-    )
+    from planner.plan_file import load_plan
+    from planner.verify import verify_markdown, verify_plan, verify_record
 
-    doc = read_plan(plan_path)
-    offsets = mounting_offsets(vertical_axis_error_deg, lframe_tilt_deg, axis_offset_mm)
-    inputs = given_paths(plan_path, plan_dem_path(doc), error_model_path)
+    plan = load_plan(plan_path)
+    ids = select_stations([s.id for s in plan.stations], station_ids)
+    inputs = given_paths(plan_path, plan.dem_path, error_model.path)
     with output_folder(out, overwrite, "verify", inputs=inputs) as stage:
-        if error_model_path is not None:
-            from error_model.model import ErrorModel
-
-            model, model_name = ErrorModel.load(error_model_path), str(error_model_path)
-        else:
-            from error_model import default_model
-
-            model, model_name = default_model(), "default"
-        checks = verify_plan(doc, model, seed=seed, progress=not as_json or sys.stderr.isatty(),
-                             offsets=offsets)
-        rec = verify_record(doc, checks, seed, model_name, offsets)
+        checks = verify_plan(plan, error_model.model, seed=seed,
+                             progress=not as_json or sys.stderr.isatty(), offsets=offsets,
+                             station_ids=ids)
+        rec = verify_record(plan, checks, seed, error_model.name, offsets)
         (stage / "verify.json").write_text(json.dumps(rec, indent=2) + "\n")
         (stage / "verify.md").write_text(verify_markdown(rec))
     summary = {"out": str(out), "passed": rec["passed"], "requirement_m": rec["requirement_m"],

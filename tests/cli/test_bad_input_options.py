@@ -4,7 +4,7 @@ import pytest
 
 from tests.cli.bad_input import Case, check_refused
 
-SIM = ["simulate", "--stations", "S1", "--frames", "4", "--out", "out"]
+SIM = ["simulate", "--station-ids", "S1", "--frames", "4", "--out", "out"]
 RANGE = ["range-study", "--frames", "4", "--replicates", "1", "--out", "out"]
 SCAN = "{inputs}/scan/station_S1.scan.npz"
 PROCESS = ["process", SCAN, "--out", "out"]
@@ -43,13 +43,13 @@ CASES = [
     usage("verify-negative-seed", ["verify", "{inputs}/plan/plan.json", "--seed", "-1",
                                    "--out", "out"], "--seed"),
     usage("verify-without-out", ["verify", "{inputs}/plan/plan.json"], "--out"),
-    usage("plan-negative-seed", ["plan", "--seed", "-1", "--out", "out"], "--seed"),
+    usage("plan-negative-site-seed", ["plan", "--site-seed", "-1", "--out", "out"], "--site-seed"),
     usage("plan-budget-zero", ["plan", "--budget", "0", "--out", "out"], "--budget"),
     usage("plan-time-limit-zero", ["plan", "--time-limit", "0", "--out", "out"], "--time-limit"),
     usage("plan-time-limit-1e9", ["plan", "--time-limit", "1e9", "--out", "out"],
           "--time-limit"),
-    usage("reduce-negative-verify-seed", ["reduce", "as-built", "--verify", "--verify-seed", "-1",
-                                          "--out", "out"], "--verify-seed"),
+    usage("reduce-negative-seed", ["reduce", "as-built", "--verify", "--seed", "-1",
+                                   "--out", "out"], "--seed"),
     usage("reduce-k-min-zero", ["reduce", "as-built", "--k-min", "0", "--out", "out"],
           "--k-min"),
     usage("fit-error-model-negative-seed", ["fit-error-model", "{inputs}/markers.csv", "--seed",
@@ -57,8 +57,8 @@ CASES = [
     usage("fit-error-model-bootstrap-1e6", ["fit-error-model", "{inputs}/markers.csv",
                                             "--bootstrap", "1000000", "--out", "out"],
           "--bootstrap"),
-    usage("process-radius-zero", PROCESS + ["--radius", "0"], "--radius"),
-    usage("process-radius-nan", PROCESS + ["--radius", "nan"], "--radius"),
+    usage("process-radius-zero", PROCESS + ["--marker-radius", "0"], "--marker-radius"),
+    usage("process-radius-nan", PROCESS + ["--marker-radius", "nan"], "--marker-radius"),
     usage("process-min-points-zero", PROCESS + ["--min-points", "0"], "--min-points"),
     usage("process-max-rms-zero", PROCESS + ["--max-rms", "0"], "--max-rms"),
     usage("process-visible-fraction-2", PROCESS + ["--min-visible-fraction", "2"],
@@ -67,8 +67,16 @@ CASES = [
     Case("process-same-scan-twice-other-path",
          ["process", SCAN, "{inputs}/scan/../scan/station_S1.scan.npz", "--out", "out"],
          "given twice"),
-    Case("fit-sphere-radius-nan", ["fit-sphere", "p.xyz", "--radius", "nan"], "radius",
-         files={"p.xyz": "0 0 0.1\n0.1 0 0\n0 0.1 0\n-0.1 0 0\n0 -0.1 0\n"}),
+    usage("fit-sphere-radius-nan", ["fit-sphere", "p.xyz", "--marker-radius", "nan"],
+          "--marker-radius"),
+    usage("fit-sphere-sensor-two-numbers", ["fit-sphere", "p.xyz", "--marker-radius", "0.1",
+                                            "--sensor", "1,2"], "--sensor"),
+    usage("simulate-axis-offset-one-number", SIM + ["--axis-offset-mm", "5"], "--axis-offset-mm"),
+    usage("simulate-axis-offset-nan", SIM + ["--axis-offset-mm", "nan,0"], "--axis-offset-mm"),
+    usage("process-estimator-unknown", PROCESS + ["--estimator", "magic"], "--estimator"),
+    usage("fit-error-model-estimator-unknown", ["fit-error-model", "{inputs}/markers.csv",
+                                                "--estimator", "magic", "--out", "out"],
+          "--estimator"),
 ]
 
 

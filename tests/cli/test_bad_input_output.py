@@ -13,7 +13,7 @@ from tests.cli.bad_input import Case, check_refused
 
 # the smallest valid command line of every command that writes --out
 COMMANDS = {
-    "simulate": ["simulate", "--frames", "4", "--stations", "S1"],
+    "simulate": ["simulate", "--frames", "4", "--station-ids", "S1"],
     "process": ["process", "{inputs}/scan/station_S1.scan.npz"],
     "range-study": ["range-study", "--frames", "4", "--replicates", "1"],
     "fit-error-model": ["fit-error-model", "{inputs}/markers.csv"],

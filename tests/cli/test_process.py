@@ -46,8 +46,8 @@ def test_process_with_total_station_csv_in_another_frame(station, tmp_path, caps
                                                  for k, (x, y, z) in enumerate(world)))
     out = tmp_path / "o"
     code, stdout, _ = run_cli(capsys, ["process", str(station / "station_S1.scan.npz"),
-                                       "--reference", str(ts), "--no-calibrate",
-                                       "--method", "hemisphere-icp", "--out", str(out), "--json"])
+                                       "--reference", str(ts), "--no-calibrate", "--estimator",
+                                       "hemisphere-icp", "--out", str(out), "--json"])
     assert code == 0
     st = json.loads(stdout)["stations"][0]
     assert st["registered"] and st["n_matched_accepted"] == 4
@@ -106,13 +106,60 @@ def test_bad_input_one_line_no_output(station, tmp_path, capsys, case, needle):
 
 
 def test_known_offsets_option(station, tmp_path, capsys):
-    code, _, err = run_cli(capsys, ["process", str(station / "station_S1.scan.npz"),
-                                    "--no-calibrate", "--offsets", "0.3,0.3", "--out",
-                                    str(tmp_path / "o")])
-    assert code == 1 and "--offsets" in err and not (tmp_path / "o").exists()
     code, stdout, _ = run_cli(capsys, ["process", str(station / "station_S1.scan.npz"),
-                                       "--no-calibrate", "--offsets", "0,0,0,0", "--out",
+                                       "--no-calibrate", "--vertical-axis-error-deg", "0.3",
+                                       "--axis-offset-mm", "15,-2", "--out",
                                        str(tmp_path / "k"), "--json"])
     assert code == 0
     cal = json.loads(stdout)["stations"][0]["calibration"]
-    assert cal["enabled"] is False and cal["offsets"]["axis_offset_m"] == [0.0, 0.0]
+    assert cal["enabled"] is False
+    assert cal["offsets"]["axis_offset_m"] == pytest.approx([0.015, -0.002])
+    assert cal["offsets"]["vertical_axis_error_rad"] == pytest.approx(np.radians(0.3))
+
+
+def _simulate_like_folder(station, tmp_path):
+    """The synthetic station as ``simulate`` leaves it: scan, truth, site.json, provenance."""
+    folder = tmp_path / "sim"
+    folder.mkdir()
+    for f in station.iterdir():
+        (folder / f.name).write_bytes(f.read_bytes())
+    (folder / "site.json").write_text("{}\n")
+    (folder / "provenance.json").write_text("{}\n")
+    return folder
+
+
+def test_process_takes_the_folder_simulate_wrote(station, tmp_path, capsys):
+    folder = _simulate_like_folder(station, tmp_path)
+    code, stdout, err = run_cli(capsys, ["process", str(folder), "--no-calibrate", "--out",
+                                         str(tmp_path / "t"), "--json"])
+    assert code == 0, err
+    assert "passed over" in err and "site.json" in err and "provenance.json" in err
+    st = json.loads(stdout)["stations"][0]
+    assert st["n_matched_accepted"] == 4 and st["mean_error_m"] < 0.005  # truth found inside
+    # the shell's expansion of sim/* gives the same tables
+    code, stdout_glob, err = run_cli(capsys, ["process", *map(str, sorted(folder.iterdir())),
+                                              "--no-calibrate", "--out", str(tmp_path / "g")])
+    assert code == 0, err
+    assert (tmp_path / "g" / "markers.csv").read_bytes() == \
+        (tmp_path / "t" / "markers.csv").read_bytes()
+
+
+def test_marker_radius_comes_from_the_truth(station, tmp_path, capsys):
+    folder = _simulate_like_folder(station, tmp_path)
+    truth = folder / "station_S1.truth.json"
+    truth.write_text(truth.read_text().replace('"marker_radius_m": 0.1', '"marker_radius_m": 0.15'))
+    code, stdout, err = run_cli(capsys, ["process", str(folder), "--no-calibrate", "--out",
+                                         str(tmp_path / "t"), "--json"])
+    assert code == 0, err
+    assert json.loads(stdout)["provenance"]["config"]["fit"]["radius_m"] == 0.15
+    code, stdout, err = run_cli(capsys, ["process", str(folder), "--no-calibrate",
+                                         "--marker-radius", "0.1", "--out", str(tmp_path / "u"),
+                                         "--json"])
+    assert code == 0 and json.loads(stdout)["provenance"]["config"]["fit"]["radius_m"] == 0.1
+
+
+def test_folder_without_scans_refused(tmp_path, capsys):
+    (tmp_path / "empty").mkdir()
+    code, _, err = run_cli(capsys, ["process", str(tmp_path / "empty"), "--out",
+                                    str(tmp_path / "o")])
+    assert code == 1 and "holds no *.scan.npz" in err and err.count("\n") == 1

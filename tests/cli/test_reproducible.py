@@ -34,7 +34,7 @@ def synthetic_tables(inputs, cwd):
 
 
 COMMANDS = {
-    "simulate": lambda inputs, cwd: ["simulate", "--frames", "6", "--stations", "S1,S2",
+    "simulate": lambda inputs, cwd: ["simulate", "--frames", "6", "--station-ids", "S1,S2",
                                      "--seed", "5"],
     "process": lambda inputs, cwd: ["process", f"{inputs}/scan/station_S1.scan.npz",
                                     "--reference", f"{inputs}/scan"],

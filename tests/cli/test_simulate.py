@@ -12,7 +12,7 @@ from tests.cli.invoke import run_cli
 def test_simulate_writes_scans_and_truth(tmp_path, capsys):
     out = tmp_path / "scans"
     code, stdout, _ = run_cli(capsys, [
-        "simulate", "--site", "default", "--stations", "S1,S3", "--frames", "8", "--seed", "2",
+        "simulate", "--site", "default", "--station-ids", "S1,S3", "--frames", "8", "--seed", "2",
         "--axis-offset-mm", "5,-3", "--vertical-axis-error-deg", "0.2", "--lframe-tilt-deg",
         "-0.1", "--range-noise-mm", "10", "--out", str(out), "--json"])
     assert code == 0
@@ -40,7 +40,7 @@ def test_simulate_writes_scans_and_truth(tmp_path, capsys):
 
 def test_station_count_and_overwrite(tmp_path, capsys):
     out = tmp_path / "o"
-    args = ["simulate", "--stations", "1", "--frames", "2", "--out", str(out), "--json"]
+    args = ["simulate", "--station-ids", "S1", "--frames", "2", "--out", str(out), "--json"]
     assert run_cli(capsys, args)[0] == 0
     code, _, err = run_cli(capsys, args)
     assert code == 1 and "--overwrite" in err
@@ -80,7 +80,7 @@ def test_station_outside_dem_refused(tmp_path, capsys):
 def test_unwritable_out_refused(tmp_path, capsys):
     blocker = tmp_path / "file"
     blocker.write_text("not a folder")
-    code, stdout, err = run_cli(capsys, ["simulate", "--frames", "2", "--stations", "1",
+    code, stdout, err = run_cli(capsys, ["simulate", "--frames", "2", "--station-ids", "S1",
                                          "--out", str(blocker / "out")])
     _assert_clean_failure(tmp_path, code, stdout, err, "writable")
 
@@ -100,8 +100,7 @@ def test_unknown_preset_refused(tmp_path, capsys):
 
 
 @pytest.mark.parametrize(("option", "value", "fix"), [
-    ("--axis-offset-mm", "5", "two comma-separated"),
-    ("--stations", "S9", "valid ids are"),
+    ("--station-ids", "S9", "valid ids are"),
     ("--rpm", "610", "steps of 60"),
 ])
 def test_bad_options_refused(tmp_path, capsys, option, value, fix):
