@@ -84,8 +84,8 @@ def command(layout_spec, site_name, seed, dem_path, stations_path, boundary_path
     self-calibrates it).
     """
     from markerplan.output_folder import output_folder
-    from planner.reduction_plot import plot_tradeoff
-    from planner.reduction_report import reduce_timings, summary, write_reduce_files
+    from planner.reduction.plot import plot_tradeoff
+    from planner.reduction.report import reduce_timings, summary, write_reduce_files
 
     inputs_given = given_paths(dem_path, stations_path, boundary_path, error_model_path,
                                config_path, *exclude_paths,
@@ -119,8 +119,8 @@ def _study(layout_spec, site_name, seed, dem_path, stations_path, boundary_path,
     from markerplan.errors import ConfigError
     from pipeline.rig import MountingOffsets
     from planner.config import load_config
-    from planner.reduction_report import reduce_record
-    from planner.reduction_study import layout_problem, marker_ids_iv, resolve_inputs, run_study
+    from planner.reduction.report import reduce_record
+    from planner.reduction.study import layout_problem, marker_ids_iv, resolve_inputs, run_study
 
     config = load_config(config_path) if config_path else None
     inputs, layout, config = resolve_inputs(
@@ -154,7 +154,7 @@ def _study(layout_spec, site_name, seed, dem_path, stations_path, boundary_path,
     if verify:
         import time
 
-        from planner.reduction_verify import verify_points
+        from planner.reduction.verify import verify_points
 
         t = time.perf_counter()
         verified = verify_points(study, inputs, ks, model, seed=verify_seed, progress=progress,
