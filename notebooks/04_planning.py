@@ -34,7 +34,7 @@ from error_model import default_model  # noqa: E402
 from planner.config import PlanConfig  # noqa: E402
 from planner.plan_map import draw_plan_map  # noqa: E402
 from planner.planning import load_inputs, make_plan  # noqa: E402
-from planner.program import evaluate_layout  # noqa: E402
+from planner.station_checks import evaluate_layout  # noqa: E402
 from planner.usability import REASONS  # noqa: E402
 
 OUT = Path(os.environ.get("MARKERPLAN_NB_OUT") or tempfile.mkdtemp(prefix="markerplan-nb-"))

@@ -32,9 +32,9 @@ import numpy as np  # noqa: E402
 from error_model import default_model  # noqa: E402
 from planner.config import PlanConfig  # noqa: E402
 from planner.planning import load_inputs  # noqa: E402
-from planner.reduction_plot import plot_tradeoff  # noqa: E402
-from planner.reduction_report import reduce_record  # noqa: E402
-from planner.reduction_study import layout_problem, read_layout, run_study  # noqa: E402
+from planner.reduction.plot import plot_tradeoff  # noqa: E402
+from planner.reduction.report import reduce_record  # noqa: E402
+from planner.reduction.study import layout_problem, read_layout, run_study  # noqa: E402
 
 OUT = Path(os.environ.get("MARKERPLAN_NB_OUT") or tempfile.mkdtemp(prefix="markerplan-nb-"))
 OUT.mkdir(parents=True, exist_ok=True)

@@ -67,49 +67,9 @@ def _accuracy_iv(station_xy, marker_xy, sigma_m):
     return station_xy[:2], marker_xy[:, :2], sigma_m
 
 
-def information_matrix(station_xy, marker_xy, sigma_m) -> np.ndarray:
-    """Fisher information of the 4-DoF pose (x, y, z, heading) from a set of markers.
-
-    Parameters
-    ----------
-    station_xy : (2,) or (3,) float
-        Station position, site frame, m (only x, y are used).
-    marker_xy : (k, 2) or (k, 3) float
-        Marker centres, site frame, m.
-    sigma_m : (k,) float
-        1-sigma 3D centre error of each marker as seen from this station, m.
-
-    Returns
-    -------
-    J : (4, 4) float
-        Information matrix in units of 1/m^2 (translation) and 1/rad^2 (heading).
-
-    Examples
-    --------
-    >>> J = information_matrix([0, 0], [[10, 0], [0, 10], [-10, 0]], [0.01, 0.01, 0.01])
-    >>> round(J[0, 0])
-    90000
-    """
-    station_xy, marker_xy, sigma_m = _accuracy_iv(station_xy, marker_xy, sigma_m)
-    return _information(marker_xy - station_xy, 3.0 / sigma_m**2)
-
-
 def _information(offset_xy: np.ndarray, weight: np.ndarray) -> np.ndarray:
     h = _design_blocks(offset_xy)
     return np.einsum("k,kia,kib->ab", weight, h, h)
-
-
-def pose_covariance(station_xy, marker_xy, sigma_m) -> np.ndarray | None:
-    """Covariance of (x, y, z, heading), or ``None`` when the markers do not fix the pose."""
-    j = information_matrix(station_xy, marker_xy, sigma_m)
-    return _invert(j)
-
-
-def _invert(j: np.ndarray) -> np.ndarray | None:
-    w = np.linalg.eigvalsh(j)
-    if w[0] <= 1e-9 * max(w[-1], 1e-300):
-        return None
-    return np.linalg.inv(j)
 
 
 def _rim_blocks(working_radius_m: float) -> np.ndarray:
@@ -237,21 +197,30 @@ def linearisation(j: np.ndarray, working_radius_m: float, inclinometer_sigma_rad
     return cuts
 
 
-def error_from_covariance(cov: np.ndarray | None, working_radius_m: float,
-                          inclinometer_sigma_rad: float) -> float:
-    """95 % bound of the registered position error over the working disc, m (see module doc).
-
-    ``inf`` when ``cov`` is ``None`` (pose not determined).
-    """
-    if cov is None:
-        return float("inf")
-    return float(errors_from_information(np.linalg.inv(cov)[None], working_radius_m,
-                                         inclinometer_sigma_rad)[0])
-
-
 def pair_information(station_xy, marker_xy, sigma_m) -> np.ndarray:
-    """(k, 4, 4) information contributed by each marker separately (see
-    :func:`information_matrix`)."""
+    """Fisher information of the 4-DoF pose (x, y, z, heading) from each marker separately.
+
+    Parameters
+    ----------
+    station_xy : (2,) or (3,) float
+        Station position, site frame, m (only x, y are used).
+    marker_xy : (k, 2) or (k, 3) float
+        Marker centres, site frame, m.
+    sigma_m : (k,) float
+        1-sigma 3D centre error of each marker as seen from this station, m.
+
+    Returns
+    -------
+    J : (k, 4, 4) float
+        Information of each marker in units of 1/m^2 (translation) and 1/rad^2 (heading); a
+        set of markers has the sum.
+
+    Examples
+    --------
+    >>> J = pair_information([0, 0], [[10, 0], [0, 10], [-10, 0]], [0.01, 0.01, 0.01])
+    >>> round(J.sum(axis=0)[0, 0])
+    90000
+    """
     station_xy, marker_xy, sigma_m = _accuracy_iv(station_xy, marker_xy, sigma_m)
     h = _design_blocks(marker_xy - station_xy)
     return np.einsum("k,kia,kib->kab", 3.0 / sigma_m**2, h, h)
@@ -387,33 +356,3 @@ def registration_error(translation_est_m, heading_est_rad: float, translation_tr
     est = np.asarray(translation_est_m, float) + _rz(heading_est_rad, p)
     tru = np.asarray(translation_true_m, float) + _rz(heading_true_rad, p)
     return float(np.linalg.norm(est - tru, axis=1).max())
-
-
-def station_errors(problem, selected, working_radius_m: float,
-                   inclinometer_sigma_rad: float = 0.0) -> np.ndarray:
-    """Predicted error of every station of a :class:`~planner.usability.PlanProblem`, m.
-
-    Parameters
-    ----------
-    problem : PlanProblem
-    selected : (n,) bool
-        Which candidate sites hold a marker; each station uses its usable selected ones.
-    working_radius_m, inclinometer_sigma_rad : float
-        As in :func:`station_error`.
-
-    Returns
-    -------
-    error_m : (s,) float
-        ``inf`` for a station whose markers cannot fix its pose.
-    """
-    selected = np.asarray(selected, dtype=bool)
-    if selected.shape != (problem.n_sites,):
-        raise ConfigError(f"`selected` must have shape ({problem.n_sites},), got {selected.shape}")
-    out = np.empty(problem.n_stations)
-    for s in range(problem.n_stations):
-        idx = problem.usable_pairs(s)
-        idx = idx[selected[problem.pair_site[idx]]]
-        out[s] = station_error(problem.station_xyz[s], problem.site_xyz[problem.pair_site[idx]],
-                               problem.pair_sigma_m[idx], working_radius_m,
-                               inclinometer_sigma_rad) if idx.size else float("inf")
-    return out

@@ -15,7 +15,7 @@ from scipy.spatial import cKDTree
 
 from markerplan.errors import InfeasiblePlanError
 from planner import accuracy
-from planner.program import _resolve_ids, evaluate_layout, station_infos
+from planner.station_checks import evaluate_layout, station_infos
 from planner.usability import PlanProblem, direction_status, sector_index
 
 #: Grid phases tried at each spacing (fraction of the spacing from the bounds' lower corner).
@@ -59,8 +59,8 @@ def greedy_cover(problem: PlanProblem, config) -> Baseline:
         When no remaining site improves a station that still fails.
     """
     infos = station_infos(problem, config)
-    forbidden = _resolve_ids(problem, config.forbidden, "forbidden")
-    selected = problem.site_existing | _resolve_ids(problem, config.existing, "existing")
+    forbidden = problem.site_mask(config.forbidden, "forbidden")
+    selected = problem.site_existing | problem.site_mask(config.existing, "existing")
     min_count = config.min_markers + (1 if config.redundant else 0)
     sec = [sector_index(problem.pair_bearing_rad[problem.usable_pairs(s)], config.n_sectors)
            for s in range(problem.n_stations)]
@@ -129,8 +129,8 @@ def regular_grid(problem: PlanProblem, config, bounds_xy: tuple[float, float, fl
         spacing works.
     """
     infos = station_infos(problem, config)
-    forbidden = _resolve_ids(problem, config.forbidden, "forbidden")
-    existing = problem.site_existing | _resolve_ids(problem, config.existing, "existing")
+    forbidden = problem.site_mask(config.forbidden, "forbidden")
+    existing = problem.site_existing | problem.site_mask(config.existing, "existing")
     pool = np.flatnonzero(~forbidden & ~problem.site_existing)
     tree = cKDTree(problem.site_xyz[pool, :2])
     if spacings_m is None:

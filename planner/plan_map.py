@@ -16,6 +16,7 @@ MAX_LABELS = 30
 
 def draw_plan_map(outcome, path: Path, dpi: int = 150) -> Path:
     """Draw the map of a :class:`~planner.planning.PlanOutcome` into ``path`` (PNG)."""
+    # lazy: pyplot takes ~1 s to import, paid only once a figure is drawn (not by a refused input)
     import matplotlib
 
     matplotlib.use("Agg")

@@ -1,7 +1,10 @@
 """One planning run, end to end: inputs -> candidates -> visibility -> program -> baselines.
 
 The CLI (``markerplan plan``), the benchmark and notebooks call :func:`load_inputs` and
-:func:`make_plan`; writing files is :mod:`planner.report` and :mod:`planner.plan_map`.
+:func:`make_plan`. The inputs come from a site preset (:mod:`visibility.sites`) and optional
+files; candidate sites are :mod:`planner.candidates`, what each station sees
+:mod:`planner.sight`, the plan :func:`planner.program.plan_sites`, the baselines
+:mod:`planner.baselines` and the as-built check :func:`planner.station_checks.evaluate_layout`.
 """
 
 from __future__ import annotations
@@ -25,8 +28,12 @@ from markerplan.reading import (
 from planner.baselines import Baseline, greedy_cover, regular_grid
 from planner.candidates import Candidates, candidate_sites, load_polygons
 from planner.config import MAX_MARKERS, MAX_STATIONS
-from planner.program import LayoutCheck, PlanResult, evaluate_layout, plan_sites
-from planner.usability import PlanProblem, problem_from_visibility
+from planner.program import PlanResult, plan_sites
+from planner.sight import sight_problem
+from planner.station_checks import LayoutCheck, evaluate_layout
+from planner.usability import PlanProblem
+from visibility.dem import read_dem
+from visibility.sites import load_site
 
 
 @dataclass
@@ -110,9 +117,6 @@ def load_inputs(site: str = "default", seed: int | None = None, dem_path=None,
         A malformed input file (see :func:`read_stations`, :func:`read_markers`,
         :func:`planner.candidates.load_polygons`), or a point outside the DEM.
     """
-    from visibility.dem import read_dem
-    from visibility.sites import load_site
-
     if dem_path is not None and stations_path is None:
         raise ConfigError(f"--dem {dem_path} needs --stations: the preset's stations belong to "
                           "its own terrain, not to this DEM; give --stations with the stations "
@@ -304,14 +308,9 @@ def read_stations(path, dem, lidar_height_m: float) -> tuple[list[str], np.ndarr
         Unreadable or malformed file (see :func:`_read_points`), or a station outside the DEM.
     """
     pts = _read_points(path, "--stations", MAX_STATIONS)
-    ids = [p["id"] for p in pts]
-    xy = np.array([[p["x_m"], p["y_m"]] for p in pts], float)
-    _check_inside(dem, xy, ids, "station")
-    ground = dem.height_at(xy)
-    z = np.array([g + lidar_height_m if p["z_m"] is None else p["z_m"]
-                  for p, g in zip(pts, ground, strict=True)], float)
+    ids, xyz = _points_on_dem(pts, dem, lidar_height_m, "station")
     heading = np.radians([p["heading_deg"] or 0.0 for p in pts])
-    return ids, np.column_stack([xy, z]), heading
+    return ids, xyz, heading
 
 
 def read_markers(path, dem, marker_radius_m: float, option: str = "--existing"
@@ -334,13 +333,20 @@ def read_markers(path, dem, marker_radius_m: float, option: str = "--existing"
     InputFileError, DataError
         Unreadable or malformed file (see :func:`_read_points`), or a marker outside the DEM.
     """
-    pts = _read_points(path, option, MAX_MARKERS)
-    ids = [p["id"] for p in pts]
-    xy = np.array([[p["x_m"], p["y_m"]] for p in pts], float)
-    _check_inside(dem, xy, ids, "marker")
+    return _points_on_dem(_read_points(path, option, MAX_MARKERS), dem, marker_radius_m,
+                          "marker")
+
+
+def _points_on_dem(points: list[dict], dem, height_m: float, label: str
+                   ) -> tuple[list[str], np.ndarray]:
+    """Ids and (k, 3) positions of :func:`_read_points` rows that must lie on the DEM, m; a
+    missing ``z_m`` is the ground plus ``height_m``."""
+    ids = [p["id"] for p in points]
+    xy = np.array([[p["x_m"], p["y_m"]] for p in points], float)
+    _check_inside(dem, xy, ids, label)
     ground = dem.height_at(xy)
-    z = np.array([g + marker_radius_m if p["z_m"] is None else p["z_m"]
-                  for p, g in zip(pts, ground, strict=True)], float)
+    z = np.array([g + height_m if p["z_m"] is None else p["z_m"]
+                  for p, g in zip(points, ground, strict=True)], float)
     return ids, np.column_stack([xy, z])
 
 
@@ -364,25 +370,14 @@ class PlanOutcome:
         return [self.problem.site_ids[j] for j in np.flatnonzero(self.result.selected)]
 
 
-def angular_sampling():
-    """The default rig's angular sampling (:mod:`visibility.sensor`) for point counts."""
-    from visibility.sensor import RigConfig, SensorConfig
-    from visibility.visibility_matrix import AngularSampling
-
-    return AngularSampling(azimuth_step_rad=SensorConfig().azimuth_step_rad,
-                           frames_per_turn=RigConfig().frames_per_turn)
-
-
 def build_problem(inputs: PlanInputs, config, error_model, progress: bool = True
                   ) -> tuple[PlanProblem, Candidates, object, object, dict]:
-    """Candidates + visibility matrix + usability -> the program's input.
+    """Candidates + visibility matrix + usability (:func:`planner.sight.sight_problem`) -> the
+    program's input.
 
     Returns ``(problem, candidates, visibility, scene, timings_s)``; existing markers are
     appended to the candidate sites (ids as given) and fixed.
     """
-    from visibility.scene import RayScene
-    from visibility.visibility_matrix import visibility_matrix
-
     timings = {}
     t = time.perf_counter()
     cand = candidate_sites(inputs.dem, config, boundary=inputs.boundary_xy,
@@ -395,17 +390,10 @@ def build_problem(inputs: PlanInputs, config, error_model, progress: bool = True
                              "rename the existing markers")
     site_xyz = np.vstack([cand.centre_m, inputs.existing_xyz])
     existing = np.r_[np.zeros(len(cand), bool), np.ones(len(inputs.existing_ids), bool)]
-    t = time.perf_counter()
-    scene = RayScene(inputs.dem)
-    timings["scene"] = time.perf_counter() - t
-    vis = visibility_matrix(scene, inputs.station_xyz, site_xyz, inputs.marker_radius_m,
-                            config.max_range_m, config.rays_per_marker, angular_sampling(),
-                            progress=progress)
-    timings["visibility"] = vis.elapsed_s
-    problem = problem_from_visibility(vis, error_model, config, inputs.station_ids,
-                                      inputs.station_xyz, site_ids, site_xyz,
-                                      site_existing=existing)
-    return problem, cand, vis, scene, timings
+    sight = sight_problem(inputs, site_ids, site_xyz, config, error_model,
+                          site_existing=existing, progress=progress)
+    timings.update(sight.timings_s)
+    return sight.problem, cand, sight.visibility, sight.scene, timings
 
 
 def make_plan(inputs: PlanInputs, config, error_model, model_name: str = "default",
@@ -439,14 +427,8 @@ def make_plan(inputs: PlanInputs, config, error_model, model_name: str = "defaul
     timings["baselines"] = time.perf_counter() - t
     as_built = None
     if scene is not None and len(inputs.as_built_ids):
-        from visibility.visibility_matrix import visibility_matrix
-
-        vab = visibility_matrix(scene, inputs.station_xyz, inputs.as_built_xyz,
-                                inputs.marker_radius_m, config.max_range_m,
-                                config.rays_per_marker, angular_sampling(), progress=False)
-        pab = problem_from_visibility(vab, error_model, config, inputs.station_ids,
-                                      inputs.station_xyz, inputs.as_built_ids,
-                                      inputs.as_built_xyz)
+        pab = sight_problem(inputs, inputs.as_built_ids, inputs.as_built_xyz, config,
+                            error_model, scene=scene, progress=False).problem
         as_built = evaluate_layout(pab, np.ones(len(inputs.as_built_ids), bool),
                                    config.replace(existing=(), forbidden=()))
     return PlanOutcome(inputs=inputs, config=config, model_name=model_name, problem=problem,

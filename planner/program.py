@@ -6,11 +6,12 @@ Build, solve and check are separate steps:
   (plain data: ``c``, sparse ``A``, row and variable bounds, index maps);
 - :func:`solve` runs ``scipy.optimize.milp`` (HiGHS) once -> :class:`Solution`;
 - :func:`plan_sites` is the accuracy-cut loop: solve, check every station's predicted accuracy
-  exactly (:func:`planner.accuracy.station_errors`), add valid cuts for stations that fail and
-  re-solve until all pass.
+  exactly (:class:`planner.station_checks.StationInfo`), add valid cuts for stations that fail
+  and re-solve until all pass.
 
-Models are immutable: :meth:`Model.with_rows` and :meth:`Model.with_bounds` return new models, so
-what-if studies re-use one model with a changed bound or an added constraint.
+Models are immutable: :meth:`Model.with_rows` returns a new model, so what-if studies re-use one
+model with changed bounds (``dataclasses.replace``) or added rows. Every row carries a
+:class:`RowKind` (its family and station), so no caller parses row labels.
 
 Formulation
 -----------
@@ -35,8 +36,8 @@ mode also ``z_sk`` "... at least two". For every station ``s`` with usable sites
   ``sum_{j in U_s \\ T'} x_j >= 1``. In redundant mode, when losing marker ``m`` leaves a failing
   set ``T`` (grown to ``T'`` without ``m``): ``sum_{j in U_s \\ T', j != m} x_j - x_m >= 0``.
   Each failing set also yields an outer-approximation cut (the tangent of the convex worst-case
-  variance, :func:`planner.accuracy.linearisation`), which carries the geometry — which sites
-  would fix the failing direction — and makes the loop converge in a few rounds.
+  variance, :meth:`planner.station_checks.StationInfo.oa_cuts`), which carries the geometry —
+  which sites would fix the failing direction — and makes the loop converge in a few rounds.
 
 Options: existing markers (lower bound 1, cost 0), forbidden sites (upper bound 0), a budget
 row ``sum_j x_j <= budget``.
@@ -53,14 +54,32 @@ from scipy.optimize import Bounds, LinearConstraint, milp
 
 from markerplan.errors import ConfigError, InfeasiblePlanError
 from planner import accuracy
-from planner.usability import (
-    OCCLUDED,
-    OUT_OF_DOMAIN,
-    TOO_INACCURATE,
-    PlanProblem,
-    direction_status,
-    sector_index,
+from planner.station_checks import (
+    LayoutCheck,
+    StationInfo,
+    diagnose,
+    evaluate_layout,
+    station_infos,
 )
+from planner.usability import PlanProblem, sector_index
+
+
+@dataclass(frozen=True)
+class RowKind:
+    """What one row of a :class:`Model` is.
+
+    Attributes
+    ----------
+    family : str
+        "count", "info", "sector", "sector2", "sector21", "directions", "directions-loss",
+        "budget" (from :func:`build_model`), "heading", "oa0" (:func:`tightening_rows`), "cut",
+        "oa", "cut-loss", "oa-loss", "info-loss", "heading-loss" (:func:`accuracy_cuts`).
+    station : int
+        Index of the station the row belongs to, -1 for rows of no station (budget).
+    """
+
+    family: str
+    station: int = -1
 
 
 @dataclass(frozen=True)
@@ -78,8 +97,8 @@ class Model:
         Candidate-site index of each ``x`` variable (the first ``nx`` variables).
     site_var : (n,) int
         Variable index of each candidate site, -1 when the site is not in the model.
-    row_kind : tuple of str, (m,)
-        Label of every row ("count:S1", "sector:S1", "info:S1", "cut:S1", "budget", ...).
+    row_kind : tuple of RowKind, (m,)
+        Family and station of every row.
     """
 
     c: np.ndarray
@@ -91,14 +110,21 @@ class Model:
     integrality: np.ndarray
     var_site: np.ndarray
     site_var: np.ndarray
-    row_kind: tuple[str, ...]
+    row_kind: tuple[RowKind, ...]
 
     @property
     def n_vars(self) -> int:
         return self.c.shape[0]
 
     def with_rows(self, rows: sp.sparray, row_lb, row_ub, kinds) -> Model:
-        """A new model with rows appended (this one is unchanged)."""
+        """A new model with rows appended (this one is unchanged).
+
+        Parameters
+        ----------
+        rows : (r, v) sparse
+        row_lb, row_ub : (r,) float
+        kinds : sequence of RowKind, (r,)
+        """
         rows = sp.csr_array(rows)
         if rows.shape[1] != self.n_vars:
             raise ConfigError(f"`rows` must have {self.n_vars} columns, got {rows.shape[1]}")
@@ -106,15 +132,6 @@ class Model:
                        row_lb=np.concatenate([self.row_lb, np.asarray(row_lb, float)]),
                        row_ub=np.concatenate([self.row_ub, np.asarray(row_ub, float)]),
                        row_kind=self.row_kind + tuple(kinds))
-
-    def with_bounds(self, var_index, lb=None, ub=None) -> Model:
-        """A new model with some variable bounds changed (this one is unchanged)."""
-        new_lb, new_ub = self.lb.copy(), self.ub.copy()
-        if lb is not None:
-            new_lb[var_index] = lb
-        if ub is not None:
-            new_ub[var_index] = ub
-        return replace(self, lb=new_lb, ub=new_ub)
 
     def site_row(self, site_index, coef=1.0) -> sp.csr_array:
         """One sparse row with ``coef`` on the ``x`` variables of the given candidate sites."""
@@ -202,8 +219,8 @@ def build_model(problem: PlanProblem, config) -> Model:
     model : Model
     """
     usable = problem.pair_usable
-    existing = _resolve_ids(problem, config.existing, "existing") | problem.site_existing
-    forbidden = _resolve_ids(problem, config.forbidden, "forbidden")
+    existing = problem.site_mask(config.existing, "existing") | problem.site_existing
+    forbidden = problem.site_mask(config.forbidden, "forbidden")
     in_model = existing.copy()
     in_model[problem.pair_site[usable]] = True
     var_site = np.flatnonzero(in_model)
@@ -226,12 +243,11 @@ def build_model(problem: PlanProblem, config) -> Model:
 
     min_count = config.min_markers + (1 if config.redundant else 0)
     for s in range(problem.n_stations):
-        sid = problem.station_ids[s]
         idx = problem.usable_pairs(s)
         cols = site_var[problem.pair_site[idx]]
-        add_row(cols, np.ones(cols.size), min_count, np.inf, f"count:{sid}")
+        add_row(cols, np.ones(cols.size), min_count, np.inf, RowKind("count", s))
         w_t, _ = info_weights(problem, idx, config)
-        add_row(cols, w_t, 1.0, np.inf, f"info:{sid}")
+        add_row(cols, w_t, 1.0, np.inf, RowKind("info", s))
         sec = sector_index(problem.pair_bearing_rad[idx], config.n_sectors)
         present = np.unique(sec)
         y = {}
@@ -241,22 +257,23 @@ def build_model(problem: PlanProblem, config) -> Model:
             n_vars += 1
             in_k = cols[sec == k]
             add_row(np.r_[y[k], in_k], np.r_[1.0, -np.ones(in_k.size)], -np.inf, 0.0,
-                    f"sector:{sid}:{k}")
+                    RowKind("sector", s))
             if config.redundant:
                 z[k] = n_vars
                 n_vars += 1
                 add_row(np.r_[z[k], in_k], np.r_[2.0, -np.ones(in_k.size)], -np.inf, 0.0,
-                        f"sector2:{sid}:{k}")
-                add_row([z[k], y[k]], [1.0, -1.0], -np.inf, 0.0, f"sector21:{sid}:{k}")
+                        RowKind("sector2", s))
+                add_row([z[k], y[k]], [1.0, -1.0], -np.inf, 0.0, RowKind("sector21", s))
         ycols = [y[k] for k in present]
-        add_row(ycols, np.ones(len(ycols)), config.min_sectors, np.inf, f"directions:{sid}")
+        add_row(ycols, np.ones(len(ycols)), config.min_sectors, np.inf, RowKind("directions", s))
         if config.redundant:
             for k in present:
                 vals = [1.0 if kk != k else 0.0 for kk in present]
                 add_row(ycols + [z[k]], vals + [1.0], config.min_sectors, np.inf,
-                        f"directions-loss:{sid}:{k}")
+                        RowKind("directions-loss", s))
     if config.budget is not None:
-        add_row(np.arange(nx), np.ones(nx), -np.inf, float(config.budget), "budget")
+        add_row(np.arange(nx), np.ones(nx), -np.inf, float(config.budget),
+                RowKind("budget"))
 
     a = sp.csr_array((np.concatenate(rows_v) if rows_v else np.zeros(0),
                       (np.concatenate(rows_i) if rows_i else np.zeros(0, np.int64),
@@ -287,29 +304,28 @@ def _boundary_oa_cuts(problem: PlanProblem, s: int, config) -> list:
 
 
 def tightening_rows(problem: PlanProblem, model: Model, config
-                    ) -> tuple[sp.csr_array | None, list[float], list[str]]:
+                    ) -> tuple[sp.csr_array | None, list[float], list[RowKind]]:
     """Valid rows that tighten the model for ``config.requirement_m`` before the first solve.
 
     Per station: the heading-information row
     (:func:`planner.accuracy.heading_information_lower_bound`) and outer-approximation tangents
-    at 9 rim points (``"heading:S"``, ``"oa0:S"``). Unlike the ``info:`` rows of
+    at 9 rim points (families ``"heading"``, ``"oa0"``). Unlike the ``info:`` rows of
     :func:`build_model` they do not rescale with the requirement, so a model re-used for another
     requirement level must leave them out. Returns ``(rows, lower, kinds)``.
     """
     rows, lower, kinds = [], [], []
     for s in range(problem.n_stations):
-        sid = problem.station_ids[s]
         idx = problem.usable_pairs(s)
         if idx.size == 0:
             continue
         _, w_h = info_weights(problem, idx, config)
         rows.append(model.site_row(problem.pair_site[idx], w_h))
         lower.append(1.0)
-        kinds.append(f"heading:{sid}")
+        kinds.append(RowKind("heading", s))
         for sites, coef, rhs in _boundary_oa_cuts(problem, s, config):
             rows.append(model.site_row(sites, coef))
             lower.append(rhs)
-            kinds.append(f"oa0:{sid}")
+            kinds.append(RowKind("oa0", s))
     return (sp.csr_array(sp.vstack(rows)) if rows else None), lower, kinds
 
 
@@ -328,17 +344,6 @@ def info_weights(problem: PlanProblem, pairs: np.ndarray, config
     w_h = w * np.sum(d**2, axis=1) / accuracy.heading_information_lower_bound(
         config.requirement_m, config.working_radius_m)
     return w_t, w_h
-
-
-def _resolve_ids(problem: PlanProblem, ids, name: str) -> np.ndarray:
-    pos = {sid: i for i, sid in enumerate(problem.site_ids)}
-    unknown = [i for i in ids if i not in pos]
-    if unknown:
-        raise ConfigError(f"`{name}` names unknown site id(s) {', '.join(unknown[:5])}; "
-                          "use ids from the candidate sites or the marker layout")
-    mask = np.zeros(problem.n_sites, dtype=bool)
-    mask[[pos[i] for i in ids]] = True
-    return mask
 
 
 def solve(model: Model, time_limit_s: float = 60.0, gap: float = 0.0) -> Solution:
@@ -391,241 +396,14 @@ def solve(model: Model, time_limit_s: float = 60.0, gap: float = 0.0) -> Solutio
                     solve_time_s=elapsed, message=str(res.message), x=x)
 
 
-class StationInfo:
-    """Cached usable sites of one station and the information each contributes."""
-
-    def __init__(self, problem: PlanProblem, s: int, config) -> None:
-        idx = problem.usable_pairs(s)
-        self.pairs = idx
-        self.sites = problem.pair_site[idx]
-        self.sigma_m = problem.pair_sigma_m[idx]
-        self.info = (accuracy.pair_information(problem.station_xyz[s],
-                                               problem.site_xyz[self.sites], self.sigma_m)
-                     if idx.size else np.zeros((0, 4, 4)))
-        self.position = {int(j): k for k, j in enumerate(self.sites)}
-        self.radius = config.working_radius_m
-        self.incl = config.inclinometer_sigma_rad
-
-    def error(self, sites) -> float:
-        """Predicted error using the usable ones among ``sites`` (candidate-site indices), m."""
-        k = [self.position[int(j)] for j in np.atleast_1d(sites) if int(j) in self.position]
-        if not k:
-            return float("inf")
-        j = self.info[k].sum(axis=0)
-        return float(accuracy.errors_from_information(j[None], self.radius, self.incl)[0])
-
-    def oa_cuts(self, sites, requirement_m: float, exclude: int | None = None,
-                scale: float = 1.0, rim: str = "worst") -> list:
-        """Outer-approximation cuts linearised at ``scale`` x the information of ``sites``
-        (:func:`planner.accuracy.linearisation`), as ``(sites, coefficients, rhs)`` with the cut
-        ``sum coef * x >= rhs``; only cuts with a positive right-hand side. ``exclude`` gets no
-        coefficient (the cut then holds for the others alone)."""
-        k = [self.position[int(j)] for j in np.atleast_1d(sites) if int(j) in self.position]
-        if not k:
-            return []
-        keep = np.ones(self.sites.size, bool)
-        if exclude is not None and int(exclude) in self.position:
-            keep[self.position[int(exclude)]] = False
-        out = []
-        for v, rhs in accuracy.linearisation(scale * self.info[k].sum(axis=0), self.radius,
-                                             self.incl, requirement_m, rim):
-            if rhs > 0:
-                coef = np.einsum("a,kab,b->k", v, self.info[keep], v)
-                out.append((self.sites[keep], coef / rhs, 1.0))
-        return out
-
-    def grow_failing(self, failing, exclude: int | None, requirement_m: float,
-                     max_skips: int = 25) -> np.ndarray:
-        """Grow a failing site set, least informative sites first, while it keeps failing.
-
-        Monotonicity makes "the set plus the next ``m`` sites in order still fails" monotone in
-        ``m``, so each run of additions is found by bisection; a site whose addition would make
-        the station pass is skipped (at most ``max_skips`` times). ``exclude`` is never added.
-        Returns candidate-site indices of the grown (still failing) set.
-        """
-        in_set = np.zeros(self.sites.size, bool)
-        in_set[[self.position[int(j)] for j in np.atleast_1d(failing)
-                if int(j) in self.position]] = True
-        order = np.argsort(1.0 / self.sigma_m**2, kind="stable")
-        skip = in_set.copy()
-        if exclude is not None and int(exclude) in self.position:
-            skip[self.position[int(exclude)]] = True
-        order = order[~skip[order]]
-        total = self.info[in_set].sum(axis=0)
-        cum = np.concatenate([np.zeros((1, 4, 4)), np.cumsum(self.info[order], axis=0)])
-
-        def fails(a: int, b: int) -> bool:
-            trial = total + cum[b] - cum[a]
-            e = accuracy.errors_from_information(trial[None], self.radius, self.incl)[0]
-            return bool(e > requirement_m)
-
-        pos, skips = 0, 0
-        while pos < order.size and skips <= max_skips:
-            lo, hi = 0, order.size - pos  # largest m with fails(pos, pos + m)
-            while lo < hi:
-                mid = (lo + hi + 1) // 2
-                if fails(pos, pos + mid):
-                    lo = mid
-                else:
-                    hi = mid - 1
-            in_set[order[pos:pos + lo]] = True
-            total = total + cum[pos + lo] - cum[pos]
-            pos += lo + 1
-            skips += 1
-        return self.sites[in_set]
-
-
-def station_infos(problem: PlanProblem, config) -> list[StationInfo]:
-    """:class:`StationInfo` of every station (cache it across repeated checks)."""
-    return [StationInfo(problem, s, config) for s in range(problem.n_stations)]
-
-
-def diagnose(problem: PlanProblem, config, infos: list[StationInfo] | None = None
-             ) -> dict[str, str]:
-    """Stations that no layout can satisfy, with the reason (empty dict: none found).
-
-    Checks, per station and with every allowed usable site selected: any site in range, any
-    unoccluded, enough usable sites, enough sectors, accuracy reachable (and, in redundant mode,
-    reachable after losing any one site).
-    """
-    infos = infos or station_infos(problem, config)
-    forbidden = _resolve_ids(problem, config.forbidden, "forbidden")
-    allowed = ~forbidden
-    min_count = config.min_markers + (1 if config.redundant else 0)
-    out = {}
-    for s in range(problem.n_stations):
-        sid = problem.station_ids[s]
-        pairs = np.flatnonzero(problem.pair_station == s)
-        pairs = pairs[allowed[problem.pair_site[pairs]]]
-        if pairs.size == 0:
-            out[sid] = f"no candidate site within {config.max_range_m:g} m (no site in range)"
-            continue
-        reason = problem.pair_reason[pairs]
-        idx = pairs[reason == 0]
-        if idx.size == 0:
-            if np.all(reason == OCCLUDED):
-                out[sid] = f"all {pairs.size} sites in range are occluded"
-            else:
-                out[sid] = (f"no usable site: {np.sum(reason == OCCLUDED)} occluded, "
-                            f"{np.sum(reason == OUT_OF_DOMAIN)} outside the error model's "
-                            f"domain, {np.sum(reason == TOO_INACCURATE)} with 95 % centre error "
-                            f"above {config.requirement_m:g} m")
-            continue
-        sites = problem.pair_site[idx]
-        sel = np.zeros(problem.n_sites, bool)
-        sel[sites] = True
-        count, sectors = direction_status(problem, sel, config.n_sectors)
-        if count[s] < min_count:
-            out[sid] = f"too few usable sites: {count[s]} (needs {min_count})"
-            continue
-        if sectors[s] < config.min_sectors:
-            out[sid] = (f"too few directions: usable sites in {sectors[s]} of "
-                        f"{config.n_sectors} sectors (needs {config.min_sectors})")
-            continue
-        if config.redundant:
-            per = np.bincount(sector_index(problem.pair_bearing_rad[idx], config.n_sectors),
-                              minlength=config.n_sectors)
-            left = int((per > 0).sum()) - int(np.any(per == 1))
-            if left < config.min_sectors:
-                out[sid] = (f"too few directions after losing one marker: the usable sites "
-                            f"leave {left} of {config.n_sectors} sectors (needs "
-                            f"{config.min_sectors})")
-                continue
-        err = infos[s].error(sites)
-        if err > config.requirement_m:
-            out[sid] = (f"accuracy unreachable: all {sites.size} usable sites give "
-                        f"{err:.3f} m > {config.requirement_m:g} m")
-            continue
-        if config.redundant:
-            worst = max(infos[s].error(np.delete(sites, i)) for i in range(sites.size))
-            if worst > config.requirement_m:
-                out[sid] = (f"accuracy unreachable after losing one marker: {worst:.3f} m > "
-                            f"{config.requirement_m:g} m")
-    return out
-
-
-@dataclass(frozen=True)
-class LayoutCheck:
-    """Whether a marker layout meets the requirement at every station.
-
-    Attributes
-    ----------
-    count, sectors : (s,) int
-        Usable selected markers and occupied sectors per station.
-    error_m : (s,) float
-        Predicted error per station, m.
-    worst_loss_error_m : (s,) float or None
-        Redundant mode: worst predicted error after losing any one of the station's markers.
-    worst_loss_sectors : (s,) int or None
-        Redundant mode: fewest occupied sectors after losing any one marker.
-    ok : (s,) bool
-    """
-
-    count: np.ndarray
-    sectors: np.ndarray
-    error_m: np.ndarray
-    worst_loss_error_m: np.ndarray | None
-    worst_loss_sectors: np.ndarray | None
-    ok: np.ndarray
-
-    @property
-    def all_ok(self) -> bool:
-        return bool(self.ok.all())
-
-
-def evaluate_layout(problem: PlanProblem, selected: np.ndarray, config,
-                    infos: list[StationInfo] | None = None) -> LayoutCheck:
-    """Check directions and predicted accuracy of a layout at every station.
-
-    Parameters
-    ----------
-    problem : PlanProblem
-    selected : (n,) bool
-        Candidate sites holding a marker.
-    config : PlanConfig
-        In redundant mode the layout must also survive the loss of any one marker.
-    infos : list of StationInfo, optional
-        Cache from :func:`station_infos`.
-    """
-    infos = infos or station_infos(problem, config)
-    selected = np.asarray(selected, dtype=bool)
-    count, sectors = direction_status(problem, selected, config.n_sectors)
-    err = np.array([infos[s].error(infos[s].sites[selected[infos[s].sites]])
-                    for s in range(problem.n_stations)])
-    ok = (count >= config.min_markers) & (sectors >= config.min_sectors) \
-        & (err <= config.requirement_m)
-    worst_err = worst_sec = None
-    if config.redundant:
-        worst_err = err.copy()
-        worst_sec = sectors.copy()
-        for s in range(problem.n_stations):
-            info = infos[s]
-            chosen = info.sites[selected[info.sites]]
-            if chosen.size:
-                parts = info.info[selected[info.sites]]
-                without = parts.sum(axis=0)[None] - parts  # J after losing each marker
-                worst_err[s] = max(worst_err[s], float(accuracy.errors_from_information(
-                    without, info.radius, info.incl).max()))
-            sel_pairs = problem.usable_pairs(s)
-            sel_pairs = sel_pairs[selected[problem.pair_site[sel_pairs]]]
-            sec = sector_index(problem.pair_bearing_rad[sel_pairs], config.n_sectors)
-            per = np.bincount(sec, minlength=config.n_sectors)
-            if chosen.size:
-                worst_sec[s] = int((per > 0).sum()) - int(np.any(per == 1))
-        ok &= (count >= config.min_markers + 1) & (worst_sec >= config.min_sectors) \
-            & (worst_err <= config.requirement_m)
-    return LayoutCheck(count=count, sectors=sectors, error_m=err, worst_loss_error_m=worst_err,
-                       worst_loss_sectors=worst_sec, ok=ok)
-
-
 def accuracy_cuts(problem: PlanProblem, model: Model, selected: np.ndarray, config,
                   infos: list[StationInfo], outer_approximation: bool = False
-                  ) -> tuple[sp.csr_array | None, list[float], list[str]]:
+                  ) -> tuple[sp.csr_array | None, list[float], list[RowKind]]:
     """Valid cuts for every station whose predicted accuracy fails with ``selected``.
 
     By default only the combinatorial (no-good) cuts, which stay valid for any looser
-    requirement; with ``outer_approximation`` also the tangent cuts (``"oa:"``, ``"oa-loss:"``,
-    ``"info-loss:"``, ``"heading-loss:"`` rows), valid for ``config.requirement_m`` only.
+    requirement; with ``outer_approximation`` also the tangent cuts (``"oa"``, ``"oa-loss"``,
+    ``"info-loss"``, ``"heading-loss"`` rows), valid for ``config.requirement_m`` only.
 
     Returns
     -------
@@ -633,23 +411,22 @@ def accuracy_cuts(problem: PlanProblem, model: Model, selected: np.ndarray, conf
         ``None`` when every station passes.
     lower : list of float
         Row lower bounds (upper bounds are +inf).
-    kinds : list of str
+    kinds : list of RowKind
     """
     rows, lower, kinds = [], [], []
     for s in range(problem.n_stations):
-        sid = problem.station_ids[s]
         info = infos[s]
         chosen = info.sites[selected[info.sites]]
         if info.error(chosen) > config.requirement_m:
             grown = info.grow_failing(chosen, None, config.requirement_m)
             rows.append(model.site_row(np.setdiff1d(info.sites, grown)))
             lower.append(1.0)
-            kinds.append(f"cut:{sid}")
+            kinds.append(RowKind("cut", s))
             for at in (chosen, grown) if outer_approximation else ():
                 for oa in info.oa_cuts(at, config.requirement_m, rim="spread"):
                     rows.append(model.site_row(oa[0], oa[1]))
                     lower.append(oa[2])
-                    kinds.append(f"oa:{sid}")
+                    kinds.append(RowKind("oa", s))
             continue
         if not config.redundant:
             continue
@@ -660,21 +437,21 @@ def accuracy_cuts(problem: PlanProblem, model: Model, selected: np.ndarray, conf
                 rest = np.setdiff1d(info.sites, np.r_[grown, m])
                 rows.append(model.site_row(np.r_[rest, m], np.r_[np.ones(rest.size), -1.0]))
                 lower.append(0.0)
-                kinds.append(f"cut-loss:{sid}:{problem.site_ids[m]}")
+                kinds.append(RowKind("cut-loss", s))
                 if not outer_approximation:
                     continue
                 for oa in info.oa_cuts(left, config.requirement_m, exclude=int(m)):
                     # if m is selected, the others alone must pass
                     rows.append(model.site_row(np.r_[oa[0], m], np.r_[oa[1], -oa[2]]))
                     lower.append(0.0)
-                    kinds.append(f"oa-loss:{sid}:{problem.site_ids[m]}")
+                    kinds.append(RowKind("oa-loss", s))
                 # if m is selected, the others alone must carry the information cuts
                 others = np.flatnonzero(problem.pair_site[info.pairs] != m)
                 for w, name in zip(info_weights(problem, info.pairs[others], config),
                                    ("info", "heading"), strict=True):
                     rows.append(model.site_row(np.r_[info.sites[others], m], np.r_[w, -1.0]))
                     lower.append(0.0)
-                    kinds.append(f"{name}-loss:{sid}:{problem.site_ids[m]}")
+                    kinds.append(RowKind(f"{name}-loss", s))
     block = sp.csr_array(sp.vstack(rows)) if rows else None
     return block, lower, kinds
 

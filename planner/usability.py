@@ -2,8 +2,9 @@
 
 :class:`PlanProblem` is the plain-data input of the integer program: stations, candidate sites,
 and the sparse list of station-site pairs with bearing, error-model sigma and a usability verdict.
-It is built either from a visibility matrix and an error model (:func:`problem_from_visibility`)
-or from a visibility table computed elsewhere (:mod:`planner.visibility_io`).
+It looks site ids up (:meth:`PlanProblem.site_mask`) and gives the sub-problem of some sites
+(:meth:`PlanProblem.restrict`). :func:`problem_from_visibility` judges every pair of a visibility
+matrix with an error model; :func:`direction_status` counts a layout's markers and sectors.
 """
 
 from __future__ import annotations
@@ -79,9 +80,59 @@ class PlanProblem:
         idx = np.flatnonzero((self.pair_station == station) & self.pair_usable)
         return idx[np.argsort(self.pair_site[idx], kind="stable")]
 
-    def with_pair_reason(self, reason: np.ndarray) -> PlanProblem:
-        """Copy with a new usability verdict (inputs are never mutated)."""
-        return replace(self, pair_reason=np.asarray(reason, dtype=np.int8))
+    def site_mask(self, ids, name: str) -> np.ndarray:
+        """(n,) bool: the candidate sites named by ``ids``.
+
+        Parameters
+        ----------
+        ids : iterable of str
+            Site ids (e.g. ``config.existing``).
+        name : str
+            How error messages name the list (``"existing"``, ``"forbidden"``).
+
+        Raises
+        ------
+        ConfigError
+            An id that names no candidate site.
+        """
+        ids = list(ids)
+        pos = {sid: i for i, sid in enumerate(self.site_ids)}
+        unknown = [i for i in ids if i not in pos]
+        if unknown:
+            raise ConfigError(f"`{name}` names unknown site id(s) {', '.join(unknown[:5])}; "
+                              "use ids from the candidate sites or the marker layout")
+        mask = np.zeros(self.n_sites, dtype=bool)
+        mask[[pos[i] for i in ids]] = True
+        return mask
+
+    def restrict(self, sites: np.ndarray) -> PlanProblem:
+        """The problem with only the candidate sites in ``sites`` (their pairs kept, re-indexed).
+
+        Parameters
+        ----------
+        sites : (n,) bool
+            Candidate sites to keep.
+
+        Returns
+        -------
+        sub : PlanProblem
+            Same stations; the kept sites in their original order.
+        """
+        keep = np.asarray(sites, dtype=bool)
+        if keep.shape != (self.n_sites,):
+            raise ConfigError(f"`sites` must have shape ({self.n_sites},), got {keep.shape}")
+        idx = np.flatnonzero(keep)
+        new = np.full(self.n_sites, -1, dtype=np.int64)
+        new[idx] = np.arange(idx.size)
+        pairs = keep[self.pair_site]
+        return replace(self, site_ids=tuple(self.site_ids[j] for j in idx),
+                       site_xyz=self.site_xyz[idx], site_existing=self.site_existing[idx],
+                       site_cost=self.site_cost[idx], pair_station=self.pair_station[pairs],
+                       pair_site=new[self.pair_site[pairs]],
+                       pair_distance_m=self.pair_distance_m[pairs],
+                       pair_bearing_rad=self.pair_bearing_rad[pairs],
+                       pair_sigma_m=self.pair_sigma_m[pairs],
+                       pair_reason=self.pair_reason[pairs])
 
 
 def _problem_iv(p: PlanProblem) -> None:

@@ -280,11 +280,6 @@ class RayScene:
         return best_t, best_k, best_c
 
 
-def terrain_scene(dem: DEM, threads: int | None = None) -> RayScene:
-    """A terrain-only scene (rocks are in the DEM), e.g. for station x site visibility."""
-    return RayScene(dem, None, threads=threads)
-
-
 def _cos_incidence(normals: np.ndarray, d: np.ndarray) -> np.ndarray:
     """|cos| between unit directions (n, 3) and (unnormalised) normals (n, 3)."""
     ng = normals.astype(np.float64)

@@ -83,8 +83,8 @@ def command(layout_spec, site_name, site_seed, dem_path, stations_path, station_
     simulates (the pipeline self-calibrates it).
     """
     from markerplan.output_folder import output_folder
-    from planner.reduction_plot import plot_tradeoff
-    from planner.reduction_report import reduce_timings, summary, write_reduce_files
+    from planner.reduction.plot import plot_tradeoff
+    from planner.reduction.report import reduce_timings, summary, write_reduce_files
 
     inputs_given = given_paths(dem_path, stations_path, boundary_path, error_model.path,
                                config_path, *exclude_paths,
@@ -122,8 +122,8 @@ def _study(layout_spec, sources, error_model, config_path, free, keep_ids, drop_
     from markerplan.errors import ConfigError
     from pipeline.rig import MountingOffsets
     from planner.config import load_config
-    from planner.reduction_report import reduce_record
-    from planner.reduction_study import layout_problem, marker_ids_iv, resolve_inputs, run_study
+    from planner.reduction.report import reduce_record
+    from planner.reduction.study import layout_problem, marker_ids_iv, resolve_inputs, run_study
 
     config = load_config(config_path) if config_path else None
     inputs, layout, config = resolve_inputs(layout_spec, config=config, **sources)
@@ -148,7 +148,7 @@ def _study(layout_spec, sources, error_model, config_path, free, keep_ids, drop_
     if verify:
         import time
 
-        from planner.reduction_verify import verify_points
+        from planner.reduction.verify import verify_points
 
         t = time.perf_counter()
         verified = verify_points(study, inputs, ks, model, seed=seed, progress=progress,

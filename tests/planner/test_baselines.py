@@ -2,7 +2,8 @@ import numpy as np
 
 from planner.baselines import greedy_cover, regular_grid
 from planner.config import PlanConfig
-from planner.program import evaluate_layout, plan_sites
+from planner.program import plan_sites
+from planner.station_checks import evaluate_layout
 from tests.planner.instances import make_problem
 
 

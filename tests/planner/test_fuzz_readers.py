@@ -21,7 +21,7 @@ from planner.candidates import load_polygons
 from planner.config import BOUNDS, PlanConfig, load_config
 from planner.plan_file import read_plan
 from planner.planning import read_markers, read_stations
-from planner.reduction_study import _plan_layout
+from planner.reduction.study import _plan_layout
 from planner.visibility_io import REQUIRED, read_visibility_table
 from tests.json_paths import json_paths
 

@@ -5,7 +5,8 @@ import pytest
 
 from markerplan.errors import ConfigError, InfeasiblePlanError
 from planner.config import PlanConfig
-from planner.program import build_model, evaluate_layout, plan_sites, solve, station_infos
+from planner.program import RowKind, build_model, plan_sites, solve
+from planner.station_checks import evaluate_layout, station_infos
 from tests.planner.instances import make_problem, ring
 
 LOOSE = PlanConfig(requirement_m=0.10, working_radius_m=10.0, max_range_m=30.0)
@@ -123,10 +124,9 @@ def test_models_and_inputs_are_never_mutated():
     before = {k: np.copy(getattr(p, k)) for k in ("pair_reason", "pair_sigma_m", "site_xyz")}
     model = build_model(p, LOOSE)
     rows = model.site_row([0, 1])
-    bigger = model.with_rows(rows, [1.0], [np.inf], ["extra"])
-    tighter = model.with_bounds(0, ub=0.0)
+    bigger = model.with_rows(rows, [1.0], [np.inf], [RowKind("budget")])
     assert model.A.shape[0] + 1 == bigger.A.shape[0]
-    assert model.ub[0] == 1.0 and tighter.ub[0] == 0.0
+    assert len(bigger.row_kind) == bigger.A.shape[0] and bigger.row_kind[-1].station == -1
     plan_sites(p, LOOSE)
     for k, v in before.items():
         assert np.array_equal(getattr(p, k), v)

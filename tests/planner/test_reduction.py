@@ -11,24 +11,28 @@ from hypothesis import strategies as st
 
 from markerplan.errors import ConfigError, InfeasiblePlanError
 from planner.config import PlanConfig
-from planner.program import evaluate_layout, plan_sites, station_infos
-from planner.reduction import (
+from planner.program import plan_sites
+from planner.reduction.curve import (
     drop_order,
     failure_reason,
     marker_losses,
-    restrict,
     tradeoff_curve,
 )
+from planner.reduction.study import run_study
+from planner.station_checks import evaluate_layout, station_infos
 from tests.planner.instances import make_problem, ring
 
 CONFIG = PlanConfig(requirement_m=0.03, working_radius_m=10.0)
 
 
-def _brute_force(problem, config, k):
-    """Least worst-station error over all k-subsets meeting count and directions."""
+def _brute_force(problem, config, k, keep=None, drop=None):
+    """Least worst-station error over all k-subsets meeting count and directions (holding site
+    ``keep`` and not site ``drop``)."""
     infos = station_infos(problem, config)
     best = np.inf
     for sub in itertools.combinations(range(problem.n_sites), k):
+        if (keep is not None and keep not in sub) or drop in sub:
+            continue
         sel = np.zeros(problem.n_sites, bool)
         sel[list(sub)] = True
         chk = evaluate_layout(problem, sel, config, infos)
@@ -170,31 +174,17 @@ def test_kept_and_dropped_markers_are_honoured(tiny):
     for p in curve.points:
         assert p.selected[5] and not p.selected[1]
         assert p.worst_error_m == pytest.approx(
-            _brute_force_with(tiny, config, p.k, keep=5, drop=1), rel=1e-9)
+            _brute_force(tiny, config, p.k, keep=5, drop=1), rel=1e-9)
     steps = drop_order(tiny, config, np.ones(tiny.n_sites, bool))
     assert all(s.removed != 5 and not s.selected[1] for s in steps)
-
-
-def _brute_force_with(problem, config, k, keep, drop):
-    infos = station_infos(problem, config)
-    best = np.inf
-    for sub in itertools.combinations(range(problem.n_sites), k):
-        if keep not in sub or drop in sub:
-            continue
-        sel = np.zeros(problem.n_sites, bool)
-        sel[list(sub)] = True
-        chk = evaluate_layout(problem, sel, config, infos)
-        if np.all((chk.count >= config.min_markers) & (chk.sectors >= config.min_sectors)):
-            best = min(best, float(chk.error_m.max()))
-    return best
+    with pytest.raises(ConfigError, match="unknown site id"):
+        drop_order(tiny, CONFIG.replace(forbidden=("nope",)), np.ones(tiny.n_sites, bool))
 
 
 def test_free_choice_is_never_worse_than_the_layout(tiny):
-    from planner.reduction_study import run_study
-
     layout = np.zeros(tiny.n_sites, bool)
     layout[[0, 1, 2, 4, 5, 6]] = True
-    sub = restrict(tiny, layout)
+    sub = tiny.restrict(layout)
     fixed = run_study(sub, CONFIG, np.ones(sub.n_sites, bool))
     free = run_study(tiny, CONFIG, layout, free=True)
     assert free.n_layout == 6 and free.curve.points[0].k == 6
@@ -214,7 +204,7 @@ def test_an_unproven_point_is_repaired_from_a_better_smaller_subset(tiny):
     import time
     from dataclasses import replace
 
-    from planner.reduction import _MinimaxModel, _monotone
+    from planner.reduction.curve import _MinimaxModel, _monotone
 
     curve = tradeoff_curve(tiny, CONFIG)
     mm = _MinimaxModel(tiny, CONFIG, time.perf_counter() + 10)

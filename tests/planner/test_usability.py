@@ -56,3 +56,18 @@ def test_direction_status_counts_only_usable_selected():
     p = make_problem([[0, 0]], ring([0, 0], 8.0, [10, 20, 100, 200]), occluded=[(0, 3)])
     count, sectors = direction_status(p, np.array([True, True, True, True]), 6)
     assert count.tolist() == [3] and sectors.tolist() == [2]
+
+
+def test_site_ids_are_looked_up_strictly_and_sub_problems_keep_their_pairs():
+    p = make_problem([[0, 0], [20, 0]], ring([0, 0], 8.0, [0, 90, 180, 270]))
+    assert p.site_mask(("C001", "C003"), "existing").tolist() == [False, True, False, True]
+    with pytest.raises(ConfigError, match="`forbidden` names unknown site id"):
+        p.site_mask(("C001", "nope"), "forbidden")
+    sub = p.restrict(np.array([False, True, False, True]))
+    assert sub.site_ids == ("C001", "C003") and sub.n_stations == p.n_stations
+    kept = np.isin(p.pair_site, [1, 3])
+    assert sub.pair_station.tolist() == p.pair_station[kept].tolist()
+    assert [sub.site_ids[j] for j in sub.pair_site] == [p.site_ids[j] for j in p.pair_site[kept]]
+    assert np.array_equal(sub.pair_sigma_m, p.pair_sigma_m[kept])
+    with pytest.raises(ConfigError, match="shape"):
+        p.restrict(np.ones(3, bool))

@@ -1,6 +1,6 @@
 """``tradeoff.png``: markers kept against worst-station and mean predicted error, the requirement
 line, the drop order for comparison and, after ``--verify``, the achieved errors beside the
-predicted ones. Reads a ``reduce.json`` document (:mod:`planner.reduction_report`)."""
+predicted ones. Reads a ``reduce.json`` document."""
 
 from __future__ import annotations
 
@@ -23,6 +23,7 @@ def plot_tradeoff(doc: dict, path: str | Path) -> Path:
     -------
     path : Path
     """
+    # lazy: pyplot takes ~1 s to import, paid only once a figure is drawn (not by a refused input)
     import matplotlib
 
     matplotlib.use("Agg")
@@ -79,6 +80,7 @@ def plot_tradeoff(doc: dict, path: str | Path) -> Path:
 def _log_error_axis(ax, label: str) -> None:
     """Log-scale error axis with plain-number ticks: errors of a few millimetres and the 10 cm
     requirement line stay readable in one panel."""
+    # lazy, as in plot_tradeoff: only when a figure is drawn
     from matplotlib.ticker import FuncFormatter
 
     ax.set_yscale("log")

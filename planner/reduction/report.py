@@ -29,7 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from markerplan.provenance import provenance
-from planner.reduction import failure_reason
+from planner.reduction.curve import failure_reason
 
 SCHEMA = "markerplan-reduce"
 SCHEMA_VERSION = 1
@@ -55,7 +55,7 @@ def _stations(problem, check, config) -> list[dict]:
 
 def reduce_record(study, layout, inputs, model_name: str, options: dict,
                   verify: dict | None = None) -> dict:
-    """The ``reduce.json`` document of a :class:`~planner.reduction_study.ReductionStudy`."""
+    """The ``reduce.json`` document of a :class:`~planner.reduction.study.ReductionStudy`."""
     prob, cfg, curve = study.problem, study.config, study.curve
     statuses = Counter(s for p in curve.points for s in p.statuses)
     points = []

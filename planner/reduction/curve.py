@@ -4,7 +4,7 @@ For a :class:`~planner.usability.PlanProblem` whose candidate sites are the mark
 kept (a layout, or with ``--free`` every candidate site), three studies:
 
 - :func:`tradeoff_curve`: for every count ``k``, the ``k`` markers that minimise the **worst
-  station's** predicted error (:mod:`planner.accuracy`), proven by integer programming;
+  station's** predicted error (:mod:`planner.station_checks`), proven by integer programming;
 - :func:`drop_order`: remove one marker at a time, each time the one whose loss hurts least;
 - :func:`marker_losses`: for every marker, the layout without it (robustness).
 
@@ -41,16 +41,8 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from markerplan.errors import ConfigError, InfeasiblePlanError
-from planner.program import (
-    LayoutCheck,
-    Model,
-    accuracy_cuts,
-    build_model,
-    diagnose,
-    evaluate_layout,
-    solve,
-    station_infos,
-)
+from planner.program import Model, RowKind, accuracy_cuts, build_model, solve
+from planner.station_checks import LayoutCheck, diagnose, evaluate_layout, station_infos
 from planner.usability import PlanProblem, directions_ok
 
 #: Final bisection step: a subset is proven optimal when nothing is feasible this far below it.
@@ -234,13 +226,12 @@ class _MinimaxModel:
         nx = base.var_site.size
         self.nx = nx
         self.model: Model = base.with_rows(base.site_row(base.var_site), [0.0], [float(nx)],
-                                           ["reduce:budget"])
+                                           [RowKind("budget")])
         self.budget_row = self.model.A.shape[0] - 1
         self.info_rows = np.array([i for i, k in enumerate(self.model.row_kind)
-                                   if k.startswith("info:")], dtype=np.int64)
+                                   if k.family == "info"], dtype=np.int64)
         self.cut_rows: list[int] = []
         self.cut_threshold: list[float] = []
-        self.station_index = {sid: s for s, sid in enumerate(problem.station_ids)}
         self.solve_time_s = 0.0
         self.solve_cap_s = np.inf  # longest single solve, s
 
@@ -305,10 +296,9 @@ class _MinimaxModel:
             self.cut_rows.extend(range(start, start + len(kinds)))
             self.cut_threshold.extend(thresholds)
 
-    def _threshold(self, row, kind: str) -> float:
+    def _threshold(self, row, kind: RowKind) -> float:
         """Error of the failing set a cut row excludes: the cut is valid for eps below it."""
-        s = self.station_index[kind.split(":", 1)[1]]
-        info = self.infos[s]
+        info = self.infos[kind.station]
         support = self.model.var_site[row.indices[row.indices < self.nx]]
         return info.error(np.setdiff1d(info.sites, support))
 
@@ -380,7 +370,7 @@ def tradeoff_curve(problem: PlanProblem, config, k_max: int | None = None,
             + (": " + "; ".join(f"{k}: {v}" for k, v in why.items()) if why else "")
             + "; add markers or relax min_markers / min_sectors")
     n = problem.n_sites
-    pool = ~_id_mask(problem, config.forbidden)
+    pool = ~problem.site_mask(config.forbidden, "forbidden")
     k_max = int(pool.sum()) if k_max is None else k_max
     k_min = k_dir if k_min is None else k_min
     _k_range_iv(k_min, k_max, k_dir, int(pool.sum()))
@@ -389,7 +379,7 @@ def tradeoff_curve(problem: PlanProblem, config, k_max: int | None = None,
         start = None  # not a valid incumbent: some station lacks its count or directions
     allowed = np.isin(np.arange(n), mm.model.var_site) & pool
     floor = _worst(mm, allowed) * (1 - REL_TOL)  # no subset beats keeping every site
-    kept = _id_mask(problem, config.existing)
+    kept = problem.site_mask(config.existing, "existing")
     points: list[CurvePoint] = []
     complete = True
     best_above = None  # proven optimum of the next larger k (a lower bound for this k)
@@ -563,12 +553,6 @@ def _worst(mm: _MinimaxModel, selected: np.ndarray) -> float:
     return float(max(info.error(info.sites[selected[info.sites]]) for info in mm.infos))
 
 
-def _id_mask(problem: PlanProblem, ids) -> np.ndarray:
-    mask = np.zeros(problem.n_sites, dtype=bool)
-    mask[[problem.site_ids.index(i) for i in ids if i in problem.site_ids]] = True
-    return mask
-
-
 def _k_range_iv(k_min: int, k_max: int, k_dir: int, n: int) -> None:
     for name, v in (("k_min", k_min), ("k_max", k_max)):
         if not isinstance(v, (int, np.integer)) or isinstance(v, bool):
@@ -579,36 +563,6 @@ def _k_range_iv(k_min: int, k_max: int, k_dir: int, n: int) -> None:
     if not k_dir <= k_min <= k_max:
         raise ConfigError(f"`k_min` must be in {k_dir}..{k_max} (below {k_dir} markers no subset "
                           f"meets the direction rows), got {k_min}")
-
-
-def restrict(problem: PlanProblem, keep: np.ndarray) -> PlanProblem:
-    """The problem with only the candidate sites in ``keep`` (their pairs kept, re-indexed).
-
-    Parameters
-    ----------
-    problem : PlanProblem
-    keep : (n,) bool
-
-    Returns
-    -------
-    sub : PlanProblem
-        Sites in their original order.
-    """
-    keep = np.asarray(keep, dtype=bool)
-    if keep.shape != (problem.n_sites,):
-        raise ConfigError(f"`keep` must have shape ({problem.n_sites},), got {keep.shape}")
-    idx = np.flatnonzero(keep)
-    new = np.full(problem.n_sites, -1, dtype=np.int64)
-    new[idx] = np.arange(idx.size)
-    pairs = keep[problem.pair_site]
-    return replace(problem, site_ids=tuple(problem.site_ids[j] for j in idx),
-                   site_xyz=problem.site_xyz[idx], site_existing=problem.site_existing[idx],
-                   site_cost=problem.site_cost[idx], pair_station=problem.pair_station[pairs],
-                   pair_site=new[problem.pair_site[pairs]],
-                   pair_distance_m=problem.pair_distance_m[pairs],
-                   pair_bearing_rad=problem.pair_bearing_rad[pairs],
-                   pair_sigma_m=problem.pair_sigma_m[pairs],
-                   pair_reason=problem.pair_reason[pairs])
 
 
 def drop_order(problem: PlanProblem, config, layout: np.ndarray) -> list[DropStep]:
@@ -633,8 +587,9 @@ def drop_order(problem: PlanProblem, config, layout: np.ndarray) -> list[DropSte
     -------
     steps : list of DropStep
     """
-    current = _reduction_iv(problem, config, layout) & ~_id_mask(problem, config.forbidden)
-    kept = _id_mask(problem, config.existing)
+    current = _reduction_iv(problem, config, layout) \
+        & ~problem.site_mask(config.forbidden, "forbidden")
+    kept = problem.site_mask(config.existing, "existing")
     infos = station_infos(problem, config)
     steps = []
     while (current & ~kept).any():
@@ -683,7 +638,8 @@ def marker_losses(problem: PlanProblem, config, layout: np.ndarray) -> list[Mark
 
 
 def failure_reason(check, s: int, config) -> str:
-    """Why station ``s`` fails in a :class:`~planner.program.LayoutCheck` ("" when it passes)."""
+    """Why station ``s`` fails in a :class:`~planner.station_checks.LayoutCheck` ("" when it
+    passes)."""
     why = []
     if check.count[s] < config.min_markers:
         why.append(f"{int(check.count[s])} usable markers < {config.min_markers}")

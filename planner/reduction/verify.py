@@ -7,6 +7,7 @@ from __future__ import annotations
 import numpy as np
 
 from markerplan.errors import ConfigError
+from planner.verify import verify_plan
 
 
 def default_counts(study) -> tuple[int, ...]:
@@ -80,8 +81,6 @@ def verify_points(study, inputs, ks, error_model, seed: int = 0, progress: bool 
         a station whose pose could not be registered has ``achieved_error_m`` None, and then
         the point's ``achieved_worst_error_m`` is None too.
     """
-    from planner.verify import verify_plan
-
     ks = default_counts(study) if ks is None else _counts_iv(study, ks)
     points = []
     for k in ks:

@@ -1,10 +1,11 @@
 """A marker-reduction study on a site: the layout, its integer-program input and the three studies.
 
 The layout comes from a plan (``plan.json``), a markers CSV (``id, x_m, y_m[, z_m]``, site
-frame) or the site preset's as-built layout (``"as-built"``). :func:`layout_problem` ray-casts the
-stations against the layout's markers (or, with ``free``, against every candidate site plus the
-layout) and judges each pair exactly as :mod:`planner.planning` does for a plan; the studies are
-:mod:`planner.reduction`.
+frame) or the site preset's as-built layout (``"as-built"``), on the site inputs of
+:func:`planner.planning.load_inputs`. :func:`layout_problem` ray-casts the stations against the
+layout's markers (:func:`planner.sight.sight_problem`, as a plan does) or, with ``free``, against
+every candidate site plus the layout (:func:`planner.planning.build_problem`); the studies are
+:mod:`planner.reduction.curve`.
 """
 
 from __future__ import annotations
@@ -14,18 +15,21 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
+import shapely
 
 from markerplan.errors import ConfigError, DataError, InputFileError
 from planner import plan_file
-from planner.reduction import (
+from planner.config import PlanConfig, config_from_dict
+from planner.planning import build_problem, load_inputs, read_markers
+from planner.reduction.curve import (
     Curve,
     DropStep,
     MarkerLoss,
     drop_order,
     marker_losses,
-    restrict,
     tradeoff_curve,
 )
+from planner.sight import sight_problem
 from planner.usability import PlanProblem
 
 AS_BUILT = "as-built"
@@ -105,8 +109,6 @@ def read_layout(spec: str, inputs) -> Layout:
     InputFileError, DataError
         Missing or malformed file, duplicate ids, or a marker outside the site.
     """
-    from planner.planning import read_markers
-
     if spec == AS_BUILT:
         if not len(inputs.as_built_ids):
             raise InputFileError("INPUT as-built: this site has no as-built layout; give a plan "
@@ -146,9 +148,6 @@ def resolve_inputs(spec: str, site: str | None = None, seed: int | None = None,
     layout : Layout
     config : PlanConfig
     """
-    from planner.config import PlanConfig, config_from_dict
-    from planner.planning import load_inputs
-
     plan = _read_plan(Path(spec)) if _is_plan(spec) else None
     if plan is not None:
         recorded = plan.get("provenance", {}).get("inputs", {})
@@ -190,8 +189,6 @@ def _plan_layout(data: dict, path) -> Layout:
 
 
 def _inside_site_iv(layout: Layout, inputs) -> None:
-    import shapely
-
     xy = layout.xyz[:, :2]
     inside = inputs.dem.contains(xy)
     where = "the DEM"
@@ -237,28 +234,16 @@ def layout_problem(inputs, layout: Layout, config, error_model, free: bool = Fal
     layout_mask : (n,) bool
     timings_s : dict
     """
-    from planner.planning import angular_sampling, build_problem
-    from planner.usability import problem_from_visibility
-    from visibility.scene import RayScene
-    from visibility.visibility_matrix import visibility_matrix
-
     if free:
         with_layout = replace(inputs, existing_ids=list(layout.ids), existing_xyz=layout.xyz)
         problem, _, _, _, timings = build_problem(with_layout, config, error_model, progress)
         problem = replace(problem, site_existing=np.zeros(problem.n_sites, bool),
                           site_cost=np.ones(problem.n_sites))
-        mask = np.isin(np.asarray(problem.site_ids), layout.ids)
+        mask = problem.site_mask(layout.ids, "layout")
         return problem, mask, timings
-    t = time.perf_counter()
-    scene = RayScene(inputs.dem)
-    timings = {"scene": time.perf_counter() - t}
-    vis = visibility_matrix(scene, inputs.station_xyz, layout.xyz, inputs.marker_radius_m,
-                            config.max_range_m, config.rays_per_marker, angular_sampling(),
-                            progress=progress)
-    timings["visibility"] = vis.elapsed_s
-    problem = problem_from_visibility(vis, error_model, config, inputs.station_ids,
-                                      inputs.station_xyz, layout.ids, layout.xyz)
-    return problem, np.ones(problem.n_sites, bool), timings
+    sight = sight_problem(inputs, layout.ids, layout.xyz, config, error_model,
+                          progress=progress)
+    return sight.problem, np.ones(sight.problem.n_sites, bool), sight.timings_s
 
 
 def run_study(problem: PlanProblem, config, layout: np.ndarray, free: bool = False,
@@ -280,14 +265,14 @@ def run_study(problem: PlanProblem, config, layout: np.ndarray, free: bool = Fal
         Limit of the curve's integer programming, s (default ``config.time_limit_s``).
     """
     layout = np.asarray(layout, dtype=bool)
-    n_allowed = int(np.sum(layout & ~np.isin(np.asarray(problem.site_ids), config.forbidden)))
+    start = layout & ~problem.site_mask(config.forbidden, "forbidden")
+    n_allowed = int(start.sum())
     t = time.perf_counter()
-    start = layout & ~np.isin(np.asarray(problem.site_ids), config.forbidden)
     layout_curve = None
     incumbents = None
     limit = config.time_limit_s if time_limit_s is None else float(time_limit_s)
     if free:  # the layout's own (exact, cheap) optimum is a valid start for every count
-        layout_curve = tradeoff_curve(restrict(problem, layout), config, time_limit_s=limit)
+        layout_curve = tradeoff_curve(problem.restrict(layout), config, time_limit_s=limit)
         limit = max(limit - (time.perf_counter() - t), 1.0)
         idx = np.flatnonzero(layout)
         incumbents = {}
