@@ -242,6 +242,9 @@ def _provenance_iv(prov: Any, what: str, full: bool) -> None:
         for key in ("dem", "stations"):
             if inputs.get(key) is not None:
                 require_type(inputs[key], str, f"{what} inputs {key}")
+        if "station_ids" in inputs:
+            for sid in require_type(inputs["station_ids"], list, f"{what} inputs station_ids"):
+                require_type(sid, str, f"{what} inputs station_ids entry")
 
 
 def _entries(value: Any, what: str, name: str, most: int) -> list[dict]:

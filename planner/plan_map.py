@@ -55,9 +55,7 @@ def draw_plan_map(outcome, path: Path, dpi: int = 150) -> Path:
                              alpha=0.15, ec="#d62728", lw=0.8))
     # lines of sight each station uses
     for s in range(prob.n_stations):
-        idx = prob.usable_pairs(s)
-        idx = idx[res.selected[prob.pair_site[idx]]]
-        for j in prob.pair_site[idx]:
+        for j in prob.pair_site[prob.selected_pairs(s, res.selected)]:
             ax.plot([prob.station_xyz[s, 0], prob.site_xyz[j, 0]],
                     [prob.station_xyz[s, 1], prob.site_xyz[j, 1]], color="#ffbf00", lw=0.9,
                     alpha=0.8, zorder=3)

@@ -10,7 +10,7 @@ files; candidate sites are :mod:`planner.candidates`, what each station sees
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -33,7 +33,7 @@ from planner.sight import sight_problem
 from planner.station_checks import LayoutCheck, evaluate_layout
 from planner.usability import PlanProblem
 from visibility.dem import read_dem
-from visibility.sites import load_site
+from visibility.sites import load_site, site_with_marker_radius
 
 
 @dataclass
@@ -43,7 +43,8 @@ class PlanInputs:
     Attributes
     ----------
     site_name : str
-    seed : int or None
+    site_seed : int or None
+        Terrain seed of the site preset.
     dem : visibility.dem.DEM
     station_ids : list of str
     station_xyz : (s, 3) float
@@ -66,7 +67,7 @@ class PlanInputs:
     """
 
     site_name: str
-    seed: int | None
+    site_seed: int | None
     dem: object
     station_ids: list[str]
     station_xyz: np.ndarray
@@ -82,18 +83,52 @@ class PlanInputs:
     lidar_height_m: float = 1.0
     sources: dict = field(default_factory=dict)
 
+    def with_stations(self, ids: list[str]) -> PlanInputs:
+        """These inputs for the stations ``ids`` only (ids of :attr:`station_ids`, as
+        :func:`select_stations` checks them), in that order; ``sources`` records them."""
+        k = [self.station_ids.index(i) for i in ids]
+        return replace(self, station_ids=list(ids), station_xyz=self.station_xyz[k],
+                       station_heading_rad=self.station_heading_rad[k],
+                       sources={**self.sources, "station_ids": list(ids)})
 
-def load_inputs(site: str = "default", seed: int | None = None, dem_path=None,
+
+def select_stations(available: list[str], wanted: tuple[str, ...] | None) -> list[str]:
+    """The ``--station-ids`` among ``available`` (all of them when ``wanted`` is ``None``).
+
+    Raises
+    ------
+    ConfigError
+        An id that is not among ``available``; the message lists the valid ones.
+
+    Examples
+    --------
+    >>> select_stations(["S1", "S2", "S3"], ("S3", "S1"))
+    ['S3', 'S1']
+    >>> select_stations(["S1"], None)
+    ['S1']
+    """
+    if wanted is None:
+        return list(available)
+    unknown = [s for s in wanted if s not in available]
+    if unknown:
+        shown = ", ".join(available[:20]) + (", ..." if len(available) > 20 else "")
+        raise ConfigError(f"--station-ids: unknown station id(s) {', '.join(unknown)}; valid ids "
+                          f"are {shown}")
+    return list(wanted)
+
+
+def load_inputs(site: str = "default", site_seed: int | None = None, dem_path=None,
                 stations_path=None, boundary_path=None, exclude_paths=(),
-                existing: str | None = None) -> PlanInputs:
+                existing: str | None = None, marker_radius_m: float | None = None
+                ) -> PlanInputs:
     """Assemble the inputs of a plan from a site preset and optional files.
 
     Parameters
     ----------
     site : str
         Preset name (``visibility.sites``); supplies what no file replaces.
-    seed : int, optional
-        Preset seed.
+    site_seed : int, optional
+        Terrain seed of the preset (default 0).
     dem_path : path, optional
         GeoTIFF / npz DEM in the site frame (replaces the preset terrain; the preset's craters
         and as-built layout are then dropped). Needs ``stations_path``: the preset's stations
@@ -108,6 +143,9 @@ def load_inputs(site: str = "default", seed: int | None = None, dem_path=None,
     existing : str, optional
         ``"as-built"`` (the preset's layout) or a markers CSV (``id, x_m, y_m[, z_m]``): markers
         already in the field, fixed in the plan.
+    marker_radius_m : float, optional
+        Marker radius, m (default: the preset's); markers rest on the ground, so their centres
+        stand this far above it.
 
     Raises
     ------
@@ -121,7 +159,9 @@ def load_inputs(site: str = "default", seed: int | None = None, dem_path=None,
         raise ConfigError(f"--dem {dem_path} needs --stations: the preset's stations belong to "
                           "its own terrain, not to this DEM; give --stations with the stations "
                           "on this DEM")
-    preset = load_site(site, seed)
+    preset = load_site(site, site_seed)
+    if marker_radius_m is not None:
+        preset = site_with_marker_radius(preset, marker_radius_m)
     sources = {"site": site, "seed": preset.seed}
     dem = preset.dem
     craters = list(preset.craters)
@@ -163,7 +203,7 @@ def load_inputs(site: str = "default", seed: int | None = None, dem_path=None,
         ex_ids, ex_xyz = read_markers(existing, dem, float(preset.marker_radius_m))
     if existing is not None:
         sources["existing"] = existing
-    return PlanInputs(site_name=site, seed=preset.seed, dem=dem, station_ids=ids,
+    return PlanInputs(site_name=site, site_seed=preset.seed, dem=dem, station_ids=ids,
                       station_xyz=xyz, station_heading_rad=heading, boundary_xy=boundary,
                       exclusions=exclusions, craters=craters, as_built_ids=as_built_ids,
                       as_built_xyz=as_built_xyz, existing_ids=ex_ids, existing_xyz=ex_xyz,

@@ -29,10 +29,9 @@ from pathlib import Path
 import numpy as np
 
 from markerplan.provenance import provenance
+from planner.plan_file import SCHEMA, SCHEMA_VERSION, write_plan
 from planner.usability import sector_index
 
-SCHEMA = "markerplan-plan"
-SCHEMA_VERSION = 1
 FRAME_NOTE = ("site frame: local metres (x, y horizontal, z up); not geographic coordinates, "
               "not WGS84")
 
@@ -51,8 +50,7 @@ def plan_record(outcome) -> dict:
     used_by: dict[int, list[str]] = {int(j): [] for j in sel}
     stations = []
     for s in range(prob.n_stations):
-        idx = prob.usable_pairs(s)
-        idx = idx[res.selected[prob.pair_site[idx]]]
+        idx = prob.selected_pairs(s, res.selected)
         for j in prob.pair_site[idx]:
             used_by[int(j)].append(prob.station_ids[s])
         rec = {"id": prob.station_ids[s],
@@ -102,7 +100,8 @@ def plan_record(outcome) -> dict:
                                  solver={"name": solver["name"], "status": sol.status},
                                  inputs=inp.sources),
         "frame": FRAME_NOTE,
-        "site": {"name": inp.site_name, "seed": inp.seed, "marker_radius_m": inp.marker_radius_m,
+        "site": {"name": inp.site_name, "seed": inp.site_seed,
+                 "marker_radius_m": inp.marker_radius_m,
                  "boundary_xy_m": None if inp.boundary_xy is None
                  else np.asarray(inp.boundary_xy).tolist()},
         "requirement": {"requirement_m": cfg.requirement_m, "n_sectors": cfg.n_sectors,
@@ -136,7 +135,7 @@ def write_plan_files(outcome, folder: Path) -> dict:
     """
     folder = Path(folder)
     doc = plan_record(outcome)
-    (folder / "plan.json").write_text(json.dumps(doc, indent=2) + "\n")
+    write_plan(doc, folder / "plan.json")
     _write_markers_csv(doc, folder / "markers.csv")
     _write_geojson(doc, folder / "markers.geojson")
     (folder / "report.md").write_text(report_markdown(doc))

@@ -268,8 +268,7 @@ def evaluate_layout(problem: PlanProblem, selected: np.ndarray, config,
                 without = parts.sum(axis=0)[None] - parts  # J after losing each marker
                 worst_err[s] = max(worst_err[s], float(accuracy.errors_from_information(
                     without, info.radius, info.incl).max()))
-            sel_pairs = problem.usable_pairs(s)
-            sel_pairs = sel_pairs[selected[problem.pair_site[sel_pairs]]]
+            sel_pairs = problem.selected_pairs(s, selected)
             sec = sector_index(problem.pair_bearing_rad[sel_pairs], config.n_sectors)
             per = np.bincount(sec, minlength=config.n_sectors)
             if chosen.size:

@@ -80,6 +80,12 @@ class PlanProblem:
         idx = np.flatnonzero((self.pair_station == station) & self.pair_usable)
         return idx[np.argsort(self.pair_site[idx], kind="stable")]
 
+    def selected_pairs(self, station: int, selected: np.ndarray) -> np.ndarray:
+        """Indices of the usable pairs of ``station`` whose site is ``selected`` ((n_sites,)
+        bool), ordered by site index: the markers of a layout the station uses."""
+        idx = self.usable_pairs(station)
+        return idx[selected[self.pair_site[idx]]]
+
     def site_mask(self, ids, name: str) -> np.ndarray:
         """(n,) bool: the candidate sites named by ``ids``.
 

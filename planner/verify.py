@@ -24,13 +24,13 @@ import sys
 from dataclasses import dataclass
 
 import numpy as np
+from pipeline.stages import config_for_marker
 from tqdm import tqdm
 
 from markerplan.provenance import provenance
 from pipeline.evaluation import Reference
 from pipeline.process import process_station
 from pipeline.rig import MountingOffsets, station_to_site_matrix
-from pipeline.stages import config_for_marker
 from planner import accuracy
 from planner.plan_file import SurveyPlan
 from visibility.sensor import RigConfig

@@ -25,8 +25,9 @@ option                      meaning (and the value the command receives)
 ==========================  =====================================================================
 
 Helpers: :func:`emit_summary` (JSON or human summary), :func:`report_timings` (step timings on
-stderr, never in files), :func:`given_paths` (the inputs an output folder must not contain),
-:func:`select_stations` (``--station-ids`` against the stations at hand).
+stderr, never in files), :func:`given_paths` (the inputs an output folder must not contain).
+``--station-ids`` is checked against the stations at hand by
+:func:`planner.planning.select_stations`.
 """
 
 from __future__ import annotations
@@ -39,7 +40,6 @@ from typing import Any, NamedTuple
 
 import click
 
-from markerplan.errors import ConfigError
 from pipeline.rig import MountingOffsets
 from pipeline.sphere_fit import METHODS
 
@@ -287,28 +287,3 @@ def mounting_offset_options(command):
     ]):
         with_offsets = option(with_offsets)
     return with_offsets
-
-
-def select_stations(available: list[str], wanted: tuple[str, ...] | None) -> list[str]:
-    """The ``--station-ids`` among ``available`` (all of them when ``wanted`` is ``None``).
-
-    Raises
-    ------
-    ConfigError
-        An id that is not among ``available``; the message lists the valid ones.
-
-    Examples
-    --------
-    >>> select_stations(["S1", "S2", "S3"], ("S3", "S1"))
-    ['S3', 'S1']
-    >>> select_stations(["S1"], None)
-    ['S1']
-    """
-    if wanted is None:
-        return list(available)
-    unknown = [s for s in wanted if s not in available]
-    if unknown:
-        shown = ", ".join(available[:20]) + (", ..." if len(available) > 20 else "")
-        raise ConfigError(f"--station-ids: unknown station id(s) {', '.join(unknown)}; valid ids "
-                          f"are {shown}")
-    return list(wanted)

@@ -22,7 +22,6 @@ from planner.cli._common import (
     range_noise_option,
     rpm_option,
     seed_option,
-    select_stations,
     site_option,
     site_seed_option,
     station_ids_option,
@@ -79,6 +78,7 @@ def command(site_name: str, site_seed: int | None, dem_path: Path | None,
     from tqdm import tqdm
 
     from markerplan.output_folder import output_folder
+    from planner.planning import select_stations
     from visibility.sensor import RigConfig, SensorConfig
     from visibility.simulate import simulate_site, write_site_json
 
@@ -110,8 +110,12 @@ def _site(site_name, site_seed, dem_path, dem_fill, stations_path, marker_radius
 
     from planner.planning import read_stations
     from visibility.dem import read_dem
-    from visibility.sites import load_site, site_with_dem, site_with_marker_radius, \
-        site_with_stations
+    from visibility.sites import (
+        load_site,
+        site_with_dem,
+        site_with_marker_radius,
+        site_with_stations,
+    )
 
     site = load_site(site_name, seed=site_seed)
     if dem_path is not None:

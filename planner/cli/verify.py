@@ -16,7 +16,6 @@ from planner.cli._common import (
     out_option,
     overwrite_option,
     seed_option,
-    select_stations,
     station_ids_option,
 )
 
@@ -51,6 +50,7 @@ def command(plan_path, error_model, seed, station_ids, offsets, out, overwrite, 
     from markerplan.errors import InfeasiblePlanError
     from markerplan.output_folder import output_folder
     from planner.plan_file import load_plan
+    from planner.planning import select_stations
     from planner.verify import verify_markdown, verify_plan, verify_record
 
     plan = load_plan(plan_path)

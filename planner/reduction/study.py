@@ -20,7 +20,7 @@ import shapely
 from markerplan.errors import ConfigError, DataError, InputFileError
 from planner import plan_file
 from planner.config import PlanConfig, config_from_dict
-from planner.planning import build_problem, load_inputs, read_markers
+from planner.planning import build_problem, load_inputs, read_markers, select_stations
 from planner.reduction.curve import (
     Curve,
     DropStep,
@@ -124,21 +124,25 @@ def read_layout(spec: str, inputs) -> Layout:
     return layout
 
 
-def resolve_inputs(spec: str, site: str | None = None, seed: int | None = None,
-                   dem_path=None, stations_path=None, boundary_path=None, exclude_paths=(),
+def resolve_inputs(spec: str, site_name: str | None = None, site_seed: int | None = None,
+                   dem_path=None, stations_path=None, station_ids=None, boundary_path=None,
+                   exclude_paths=(), marker_radius_m: float | None = None,
                    config=None) -> tuple[object, Layout, object]:
     """Site inputs, layout and plan configuration of a reduction study.
 
-    A ``plan.json`` supplies its own site, seed, DEM and stations files and configuration
-    unless they are given here. The plan-only settings ``budget``, ``existing``, ``forbidden``
-    and ``redundant`` are reset: the study decides which markers stay.
+    A ``plan.json`` supplies its own site, terrain seed, DEM and stations files, stations,
+    marker radius and configuration unless they are given here. The plan-only settings
+    ``budget``, ``existing``, ``forbidden`` and ``redundant`` are reset: the study decides which
+    markers stay.
 
     Parameters
     ----------
     spec : str
         ``"as-built"``, a ``plan.json`` or a markers CSV (``id, x_m, y_m[, z_m]``).
-    site, seed, dem_path, stations_path, boundary_path, exclude_paths
-        As for :func:`planner.planning.load_inputs`.
+    site_name, site_seed, dem_path, stations_path, boundary_path, exclude_paths, marker_radius_m
+        As for :func:`planner.planning.load_inputs` (``site``, ``site_seed``, ...).
+    station_ids : sequence of str, optional
+        Only these stations (:func:`planner.planning.select_stations`).
     config : PlanConfig, optional
         Default: the plan's configuration, else ``PlanConfig()``.
 
@@ -151,18 +155,23 @@ def resolve_inputs(spec: str, site: str | None = None, seed: int | None = None,
     plan = _read_plan(Path(spec)) if _is_plan(spec) else None
     if plan is not None:
         recorded = plan.get("provenance", {}).get("inputs", {})
-        site = site or plan.get("site", {}).get("name") or "default"
-        seed = plan.get("site", {}).get("seed") if seed is None else seed
+        site_name = site_name or plan.get("site", {}).get("name")
+        site_seed = plan.get("site", {}).get("seed") if site_seed is None else site_seed
         dem_path = dem_path or recorded.get("dem")
         stations_path = stations_path or recorded.get("stations")
+        station_ids = station_ids or recorded.get("station_ids")
+        if marker_radius_m is None:
+            marker_radius_m = plan.get("site", {}).get("marker_radius_m")
         if config is None:
             config = config_from_dict(plan.get("provenance", {}).get("config", {}),
                                       where=f"INPUT {spec} (its configuration)")
     config = (config or PlanConfig()).replace(budget=None, existing=(), forbidden=(),
                                               redundant=False)
-    inputs = load_inputs(site or "default", seed, dem_path=dem_path,
+    inputs = load_inputs(site_name or "default", site_seed, dem_path=dem_path,
                          stations_path=stations_path, boundary_path=boundary_path,
-                         exclude_paths=exclude_paths)
+                         exclude_paths=exclude_paths, marker_radius_m=marker_radius_m)
+    if station_ids is not None:
+        inputs = inputs.with_stations(select_stations(inputs.station_ids, station_ids))
     if plan is None:
         return inputs, read_layout(spec, inputs), config
     layout = _plan_layout(plan, spec)

@@ -7,6 +7,7 @@ from __future__ import annotations
 import numpy as np
 
 from markerplan.errors import ConfigError
+from planner.plan_file import PlannedStation, SurveyPlan
 from planner.verify import verify_plan
 
 
@@ -28,30 +29,31 @@ def _counts_iv(study, ks) -> tuple[int, ...]:
     return tuple(dict.fromkeys(ks))
 
 
-def point_plan(study, inputs, k: int) -> dict:
-    """A ``plan.json``-shaped document of the curve's ``k``-marker subset, for the verifier."""
+def point_plan(study, inputs, k: int) -> SurveyPlan:
+    """The plan of the curve's ``k``-marker subset, for the verifier.
+
+    Parameters
+    ----------
+    study : ReductionStudy
+    inputs : PlanInputs
+        Terrain, station headings and marker radius of the study.
+    k : int
+        A count on the curve.
+    """
     prob, cfg = study.problem, study.config
     p = study.curve.at(k)
     sel = np.flatnonzero(p.selected)
-    stations = []
-    for s, sid in enumerate(prob.station_ids):
-        idx = prob.usable_pairs(s)
-        idx = idx[p.selected[prob.pair_site[idx]]]
-        stations.append({"id": sid, "x_m": float(prob.station_xyz[s, 0]),
-                         "y_m": float(prob.station_xyz[s, 1]),
-                         "z_m": float(prob.station_xyz[s, 2]),
-                         "heading_rad": float(inputs.station_heading_rad[s]),
-                         "predicted_error_m": float(p.error_m[s]),
-                         "markers": [prob.site_ids[j] for j in prob.pair_site[idx]]})
-    return {"markers": [{"id": prob.site_ids[j], "x_m": float(prob.site_xyz[j, 0]),
-                         "y_m": float(prob.site_xyz[j, 1]), "z_m": float(prob.site_xyz[j, 2])}
-                        for j in sel],
-            "stations": stations,
-            "site": {"name": inputs.site_name, "seed": inputs.seed,
-                     "marker_radius_m": inputs.marker_radius_m},
-            "requirement": {"requirement_m": cfg.requirement_m,
-                            "working_radius_m": cfg.working_radius_m},
-            "provenance": {"inputs": dict(inputs.sources)}}
+    stations = tuple(
+        PlannedStation(sid, prob.station_xyz[s].astype(float),
+                       float(inputs.station_heading_rad[s]), float(p.error_m[s]),
+                       tuple(prob.site_ids[j]
+                             for j in prob.pair_site[prob.selected_pairs(s, p.selected)]))
+        for s, sid in enumerate(prob.station_ids))
+    return SurveyPlan(dem=inputs.dem, stations=stations,
+                      marker_ids=tuple(prob.site_ids[j] for j in sel),
+                      marker_xyz_m=prob.site_xyz[sel].astype(float),
+                      marker_radius_m=inputs.marker_radius_m, requirement_m=cfg.requirement_m,
+                      working_radius_m=cfg.working_radius_m)
 
 
 def verify_points(study, inputs, ks, error_model, seed: int = 0, progress: bool = True,
@@ -84,13 +86,13 @@ def verify_points(study, inputs, ks, error_model, seed: int = 0, progress: bool 
     ks = default_counts(study) if ks is None else _counts_iv(study, ks)
     points = []
     for k in ks:
-        doc = point_plan(study, inputs, k)
-        checks = verify_plan(doc, error_model, seed=seed, progress=progress, offsets=offsets)
+        plan = point_plan(study, inputs, k)
+        checks = verify_plan(plan, error_model, seed=seed, progress=progress, offsets=offsets)
         achieved = [c.achieved_error_m for c in checks]
         finite = [a for a in achieved if a is not None]
         points.append({
-            "k": k, "markers": [m["id"] for m in doc["markers"]],
-            "predicted_worst_error_m": max(s["predicted_error_m"] for s in doc["stations"]),
+            "k": k, "markers": list(plan.marker_ids),
+            "predicted_worst_error_m": max(s.predicted_error_m for s in plan.stations),
             "achieved_worst_error_m": (max(finite) if len(finite) == len(achieved)
                                        else None),
             "achieved_mean_error_m": float(np.mean(finite)) if finite else None,

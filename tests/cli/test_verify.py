@@ -49,3 +49,21 @@ def test_verify_passes_and_fails_with_the_reason(tmp_path, capsys):
     assert code == 1 and "verification failed at S1: achieved" in err
     rec = json.loads((tmp_path / "v2" / "verify.json").read_text())
     assert rec["passed"] is False
+
+
+@pytest.mark.slow
+def test_marker_radius_travels_from_plan_to_simulation_and_fit(tmp_path, capsys):
+    """Plan with 0.15 m markers; verify must simulate and fit 0.15 m spheres (a 0.10 m fit of a
+    0.15 m sphere puts its centre about 5 cm too far along the line of sight)."""
+    plan_dir = tmp_path / "plan"
+    code, _, err = run_cli(capsys, ["plan", "--marker-radius", "0.15", "--out", str(plan_dir)])
+    assert code == 0, err
+    doc = json.loads((plan_dir / "plan.json").read_text())
+    assert doc["site"]["marker_radius_m"] == 0.15
+    code, stdout, err = run_cli(capsys, ["verify", str(plan_dir / "plan.json"), "--station-ids",
+                                         "S1", "--out", str(tmp_path / "v"), "--json"])
+    assert code == 0, err
+    assert list(json.loads(stdout)["stations"]) == ["S1"]
+    rec = json.loads((tmp_path / "v" / "verify.json").read_text())
+    errors = rec["stations"][0]["marker_centre_errors_m"]
+    assert len(errors) >= 3 and max(errors.values()) < 0.02, errors
