@@ -31,10 +31,9 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from markerplan.errors import ConfigError, DataError
-from pipeline.rig import MountingOffsets
+from pipeline.rig import MountingOffsets, sensor_to_station
 from pipeline.scan_format import StationScan
 from pipeline.sphere_fit import lsq_fixed_radius
-from pipeline.synthesis import frames_to_station
 
 
 @dataclass(frozen=True)
@@ -140,7 +139,7 @@ def _with_angles(offsets: MountingOffsets, p: np.ndarray) -> MountingOffsets:
 
 
 def _positions(scan: StationScan, idx: np.ndarray, offsets: MountingOffsets) -> np.ndarray:
-    return frames_to_station(scan.xyz_sensor_m[idx], scan.frame_index[idx],
+    return sensor_to_station(scan.xyz_sensor_m[idx], scan.frame_index[idx],
                              scan.turntable_angle_rad, offsets)
 
 

@@ -52,6 +52,7 @@ from markerplan.reading import (
     require_type,
     unique_ids,
 )
+from markerplan.writing import json_default
 
 #: Version of the scan and truth formats this markerplan writes and reads (the ``/N`` suffix).
 FORMAT_VERSION = 1
@@ -303,7 +304,7 @@ def write_scan(path: str | Path, scan: StationScan) -> Path:
     scan.validate(str(path))
     meta = {"format": SCAN_FORMAT, **scan.metadata}
     arrays = {
-        "metadata": np.array(json.dumps(meta, sort_keys=True, default=_json_default)),
+        "metadata": np.array(json.dumps(meta, sort_keys=True, default=json_default)),
         "turntable_angle_rad": scan.turntable_angle_rad,
         "xyz_sensor_m": scan.xyz_sensor_m,
         **{name: getattr(scan, name) for name in _POINT_FIELDS},
@@ -421,7 +422,7 @@ def write_truth(path: str | Path, truth: dict[str, Any]) -> Path:
     """
     body = {"format": TRUTH_FORMAT, **truth}
     path = Path(path)
-    path.write_text(json.dumps(body, indent=1, sort_keys=True, default=_json_default) + "\n")
+    path.write_text(json.dumps(body, indent=1, sort_keys=True, default=json_default) + "\n")
     return path
 
 
@@ -492,10 +493,3 @@ def _truth_iv(body: dict[str, Any], what: str) -> None:
             json_numbers(m["centre_site_m"], f"{where} 'centre_site_m'", length=3)
     unique_ids(ids, f"{what}: markers")
 
-
-def _json_default(obj: Any) -> Any:
-    if isinstance(obj, np.ndarray):
-        return obj.tolist()
-    if isinstance(obj, np.generic):
-        return obj.item()
-    raise TypeError(f"not JSON-serialisable: {type(obj).__name__}")

@@ -98,8 +98,9 @@ def verify_plan(doc: dict, error_model, seed: int = 0, progress: bool = True,
     from tqdm import tqdm
 
     from pipeline.evaluation import Reference
-    from pipeline.process import build_config, process_station
+    from pipeline.process import process_station
     from pipeline.rig import station_to_site_matrix
+    from pipeline.stages import build_config
     from visibility.sensor import RigConfig
     from visibility.simulate import simulate_markers
 

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from error_model.table import MARKER_TABLE_COLUMNS
+from pipeline.marker_table import COLUMNS
 
 SIGMA0_M = 0.002
 SLOPE_D = 0.0006  # m per m
@@ -63,7 +63,7 @@ def synthetic_table(n: int, seed: int, vf_effect_m: float = 0.0,
         "error_x_m": axis[:, 0], "error_y_m": axis[:, 1], "error_z_m": axis[:, 2],
         "replicate": np.zeros(n), "seed": np.full(n, float(seed)),
     }
-    assert tuple(cols) == MARKER_TABLE_COLUMNS
+    assert tuple(cols) == COLUMNS
     return cols
 
 
