@@ -42,9 +42,8 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 #: VLP-16 laser elevation angles in channel (firing) order, degrees (VLP-16 user manual).
-VLP16_ELEVATION_DEG = np.array(
-    [-15.0, 1.0, -13.0, 3.0, -11.0, 5.0, -9.0, 7.0, -7.0, 9.0, -5.0, 11.0, -3.0, 13.0, -1.0, 15.0]
-)
+VLP16_ELEVATION_DEG = (-15.0, 1.0, -13.0, 3.0, -11.0, 5.0, -9.0, 7.0,
+                       -7.0, 9.0, -5.0, 11.0, -3.0, 13.0, -1.0, 15.0)
 
 #: Nominal rotation sensor -> turntable (columns are S.x, S.y, S.z in T coordinates).
 NOMINAL_SENSOR_TO_TURNTABLE = np.array(
