@@ -76,14 +76,6 @@ class MountingOffsets:
         d["axis_offset_m"] = [float(v) for v in self.axis_offset_m]
         return d
 
-    @classmethod
-    def from_dict(cls, d: dict) -> MountingOffsets:
-        return cls(
-            vertical_axis_error_rad=float(d.get("vertical_axis_error_rad", 0.0)),
-            lframe_tilt_rad=float(d.get("lframe_tilt_rad", 0.0)),
-            axis_offset_m=tuple(float(v) for v in d.get("axis_offset_m", (0.0, 0.0))),
-        )
-
 
 def rot_x(a: float | np.ndarray) -> np.ndarray:
     """Rotation matrices about x. ``a`` scalar -> (3, 3); ``a`` (n,) -> (n, 3, 3)."""

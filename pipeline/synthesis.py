@@ -31,10 +31,6 @@ class StationCloud:
     range_m: np.ndarray
     offsets: MountingOffsets
 
-    @property
-    def n_points(self) -> int:
-        return int(self.xyz_m.shape[0])
-
 
 def synthesize(scan: StationScan, offsets: MountingOffsets | None = None) -> StationCloud:
     """Rotate every frame by its turntable angle (with the mounting offsets) into one cloud.

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from markerplan import writing
 from pipeline.marker_table import COLUMNS
 
 SIGMA0_M = 0.002
@@ -68,20 +69,6 @@ def synthetic_table(n: int, seed: int, vf_effect_m: float = 0.0,
 
 
 def write_csv(path, table: dict[str, np.ndarray]) -> None:
-    """Write a table dict as a marker-table CSV."""
-    import csv
-
-    with open(path, "w", newline="") as fh:
-        w = csv.writer(fh)
-        w.writerow(list(table))
-        for row in zip(*table.values(), strict=True):
-            w.writerow([_cell(v) for v in row])
-
-
-def _cell(v) -> str:
-    """A CSV cell as ``markerplan process`` writes it: true/false, empty for no value."""
-    if isinstance(v, np.bool_ | bool):
-        return str(v).lower()
-    if isinstance(v, float | np.floating) and not np.isfinite(v):
-        return ""
-    return str(v)
+    """Write a table dict as ``markerplan process`` writes a marker table."""
+    rows = [dict(zip(table, row, strict=True)) for row in zip(*table.values(), strict=True)]
+    writing.write_csv(path, tuple(table), rows)
