@@ -48,8 +48,9 @@ def main() -> None:
     from error_model import default_model
     from error_model.model import ErrorModel
     from pipeline.evaluation import reference_from_truth
-    from pipeline.process import build_config, process_station
+    from pipeline.process import process_station
     from pipeline.rig import MountingOffsets
+    from pipeline.stages import build_config
     from visibility.sensor import RigConfig
     from visibility.simulate import simulate_station, site_scene
     from visibility.sites import load_site

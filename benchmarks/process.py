@@ -47,10 +47,11 @@ def main() -> None:
     args = ap.parse_args()
 
     from pipeline.evaluation import read_reference
-    from pipeline.process import build_config, process_station, with_offsets
+    from pipeline.process import process_station
     from pipeline.range_study import measure_markers
     from pipeline.rig import MountingOffsets
     from pipeline.scan_format import read_scan, write_scan, write_truth
+    from pipeline.stages import build_config, with_offsets
     from visibility.sensor import RigConfig
     from visibility.simulate import simulate_station, site_scene
     from visibility.sites import load_site

@@ -1,5 +1,6 @@
 """Marker-centre error as a function of distance and angle: fitting (cvxpy), prediction,
-domain, serialisation and diagnostics. Imports nothing of ours but :mod:`markerplan`.
+domain, serialisation and diagnostics. Imports nothing of ours but :mod:`markerplan` and the
+marker-table schema (:mod:`pipeline.marker_table`).
 
 Loading and predicting do not import cvxpy (about 2 s); :func:`fit_error_model` does, on first
 use.
@@ -13,10 +14,10 @@ use.
 from error_model.config import FitConfig
 from error_model.default import default_model
 from error_model.model import ErrorModel, Prediction
-from error_model.table import MarkerTable, read_marker_table, read_marker_tables
+from error_model.table import MarkerTable, read_marker_tables
 
 __all__ = ["ErrorModel", "FitConfig", "MarkerTable", "Prediction", "default_model",
-           "fit_error_model", "read_marker_table", "read_marker_tables"]
+           "fit_error_model", "read_marker_tables"]
 
 
 def __getattr__(name: str):

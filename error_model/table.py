@@ -1,5 +1,6 @@
-"""Marker tables: reading the CSV written by ``markerplan process`` / ``range-study``, checking
-it, and extracting the rows an error-model fit uses.
+"""Marker tables: reading the CSV written by ``markerplan process`` / ``range-study`` (columns
+:data:`pipeline.marker_table.COLUMNS`), checking it, and extracting the rows an error-model fit
+uses.
 
 A marker table has one row per (station, marker, replicate) with, among others, the
 marker's distance and elevation seen from the LiDAR centre (station frame), its point count
@@ -19,17 +20,11 @@ import numpy as np
 from markerplan.errors import DataError, InputFileError
 from markerplan.provenance import fingerprint_arrays
 from markerplan.reading import MAX_ABS_COORDINATE_M, finite_number, read_csv
+from pipeline.marker_table import COLUMNS
 
-#: The columns ``markerplan process`` / ``range-study`` write, in order.
-MARKER_TABLE_COLUMNS = (
-    "station_id", "marker_id", "x_m", "y_m", "z_m", "distance_m", "elevation_deg",
-    "azimuth_deg", "n_points", "point_density_per_m2", "visible_fraction", "fit_rms_m",
-    "radius_fit_m", "estimator", "accepted", "reason", "error_m", "error_x_m", "error_y_m",
-    "error_z_m", "replicate", "seed",
-)
 #: Columns a fit cannot do without.
 REQUIRED_COLUMNS = ("distance_m", "elevation_deg", "error_m", "accepted")
-#: Text columns; every other schema column is numeric (empty cell -> NaN).
+#: Text columns; every other column of the schema is numeric (empty cell -> NaN).
 TEXT_COLUMNS = ("station_id", "marker_id", "estimator", "reason")
 #: Optional predictor name -> table column it is read from.
 EXTRA_COLUMNS = {"visible_fraction": "visible_fraction", "expected_points": "n_points"}
@@ -106,13 +101,15 @@ class FitData:
         return fingerprint_arrays(*arrays)
 
 
-def read_marker_table(path: str | Path) -> MarkerTable:
-    """Read one marker-table CSV.
+def read_marker_tables(paths: Iterable[str | Path] | str | Path) -> MarkerTable:
+    """Read and concatenate marker-table CSVs (columns common to all are kept).
 
     Parameters
     ----------
-    path : str or Path
-        CSV with a header row; must contain at least :data:`REQUIRED_COLUMNS`.
+    paths : iterable of str or Path, or one str or Path
+        CSV files with a header row; each must contain at least :data:`REQUIRED_COLUMNS`.
+        Columns of :data:`pipeline.marker_table.COLUMNS` other than :data:`TEXT_COLUMNS` are
+        read as numbers (empty cell -> NaN), ``accepted`` as bool, any other column as text.
 
     Returns
     -------
@@ -121,8 +118,20 @@ def read_marker_table(path: str | Path) -> MarkerTable:
     Raises
     ------
     InputFileError
-        Missing or unreadable file, missing columns, unparsable cells.
+        No file given; a missing or unreadable file, missing columns, unparsable cells.
     """
+    if isinstance(paths, str | Path):
+        paths = [paths]
+    tables = [_read_one(p) for p in paths]
+    if not tables:
+        raise InputFileError("marker tables: no file given; pass at least one CSV")
+    common = [c for c in tables[0].columns if all(c in t.columns for t in tables)]
+    columns = {c: np.concatenate([t.columns[c] for t in tables]) for c in common}
+    return MarkerTable(columns=columns, sources=tuple(s for t in tables for s in t.sources))
+
+
+def _read_one(path: str | Path) -> MarkerTable:
+    """One marker-table CSV (see :func:`read_marker_tables`)."""
     path = Path(path)
     what = f"marker table {path}"
     if not path.exists():
@@ -133,33 +142,6 @@ def read_marker_table(path: str | Path) -> MarkerTable:
     columns = {name: _parse_column(path, name, col) for name, col in zip(header, cells,
                                                                           strict=True)}
     return MarkerTable(columns=columns, sources=(str(path),))
-
-
-def read_marker_tables(paths: Iterable[str | Path] | str | Path) -> MarkerTable:
-    """Read and concatenate several marker-table CSVs (columns common to all are kept).
-
-    Parameters
-    ----------
-    paths : iterable of str or Path, or one str or Path
-        CSV files, each as :func:`read_marker_table` reads it.
-
-    Returns
-    -------
-    table : MarkerTable
-
-    Raises
-    ------
-    InputFileError
-        No file given, or any file :func:`read_marker_table` refuses.
-    """
-    if isinstance(paths, str | Path):
-        paths = [paths]
-    tables = [read_marker_table(p) for p in paths]
-    if not tables:
-        raise InputFileError("marker tables: no file given; pass at least one CSV")
-    common = [c for c in tables[0].columns if all(c in t.columns for t in tables)]
-    columns = {c: np.concatenate([t.columns[c] for t in tables]) for c in common}
-    return MarkerTable(columns=columns, sources=tuple(s for t in tables for s in t.sources))
 
 
 def as_marker_table(table: MarkerTable | Mapping[str, object]) -> MarkerTable:
@@ -292,7 +274,7 @@ def _parse_column(path: Path, name: str, cells: tuple[str, ...]) -> np.ndarray:
     """
     if name == "accepted":
         return _parse_bool(str(path), np.asarray(cells, dtype=str))
-    if name in TEXT_COLUMNS or name not in MARKER_TABLE_COLUMNS:
+    if name in TEXT_COLUMNS or name not in COLUMNS:
         return np.asarray(cells, dtype=str)
     max_abs = _MAX_ABS.get(name, MAX_ABS_COORDINATE_M)
     out = np.empty(len(cells))

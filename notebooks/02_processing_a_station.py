@@ -31,8 +31,9 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from pipeline.evaluation import reference_from_truth  # noqa: E402
-from pipeline.process import build_config, process_station  # noqa: E402
+from pipeline.process import process_station  # noqa: E402
 from pipeline.rig import MountingOffsets  # noqa: E402
+from pipeline.stages import build_config  # noqa: E402
 from pipeline.synthesis import synthesize  # noqa: E402
 from visibility.sensor import RigConfig, SensorConfig  # noqa: E402
 from visibility.simulate import simulate_station  # noqa: E402

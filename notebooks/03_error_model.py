@@ -33,10 +33,11 @@ import numpy as np  # noqa: E402
 from error_model import default_model  # noqa: E402
 from error_model.diagnostics import plot_diagnostics, summary_text  # noqa: E402
 from error_model.fit import fit_error_model  # noqa: E402
-from error_model.table import EXTRA_COLUMNS, read_marker_table  # noqa: E402
+from error_model.table import EXTRA_COLUMNS, read_marker_tables  # noqa: E402
 from pipeline.evaluation import reference_from_truth  # noqa: E402
 from pipeline.marker_table import write_marker_table  # noqa: E402
-from pipeline.process import build_config, process_station  # noqa: E402
+from pipeline.process import process_station  # noqa: E402
+from pipeline.stages import build_config  # noqa: E402
 from visibility.dem import DEM  # noqa: E402
 from visibility.simulate import simulate_markers  # noqa: E402
 
@@ -67,7 +68,7 @@ for rep in range(5):
                                    frames=range(0, 800, 8), station_id=f"R{rep}")
     rows += process_station(scan, config, reference_from_truth(truth)).rows
 path = write_marker_table(OUT / "03_markers.csv", rows)
-table = read_marker_table(path)
+table = read_marker_tables(path)
 accepted = sum(r.accepted for r in rows)
 print(f"{len(rows)} detections, {accepted} accepted -> {path.name}")
 

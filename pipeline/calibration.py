@@ -31,10 +31,9 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from markerplan.errors import ConfigError, DataError
-from pipeline.rig import MountingOffsets
+from pipeline.rig import MountingOffsets, sensor_to_station
 from pipeline.scan_format import StationScan
 from pipeline.sphere_fit import lsq_fixed_radius
-from pipeline.synthesis import frames_to_station
 
 
 @dataclass(frozen=True)
@@ -90,46 +89,6 @@ class CalibrationConfig:
         return self
 
 
-@dataclass(frozen=True)
-class CalibrationResult:
-    """Estimated mounting offsets with their formal 1-sigma uncertainties.
-
-    Attributes
-    ----------
-    offsets : MountingOffsets
-        The estimate.
-    sigma_vertical_axis_error_rad, sigma_lframe_tilt_rad : float
-        1-sigma of the two angles, radians.
-    sigma_axis_offset_m : tuple of float
-        1-sigma of ``(dx, dy)``, metres.
-    n_plane_pairs : int
-        Direct-face points matched to a reverse-face plane in the final ICP step.
-    icp_rms_m : float
-        RMS point-to-plane residual, metres.
-    n_spheres : int
-        Spheres used for the axis offset (0: offset not estimated, left at its start value).
-    sphere_rms_m : float
-        RMS of the direct-minus-reverse horizontal centre differences, metres (NaN if none).
-    """
-
-    offsets: MountingOffsets
-    sigma_vertical_axis_error_rad: float
-    sigma_lframe_tilt_rad: float
-    sigma_axis_offset_m: tuple[float, float]
-    n_plane_pairs: int
-    icp_rms_m: float
-    n_spheres: int
-    sphere_rms_m: float
-
-    def to_dict(self) -> dict:
-        return {"offsets": self.offsets.to_dict(),
-                "sigma_vertical_axis_error_rad": self.sigma_vertical_axis_error_rad,
-                "sigma_lframe_tilt_rad": self.sigma_lframe_tilt_rad,
-                "sigma_axis_offset_m": [float(v) for v in self.sigma_axis_offset_m],
-                "n_plane_pairs": self.n_plane_pairs, "icp_rms_m": self.icp_rms_m,
-                "n_spheres": self.n_spheres, "sphere_rms_m": self.sphere_rms_m}
-
-
 def direct_face(scan: StationScan) -> np.ndarray:
     """Mask of points seen by the direct face (sensor ``x >= 0``, turntable +y side)."""
     return scan.xyz_sensor_m[:, 0] >= 0
@@ -140,7 +99,7 @@ def _with_angles(offsets: MountingOffsets, p: np.ndarray) -> MountingOffsets:
 
 
 def _positions(scan: StationScan, idx: np.ndarray, offsets: MountingOffsets) -> np.ndarray:
-    return frames_to_station(scan.xyz_sensor_m[idx], scan.frame_index[idx],
+    return sensor_to_station(scan.xyz_sensor_m[idx], scan.frame_index[idx],
                              scan.turntable_angle_rad, offsets)
 
 

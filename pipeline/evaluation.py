@@ -6,7 +6,8 @@ to detections by nearest centre (one-to-one, gated); an external CSV is first al
 best-fit rigid registration found from edge-length-consistent marker triplets (RANSAC-like),
 then matched the same way. Errors are estimate minus (registered) reference, station frame.
 Edge residuals (|estimated edge| - |reference edge| for every pair of matched, accepted
-markers) need no common frame at all.
+markers) need no common frame at all. :func:`evaluate_rows` does all of this for one station's
+marker rows; :func:`pick_reference` and :func:`check_references` pair references with stations.
 """
 
 from __future__ import annotations
@@ -14,13 +15,16 @@ from __future__ import annotations
 import itertools
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
-from markerplan.errors import DataError, InputFileError
+from markerplan.errors import ConfigError, DataError, InputFileError
 from markerplan.reading import MAX_ABS_COORDINATE_M, finite_number, read_csv, unique_ids
+from pipeline.marker_table import MarkerRow
 from pipeline.scan_format import read_truth
+from pipeline.stages import EvaluateStage
 
 REFERENCE_CSV_COLUMNS = ("id", "x_m", "y_m", "z_m")
 
@@ -268,3 +272,75 @@ def edge_residuals(ids: list[str], estimated_m: np.ndarray, reference_m: np.ndar
         out.append({"marker_a": ids[a], "marker_b": ids[b], "reference_length_m": lr,
                     "estimated_length_m": le, "residual_m": le - lr})
     return out
+
+
+def evaluate_rows(rows: list[MarkerRow], reference: Reference | None, cfg: EvaluateStage
+                  ) -> tuple[list[dict], dict[str, Any]]:
+    """Match rows to the reference (in place: marker_id, errors), edge residuals, summary.
+
+    Returns
+    -------
+    edges : list of dict
+        See :func:`edge_residuals`, plus ``station_id``.
+    summary : dict
+        Matched counts, mean/max centre error of accepted markers, edge statistics.
+    """
+    if reference is None or not rows:
+        return [], {"reference": None if reference is None else reference.source}
+    centres = np.array([r.centre_m for r in rows])
+    ref = reference.centres_m
+    accepted = np.array([r.accepted for r in rows])
+    registered = reference.station_id is None
+    if registered:
+        try:
+            _, rot, t = register_reference(centres[accepted], ref, cfg.registration_tol_m)
+        except DataError as exc:  # too few accepted markers at this station: no evaluation
+            return [], {"reference": reference.source, "registered": False,
+                        "evaluation_error": str(exc)}
+        ref = ref @ rot.T + t
+        match = match_nearest(centres, ref, cfg.registration_tol_m)
+    else:
+        match = match_nearest(centres, ref, cfg.match_distance_m)
+    for r, m in zip(rows, match, strict=True):
+        r.marker_id = reference.ids[m] if m >= 0 else ""
+        r.set_error(ref[m] if m >= 0 else None)
+    use = [i for i, r in enumerate(rows) if r.accepted and match[i] >= 0]
+    ids = [reference.ids[match[i]] for i in use]
+    edges = edge_residuals(ids, centres[use], reference.centres_m[match[use]])
+    for e in edges:
+        e["station_id"] = rows[0].station_id
+    errs = np.array([rows[i].error_m for i in use])
+    resid = np.array([e["residual_m"] for e in edges])
+    matched_all = {reference.ids[m] for m in match if m >= 0}
+    return edges, {
+        "reference": reference.source, "registered": registered,
+        "n_reference": len(reference.ids), "n_matched_accepted": len(use),
+        "unmatched_reference_ids": sorted(set(reference.ids) - matched_all),
+        "mean_error_m": float(errs.mean()) if errs.size else None,
+        "max_error_m": float(errs.max()) if errs.size else None,
+        "n_edges": len(edges),
+        "mean_abs_edge_residual_m": float(np.abs(resid).mean()) if resid.size else None,
+        "rms_edge_residual_m": float(np.sqrt(np.mean(resid ** 2))) if resid.size else None,
+    }
+
+
+
+def pick_reference(references: list[Reference], station_id: str) -> Reference | None:
+    """The reference for a station: its own truth file, else the (single) external CSV."""
+    own = [r for r in references if r.station_id == station_id]
+    if own:
+        return own[0]
+    external = [r for r in references if r.station_id is None]
+    return external[0] if external else None
+
+
+def check_references(references: list[Reference]) -> None:
+    """At most one external (CSV) reference; at most one truth file per station."""
+    external = [r.source for r in references if r.station_id is None]
+    if len(external) > 1:
+        raise ConfigError(f"give at most one total-station CSV reference, got {external}")
+    ids = [r.station_id for r in references if r.station_id is not None]
+    dup = sorted({i for i in ids if ids.count(i) > 1})
+    if dup:
+        raise ConfigError(f"several truth files for station(s) {', '.join(dup)}; give one each")
+

@@ -28,7 +28,6 @@ Columns, in this order (station frame = origin at the nominal LiDAR centre, z up
 
 from __future__ import annotations
 
-import csv
 import math
 from dataclasses import asdict, dataclass, fields
 from pathlib import Path
@@ -37,6 +36,7 @@ import numpy as np
 
 from markerplan.errors import InputFileError
 from markerplan.reading import read_csv
+from markerplan.writing import write_csv
 
 COLUMNS = ("station_id", "marker_id", "x_m", "y_m", "z_m", "distance_m", "elevation_deg",
            "azimuth_deg", "n_points", "point_density_per_m2", "visible_fraction", "fit_rms_m",
@@ -103,26 +103,9 @@ def line_of_sight(centre_m: np.ndarray, sensor_m=(0.0, 0.0, 0.0)) -> tuple[float
     return dist, elev, az
 
 
-def _fmt(v) -> str:
-    if v is None:
-        return ""
-    if isinstance(v, bool | np.bool_):
-        return "true" if v else "false"
-    if isinstance(v, float | np.floating):
-        return f"{float(v):.6f}" if np.isfinite(v) else ""
-    return str(v)
-
-
 def write_marker_table(path: str | Path, rows: list[MarkerRow]) -> Path:
-    """Write rows as CSV with the header :data:`COLUMNS` (deterministic formatting)."""
-    path = Path(path)
-    with path.open("w", newline="") as fh:
-        w = csv.writer(fh, lineterminator="\n")
-        w.writerow(COLUMNS)
-        for r in rows:
-            d = asdict(r)
-            w.writerow([_fmt(d[c]) for c in COLUMNS])
-    return path
+    """Write rows as CSV with the header :data:`COLUMNS` (:func:`markerplan.writing.write_csv`)."""
+    return write_csv(path, COLUMNS, [asdict(r) for r in rows])
 
 
 def read_marker_table(path: str | Path) -> list[dict[str, str]]:

@@ -24,7 +24,7 @@ import numpy as np
 
 from markerplan.errors import DataError, InputFileError
 from pipeline.rig import VLP16_ELEVATION_DEG
-from pipeline.scan_format import StationScan
+from pipeline.scan_format import StationScan, sensor_metadata
 
 #: channel of each decoder ring (ring k = k-th lowest elevation)
 _CHANNEL_OF_RING = np.argsort(VLP16_ELEVATION_DEG, kind="stable").astype(np.uint8)
@@ -116,8 +116,7 @@ def read_vlp16_pcap(path: str | Path, turntable_angle_rad: np.ndarray | None = N
         "station_id": station_id or path.name.split(".")[0],
         "source": "pcap",
         "source_file": path.name,
-        "sensor": {"model": "VLP-16",
-                   "laser_elevation_rad": np.radians(VLP16_ELEVATION_DEG).tolist()},
+        "sensor": sensor_metadata(),
         "rig": {"frames_per_turn": int(angles.size)},
     }
     return StationScan(

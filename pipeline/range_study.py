@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from markerplan.constants import GOLDEN_ANGLE_RAD
 from markerplan.errors import ConfigError, DataError
 from pipeline.gate import RangeIndex
 from pipeline.marker_table import MarkerRow, line_of_sight
@@ -28,7 +29,6 @@ from pipeline.synthesis import synthesize
 #: Horizontal LiDAR-to-marker distances of the published range experiment, metres.
 RANGE_STUDY_DISTANCES_M = np.r_[np.arange(1.0, 16.0, 1.0), np.arange(17.0, 26.0, 2.0),
                                 np.arange(30.0, 51.0, 5.0)]
-_GOLDEN_ANGLE = np.pi * (3 - np.sqrt(5))
 
 SUMMARY_COLUMNS = ("estimator", "distance_m", "n_rows", "n_fitted", "n_accepted",
                    "median_n_points", "median_point_density_per_m2", "median_error_m",
@@ -58,7 +58,7 @@ def marker_layout(distances_m: np.ndarray = RANGE_STUDY_DISTANCES_M, radius_m: f
     if d.ndim != 1 or d.size == 0 or np.any(d <= 2 * radius_m):
         raise ConfigError(f"`distances_m` must be a non-empty list of distances > 2 * radius, "
                           f"got {d}")
-    az = _GOLDEN_ANGLE * np.arange(d.size)
+    az = GOLDEN_ANGLE_RAD * np.arange(d.size)
     return np.column_stack([d * np.cos(az), d * np.sin(az),
                             np.full(d.size, radius_m - lidar_height_m)])
 

@@ -52,6 +52,8 @@ from markerplan.reading import (
     require_type,
     unique_ids,
 )
+from markerplan.writing import json_default
+from pipeline.rig import VLP16_ELEVATION_DEG
 
 #: Version of the scan and truth formats this markerplan writes and reads (the ``/N`` suffix).
 FORMAT_VERSION = 1
@@ -63,9 +65,12 @@ MAX_RANGE_M = 1e4
 #: Largest magnitude accepted for an angle, radians (about 160 turns).
 MAX_ABS_ANGLE_RAD = 1e3
 #: Laser channels of a VLP-16.
-N_LASERS = 16
-
-_POINT_FIELDS = {
+N_LASERS = len(VLP16_ELEVATION_DEG)
+#: Sensor model of every scan (metadata ``sensor.model``).
+SENSOR_MODEL = "VLP-16"
+#: Per-point members other than ``xyz_sensor_m`` (and the optional ``intensity``), with their
+#: file dtypes.
+POINT_FIELDS = {
     "frame_index": np.uint32,
     "laser_id": np.uint8,
     "spin_azimuth_rad": np.float32,
@@ -143,7 +148,7 @@ class StationScan:
         if self.xyz_sensor_m.shape != (n, 3):
             raise InputFileError(f"{source}: xyz_sensor_m must have shape ({n}, 3), "
                                  f"got {self.xyz_sensor_m.shape}")
-        for name in _POINT_FIELDS:
+        for name in POINT_FIELDS:
             arr = getattr(self, name)
             if arr.shape != (n,):
                 raise InputFileError(f"{source}: {name} must have shape ({n},), got {arr.shape}")
@@ -164,18 +169,30 @@ class StationScan:
             raise InputFileError(f"{source}: frame_index refers to frame "
                                  f"{int(self.frame_index.max())} but only {self.n_frames} exist")
         self.turntable_angle_rad = self.turntable_angle_rad.astype(np.float64, copy=False)
-        for name, dtype in _POINT_FIELDS.items():
+        for name, dtype in POINT_FIELDS.items():
             setattr(self, name, getattr(self, name).astype(dtype, copy=False))
         self.xyz_sensor_m = self.xyz_sensor_m.astype(np.float32, copy=False)
         return self
 
+
+
+def sensor_metadata() -> dict[str, Any]:
+    """The ``sensor`` metadata every scan carries: ``model`` and ``laser_elevation_rad``.
+
+    Returns
+    -------
+    sensor : dict
+        ``{"model": SENSOR_MODEL, "laser_elevation_rad": [16 floats, channel order]}``.
+    """
+    return {"model": SENSOR_MODEL,
+            "laser_elevation_rad": [float(v) for v in np.radians(VLP16_ELEVATION_DEG)]}
 
 _NUMERIC_KINDS = "iuf"
 
 
 def _scan_arrays_iv(scan: StationScan, source: str) -> None:
     """Every array numeric (integer or float); the turntable angles one-dimensional."""
-    names = ["turntable_angle_rad", "xyz_sensor_m", *_POINT_FIELDS]
+    names = ["turntable_angle_rad", "xyz_sensor_m", *POINT_FIELDS]
     if scan.intensity is not None:
         names.append("intensity")
     for name in names:
@@ -303,10 +320,10 @@ def write_scan(path: str | Path, scan: StationScan) -> Path:
     scan.validate(str(path))
     meta = {"format": SCAN_FORMAT, **scan.metadata}
     arrays = {
-        "metadata": np.array(json.dumps(meta, sort_keys=True, default=_json_default)),
+        "metadata": np.array(json.dumps(meta, sort_keys=True, default=json_default)),
         "turntable_angle_rad": scan.turntable_angle_rad,
         "xyz_sensor_m": scan.xyz_sensor_m,
-        **{name: getattr(scan, name) for name in _POINT_FIELDS},
+        **{name: getattr(scan, name) for name in POINT_FIELDS},
     }
     if scan.intensity is not None:
         arrays["intensity"] = np.asarray(scan.intensity, dtype=np.uint8)
@@ -340,7 +357,7 @@ def read_scan(path: str | Path) -> StationScan:
     path = Path(path)
     if not path.is_file():
         raise InputFileError(f"scan file {path} does not exist; check the path")
-    required = {"metadata", "turntable_angle_rad", "xyz_sensor_m", *_POINT_FIELDS}
+    required = {"metadata", "turntable_angle_rad", "xyz_sensor_m", *POINT_FIELDS}
     data = _read_npz(path, required | {"intensity"})
     missing = sorted(required - set(data))
     if missing:
@@ -360,7 +377,7 @@ def read_scan(path: str | Path) -> StationScan:
         xyz_sensor_m=data["xyz_sensor_m"],
         metadata=meta,
         intensity=data.get("intensity"),
-        **{name: data[name] for name in _POINT_FIELDS},
+        **{name: data[name] for name in POINT_FIELDS},
     )
     return scan.validate(str(path))
 
@@ -421,7 +438,7 @@ def write_truth(path: str | Path, truth: dict[str, Any]) -> Path:
     """
     body = {"format": TRUTH_FORMAT, **truth}
     path = Path(path)
-    path.write_text(json.dumps(body, indent=1, sort_keys=True, default=_json_default) + "\n")
+    path.write_text(json.dumps(body, indent=1, sort_keys=True, default=json_default) + "\n")
     return path
 
 
@@ -492,10 +509,3 @@ def _truth_iv(body: dict[str, Any], what: str) -> None:
             json_numbers(m["centre_site_m"], f"{where} 'centre_site_m'", length=3)
     unique_ids(ids, f"{what}: markers")
 
-
-def _json_default(obj: Any) -> Any:
-    if isinstance(obj, np.ndarray):
-        return obj.tolist()
-    if isinstance(obj, np.generic):
-        return obj.item()
-    raise TypeError(f"not JSON-serialisable: {type(obj).__name__}")

@@ -24,13 +24,13 @@ import sys
 from dataclasses import dataclass
 
 import numpy as np
-from pipeline.stages import config_for_marker
 from tqdm import tqdm
 
 from markerplan.provenance import provenance
 from pipeline.evaluation import Reference
 from pipeline.process import process_station
 from pipeline.rig import MountingOffsets, station_to_site_matrix
+from pipeline.stages import build_config
 from planner import accuracy
 from planner.plan_file import SurveyPlan
 from visibility.sensor import RigConfig
@@ -82,7 +82,7 @@ def verify_plan(plan: SurveyPlan, error_model, seed: int = 0, progress: bool = T
     """
     ids = list(plan.marker_ids)
     centres = plan.marker_xyz_m
-    cfg = config_for_marker(plan.marker_radius_m)
+    cfg = build_config({"fit": {"radius_m": plan.marker_radius_m}})
     rig = RigConfig() if offsets is None else RigConfig(offsets=offsets)
     chosen = [(k, st) for k, st in enumerate(plan.stations)
               if station_ids is None or st.id in station_ids]

@@ -33,12 +33,9 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 
 from markerplan.errors import ConfigError
-from pipeline.rig import MountingOffsets
+from pipeline.rig import VLP16_ELEVATION_DEG, MountingOffsets
+from pipeline.scan_format import sensor_metadata
 
-MODEL = "VLP-16"
-#: Laser elevation per channel (= firing order), degrees.
-VLP16_ELEVATION_DEG = (-15.0, 1.0, -13.0, 3.0, -11.0, 5.0, -9.0, 7.0,
-                       -7.0, 9.0, -5.0, 11.0, -3.0, 13.0, -1.0, 15.0)
 VLP16_ELEVATION_RAD = np.radians(VLP16_ELEVATION_DEG)
 #: Channel fired at each position of a firing sequence.
 FIRING_ORDER = tuple(range(16))
@@ -115,8 +112,7 @@ class SensorConfig:
 
     def to_metadata(self) -> dict:
         """The ``sensor`` block of the scan metadata (:mod:`pipeline.scan_format`)."""
-        return {"model": MODEL, **asdict(self),
-                "laser_elevation_rad": [float(v) for v in VLP16_ELEVATION_RAD],
+        return {**sensor_metadata(), **asdict(self),
                 "firing_order": list(FIRING_ORDER),
                 "azimuth_step_rad": self.azimuth_step_rad,
                 "firing_interval_s": FIRING_INTERVAL_S, "firing_cycle_s": FIRING_CYCLE_S,

@@ -30,7 +30,7 @@ import numpy as np
 from markerplan.errors import ConfigError, DataError
 from markerplan.provenance import provenance
 from pipeline.rig import frame_poses, rot_z, station_to_site_matrix
-from pipeline.scan_format import StationScan, write_scan, write_truth
+from pipeline.scan_format import POINT_FIELDS, StationScan, write_scan, write_truth
 from visibility.dem import DEM
 from visibility.scene import HorizonBound, RayScene
 from visibility.sensor import (
@@ -105,8 +105,7 @@ def simulate_scan(scene: RayScene, position_m: np.ndarray, heading_rad: float,
         with ThreadPoolExecutor(threads) as pool:
             results = list(pool.map(work, tasks))
     parts = [p for chunk in results for p in chunk]
-    keys = ("frame_index", "laser_id", "spin_azimuth_rad", "range_m", "xyz_sensor_m",
-            "sphere_index")
+    keys = (*POINT_FIELDS, "xyz_sensor_m", "sphere_index")
     points = {k: np.concatenate([p[k] for p in parts]) for k in keys}
     points["n_rays"] = int(sum(p["n_rays"] for p in parts))
     points["n_cast"] = int(sum(p["n_cast"] for p in parts))
@@ -209,11 +208,8 @@ def _scan_from_points(points: dict, rig: RigConfig, sensor: SensorConfig, statio
             "sensor": sensor.to_metadata(), "rig": rig.to_metadata(),
             "n_rays": points["n_rays"], "n_rays_cast": points["n_cast"],
             "provenance": provenance(config)}
-    return StationScan(
-        turntable_angle_rad=rig.turntable_angles_rad(),
-        frame_index=points["frame_index"], laser_id=points["laser_id"],
-        spin_azimuth_rad=points["spin_azimuth_rad"], range_m=points["range_m"],
-        xyz_sensor_m=points["xyz_sensor_m"], metadata=meta)
+    return StationScan(turntable_angle_rad=rig.turntable_angles_rad(), metadata=meta,
+                       **{k: points[k] for k in (*POINT_FIELDS, "xyz_sensor_m")})
 
 
 def _truth(station_id: str, position: np.ndarray, heading_rad: float, rig: RigConfig,

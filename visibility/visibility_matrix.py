@@ -36,12 +36,11 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
+from markerplan.constants import GOLDEN_ANGLE_RAD
 from markerplan.errors import ConfigError
 
 #: A terrain hit this much before a sample point still counts the point as visible, m.
 HIT_TOLERANCE_M = 0.01
-
-_GOLDEN_ANGLE = np.pi * (3.0 - np.sqrt(5.0))
 
 
 @dataclass(frozen=True)
@@ -121,7 +120,7 @@ def disc_pattern(n: int) -> np.ndarray:
     """
     k = np.arange(n) + 0.5
     r = np.sqrt(k / n)
-    a = k * _GOLDEN_ANGLE
+    a = k * GOLDEN_ANGLE_RAD
     return np.column_stack([r * np.cos(a), r * np.sin(a)])
 
 

@@ -148,16 +148,11 @@ def command(scans, out, overwrite, references, estimator, marker_radius_m, no_ca
     from markerplan.errors import InputFileError
     from markerplan.output_folder import output_folder
     from markerplan.provenance import fingerprint_arrays, provenance
-    from pipeline.evaluation import read_reference
-    from pipeline.process import (
-        build_config,
-        check_references,
-        pick_reference,
-        process_station,
-        with_offsets,
-        write_results,
-    )
+    from pipeline.evaluation import check_references, pick_reference, read_reference
+    from pipeline.process import process_station
+    from pipeline.results import write_results
     from pipeline.scan_format import read_scan
+    from pipeline.stages import build_config, with_offsets
 
     scans, truths = _scan_inputs(scans)
     options = _parse_stage_options(stage_options)

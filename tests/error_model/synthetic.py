@@ -12,7 +12,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from error_model.table import MARKER_TABLE_COLUMNS
+from markerplan import writing
+from pipeline.marker_table import COLUMNS
 
 SIGMA0_M = 0.002
 SLOPE_D = 0.0006  # m per m
@@ -63,25 +64,11 @@ def synthetic_table(n: int, seed: int, vf_effect_m: float = 0.0,
         "error_x_m": axis[:, 0], "error_y_m": axis[:, 1], "error_z_m": axis[:, 2],
         "replicate": np.zeros(n), "seed": np.full(n, float(seed)),
     }
-    assert tuple(cols) == MARKER_TABLE_COLUMNS
+    assert tuple(cols) == COLUMNS
     return cols
 
 
 def write_csv(path, table: dict[str, np.ndarray]) -> None:
-    """Write a table dict as a marker-table CSV."""
-    import csv
-
-    with open(path, "w", newline="") as fh:
-        w = csv.writer(fh)
-        w.writerow(list(table))
-        for row in zip(*table.values(), strict=True):
-            w.writerow([_cell(v) for v in row])
-
-
-def _cell(v) -> str:
-    """A CSV cell as ``markerplan process`` writes it: true/false, empty for no value."""
-    if isinstance(v, np.bool_ | bool):
-        return str(v).lower()
-    if isinstance(v, float | np.floating) and not np.isfinite(v):
-        return ""
-    return str(v)
+    """Write a table dict as ``markerplan process`` writes a marker table."""
+    rows = [dict(zip(table, row, strict=True)) for row in zip(*table.values(), strict=True)]
+    writing.write_csv(path, tuple(table), rows)

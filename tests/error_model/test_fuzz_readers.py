@@ -14,7 +14,7 @@ from hypothesis import strategies as st
 
 from error_model.default import DEFAULT_MODEL_PATH
 from error_model.model import ErrorModel
-from error_model.table import fit_data, read_marker_table, read_marker_tables
+from error_model.table import fit_data, read_marker_tables
 from markerplan.errors import MarkerPlanError
 from tests.error_model.synthetic import synthetic_table, write_csv
 from tests.json_paths import json_paths
@@ -174,6 +174,6 @@ def test_random_bytes_table_is_read_or_refused(tmp_path_factory, data):
     path = tmp_path_factory.mktemp("fuzz") / "t.csv"
     path.write_bytes(b"distance_m,elevation_deg,error_m,accepted\n" + data)
     try:
-        read_marker_table(path)
+        read_marker_tables(path)
     except MarkerPlanError as exc:
         assert "\n" not in str(exc)

@@ -5,22 +5,18 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from error_model.table import (
-    MARKER_TABLE_COLUMNS,
-    fit_data,
-    read_marker_table,
-    read_marker_tables,
-)
+from error_model.table import fit_data, read_marker_tables
 from markerplan.errors import DataError, InputFileError
+from pipeline.marker_table import COLUMNS
 from tests.error_model.synthetic import synthetic_table, write_csv
 
 
 def test_csv_round_trip_keeps_values_and_types(tmp_path):
     table = synthetic_table(50, seed=1)
     write_csv(tmp_path / "t.csv", table)
-    got = read_marker_table(tmp_path / "t.csv")
-    assert tuple(got.columns) == MARKER_TABLE_COLUMNS
-    np.testing.assert_allclose(got["distance_m"], table["distance_m"])
+    got = read_marker_tables(tmp_path / "t.csv")
+    assert tuple(got.columns) == COLUMNS
+    np.testing.assert_allclose(got["distance_m"], table["distance_m"], atol=5e-7)  # 6 decimals
     np.testing.assert_array_equal(np.isnan(got["error_m"]), np.isnan(table["error_m"]))
     np.testing.assert_array_equal(got["accepted"], table["accepted"])
     assert got["station_id"][0] == table["station_id"][0]
@@ -61,7 +57,7 @@ def test_malformed_csv_is_a_one_line_error(tmp_path, edit, err, match):
     lines = path.read_text().splitlines()
     path.write_text("\n".join(edit(lines)) + "\n" if edit(lines) else "")
     with pytest.raises(err, match=match) as exc:
-        read_marker_table(path)
+        read_marker_tables(path)
     assert "\n" not in str(exc.value)
 
 
@@ -71,12 +67,12 @@ def test_non_numeric_cell_names_column_and_line(tmp_path):
     table["distance_m"][3] = "far"
     write_csv(tmp_path / "t.csv", table)
     with pytest.raises(InputFileError, match="'distance_m' line 5"):
-        read_marker_table(tmp_path / "t.csv")
+        read_marker_tables(tmp_path / "t.csv")
 
 
 def test_missing_file_is_an_input_file_error(tmp_path):
     with pytest.raises(InputFileError, match="cannot be read"):
-        read_marker_table(tmp_path / "absent.csv")
+        read_marker_tables(tmp_path / "absent.csv")
 
 
 def test_all_nan_column_and_out_of_range_values_are_data_errors(tmp_path):
@@ -84,7 +80,7 @@ def test_all_nan_column_and_out_of_range_values_are_data_errors(tmp_path):
     table["distance_m"][:] = np.nan
     write_csv(tmp_path / "t.csv", table)
     with pytest.raises(DataError, match="'distance_m' is all NaN"):
-        fit_data(read_marker_table(tmp_path / "t.csv"), 10)
+        fit_data(read_marker_tables(tmp_path / "t.csv"), 10)
     table = synthetic_table(100, seed=1)
     table["distance_m"][0] = -1.0
     table["accepted"][0] = True

@@ -6,7 +6,7 @@ import importlib
 import pytest
 
 MODULES = ["pipeline.sphere_fit", "pipeline.clustering", "pipeline.gate", "pipeline.ground",
-           "pipeline.quality", "pipeline.marker_table", "pipeline.process",
+           "pipeline.quality", "pipeline.marker_table", "pipeline.stages",
            "pipeline.range_study"]
 
 

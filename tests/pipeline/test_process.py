@@ -3,8 +3,9 @@ import pytest
 
 from markerplan.errors import ConfigError
 from pipeline.evaluation import Reference
-from pipeline.process import build_config, detection_subset, process_station, with_offsets
+from pipeline.process import detection_subset, process_station
 from pipeline.rig import MountingOffsets
+from pipeline.stages import build_config, with_offsets
 from tests.pipeline.test_synthesis import synthetic_scan
 
 

@@ -4,9 +4,10 @@ import numpy as np
 import pytest
 
 from pipeline.evaluation import Reference, reference_from_truth
-from pipeline.process import build_config, process_station, with_offsets
+from pipeline.process import process_station
 from pipeline.range_study import measure_markers
 from pipeline.rig import MountingOffsets
+from pipeline.stages import build_config, with_offsets
 
 sites = pytest.importorskip("visibility.sites")
 simulate = pytest.importorskip("visibility.simulate")

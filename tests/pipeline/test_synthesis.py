@@ -3,11 +3,9 @@
 import numpy as np
 import pytest
 
-from pipeline.rig import MountingOffsets, frame_poses
+from pipeline.rig import VLP16_ELEVATION_DEG, MountingOffsets, frame_poses
 from pipeline.scan_format import StationScan
 from pipeline.synthesis import synthesize
-
-VLP16_ELEVATION_DEG = np.array([-15, 1, -13, 3, -11, 5, -9, 7, -7, 9, -5, 11, -3, 13, -1, 15.0])
 
 
 def sensor_directions(azimuth_step_deg):
