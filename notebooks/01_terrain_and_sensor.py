@@ -18,26 +18,15 @@
 # Figures go to `$MARKERPLAN_NB_OUT` (default: a fresh temporary folder).
 
 # %%
-import os
-import tempfile
-from pathlib import Path
+import numpy as np
+from matplotlib.colors import LightSource
+from nbsetup import plt, save
 
-import matplotlib
-
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-from matplotlib.colors import LightSource  # noqa: E402
-
-from pipeline.rig import MountingOffsets, frame_poses  # noqa: E402
-from pipeline.synthesis import synthesize  # noqa: E402
-from visibility.sensor import RigConfig, SensorConfig, firing_pattern, sensor_directions  # noqa: E402
-from visibility.simulate import simulate_station  # noqa: E402
-from visibility.sites import load_site  # noqa: E402
-
-OUT = Path(os.environ.get("MARKERPLAN_NB_OUT") or tempfile.mkdtemp(prefix="markerplan-nb-"))
-OUT.mkdir(parents=True, exist_ok=True)
-print("figures ->", OUT)
+from pipeline.rig import MountingOffsets, frame_poses
+from pipeline.synthesis import synthesize
+from visibility.sensor import RigConfig, SensorConfig, firing_pattern, sensor_directions
+from visibility.simulate import simulate_station
+from visibility.sites import load_site
 
 # %% [markdown]
 # ## The default site
@@ -72,8 +61,7 @@ ax.set_ylabel("y (m)")
 ax.legend(loc="lower right", fontsize=8)
 ax.set_title("default site: hillshade, craters >= 2.5 m")
 fig.tight_layout()
-fig.savefig(OUT / "01_site.png", dpi=90)
-plt.close(fig)
+save(fig, "01_site.png")
 
 # %% [markdown]
 # A profile through the largest crater (8 m, centred at x = 13.75 m, y = 10 m): raised rim,
@@ -88,8 +76,7 @@ ax.set_xlabel("x (m) along y = 10 m")
 ax.set_ylabel("height (m)")
 ax.set_aspect(3)
 fig.tight_layout()
-fig.savefig(OUT / "01_crater_profile.png", dpi=90)
-plt.close(fig)
+save(fig, "01_crater_profile.png")
 
 # %% [markdown]
 # ## The scan pattern
@@ -115,8 +102,7 @@ ax.set_ylabel("elevation (deg)")
 ax.legend(markerscale=8, fontsize=8)
 ax.set_title("one frame = one vertical fan of 16 scan lines")
 fig.tight_layout()
-fig.savefig(OUT / "01_scan_pattern.png", dpi=90)
-plt.close(fig)
+save(fig, "01_scan_pattern.png")
 
 # %% [markdown]
 # ## One simulated station, with few frames
@@ -154,6 +140,5 @@ a2.set_xlabel("distance to marker (m)")
 a2.set_ylabel("points on the marker (0 shown as 0.5)")
 a2.set_title("returns per marker fall with distance (and occlusion)")
 fig.tight_layout()
-fig.savefig(OUT / "01_station.png", dpi=90)
-plt.close(fig)
+save(fig, "01_station.png")
 assert scan.n_points > 0 and n_points.max() > 0

@@ -19,29 +19,19 @@
 # Figures go to `$MARKERPLAN_NB_OUT` (default: a fresh temporary folder).
 
 # %%
-import os
-import tempfile
 from collections import Counter
-from pathlib import Path
 
-import matplotlib
+import numpy as np
+from nbsetup import plt, save
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-
-from pipeline.evaluation import reference_from_truth  # noqa: E402
-from pipeline.process import process_station  # noqa: E402
-from pipeline.rig import MountingOffsets  # noqa: E402
-from pipeline.stages import build_config  # noqa: E402
-from pipeline.synthesis import synthesize  # noqa: E402
-from visibility.sensor import RigConfig, SensorConfig  # noqa: E402
-from visibility.simulate import simulate_station  # noqa: E402
-from visibility.sites import load_site  # noqa: E402
-
-OUT = Path(os.environ.get("MARKERPLAN_NB_OUT") or tempfile.mkdtemp(prefix="markerplan-nb-"))
-OUT.mkdir(parents=True, exist_ok=True)
-print("figures ->", OUT)
+from pipeline.evaluation import reference_from_truth
+from pipeline.process import process_station
+from pipeline.rig import MountingOffsets
+from pipeline.stages import build_config
+from pipeline.synthesis import synthesize
+from visibility.sensor import RigConfig, SensorConfig
+from visibility.simulate import simulate_station
+from visibility.sites import load_site
 
 # %% [markdown]
 # ## Simulate S1 with known mounting errors
@@ -110,8 +100,7 @@ ax.set_ylabel("y (m)")
 ax.legend(fontsize=8, loc="lower right")
 ax.set_title(f"{scan.station_id}: {len(accepted)} accepted of {len(rows)} candidates")
 fig.tight_layout()
-fig.savefig(OUT / "02_detections.png", dpi=90)
-plt.close(fig)
+save(fig, "02_detections.png")
 
 # %% [markdown]
 # ## One marker up close, and the centre errors
@@ -144,8 +133,7 @@ a2.set_ylabel("centre error (mm)")
 a2.legend(fontsize=8)
 a2.set_title("centre error against truth")
 fig.tight_layout()
-fig.savefig(OUT / "02_marker_and_errors.png", dpi=90)
-plt.close(fig)
+save(fig, "02_marker_and_errors.png")
 print(f"mean error of accepted markers {1e3 * result.summary['mean_error_m']:.1f} mm; "
       f"edge residual RMS {1e3 * result.summary['rms_edge_residual_m']:.1f} mm")
 assert accepted and max(r.error_m for r in accepted if r.error_m is not None) < 0.05

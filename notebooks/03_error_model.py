@@ -20,30 +20,19 @@
 # Figures go to `$MARKERPLAN_NB_OUT` (default: a fresh temporary folder).
 
 # %%
-import os
-import tempfile
-from pathlib import Path
+import numpy as np
+from nbsetup import OUT, plt, save
 
-import matplotlib
-
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-
-from error_model import default_model  # noqa: E402
-from error_model.diagnostics import plot_diagnostics, summary_text  # noqa: E402
-from error_model.fit import fit_error_model  # noqa: E402
-from error_model.table import EXTRA_COLUMNS, read_marker_tables  # noqa: E402
-from pipeline.evaluation import reference_from_truth  # noqa: E402
-from pipeline.marker_table import write_marker_table  # noqa: E402
-from pipeline.process import process_station  # noqa: E402
-from pipeline.stages import build_config  # noqa: E402
-from visibility.dem import DEM  # noqa: E402
-from visibility.simulate import simulate_markers  # noqa: E402
-
-OUT = Path(os.environ.get("MARKERPLAN_NB_OUT") or tempfile.mkdtemp(prefix="markerplan-nb-"))
-OUT.mkdir(parents=True, exist_ok=True)
-print("figures ->", OUT)
+from error_model import default_model
+from error_model.diagnostics import plot_diagnostics, summary_text
+from error_model.fit import fit_error_model
+from error_model.table import EXTRA_COLUMNS, read_marker_tables
+from pipeline.evaluation import reference_from_truth
+from pipeline.marker_table import write_marker_table
+from pipeline.process import process_station
+from pipeline.stages import build_config
+from visibility.dem import DEM
+from visibility.simulate import simulate_markers
 
 # %% [markdown]
 # ## A small range study
@@ -119,7 +108,6 @@ a2.set_xlabel("distance (m) at elevation -5 deg (x: outside the domain)")
 a2.set_ylabel("sigma (mm)")
 a2.legend(fontsize=8)
 fig.tight_layout()
-fig.savefig(OUT / "03_domain.png", dpi=90)
-plt.close(fig)
+save(fig, "03_domain.png")
 assert np.all(np.diff(model.predict(d, np.radians(-5.0), **{k: v[0, 0] for k, v in
                                                             extras.items()}).sigma_m) >= -1e-12)

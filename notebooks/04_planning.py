@@ -20,26 +20,15 @@
 # Figures go to `$MARKERPLAN_NB_OUT` (default: a fresh temporary folder).
 
 # %%
-import os
-import tempfile
-from pathlib import Path
+import numpy as np
+from nbsetup import OUT, plt, save
 
-import matplotlib
-
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-
-from error_model import default_model  # noqa: E402
-from planner.config import PlanConfig  # noqa: E402
-from planner.plan_map import draw_plan_map  # noqa: E402
-from planner.planning import load_inputs, make_plan  # noqa: E402
-from planner.station_checks import evaluate_layout  # noqa: E402
-from planner.usability import REASONS  # noqa: E402
-
-OUT = Path(os.environ.get("MARKERPLAN_NB_OUT") or tempfile.mkdtemp(prefix="markerplan-nb-"))
-OUT.mkdir(parents=True, exist_ok=True)
-print("figures ->", OUT)
+from error_model import default_model
+from planner.config import PlanConfig
+from planner.plan_map import draw_plan_map
+from planner.planning import load_inputs, make_plan
+from planner.station_checks import evaluate_layout
+from planner.usability import REASONS
 
 # %% [markdown]
 # ## Inputs and configuration
@@ -97,7 +86,6 @@ ax.set_ylabel("predicted station error (cm)")
 ax.set_yscale("log")
 ax.legend(fontsize=8)
 fig.tight_layout()
-fig.savefig(OUT / "04_baselines.png", dpi=100)
-plt.close(fig)
+save(fig, "04_baselines.png", dpi=100)
 assert result.check.all_ok
 assert all(result.selected.sum() <= n for _, n, ok, _ in rows[1:] if ok)

@@ -19,26 +19,15 @@
 # Figures go to `$MARKERPLAN_NB_OUT` (default: a fresh temporary folder).
 
 # %%
-import os
-import tempfile
-from pathlib import Path
+import numpy as np
+from nbsetup import OUT, plt, save
 
-import matplotlib
-
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-
-from error_model import default_model  # noqa: E402
-from planner.config import PlanConfig  # noqa: E402
-from planner.planning import load_inputs  # noqa: E402
-from planner.reduction.plot import plot_tradeoff  # noqa: E402
-from planner.reduction.report import reduce_record  # noqa: E402
-from planner.reduction.study import layout_problem, read_layout, run_study  # noqa: E402
-
-OUT = Path(os.environ.get("MARKERPLAN_NB_OUT") or tempfile.mkdtemp(prefix="markerplan-nb-"))
-OUT.mkdir(parents=True, exist_ok=True)
-print("figures ->", OUT)
+from error_model import default_model
+from planner.config import PlanConfig
+from planner.planning import load_inputs
+from planner.reduction.plot import plot_tradeoff
+from planner.reduction.report import reduce_record
+from planner.reduction.study import layout_problem, read_layout, run_study
 
 # %% [markdown]
 # ## The site and its as-built layout
@@ -95,8 +84,7 @@ ax.set_xlabel("markers kept")
 ax.set_title("predicted station error (cm) of the minimax subsets")
 fig.colorbar(im, ax=ax)
 fig.tight_layout()
-fig.savefig(OUT / "05_per_station.png", dpi=100)
-plt.close(fig)
+save(fig, "05_per_station.png", dpi=100)
 
 # %% [markdown]
 # ## Robustness: losing one marker of the full layout

@@ -166,9 +166,10 @@ def summarise(rows: list[MarkerRow], distances_m: dict[str, float]) -> list[dict
     return out
 
 
-def plot(summary: list[dict], rows: list[MarkerRow], distances_m: dict[str, float], path
-         ) -> None:
-    """Two panels against distance: point density (log) and centre error per estimator."""
+def plot(summary: list[dict], rows: list[MarkerRow], distances_m: dict[str, float], path,
+         radius_m: float = 0.1) -> None:
+    """Two panels against distance: point density (log) and centre error per estimator, for
+    markers of radius ``radius_m`` (m)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -190,7 +191,7 @@ def plot(summary: list[dict], rows: list[MarkerRow], distances_m: dict[str, floa
             ax1.plot(d, np.where(dens > 0, dens, np.nan), "-o", ms=3, color="k")
     ax1.set_yscale("log")
     ax1.set_ylabel("points per m$^2$ (projected disc)")
-    ax1.set_title("Range study: 0.20 m markers, VLP-16 turntable rig")
+    ax1.set_title(f"Range study: {2 * radius_m:.2f} m markers, VLP-16 turntable rig")
     ax2.set_yscale("log")
     ax2.set_ylabel("centre error (mm)")
     ax2.set_xlabel("horizontal distance LiDAR - marker (m)")

@@ -222,9 +222,12 @@ station_ids_option = click.option(
     help="Work on these stations only, comma-separated ids (default: all).")
 
 
-def marker_radius_option(required: bool = False, default_help: str = ""):
+def marker_radius_option(required: bool = False, default_help: str = "",
+                         default: float | None = None):
     """``--marker-radius M``: the marker (sphere) radius, metres."""
     settings = {"required": True} if required else {}
+    if default is not None:
+        settings = {"default": default, "show_default": True}
     return click.option(
         "--marker-radius", "marker_radius_m", type=FiniteRange(0.01, 1.0), **settings,
         help="Marker (sphere) radius, metres (a 0.20 m sphere has 0.1)." + default_help)

@@ -18,9 +18,7 @@ from planner.cli._common import (
     overwrite_option,
     report_timings,
 )
-
-#: Marker radius when neither --marker-radius nor a simulator truth gives one, m.
-DEFAULT_MARKER_RADIUS_M = 0.1
+from visibility.sites import MARKER_RADIUS_M
 
 
 def _parse_stage_options(items: tuple[str, ...]) -> dict[str, dict[str, object]]:
@@ -100,7 +98,7 @@ def _marker_radius(given: float | None, truth_files: list[Path]) -> float:
         raise InputFileError(f"the truth files record different marker radii "
                              f"({', '.join(f'{r:g}' for r in sorted(radii))} m); process each "
                              "marker size separately, or give --marker-radius")
-    return float(radii.pop()) if radii else DEFAULT_MARKER_RADIUS_M
+    return float(radii.pop()) if radii else MARKER_RADIUS_M
 
 
 @click.command("process")
