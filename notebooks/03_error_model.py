@@ -27,6 +27,7 @@ from error_model import default_model
 from error_model.diagnostics import plot_diagnostics, summary_text
 from error_model.fit import fit_error_model
 from error_model.table import EXTRA_COLUMNS, read_marker_tables
+from markerplan.constants import GOLDEN_ANGLE_RAD
 from pipeline.evaluation import reference_from_truth
 from pipeline.marker_table import write_marker_table
 from pipeline.process import process_station
@@ -49,7 +50,7 @@ distances = np.array([2, 3, 4, 5, 6, 7, 8, 10, 12, 14, 16, 18, 20, 23, 26, 30], 
 config = build_config({"calibrate": {"enabled": False}})
 rows = []
 for rep in range(5):
-    az = np.radians(137.5 * np.arange(distances.size) + 40.0 * rep)
+    az = GOLDEN_ANGLE_RAD * np.arange(distances.size) + np.radians(40.0 * rep)
     xy = np.column_stack([distances * np.cos(az), distances * np.sin(az)])
     centres = np.column_stack([xy, dem.height_at(xy) + 0.10])
     station = np.array([0.0, 0.0, dem.height_at(np.zeros((1, 2)))[0] + 1.0])

@@ -27,6 +27,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
+from markerplan.constants import GOLDEN_ANGLE_RAD
 from markerplan.errors import ConfigError, DataError
 from markerplan.reading import MAX_ABS_COORDINATE_M
 
@@ -400,7 +401,7 @@ def hemisphere_model(radius_m: float, spacing_m: float | None = None) -> np.ndar
     n_full = int(np.ceil(4 * np.pi * radius_m ** 2 / spacing ** 2))
     i = np.arange(n_full) + 0.5
     x = 1 - 2 * i / n_full
-    phi = np.pi * (1 + 5 ** 0.5) * i
+    phi = -GOLDEN_ANGLE_RAD * i  # a Fibonacci sphere
     s = np.sqrt(1 - x ** 2)
     u = np.column_stack([x, s * np.cos(phi), s * np.sin(phi)])
     return radius_m * u[u[:, 0] <= 0]

@@ -34,6 +34,7 @@ import numpy as np
 from scipy.stats import chi2
 
 from markerplan.errors import ConfigError
+from pipeline.rig import rot_z
 
 #: chi-square 95 % quantile with 3 degrees of freedom (3D position error).
 CHI2_3_95 = float(chi2.ppf(0.95, 3))
@@ -323,9 +324,9 @@ def fit_pose(station_frame_xyz: np.ndarray, site_xyz: np.ndarray, sigma_m: np.nd
     if p.shape[0] < 2:
         raise ConfigError(f"fit_pose needs at least 2 markers, got {p.shape[0]}")
     psi = float(heading0_rad)
-    t = np.average(m - _rz(psi, p), axis=0, weights=w)
+    t = np.average(m - p @ rot_z(psi).T, axis=0, weights=w)
     for _ in range(iterations):
-        rp = _rz(psi, p)
+        rp = p @ rot_z(psi).T
         r = (m - (t + rp)).reshape(-1)
         h = _design_blocks(rp[:, :2]).reshape(-1, 4)
         ww = np.repeat(w, 3)
@@ -335,11 +336,6 @@ def fit_pose(station_frame_xyz: np.ndarray, site_xyz: np.ndarray, sigma_m: np.nd
         if np.abs(step).max() < 1e-12:
             break
     return t, psi
-
-
-def _rz(psi: float, p: np.ndarray) -> np.ndarray:
-    c, s = np.cos(psi), np.sin(psi)
-    return np.column_stack([c * p[:, 0] - s * p[:, 1], s * p[:, 0] + c * p[:, 1], p[:, 2]])
 
 
 def registration_error(translation_est_m, heading_est_rad: float, translation_true_m,
@@ -353,6 +349,6 @@ def registration_error(translation_est_m, heading_est_rad: float, translation_tr
     phi = np.linspace(0.0, 2.0 * np.pi, 360, endpoint=False)
     p = working_radius_m * np.column_stack([np.cos(phi), np.sin(phi), np.zeros_like(phi)])
     p = np.vstack([np.zeros((1, 3)), p])
-    est = np.asarray(translation_est_m, float) + _rz(heading_est_rad, p)
-    tru = np.asarray(translation_true_m, float) + _rz(heading_true_rad, p)
+    est = np.asarray(translation_est_m, float) + p @ rot_z(heading_est_rad).T
+    tru = np.asarray(translation_true_m, float) + p @ rot_z(heading_true_rad).T
     return float(np.linalg.norm(est - tru, axis=1).max())

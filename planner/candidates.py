@@ -40,10 +40,6 @@ class Candidates:
     centre_m: np.ndarray
     dropped: dict = field(default_factory=dict)
 
-    @property
-    def xy_m(self) -> np.ndarray:
-        return self.centre_m[:, :2]
-
     def __len__(self) -> int:
         return len(self.ids)
 

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from markerplan.errors import ConfigError, DataError, InputFileError
+from markerplan.errors import ConfigError, InputFileError
 from markerplan.reading import (
     MAX_ABS_COORDINATE_M,
     finite_number,
@@ -224,13 +224,7 @@ def _boundary_iv(polygons: list, path) -> np.ndarray:
 
 
 def _check_inside(dem, xy: np.ndarray, ids, label: str) -> None:
-    inside = dem.contains(xy)
-    if not inside.all():
-        k = int(np.flatnonzero(~inside)[0])
-        xmin, xmax, ymin, ymax = dem.extent()
-        raise DataError(f"{label} {ids[k]} at ({xy[k, 0]:.2f}, {xy[k, 1]:.2f}) m lies outside the "
-                        f"DEM [{xmin:.1f}, {xmax:.1f}] x [{ymin:.1f}, {ymax:.1f}] m; move it "
-                        "inside or use a DEM covering it")
+    dem.require_inside(xy, ids, label, "move it inside or use a DEM covering it")
 
 
 #: Largest magnitude of a ``heading_deg``, degrees.

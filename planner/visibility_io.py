@@ -21,7 +21,6 @@ output files. A site's coordinates must agree on every row that names it.
 
 from __future__ import annotations
 
-import csv
 from pathlib import Path
 
 import numpy as np
@@ -131,22 +130,3 @@ def read_visibility_table(path: str | Path, station_ids, station_xyz) -> PlanPro
         pair_distance_m=np.asarray(dist, float), pair_bearing_rad=np.asarray(bearing, float),
         pair_sigma_m=np.asarray(sigma, float),
         pair_reason=np.where(usable, USABLE, OCCLUDED).astype(np.int8))
-
-
-def write_visibility_table(path: str | Path, problem: PlanProblem) -> Path:
-    """Write a problem's pairs in the same format (round-trips through
-    :func:`read_visibility_table`; non-usable reasons collapse to ``usable = 0``)."""
-    path = Path(path)
-    with path.open("w", newline="") as fh:
-        w = csv.writer(fh)
-        w.writerow([*REQUIRED, "distance_m"])
-        for k in range(problem.pair_station.size):
-            j = problem.pair_site[k]
-            x, y, z = problem.site_xyz[j]
-            w.writerow([problem.station_ids[problem.pair_station[k]], problem.site_ids[j],
-                        int(problem.pair_reason[k] == USABLE),
-                        f"{np.degrees(problem.pair_bearing_rad[k]):.6f}",
-                        f"{problem.pair_sigma_m[k]:.6g}" if np.isfinite(problem.pair_sigma_m[k])
-                        else "1", f"{x:.4f}", f"{y:.4f}", f"{z:.4f}",
-                        f"{problem.pair_distance_m[k]:.4f}"])
-    return path

@@ -88,6 +88,34 @@ class DEM:
         return ((xy[:, 0] >= xmin) & (xy[:, 0] <= xmax)
                 & (xy[:, 1] >= ymin) & (xy[:, 1] <= ymax))
 
+    def require_inside(self, xy: np.ndarray, ids, label: str, fix: str) -> None:
+        """Raise unless every point lies on the grid (:meth:`contains`).
+
+        Parameters
+        ----------
+        xy : (n, 2) float
+            Site-frame points, metres.
+        ids : sequence of str
+            Their ids, for the message.
+        label : str
+            What they are (``"station"``, ``"marker"``).
+        fix : str
+            The message's advice.
+
+        Raises
+        ------
+        DataError
+            Names the first point outside, its position and the DEM's extent.
+        """
+        xy = np.atleast_2d(np.asarray(xy, dtype=float))
+        inside = self.contains(xy)
+        if not inside.all():
+            k = int(np.flatnonzero(~inside)[0])
+            xmin, xmax, ymin, ymax = self.extent()
+            raise DataError(f"{label} {ids[k]} at ({xy[k, 0]:.2f}, {xy[k, 1]:.2f}) m lies "
+                            f"outside the DEM [{xmin:.1f}, {xmax:.1f}] x [{ymin:.1f}, "
+                            f"{ymax:.1f}] m; {fix}")
+
     def height_at(self, xy: np.ndarray) -> np.ndarray:
         """Bilinear height at site-frame points.
 

@@ -25,7 +25,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from markerplan.errors import ConfigError, DataError
+from markerplan.errors import ConfigError
 from visibility.dem import DEM
 from visibility.terrain import Crater, CraterSpec, RockSpec, TerrainSpec, generate_terrain
 
@@ -178,13 +178,8 @@ def site_with_dem(site: Site, dem: DEM) -> Site:
     """
     for label, ids, xy in (("station", site.station_ids, site.station_xy_m),
                            ("marker", site.marker_ids, site.marker_centres_m[:, :2])):
-        inside = dem.contains(xy)
-        if not inside.all():
-            k = int(np.flatnonzero(~inside)[0])
-            xmin, xmax, ymin, ymax = dem.extent()
-            raise DataError(f"{label} {ids[k]} at ({xy[k, 0]:.2f}, {xy[k, 1]:.2f}) m lies outside "
-                            f"the DEM [{xmin:.1f}, {xmax:.1f}] x [{ymin:.1f}, {ymax:.1f}] m; use "
-                            "a DEM covering the site (same site-frame coordinates)")
+        dem.require_inside(xy, ids, label,
+                           "use a DEM covering the site (same site-frame coordinates)")
     return replace(site, dem=dem, marker_centres_m=_seated(site.marker_centres_m, dem,
                                                           site.marker_radius_m),
                    craters=[], rock_centres_m=np.zeros((0, 3)), rock_radii_m=np.zeros(0))

@@ -66,7 +66,7 @@ FILE = click.Path(dir_okay=False, path_type=Path)
 class FiniteRange(click.FloatRange):
     """``click.FloatRange`` that also refuses ``nan`` and ``inf`` (which pass its comparisons)."""
 
-    name = "finite float range"
+    name = "float"
 
     def convert(self, value, param, ctx):
         number = super().convert(value, param, ctx)
@@ -186,14 +186,15 @@ def site_option(default: str | None = "default"):
 
 
 site_seed_option = click.option(
-    "--site-seed", type=SEED, default=None,
+    "--site-seed", type=SEED, default=None, metavar="N",
     help="Seed of the site preset's synthetic terrain (default 0, or the plan's).")
 
 
 def seed_option(help_text: str = "Seed of the simulated noise; the same seed gives the same "
                                  "files."):
     """``--seed N``: the seed of the command's random noise or resampling (default 0)."""
-    return click.option("--seed", type=SEED, default=0, show_default=True, help=help_text)
+    return click.option("--seed", type=SEED, default=0, show_default=True, metavar="N",
+                        help=help_text)
 
 
 frames_option = click.option(

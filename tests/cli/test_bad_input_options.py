@@ -73,6 +73,8 @@ CASES = [
                                             "--sensor", "1,2"], "--sensor"),
     usage("simulate-axis-offset-one-number", SIM + ["--axis-offset-mm", "5"], "--axis-offset-mm"),
     usage("simulate-axis-offset-nan", SIM + ["--axis-offset-mm", "nan,0"], "--axis-offset-mm"),
+    usage("reduce-axis-offset-one-number", ["reduce", "as-built", "--verify", "--axis-offset-mm",
+                                            "15", "--out", "out"], "--axis-offset-mm"),
     usage("process-estimator-unknown", PROCESS + ["--estimator", "magic"], "--estimator"),
     usage("fit-error-model-estimator-unknown", ["fit-error-model", "{inputs}/markers.csv",
                                                 "--estimator", "magic", "--out", "out"],

@@ -112,3 +112,22 @@ def test_bad_options_refused(tmp_path, capsys, option, value, fix):
 def test_help_has_an_example(capsys):
     code, stdout, _ = run_cli(capsys, ["simulate", "--help"])
     assert code == 0 and "markerplan simulate --site default --out" in stdout
+
+
+def test_stations_file_and_marker_radius(tmp_path, capsys):
+    stations = tmp_path / "stations.csv"
+    stations.write_text("id,x_m,y_m,heading_deg\nA,3.0,4.0,90\n")
+    out = tmp_path / "o"
+    code, _, err = run_cli(capsys, ["simulate", "--stations", str(stations), "--marker-radius",
+                                    "0.15", "--frames", "2", "--out", str(out)])
+    assert code == 0, err
+    truth = read_truth(out / "station_A.truth.json")
+    assert truth["station_pose"]["position_m"][:2] == pytest.approx([3.0, 4.0])
+    assert truth["station_pose"]["heading_rad"] == pytest.approx(np.pi / 2)
+    assert truth["marker_radius_m"] == 0.15
+    site = json.loads((out / "site.json").read_text())
+    assert [s["id"] for s in site["stations"]] == ["A"] and site["marker_radius_m"] == 0.15
+    # --station-ids picks among the file's stations
+    code, _, err = run_cli(capsys, ["simulate", "--stations", str(stations), "--station-ids",
+                                    "B", "--frames", "2", "--out", str(tmp_path / "p")])
+    assert code == 1 and "valid ids are A" in err

@@ -2,6 +2,7 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from pipeline.rig import rot_z
 from planner import accuracy
 from planner.accuracy import CHI2_3_95, fit_pose, registration_error, station_error
 
@@ -54,9 +55,7 @@ def test_fit_pose_recovers_a_known_pose_and_registration_error():
     rng = np.random.default_rng(0)
     site = np.column_stack([rng.uniform(-15, 15, (5, 2)), rng.uniform(-1, 1, 5)])
     t_true, psi_true = np.array([1.0, -2.0, 0.5]), 0.7
-    c, s = np.cos(psi_true), np.sin(psi_true)
-    rot = np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]])
-    station = (site - t_true) @ rot
+    station = (site - t_true) @ rot_z(psi_true)
     t, psi = fit_pose(station, site, np.full(5, 0.01), heading0_rad=0.6)
     assert np.allclose(t, t_true, atol=1e-9) and np.isclose(psi, psi_true, atol=1e-12)
     assert registration_error(t, psi, t_true, psi_true, 10.0) < 1e-8

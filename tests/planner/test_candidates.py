@@ -26,7 +26,7 @@ def test_grid_boundary_exclusion_slope_stations_and_craters():
     crater = SimpleNamespace(centre_xy_m=(0.0, -5.0), diameter_m=2.0)
     c = candidate_sites(dem, cfg, boundary=boundary, exclusions=[exclusion],
                         station_xy=[[0.0, 5.0]], craters=[crater], marker_radius_m=0.1)
-    xy = c.xy_m
+    xy = c.centre_m[:, :2]
     assert np.all((xy >= -8) & (xy <= 8))
     assert np.all(xy[:, 0] > -4)  # exclusion zone
     assert np.all(xy[:, 0] < 5)  # the 45-degree ramp is too steep

@@ -1,11 +1,34 @@
+import csv
+from pathlib import Path
+
 import numpy as np
 import pytest
 
 from markerplan.errors import InputFileError
 from planner.config import PlanConfig
 from planner.program import plan_sites
-from planner.visibility_io import read_visibility_table, write_visibility_table
+from planner.usability import USABLE, PlanProblem
+from planner.visibility_io import REQUIRED, read_visibility_table
 from tests.planner.instances import make_problem, ring
+
+
+def write_visibility_table(path: str | Path, problem: PlanProblem) -> Path:
+    """Write a problem's pairs as a visibility table (a user's table, as the round trip
+    through :func:`read_visibility_table` needs; non-usable reasons become ``usable = 0``)."""
+    path = Path(path)
+    with path.open("w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow([*REQUIRED, "distance_m"])
+        for k in range(problem.pair_station.size):
+            j = problem.pair_site[k]
+            x, y, z = problem.site_xyz[j]
+            w.writerow([problem.station_ids[problem.pair_station[k]], problem.site_ids[j],
+                        int(problem.pair_reason[k] == USABLE),
+                        f"{np.degrees(problem.pair_bearing_rad[k]):.6f}",
+                        f"{problem.pair_sigma_m[k]:.6g}" if np.isfinite(problem.pair_sigma_m[k])
+                        else "1", f"{x:.4f}", f"{y:.4f}", f"{z:.4f}",
+                        f"{problem.pair_distance_m[k]:.4f}"])
+    return path
 
 
 def test_round_trip_gives_the_same_plan(tmp_path):
