@@ -20,7 +20,6 @@ gives them to the command's stderr and ``--json`` summary.
 
 from __future__ import annotations
 
-import csv
 import json
 import math
 from collections import Counter
@@ -29,6 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from markerplan.provenance import provenance
+from markerplan.writing import write_csv
 from planner.reduction.curve import failure_reason
 
 SCHEMA = "markerplan-reduce"
@@ -117,47 +117,39 @@ def reduce_record(study, layout, inputs, model_name: str, options: dict,
     return doc
 
 
+TRADEOFF_COLUMNS = ("k", "worst_error_m", "mean_error_m", "lower_bound_m", "meets_requirement",
+                    "directions_ok", "n_failing", "proven_optimal", "n_solves", "markers")
+PER_STATION_COLUMNS = ("k", "station", "error_m", "n_markers", "n_sectors", "meets_requirement",
+                       "reason")
+DROP_ORDER_COLUMNS = ("step", "removed", "k", "worst_error_m", "mean_error_m",
+                      "meets_requirement", "optimal_worst_error_m", "failing")
+MARKER_LOSS_COLUMNS = ("marker", "worst_error_m", "mean_error_m", "n_failing", "failing")
+
+
 def write_reduce_files(doc: dict, folder: Path) -> None:
     """Write reduce.json, the four CSV tables and report.md into ``folder``."""
     folder = Path(folder)
     (folder / "reduce.json").write_text(json.dumps(doc, indent=2) + "\n")
-    _csv(folder / "tradeoff.csv",
-         ["k", "worst_error_m", "mean_error_m", "lower_bound_m", "meets_requirement",
-          "directions_ok", "n_failing", "proven_optimal", "n_solves", "markers"],
-         [[p["k"], _f(p["worst_error_m"]), _f(p["mean_error_m"]), _f(p["lower_bound_m"]),
-           int(p["meets_requirement"]), int(p["directions_ok"]),
-           sum(not s["meets_requirement"] for s in p["stations"]), int(p["proven_optimal"]),
-           p["n_solves"], " ".join(p["markers"])] for p in doc["curve"]])
-    _csv(folder / "per_station.csv",
-         ["k", "station", "error_m", "n_markers", "n_sectors", "meets_requirement", "reason"],
-         [[p["k"], s["id"], _f(s["error_m"]), s["n_markers"], s["n_sectors"],
-           int(s["meets_requirement"]), s["reason"]] for p in doc["curve"] for s in p["stations"]])
-    _csv(folder / "drop_order.csv",
-         ["step", "removed", "k", "worst_error_m", "mean_error_m", "meets_requirement",
-          "optimal_worst_error_m", "failing"],
-         [[d["step"], d["removed"], d["k"], _f(d["worst_error_m"]), _f(d["mean_error_m"]),
-           int(d["meets_requirement"]), _f(d["optimal_worst_error_m"]), _failing(d["failing"])]
-          for d in doc["drop_order"]])
-    _csv(folder / "marker_loss.csv",
-         ["marker", "worst_error_m", "mean_error_m", "n_failing", "failing"],
-         [[m["marker"], _f(m["worst_error_m"]), _f(m["mean_error_m"]), len(m["failing"]),
-           _failing(m["failing"])] for m in doc["marker_losses"]])
+    write_csv(folder / "tradeoff.csv", TRADEOFF_COLUMNS, (
+        {**p, "meets_requirement": int(p["meets_requirement"]),
+         "directions_ok": int(p["directions_ok"]),
+         "n_failing": sum(not s["meets_requirement"] for s in p["stations"]),
+         "proven_optimal": int(p["proven_optimal"]), "markers": " ".join(p["markers"])}
+        for p in doc["curve"]))
+    write_csv(folder / "per_station.csv", PER_STATION_COLUMNS, (
+        {**s, "k": p["k"], "station": s["id"], "meets_requirement": int(s["meets_requirement"])}
+        for p in doc["curve"] for s in p["stations"]))
+    write_csv(folder / "drop_order.csv", DROP_ORDER_COLUMNS, (
+        {**d, "meets_requirement": int(d["meets_requirement"]),
+         "failing": _failing(d["failing"])} for d in doc["drop_order"]))
+    write_csv(folder / "marker_loss.csv", MARKER_LOSS_COLUMNS, (
+        {**m, "n_failing": len(m["failing"]), "failing": _failing(m["failing"])}
+        for m in doc["marker_losses"]))
     (folder / "report.md").write_text(report_markdown(doc))
-
-
-def _f(v, digits: int = 6) -> str:
-    return "" if v is None else f"{v:.{digits}f}"
 
 
 def _failing(failing: dict) -> str:
     return "; ".join(f"{k}: {v}" for k, v in failing.items())
-
-
-def _csv(path: Path, header: list[str], rows: list[list]) -> None:
-    with path.open("w", newline="") as fh:
-        w = csv.writer(fh)
-        w.writerow(header)
-        w.writerows(rows)
 
 
 def _cm(v) -> str:
