@@ -42,12 +42,15 @@ class Reference:
         The station whose frame ``centres_m`` is in (simulation truth), None for a CSV.
     source : str
         File it came from.
+    marker_radius_m : float or None
+        Radius of the markers, metres, when the reference records it (simulation truth).
     """
 
     ids: tuple[str, ...]
     centres_m: np.ndarray
     station_id: str | None
     source: str
+    marker_radius_m: float | None = None
 
 
 def read_reference(path: str | Path) -> Reference:
@@ -101,7 +104,7 @@ def reference_from_truth(truth: dict, source: str = "simulator truth") -> Refere
         raise InputFileError(f"{source}: every marker needs a 'centre_station_m' of 3 finite "
                              "numbers")
     unique_ids(ids, f"{source}: markers")
-    return Reference(ids, centres, station, source)
+    return Reference(ids, centres, station, source, truth.get("marker_radius_m"))
 
 
 def _read_reference_csv(path: Path) -> Reference:

@@ -86,7 +86,11 @@ class SurveyPlan:
     @property
     def dem_path(self) -> str | None:
         """The ``--dem`` file the plan was made on, or ``None`` for a preset's terrain."""
-        return self.provenance.get("inputs", {}).get("dem")
+        return _dem_path(self.provenance)
+
+
+def _dem_path(provenance: dict) -> str | None:
+    return provenance.get("inputs", {}).get("dem")
 
 
 def write_plan(doc: dict, path: Path) -> None:
@@ -104,7 +108,7 @@ def load_plan(path: str | Path) -> SurveyPlan:
     """
     doc = read_plan(path, "PLAN", full=True)
     site = doc["site"]
-    dem_path = doc["provenance"].get("inputs", {}).get("dem")
+    dem_path = _dem_path(doc["provenance"])
     if dem_path is not None:
         dem = read_dem(dem_path, what=f"DEM {dem_path} (named by the plan)",
                        nodata_fix="fix the DEM the plan names, or plan again on a filled DEM")

@@ -109,18 +109,38 @@ def select_stations(available: list[str], wanted: tuple[str, ...] | None) -> lis
     """
     if wanted is None:
         return list(available)
-    unknown = [s for s in wanted if s not in available]
+    return list(known_ids(wanted, available, "--station-ids", "station"))
+
+
+def known_ids(wanted, available, option: str, what: str) -> tuple[str, ...]:
+    """``wanted`` as a tuple, when every id is among ``available``.
+
+    Parameters
+    ----------
+    wanted, available : iterable of str
+    option : str
+        The option that gave ``wanted`` (for the message).
+    what : str
+        What the ids name (``"station"``, ``"marker"``).
+
+    Raises
+    ------
+    ConfigError
+        Names the unknown ids and lists the valid ones (the first 20).
+    """
+    wanted, available = tuple(wanted), list(available)
+    unknown = [i for i in wanted if i not in available]
     if unknown:
         shown = ", ".join(available[:20]) + (", ..." if len(available) > 20 else "")
-        raise ConfigError(f"--station-ids: unknown station id(s) {', '.join(unknown)}; valid ids "
-                          f"are {shown}")
-    return list(wanted)
+        raise ConfigError(f"{option}: unknown {what} id(s) {', '.join(unknown)}; valid ids are "
+                          f"{shown}")
+    return wanted
 
 
 def load_inputs(site: str = "default", site_seed: int | None = None, dem_path=None,
                 stations_path=None, boundary_path=None, exclude_paths=(),
-                existing: str | None = None, marker_radius_m: float | None = None
-                ) -> PlanInputs:
+                existing: str | None = None, marker_radius_m: float | None = None,
+                station_ids=None) -> PlanInputs:
     """Assemble the inputs of a plan from a site preset and optional files.
 
     Parameters
@@ -146,6 +166,8 @@ def load_inputs(site: str = "default", site_seed: int | None = None, dem_path=No
     marker_radius_m : float, optional
         Marker radius, m (default: the preset's); markers rest on the ground, so their centres
         stand this far above it.
+    station_ids : sequence of str, optional
+        Only these of the stations (:func:`select_stations`); default all.
 
     Raises
     ------
@@ -203,12 +225,15 @@ def load_inputs(site: str = "default", site_seed: int | None = None, dem_path=No
         ex_ids, ex_xyz = read_markers(existing, dem, float(preset.marker_radius_m))
     if existing is not None:
         sources["existing"] = existing
-    return PlanInputs(site_name=site, site_seed=preset.seed, dem=dem, station_ids=ids,
-                      station_xyz=xyz, station_heading_rad=heading, boundary_xy=boundary,
-                      exclusions=exclusions, craters=craters, as_built_ids=as_built_ids,
-                      as_built_xyz=as_built_xyz, existing_ids=ex_ids, existing_xyz=ex_xyz,
-                      marker_radius_m=float(preset.marker_radius_m), lidar_height_m=lidar_h,
-                      sources=sources)
+    inputs = PlanInputs(site_name=site, site_seed=preset.seed, dem=dem, station_ids=ids,
+                        station_xyz=xyz, station_heading_rad=heading, boundary_xy=boundary,
+                        exclusions=exclusions, craters=craters, as_built_ids=as_built_ids,
+                        as_built_xyz=as_built_xyz, existing_ids=ex_ids, existing_xyz=ex_xyz,
+                        marker_radius_m=float(preset.marker_radius_m), lidar_height_m=lidar_h,
+                        sources=sources)
+    if station_ids is None:
+        return inputs
+    return inputs.with_stations(select_stations(inputs.station_ids, station_ids))
 
 
 def _boundary_iv(polygons: list, path) -> np.ndarray:

@@ -43,20 +43,14 @@ GROUND_MARGIN_M = 5.0
 class RangeStudy:
     """A simulated range study: its marker tables, their summary and its configuration."""
 
-    marker_ids: list[str]
-    distances_m: np.ndarray
-    """(n,) horizontal LiDAR-to-marker distance of each marker id, m."""
+    distance_of: dict[str, float]
+    """Marker id -> horizontal LiDAR-to-marker distance, m (in layout order)."""
     rows: list[MarkerRow]
     """Every marker of every replicate, with each estimator."""
     summary: list[dict]
     """:func:`pipeline.range_study.summarise` of ``rows``."""
     config: dict
     """Everything the result depends on (recorded in ``summary.json``)."""
-
-    @property
-    def distance_of(self) -> dict[str, float]:
-        """Marker id -> horizontal distance, m."""
-        return dict(zip(self.marker_ids, self.distances_m.tolist(), strict=True))
 
 
 def run_range_study(max_distance_m: float = 50.0, frames: int = 800, replicates: int = 3,
@@ -109,8 +103,8 @@ def run_range_study(max_distance_m: float = 50.0, frames: int = 800, replicates:
     config = {"distances_m": distances.tolist(), "frames": frames, "replicates": replicates,
               "seed": seed, "sensor": {"rpm": sensor.rpm, "range_noise_m": sensor.range_noise_m},
               "terrain": "level ground", "marker_radius_m": marker_radius_m}
-    return RangeStudy(ids, distances, rows,
-                      summarise(rows, dict(zip(ids, distances.tolist(), strict=True))), config)
+    distance_of = dict(zip(ids, distances.tolist(), strict=True))
+    return RangeStudy(distance_of, rows, summarise(rows, distance_of), config)
 
 
 def write_range_study(study: RangeStudy, folder: Path) -> dict:

@@ -238,6 +238,7 @@ error_model_option = click.option(
     "--error-model", "error_model", type=FILE, callback=_load_error_model,
     help="Error-model JSON from fit-error-model (default: the shipped model).")
 
+
 def estimator_option(default: str | None = METHODS[0], help_text: str = "Sphere-centre "
                      "estimator: the ASTM E3125-17 line-of-sight fixed-radius fit, or the "
                      "published hemisphere ICP."):

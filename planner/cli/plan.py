@@ -98,7 +98,7 @@ def _plan(site_name, site_seed, dem_path, stations_path, station_ids, boundary_p
     """Read the inputs and make the plan; return ``(outcome, config)``."""
     from markerplan.errors import ConfigError
     from planner.config import PlanConfig, load_config
-    from planner.planning import load_inputs, make_plan, select_stations
+    from planner.planning import load_inputs, make_plan
 
     config = load_config(config_path) if config_path else PlanConfig()
     overrides = {}
@@ -114,9 +114,8 @@ def _plan(site_name, site_seed, dem_path, stations_path, station_ids, boundary_p
         raise ConfigError(f"{exc} (from the command-line options)") from exc
     inputs = load_inputs(site_name, site_seed, dem_path=dem_path, stations_path=stations_path,
                          boundary_path=boundary_path, exclude_paths=exclude_paths,
-                         existing=existing, marker_radius_m=marker_radius_m)
-    if station_ids is not None:
-        inputs = inputs.with_stations(select_stations(inputs.station_ids, station_ids))
+                         existing=existing, marker_radius_m=marker_radius_m,
+                         station_ids=station_ids)
     if inputs.existing_ids:
         config = config.replace(existing=tuple(inputs.existing_ids))
     problem = None

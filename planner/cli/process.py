@@ -86,14 +86,14 @@ def _scan_inputs(paths: tuple[Path, ...]) -> tuple[list[Path], list[Path]]:
     return scans, truths
 
 
-def _marker_radius(given: float | None, truth_files: list[Path]) -> float:
-    """``--marker-radius``, else the one the simulator's truths record, else 0.1 m."""
+def _marker_radius(given: float | None, references: list) -> float:
+    """``--marker-radius``, else the one the references (simulator truths) record, else
+    0.1 m."""
     from markerplan.errors import InputFileError
-    from pipeline.scan_format import read_truth
 
     if given is not None:
         return given
-    radii = {read_truth(f).get("marker_radius_m") for f in truth_files} - {None}
+    radii = {r.marker_radius_m for r in references} - {None}
     if len(radii) > 1:
         raise InputFileError(f"the truth files record different marker radii "
                              f"({', '.join(f'{r:g}' for r in sorted(radii))} m); process each "
@@ -165,12 +165,11 @@ def command(scans, out, overwrite, references, estimator, marker_radius_m, no_ca
                              "*.truth.json; give the truth files or a total-station CSV")
     if not references:
         ref_files = truths
-    if marker_radius_m is not None or "radius_m" not in options["fit"]:
-        options["fit"]["radius_m"] = _marker_radius(
-            marker_radius_m, [f for f in ref_files if f.name.endswith(".json")])
-    cfg = with_offsets(build_config(options), offsets, enabled=not no_calibrate)
     refs = [read_reference(p) for p in ref_files]
     check_references(refs)
+    if marker_radius_m is not None or "radius_m" not in options["fit"]:
+        options["fit"]["radius_m"] = _marker_radius(marker_radius_m, refs)
+    cfg = with_offsets(build_config(options), offsets, enabled=not no_calibrate)
     with output_folder(out, overwrite, "process", inputs=[*scans, *truths, *references]) as stage:
         results, inputs = [], []
         for path in tqdm(scans, desc="stations", file=sys.stderr, disable=None):

@@ -63,7 +63,7 @@ def command(out, overwrite, frames, replicates, seed, rpm, range_noise_mm, marke
                                     marker_radius_m, progress=bar.update)
         result = write_range_study(study, stage)
         summary_rows = study.summary
-        distances = study.distances_m
+        distances = study.distance_of.values()
     result["out"] = str(out)
     lines = [f"{'distance_m':>10} " + " ".join(f"{m:>16}" for m in ("fixed-radius mm",
                                                                     "hemisphere-icp mm"))]

@@ -122,13 +122,14 @@ def _study(layout_spec, sources, error_model, config_path, free, keep_ids, drop_
     from markerplan.errors import ConfigError
     from pipeline.rig import MountingOffsets
     from planner.config import load_config
+    from planner.planning import known_ids
     from planner.reduction.report import reduce_record
-    from planner.reduction.study import layout_problem, marker_ids_iv, resolve_inputs, run_study
+    from planner.reduction.study import layout_problem, resolve_inputs, run_study
 
     config = load_config(config_path) if config_path else None
     inputs, layout, config = resolve_inputs(layout_spec, config=config, **sources)
-    overrides = {"existing": marker_ids_iv(keep_ids or (), layout, "--keep"),
-                 "forbidden": marker_ids_iv(drop_ids or (), layout, "--drop")}
+    overrides = {"existing": known_ids(keep_ids or (), layout.ids, "--keep", "marker"),
+                 "forbidden": known_ids(drop_ids or (), layout.ids, "--drop", "marker")}
     if time_limit_s is not None:
         overrides["time_limit_s"] = time_limit_s
     try:

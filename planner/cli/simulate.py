@@ -118,17 +118,18 @@ def _site(site_name, site_seed, dem_path, dem_fill, stations_path, marker_radius
     )
 
     site = load_site(site_name, seed=site_seed)
-    if dem_path is not None:
-        site = site_with_dem(site, read_dem(
-            dem_path, fill=dem_fill, what=f"--dem {dem_path}",
-            nodata_fix="pass --dem-fill nearest, or fill them (e.g. gdal_fillnodata.py) "
-                       "or crop the DEM"))
-    if marker_radius_m is not None:
-        site = site_with_marker_radius(site, marker_radius_m)
-    if stations_path is not None:
-        ids, xyz, heading = read_stations(stations_path, site.dem, lidar_height_m)
-        if np.any(np.abs(xyz[:, 2] - site.dem.height_at(xyz[:, :2]) - lidar_height_m) > 1e-3):
+    dem = site.dem if dem_path is None else read_dem(
+        dem_path, fill=dem_fill, what=f"--dem {dem_path}",
+        nodata_fix="pass --dem-fill nearest, or fill them (e.g. gdal_fillnodata.py) or crop "
+                   "the DEM")
+    if stations_path is not None:  # before site_with_dem, which checks the stations it keeps
+        ids, xyz, heading = read_stations(stations_path, dem, lidar_height_m)
+        if np.any(np.abs(xyz[:, 2] - dem.height_at(xyz[:, :2]) - lidar_height_m) > 1e-3):
             click.echo(f"note: the z_m of --stations {stations_path} are not used: the LiDAR "
                        "centre stands --lidar-height above the ground", err=True)
         site = site_with_stations(site, ids, xyz, heading)
+    if dem_path is not None:
+        site = site_with_dem(site, dem)
+    if marker_radius_m is not None:
+        site = site_with_marker_radius(site, marker_radius_m)
     return site

@@ -17,10 +17,10 @@ from pathlib import Path
 import numpy as np
 import shapely
 
-from markerplan.errors import ConfigError, DataError, InputFileError
+from markerplan.errors import DataError, InputFileError
 from planner import plan_file
 from planner.config import PlanConfig, config_from_dict
-from planner.planning import build_problem, load_inputs, read_markers, select_stations
+from planner.planning import build_problem, load_inputs, read_markers
 from planner.reduction.curve import (
     Curve,
     DropStep,
@@ -169,9 +169,8 @@ def resolve_inputs(spec: str, site_name: str | None = None, site_seed: int | Non
                                               redundant=False)
     inputs = load_inputs(site_name or "default", site_seed, dem_path=dem_path,
                          stations_path=stations_path, boundary_path=boundary_path,
-                         exclude_paths=exclude_paths, marker_radius_m=marker_radius_m)
-    if station_ids is not None:
-        inputs = inputs.with_stations(select_stations(inputs.station_ids, station_ids))
+                         exclude_paths=exclude_paths, marker_radius_m=marker_radius_m,
+                         station_ids=station_ids)
     if plan is None:
         return inputs, read_layout(spec, inputs), config
     layout = _plan_layout(plan, spec)
@@ -209,16 +208,6 @@ def _inside_site_iv(layout: Layout, inputs) -> None:
         k = int(np.flatnonzero(~inside)[0])
         raise DataError(f"marker {layout.ids[k]} at ({xy[k, 0]:.2f}, {xy[k, 1]:.2f}) m lies "
                         f"outside {where}; give markers in the site frame inside the site")
-
-
-def marker_ids_iv(ids, layout: Layout, option: str) -> tuple[str, ...]:
-    """Check that every id names a layout marker; returns them as a tuple."""
-    ids = tuple(ids)
-    unknown = [i for i in ids if i not in layout.ids]
-    if unknown:
-        raise ConfigError(f"{option} names unknown marker id(s) {', '.join(unknown)}; the layout "
-                          f"has {', '.join(layout.ids)}")
-    return ids
 
 
 def layout_problem(inputs, layout: Layout, config, error_model, free: bool = False,

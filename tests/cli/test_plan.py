@@ -140,3 +140,21 @@ def test_plan_from_a_visibility_table(tmp_path, capsys):
     summary = json.loads(stdout)
     assert summary["n_markers"] == 21 and summary["meets_requirement"]
     assert not any(m.endswith("-0") for m in summary["markers"])  # unusable sites unused
+
+
+def test_station_ids_select_and_travel_to_reduce(tmp_path, capsys):
+    """plan --station-ids plans for those stations only; reduce of that plan keeps them."""
+    code, _, err = run_cli(capsys, ["plan", "--station-ids", "S3,S1", "--out",
+                                    str(tmp_path / "p")])
+    assert code == 0, err
+    doc = json.loads((tmp_path / "p" / "plan.json").read_text())
+    assert [s["id"] for s in doc["stations"]] == ["S3", "S1"]
+    assert doc["provenance"]["inputs"]["station_ids"] == ["S3", "S1"]
+    code, _, err = run_cli(capsys, ["reduce", str(tmp_path / "p" / "plan.json"), "--out",
+                                    str(tmp_path / "r")])
+    assert code == 0, err
+    red = json.loads((tmp_path / "r" / "reduce.json").read_text())
+    assert all([s["id"] for s in p["stations"]] == ["S3", "S1"] for p in red["curve"])
+    code, _, err = run_cli(capsys, ["plan", "--station-ids", "S9", "--out", str(tmp_path / "q")])
+    assert code == 1 and "--station-ids: unknown station id(s) S9; valid ids are S1" in err
+    assert not (tmp_path / "q").exists()

@@ -163,3 +163,15 @@ def test_folder_without_scans_refused(tmp_path, capsys):
     code, _, err = run_cli(capsys, ["process", str(tmp_path / "empty"), "--out",
                                     str(tmp_path / "o")])
     assert code == 1 and "holds no *.scan.npz" in err and err.count("\n") == 1
+
+
+def test_truths_with_different_marker_radii_refused(station, tmp_path, capsys):
+    folder = _simulate_like_folder(station, tmp_path)
+    other = folder / "station_S2.truth.json"
+    other.write_text((folder / "station_S1.truth.json").read_text()
+                     .replace('"station_id": "S1"', '"station_id": "S2"')
+                     .replace('"marker_radius_m": 0.1', '"marker_radius_m": 0.15'))
+    code, _, err = run_cli(capsys, ["process", str(folder / "station_S1.scan.npz"),
+                                    "--reference", str(folder), "--out", str(tmp_path / "o")])
+    assert code == 1 and "different marker radii (0.1, 0.15 m)" in err and err.count("\n") == 1
+    assert not (tmp_path / "o").exists()
