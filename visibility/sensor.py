@@ -35,6 +35,7 @@ import numpy as np
 from markerplan.errors import ConfigError
 from pipeline.rig import VLP16_ELEVATION_DEG, MountingOffsets
 from pipeline.scan_format import sensor_metadata
+from pipeline.sensor_noise import RangeNoise
 
 VLP16_ELEVATION_RAD = np.radians(VLP16_ELEVATION_DEG)
 #: Channel fired at each position of a firing sequence.
@@ -69,42 +70,50 @@ class SensorConfig:
     ----------
     rpm : int
         Spin rate, 300-1200 in steps of 60.
-    range_noise_m : float
-        1-sigma Gaussian range noise at normal incidence, metres.
-    incidence_noise_m : float
-        Extra 1-sigma noise ``incidence_noise_m * tan(incidence)`` (tan capped at 10), metres.
-    range_resolution_m : float
-        Reported ranges are rounded to this, metres.
+    range_noise_m, range_noise_per_m, incidence_noise_m, range_resolution_m : float
+        The range noise of :class:`pipeline.sensor_noise.RangeNoise`: 1-sigma at short range
+        and normal incidence (m), growth with range (m/m) and with ``tan(incidence)`` (m), and
+        the rounding of reported ranges (m).
     min_range_m, max_range_m : float
         Returns outside are dropped, metres.
     beam_divergence : bool
-        Sample each return inside the 3 x 1.5 mrad footprint.
+        Model the 3 x 1.5 mrad beam footprint and the mixed returns where it straddles an edge
+        (see :mod:`visibility.simulate`).
+    footprint_samples : int
+        Sub-rays cast inside the footprint of a beam that passes near a marker's silhouette.
     dropout_prob : float
         Probability that a return is lost at random.
     """
 
     rpm: int = 600
     range_noise_m: float = DEFAULT_RANGE_NOISE_M
+    range_noise_per_m: float = 0.0
     incidence_noise_m: float = 0.0
     range_resolution_m: float = RANGE_RESOLUTION_M
     min_range_m: float = MIN_RANGE_M
     max_range_m: float = MAX_RANGE_M
     beam_divergence: bool = False
+    footprint_samples: int = 7
     dropout_prob: float = 0.0
 
     def __post_init__(self) -> None:
         if not (RPM_MIN <= self.rpm <= RPM_MAX and (self.rpm - RPM_MIN) % RPM_STEP == 0):
             raise ConfigError(f"rpm must be {RPM_MIN}-{RPM_MAX} in steps of {RPM_STEP} "
                               f"(VLP-16), got {self.rpm}")
-        for name in ("range_noise_m", "incidence_noise_m", "range_resolution_m"):
-            v = getattr(self, name)
-            if not (np.isfinite(v) and v >= 0):
-                raise ConfigError(f"{name} must be a number >= 0, got {v}")
+        self.range_noise()  # validates the noise parameters
         if not 0 <= self.min_range_m < self.max_range_m:
             raise ConfigError(f"need 0 <= min_range_m < max_range_m, got {self.min_range_m}, "
                               f"{self.max_range_m}")
         if not 0 <= self.dropout_prob < 1:
             raise ConfigError(f"dropout_prob must be in [0, 1), got {self.dropout_prob}")
+        if not (isinstance(self.footprint_samples, int) and 1 <= self.footprint_samples <= 64):
+            raise ConfigError(f"footprint_samples must be an integer in 1..64, got "
+                              f"{self.footprint_samples!r}")
+
+    def range_noise(self) -> RangeNoise:
+        """The range-noise model of these settings."""
+        return RangeNoise(self.range_noise_m, self.range_noise_per_m, self.incidence_noise_m,
+                          self.range_resolution_m)
 
     @property
     def azimuth_step_rad(self) -> float:
@@ -120,6 +129,39 @@ class SensorConfig:
 
 
 @dataclass(frozen=True)
+class TurntableErrors:
+    """Random errors of the turntable, drawn independently for every frame (SI units).
+
+    Attributes
+    ----------
+    encoder_noise_rad : float
+        1-sigma Gaussian error of the frame's turntable angle read by the encoder, radians.
+    backlash_rad : float
+        Full width of the gear backlash: the angle error is uniform in ``+-backlash / 2``.
+    sync_jitter_s : float
+        1-sigma timing error between the LiDAR revolution and the turntable angle stamped on
+        it, seconds; at the table's mean rate ``2 pi / (frames * 60 / rpm)`` it is an angle error.
+    wobble_rad : float
+        1-sigma tilt of the turntable axis (bearing wobble) about each horizontal axis, radians.
+    """
+
+    encoder_noise_rad: float = 0.0
+    backlash_rad: float = 0.0
+    sync_jitter_s: float = 0.0
+    wobble_rad: float = 0.0
+
+    def __post_init__(self) -> None:
+        for name, value in asdict(self).items():
+            if not (isinstance(value, int | float) and np.isfinite(value) and value >= 0):
+                raise ConfigError(f"turntable {name} must be a number >= 0, got {value!r}")
+
+    @property
+    def enabled(self) -> bool:
+        """True if any term is non-zero."""
+        return any(v > 0 for v in asdict(self).values())
+
+
+@dataclass(frozen=True)
 class RigConfig:
     """Turntable rig settings.
 
@@ -132,11 +174,14 @@ class RigConfig:
         turntable angle ``2 pi f / frames_per_turn``.
     offsets : MountingOffsets
         True mounting errors (recorded in the truth file only).
+    turntable : TurntableErrors
+        Per-frame random errors of the turntable (none by default).
     """
 
     lidar_height_m: float = 1.0
     frames_per_turn: int = 800
     offsets: MountingOffsets = field(default_factory=MountingOffsets)
+    turntable: TurntableErrors = field(default_factory=TurntableErrors)
 
     def __post_init__(self) -> None:
         if not (isinstance(self.frames_per_turn, int | np.integer) and self.frames_per_turn > 0):
@@ -152,7 +197,8 @@ class RigConfig:
     def to_metadata(self) -> dict:
         """The ``rig`` block of the scan metadata (no mounting offsets: those are truth)."""
         return {"lidar_height_m": float(self.lidar_height_m),
-                "frames_per_turn": int(self.frames_per_turn)}
+                "frames_per_turn": int(self.frames_per_turn),
+                "turntable_errors": asdict(self.turntable)}
 
 
 def firing_pattern(rpm: float, phase_rad: float = 0.0) -> tuple[np.ndarray, np.ndarray]:

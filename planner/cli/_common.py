@@ -17,6 +17,9 @@ option                      meaning (and the value the command receives)
 ``--marker-radius M``       marker (sphere) radius, metres (``float``)
 ``--error-model FILE``      error model (:class:`ErrorModelChoice`, the shipped one by default)
 ``--estimator NAME``        sphere-centre estimator, from :data:`pipeline.sphere_fit.METHODS`
+``--sensor-profile NAME``   sensor, turntable and reference errors (a loaded
+                            :class:`~visibility.sensor_profile.SensorProfile`; ``calibrated``
+                            by default, ``datasheet``, or a JSON file from ``calibrate-sensor``)
 ``--vertical-axis-error-deg``, ``--lframe-tilt-deg``, ``--axis-offset-mm``
                             the rig's mounting offsets (one :class:`~pipeline.rig.MountingOffsets`
                             argument ``offsets``)
@@ -143,6 +146,19 @@ def _load_error_model(ctx, param, path: Path | None) -> ErrorModelChoice:
     if path is None:
         return ErrorModelChoice(default_model(), "default (shipped with markerplan)", None)
     return ErrorModelChoice(ErrorModel.load(path), str(path), path)
+
+
+def _load_sensor_profile(ctx, param, text: str):
+    from visibility.sensor_profile import load_profile
+
+    return load_profile(text)
+
+
+sensor_profile_option = click.option(
+    "--sensor-profile", "profile", default="calibrated", show_default=True,
+    metavar="NAME|FILE", callback=_load_sensor_profile,
+    help="Sensor profile: calibrated (fitted to the published field experiment), datasheet "
+         "(Velodyne's figures only), or a JSON file written by calibrate-sensor.")
 
 
 def id_list(ctx, param, text: str | None) -> tuple[str, ...] | None:
