@@ -25,6 +25,7 @@ COMMANDS: dict[str, str] = {
     "plan": "plan",
     "verify": "verify",
     "reduce": "reduce",
+    "calibrate-sensor": "calibrate_sensor",
 }
 
 

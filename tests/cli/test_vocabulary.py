@@ -15,6 +15,8 @@ CONTEXTUAL = {
     # the example/default part says where the default comes from in each command
     "--site": set(COMMANDS), "--marker-radius": set(COMMANDS), "--out": set(COMMANDS),
     "--estimator": {"fit-error-model"},
+    # a range study's replicates are scans; calibrate-sensor's are per design point
+    "--replicates": {"calibrate-sensor"},
 }
 #: Names the vocabulary replaced; no command may take them again.
 RETIRED = ("--radius", "--method", "--offsets", "--verify-seed")
