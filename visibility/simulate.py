@@ -291,19 +291,19 @@ def _frame(setup: _Setup, frame: int, rotation: np.ndarray, origin: np.ndarray) 
     d0 = setup.d0
     spin = rot_z(-phase)
     rot = rotation @ spin
-    cast = np.flatnonzero(setup.horizon.may_hit_z(d0 @ rot[2], lambda idx: d0[idx] @ rot.T))
+    may_hit = setup.horizon.may_hit_z(d0 @ rot[2], lambda idx: d0[idx] @ rot.T)
     incidence = sensor.incidence_noise_m > 0
-    near = np.zeros(0, dtype=np.int64)
+    is_near = np.zeros(len(d0), dtype=bool)
     if len(setup.footprint):
-        near = _near_silhouette(setup, rot, origin)
-        cast = np.union1d(cast, near)
-    central = cast[~np.isin(cast, near)]
+        is_near[_near_silhouette(setup, rot, origin)] = True
+    cast = np.flatnonzero(may_hit | is_near)
+    is_central = ~is_near[cast]
+    central, near = cast[is_central], cast[~is_central]
     hits = scene.intersect_unit(np.broadcast_to(origin, (len(central), 3)), d0[central] @ rot.T,
                                 max_range_m=sensor.max_range_m, threads=1, incidence=incidence)
     true_range = np.empty(len(cast))
     sphere = np.empty(len(cast), dtype=np.int64)
     tan_i = np.zeros(len(cast))
-    is_central = np.isin(cast, central)
     true_range[is_central], sphere[is_central] = hits.distance_m, hits.sphere_index
     if incidence:
         tan_i[is_central] = _tan_incidence(hits.cos_incidence)
@@ -350,15 +350,21 @@ def _near_silhouette(setup: _Setup, rot: np.ndarray, origin: np.ndarray) -> np.n
     dist = np.linalg.norm(u, axis=1)
     radius = scene.sphere_radius_m
     reach = (dist > radius) & (dist - radius <= setup.sensor.max_range_m)
-    if not reach.any():
-        return np.zeros(0, dtype=np.int64)
-    u, dist = u[reach], dist[reach]
+    # sphere centre directions in the frame of the phase-0 pattern, and the band's outer radius
+    v = (rot.T @ (u[reach] / dist[reach, None]).T)
+    rho = np.arcsin(radius / dist[reach])
     half = 0.5 * max(BEAM_DIVERGENCE_RAD) + SILHOUETTE_MARGIN_RAD
-    rho = np.arcsin(radius / dist)
-    cos_lo = np.cos(np.minimum(rho + half, np.pi))  # farthest from the centre direction
-    cos_hi = np.cos(np.maximum(rho - half, 0.0))  # nearest
-    cosang = setup.d0 @ (rot.T @ (u / dist[:, None]).T)  # (n, m): pattern in the site frame
-    return np.flatnonzero(((cosang >= cos_lo) & (cosang <= cos_hi)).any(axis=1))
+    # cheap first cut: channels whose elevation is within the band of a sphere's elevation
+    close = (np.abs(VLP16_ELEVATION_RAD[:, None] - np.arcsin(np.clip(v[2], -1, 1))[None, :])
+             <= (rho + half)[None, :])
+    spheres = close.any(axis=0)
+    rows = np.flatnonzero(close[:, spheres].any(axis=1)[setup.laser])
+    if not len(rows):
+        return rows
+    cosang = setup.d0[rows] @ v[:, spheres]  # (k, m') cosines beam-to-centre
+    cos_lo = np.cos(np.minimum(rho[spheres] + half, np.pi))  # farthest from the centre
+    cos_hi = np.cos(np.maximum(rho[spheres] - half, 0.0))  # nearest
+    return rows[((cosang >= cos_lo) & (cosang <= cos_hi)).any(axis=1)]
 
 
 def _mixed_returns(setup: _Setup, beams: np.ndarray, rot: np.ndarray, origin: np.ndarray,
