@@ -19,9 +19,11 @@ member                 shape/dtype   meaning
 ``metadata`` keys: ``format`` (``"markerplan-scan/1"``), ``station_id``, ``source``
 (``"simulated"`` or ``"pcap"``), ``sensor`` (``model``, ``rpm``, ``laser_elevation_rad``
 list of 16 in channel order, ``firing_order``, ``range_noise_m``, ...), ``rig``
-(``lidar_height_m`` nominal height of the LiDAR centre above ground, ``frames_per_turn``),
-and ``provenance`` (:func:`markerplan.provenance.provenance`). Mounting offsets are *not*
-stored here: the processor must estimate them (simulation truth goes to the truth file).
+(``lidar_height_m`` nominal height of the LiDAR centre above ground, ``frames_per_turn``,
+``turntable_errors`` the sigmas of the simulated turntable), ``sensor_profile`` (simulated
+scans: the name of the sensor profile, or ``null``) and ``provenance``
+(:func:`markerplan.provenance.provenance`). Mounting offsets are *not* stored here: the
+processor must estimate them (simulation truth goes to the truth file).
 
 A simulated scan has a sibling truth file ``<name>.truth.json`` (see :func:`write_truth`).
 """
@@ -434,7 +436,8 @@ def write_truth(path: str | Path, truth: dict[str, Any]) -> Path:
     the station-frame origin, ``heading_rad``, ``roll_rad``, ``pitch_rad``};
     ``mounting_offsets`` (:meth:`pipeline.rig.MountingOffsets.to_dict`); ``marker_radius_m``;
     ``markers`` list of {``id``, ``centre_site_m``, ``centre_station_m``}; ``rocks`` list of
-    {``centre_site_m``, ``radius_m``}; ``provenance``.
+    {``centre_site_m``, ``radius_m``}; ``turntable_frame_errors`` (``null`` or {``frames``,
+    ``angle_error_rad``, ``wobble_rad``}: the true per-frame turntable errors); ``provenance``.
     """
     body = {"format": TRUTH_FORMAT, **truth}
     path = Path(path)

@@ -5,7 +5,8 @@ registration error with the plan's prediction.
 Per station:
 
 1. ``visibility.simulate.simulate_markers`` — a full turntable scan of the site's terrain with
-   only the planned markers, at the planned station pose;
+   only the planned markers, at the planned station pose, with the sensor and turntable errors
+   of a sensor profile (:mod:`visibility.sensor_profile`, ``calibrated`` by default);
 2. ``pipeline.process.process_station`` — the published chain; detections are matched to the
    planned markers projected into the station frame with the *planned* (nominal) pose;
 3. weighted least squares (:func:`planner.accuracy.fit_pose`, 4 DoF: x, y, z, heading; roll and
@@ -34,6 +35,7 @@ from pipeline.stages import build_config
 from planner import accuracy
 from planner.plan_file import SurveyPlan
 from visibility.sensor import RigConfig
+from visibility.sensor_profile import DEFAULT_PROFILE, SensorProfile, load_profile
 from visibility.simulate import simulate_markers
 
 #: Smallest number of matched markers that can fix x, y, z and heading.
@@ -56,7 +58,8 @@ class StationCheck:
 
 def verify_plan(plan: SurveyPlan, error_model, seed: int = 0, progress: bool = True,
                 offsets: MountingOffsets | None = None,
-                station_ids: list[str] | None = None) -> list[StationCheck]:
+                station_ids: list[str] | None = None,
+                profile: SensorProfile | None = None) -> list[StationCheck]:
     """Simulate, process and register every station of a plan (see module docstring).
 
     Parameters
@@ -75,6 +78,9 @@ def verify_plan(plan: SurveyPlan, error_model, seed: int = 0, progress: bool = T
         them from each station's scan, as it would in the field.
     station_ids : list of str, optional
         Verify only these stations (default: all), in the plan's order.
+    profile : SensorProfile, optional
+        Sensor and turntable errors of the simulated rig (default: the shipped
+        ``calibrated`` profile), at 600 rpm.
 
     Returns
     -------
@@ -83,15 +89,17 @@ def verify_plan(plan: SurveyPlan, error_model, seed: int = 0, progress: bool = T
     ids = list(plan.marker_ids)
     centres = plan.marker_xyz_m
     cfg = build_config({"fit": {"radius_m": plan.marker_radius_m}})
-    rig = RigConfig() if offsets is None else RigConfig(offsets=offsets)
+    profile = profile or load_profile(DEFAULT_PROFILE)
+    rig = RigConfig(offsets=offsets or MountingOffsets(), turntable=profile.turntable)
     chosen = [(k, st) for k, st in enumerate(plan.stations)
               if station_ids is None or st.id in station_ids]
     checks = []
     for k, st in tqdm(chosen, desc="verify", unit="station", file=sys.stderr,
                       disable=None if progress else True):
-        scan, truth = simulate_markers(plan.dem, st.position_m, st.heading_rad, centres, rig=rig,
-                                       seed=seed + k, marker_radius_m=plan.marker_radius_m,
-                                       marker_ids=ids, station_id=st.id)
+        scan, truth = simulate_markers(plan.dem, st.position_m, st.heading_rad, centres,
+                                       profile.sensor_config(), rig, seed=seed + k,
+                                       marker_radius_m=plan.marker_radius_m, marker_ids=ids,
+                                       station_id=st.id, sensor_profile=profile.name)
         rot = station_to_site_matrix(st.heading_rad)
         nominal = (centres - st.position_m) @ rot  # planned markers in the planned station frame
         ref = Reference(tuple(ids), nominal, st.id, "plan (nominal pose)")
@@ -126,13 +134,17 @@ def verify_plan(plan: SurveyPlan, error_model, seed: int = 0, progress: bool = T
 
 
 def verify_record(plan: SurveyPlan, checks: list[StationCheck], seed: int, model_name: str,
-                  offsets: MountingOffsets | None = None) -> dict:
-    """The ``verify.json`` document (``offsets``: the simulated rig's true mounting offsets)."""
+                  offsets: MountingOffsets | None = None,
+                  profile: SensorProfile | None = None) -> dict:
+    """The ``verify.json`` document (``offsets``: the simulated rig's true mounting offsets;
+    ``profile``: its sensor profile, default the shipped one, recorded in the provenance)."""
     true_offsets = (offsets or MountingOffsets()).to_dict()
+    profile = profile or load_profile(DEFAULT_PROFILE)
     return {
         "schema": "markerplan-verify", "schema_version": 1,
         "provenance": provenance({"seed": seed, "error_model": model_name,
                                   "mounting_offsets": true_offsets,
+                                  "sensor_profile": profile.to_dict(),
                                   "plan_config_sha256": plan.provenance["config_sha256"]},
                                  plan=plan.provenance),
         "requirement_m": plan.requirement_m,

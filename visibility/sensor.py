@@ -12,9 +12,10 @@ format" and appendix "firing timing") and datasheet (63-9229):
 - range accuracy "+-3 cm (typical)". We read this as a ~95 % band and use a 1-sigma Gaussian
   range noise of **1.5 cm** (``DEFAULT_RANGE_NOISE_M``); pass ``range_noise_m=0.03`` to treat
   the datasheet figure as 1 sigma instead;
-- beam divergence 3.0 mrad (horizontal, along the spin) x 1.5 mrad (vertical); optional: each
-  return is taken at a uniformly random point of that elliptical footprint, while the reported
-  direction stays the nominal one;
+- beam divergence 3.0 mrad (horizontal, along the spin) x 1.5 mrad (vertical); optional: where
+  that elliptical footprint straddles a marker's silhouette the return is a mixed return of the
+  sub-rays inside it (:mod:`visibility.simulate`), while the reported direction stays the
+  nominal one;
 - minimum range: the datasheet gives none; the ROS ``velodyne_pointcloud`` driver discards
   VLP-16 returns closer than 0.4 m (``VLP16_points.launch``), which we follow.
 
@@ -228,6 +229,19 @@ def firing_pattern(rpm: float, phase_rad: float = 0.0) -> tuple[np.ndarray, np.n
 
 def sensor_directions(laser_id: np.ndarray, azimuth_rad: np.ndarray) -> np.ndarray:
     """Unit beam directions in the sensor frame (:mod:`pipeline.rig`), shape (n, 3)."""
-    w = VLP16_ELEVATION_RAD[np.asarray(laser_id, dtype=np.int64)]
+    return beam_directions(VLP16_ELEVATION_RAD[np.asarray(laser_id, dtype=np.int64)],
+                           azimuth_rad)
+
+
+def beam_directions(elevation_rad: np.ndarray, azimuth_rad: np.ndarray) -> np.ndarray:
+    """Unit sensor-frame directions of elevation ``elevation_rad`` and spin azimuth
+    ``azimuth_rad`` (clockwise from +y), both (n,) radians; shape (n, 3).
+
+    Examples
+    --------
+    >>> beam_directions(np.array([0.0]), np.array([np.pi / 2])).round(12)
+    array([[1., 0., 0.]])
+    """
+    w = np.asarray(elevation_rad, dtype=float)
     cw = np.cos(w)
     return np.column_stack([cw * np.sin(azimuth_rad), cw * np.cos(azimuth_rad), np.sin(w)])

@@ -84,6 +84,20 @@ class SensorProfile:
             blocks.setdefault(block, {})[name] = value
         return replace(self, **{b: replace(getattr(self, b), **v) for b, v in blocks.items()})
 
+    def sensor_config(self, rpm: int = 600, **overrides) -> SensorConfig:
+        """This profile's :class:`SensorConfig` at ``rpm``, with the ``overrides`` that are not
+        ``None`` (a command's explicit options, e.g. ``range_noise_m=0.01``) replacing its
+        fields.
+
+        Examples
+        --------
+        >>> s = SensorProfile("x").sensor_config(300, range_noise_m=0.01, dropout_prob=None)
+        >>> s.rpm, s.range_noise_m, s.dropout_prob, s.beam_divergence
+        (300, 0.01, 0.0, True)
+        """
+        given = {k: v for k, v in overrides.items() if v is not None}
+        return replace(self.sensor, rpm=rpm, **given)
+
     def value(self, key: str) -> float:
         """The parameter named ``block.field``."""
         block, _, name = key.partition(".")

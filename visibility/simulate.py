@@ -4,15 +4,48 @@ For frame ``f`` at turntable angle ``theta_f`` the sensor pose in the station fr
 :func:`pipeline.rig.frame_poses` (the geometry contract, true mounting offsets applied), and
 the station frame sits at ``position`` in the site frame, rotated by ``heading`` (level: zero
 roll and pitch). A beam of channel ``i`` at spin azimuth ``alpha`` leaves the LiDAR centre along
-``Rz(heading) R_f d_S(i, alpha)``. Its first hit (terrain or marker sphere) gives the true range;
-the measured range adds Gaussian noise, optional incidence-angle noise, and is rounded to the
-2 mm resolution; returns outside [min, max] range or lost to dropout are discarded. The point
-stored in the sensor frame is ``range * d_S`` along the *nominal* beam.
+``Rz(heading) R_f d_S(i, alpha)``. Its first hit (terrain or marker sphere) gives the true range.
+The point stored in the sensor frame is ``range * d_S`` along the *nominal* beam, and the scan
+stores the *nominal* turntable angles. Sensor physics (``docs/simulator.md``, "Sensor physics";
+each term is off when its parameter is zero or false):
+
+Range noise (``SensorConfig.range_noise_m``, ``range_noise_per_m``, ``incidence_noise_m``,
+``range_resolution_m``)
+    Gaussian with the standard deviation of :meth:`pipeline.sensor_noise.RangeNoise.sigma_m` at
+    the true range and incidence, then rounded to the 2 mm resolution (VLP-16 datasheet
+    63-9229). Returns outside [min, max] range or lost to ``dropout_prob`` are discarded.
+Beam footprint and mixed returns (``SensorConfig.beam_divergence``, ``footprint_samples``)
+    The VLP-16 beam diverges 3.0 mrad along the spin x 1.5 mrad across it
+    (:data:`visibility.sensor.BEAM_DIVERGENCE_RAD`). Only where the footprint can straddle a
+    marker's silhouette does this change a return (a beam whose angle from the sphere's centre
+    direction is within ``asin(R / d) +- (1.5 mrad + margin)``); there
+    ``footprint_samples`` sub-rays are cast in a fixed sunflower (Vogel) pattern that fills the
+    elliptical footprint with equal areas (:func:`footprint_offsets_rad`), each carrying an
+    equal share of the pulse energy (a top-hat beam; the ``cos(i) / r^2`` variation of the echo
+    within one footprint is neglected). The sub-ray ranges are grouped: ranges closer than
+    :data:`PULSE_SEPARATION_M` to the next one merge into one echo. The single-return
+    (strongest) mode of the VLP-16 (manual 63-9243, "Laser Return Modes") reports the group
+    with the largest energy share (ties: the nearest), at the energy-weighted mean range of its
+    sub-rays: at an edge with background closer than the pulse separation the range lies
+    between foreground and background (mixed pixels, Hebert and Krotkov 1992; Tuley, Vandapel
+    and Hebert 2005). A beam none of whose sub-rays hits returns nothing. Every other beam is
+    one central ray.
+Turntable errors (``RigConfig.turntable``, :class:`visibility.sensor.TurntableErrors`)
+    Frame ``f`` is taken at the true angle ``theta_f + e_enc + e_backlash + rate * e_sync``
+    (encoder noise N(0, sigma_enc), backlash U(-b/2, b/2), synchronisation jitter N(0,
+    sigma_sync) s at the table rate ``2 pi / (frames_per_turn * 60 / rpm)``), with the
+    turntable axis tilted by ``Rx(w_x) Ry(w_y)``, ``w ~ N(0, sigma_wobble)`` (bearing wobble,
+    about the turntable-frame origin). They perturb only the simulated pose; the scan keeps the
+    nominal angles, as the processing chain must. The truth file lists each frame's errors.
 
 Rays that provably cannot hit anything (steeper than the conservative
-:class:`visibility.scene.HorizonBound` in their azimuth bin) are skipped without changing the
-result. Randomness: frame ``f`` uses ``numpy.random.default_rng([seed, f])``, so output is
-independent of threading and the same seed gives byte-identical files.
+:class:`visibility.scene.HorizonBound` in their azimuth bin, built around the lowest and widest
+perturbed LiDAR centre) are skipped without changing the result; near-silhouette beams are
+never skipped. Randomness: frame ``f`` draws its phase, noise and dropout from
+``numpy.random.default_rng([seed, f])`` and its turntable errors from ``default_rng([seed, f,
+1])`` (always five draws, so switching one term off leaves the others), so output is
+independent of threading and of which frames are simulated, and the same seed gives
+byte-identical files.
 """
 
 from __future__ import annotations
@@ -22,14 +55,15 @@ import os
 import zlib
 from collections.abc import Callable, Sequence
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import asdict
+from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
 
+from markerplan.constants import GOLDEN_ANGLE_RAD
 from markerplan.errors import ConfigError, DataError
 from markerplan.provenance import provenance
-from pipeline.rig import frame_poses, rot_z, station_to_site_matrix
+from pipeline.rig import frame_poses, rot_x, rot_y, rot_z, station_to_site_matrix
 from pipeline.scan_format import POINT_FIELDS, StationScan, write_scan, write_truth
 from visibility.dem import DEM
 from visibility.scene import HorizonBound, RayScene
@@ -38,12 +72,40 @@ from visibility.sensor import (
     VLP16_ELEVATION_RAD,
     RigConfig,
     SensorConfig,
+    beam_directions,
     firing_pattern,
     sensor_directions,
 )
 from visibility.sites import Site
 
 _FRAMES_PER_TASK = 8
+#: Echoes of one pulse closer than this merge into one return, metres. Velodyne's manuals give
+#: one metre as the smallest separation at which two objects give two returns (VLS-128 manual
+#: 63-9483, "Dual Return Mode"); it matches a pulse of a few nanoseconds.
+PULSE_SEPARATION_M = 1.0
+#: Added to the footprint's half major axis in the near-silhouette test, radians (float32
+#: directions, the icosphere proxy's tolerance).
+SILHOUETTE_MARGIN_RAD = 1e-4
+#: Third entry of the turntable-error seed ``[seed, f, _TURNTABLE_STREAM]``.
+_TURNTABLE_STREAM = 1
+
+
+@dataclass(frozen=True)
+class _Setup:
+    """What every frame of one scan shares."""
+
+    scene: RayScene
+    horizon: HorizonBound
+    sensor: SensorConfig
+    seed: int
+    laser: np.ndarray
+    """(n,) uint8 channel of each firing."""
+    az0: np.ndarray
+    """(n,) spin azimuth at phase 0, radians."""
+    d0: np.ndarray
+    """(n, 3) sensor-frame unit directions at phase 0."""
+    footprint: np.ndarray
+    """(k, 2) sub-ray offsets (along the spin, across it), radians; empty without footprint."""
 
 
 def simulate_scan(scene: RayScene, position_m: np.ndarray, heading_rad: float,
@@ -63,7 +125,8 @@ def simulate_scan(scene: RayScene, position_m: np.ndarray, heading_rad: float,
         Station heading (rotation about site z), radians.
     sensor, rig : SensorConfig, RigConfig
     seed : int
-        Frame ``f`` draws from ``default_rng([seed, f])``.
+        Frame ``f`` draws from ``default_rng([seed, f])`` (turntable errors from
+        ``default_rng([seed, f, 1])``).
     frames : sequence of int, optional
         Frame indices to simulate (default: all ``rig.frames_per_turn``).
     progress : callable, optional
@@ -77,23 +140,32 @@ def simulate_scan(scene: RayScene, position_m: np.ndarray, heading_rad: float,
         ``frame_index`` (N,) uint32, ``laser_id`` (N,) uint8, ``spin_azimuth_rad`` (N,)
         float32, ``range_m`` (N,) float32, ``xyz_sensor_m`` (N, 3) float32, ``sphere_index``
         (N,) int64 (marker hit, -1 terrain), ``n_rays`` and ``n_cast`` (int, rays in the
-        pattern and rays actually cast).
+        pattern and rays actually cast, sub-rays included), ``frames`` (F,) int64 (the frames
+        simulated), ``angle_error_rad`` (F,) and ``wobble_rad`` (F, 2) (their turntable errors,
+        see :func:`turntable_errors`).
     """
     position, frame_ids = _simulate_iv(scene.dem, position_m, rig, frames)
-    offsets = rig.offsets
-    rotation, translation = frame_poses(rig.turntable_angles_rad()[frame_ids], offsets)
+    angle_error, wobble = turntable_errors(rig, sensor.rpm, seed, frame_ids)
+    rotation, translation = frame_poses(rig.turntable_angles_rad()[frame_ids] + angle_error,
+                                        rig.offsets)
+    tilt = rot_x(wobble[:, 0]) @ rot_y(wobble[:, 1])
+    rotation, translation = tilt @ rotation, np.einsum("fij,fj->fi", tilt, translation)
     m = station_to_site_matrix(heading_rad)
-    horizon = HorizonBound(scene.dem, position, float(np.hypot(*offsets.axis_offset_m)),
+    # the bound holds for origins in a level disc; wobble also lowers some of them
+    low = min(0.0, float(translation[:, 2].min()))
+    horizon = HorizonBound(scene.dem, position + [0.0, 0.0, low],
+                           float(np.hypot(translation[:, 0], translation[:, 1]).max()),
                            scene.sphere_centres_m, scene.sphere_radius_m, sensor.max_range_m)
     tasks = [np.arange(a, min(a + _FRAMES_PER_TASK, len(frame_ids)))
              for a in range(0, len(frame_ids), _FRAMES_PER_TASK)]
-
     laser, az0 = firing_pattern(sensor.rpm, 0.0)
-    pattern = (laser, az0, sensor_directions(laser, az0))
+    setup = _Setup(scene, horizon, sensor, seed, laser, az0, sensor_directions(laser, az0),
+                   footprint_offsets_rad(sensor.footprint_samples) if sensor.beam_divergence
+                   else np.zeros((0, 2)))
 
     def work(rows: np.ndarray) -> list[dict]:
-        out = [_frame(scene, horizon, int(frame_ids[r]), m @ rotation[r],
-                      position + m @ translation[r], sensor, seed, pattern) for r in rows]
+        out = [_frame(setup, int(frame_ids[r]), m @ rotation[r], position + m @ translation[r])
+               for r in rows]
         if progress is not None:
             progress(len(rows))
         return out
@@ -109,7 +181,78 @@ def simulate_scan(scene: RayScene, position_m: np.ndarray, heading_rad: float,
     points = {k: np.concatenate([p[k] for p in parts]) for k in keys}
     points["n_rays"] = int(sum(p["n_rays"] for p in parts))
     points["n_cast"] = int(sum(p["n_cast"] for p in parts))
+    points.update(frames=frame_ids, angle_error_rad=angle_error, wobble_rad=wobble)
     return points
+
+
+def turntable_errors(rig: RigConfig, rpm: int, seed: int, frames: np.ndarray
+                     ) -> tuple[np.ndarray, np.ndarray]:
+    """Per-frame turntable errors of :class:`visibility.sensor.TurntableErrors`.
+
+    Parameters
+    ----------
+    rig : RigConfig
+        ``rig.turntable`` gives the sigmas; ``rig.frames_per_turn`` the table rate.
+    rpm : int
+        LiDAR spin rate (one frame per LiDAR revolution).
+    seed : int
+        Frame ``f`` draws from ``default_rng([seed, f, 1])``.
+    frames : (F,) int
+        Frame indices.
+
+    Returns
+    -------
+    angle_error_rad : (F,) float
+        True minus nominal turntable angle (encoder + backlash + rate x sync jitter), radians.
+    wobble_rad : (F, 2) float
+        Tilt of the turntable axis about the turntable frame's x and y axes, radians.
+
+    Examples
+    --------
+    >>> angle, wobble = turntable_errors(RigConfig(), 600, 0, np.arange(3))
+    >>> angle.tolist(), wobble.shape
+    ([0.0, 0.0, 0.0], (3, 2))
+    """
+    errors = rig.turntable
+    if not errors.enabled:
+        return np.zeros(len(frames)), np.zeros((len(frames), 2))
+    rate = 2 * np.pi / (rig.frames_per_turn * 60.0 / rpm)
+    draws = np.array([_turntable_draws(np.random.default_rng([seed, int(f), _TURNTABLE_STREAM]))
+                      for f in frames]).reshape(-1, 5)
+    angle = (errors.encoder_noise_rad * draws[:, 0] + errors.backlash_rad * draws[:, 1]
+             + rate * errors.sync_jitter_s * draws[:, 2])
+    return angle, errors.wobble_rad * draws[:, 3:5]
+
+
+def _turntable_draws(rng: np.random.Generator) -> list[float]:
+    """One frame's draws: encoder N(0, 1), backlash U(-1/2, 1/2), sync N(0, 1), wobble x, y
+    N(0, 1) (always all five, so switching a term off leaves the others unchanged)."""
+    return [rng.standard_normal(), rng.uniform(-0.5, 0.5), *rng.standard_normal(3)]
+
+
+def footprint_offsets_rad(n: int) -> np.ndarray:
+    """Sub-ray offsets filling the VLP-16 beam footprint: a sunflower (Vogel) pattern.
+
+    Sample ``k`` of ``n`` sits at radius ``sqrt((k + 0.5) / n)`` and angle ``k`` times the
+    golden angle on the unit disc (equal areas per sample), scaled to the ellipse of semi-axes
+    ``BEAM_DIVERGENCE_RAD / 2`` (1.5 mrad along the spin, 0.75 mrad across it).
+
+    Returns
+    -------
+    offsets : (n, 2) float
+        Angular offsets along the spin and across it (in elevation), radians.
+
+    Examples
+    --------
+    >>> off = footprint_offsets_rad(7)
+    >>> off.shape, bool(np.all(np.hypot(off[:, 0] / 1.5e-3, off[:, 1] / 0.75e-3) < 1))
+    ((7, 2), True)
+    """
+    k = np.arange(n)
+    rho = np.sqrt((k + 0.5) / n)
+    angle = k * GOLDEN_ANGLE_RAD
+    return np.column_stack([0.5 * BEAM_DIVERGENCE_RAD[0] * rho * np.cos(angle),
+                            0.5 * BEAM_DIVERGENCE_RAD[1] * rho * np.sin(angle)])
 
 
 def _simulate_iv(dem: DEM, position_m: np.ndarray, rig: RigConfig,
@@ -136,64 +279,136 @@ def _station_inside_iv(dem: DEM, xy: np.ndarray, label: str) -> None:
                         "station inside or use a larger DEM")
 
 
-def _frame(scene: RayScene, horizon: HorizonBound, frame: int, rotation: np.ndarray,
-           origin: np.ndarray, sensor: SensorConfig, seed: int,
-           pattern: tuple[np.ndarray, np.ndarray, np.ndarray]) -> dict:
-    """Simulate one frame. ``rotation``/``origin``: sensor -> site pose of this frame.
+def _frame(setup: _Setup, frame: int, rotation: np.ndarray, origin: np.ndarray) -> dict:
+    """Simulate one frame. ``rotation``/``origin``: true sensor -> site pose of this frame.
 
-    ``pattern`` is the firing pattern at phase 0 (laser ids, azimuths, sensor-frame unit
-    directions); this frame's random phase ``phi`` turns it by ``rot_z(-phi)`` (the spin
-    azimuth runs clockwise from +y).
+    The firing pattern is stored at phase 0; this frame's random phase ``phi`` turns it by
+    ``rot_z(-phi)`` (the spin azimuth runs clockwise from +y).
     """
-    rng = np.random.default_rng([seed, frame])
+    sensor, scene = setup.sensor, setup.scene
+    rng = np.random.default_rng([setup.seed, frame])
     phase = rng.uniform(0.0, sensor.azimuth_step_rad)
-    laser, az0, d0 = pattern
+    d0 = setup.d0
     spin = rot_z(-phase)
-    if sensor.beam_divergence:
-        d_beam, rot = _diverge(laser, az0 + phase, rng), rotation
-    else:
-        d_beam, rot = d0, rotation @ spin
-    keep = np.flatnonzero(horizon.may_hit_z(d_beam @ rot[2], lambda idx: d_beam[idx] @ rot.T))
-    hits = scene.intersect_unit(np.broadcast_to(origin, (len(keep), 3)), d_beam[keep] @ rot.T,
-                                max_range_m=sensor.max_range_m, threads=1,
-                                incidence=sensor.incidence_noise_m > 0)
-    true_range = hits.distance_m
-    sigma: float | np.ndarray = sensor.range_noise_m
-    if sensor.incidence_noise_m > 0:
-        cosi = np.clip(np.nan_to_num(hits.cos_incidence, nan=1.0), 1e-12, 1.0)
-        tan = np.minimum(np.sqrt(1 - cosi ** 2) / cosi, 10.0)
-        sigma = np.hypot(sigma, sensor.incidence_noise_m * tan)
-    with np.errstate(invalid="ignore"):
-        measured = true_range + sigma * rng.standard_normal(len(keep))
+    rot = rotation @ spin
+    may_hit = setup.horizon.may_hit_z(d0 @ rot[2], lambda idx: d0[idx] @ rot.T)
+    incidence = sensor.incidence_noise_m > 0
+    is_near = np.zeros(len(d0), dtype=bool)
+    if len(setup.footprint):
+        is_near[_near_silhouette(setup, rot, origin)] = True
+    cast = np.flatnonzero(may_hit | is_near)
+    is_central = ~is_near[cast]
+    central, near = cast[is_central], cast[~is_central]
+    hits = scene.intersect_unit(np.broadcast_to(origin, (len(central), 3)), d0[central] @ rot.T,
+                                max_range_m=sensor.max_range_m, threads=1, incidence=incidence)
+    true_range = np.empty(len(cast))
+    sphere = np.empty(len(cast), dtype=np.int64)
+    tan_i = np.zeros(len(cast))
+    true_range[is_central], sphere[is_central] = hits.distance_m, hits.sphere_index
+    if incidence:
+        tan_i[is_central] = _tan_incidence(hits.cos_incidence)
+    if len(near):
+        mixed = _mixed_returns(setup, near, rot, origin, incidence)
+        true_range[~is_central], sphere[~is_central], tan_i[~is_central] = mixed
+    with np.errstate(invalid="ignore"):  # misses (inf) become NaN and fail the range test
+        sigma = sensor.range_noise().sigma_m(true_range, tan_i)
+        measured = true_range + sigma * rng.standard_normal(len(cast))
         if sensor.range_resolution_m > 0:
             measured = np.round(measured / sensor.range_resolution_m) * sensor.range_resolution_m
         ok = (measured >= sensor.min_range_m) & (measured <= sensor.max_range_m)
     if sensor.dropout_prob > 0:
-        ok &= rng.random(len(keep)) >= sensor.dropout_prob
-    sel = keep[ok]
+        ok &= rng.random(len(cast)) >= sensor.dropout_prob
+    sel = cast[ok]
     r = measured[ok]
     return {
         "frame_index": np.full(len(sel), frame, dtype=np.uint32),
-        "laser_id": laser[sel],
-        "spin_azimuth_rad": np.mod(az0[sel] + phase, 2 * np.pi).astype(np.float32),
+        "laser_id": setup.laser[sel],
+        "spin_azimuth_rad": np.mod(setup.az0[sel] + phase, 2 * np.pi).astype(np.float32),
         "range_m": r.astype(np.float32),
         "xyz_sensor_m": (r[:, None] * (d0[sel] @ spin.T)).astype(np.float32),
-        "sphere_index": hits.sphere_index[ok],
-        "n_rays": len(laser),
-        "n_cast": len(keep),
+        "sphere_index": sphere[ok],
+        "n_rays": len(setup.laser),
+        "n_cast": len(central) + len(near) * len(setup.footprint),
     }
 
 
-def _diverge(laser: np.ndarray, az: np.ndarray, rng: np.random.Generator) -> np.ndarray:
-    """Beam directions sampled uniformly inside the elliptical 3 x 1.5 mrad footprint."""
-    n = len(laser)
-    rad = np.sqrt(rng.random(n))
-    ang = rng.uniform(0, 2 * np.pi, n)
-    d_az = 0.5 * BEAM_DIVERGENCE_RAD[0] * rad * np.cos(ang)
-    d_el = 0.5 * BEAM_DIVERGENCE_RAD[1] * rad * np.sin(ang)
-    w = VLP16_ELEVATION_RAD[laser.astype(np.int64)] + d_el
-    a = az + d_az / np.cos(w)
-    return np.column_stack([np.cos(w) * np.sin(a), np.cos(w) * np.cos(a), np.sin(w)])
+def _tan_incidence(cos_incidence: np.ndarray) -> np.ndarray:
+    """tan of the incidence angle from its |cos| (misses, NaN, give 0)."""
+    c = np.clip(np.nan_to_num(cos_incidence, nan=1.0), 1e-12, 1.0)
+    return np.sqrt(1.0 - c ** 2) / c
+
+
+def _near_silhouette(setup: _Setup, rot: np.ndarray, origin: np.ndarray) -> np.ndarray:
+    """Indices of the beams whose footprint may straddle a marker's silhouette.
+
+    A beam is near the silhouette of a sphere of radius ``R`` whose centre lies at distance
+    ``d`` if its angle from the centre direction is within ``asin(R / d) +- h``, ``h`` the
+    footprint's half major axis plus :data:`SILHOUETTE_MARGIN_RAD`.
+    """
+    scene = setup.scene
+    u = scene.sphere_centres_m - origin
+    dist = np.linalg.norm(u, axis=1)
+    radius = scene.sphere_radius_m
+    reach = (dist > radius) & (dist - radius <= setup.sensor.max_range_m)
+    # sphere centre directions in the frame of the phase-0 pattern, and the band's outer radius
+    v = (rot.T @ (u[reach] / dist[reach, None]).T)
+    rho = np.arcsin(radius / dist[reach])
+    half = 0.5 * max(BEAM_DIVERGENCE_RAD) + SILHOUETTE_MARGIN_RAD
+    # cheap first cut: channels whose elevation is within the band of a sphere's elevation
+    close = (np.abs(VLP16_ELEVATION_RAD[:, None] - np.arcsin(np.clip(v[2], -1, 1))[None, :])
+             <= (rho + half)[None, :])
+    spheres = close.any(axis=0)
+    rows = np.flatnonzero(close[:, spheres].any(axis=1)[setup.laser])
+    if not len(rows):
+        return rows
+    cosang = setup.d0[rows] @ v[:, spheres]  # (k, m') cosines beam-to-centre
+    cos_lo = np.cos(np.minimum(rho[spheres] + half, np.pi))  # farthest from the centre
+    cos_hi = np.cos(np.maximum(rho[spheres] - half, 0.0))  # nearest
+    return rows[((cosang >= cos_lo) & (cosang <= cos_hi)).any(axis=1)]
+
+
+def _mixed_returns(setup: _Setup, beams: np.ndarray, rot: np.ndarray, origin: np.ndarray,
+                   incidence: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The one (strongest) return of each footprint-sampled beam (see the module docstring).
+
+    Returns
+    -------
+    range_m : (b,) float
+        Energy-weighted mean range of the strongest echo group, ``inf`` if no sub-ray hit.
+    sphere_index : (b,) int64
+        The marker hit by at least half of that group's sub-rays, else -1.
+    tan_incidence : (b,) float
+        Mean tan(incidence) of the group (0 without ``incidence``).
+    """
+    k = len(setup.footprint)
+    w = VLP16_ELEVATION_RAD[setup.laser[beams].astype(np.int64)]
+    el = (w[:, None] + setup.footprint[None, :, 1]).ravel()
+    az = (setup.az0[beams][:, None] + setup.footprint[None, :, 0] / np.cos(w)[:, None]).ravel()
+    d = beam_directions(el, az) @ rot.T
+    hits = setup.scene.intersect_unit(np.broadcast_to(origin, (len(d), 3)), d,
+                                      max_range_m=setup.sensor.max_range_m, threads=1,
+                                      incidence=incidence)
+    order = np.argsort(hits.distance_m.reshape(-1, k), axis=1, kind="stable")
+    r = np.take_along_axis(hits.distance_m.reshape(-1, k), order, axis=1)
+    sph = np.take_along_axis(hits.sphere_index.reshape(-1, k), order, axis=1)
+    hit = np.isfinite(r)
+    with np.errstate(invalid="ignore"):
+        gap = np.diff(r, axis=1) > PULSE_SEPARATION_M
+    group = np.concatenate([np.zeros((len(r), 1), np.int64), np.cumsum(gap, axis=1)], axis=1)
+    group[~hit] = k  # misses carry no energy
+    share = np.stack([(group == g).sum(axis=1) for g in range(k)], axis=1)
+    members = group == np.argmax(share, axis=1)[:, None]  # ties: the nearest group
+    n = members.sum(axis=1)
+    mean_range = np.where(n > 0, np.where(members, r, 0.0).sum(axis=1) / np.maximum(n, 1),
+                          np.inf)
+    on_marker = members & (sph >= 0)
+    first = np.take_along_axis(sph, np.argmax(on_marker, axis=1)[:, None], axis=1)[:, 0]
+    label = np.where(2 * on_marker.sum(axis=1) >= np.maximum(n, 1), first, -1)
+    tan_i = np.zeros(len(r))
+    if incidence:
+        t = np.take_along_axis(_tan_incidence(hits.cos_incidence).reshape(-1, k), order, axis=1)
+        tan_i = np.where(members, t, 0.0).sum(axis=1) / np.maximum(n, 1)
+    return mean_range, label, tan_i
 
 
 def _station_seed(seed: int, station_id: str) -> int:
@@ -206,6 +421,7 @@ def _scan_from_points(points: dict, rig: RigConfig, sensor: SensorConfig, statio
                       config: dict) -> StationScan:
     meta = {"station_id": station_id, "source": "simulated",
             "sensor": sensor.to_metadata(), "rig": rig.to_metadata(),
+            "sensor_profile": config["sensor_profile"],
             "n_rays": points["n_rays"], "n_rays_cast": points["n_cast"],
             "provenance": provenance(config)}
     return StationScan(turntable_angle_rad=rig.turntable_angles_rad(), metadata=meta,
@@ -225,6 +441,11 @@ def _truth(station_id: str, position: np.ndarray, heading_rad: float, rig: RigCo
                for k, (mid, c) in enumerate(zip(marker_ids, marker_centres_m, strict=True))]
     rocks = [{"centre_site_m": [float(v) for v in c], "radius_m": float(r)}
              for c, r in zip(rock_centres_m, rock_radii_m, strict=True)]
+    turntable = None
+    if rig.turntable.enabled:
+        turntable = {"frames": points["frames"].tolist(),
+                     "angle_error_rad": points["angle_error_rad"].tolist(),
+                     "wobble_rad": points["wobble_rad"].tolist()}
     return {
         "station_id": station_id,
         "station_pose": {"position_m": [float(v) for v in position],
@@ -233,12 +454,15 @@ def _truth(station_id: str, position: np.ndarray, heading_rad: float, rig: RigCo
         "marker_radius_m": float(marker_radius_m),
         "markers": markers,
         "rocks": rocks,
+        "turntable_frame_errors": turntable,
         "provenance": provenance(config),
     }
 
 
-def _config(sensor: SensorConfig, rig: RigConfig, seed: int, **extra) -> dict:
-    return {"sensor": asdict(sensor), "rig": rig.to_metadata(), "seed": int(seed), **extra}
+def _config(sensor: SensorConfig, rig: RigConfig, seed: int, sensor_profile: str | None,
+            **extra) -> dict:
+    return {"sensor": asdict(sensor), "rig": rig.to_metadata(), "seed": int(seed),
+            "sensor_profile": sensor_profile, **extra}
 
 
 def simulate_station(site: Site, station_index: int, sensor: SensorConfig | None = None,
@@ -246,7 +470,8 @@ def simulate_station(site: Site, station_index: int, sensor: SensorConfig | None
                      frames: Sequence[int] | None = None,
                      progress: Callable[[int], None] | None = None,
                      scene: RayScene | None = None,
-                     threads: int | None = None) -> tuple[StationScan, dict]:
+                     threads: int | None = None,
+                     sensor_profile: str | None = None) -> tuple[StationScan, dict]:
     """Simulate one station of a site.
 
     Parameters
@@ -265,6 +490,9 @@ def simulate_station(site: Site, station_index: int, sensor: SensorConfig | None
     scene : RayScene, optional
         Pre-built scene of this site with its markers (re-used across stations).
     threads : int, optional
+    sensor_profile : str, optional
+        Name of the sensor profile ``sensor`` and ``rig.turntable`` come from (recorded as the
+        scan metadata's ``sensor_profile``; ``None``: library defaults).
 
     Returns
     -------
@@ -272,7 +500,9 @@ def simulate_station(site: Site, station_index: int, sensor: SensorConfig | None
         Metadata per :mod:`pipeline.scan_format` (no mounting offsets).
     truth : dict
         For :func:`pipeline.scan_format.write_truth`; markers carry ``centre_site_m``,
-        ``centre_station_m`` and the number of simulated points ``n_points``.
+        ``centre_station_m`` and the number of simulated points ``n_points``;
+        ``turntable_frame_errors`` is ``None`` or {``frames``, ``angle_error_rad``,
+        ``wobble_rad``} (:func:`turntable_errors` of the simulated frames).
     """
     sensor = sensor or SensorConfig()
     rig = rig or RigConfig()
@@ -287,7 +517,7 @@ def simulate_station(site: Site, station_index: int, sensor: SensorConfig | None
     scene = scene or site_scene(site)
     sseed = _station_seed(seed, station_id)
     points = simulate_scan(scene, position, heading, sensor, rig, sseed, frames, progress, threads)
-    config = _config(sensor, rig, seed, site=site.name, site_seed=site.seed,
+    config = _config(sensor, rig, seed, sensor_profile, site=site.name, site_seed=site.seed,
                      station_id=station_id)
     scan = _scan_from_points(points, rig, sensor, station_id, config)
     truth = _truth(station_id, position, heading, rig, site.marker_ids, site.marker_centres_m,
@@ -304,7 +534,8 @@ def site_scene(site: Site, threads: int | None = None) -> RayScene:
 def simulate_site(site: Site, out_dir: str | Path, sensor: SensorConfig | None = None,
                   rig: RigConfig | None = None, seed: int = 0,
                   station_ids: Sequence[str] | None = None,
-                  progress: Callable[[int], None] | None = None) -> list[dict]:
+                  progress: Callable[[int], None] | None = None,
+                  sensor_profile: str | None = None) -> list[dict]:
     """Simulate stations of ``site`` into ``out_dir``.
 
     Writes ``station_<id>.scan.npz`` and ``station_<id>.truth.json`` per station.
@@ -320,6 +551,8 @@ def simulate_site(site: Site, out_dir: str | Path, sensor: SensorConfig | None =
         Stations to simulate (default all).
     progress : callable, optional
         Called with the number of frames finished.
+    sensor_profile : str, optional
+        As in :func:`simulate_station`.
 
     Returns
     -------
@@ -337,7 +570,8 @@ def simulate_site(site: Site, out_dir: str | Path, sensor: SensorConfig | None =
     summary = []
     for sid in ids:
         k = site.station_ids.index(sid)
-        scan, truth = simulate_station(site, k, sensor, rig, seed, progress=progress, scene=scene)
+        scan, truth = simulate_station(site, k, sensor, rig, seed, progress=progress, scene=scene,
+                                       sensor_profile=sensor_profile)
         scan_path = write_scan(out / f"station_{sid}.scan.npz", scan)
         truth_path = write_truth(out / f"station_{sid}.truth.json", truth)
         summary.append({"station_id": sid, "n_points": scan.n_points,
@@ -382,7 +616,8 @@ def simulate_markers(dem: DEM, station_position_m: np.ndarray, heading_rad: floa
                      marker_radius_m: float = 0.1, marker_ids: Sequence[str] | None = None,
                      station_id: str = "S1", frames: Sequence[int] | None = None,
                      progress: Callable[[int], None] | None = None,
-                     threads: int | None = None) -> tuple[StationScan, dict]:
+                     threads: int | None = None,
+                     sensor_profile: str | None = None) -> tuple[StationScan, dict]:
     """Simulate one station seeing arbitrary markers on a DEM (range study, what-ifs).
 
     Parameters
@@ -404,6 +639,8 @@ def simulate_markers(dem: DEM, station_position_m: np.ndarray, heading_rad: floa
     station_id : str
     frames, progress, threads : optional
         As in :func:`simulate_scan`.
+    sensor_profile : str, optional
+        As in :func:`simulate_station`.
 
     Returns
     -------
@@ -433,7 +670,7 @@ def simulate_markers(dem: DEM, station_position_m: np.ndarray, heading_rad: floa
     position = np.asarray(station_position_m, dtype=float)
     points = simulate_scan(scene, position, heading_rad, sensor, rig, seed, frames, progress,
                            threads)
-    config = _config(sensor, rig, seed, station_id=station_id,
+    config = _config(sensor, rig, seed, sensor_profile, station_id=station_id,
                      marker_centres_m=centres.tolist(), station_position_m=position.tolist(),
                      heading_rad=float(heading_rad))
     scan = _scan_from_points(points, rig, sensor, station_id, config)

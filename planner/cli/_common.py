@@ -222,8 +222,9 @@ rpm_option = click.option(
     help="VLP-16 spin rate, 300-1200 in steps of 60.")
 
 range_noise_option = click.option(
-    "--range-noise-mm", type=RANGE_NOISE_MM, default=15.0, show_default=True,
-    help="1-sigma range noise, mm (datasheet +-3 cm read as 2 sigma).")
+    "--range-noise-mm", type=RANGE_NOISE_MM, default=None,
+    help="1-sigma range noise at short range and normal incidence, mm; overrides the sensor "
+         "profile's (datasheet: 15, +-3 cm read as 2 sigma).")
 
 dem_option = click.option(
     "--dem", "dem_path", type=FILE,

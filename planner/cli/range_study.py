@@ -54,9 +54,10 @@ def command(out, overwrite, frames, replicates, seed, rpm, range_noise_mm, marke
 
     from markerplan.output_folder import output_folder
     from visibility.range_experiment import run_range_study, write_range_study
-    from visibility.sensor import SensorConfig
+    from visibility.sensor import DEFAULT_RANGE_NOISE_M, SensorConfig
 
-    sensor = SensorConfig(rpm=rpm, range_noise_m=range_noise_mm / 1e3)
+    sensor = SensorConfig(rpm=rpm, range_noise_m=DEFAULT_RANGE_NOISE_M if range_noise_mm is None
+                          else range_noise_mm / 1e3)
     with output_folder(out, overwrite, "range-study") as stage:
         with tqdm(total=replicates, desc="replicates", file=sys.stderr, disable=None) as bar:
             study = run_range_study(max_distance_m, frames, replicates, seed, sensor,

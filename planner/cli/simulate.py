@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import sys
+from dataclasses import asdict
 from pathlib import Path
 
 import click
@@ -22,6 +23,7 @@ from planner.cli._common import (
     range_noise_option,
     rpm_option,
     seed_option,
+    sensor_profile_option,
     site_option,
     site_seed_option,
     station_ids_option,
@@ -45,47 +47,54 @@ from planner.cli._common import (
               default=1.0, show_default=True,
               help="LiDAR centre above the ground, metres.")
 @mounting_offset_options
+@sensor_profile_option
 @range_noise_option
-@click.option("--incidence-noise-mm", type=RANGE_NOISE_MM, default=0.0, show_default=True,
-              help="Extra noise x tan(incidence), mm.")
-@click.option("--beam-divergence", is_flag=True,
-              help="Sample returns inside the 3 x 1.5 mrad beam footprint.")
+@click.option("--incidence-noise-mm", type=RANGE_NOISE_MM, default=None,
+              help="Range noise growth with incidence: adds this x tan(incidence) in "
+                   "quadrature, mm; overrides the sensor profile's.")
+@click.option("--beam-divergence/--no-beam-divergence", default=None,
+              help="Model the 3 x 1.5 mrad beam footprint and its mixed returns at marker "
+                   "edges; overrides the sensor profile's.")
 @click.option("--dropout", "dropout_prob", type=FiniteRange(0.0, 1.0, max_open=True),
-              default=0.0, show_default=True,
-              help="Probability that a return is lost.")
+              default=None,
+              help="Probability that a return is lost; overrides the sensor profile's.")
 @out_option(required=True)
 @overwrite_option
 @json_option
 def command(site_name: str, site_seed: int | None, dem_path: Path | None,
             dem_fill: str | None, stations_path: Path | None, station_ids: tuple[str, ...] | None,
             marker_radius_m: float | None, frames: int, rpm: int, seed: int,
-            lidar_height_m: float, offsets, range_noise_mm: float, incidence_noise_mm: float,
-            beam_divergence: bool,
-            dropout_prob: float, out: Path, overwrite: bool, as_json: bool) -> None:
+            lidar_height_m: float, offsets, profile, range_noise_mm: float | None,
+            incidence_noise_mm: float | None, beam_divergence: bool | None,
+            dropout_prob: float | None, out: Path, overwrite: bool, as_json: bool) -> None:
     """Simulate turntable VLP-16 scans of a site: one scan file and one truth file per station.
 
     Writes station_<id>.scan.npz (pipeline scan format), station_<id>.truth.json (true marker
     centres, station pose, mounting offsets) and site.json (the layout) into --out. The
     preset's markers are scanned; --dem replaces its terrain and --stations its stations (the
-    LiDAR centre stands --lidar-height above the ground).
+    LiDAR centre stands --lidar-height above the ground). The sensor's noise, beam footprint and
+    the turntable's errors come from --sensor-profile; --range-noise-mm, --incidence-noise-mm,
+    --beam-divergence and --dropout override its values.
 
     \b
     Example:
       markerplan simulate --site default --out scans/
       markerplan simulate --station-ids S1,S2 --frames 200 --axis-offset-mm 5,-3 --out scans/
       markerplan simulate --dem site.tif --stations stations.csv --marker-radius 0.15 --out s/
+      markerplan simulate --sensor-profile datasheet --no-beam-divergence --out s/
     """
     from tqdm import tqdm
 
     from markerplan.output_folder import output_folder
     from planner.planning import select_stations
-    from visibility.sensor import RigConfig, SensorConfig
+    from visibility.sensor import RigConfig
     from visibility.simulate import simulate_site, write_site_json
 
-    sensor = SensorConfig(rpm=rpm, range_noise_m=range_noise_mm / 1e3,
-                          incidence_noise_m=incidence_noise_mm / 1e3,
-                          beam_divergence=beam_divergence, dropout_prob=dropout_prob)
-    rig = RigConfig(lidar_height_m=lidar_height_m, frames_per_turn=frames, offsets=offsets)
+    sensor = profile.sensor_config(rpm, range_noise_m=_metres(range_noise_mm),
+                                   incidence_noise_m=_metres(incidence_noise_mm),
+                                   beam_divergence=beam_divergence, dropout_prob=dropout_prob)
+    rig = RigConfig(lidar_height_m=lidar_height_m, frames_per_turn=frames, offsets=offsets,
+                    turntable=profile.turntable)
     with output_folder(out, overwrite, "simulate",
                        inputs=given_paths(dem_path, stations_path)) as stage:
         site = _site(site_name, site_seed, dem_path, dem_fill, stations_path, marker_radius_m,
@@ -93,14 +102,20 @@ def command(site_name: str, site_seed: int | None, dem_path: Path | None,
         ids = select_stations(site.station_ids, station_ids)
         with tqdm(total=len(ids) * frames, unit="frame", file=sys.stderr, disable=None,
                   desc="simulate") as bar:
-            per_station = simulate_site(site, stage, sensor, rig, seed, ids, progress=bar.update)
+            per_station = simulate_site(site, stage, sensor, rig, seed, ids, progress=bar.update,
+                                        sensor_profile=profile.name)
         write_site_json(stage / "site.json", site, rig)
     summary = {"out": str(out), "site": site.name, "stations": per_station,
                "n_points": int(sum(s["n_points"] for s in per_station)), "frames": frames,
-               "seed": seed}
+               "seed": seed, "sensor_profile": profile.to_dict(), "sensor": asdict(sensor)}
     human = "\n".join(f"{s['station_id']}: {s['n_points']} points -> {out / s['scan']}"
                       for s in per_station)
     emit_summary(summary, as_json, human)
+
+
+def _metres(mm: float | None) -> float | None:
+    """Millimetres to metres, ``None`` (not given) kept."""
+    return None if mm is None else mm / 1e3
 
 
 def _site(site_name, site_seed, dem_path, dem_fill, stations_path, marker_radius_m,

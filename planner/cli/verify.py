@@ -16,6 +16,7 @@ from planner.cli._common import (
     out_option,
     overwrite_option,
     seed_option,
+    sensor_profile_option,
     station_ids_option,
 )
 
@@ -26,17 +27,20 @@ from planner.cli._common import (
 @seed_option()
 @station_ids_option
 @mounting_offset_options
+@sensor_profile_option
 @out_option(required=True)
 @overwrite_option
 @json_option
-def command(plan_path, error_model, seed, station_ids, offsets, out, overwrite, as_json):
+def command(plan_path, error_model, seed, station_ids, offsets, profile, out, overwrite,
+            as_json):
     """Check a plan by simulation: scan each station with the planned markers, process the
     scans, register each station to its detected markers, and compare achieved with predicted
     error. Exit code 1 when any station's achieved error exceeds the requirement. The plan's
     marker radius is simulated and fitted; --station-ids verifies some stations only.
 
     With mounting offsets the simulated rig is mis-mounted and the pipeline self-calibrates
-    each station's scan before detecting the markers, as in the field.
+    each station's scan before detecting the markers, as in the field. The simulated sensor
+    and turntable errors come from --sensor-profile.
 
     \b
     Example:
@@ -59,8 +63,8 @@ def command(plan_path, error_model, seed, station_ids, offsets, out, overwrite, 
     with output_folder(out, overwrite, "verify", inputs=inputs) as stage:
         checks = verify_plan(plan, error_model.model, seed=seed,
                              progress=not as_json or sys.stderr.isatty(), offsets=offsets,
-                             station_ids=ids)
-        rec = verify_record(plan, checks, seed, error_model.name, offsets)
+                             station_ids=ids, profile=profile)
+        rec = verify_record(plan, checks, seed, error_model.name, offsets, profile)
         (stage / "verify.json").write_text(json.dumps(rec, indent=2) + "\n")
         (stage / "verify.md").write_text(verify_markdown(rec))
     summary = {"out": str(out), "passed": rec["passed"], "requirement_m": rec["requirement_m"],

@@ -8,6 +8,8 @@ SIM = ["simulate", "--station-ids", "S1", "--frames", "4", "--out", "out"]
 RANGE = ["range-study", "--frames", "4", "--replicates", "1", "--out", "out"]
 SCAN = "{inputs}/scan/station_S1.scan.npz"
 PROCESS = ["process", SCAN, "--out", "out"]
+#: A sensor profile file with one block filled in by ``%``.
+PROFILE = '{"format": "markerplan-sensor-profile", "format_version": 1, "name": "bad", %s}'
 
 
 def usage(name, args, option):
@@ -71,6 +73,20 @@ CASES = [
           "--marker-radius"),
     usage("fit-sphere-sensor-two-numbers", ["fit-sphere", "p.xyz", "--marker-radius", "0.1",
                                             "--sensor", "1,2"], "--sensor"),
+    Case("simulate-profile-missing-file", SIM + ["--sensor-profile", "nope.json"],
+         "neither a shipped profile"),
+    Case("simulate-profile-unknown-field", SIM + ["--sensor-profile", "p.json"],
+         "has no field 'beam_width'", files={"p.json": PROFILE % '"sensor": {"beam_width": 2}'}),
+    Case("simulate-profile-negative-sigma", SIM + ["--sensor-profile", "p.json"],
+         "range_noise_m must be a number >= 0",
+         files={"p.json": PROFILE % '"sensor": {"range_noise_m": -0.01}'}),
+    Case("simulate-profile-negative-encoder", SIM + ["--sensor-profile", "p.json"],
+         "encoder_noise_rad must be a number >= 0",
+         files={"p.json": PROFILE % '"turntable": {"encoder_noise_rad": -1e-4}'}),
+    Case("simulate-profile-not-a-profile", SIM + ["--sensor-profile", "p.json"],
+         "not a sensor profile", files={"p.json": '{"format": "other"}'}),
+    Case("verify-profile-missing-file", ["verify", "{inputs}/plan/plan.json", "--sensor-profile",
+                                         "nope.json", "--out", "out"], "neither a shipped profile"),
     usage("simulate-axis-offset-one-number", SIM + ["--axis-offset-mm", "5"], "--axis-offset-mm"),
     usage("simulate-axis-offset-nan", SIM + ["--axis-offset-mm", "nan,0"], "--axis-offset-mm"),
     usage("reduce-axis-offset-one-number", ["reduce", "as-built", "--verify", "--axis-offset-mm",

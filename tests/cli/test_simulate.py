@@ -27,7 +27,11 @@ def test_simulate_writes_scans_and_truth(tmp_path, capsys):
     assert meta["source"] == "simulated" and meta["station_id"] == "S1"
     assert len(meta["sensor"]["laser_elevation_rad"]) == 16 and meta["sensor"]["rpm"] == 600
     assert meta["sensor"]["range_noise_m"] == pytest.approx(0.01)
-    assert meta["rig"] == {"lidar_height_m": 1.0, "frames_per_turn": 8}
+    assert meta["rig"]["lidar_height_m"] == 1.0 and meta["rig"]["frames_per_turn"] == 8
+    # the default profile (calibrated) drives the sensor; --range-noise-mm overrides it
+    assert meta["sensor_profile"] == "calibrated" and meta["sensor"]["beam_divergence"]
+    assert summary["sensor_profile"]["name"] == "calibrated"
+    assert summary["sensor"]["range_noise_m"] == pytest.approx(0.01)
     assert "mounting_offsets" not in json.dumps(meta)
     truth = read_truth(out / "station_S1.truth.json")
     assert truth["mounting_offsets"]["axis_offset_m"] == pytest.approx([0.005, -0.003])
