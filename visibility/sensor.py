@@ -50,6 +50,8 @@ RANGE_RESOLUTION_M = 0.002
 DATASHEET_RANGE_ACCURACY_M = 0.03
 DEFAULT_RANGE_NOISE_M = DATASHEET_RANGE_ACCURACY_M / 2
 BEAM_DIVERGENCE_RAD = (3.0e-3, 1.5e-3)
+#: Second entry of the per-channel offset seed ``[unit_seed, LASER_BIAS_STREAM]``.
+LASER_BIAS_STREAM = 2
 
 
 def azimuth_step_rad(rpm: float) -> float:
@@ -84,6 +86,14 @@ class SensorConfig:
         Sub-rays cast inside the footprint of a beam that passes near a marker's silhouette.
     dropout_prob : float
         Probability that a return is lost at random.
+    laser_range_bias_m : float
+        1-sigma of each laser channel's constant range offset (the factory calibration's
+        residual), metres; one draw per channel and unit.
+    laser_angle_bias_rad : float
+        1-sigma of each channel's constant elevation and azimuth offsets, radians.
+    unit_seed : int
+        Which sensor unit: the channels' offsets are drawn from ``default_rng([unit_seed,
+        LASER_BIAS_STREAM])``, the same for every station scanned with these settings.
     """
 
     rpm: int = 600
@@ -96,6 +106,9 @@ class SensorConfig:
     beam_divergence: bool = False
     footprint_samples: int = 7
     dropout_prob: float = 0.0
+    laser_range_bias_m: float = 0.0
+    laser_angle_bias_rad: float = 0.0
+    unit_seed: int = 0
 
     def __post_init__(self) -> None:
         if not (RPM_MIN <= self.rpm <= RPM_MAX and (self.rpm - RPM_MIN) % RPM_STEP == 0):
@@ -107,9 +120,34 @@ class SensorConfig:
                               f"{self.max_range_m}")
         if not 0 <= self.dropout_prob < 1:
             raise ConfigError(f"dropout_prob must be in [0, 1), got {self.dropout_prob}")
+        for name in ("laser_range_bias_m", "laser_angle_bias_rad"):
+            value = getattr(self, name)
+            if not (isinstance(value, int | float) and np.isfinite(value) and value >= 0):
+                raise ConfigError(f"{name} must be a number >= 0, got {value!r}")
+        if not (isinstance(self.unit_seed, int | np.integer) and self.unit_seed >= 0):
+            raise ConfigError(f"unit_seed must be an integer >= 0, got {self.unit_seed!r}")
         if not (isinstance(self.footprint_samples, int) and 1 <= self.footprint_samples <= 64):
             raise ConfigError(f"footprint_samples must be an integer in 1..64, got "
                               f"{self.footprint_samples!r}")
+
+    def laser_biases(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """This unit's constant per-channel offsets (always 48 draws, so either term can be off).
+
+        Returns
+        -------
+        range_bias_m, elevation_bias_rad, azimuth_bias_rad : (16,) float
+            Indexed by channel.
+
+        Examples
+        --------
+        >>> r, e, a = SensorConfig(laser_range_bias_m=0.01).laser_biases()
+        >>> r.shape, bool(np.all(e == 0))
+        ((16,), True)
+        """
+        draws = np.random.default_rng([self.unit_seed, LASER_BIAS_STREAM]).standard_normal(
+            (3, len(VLP16_ELEVATION_RAD)))
+        return (self.laser_range_bias_m * draws[0], self.laser_angle_bias_rad * draws[1],
+                self.laser_angle_bias_rad * draws[2])
 
     def range_noise(self) -> RangeNoise:
         """The range-noise model of these settings."""

@@ -38,6 +38,17 @@ Turntable errors (``RigConfig.turntable``, :class:`visibility.sensor.TurntableEr
     about the turntable-frame origin). They perturb only the simulated pose; the scan keeps the
     nominal angles, as the processing chain must. The truth file lists each frame's errors.
 
+Per-channel offsets (``SensorConfig.laser_range_bias_m``, ``laser_angle_bias_rad``,
+``unit_seed``)
+    Each of the 16 lasers of a unit has its own constant range offset and elevation and azimuth
+    offsets, the residual of the factory calibration (Glennie and Lichti 2010, 2016, and Kidd
+    2017 measured per-laser range offsets of centimetres and angular offsets of a few tenths of
+    a milliradian to milliradians on Velodyne HDL-32E/VLP-16 units; the datasheet's +-3 cm
+    "accuracy" includes them). They are drawn once per unit
+    (:meth:`visibility.sensor.SensorConfig.laser_biases`), shared by every station of a run,
+    and do not average out over frames: every frame sees a far marker with the same few
+    lasers. The rays are cast along the true directions; the scan reports the nominal ones.
+
 Rays that provably cannot hit anything (steeper than the conservative
 :class:`visibility.scene.HorizonBound` in their azimuth bin, built around the lowest and widest
 perturbed LiDAR centre) are skipped without changing the result; near-silhouette beams are
@@ -101,9 +112,17 @@ class _Setup:
     laser: np.ndarray
     """(n,) uint8 channel of each firing."""
     az0: np.ndarray
-    """(n,) spin azimuth at phase 0, radians."""
+    """(n,) nominal spin azimuth at phase 0, radians."""
     d0: np.ndarray
-    """(n, 3) sensor-frame unit directions at phase 0."""
+    """(n, 3) nominal sensor-frame unit directions at phase 0 (what the scan reports)."""
+    elevation: np.ndarray
+    """(n,) true elevation of each firing (the channel's, plus its offset), radians."""
+    azimuth: np.ndarray
+    """(n,) true spin azimuth at phase 0 (plus the channel's offset), radians."""
+    d_true: np.ndarray
+    """(n, 3) true directions at phase 0 (the rays cast)."""
+    range_bias: np.ndarray
+    """(n,) the channel's constant range offset of each firing, metres."""
     footprint: np.ndarray
     """(k, 2) sub-ray offsets (along the spin, across it), radians; empty without footprint."""
 
@@ -159,7 +178,12 @@ def simulate_scan(scene: RayScene, position_m: np.ndarray, heading_rad: float,
     tasks = [np.arange(a, min(a + _FRAMES_PER_TASK, len(frame_ids)))
              for a in range(0, len(frame_ids), _FRAMES_PER_TASK)]
     laser, az0 = firing_pattern(sensor.rpm, 0.0)
+    range_bias, elevation_bias, azimuth_bias = sensor.laser_biases()
+    channel = laser.astype(np.int64)
+    elevation = VLP16_ELEVATION_RAD[channel] + elevation_bias[channel]
+    azimuth = az0 + azimuth_bias[channel]
     setup = _Setup(scene, horizon, sensor, seed, laser, az0, sensor_directions(laser, az0),
+                   elevation, azimuth, beam_directions(elevation, azimuth), range_bias[channel],
                    footprint_offsets_rad(sensor.footprint_samples) if sensor.beam_divergence
                    else np.zeros((0, 2)))
 
@@ -288,19 +312,20 @@ def _frame(setup: _Setup, frame: int, rotation: np.ndarray, origin: np.ndarray) 
     sensor, scene = setup.sensor, setup.scene
     rng = np.random.default_rng([setup.seed, frame])
     phase = rng.uniform(0.0, sensor.azimuth_step_rad)
-    d0 = setup.d0
+    d_true = setup.d_true
     spin = rot_z(-phase)
     rot = rotation @ spin
-    may_hit = setup.horizon.may_hit_z(d0 @ rot[2], lambda idx: d0[idx] @ rot.T)
+    may_hit = setup.horizon.may_hit_z(d_true @ rot[2], lambda idx: d_true[idx] @ rot.T)
     incidence = sensor.incidence_noise_m > 0
-    is_near = np.zeros(len(d0), dtype=bool)
+    is_near = np.zeros(len(d_true), dtype=bool)
     if len(setup.footprint):
         is_near[_near_silhouette(setup, rot, origin)] = True
     cast = np.flatnonzero(may_hit | is_near)
     is_central = ~is_near[cast]
     central, near = cast[is_central], cast[~is_central]
-    hits = scene.intersect_unit(np.broadcast_to(origin, (len(central), 3)), d0[central] @ rot.T,
-                                max_range_m=sensor.max_range_m, threads=1, incidence=incidence)
+    hits = scene.intersect_unit(np.broadcast_to(origin, (len(central), 3)),
+                                d_true[central] @ rot.T, max_range_m=sensor.max_range_m,
+                                threads=1, incidence=incidence)
     true_range = np.empty(len(cast))
     sphere = np.empty(len(cast), dtype=np.int64)
     tan_i = np.zeros(len(cast))
@@ -312,7 +337,8 @@ def _frame(setup: _Setup, frame: int, rotation: np.ndarray, origin: np.ndarray) 
         true_range[~is_central], sphere[~is_central], tan_i[~is_central] = mixed
     with np.errstate(invalid="ignore"):  # misses (inf) become NaN and fail the range test
         sigma = sensor.range_noise().sigma_m(true_range, tan_i)
-        measured = true_range + sigma * rng.standard_normal(len(cast))
+        measured = (true_range + setup.range_bias[cast]
+                    + sigma * rng.standard_normal(len(cast)))
         if sensor.range_resolution_m > 0:
             measured = np.round(measured / sensor.range_resolution_m) * sensor.range_resolution_m
         ok = (measured >= sensor.min_range_m) & (measured <= sensor.max_range_m)
@@ -325,7 +351,7 @@ def _frame(setup: _Setup, frame: int, rotation: np.ndarray, origin: np.ndarray) 
         "laser_id": setup.laser[sel],
         "spin_azimuth_rad": np.mod(setup.az0[sel] + phase, 2 * np.pi).astype(np.float32),
         "range_m": r.astype(np.float32),
-        "xyz_sensor_m": (r[:, None] * (d0[sel] @ spin.T)).astype(np.float32),
+        "xyz_sensor_m": (r[:, None] * (setup.d0[sel] @ spin.T)).astype(np.float32),
         "sphere_index": sphere[ok],
         "n_rays": len(setup.laser),
         "n_cast": len(central) + len(near) * len(setup.footprint),
@@ -355,13 +381,17 @@ def _near_silhouette(setup: _Setup, rot: np.ndarray, origin: np.ndarray) -> np.n
     rho = np.arcsin(radius / dist[reach])
     half = 0.5 * max(BEAM_DIVERGENCE_RAD) + SILHOUETTE_MARGIN_RAD
     # cheap first cut: channels whose elevation is within the band of a sphere's elevation
-    close = (np.abs(VLP16_ELEVATION_RAD[:, None] - np.arcsin(np.clip(v[2], -1, 1))[None, :])
+    channels = np.unique(setup.laser)
+    elevation = np.array([setup.elevation[setup.laser == c][0] for c in channels])
+    close = (np.abs(elevation[:, None] - np.arcsin(np.clip(v[2], -1, 1))[None, :])
              <= (rho + half)[None, :])
     spheres = close.any(axis=0)
-    rows = np.flatnonzero(close[:, spheres].any(axis=1)[setup.laser])
+    near_channel = np.zeros(256, dtype=bool)
+    near_channel[channels] = close[:, spheres].any(axis=1)
+    rows = np.flatnonzero(near_channel[setup.laser])
     if not len(rows):
         return rows
-    cosang = setup.d0[rows] @ v[:, spheres]  # (k, m') cosines beam-to-centre
+    cosang = setup.d_true[rows] @ v[:, spheres]  # (k, m') cosines beam-to-centre
     cos_lo = np.cos(np.minimum(rho[spheres] + half, np.pi))  # farthest from the centre
     cos_hi = np.cos(np.maximum(rho[spheres] - half, 0.0))  # nearest
     return rows[((cosang >= cos_lo) & (cosang <= cos_hi)).any(axis=1)]
@@ -381,9 +411,9 @@ def _mixed_returns(setup: _Setup, beams: np.ndarray, rot: np.ndarray, origin: np
         Mean tan(incidence) of the group (0 without ``incidence``).
     """
     k = len(setup.footprint)
-    w = VLP16_ELEVATION_RAD[setup.laser[beams].astype(np.int64)]
+    w = setup.elevation[beams]
     el = (w[:, None] + setup.footprint[None, :, 1]).ravel()
-    az = (setup.az0[beams][:, None] + setup.footprint[None, :, 0] / np.cos(w)[:, None]).ravel()
+    az = (setup.azimuth[beams][:, None] + setup.footprint[None, :, 0] / np.cos(w)[:, None]).ravel()
     d = beam_directions(el, az) @ rot.T
     hits = setup.scene.intersect_unit(np.broadcast_to(origin, (len(d), 3)), d,
                                       max_range_m=setup.sensor.max_range_m, threads=1,

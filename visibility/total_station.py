@@ -80,7 +80,7 @@ class TotalStationReference:
         Examples
         --------
         >>> round(TotalStationReference(0.002, 0.003).sigma_3d_m(0.1), 5)
-        0.00547
+        0.00548
         """
         drop_mean_square = 2 * self.aim_sigma_m ** 4 / radius_m ** 2  # E[(d^2 / 2R)^2]
         return float(np.sqrt(3 * self.point_sigma_m ** 2 + 2 * self.aim_sigma_m ** 2

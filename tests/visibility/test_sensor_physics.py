@@ -261,3 +261,36 @@ def test_simulate_command_takes_a_profile(tmp_path, capsys):
     assert meta["rig"]["turntable_errors"]["encoder_noise_rad"] == 1e-4
     truth = read_truth(out2 / "station_S1.truth.json")
     assert len(truth["turntable_frame_errors"]["angle_error_rad"]) == 4
+
+
+def test_per_channel_range_offsets_shift_each_channel_by_its_own_draw():
+    """Exact ranges plus the channel offsets: each channel's ground residuals are its offset."""
+    sensor = SensorConfig(range_noise_m=0.0, range_resolution_m=0.0, laser_range_bias_m=0.02,
+                          unit_seed=3)
+    bias, _, _ = sensor.laser_biases()
+    scan, _ = simulate_markers(_flat(), [0, 0, 1.0], 0.0, np.zeros((0, 3)), sensor, RigConfig(),
+                               seed=1, frames=range(0, 800, 80))
+    # the reported direction is nominal; plane z = -1 in T: S.y -> T.z
+    true_r = -1.0 / (scan.xyz_sensor_m[:, 1] / scan.range_m)
+    for channel in np.unique(scan.laser_id):
+        sel = scan.laser_id == channel
+        assert np.allclose(scan.range_m[sel] - true_r[sel], bias[channel], atol=2e-5)
+    assert np.std(bias) > 0.005  # 16 draws of sigma 2 cm
+    other = SensorConfig(laser_range_bias_m=0.02, unit_seed=4).laser_biases()[0]
+    assert not np.allclose(bias, other)  # another unit, other offsets
+
+
+def test_per_channel_angle_offsets_move_the_hit_not_the_reported_direction():
+    """With an elevation offset the beam hits the flat ground elsewhere: the reported point
+    along the nominal direction then lies off the plane by the offset's geometry."""
+    sensor = SensorConfig(range_noise_m=0.0, range_resolution_m=0.0,
+                          laser_angle_bias_rad=2e-3, unit_seed=5)
+    _, elevation_bias, azimuth_bias = sensor.laser_biases()
+    assert np.abs(elevation_bias).max() > 1e-3 and np.abs(azimuth_bias).max() > 1e-3
+    off, _ = simulate_markers(_flat(), [0, 0, 1.0], 0.0, np.zeros((0, 3)), sensor, RigConfig(),
+                              seed=1, frames=range(0, 800, 80))
+    exact, _ = simulate_markers(_flat(), [0, 0, 1.0], 0.0, np.zeros((0, 3)), EXACT, RigConfig(),
+                                seed=1, frames=range(0, 800, 80))
+    height = lambda scan: scan.xyz_sensor_m[:, 1]  # noqa: E731  T.z of the point, -1 on the plane
+    assert np.allclose(height(exact), -1.0, atol=1e-5)
+    assert np.abs(height(off) + 1.0).max() > 0.005  # points leave the plane
