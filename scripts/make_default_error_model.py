@@ -34,8 +34,9 @@ Usage, from the project root:
                                                                     # smoke run, ~1 min
 
 Runtime: one variant is a full 800-frame station simulation with the beam footprint and its
-processing: 95 s of CPU time (2 min 22 s wall on two cores shared with other jobs,
-2026-12-02), so the six variants take about 10 min on two idle cores, and longer under load.
+processing. The six variants and the fit took 531 s of CPU time and 18 min 20 s wall on
+2026-12-01 on two cores shared with other jobs (load average ~5); on two idle cores expect
+well under 10 min (an estimate, not measured), on a loaded machine half an hour.
 """
 
 from __future__ import annotations
