@@ -36,12 +36,28 @@ SUMMARY_COLUMNS = ("estimator", "distance_m", "n_rows", "n_fitted", "n_accepted"
 
 
 def marker_layout(distances_m: np.ndarray = RANGE_STUDY_DISTANCES_M, radius_m: float = 0.1,
-                  lidar_height_m: float = 1.0) -> np.ndarray:
-    """Marker centres in the station frame on level ground, one per distance.
+                  lidar_height_m: float = 1.0, slope_rad: float = 0.0) -> np.ndarray:
+    """Marker centres in the station frame, one per distance, resting on a planar ground.
 
-    Marker ``k`` sits at horizontal distance ``distances_m[k]`` and azimuth ``k`` times the
-    golden angle (137.5 deg), so no marker hides another; its centre is ``radius_m`` above the
-    ground, which lies ``lidar_height_m`` below the LiDAR centre.
+    The ground is the plane ``z = x tan(slope_rad) - lidar_height_m`` (station frame, LiDAR
+    centre at the origin, z up): it passes ``lidar_height_m`` below the LiDAR centre and rises
+    towards +x by ``slope_rad`` (level for 0). Marker ``k`` sits at horizontal distance
+    ``distances_m[k]`` and azimuth ``k`` times the golden angle (137.5 deg), so no marker
+    hides another; it rests on the plane, so its centre lies ``radius_m`` from the plane along
+    the plane's upward normal (``radius_m / cos(slope_rad)`` above the plane vertically). With
+    a slope, markers towards +x are uphill (seen higher than on level ground) and markers
+    towards -x downhill; from a LiDAR above the plane no marker is hidden by the ground.
+
+    Parameters
+    ----------
+    distances_m : (n,) float
+        Horizontal LiDAR-to-marker-centre distances, metres, each > ``2 * radius_m``.
+    radius_m : float
+        Marker radius, metres.
+    lidar_height_m : float
+        LiDAR centre above the ground at the station, metres (> 0).
+    slope_rad : float
+        Ground slope, radians, in (-pi/4, pi/4); positive rises towards +x.
 
     Returns
     -------
@@ -53,14 +69,30 @@ def marker_layout(distances_m: np.ndarray = RANGE_STUDY_DISTANCES_M, radius_m: f
     >>> c = marker_layout(np.array([1.0, 2.0]))
     >>> np.round(np.hypot(c[:, 0], c[:, 1]), 6).tolist(), c[:, 2].tolist()
     ([1.0, 2.0], [-0.9, -0.9])
+    >>> c = marker_layout(np.array([4.0]), lidar_height_m=0.8, slope_rad=np.radians(15))
+    >>> c.round(4).tolist(), round(float(np.degrees(np.arctan2(c[0, 2], c[0, 0]))), 2)
+    ([[4.0, 0.0, 0.3753]], 5.36)
     """
+    d = _layout_iv(distances_m, radius_m, lidar_height_m, slope_rad)
+    az = GOLDEN_ANGLE_RAD * np.arange(d.size)
+    x = d * np.cos(az)
+    return np.column_stack([x, d * np.sin(az), x * np.tan(slope_rad)
+                            + radius_m / np.cos(slope_rad) - lidar_height_m])
+
+
+def _layout_iv(distances_m, radius_m: float, lidar_height_m: float, slope_rad: float
+               ) -> np.ndarray:
+    """Validate :func:`marker_layout`'s arguments; return the distances as a float array."""
     d = np.asarray(distances_m, dtype=float)
     if d.ndim != 1 or d.size == 0 or np.any(d <= 2 * radius_m):
         raise ConfigError(f"`distances_m` must be a non-empty list of distances > 2 * radius, "
                           f"got {d}")
-    az = GOLDEN_ANGLE_RAD * np.arange(d.size)
-    return np.column_stack([d * np.cos(az), d * np.sin(az),
-                            np.full(d.size, radius_m - lidar_height_m)])
+    if not (np.isfinite(lidar_height_m) and lidar_height_m > 0):
+        raise ConfigError(f"`lidar_height_m` must be > 0, got {lidar_height_m}")
+    if not (np.isfinite(slope_rad) and abs(slope_rad) < np.pi / 4):
+        raise ConfigError(f"`slope_rad` must be in (-pi/4, pi/4) (steeper than 45 deg no marker "
+                          f"rests on the ground), got {slope_rad}")
+    return d
 
 
 def measure_markers(scan: StationScan, centres_m: np.ndarray, ids: list[str],

@@ -1,28 +1,42 @@
 """Regenerate ``error_model/data/default_model.json``, the error model shipped with markerplan.
 
-Data: our own simulation of the default rig — the published range experiment run by
-``markerplan range-study`` (simulator + pipeline: 0.20 m markers every 1 m from 1-15 m, every
-2 m from 15-25 m, every 5 m from 25-50 m on level ground, 800 frames, default VLP-16 sensor
-and rig) with ``--replicates N --seed S``. The model is fitted on the ``fixed-radius``
-estimator's rows (the estimator ``markerplan process`` uses by default) with the default fit
-settings and fit seed 0, except that the point count is not offered as a predictor: the
-table's ``n_points`` counts the points the fit used, while the planner's ``expected_points``
-counts all expected returns on the marker (about 1.4 times more at 10 m), so a model using it
-would be optimistic in planning. (Offered anyway, cross-validation keeps it for a 5.6 % lower
-held-out mean squared error on this data; distance carries the same information here.)
+Data: our own simulation of the rig with the ``calibrated`` sensor profile — the published
+range experiment (0.20 m markers every 1 m from 1-15 m, every 2 m from 15-25 m, every 5 m from
+25-50 m, 800 frames) run by ``markerplan range-study`` on six relief variants (:data:`VARIANTS`):
+the LiDAR centre 0.8 m and 1.5 m above the ground (the tripod's lowest and highest setting)
+times ground slopes of -15, 0 and +15 deg (markers resting on a plane through the station's
+foot). On a slope the markers uphill are seen up to ~15 deg higher than on level ground and the
+markers downhill up to ~15 deg lower, so at every distance the data span the elevations crater
+terrain gives (from -59 deg at 1 m to +14 deg beyond 10 m). The error model's predictors are
+distance and elevation, not height or slope: the two extreme heights span the elevations of
+every height in between, the two signs of the slope put each marker of the layout once uphill
+and once downhill, and the level variants fill the middle with markers at every azimuth. One
+replicate per variant (variant ``k``, replicate ``r`` simulated with seed ``seed + k *
+replicates + r``) keeps the scan count of the former level-ground design (6 replicates).
+
+The model is fitted on the ``fixed-radius`` estimator's rows (the estimator ``markerplan
+process`` uses by default) of all variants together, with the default fit settings and fit
+seed 0, except that the point count is not offered as a predictor: the table's ``n_points``
+counts the points the fit used, while the planner's ``expected_points`` counts all expected
+returns on the marker (about 1.4 times more at 10 m), so a model using it would be optimistic in
+planning.
 Every step is seeded: on one machine a rerun is byte-identical. Across machines the range
-study (and so the data fingerprint) is identical, but the convex solver's last digits depend on
-the CPU's vector instructions (seen: relative differences up to ~1e-13 between two machines), so
-``--check`` compares the data exactly and every number to a relative 1e-9 (absolute 1e-12).
+studies (and so the data fingerprint) are identical, but the convex solver's last digits depend
+on the CPU's vector instructions (seen: relative differences up to ~1e-13 between two
+machines), so ``--check`` compares the data exactly and every number to a relative 1e-9
+(absolute 1e-12).
 
 Usage, from the project root:
     .venv/bin/python scripts/make_default_error_model.py            # rewrite the JSON
     .venv/bin/python scripts/make_default_error_model.py --check    # compare, exit 1 if stale
-    .venv/bin/python scripts/make_default_error_model.py --keep range/   # keep the study output
+    .venv/bin/python scripts/make_default_error_model.py --keep range/   # keep the studies
+    .venv/bin/python scripts/make_default_error_model.py --frames 100 --output /tmp/m.json
+                                                                    # smoke run, ~1 min
 
-Runtime: one range-study replicate is a full 800-frame station simulation and processing
-(about 40 s on two idle cores, several minutes under load): the default 6 replicates took
-3 min 50 s on 2026-12-01 on idle cores; expect up to half an hour on a loaded machine.
+Runtime: one variant is a full 800-frame station simulation with the beam footprint and its
+processing. The six variants and the fit took 531 s of CPU time and 18 min 20 s wall on
+2026-12-01 on two cores shared with other jobs (load average ~5); on two idle cores expect
+well under 10 min (an estimate, not measured), on a loaded machine half an hour.
 """
 
 from __future__ import annotations
@@ -42,30 +56,44 @@ from error_model.default import DEFAULT_MODEL_PATH  # noqa: E402
 from error_model.fit import fit_error_model  # noqa: E402
 from error_model.table import read_marker_tables  # noqa: E402
 from planner.cli import cli  # noqa: E402
+from visibility.sensor_profile import DEFAULT_PROFILE  # noqa: E402
 
-REPLICATES = 6
+#: Relief variants: (LiDAR height m, ground slope deg).
+VARIANTS = ((0.8, -15.0), (0.8, 0.0), (0.8, 15.0), (1.5, -15.0), (1.5, 0.0), (1.5, 15.0))
+REPLICATES = 1
+FRAMES = 800
 STUDY_SEED = 0
 FIT_SEED = 0
 ESTIMATOR = "fixed-radius"
 EXTRA_CANDIDATES = ("visible_fraction",)
 
 
-def run_range_study(out: Path, replicates: int, seed: int) -> Path:
-    """Run ``markerplan range-study`` into ``out`` and return its marker table."""
-    cli.main(args=["range-study", "--out", str(out), "--replicates", str(replicates),
-                   "--seed", str(seed), "--json"], prog_name="markerplan",
-             standalone_mode=False)
-    return out / "markers.csv"
+def run_variants(folder: Path, profile: str, replicates: int, frames: int,
+                 seed: int) -> list[Path]:
+    """Run ``markerplan range-study`` once per variant into ``folder`` and return the marker
+    tables, in :data:`VARIANTS` order."""
+    tables = []
+    for k, (height, slope) in enumerate(VARIANTS):
+        out = folder / f"h{height:.1f}_slope{slope:+.0f}"
+        cli.main(args=["range-study", "--out", str(out), "--sensor-profile", profile,
+                       "--replicates", str(replicates), "--frames", str(frames),
+                       "--seed", str(seed + k * replicates), "--lidar-height", str(height),
+                       "--slope-deg", str(slope)],
+                 prog_name="markerplan", standalone_mode=False)
+        tables.append(out / "markers.csv")
+    return tables
 
 
-def build_model(markers_csv: Path, replicates: int, seed: int):
-    """Fit the default model on the range study's fixed-radius rows."""
-    description = (f"simulation of the default rig: `markerplan range-study --replicates "
-                   f"{replicates} --seed {seed}` (range study, level ground, 800 frames, default "
-                   f"VLP-16 and rig), estimator {ESTIMATOR}, optional predictors offered "
+def build_model(tables: list[Path], profile: str, replicates: int, frames: int, seed: int):
+    """Fit the default model on the fixed-radius rows of every variant's marker table."""
+    variants = ", ".join(f"{h} m / {s:+.0f} deg" for h, s in VARIANTS)
+    description = (f"simulation of the rig with sensor profile {profile}: `markerplan "
+                   f"range-study --sensor-profile {profile} --replicates {replicates} --frames "
+                   f"{frames} --lidar-height H --slope-deg S` for (H, S) in {variants}, seeds "
+                   f"from {seed}; estimator {ESTIMATOR}, optional predictors offered "
                    f"{list(EXTRA_CANDIDATES)}; regenerated by "
                    "scripts/make_default_error_model.py")
-    table = read_marker_tables(markers_csv)
+    table = read_marker_tables(tables)
     config = FitConfig(estimator=ESTIMATOR, extra_candidates=EXTRA_CANDIDATES)
     return fit_error_model(table, config, seed=FIT_SEED, description=description)
 
@@ -101,19 +129,27 @@ def _differences(shipped, fresh, where: str):
 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--replicates", type=int, default=REPLICATES)
+    parser.add_argument("--sensor-profile", default=DEFAULT_PROFILE,
+                        help="Sensor profile name or file (default %(default)s).")
+    parser.add_argument("--replicates", type=int, default=REPLICATES,
+                        help="Replicates per variant (default %(default)s).")
+    parser.add_argument("--frames", type=int, default=FRAMES,
+                        help="Frames per turntable revolution (default %(default)s; 100 for a "
+                             "smoke run).")
     parser.add_argument("--seed", type=int, default=STUDY_SEED)
     parser.add_argument("--check", action="store_true",
                         help="Do not write; exit 1 if the shipped JSON differs.")
     parser.add_argument("--keep", type=Path, default=None,
-                        help="Keep the range-study output in this (new) folder.")
+                        help="Keep the range-study outputs in this (new) folder.")
     parser.add_argument("--output", type=Path, default=DEFAULT_MODEL_PATH)
     args = parser.parse_args()
 
     with tempfile.TemporaryDirectory() as tmp:
-        study = args.keep if args.keep is not None else Path(tmp) / "range"
-        markers = run_range_study(study, args.replicates, args.seed)
-        model = build_model(markers, args.replicates, args.seed)
+        folder = args.keep if args.keep is not None else Path(tmp) / "range"
+        tables = run_variants(folder, args.sensor_profile, args.replicates, args.frames,
+                              args.seed)
+        model = build_model(tables, args.sensor_profile, args.replicates, args.frames,
+                            args.seed)
         if args.check:
             fresh = json.loads(model.save(Path(tmp) / "fresh.json").read_text())
             shipped = json.loads(args.output.read_text()) if args.output.exists() else None

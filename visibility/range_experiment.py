@@ -1,5 +1,6 @@
 """The published range experiment, simulated: 0.20 m markers from 1 m to 50 m around one station
-on level ground, scanned with the turntable rig and fitted with every estimator.
+on level ground, scanned with the turntable rig and fitted with every estimator; and its relief
+variants, the same markers resting on a planar slope with the LiDAR 0.8-1.5 m up.
 
 The simulator (:func:`visibility.simulate.simulate_markers`) scans the markers laid out by
 :func:`pipeline.range_study.marker_layout` once per replicate (replicate ``r`` with seed
@@ -12,7 +13,7 @@ from __future__ import annotations
 
 import json
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -30,10 +31,11 @@ from pipeline.range_study import (
 )
 from pipeline.stages import RADIUS_SCALED
 from visibility.dem import DEM
-from visibility.sensor import RigConfig, SensorConfig
+from visibility.sensor import RigConfig
+from visibility.sensor_profile import DEFAULT_PROFILE, SensorProfile, load_profile
 from visibility.simulate import simulate_markers
 
-#: DEM cell of the level ground, m.
+#: DEM cell of the ground, m (the ground is a plane, so the cell size changes nothing).
 GROUND_CELL_M = 0.5
 #: Ground beyond the farthest marker, m.
 GROUND_MARGIN_M = 5.0
@@ -54,10 +56,12 @@ class RangeStudy:
 
 
 def run_range_study(max_distance_m: float = 50.0, frames: int = 800, replicates: int = 3,
-                    seed: int = 0, sensor: SensorConfig | None = None,
+                    seed: int = 0, profile: SensorProfile | None = None,
                     marker_radius_m: float = 0.1,
-                    progress: Callable[[int], object] | None = None) -> RangeStudy:
-    """Simulate and measure the range experiment.
+                    progress: Callable[[int], object] | None = None, *, rpm: int = 600,
+                    range_noise_m: float | None = None, lidar_height_m: float = 1.0,
+                    slope_deg: float = 0.0) -> RangeStudy:
+    """Simulate and measure the range experiment, on level ground or on a slope.
 
     Parameters
     ----------
@@ -66,32 +70,46 @@ def run_range_study(max_distance_m: float = 50.0, frames: int = 800, replicates:
     frames : int
         Frames per turntable revolution.
     replicates : int
-        Scans of the same layout; replicate ``r`` uses noise seed ``seed + r``.
+        Scans of the same layout; replicate ``r`` uses noise seed ``seed + r`` and sensor unit
+        ``seed + r`` (its per-channel offsets, :meth:`SensorConfig.laser_biases`).
     seed : int
         Noise seed of the first replicate.
-    sensor : SensorConfig, optional
-        Default: :class:`~visibility.sensor.SensorConfig` ().
+    profile : SensorProfile, optional
+        The sensor's and turntable's errors (default: the ``calibrated`` profile).
     marker_radius_m : float
         Marker radius, m.
     progress : callable, optional
         Called with 1 after each replicate.
+    rpm : int
+        VLP-16 spin rate.
+    range_noise_m : float, optional
+        1-sigma range noise, m, instead of the profile's.
+    lidar_height_m : float
+        LiDAR centre above the ground at the station, m (the rig stands 0.8-1.5 m).
+    slope_deg : float
+        Ground slope, degrees, in (-45, 45): the ground is a plane through the station's foot
+        rising towards the station frame's +x; markers rest on it (see
+        :func:`pipeline.range_study.marker_layout`). 0 is the published level ground.
 
     Returns
     -------
     study : RangeStudy
     """
-    sensor = sensor or SensorConfig()
+    profile = profile or load_profile(DEFAULT_PROFILE)
+    sensor = profile.sensor_config(rpm, range_noise_m=range_noise_m)
     distances = RANGE_STUDY_DISTANCES_M[RANGE_STUDY_DISTANCES_M <= max_distance_m]
-    rig = RigConfig(frames_per_turn=frames)
-    centres = marker_layout(distances, marker_radius_m, rig.lidar_height_m)
+    rig = RigConfig(frames_per_turn=frames, lidar_height_m=lidar_height_m,
+                    turntable=profile.turntable)
+    slope_rad = float(np.radians(slope_deg))
+    centres = marker_layout(distances, marker_radius_m, lidar_height_m, slope_rad)
     ids = [f"R{d:04.1f}" for d in distances]
-    half = float(distances.max()) + GROUND_MARGIN_M
-    dem = DEM(np.zeros((int(2 * half / GROUND_CELL_M) + 1,) * 2), (-half, -half), GROUND_CELL_M)
-    station = [0.0, 0.0, rig.lidar_height_m]
+    dem = _ground(float(distances.max()) + GROUND_MARGIN_M, slope_rad)
+    station = [0.0, 0.0, lidar_height_m]
     research_radius_m = RADIUS_SCALED[("research", "radius_m")] * marker_radius_m
     rows = []
     for rep in range(replicates):
-        scan, _ = simulate_markers(dem, station, 0.0, centres + station, sensor, rig,
+        unit = replace(sensor, unit_seed=seed + rep)  # each replicate another sensor unit
+        scan, _ = simulate_markers(dem, station, 0.0, centres + station, unit, rig,
                                    seed=seed + rep, marker_radius_m=marker_radius_m,
                                    marker_ids=ids, station_id="RANGE")
         rows += measure_markers(scan, centres, ids, radius_m=marker_radius_m,
@@ -101,10 +119,20 @@ def run_range_study(max_distance_m: float = 50.0, frames: int = 800, replicates:
         if progress is not None:
             progress(1)
     config = {"distances_m": distances.tolist(), "frames": frames, "replicates": replicates,
-              "seed": seed, "sensor": {"rpm": sensor.rpm, "range_noise_m": sensor.range_noise_m},
-              "terrain": "level ground", "marker_radius_m": marker_radius_m}
+              "seed": seed, "sensor_profile": profile.name, "sensor": asdict(sensor),
+              "turntable": asdict(profile.turntable),
+              "terrain": {"lidar_height_m": lidar_height_m, "slope_deg": slope_deg,
+                          "ground": "plane through the station's foot rising towards +x"},
+              "marker_radius_m": marker_radius_m}
     distance_of = dict(zip(ids, distances.tolist(), strict=True))
     return RangeStudy(distance_of, rows, summarise(rows, distance_of), config)
+
+
+def _ground(half_m: float, slope_rad: float) -> DEM:
+    """The planar ground ``z = x tan(slope_rad)`` (site frame) over ``+-half_m`` in x and y."""
+    n = int(2 * half_m / GROUND_CELL_M) + 1
+    x = -half_m + GROUND_CELL_M * np.arange(n)
+    return DEM(np.tile(x * np.tan(slope_rad), (n, 1)), (-half_m, -half_m), GROUND_CELL_M)
 
 
 def write_range_study(study: RangeStudy, folder: Path) -> dict:

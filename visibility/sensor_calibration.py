@@ -34,7 +34,7 @@ from __future__ import annotations
 
 import itertools
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.optimize import least_squares, nnls
@@ -230,7 +230,7 @@ def simulate_position(profile: SensorProfile, position: FieldPosition, index: in
     half = float(d.max()) + FIELD_MARGIN_M
     dem = DEM(np.zeros((int(2 * half / FIELD_CELL_M) + 1,) * 2), (-half, -half), FIELD_CELL_M)
     station = np.array([0.0, 0.0, settings.lidar_height_m])
-    sensor = replace(profile.sensor, rpm=settings.rpm)
+    sensor = profile.sensor_config(settings.rpm, unit_seed=int(seeds[0]))
     rig = RigConfig(lidar_height_m=settings.lidar_height_m, frames_per_turn=settings.frames,
                     turntable=profile.turntable)
     ids = [f"M{k + 1:02d}" for k in range(len(d))]

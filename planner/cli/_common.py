@@ -15,6 +15,7 @@ option                      meaning (and the value the command receives)
 ``--stations FILE``         stations CSV/GeoJSON (``Path``)
 ``--station-ids S1,S3``     which stations to work on (``tuple[str, ...]``)
 ``--marker-radius M``       marker (sphere) radius, metres (``float``)
+``--lidar-height M``        LiDAR centre above the ground at the station, metres (``float``)
 ``--error-model FILE``      error model (:class:`ErrorModelChoice`, the shipped one by default)
 ``--estimator NAME``        sphere-centre estimator, from :data:`pipeline.sphere_fit.METHODS`
 ``--sensor-profile NAME``   sensor, turntable and reference errors (a loaded
@@ -88,6 +89,9 @@ FRAMES = click.IntRange(1, 20_000)
 RANGE_NOISE_MM = FiniteRange(0.0, 500.0)
 #: VLP-16 spin rate, rpm (the sensor's own range; steps of 60 are checked by the sensor model).
 RPM = click.IntRange(300, 1200)
+#: LiDAR centre above the ground, m: the rig's tripod stands 0.8-1.5 m; below 0.3 m the turntable
+#: and bracket are in the way, above 3 m no tripod reaches.
+LIDAR_HEIGHT_M = FiniteRange(0.3, 3.0)
 #: Solver time limits, seconds (one day at most).
 TIME_LIMIT_S = FiniteRange(0.0, 86_400.0, min_open=True)
 
@@ -225,6 +229,10 @@ range_noise_option = click.option(
     "--range-noise-mm", type=RANGE_NOISE_MM, default=None,
     help="1-sigma range noise at short range and normal incidence, mm; overrides the sensor "
          "profile's (datasheet: 15, +-3 cm read as 2 sigma).")
+
+lidar_height_option = click.option(
+    "--lidar-height", "lidar_height_m", type=LIDAR_HEIGHT_M, default=1.0, show_default=True,
+    help="LiDAR centre above the ground, metres.")
 
 dem_option = click.option(
     "--dem", "dem_path", type=FILE,

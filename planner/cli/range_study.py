@@ -11,14 +11,20 @@ from planner.cli._common import (
     emit_summary,
     frames_option,
     json_option,
+    lidar_height_option,
     marker_radius_option,
     out_option,
     overwrite_option,
     range_noise_option,
     rpm_option,
     seed_option,
+    sensor_profile_option,
 )
 from visibility.sites import MARKER_RADIUS_M
+
+#: Ground slope, degrees: regolith's angle of repose is about 30-35 deg, so markers on steeper
+#: ground do not stay put.
+SLOPE_DEG = FiniteRange(-30.0, 30.0)
 
 
 @click.command("range-study")
@@ -28,40 +34,48 @@ from visibility.sites import MARKER_RADIUS_M
 @click.option("--replicates", type=click.IntRange(1, 100), default=3, show_default=True,
               help="Replicates; replicate r is simulated with seed + r.")
 @seed_option()
+@sensor_profile_option
 @rpm_option
 @range_noise_option
 @marker_radius_option(default=MARKER_RADIUS_M)
 @click.option("--max-distance", "max_distance_m", type=FiniteRange(1.0, 100.0),
               default=50.0, show_default=True,
               help="Drop the published distances beyond this, metres.")
+@lidar_height_option
+@click.option("--slope-deg", type=SLOPE_DEG, default=0.0, show_default=True,
+              help="Ground slope, degrees: a plane through the station's foot rising towards "
+                   "the station frame's +x (negative: falling); markers rest on it.")
 @json_option
-def command(out, overwrite, frames, replicates, seed, rpm, range_noise_mm, marker_radius_m,
-            max_distance_m, as_json) -> None:
+def command(out, overwrite, frames, replicates, seed, profile, rpm, range_noise_mm,
+            marker_radius_m, max_distance_m, lidar_height_m, slope_deg, as_json) -> None:
     """Simulate the published range experiment and fit every marker with both estimators.
 
-    Markers every 1 m from 1-15 m, every 2 m from 15-25 m, every 5 m from 25-50 m on level
-    ground around one station (0.20 m spheres unless --marker-radius says otherwise). Writes
-    markers.csv (marker table, all replicates), summary.csv (per estimator and distance:
-    median density, median and 95th-percentile centre error), range_study.png and
-    summary.json.
+    Markers every 1 m from 1-15 m, every 2 m from 15-25 m, every 5 m from 25-50 m around one
+    station (0.20 m spheres unless --marker-radius says otherwise), on level ground or, with
+    --slope-deg, resting on a planar slope (markers towards +x uphill, towards -x downhill);
+    the LiDAR centre stands --lidar-height above the station's foot. The sensor's and
+    turntable's errors come from --sensor-profile (--range-noise-mm overrides its range
+    noise). Writes markers.csv (marker table, all replicates), summary.csv (per estimator and
+    distance: median density, median and 95th-percentile centre error), range_study.png and
+    summary.json (its provenance records the profile, sensor, turntable and terrain).
 
     \b
     Example:
       markerplan range-study --out range/ --replicates 3
       markerplan range-study --out quick/ --frames 100 --replicates 1
+      markerplan range-study --out slope/ --lidar-height 0.8 --slope-deg 15
     """
     from tqdm import tqdm
 
     from markerplan.output_folder import output_folder
     from visibility.range_experiment import run_range_study, write_range_study
-    from visibility.sensor import DEFAULT_RANGE_NOISE_M, SensorConfig
 
-    sensor = SensorConfig(rpm=rpm, range_noise_m=DEFAULT_RANGE_NOISE_M if range_noise_mm is None
-                          else range_noise_mm / 1e3)
     with output_folder(out, overwrite, "range-study") as stage:
         with tqdm(total=replicates, desc="replicates", file=sys.stderr, disable=None) as bar:
-            study = run_range_study(max_distance_m, frames, replicates, seed, sensor,
-                                    marker_radius_m, progress=bar.update)
+            study = run_range_study(
+                max_distance_m, frames, replicates, seed, profile, marker_radius_m,
+                progress=bar.update, rpm=rpm, lidar_height_m=lidar_height_m, slope_deg=slope_deg,
+                range_noise_m=None if range_noise_mm is None else range_noise_mm / 1e3)
         result = write_range_study(study, stage)
         summary_rows = study.summary
         distances = study.distance_of.values()

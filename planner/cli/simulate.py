@@ -16,6 +16,7 @@ from planner.cli._common import (
     frames_option,
     given_paths,
     json_option,
+    lidar_height_option,
     marker_radius_option,
     mounting_offset_options,
     out_option,
@@ -43,9 +44,7 @@ from planner.cli._common import (
 @frames_option
 @rpm_option
 @seed_option()
-@click.option("--lidar-height", "lidar_height_m", type=FiniteRange(0.1, 10.0),
-              default=1.0, show_default=True,
-              help="LiDAR centre above the ground, metres.")
+@lidar_height_option
 @mounting_offset_options
 @sensor_profile_option
 @range_noise_option

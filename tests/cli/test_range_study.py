@@ -32,6 +32,26 @@ def test_quick_range_study(tmp_path, capsys):
     assert dens[0] > dens[-1]  # density falls with distance
 
 
+def test_slope_and_profile_recorded_and_markers_seen(tmp_path, capsys):
+    out = tmp_path / "slope"
+    code, stdout, _ = run_cli(capsys, [
+        "range-study", "--out", str(out), "--frames", "50", "--replicates", "1",
+        "--max-distance", "10", "--lidar-height", "0.8", "--slope-deg", "15",
+        "--sensor-profile", "datasheet", "--range-noise-mm", "10", "--json"])
+    assert code == 0
+    config = json.loads((out / "summary.json").read_text())["provenance"]["config"]
+    assert json.loads(stdout)["provenance"]["config"] == config
+    assert config["terrain"]["lidar_height_m"] == 0.8 and config["terrain"]["slope_deg"] == 15
+    assert config["sensor_profile"] == "datasheet"
+    assert config["sensor"]["range_noise_m"] == 0.01 and config["sensor"]["beam_divergence"]
+    assert set(config["turntable"]) == {"encoder_noise_rad", "backlash_rad", "sync_jitter_s",
+                                        "wobble_rad"}
+    rows = [r for r in read_marker_table(out / "markers.csv") if r["estimator"] == "fixed-radius"]
+    assert len(rows) == 10 and all(int(r["n_points"]) > 0 for r in rows)  # no marker hidden
+    # the 9 m marker lies almost straight uphill (azimuth 20 deg): seen above the horizon
+    assert float(next(r for r in rows if r["marker_id"] == "R09.0")["elevation_deg"]) > 9
+
+
 def test_bad_options(tmp_path, capsys):
     code, _, err = run_cli(capsys, ["range-study", "--out", str(tmp_path / "o"), "--replicates",
                                     "0"])

@@ -29,6 +29,44 @@ def test_layout_spreads_markers_on_the_ground():
         marker_layout(np.array([0.1]))
 
 
+def _elevation_deg(c):
+    return np.degrees(np.arctan2(c[:, 2], np.hypot(c[:, 0], c[:, 1])))
+
+
+@pytest.mark.parametrize(("height", "slope_deg"), [(0.8, 15.0), (1.5, -15.0), (1.0, 20.0)])
+def test_layout_rests_markers_on_the_slope(height, slope_deg):
+    d, r, s = RANGE_STUDY_DISTANCES_M, 0.1, np.radians(slope_deg)
+    c = marker_layout(d, r, height, s)
+    np.testing.assert_allclose(np.hypot(c[:, 0], c[:, 1]), d)
+    normal = np.array([-np.sin(s), 0.0, np.cos(s)])  # upward normal of z = x tan(s) - height
+    contact = c - r * normal
+    np.testing.assert_allclose(contact[:, 2], contact[:, 0] * np.tan(s) - height, atol=1e-12)
+    # uphill markers are seen higher than on level ground, downhill ones lower, by up to ~slope
+    # (less at 1-2 m, where the line of sight is steep on any ground)
+    shift = _elevation_deg(c) - _elevation_deg(marker_layout(d, r, height))
+    uphill = np.cos(np.arctan2(c[:, 1], c[:, 0])) * np.sign(slope_deg)
+    assert np.all(shift[(uphill > 0.9) & (d >= 3)] > 10)
+    assert np.all(shift[(uphill < -0.9) & (d >= 3)] < -10)
+    assert np.all(np.abs(shift) < abs(slope_deg) + 1)
+
+
+def test_layout_reaches_positive_and_steep_negative_elevations():
+    near = RANGE_STUDY_DISTANCES_M[RANGE_STUDY_DISTANCES_M <= 15]
+    up = _elevation_deg(marker_layout(near, 0.1, 0.8, np.radians(15)))
+    down = _elevation_deg(marker_layout(near, 0.1, 1.5, np.radians(-15)))
+    level = _elevation_deg(marker_layout(near))
+    assert up.max() > 10 > level.max()
+    assert (down - level).min() < -10 and down.min() < -55
+
+
+@pytest.mark.parametrize(("kwargs", "needle"), [({"lidar_height_m": 0.0}, "lidar_height_m"),
+                                                ({"slope_rad": np.radians(50)}, "slope_rad"),
+                                                ({"slope_rad": np.nan}, "slope_rad")])
+def test_layout_refuses_bad_relief(kwargs, needle):
+    with pytest.raises(ConfigError, match=needle):
+        marker_layout(np.array([2.0]), **kwargs)
+
+
 def test_measure_both_estimators_on_synthetic_scan():
     centres = marker_layout(np.array([2.0, 4.0, 30.0]))
     scan = synthetic_scan(n_frames=200, spheres=[(c, 0.1) for c in centres], noise_m=0.005,
