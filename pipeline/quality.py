@@ -18,12 +18,15 @@ radius_fit_m
     Radius of a free-radius sphere through the points used (the "radius check": rocks are not
     0.10 m spheres). Without the noise: geometric least squares
     (:func:`~pipeline.sphere_fit.fit_free_radius`, biased small by range noise); with it:
-    the line-of-sight fit (:func:`~pipeline.sphere_fit.fit_line_of_sight`), unbiased.
+    the line-of-sight fit (:func:`~pipeline.sphere_fit.fit_line_of_sight`), unbiased, of the
+    points whose beams pass within ``R sin 60 deg`` of the centre
+    (:func:`~pipeline.sphere_fit.beam_cap`; drops the ground an ICP fit may have used).
 radius_sigma_m
-    Standard error of ``radius_fit_m`` under the sensor's range noise (0 when the noise is
-    unknown): from the line-of-sight fit's covariance, ``(J^T W J)^-1`` with weights
-    ``1 / sigma_i^2``. It grows as the points thin out with range (about 1 mm at 5 m, 5 mm at
-    14 m, 20 mm at 25 m for ``s = 45 mm``, ``R = 0.1 m``).
+    Standard error that range noise gives ``radius_fit_m`` if the points were a marker of
+    radius ``R`` at the fitted centre (:func:`~pipeline.sphere_fit.radius_standard_error`:
+    ``(J^T W J)^-1`` of the line-of-sight fit, weights ``1 / sigma_i^2``); 0 when the noise is
+    unknown. It grows as the points thin out with range (about 6 mm at 5 m, 12 mm at 14 m,
+    50 mm at 25 m for ``s = 45 mm``, ``R = 0.1 m``; measured spread 5, 16 and diverging).
 expected_rms_m
     The fit RMS a clean sphere gives under the sensor's noise
     (:func:`~pipeline.sphere_fit.expected_rms`): the RMS over the points used of
@@ -45,7 +48,14 @@ import numpy as np
 
 from markerplan.errors import ConfigError
 from pipeline.sensor_noise import RangeNoise
-from pipeline.sphere_fit import SphereFit, expected_rms, fit_free_radius, fit_line_of_sight
+from pipeline.sphere_fit import (
+    SphereFit,
+    beam_cap,
+    expected_rms,
+    fit_free_radius,
+    fit_line_of_sight,
+    radius_standard_error,
+)
 
 _POINTS_PER_CELL = 6
 _INNER = 0.8
@@ -137,8 +147,12 @@ def marker_metrics(points_m: np.ndarray, fit: SphereFit, sensor_m=(0.0, 0.0, 0.0
     if noise is None:
         _, r_free, _ = fit_free_radius(used, fit.centre_m, radius)
         return MarkerMetrics(float(density), frac, r_free)
-    free = fit_line_of_sight(used, radius, noise, sensor_m, fit.centre_m, free_radius=True)
-    return MarkerMetrics(float(density), frac, free.radius_m, free.sigma_radius_m,
+    cap = used[beam_cap(used, fit.centre_m, radius, sensor_m)]
+    if cap.shape[0] < 4:
+        return MarkerMetrics(float(density), frac, float("nan"))
+    free = fit_line_of_sight(cap, radius, noise, sensor_m, fit.centre_m, free_radius=True)
+    return MarkerMetrics(float(density), frac, free.radius_m,
+                         radius_standard_error(cap, fit.centre_m, radius, noise, sensor_m),
                          expected_rms(used, fit.centre_m, radius, noise, sensor_m))
 
 

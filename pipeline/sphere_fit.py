@@ -38,7 +38,7 @@ position of the scanner in that same frame, and return a :class:`SphereFit`.
 A free-radius fit serves the quality gate's radius check: :func:`fit_free_radius` (geometric
 least squares, biased small by range noise: 87 mm at ``s = 15 mm``, 62 mm at ``s = 45 mm`` for
 ``R = 0.1 m``) or, with the noise known, :func:`fit_line_of_sight` with ``free_radius=True``
-(unbiased, and with the radius's standard error).
+(unbiased) and :func:`radius_standard_error`.
 """
 
 from __future__ import annotations
@@ -439,13 +439,10 @@ class LineOfSightFit:
         Centre, metres, frame of the input points.
     radius_m : float
         Fitted (``free_radius``) or given radius, metres.
-    sigma_radius_m : float
-        Standard error of the fitted radius from the noise model, metres (0 if fixed).
     """
 
     centre_m: np.ndarray
     radius_m: float
-    sigma_radius_m: float
 
 
 def fit_line_of_sight(points_m: np.ndarray, radius_m: float, noise: RangeNoise,
@@ -490,9 +487,39 @@ def fit_line_of_sight(points_m: np.ndarray, radius_m: float, noise: RangeNoise,
     sensor = np.asarray(sensor_m, dtype=float)
     rng, beam = _beams(np.asarray(points_m, dtype=float), sensor)
     start = cap_start(points_m, radius_m, sensor) if centre0_m is None else centre0_m
-    c, r, cov = _los_solve(rng, beam, np.asarray(start, float) - sensor, float(radius_m), noise,
-                           free_radius)
-    return LineOfSightFit(c + sensor, r, float(np.sqrt(cov[3, 3])) if free_radius else 0.0)
+    c, r, _ = _los_solve(rng, beam, np.asarray(start, float) - sensor, float(radius_m), noise,
+                         free_radius)
+    return LineOfSightFit(c + sensor, r)
+
+
+def radius_standard_error(points_m: np.ndarray, centre_m: np.ndarray, radius_m: float,
+                          noise: RangeNoise, sensor_m=(0.0, 0.0, 0.0)) -> float:
+    """Standard error of a free-radius :func:`fit_line_of_sight` if the points' beams met the
+    sphere ``(centre_m, radius_m)``, metres.
+
+    ``sqrt([(J^T W J)^-1]_RR)`` at that sphere (``W = diag(1 / sigma_i^2)``): the spread that
+    range noise alone gives the free radius of a marker seen with these beams, the scale of
+    the quality gate's radius check. Evaluated at the marker hypothesis, not at the free fit,
+    so a flat patch of a boulder (whose free radius is poorly determined) does not widen it.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> g = np.stack(np.meshgrid(np.linspace(-.08, .08, 9), np.linspace(-.08, .08, 9)), -1)
+    >>> g = g.reshape(-1, 2)[np.hypot(*g.reshape(-1, 2).T) <= 0.08]  # beams up to 53 deg
+    >>> p = np.column_stack([np.full(len(g), 4.95), g])  # only the beam directions count
+    >>> se = radius_standard_error(p, np.array([5.0, 0, 0]), 0.1, RangeNoise(0.015, 0, 0, 0))
+    >>> round(se, 4)  # 49 points of 15 mm noise
+    0.0115
+    """
+    sensor = np.asarray(sensor_m, dtype=float)
+    rng, beam = _beams(np.asarray(points_m, dtype=float), sensor)
+    jac, w, _ = _los_system(rng, beam, np.append(np.asarray(centre_m, float) - sensor, radius_m),
+                            noise, True)
+    try:
+        return float(np.sqrt(np.linalg.inv(jac.T @ (w[:, None] * jac))[3, 3]))
+    except np.linalg.LinAlgError:
+        return float("inf")
 
 
 def expected_rms(points_m: np.ndarray, centre_m: np.ndarray, radius_m: float, noise: RangeNoise,
@@ -522,6 +549,28 @@ def expected_rms(points_m: np.ndarray, centre_m: np.ndarray, radius_m: float, no
     rng, beam = _beams(np.asarray(points_m, dtype=float), sensor)
     _, h, _ = _los_range(beam, np.asarray(centre_m, dtype=float) - sensor, radius_m)
     return float(np.sqrt(np.mean((_los_sigma(rng, h, radius_m, noise) * h / radius_m) ** 2)))
+
+
+def beam_cap(points_m: np.ndarray, centre_m: np.ndarray, radius_m: float,
+             sensor_m=(0.0, 0.0, 0.0)) -> np.ndarray:
+    """Points whose beams pass the centre closer than ``R sin 60 deg`` (the ASTM cylinder tested
+    on the beam, independent of the range noise).
+
+    Returns
+    -------
+    inside : (n,) bool
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> beam_cap(np.array([[4.9, 0, 0], [4.9, 0.095, 0], [5.2, 0, 0.5]]), np.array([5.0, 0, 0]),
+    ...          0.1).tolist()
+    [True, False, False]
+    """
+    sensor = np.asarray(sensor_m, dtype=float)
+    _, beam = _beams(np.asarray(points_m, dtype=float), sensor)
+    return _beam_cylinder(beam, np.asarray(centre_m, float) - sensor,
+                          radius_m * np.sin(np.radians(ASTM_CONE_DEG / 2)))
 
 
 def _beams(p: np.ndarray, sensor: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -559,6 +608,17 @@ def _los_z(rng, beam, centre, radius, noise) -> np.ndarray:
     return (rng - t) / _los_sigma(rng, h, radius, noise)
 
 
+def _los_system(rng, beam, x, noise, free_radius
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Jacobian (n, 3 or 4), weights (n,) and residuals ``rho - t`` (n,) of the line-of-sight
+    problem at ``x = (centre, R)``, sensor at the origin."""
+    t, h, q = _los_range(beam, x[:3], x[3])
+    jac = (q - x[:3]) / h[:, None]  # d(rho - t)/dc
+    if free_radius:
+        jac = np.column_stack([jac, x[3] / h])  # d(rho - t)/dR
+    return jac, 1.0 / _los_sigma(rng, h, x[3], noise) ** 2, rng - t
+
+
 def _los_solve(rng, beam, centre, radius, noise, free_radius=False, max_iter=50, tol_m=1e-10
                ) -> tuple[np.ndarray, float, np.ndarray]:
     """Gauss-Newton of :func:`fit_line_of_sight`, sensor at the origin.
@@ -570,17 +630,13 @@ def _los_solve(rng, beam, centre, radius, noise, free_radius=False, max_iter=50,
     k = 4 if free_radius else 3
     cov = np.full((k, k), np.nan)
     for _ in range(max_iter):
-        t, h, q = _los_range(beam, x[:3], x[3])
-        w = 1.0 / _los_sigma(rng, h, x[3], noise) ** 2
-        jac = (q - x[:3]) / h[:, None]  # d(rho - t)/dc
-        if free_radius:
-            jac = np.column_stack([jac, x[3] / h])  # d(rho - t)/dR
-        normal = jac.T @ (w[:, None] * jac)
+        jac, w, res = _los_system(rng, beam, x, noise, free_radius)
         try:
-            cov = np.linalg.inv(normal)
+            cov = np.linalg.inv(jac.T @ (w[:, None] * jac))
         except np.linalg.LinAlgError:
             break
-        step = -cov @ (jac.T @ (w * (rng - t)))
+        step = -cov @ (jac.T @ (w * res))
+        step *= min(1.0, 0.5 * x[3] / max(float(np.linalg.norm(step)), 1e-300))  # damped
         x[:k] += step
         if np.linalg.norm(step) < tol_m:
             break
