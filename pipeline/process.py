@@ -7,6 +7,10 @@ calibration; once the axis offset has been estimated from the accepted spheres, 
 candidates' neighbourhoods are synthesised again and re-fitted. Detection (ground, cluster,
 gate) runs on a range-thinned copy of the cloud (:func:`detection_subset`); re-search and
 fitting use every point; :func:`pipeline.evaluation.evaluate_rows` evaluates the rows.
+
+When the range noise is known (recorded in the scan, or given), the gate and re-search are
+widened for it (:func:`pipeline.stages.noise_widened`) and the fit and quality gate take their
+scales from it (:mod:`pipeline.sphere_fit`, :mod:`pipeline.quality`).
 """
 
 from __future__ import annotations
@@ -27,8 +31,9 @@ from pipeline.marker_table import MarkerRow, line_of_sight
 from pipeline.quality import MarkerMetrics, marker_metrics, quality_gate
 from pipeline.rig import MountingOffsets, sensor_to_station
 from pipeline.scan_format import StationScan
+from pipeline.sensor_noise import RangeNoise
 from pipeline.sphere_fit import SphereFit, cap_start, fit_sphere
-from pipeline.stages import ProcessConfig, build_config
+from pipeline.stages import ProcessConfig, build_config, noise_widened
 from pipeline.synthesis import StationCloud, synthesize
 
 
@@ -118,7 +123,7 @@ def detect_candidates(cloud: StationCloud, cfg: ProcessConfig) -> list[np.ndarra
 
 
 def measure_candidates(xyz_m: np.ndarray, index: RangeIndex, starts_m: np.ndarray,
-                       cfg: ProcessConfig) -> list[Candidate]:
+                       cfg: ProcessConfig, noise: RangeNoise | None = None) -> list[Candidate]:
     """Re-search, centre fit and quality gate of every candidate; duplicates merged.
 
     Parameters
@@ -130,6 +135,8 @@ def measure_candidates(xyz_m: np.ndarray, index: RangeIndex, starts_m: np.ndarra
     starts_m : (K, 3) float
         Initial centre of each candidate (station frame); the re-search is centred on it.
     cfg : ProcessConfig
+    noise : RangeNoise, optional
+        The sensor's range noise, for the fit and the quality gate (``None``: unknown).
     """
     out = []
     fit_cfg = cfg.fit
@@ -140,10 +147,11 @@ def measure_candidates(xyz_m: np.ndarray, index: RangeIndex, starts_m: np.ndarra
         pts = xyz_m[members]
         try:
             fit = fit_sphere(pts, fit_cfg.radius_m, method=fit_cfg.method,
-                             max_correspondence_m=fit_cfg.max_correspondence_m, centre0_m=start)
+                             max_correspondence_m=fit_cfg.max_correspondence_m, centre0_m=start,
+                             noise=noise)
         except DataError:  # no sphere in these points (degenerate, none used): not listed
             continue
-        metrics = marker_metrics(pts, fit)
+        metrics = marker_metrics(pts, fit, noise=noise)
         ok, reason = quality_gate(fit, metrics, cfg.quality)
         out.append(Candidate(start, members, fit, metrics, ok, reason))
     return _merge_duplicates(out, fit_cfg.radius_m)
@@ -161,8 +169,8 @@ def _merge_duplicates(cands: list[Candidate], radius_m: float) -> list[Candidate
 
 
 def process_station(scan: StationScan, config: ProcessConfig | None = None,
-                    reference: Reference | None = None, *, replicate: int = 0,
-                    seed: int | None = None) -> StationResult:
+                    reference: Reference | None = None, *, noise: RangeNoise | None = None,
+                    replicate: int = 0, seed: int | None = None) -> StationResult:
     """Run the chain on one station scan.
 
     Parameters
@@ -174,6 +182,9 @@ def process_station(scan: StationScan, config: ProcessConfig | None = None,
     reference : Reference, optional
         Reference centres for evaluation (a station-frame truth for this station, or an
         external CSV).
+    noise : RangeNoise, optional
+        The sensor's range noise; default: the one the scan records
+        (:meth:`RangeNoise.recorded`), else unknown (absolute gates, geometric fits).
     replicate, seed : int
         Copied into the marker table (``seed`` defaults to the simulation seed recorded in
         the scan's provenance, if any).
@@ -183,6 +194,9 @@ def process_station(scan: StationScan, config: ProcessConfig | None = None,
     StationResult
     """
     cfg = config or build_config()
+    noise = noise or RangeNoise.recorded(scan.metadata.get("sensor", {}))
+    if noise is not None:
+        cfg = noise_widened(cfg, noise)
     if seed is None:
         seed = scan.metadata.get("provenance", {}).get("config", {}).get("seed")
     timer = _Timer()
@@ -196,7 +210,7 @@ def process_station(scan: StationScan, config: ProcessConfig | None = None,
                      sigma_lframe_tilt_rad=float(np.sqrt(cov[1, 1])), n_plane_pairs=n_pairs,
                      icp_rms_m=icp_rms)
         timer.lap("calibrate_angles")
-    cands = _detect_and_measure(scan, offsets, cfg, timer)
+    cands = _detect_and_measure(scan, offsets, cfg, noise, timer)
     if cal.enabled:
         # The sphere inlier sets depend on the offsets and the angle ICP is biased by an
         # unknown axis offset: estimate d, re-estimate the angles with it (first round only),
@@ -220,10 +234,10 @@ def process_station(scan: StationScan, config: ProcessConfig | None = None,
                              n_plane_pairs=n_pairs, icp_rms_m=icp_rms)
                 timer.lap("calibrate_angles")
                 if np.hypot(*offsets.axis_offset_m) > cal.redetect_axis_offset_m:
-                    cands = _detect_and_measure(scan, offsets, cfg, timer)
+                    cands = _detect_and_measure(scan, offsets, cfg, noise, timer)
                     calib["redetected"] = True
                     continue
-            cands = _remeasure(scan, offsets, cands, cfg)
+            cands = _remeasure(scan, offsets, cands, cfg, noise)
             timer.lap("research+fit+quality")
     calib["offsets"] = offsets.to_dict()
     rows = [_row(scan.station_id, c, cfg.fit.method, replicate, seed) for c in cands]
@@ -238,7 +252,7 @@ def process_station(scan: StationScan, config: ProcessConfig | None = None,
 
 
 def _detect_and_measure(scan: StationScan, offsets: MountingOffsets, cfg: ProcessConfig,
-                        timer: _Timer) -> list[Candidate]:
+                        noise: RangeNoise | None, timer: _Timer) -> list[Candidate]:
     """Synthesise the cloud with ``offsets``, detect candidates, re-search and fit them."""
     cloud = synthesize(scan, offsets)
     timer.lap("synthesis")
@@ -247,19 +261,19 @@ def _detect_and_measure(scan: StationScan, offsets: MountingOffsets, cfg: Proces
     starts = np.array([cap_start(cloud.xyz_m[m], cfg.fit.radius_m) for m in clusters])
     index = RangeIndex(cloud.xyz_m, cloud.range_m)
     timer.lap("index")
-    cands = measure_candidates(cloud.xyz_m, index, starts.reshape(-1, 3), cfg)
+    cands = measure_candidates(cloud.xyz_m, index, starts.reshape(-1, 3), cfg, noise)
     timer.lap("research+fit+quality")
     return cands
 
 
 def _remeasure(scan: StationScan, offsets: MountingOffsets, cands: list[Candidate],
-               cfg: ProcessConfig) -> list[Candidate]:
+               cfg: ProcessConfig, noise: RangeNoise | None) -> list[Candidate]:
     """Fit the candidates again with new offsets, re-synthesising only their neighbourhoods."""
     sub = np.unique(np.concatenate([c.members for c in cands]))
     xyz = sensor_to_station(scan.xyz_sensor_m[sub], scan.frame_index[sub],
                             scan.turntable_angle_rad, offsets)
     starts = np.array([c.fit.centre_m for c in cands]).reshape(-1, 3)
-    new = measure_candidates(xyz, RangeIndex(xyz), starts, cfg)
+    new = measure_candidates(xyz, RangeIndex(xyz), starts, cfg, noise)
     for c in new:
         c.members = sub[c.members]
     return new

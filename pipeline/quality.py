@@ -15,8 +15,29 @@ visible_fraction
     a rock scores ~0.5. With fewer than ``4 k`` points the four quadrants of the disc are used
     as the cells.
 radius_fit_m
-    Radius of a free-radius least-squares sphere through the points used (the "radius check":
-    rocks are not 0.10 m spheres).
+    Radius of a free-radius sphere through the points used (the "radius check": rocks are not
+    0.10 m spheres). Without the noise: geometric least squares
+    (:func:`~pipeline.sphere_fit.fit_free_radius`, biased small by range noise); with it:
+    the line-of-sight fit (:func:`~pipeline.sphere_fit.fit_line_of_sight`), unbiased, of the
+    points whose beams pass within ``R sin 60 deg`` of the centre
+    (:func:`~pipeline.sphere_fit.beam_cap`; drops the ground an ICP fit may have used).
+radius_sigma_m
+    Standard error that range noise gives ``radius_fit_m`` if the points were a marker of
+    radius ``R`` at the fitted centre (:func:`~pipeline.sphere_fit.radius_standard_error`:
+    ``(J^T W J)^-1`` of the line-of-sight fit, weights ``1 / sigma_i^2``); 0 when the noise is
+    unknown. It grows as the points thin out with range (about 6 mm at 5 m, 12 mm at 14 m,
+    50 mm at 25 m for ``s = 45 mm``, ``R = 0.1 m``; measured spread 5, 16 and diverging).
+expected_rms_m
+    The fit RMS a clean sphere gives under the sensor's noise
+    (:func:`~pipeline.sphere_fit.expected_rms`): the RMS over the points used of
+    ``sigma_i cos i_i`` (range noise seen along the surface normal; ``sigma_i`` from
+    :class:`~pipeline.sensor_noise.RangeNoise` at the point's range and incidence ``i_i``).
+    NaN when the noise is unknown.
+
+Noise-scaled gate (the sensor's noise known): ``high_rms`` when the fit RMS exceeds
+``max_rms_sigma * expected_rms_m``; ``radius_mismatch`` when ``|radius_fit_m - R|`` exceeds
+``radius_tolerance * R + radius_sigma * radius_sigma_m``. Without the noise, or with
+``max_rms_sigma = 0``, the absolute ``max_rms_m`` applies (and ``radius_sigma_m = 0``).
 """
 
 from __future__ import annotations
@@ -26,7 +47,15 @@ from dataclasses import dataclass
 import numpy as np
 
 from markerplan.errors import ConfigError
-from pipeline.sphere_fit import SphereFit, fit_free_radius
+from pipeline.sensor_noise import RangeNoise
+from pipeline.sphere_fit import (
+    SphereFit,
+    beam_cap,
+    expected_rms,
+    fit_free_radius,
+    fit_line_of_sight,
+    radius_standard_error,
+)
 
 _POINTS_PER_CELL = 6
 _INNER = 0.8
@@ -44,17 +73,26 @@ class QualityConfig:
     ----------
     min_points : int
         Fewer points used by the fit -> ``too_few_points``.
+    max_rms_sigma : float
+        Noise known: fit RMS above this multiple of the marker's ``expected_rms_m`` ->
+        ``high_rms`` (0: use ``max_rms_m`` instead).
     max_rms_m : float
-        Larger fit RMS -> ``high_rms`` (metres; ~2x the VLP-16's 1.5 cm range noise).
+        Noise unknown, or ``max_rms_sigma = 0``: larger fit RMS -> ``high_rms`` (metres; ~2x
+        the VLP-16's 1.5 cm range noise).
     radius_tolerance : float
-        ``|radius_fit - R| > radius_tolerance * R`` -> ``radius_mismatch``.
+        ``|radius_fit - R| > radius_tolerance * R + radius_sigma * radius_sigma_m`` ->
+        ``radius_mismatch``.
+    radius_sigma : float
+        Multiple of the free radius's standard error added to the tolerance (noise known).
     min_visible_fraction : float
         Lower visible fraction -> ``incomplete_cloud``.
     """
 
     min_points: int = 20
+    max_rms_sigma: float = 3.0
     max_rms_m: float = 0.03
     radius_tolerance: float = 0.5
+    radius_sigma: float = 3.0
     min_visible_fraction: float = 0.6
 
     def validate(self) -> QualityConfig:
@@ -62,6 +100,10 @@ class QualityConfig:
             raise ConfigError(f"quality `min_points` must be >= 4, got {self.min_points}")
         if not self.max_rms_m > 0:
             raise ConfigError(f"quality `max_rms_m` must be > 0 metres, got {self.max_rms_m}")
+        for name in ("max_rms_sigma", "radius_sigma"):
+            if not getattr(self, name) >= 0:
+                raise ConfigError(f"quality `{name}` must be >= 0 (a multiple of the noise), "
+                                  f"got {getattr(self, name)}")
         if not self.radius_tolerance > 0:
             raise ConfigError(f"quality `radius_tolerance` must be > 0, got "
                               f"{self.radius_tolerance}")
@@ -78,11 +120,13 @@ class MarkerMetrics:
     point_density_per_m2: float
     visible_fraction: float
     radius_fit_m: float
+    radius_sigma_m: float = 0.0
+    expected_rms_m: float = float("nan")
 
 
-def marker_metrics(points_m: np.ndarray, fit: SphereFit, sensor_m=(0.0, 0.0, 0.0)
-                   ) -> MarkerMetrics:
-    """Density, visible fraction and free-fit radius of the points a fit used.
+def marker_metrics(points_m: np.ndarray, fit: SphereFit, sensor_m=(0.0, 0.0, 0.0),
+                   noise: RangeNoise | None = None) -> MarkerMetrics:
+    """Density, visible fraction, free-fit radius and noise scales of the points a fit used.
 
     Parameters
     ----------
@@ -91,16 +135,25 @@ def marker_metrics(points_m: np.ndarray, fit: SphereFit, sensor_m=(0.0, 0.0, 0.0
     fit : SphereFit
     sensor_m : (3,) float
         LiDAR centre, same frame.
+    noise : RangeNoise, optional
+        The sensor's range noise (module docstring); ``None``: unknown.
     """
     used = points_m[fit.used]
     radius = fit.radius_m
     density = used.shape[0] / (np.pi * radius ** 2)
     frac = visible_fraction(used, fit.centre_m, radius, sensor_m)
-    if used.shape[0] >= 4:
+    if used.shape[0] < 4:
+        return MarkerMetrics(float(density), frac, float("nan"))
+    if noise is None:
         _, r_free, _ = fit_free_radius(used, fit.centre_m, radius)
-    else:
-        r_free = float("nan")
-    return MarkerMetrics(float(density), frac, r_free)
+        return MarkerMetrics(float(density), frac, r_free)
+    cap = used[beam_cap(used, fit.centre_m, radius, sensor_m)]
+    if cap.shape[0] < 4:
+        return MarkerMetrics(float(density), frac, float("nan"))
+    free = fit_line_of_sight(cap, radius, noise, sensor_m, fit.centre_m, free_radius=True)
+    return MarkerMetrics(float(density), frac, free.radius_m,
+                         radius_standard_error(cap, fit.centre_m, radius, noise, sensor_m),
+                         expected_rms(used, fit.centre_m, radius, noise, sensor_m))
 
 
 def visible_fraction(points_m: np.ndarray, centre_m: np.ndarray, radius_m: float,
@@ -163,8 +216,12 @@ def quality_gate(fit: SphereFit, metrics: MarkerMetrics, config: QualityConfig
         return False, "too_few_points"
     if metrics.visible_fraction < config.min_visible_fraction:
         return False, "incomplete_cloud"
-    if not fit.rms_m <= config.max_rms_m:
+    scaled = config.max_rms_sigma > 0 and np.isfinite(metrics.expected_rms_m)
+    max_rms = config.max_rms_sigma * metrics.expected_rms_m if scaled else config.max_rms_m
+    if not fit.rms_m <= max_rms:
         return False, "high_rms"
-    if not abs(metrics.radius_fit_m - fit.radius_m) <= config.radius_tolerance * fit.radius_m:
+    tolerance = (config.radius_tolerance * fit.radius_m
+                 + config.radius_sigma * metrics.radius_sigma_m)
+    if not abs(metrics.radius_fit_m - fit.radius_m) <= tolerance:
         return False, "radius_mismatch"
     return True, ""

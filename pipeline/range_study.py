@@ -9,7 +9,9 @@ markers out, extracts and fits each one, and aggregates the marker tables of the
 Extraction: each marker's points are re-searched within ``research_radius_m`` of its known
 position (as a total station would guide it); the start of the fit is computed from the points
 above the marker's equator only (:func:`pipeline.sphere_fit.cap_start`), so the estimators see
-the same input as in :mod:`pipeline.process` and do not start from the truth.
+the same input as in :mod:`pipeline.process` and do not start from the truth. Given the
+sensor's range noise, the fit and the quality gate take their scales from it, as in
+:mod:`pipeline.process`.
 """
 
 from __future__ import annotations
@@ -23,6 +25,7 @@ from pipeline.marker_table import MarkerRow, line_of_sight
 from pipeline.quality import QualityConfig, marker_metrics, quality_gate
 from pipeline.rig import MountingOffsets
 from pipeline.scan_format import StationScan
+from pipeline.sensor_noise import RangeNoise
 from pipeline.sphere_fit import METHODS, cap_start, fit_sphere
 from pipeline.synthesis import synthesize
 
@@ -99,7 +102,8 @@ def measure_markers(scan: StationScan, centres_m: np.ndarray, ids: list[str],
                     radius_m: float = 0.1, methods: tuple[str, ...] = METHODS,
                     offsets: MountingOffsets | None = None, research_radius_m: float = 0.3,
                     quality: QualityConfig | None = None, replicate: int = 0,
-                    seed: int | None = None) -> list[MarkerRow]:
+                    seed: int | None = None, noise: RangeNoise | None = None
+                    ) -> list[MarkerRow]:
     """Fit every known marker of a scan with each estimator.
 
     Parameters
@@ -118,6 +122,8 @@ def measure_markers(scan: StationScan, centres_m: np.ndarray, ids: list[str],
     quality : QualityConfig, optional
     replicate, seed : int
         Written into the rows.
+    noise : RangeNoise, optional
+        The sensor's range noise, for the fit and the quality gate (``None``: unknown).
 
     Returns
     -------
@@ -141,7 +147,7 @@ def measure_markers(scan: StationScan, centres_m: np.ndarray, ids: list[str],
             if cap.shape[0] >= 4:
                 try:
                     fit = fit_sphere(pts, radius_m, method=method,
-                                     centre0_m=cap_start(cap, radius_m))
+                                     centre0_m=cap_start(cap, radius_m), noise=noise)
                 except DataError:  # degenerate points or none used: no fit
                     fit = None
             if fit is None:
@@ -150,7 +156,7 @@ def measure_markers(scan: StationScan, centres_m: np.ndarray, ids: list[str],
                                       float("nan"), float("nan"), method, False,
                                       "too_few_points", replicate=replicate, seed=seed))
                 continue
-            metrics = marker_metrics(pts, fit)
+            metrics = marker_metrics(pts, fit, noise=noise)
             ok, reason = quality_gate(fit, metrics, quality)
             dist, elev, az = line_of_sight(fit.centre_m)
             row = MarkerRow(scan.station_id, mid, *(float(v) for v in fit.centre_m), dist, elev,

@@ -66,6 +66,18 @@ class RangeNoise:
         names = ("range_noise_m", "range_noise_per_m", "incidence_noise_m", "range_resolution_m")
         return cls(**{k: float(sensor[k]) for k in names if sensor.get(k) is not None})
 
+    @classmethod
+    def recorded(cls, sensor: dict) -> RangeNoise | None:
+        """The noise a scan's ``sensor`` block records, or ``None`` if it records none (real
+        pcap scans: the user's sensor profile must supply it).
+
+        Examples
+        --------
+        >>> RangeNoise.recorded({"model": "VLP-16"}) is None
+        True
+        """
+        return cls.from_metadata(sensor) if sensor.get("range_noise_m") is not None else None
+
     def sigma_m(self, range_m, tan_incidence=0.0) -> np.ndarray:
         """1-sigma Gaussian range error, metres (before rounding), shape of the broadcast inputs.
 

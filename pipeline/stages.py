@@ -23,6 +23,29 @@ given (:data:`RADIUS_SCALED`): ground ``min_height_m`` = R (the upper half of a 
 on the ground stands above it), cluster ``tolerance_m`` = 2 R, gate ``max_box_m`` = 3 R and
 ``min_box_m`` = R / 2, research ``radius_m`` = 3 R. The class defaults are these values for the
 0.20 m markers of the published experiment (R = 0.1 m).
+
+Scales that follow the sensor's range noise (:class:`~pipeline.sensor_noise.RangeNoise`, from
+the scan's ``sensor`` block or the user's sensor profile; ``sigma`` = its total sigma at the
+ground stage's ``max_range_m``, the largest a candidate can have) are applied by
+:func:`noise_widened` when the chain knows the noise:
+
+=======================  ======================================================================
+option                   with the noise known
+=======================  ======================================================================
+gate ``max_box_m``       ``max(max_box_m, R + max_box_sigma * sigma)``: the cube holds the
+                         sphere's cap (``R`` deep) smeared by +-3 sigma along the line of sight
+                         (``max_box_sigma = 6``); at 15 mm the 3 R default still rules
+research ``radius_m``    ``max(radius_m, 2 R + radius_sigma * sigma)``: every noisy point
+                         (``R + 3 sigma`` from the centre) around a start up to ``R`` off
+                         (``radius_sigma = 3``)
+fit                      fixed-radius fit on line-of-sight residuals (:mod:`.sphere_fit`)
+quality ``high_rms``     ``max_rms_sigma`` times the marker's expected RMS (:mod:`.quality`)
+quality radius check     tolerance plus ``radius_sigma`` standard errors of the free radius
+=======================  ======================================================================
+
+The cluster ``tolerance_m`` (2 R) is not widened: range noise moves points along the line of
+sight, across the sphere's 2 R extent, so neighbouring returns of one sphere stay within
+``3 sqrt(2) sigma`` of each other, below 2 R up to ``sigma = 47 mm``.
 """
 
 from __future__ import annotations
@@ -37,6 +60,7 @@ from markerplan.errors import ConfigError
 from pipeline.calibration import CalibrationConfig
 from pipeline.quality import QualityConfig
 from pipeline.rig import MountingOffsets
+from pipeline.sensor_noise import RangeNoise
 from pipeline.sphere_fit import METHODS
 
 
@@ -119,27 +143,34 @@ class ClusterStage:
 
 @dataclass(frozen=True)
 class GateStage:
-    """``gate``: edges of the large and the small cube, metres."""
+    """``gate``: edges of the large and the small cube, metres; widening of the large cube in
+    range-noise sigmas (module docstring)."""
 
     max_box_m: float = 0.30
     min_box_m: float = 0.05
+    max_box_sigma: float = 6.0
 
     def validate(self) -> GateStage:
         if not 0 < self.min_box_m < self.max_box_m:
             raise ConfigError(f"gate stage needs 0 < min_box_m < max_box_m, got "
                               f"{self.min_box_m}, {self.max_box_m}")
+        if not self.max_box_sigma >= 0:
+            raise ConfigError(f"gate stage needs max_box_sigma >= 0, got {self.max_box_sigma}")
         return self
 
 
 @dataclass(frozen=True)
 class ResearchStage:
-    """``research``: search radius around each candidate centroid, metres."""
+    """``research``: search radius around each candidate centroid, metres; its widening in
+    range-noise sigmas (module docstring)."""
 
     radius_m: float = 0.3
+    radius_sigma: float = 3.0
 
     def validate(self) -> ResearchStage:
-        if not self.radius_m > 0:
-            raise ConfigError(f"research stage needs radius_m > 0, got {self.radius_m}")
+        if not self.radius_m > 0 or not self.radius_sigma >= 0:
+            raise ConfigError(f"research stage needs radius_m > 0 and radius_sigma >= 0, got "
+                              f"{self.radius_m}, {self.radius_sigma}")
         return self
 
 
@@ -228,7 +259,7 @@ def build_config(options: dict[str, dict[str, Any]] | None = None) -> ProcessCon
     ...     build_config({"gate": {"max_box": 0.3}})
     ... except ConfigError as exc:
     ...     print(exc)
-    stage 'gate' has no option 'max_box'; its options are max_box_m, min_box_m
+    stage 'gate' has no option 'max_box'; its options are max_box_m, min_box_m, max_box_sigma
     """
     options = options or {}
     radius = options.get("fit", {}).get("radius_m")
@@ -255,6 +286,27 @@ def build_config(options: dict[str, dict[str, Any]] | None = None) -> ProcessCon
     for name in STAGES:
         getattr(cfg, name).validate()
     return cfg
+
+
+def noise_widened(cfg: ProcessConfig, noise: RangeNoise) -> ProcessConfig:
+    """A copy of ``cfg`` whose gate and research radius hold markers under ``noise``.
+
+    Examples
+    --------
+    >>> cfg = build_config()
+    >>> noise_widened(cfg, RangeNoise(0.015)).gate.max_box_m
+    0.3
+    >>> w = noise_widened(cfg, RangeNoise(0.045, range_resolution_m=0.0))
+    >>> round(w.gate.max_box_m, 3), round(w.research.radius_m, 3)
+    (0.37, 0.335)
+    """
+    sigma = float(noise.total_sigma_m(cfg.ground.max_range_m))
+    radius = cfg.fit.radius_m
+    gate = replace(cfg.gate, max_box_m=max(cfg.gate.max_box_m,
+                                           radius + cfg.gate.max_box_sigma * sigma))
+    research = replace(cfg.research, radius_m=max(cfg.research.radius_m,
+                                                  2 * radius + cfg.research.radius_sigma * sigma))
+    return replace(cfg, gate=gate.validate(), research=research.validate())
 
 
 def _coerce(stage: str, key: str, default: Any, value: Any) -> Any:

@@ -14,7 +14,9 @@ Method
 1. **Design.** Each free parameter takes ``design_points`` values evenly spread over its range
    (a full grid for two); every design point is simulated ``replicates`` times per position
    with the same seeds at every design point (common random numbers, so differences between
-   design points come from the parameters, not the noise draw).
+   design points come from the parameters, not the noise draw). A replicate is also another
+   sensor unit (its per-channel offsets, drawn anew), shared by all positions of the replicate
+   as the field's positions shared one LiDAR.
 2. **Emulator.** Edge residuals add independent error sources in quadrature, and a noise
    parameter's contribution to a variance grows as its square, so per position
    ``s_k(p)^2 = a_k + sum_i b_ki p_i^2`` with ``a, b >= 0`` (non-negative least squares on the
@@ -58,20 +60,24 @@ FIELD_CELL_M = 0.5
 #: reference — a reflectorless total station at <= 30 m measures a point to about 2 mm + 2 ppm
 #: in distance and 1-2 arc seconds in angle (0.3 mm at 30 m): 2 mm per axis; aiming by eye at the
 #: top of a 0.20 m sphere misses it by a few millimetres: 3 mm per horizontal axis.
-#: turntable — a geared stepper table of 0.01 deg resolution: backlash 0.02 deg (0.35 mrad),
-#: axis wobble 0.05 mrad, a 1 ms timestamp jitter between table and LiDAR.
+#: turntable — a geared stepper table with a 0.01 deg encoder: encoder noise 0.1 mrad, backlash
+#: 0.02 deg (0.35 mrad), axis wobble 0.05 mrad, a 1 ms timestamp jitter between table and LiDAR.
 #: sensor — range noise growing by 0.3 mm per metre of range (weaker echoes) and 5 mm times
-#: tan(incidence) (a slanted footprint spreads the pulse).
+#: tan(incidence) (a slanted footprint spreads the pulse); per-channel angular offsets of
+#: 0.2 mrad (the residual of the factory calibration, Glennie and Lichti 2010).
 FIELD_PRIORS: dict[str, float] = {
     "reference.point_sigma_m": 0.002, "reference.aim_sigma_m": 0.003,
-    "turntable.backlash_rad": 3.5e-4, "turntable.wobble_rad": 5e-5,
-    "turntable.sync_jitter_s": 1e-3,
+    "turntable.encoder_noise_rad": 1e-4, "turntable.backlash_rad": 3.5e-4,
+    "turntable.wobble_rad": 5e-5, "turntable.sync_jitter_s": 1e-3,
     "sensor.range_noise_per_m": 3e-4, "sensor.incidence_noise_m": 0.005,
+    "sensor.laser_angle_bias_rad": 2e-4,
 }
-#: The parameter ``calibrate-sensor`` fits by default: the per-frame angle noise of the
-#: turntable's encoder, the least documented error of the rig and the one whose effect grows
-#: with distance and does not average over the few frames that see a far marker.
-DEFAULT_FREE = ("turntable.encoder_noise_rad=0:0.003",)
+#: The parameter ``calibrate-sensor`` fits by default: the spread of the lasers' constant range
+#: offsets. Random errors average over the hundreds of returns and tens of frames that see a
+#: marker (a turntable angle noise of 1.5 mrad moved the field statistic by only ~2 mm); a
+#: channel's offset does not: the few lasers that see a far marker all push its points the same
+#: way. The datasheet's "+-3 cm typical accuracy" leaves room for offsets of centimetres.
+DEFAULT_FREE = ("sensor.laser_range_bias_m=0:0.04",)
 #: Relative uncertainty of a position's statistic when one replicate gives no spread, and the
 #: floor under any estimated spread (an emulator is not better than this).
 DEFAULT_REL_SPREAD = 0.1
@@ -224,13 +230,15 @@ def simulate_position(profile: SensorProfile, position: FieldPosition, index: in
         two markers were accepted), ``n_accepted``, ``n_markers``.
     """
     seeds = np.random.SeedSequence([settings.seed, index, replicate]).generate_state(2)
+    # one sensor unit per replicate, shared by its positions (the field had one LiDAR)
+    unit = int(np.random.SeedSequence([settings.seed, replicate]).generate_state(1)[0])
     radius = settings.marker_radius_m
     d = position.distances_m
     centres = marker_layout(d, radius, settings.lidar_height_m)
     half = float(d.max()) + FIELD_MARGIN_M
     dem = DEM(np.zeros((int(2 * half / FIELD_CELL_M) + 1,) * 2), (-half, -half), FIELD_CELL_M)
     station = np.array([0.0, 0.0, settings.lidar_height_m])
-    sensor = profile.sensor_config(settings.rpm, unit_seed=int(seeds[0]))
+    sensor = profile.sensor_config(settings.rpm, unit_seed=unit)
     rig = RigConfig(lidar_height_m=settings.lidar_height_m, frames_per_turn=settings.frames,
                     turntable=profile.turntable)
     ids = [f"M{k + 1:02d}" for k in range(len(d))]

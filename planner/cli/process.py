@@ -17,6 +17,7 @@ from planner.cli._common import (
     out_option,
     overwrite_option,
     report_timings,
+    sensor_profile_option,
 )
 from visibility.sites import MARKER_RADIUS_M
 
@@ -118,22 +119,25 @@ def _marker_radius(given: float | None, references: list) -> float:
 @click.option("--min-points", type=click.IntRange(1, 1_000_000),
               help="Quality gate: minimum points per marker.")
 @click.option("--max-rms", "max_rms_m", type=FiniteRange(0.0, 1.0, min_open=True),
-              help="Quality gate: maximum fit RMS, m.")
+              help="Quality gate: maximum fit RMS, m (replaces the default of 3x the RMS the "
+                   "sensor's noise gives).")
 @click.option("--min-visible-fraction", type=FiniteRange(0.0, 1.0),
               help="Quality gate: minimum visible fraction.")
 @click.option("--set", "stage_options", multiple=True, metavar="STAGE.OPTION=VALUE",
               help="Any stage option, e.g. --set ground.min_height_m=0.1 "
                    "--set gate.max_box_m=0.3 (unknown names are refused).")
+@sensor_profile_option
 @json_option
 def command(scans, out, overwrite, references, estimator, marker_radius_m, no_calibrate, offsets,
-            min_points, max_rms_m, min_visible_fraction, stage_options, as_json) -> None:
+            min_points, max_rms_m, min_visible_fraction, stage_options, profile, as_json) -> None:
     """Process station scans into a marker table.
 
     SCANS are .scan.npz files or the folder `markerplan simulate` wrote (its scans, with
     their truths as the reference). Writes markers.csv (one row per candidate; columns in
     docs/pipeline.md), stations.csv (per-station summary with calibration estimates), edges.csv
     (edge-length residuals when a reference is given) and summary.json (configuration and
-    provenance).
+    provenance). Gates and fit follow the range noise the scan records (simulated scans), else
+    the one of --sensor-profile.
 
     \b
     Example:
@@ -141,6 +145,8 @@ def command(scans, out, overwrite, references, estimator, marker_radius_m, no_ca
       markerplan process scans/station_S1.scan.npz --reference scans/ --out tables/
       markerplan process s1.scan.npz --reference total_station.csv --out t/
     """
+    import dataclasses
+
     from tqdm import tqdm
 
     from markerplan.errors import InputFileError
@@ -150,12 +156,14 @@ def command(scans, out, overwrite, references, estimator, marker_radius_m, no_ca
     from pipeline.process import process_station
     from pipeline.results import write_results
     from pipeline.scan_format import read_scan
+    from pipeline.sensor_noise import RangeNoise
     from pipeline.stages import build_config, with_offsets
 
     scans, truths = _scan_inputs(scans)
     options = _parse_stage_options(stage_options)
     options.setdefault("fit", {}).update(method=estimator)
     quality = {"min_points": min_points, "max_rms_m": max_rms_m,
+               "max_rms_sigma": None if max_rms_m is None else 0.0,
                "min_visible_fraction": min_visible_fraction}
     options.setdefault("quality", {}).update({k: v for k, v in quality.items() if v is not None})
     ref_files = [f for p in references
@@ -174,10 +182,15 @@ def command(scans, out, overwrite, references, estimator, marker_radius_m, no_ca
         results, inputs = [], []
         for path in tqdm(scans, desc="stations", file=sys.stderr, disable=None):
             scan = read_scan(path)
+            noise = RangeNoise.recorded(scan.metadata.get("sensor", {}))
+            source = "scan" if noise else f"sensor profile {profile.name}"
+            noise = noise or profile.sensor.range_noise()
             inputs.append({"scan": str(path), "station_id": scan.station_id,
                            "sha256": fingerprint_arrays(scan.xyz_sensor_m, scan.frame_index,
-                                                        scan.turntable_angle_rad)})
-            results.append(process_station(scan, cfg, pick_reference(refs, scan.station_id)))
+                                                        scan.turntable_angle_rad),
+                           "range_noise": {**dataclasses.asdict(noise), "source": source}})
+            results.append(process_station(scan, cfg, pick_reference(refs, scan.station_id),
+                                           noise=noise))
             del scan
         prov = provenance(cfg.to_dict(), inputs=inputs,
                           references=[r.source for r in refs], command="process")
