@@ -56,15 +56,28 @@ class RangeNoise:
 
     @classmethod
     def from_metadata(cls, sensor: dict) -> RangeNoise:
-        """The noise recorded in a scan's ``sensor`` metadata block (missing keys: defaults).
+        """The range scatter the processing chain should expect of a sensor described by a
+        scan's ``sensor`` metadata block (or a ``SensorConfig`` as a dict; missing keys:
+        defaults).
+
+        The unit's per-channel range offsets (``laser_range_bias_m``, constant per laser) are
+        added in quadrature to the constant term: one marker is seen by a handful of lasers, so
+        for its fit and quality gate the offsets scatter its points like noise.
 
         Examples
         --------
         >>> RangeNoise.from_metadata({"range_noise_m": 0.02, "model": "VLP-16"}).range_noise_m
         0.02
+        >>> RangeNoise.from_metadata({"range_noise_m": 0.03, "laser_range_bias_m": 0.04}
+        ...                          ).range_noise_m
+        0.05
         """
         names = ("range_noise_m", "range_noise_per_m", "incidence_noise_m", "range_resolution_m")
-        return cls(**{k: float(sensor[k]) for k in names if sensor.get(k) is not None})
+        values = {k: float(sensor[k]) for k in names if sensor.get(k) is not None}
+        bias = float(sensor.get("laser_range_bias_m") or 0.0)
+        if bias:
+            values["range_noise_m"] = float(np.hypot(values.get("range_noise_m", 0.015), bias))
+        return cls(**values)
 
     @classmethod
     def recorded(cls, sensor: dict) -> RangeNoise | None:

@@ -114,7 +114,7 @@ def run_range_study(max_distance_m: float = 50.0, frames: int = 800, replicates:
                                    marker_ids=ids, station_id="RANGE")
         rows += measure_markers(scan, centres, ids, radius_m=marker_radius_m,
                                 research_radius_m=research_radius_m, replicate=rep,
-                                seed=seed + rep, noise=sensor.range_noise())
+                                seed=seed + rep, noise=sensor.expected_scatter())
         del scan
         if progress is not None:
             progress(1)

@@ -149,8 +149,13 @@ class SensorConfig:
         return (self.laser_range_bias_m * draws[0], self.laser_angle_bias_rad * draws[1],
                 self.laser_angle_bias_rad * draws[2])
 
+    def expected_scatter(self) -> RangeNoise:
+        """The range scatter the processing chain should expect of this sensor: the noise with
+        the per-channel offsets folded in (:meth:`RangeNoise.from_metadata`)."""
+        return RangeNoise.from_metadata(asdict(self))
+
     def range_noise(self) -> RangeNoise:
-        """The range-noise model of these settings."""
+        """The random range noise the simulator draws (per return)."""
         return RangeNoise(self.range_noise_m, self.range_noise_per_m, self.incidence_noise_m,
                           self.range_resolution_m)
 
@@ -182,12 +187,16 @@ class TurntableErrors:
         it, seconds; at the table's mean rate ``2 pi / (frames * 60 / rpm)`` it is an angle error.
     wobble_rad : float
         1-sigma tilt of the turntable axis (bearing wobble) about each horizontal axis, radians.
+    periodic_error_rad : float
+        Amplitude of the periodic angle error ``A sin(2 theta + phi)`` (second harmonic of the
+        table angle ``theta``: an elliptical bearing race or encoder disc), radians.
     """
 
     encoder_noise_rad: float = 0.0
     backlash_rad: float = 0.0
     sync_jitter_s: float = 0.0
     wobble_rad: float = 0.0
+    periodic_error_rad: float = 0.0
 
     def __post_init__(self) -> None:
         for name, value in asdict(self).items():

@@ -35,7 +35,11 @@ Turntable errors (``RigConfig.turntable``, :class:`visibility.sensor.TurntableEr
     (encoder noise N(0, sigma_enc), backlash U(-b/2, b/2), synchronisation jitter N(0,
     sigma_sync) s at the table rate ``2 pi / (frames_per_turn * 60 / rpm)``), with the
     turntable axis tilted by ``Rx(w_x) Ry(w_y)``, ``w ~ N(0, sigma_wobble)`` (bearing wobble,
-    about the turntable-frame origin). They perturb only the simulated pose; the scan keeps the
+    about the turntable-frame origin), plus a periodic error ``A sin(2 theta_f + phi)`` (the
+    second harmonic of the table angle: an elliptical bearing race or encoder disc; unlike the
+    per-frame terms it is the same for every frame that sees a marker, so it does not average
+    out, and unlike the first harmonic it does not cancel between the two faces, which see a
+    marker 180 degrees apart). They perturb only the simulated pose; the scan keeps the
     nominal angles, as the processing chain must. The truth file lists each frame's errors.
 
 Per-channel offsets (``SensorConfig.laser_range_bias_m``, ``laser_angle_bias_rad``,
@@ -99,6 +103,8 @@ PULSE_SEPARATION_M = 1.0
 SILHOUETTE_MARGIN_RAD = 1e-4
 #: Third entry of the turntable-error seed ``[seed, f, _TURNTABLE_STREAM]``.
 _TURNTABLE_STREAM = 1
+#: Second entry of the periodic turntable error's phase seed ``[seed, _PERIODIC_STREAM]``.
+_PERIODIC_STREAM = 3
 
 
 @dataclass(frozen=True)
@@ -227,7 +233,9 @@ def turntable_errors(rig: RigConfig, rpm: int, seed: int, frames: np.ndarray
     Returns
     -------
     angle_error_rad : (F,) float
-        True minus nominal turntable angle (encoder + backlash + rate x sync jitter), radians.
+        True minus nominal turntable angle (encoder + backlash + rate x sync jitter + the
+        periodic error ``A sin(2 theta + phi)``, ``phi`` drawn from ``default_rng([seed, 3])``),
+        radians.
     wobble_rad : (F, 2) float
         Tilt of the turntable axis about the turntable frame's x and y axes, radians.
 
@@ -245,6 +253,10 @@ def turntable_errors(rig: RigConfig, rpm: int, seed: int, frames: np.ndarray
                       for f in frames]).reshape(-1, 5)
     angle = (errors.encoder_noise_rad * draws[:, 0] + errors.backlash_rad * draws[:, 1]
              + rate * errors.sync_jitter_s * draws[:, 2])
+    if errors.periodic_error_rad:
+        phase = np.random.default_rng([seed, _PERIODIC_STREAM]).uniform(0.0, 2 * np.pi)
+        theta = 2 * np.pi * np.asarray(frames, dtype=float) / rig.frames_per_turn
+        angle = angle + errors.periodic_error_rad * np.sin(2 * theta + phase)
     return angle, errors.wobble_rad * draws[:, 3:5]
 
 

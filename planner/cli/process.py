@@ -184,7 +184,7 @@ def command(scans, out, overwrite, references, estimator, marker_radius_m, no_ca
             scan = read_scan(path)
             noise = RangeNoise.recorded(scan.metadata.get("sensor", {}))
             source = "scan" if noise else f"sensor profile {profile.name}"
-            noise = noise or profile.sensor.range_noise()
+            noise = noise or profile.sensor.expected_scatter()
             inputs.append({"scan": str(path), "station_id": scan.station_id,
                            "sha256": fingerprint_arrays(scan.xyz_sensor_m, scan.frame_index,
                                                         scan.turntable_angle_rad),

@@ -36,7 +36,7 @@ CASES = [
                                         "--fit", "sensor.dropout_prob=0:0.1"],
          "one or two free parameters"),
     Case("fix-unknown", CAL + ["--fix", "sensor.colour=1"], "not a sensor-profile"),
-    Case("fix-and-fit", CAL + ["--fix", "sensor.laser_range_bias_m=0.01"],
+    Case("fix-and-fit", CAL + ["--fix", "turntable.periodic_error_rad=0.001"],
          "both fixed"),
     Case("fix-negative", CAL + ["--fix", "reference.aim_sigma_m=-1"], ">= 0"),
     Case("missing-base-profile", CAL + ["--base-profile", "nope.json"],

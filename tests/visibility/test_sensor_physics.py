@@ -294,3 +294,19 @@ def test_per_channel_angle_offsets_move_the_hit_not_the_reported_direction():
     height = lambda scan: scan.xyz_sensor_m[:, 1]  # noqa: E731  T.z of the point, -1 on the plane
     assert np.allclose(height(exact), -1.0, atol=1e-5)
     assert np.abs(height(off) + 1.0).max() > 0.005  # points leave the plane
+
+
+def test_periodic_turntable_error_is_the_second_harmonic_of_the_table_angle():
+    """Only the periodic term on: frames 180 deg apart share their error (it does not cancel
+    between the two faces), its amplitude is A, and it is a sinusoid of twice the angle."""
+    rig = RigConfig(turntable=TurntableErrors(periodic_error_rad=1e-3))
+    frames = np.arange(800)
+    angle, wobble = turntable_errors(rig, 600, 7, frames)
+    assert np.allclose(angle[:400], angle[400:], atol=1e-15)
+    assert np.abs(angle).max() == pytest.approx(1e-3, rel=1e-3)
+    theta = 2 * np.pi * frames / 800
+    design = np.column_stack([np.sin(2 * theta), np.cos(2 * theta)])
+    coef, *_ = np.linalg.lstsq(design, angle, rcond=None)
+    assert np.allclose(design @ coef, angle, atol=1e-12)
+    assert np.hypot(*coef) == pytest.approx(1e-3, rel=1e-9)
+    assert not wobble.any()
