@@ -159,6 +159,9 @@ class CalibrationSettings:
         Frames per turntable revolution of each simulated position (the rig's 800).
     replicates : int
         Simulations per design point and position (different seeds).
+    check_replicates : int
+        Simulations per position of the confirmation and of each hold-out prediction (a field
+        position is one noisy draw of the statistic; their mean is the prediction).
     design_points : int
         Values per free parameter.
     marker_radius_m, lidar_height_m : float
@@ -173,6 +176,7 @@ class CalibrationSettings:
 
     frames: int = 800
     replicates: int = 2
+    check_replicates: int = 6
     design_points: int = 4
     marker_radius_m: float = 0.1
     lidar_height_m: float = 1.0
@@ -330,9 +334,10 @@ def _calibrate_iv(positions, free, settings) -> None:
     if len(positions) < len(free) + 1:
         raise ConfigError(f"{len(free)} free parameter(s) need at least {len(free) + 1} "
                           f"positions, got {len(positions)}")
-    if settings.design_points < 3 or settings.replicates < 1:
-        raise ConfigError("the design needs >= 3 points per parameter and >= 1 replicate, got "
-                          f"{settings.design_points} and {settings.replicates}")
+    if settings.design_points < 3 or settings.replicates < 1 or settings.check_replicates < 1:
+        raise ConfigError("the design needs >= 3 points per parameter and >= 1 replicate, and "
+                          f"the checks >= 1 replicate, got {settings.design_points}, "
+                          f"{settings.replicates} and {settings.check_replicates}")
 
 
 def _fit_emulator(pos: FieldPosition, k: int, free: list[FreeParameter], design: list[dict],
@@ -410,7 +415,7 @@ def _predict(profile: SensorProfile, pos: FieldPosition, k: int, settings: Calib
              replicate0: int, progress) -> dict:
     """Simulate ``pos`` with ``profile`` (fresh seeds) and compare with its measurement."""
     stats, accepted = [], []
-    for rep in range(settings.replicates):
+    for rep in range(settings.check_replicates):
         run = simulate_position(profile, pos, k, replicate0 + rep, settings)
         stats.append(run["statistic_m"])
         accepted.append(run["n_accepted"])

@@ -44,6 +44,8 @@ from planner.cli._common import (
 @frames_option
 @click.option("--replicates", type=click.IntRange(1, 20), default=2, show_default=True,
               help="Simulations per design point and position.")
+@click.option("--check-replicates", type=click.IntRange(1, 50), default=6, show_default=True,
+              help="Simulations per position of the confirmation and of each hold-out check.")
 @click.option("--design-points", type=click.IntRange(3, 12), default=4, show_default=True,
               help="Values per free parameter.")
 @click.option("--resolution-mm", type=FiniteRange(0.0, 10.0), default=1.0, show_default=True,
@@ -55,8 +57,8 @@ from planner.cli._common import (
 @seed_option()
 @json_option
 def command(summary, marker_table, reference, out, overwrite, base_profile, fixed, free, name,
-            frames, replicates, design_points, resolution_mm, holdout, marker_radius_m, rpm,
-            seed, as_json) -> None:
+            frames, replicates, check_replicates, design_points, resolution_mm, holdout,
+            marker_radius_m, rpm, seed, as_json) -> None:
     """Fit the sensor's free parameters so that simulation reproduces a field experiment.
 
     SUMMARY is a CSV with columns position, distances_m (space-separated, metres) and
@@ -106,6 +108,7 @@ def command(summary, marker_table, reference, out, overwrite, base_profile, fixe
     if overlap:
         raise ConfigError(f"{overlap[0]} is both fixed (--fix) and fitted (--fit); give it once")
     settings = CalibrationSettings(frames=frames, replicates=replicates,
+                                   check_replicates=check_replicates,
                                    design_points=design_points, marker_radius_m=marker_radius_m,
                                    seed=seed, rpm=rpm, resolution_m=resolution_mm / 1e3,
                                    holdout=holdout)
@@ -115,8 +118,8 @@ def command(summary, marker_table, reference, out, overwrite, base_profile, fixe
         positions = (positions_from_marker_table(marker_table, reference) if marker_table
                      else read_field_summary(data))
         start = base.with_values(settings_fixed)
-        n_runs = len(positions) * replicates * (design_points ** len(free_params) + 1
-                                                + (1 if holdout else 0))
+        n_runs = len(positions) * (replicates * design_points ** len(free_params)
+                                   + check_replicates * (2 if holdout else 1))
         with tqdm(total=n_runs, desc="simulated positions", file=sys.stderr,
                   disable=None) as bar:
             result = calibrate(positions, start, free_params, settings, progress=bar.update)

@@ -66,7 +66,8 @@ def test_small_calibration_is_seeded_reproducible_and_usable(tmp_path, capsys, m
     monkeypatch.chdir(tmp_path)
     (tmp_path / "s.csv").write_text(HEADER + "A,2.5 3.5 4.5 5.5,0.004\nB,3 4 5 6,0.005\n")
     args = ["calibrate-sensor", "s.csv", "--frames", "60", "--replicates", "1",
-            "--design-points", "3", "--no-holdout", "--fit", "sensor.range_noise_m=0.005:0.03"]
+            "--check-replicates", "1", "--design-points", "3", "--no-holdout",
+            "--fit", "sensor.range_noise_m=0.005:0.03"]
     for out in ("a", "b"):
         code, _, err = run_cli(capsys, args + ["--out", out])
         assert code == 0, err

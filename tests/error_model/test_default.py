@@ -60,9 +60,12 @@ def test_regeneration_script_fits_only_the_fixed_radius_rows(tmp_path):
     table = synthetic_table(300, seed=4)
     table["estimator"] = np.where(np.arange(300) % 3, "fixed-radius", "hemisphere-icp")
     write_csv(tmp_path / "markers.csv", table)
-    model = script.build_model(tmp_path / "markers.csv", replicates=6, seed=0)
+    model = script.build_model([tmp_path / "markers.csv"], "calibrated", replicates=1,
+                               frames=800, seed=0)
     assert model.info["data"]["counts"]["dropped_other_estimator"] == 100
-    assert "range-study --replicates 6 --seed 0" in model.info["data"]["description"]
+    description = model.info["data"]["description"]
+    assert "range-study --sensor-profile calibrated --replicates 1 --frames 800" in description
+    assert "--slope-deg S" in description
     assert model.info["provenance"]["config"]["estimator"] == "fixed-radius"
 
 
