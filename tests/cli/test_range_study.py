@@ -45,7 +45,7 @@ def test_slope_and_profile_recorded_and_markers_seen(tmp_path, capsys):
     assert config["sensor_profile"] == "datasheet"
     assert config["sensor"]["range_noise_m"] == 0.01 and config["sensor"]["beam_divergence"]
     assert set(config["turntable"]) == {"encoder_noise_rad", "backlash_rad", "sync_jitter_s",
-                                        "wobble_rad"}
+                                        "wobble_rad", "periodic_error_rad"}
     rows = [r for r in read_marker_table(out / "markers.csv") if r["estimator"] == "fixed-radius"]
     assert len(rows) == 10 and all(int(r["n_points"]) > 0 for r in rows)  # no marker hidden
     # the 9 m marker lies almost straight uphill (azimuth 20 deg): seen above the horizon
