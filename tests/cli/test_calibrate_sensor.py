@@ -32,7 +32,7 @@ CASES = [
     Case("fit-range-reversed", CAL + ["--fit", "sensor.range_noise_m=0.05:0.01"], "LOW < HIGH"),
     Case("fit-not-numbers", CAL + ["--fit", "sensor.range_noise_m=a:b"], "NAME=LOW:HIGH"),
     Case("three-fit-parameters", CAL + ["--fit", "sensor.range_noise_m=0:0.1",
-                                        "--fit", "turntable.encoder_noise_rad=0:0.1",
+                                        "--fit", "turntable.periodic_error_rad=0:0.1",
                                         "--fit", "sensor.dropout_prob=0:0.1"],
          "one or two free parameters"),
     Case("fix-unknown", CAL + ["--fix", "sensor.colour=1"], "not a sensor-profile"),
@@ -61,11 +61,11 @@ def test_bad_input_refused(case, capsys, monkeypatch, tmp_path, valid_inputs):
 
 @pytest.mark.slow
 def test_small_calibration_is_seeded_reproducible_and_usable(tmp_path, capsys, monkeypatch):
-    """Two positions of four near markers, 60 frames: the same command twice gives the same
+    """Two positions of four near markers, 200 frames: the same command twice gives the same
     bytes, the profile records the fit, and simulate accepts it."""
     monkeypatch.chdir(tmp_path)
-    (tmp_path / "s.csv").write_text(HEADER + "A,2.5 3.5 4.5 5.5,0.004\nB,3 4 5 6,0.005\n")
-    args = ["calibrate-sensor", "s.csv", "--frames", "60", "--replicates", "1",
+    (tmp_path / "s.csv").write_text(HEADER + "A,6 8 10 12,0.005\nB,7 9 11 13,0.006\n")
+    args = ["calibrate-sensor", "s.csv", "--frames", "200", "--replicates", "1",
             "--check-replicates", "1", "--design-points", "3", "--no-holdout",
             "--fit", "sensor.range_noise_m=0.005:0.03"]
     for out in ("a", "b"):
