@@ -672,8 +672,10 @@ def _facing_rotation(los: np.ndarray) -> np.ndarray:
     a = np.array([1.0, 0.0, 0.0])
     v = np.cross(a, los)
     c = float(a @ los)
+    if 1 + c < 1e-9:  # los within ~5e-5 rad of -x: the half turn about z (1 / (1 + c) blows up)
+        return np.diag([-1.0, -1.0, 1.0])
     if np.linalg.norm(v) < 1e-12:
-        return np.eye(3) if c > 0 else np.diag([-1.0, -1.0, 1.0])
+        return np.eye(3)
     vx = np.array([[0, -v[2], v[1]], [v[2], 0, -v[0]], [-v[1], v[0], 0]])
     return np.eye(3) + vx + vx @ vx / (1 + c)
 

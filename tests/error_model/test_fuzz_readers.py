@@ -40,6 +40,8 @@ def _mutate(doc, path, action, value):
     parent = doc
     for key in path[:-1]:
         parent = parent[key]
+    if not isinstance(parent, dict | list):  # an earlier mutation replaced the container
+        return
     last = path[-1]
     if action == "drop":
         if isinstance(parent, dict):
