@@ -133,8 +133,11 @@ def test_a_signal_to_a_running_command_leaves_nothing(tmp_path, signum):
         main(["range-study", "--frames", "4", "--replicates", "1", "--max-distance", "2",
               "--out", {str(tmp_path / "out")!r}])
     """)
+    # a shell without job control starts background jobs with SIGINT ignored, and Python keeps
+    # an inherited SIG_IGN: give the child the default disposition a terminal user's has
     proc = subprocess.Popen([sys.executable, "-c", script], stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True, cwd=tmp_path)
+                            stderr=subprocess.PIPE, text=True, cwd=tmp_path,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     assert proc.stdout.readline().strip() == "writing"
     assert any(n.startswith(".out.partial-") for n in os.listdir(tmp_path))
     proc.send_signal(signum)
