@@ -20,10 +20,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from markerplan.errors import ConfigError
+from markerplan.checks import require_non_negative
 
 #: tan(incidence) is capped here (grazing returns), about 84 degrees.
 MAX_TAN_INCIDENCE = 10.0
+
+
+#: The fields of :class:`RangeNoise`, as named in a scan's ``sensor`` metadata block.
+_NAMES = ("range_noise_m", "range_noise_per_m", "incidence_noise_m", "range_resolution_m")
 
 
 @dataclass(frozen=True)
@@ -48,11 +52,7 @@ class RangeNoise:
     range_resolution_m: float = 0.002
 
     def __post_init__(self) -> None:
-        for name in ("range_noise_m", "range_noise_per_m", "incidence_noise_m",
-                     "range_resolution_m"):
-            value = getattr(self, name)
-            if not (isinstance(value, int | float) and np.isfinite(value) and value >= 0):
-                raise ConfigError(f"{name} must be a number >= 0, got {value!r}")
+        require_non_negative(self, _NAMES)
 
     @classmethod
     def from_metadata(cls, sensor: dict) -> RangeNoise:
@@ -61,8 +61,9 @@ class RangeNoise:
         defaults).
 
         The unit's per-channel range offsets (``laser_range_bias_m``, constant per laser) are
-        added in quadrature to the constant term: one marker is seen by a handful of lasers, so
-        for its fit and quality gate the offsets scatter its points like noise.
+        added in quadrature to the constant term: a marker's points come from several lasers,
+        each shifted by its own offset, so for its fit and quality gate the offsets scatter
+        them like noise.
 
         Examples
         --------
@@ -72,11 +73,11 @@ class RangeNoise:
         ...                          ).range_noise_m
         0.05
         """
-        names = ("range_noise_m", "range_noise_per_m", "incidence_noise_m", "range_resolution_m")
-        values = {k: float(sensor[k]) for k in names if sensor.get(k) is not None}
+        values = {k: float(sensor[k]) for k in _NAMES if sensor.get(k) is not None}
         bias = float(sensor.get("laser_range_bias_m") or 0.0)
         if bias:
-            values["range_noise_m"] = float(np.hypot(values.get("range_noise_m", 0.015), bias))
+            values["range_noise_m"] = float(np.hypot(values.get("range_noise_m",
+                                                                cls.range_noise_m), bias))
         return cls(**values)
 
     @classmethod

@@ -391,34 +391,21 @@ def _residuals(p: np.ndarray, centre: np.ndarray, radius: float) -> np.ndarray:
 
 def _astm_e3125(p, radius, sensor, centre, tol_m, max_iter, noise=None) -> SphereFit:
     """The ASTM E3125 loop; with ``noise`` on line-of-sight residuals (module docstring)."""
-    half = np.radians(ASTM_CONE_DEG / 2)
-    if noise is not None:
-        rng, beam = _beams(p, sensor)
+    select, solve = (_geometric_steps(p, radius, sensor) if noise is None
+                     else _line_of_sight_steps(p, radius, sensor, noise))
     used = np.ones(p.shape[0], dtype=bool)
     converged = False
     it = 0
     for it in range(1, max_iter + 1):  # noqa: B007 - `it` is reported
-        if noise is None:
-            sel = _cone_cylinder(p, radius, sensor, centre, half)
-        else:
-            sel = _beam_cylinder(beam, centre - sensor, radius * np.sin(half))
+        sel = select(centre)
         if sel.sum() < _MIN_POINTS:
             break
-        if noise is None:
-            c1 = lsq_fixed_radius(p[sel], radius, centre)
-            res = _residuals(p[sel], c1, radius)
-        else:
-            c1, _, _ = _los_solve(rng[sel], beam[sel], centre - sensor, radius, noise)
-            res = _los_z(rng[sel], beam[sel], c1, radius, noise)
-            c1 = c1 + sensor
+        c1, res = solve(sel, centre)
         keep = np.zeros_like(sel)
         keep[np.flatnonzero(sel)[np.abs(res) < 3 * np.std(res)]] = True
         if keep.sum() < _MIN_POINTS:
             keep = sel
-        if noise is None:
-            new = lsq_fixed_radius(p[keep], radius, c1)
-        else:
-            new = _los_solve(rng[keep], beam[keep], c1 - sensor, radius, noise)[0] + sensor
+        new, _ = solve(keep, c1)
         moved = float(np.linalg.norm(new - centre))
         centre, used = new, keep
         if moved < tol_m:
@@ -427,6 +414,37 @@ def _astm_e3125(p, radius, sensor, centre, tol_m, max_iter, noise=None) -> Spher
     res = _residuals(p[used], centre, radius)
     return SphereFit(centre, radius, float(np.sqrt(np.mean(res ** 2))), p.shape[0],
                      int(used.sum()), used, "fixed-radius", it, converged)
+
+
+def _geometric_steps(p, radius, sensor):
+    """The ASTM steps on the points: the 60 deg cone/cylinder about the centre, and the
+    geometric fixed-radius fit with its ``|p - c| - R`` residuals."""
+    half = np.radians(ASTM_CONE_DEG / 2)
+
+    def select(centre):
+        return _cone_cylinder(p, radius, sensor, centre, half)
+
+    def solve(sel, start):
+        c = lsq_fixed_radius(p[sel], radius, start)
+        return c, _residuals(p[sel], c, radius)
+
+    return select, solve
+
+
+def _line_of_sight_steps(p, radius, sensor, noise):
+    """The ASTM steps on the beams: the cylinder tested on each beam, and the line-of-sight fit
+    with its normalised range residuals ``(rho - t) / sigma``."""
+    rng, beam = _beams(p, sensor)
+    max_miss = radius * np.sin(np.radians(ASTM_CONE_DEG / 2))
+
+    def select(centre):
+        return _beam_cylinder(beam, centre - sensor, max_miss)
+
+    def solve(sel, start):
+        c = _los_solve(rng[sel], beam[sel], start - sensor, radius, noise)[0]
+        return c + sensor, _los_z(rng[sel], beam[sel], c, radius, noise)
+
+    return select, solve
 
 
 @dataclass(frozen=True)

@@ -34,8 +34,7 @@ from pipeline.rig import MountingOffsets, station_to_site_matrix
 from pipeline.stages import build_config
 from planner import accuracy
 from planner.plan_file import SurveyPlan
-from visibility.sensor import RigConfig
-from visibility.sensor_profile import DEFAULT_PROFILE, SensorProfile, load_profile
+from visibility.sensor_profile import SensorProfile, default_profile
 from visibility.simulate import simulate_markers
 
 #: Smallest number of matched markers that can fix x, y, z and heading.
@@ -89,8 +88,8 @@ def verify_plan(plan: SurveyPlan, error_model, seed: int = 0, progress: bool = T
     ids = list(plan.marker_ids)
     centres = plan.marker_xyz_m
     cfg = build_config({"fit": {"radius_m": plan.marker_radius_m}})
-    profile = profile or load_profile(DEFAULT_PROFILE)
-    rig = RigConfig(offsets=offsets or MountingOffsets(), turntable=profile.turntable)
+    profile = profile or default_profile()
+    rig = profile.rig_config(offsets=offsets or MountingOffsets())
     chosen = [(k, st) for k, st in enumerate(plan.stations)
               if station_ids is None or st.id in station_ids]
     checks = []
@@ -139,7 +138,7 @@ def verify_record(plan: SurveyPlan, checks: list[StationCheck], seed: int, model
     """The ``verify.json`` document (``offsets``: the simulated rig's true mounting offsets;
     ``profile``: its sensor profile, default the shipped one, recorded in the provenance)."""
     true_offsets = (offsets or MountingOffsets()).to_dict()
-    profile = profile or load_profile(DEFAULT_PROFILE)
+    profile = profile or default_profile()
     return {
         "schema": "markerplan-verify", "schema_version": 1,
         "provenance": provenance({"seed": seed, "error_model": model_name,

@@ -31,8 +31,7 @@ from pipeline.range_study import (
 )
 from pipeline.stages import RADIUS_SCALED
 from visibility.dem import DEM
-from visibility.sensor import RigConfig
-from visibility.sensor_profile import DEFAULT_PROFILE, SensorProfile, load_profile
+from visibility.sensor_profile import SensorProfile, default_profile
 from visibility.simulate import simulate_markers
 
 #: DEM cell of the ground, m (the ground is a plane, so the cell size changes nothing).
@@ -95,15 +94,14 @@ def run_range_study(max_distance_m: float = 50.0, frames: int = 800, replicates:
     -------
     study : RangeStudy
     """
-    profile = profile or load_profile(DEFAULT_PROFILE)
+    profile = profile or default_profile()
     sensor = profile.sensor_config(rpm, range_noise_m=range_noise_m)
     distances = RANGE_STUDY_DISTANCES_M[RANGE_STUDY_DISTANCES_M <= max_distance_m]
-    rig = RigConfig(frames_per_turn=frames, lidar_height_m=lidar_height_m,
-                    turntable=profile.turntable)
+    rig = profile.rig_config(frames_per_turn=frames, lidar_height_m=lidar_height_m)
     slope_rad = float(np.radians(slope_deg))
     centres = marker_layout(distances, marker_radius_m, lidar_height_m, slope_rad)
     ids = [f"R{d:04.1f}" for d in distances]
-    dem = _ground(float(distances.max()) + GROUND_MARGIN_M, slope_rad)
+    dem = ground_dem(float(distances.max()), slope_rad)
     station = [0.0, 0.0, lidar_height_m]
     research_radius_m = RADIUS_SCALED[("research", "radius_m")] * marker_radius_m
     rows = []
@@ -128,11 +126,26 @@ def run_range_study(max_distance_m: float = 50.0, frames: int = 800, replicates:
     return RangeStudy(distance_of, rows, summarise(rows, distance_of), config)
 
 
-def _ground(half_m: float, slope_rad: float) -> DEM:
-    """The planar ground ``z = x tan(slope_rad)`` (site frame) over ``+-half_m`` in x and y."""
+def ground_dem(max_distance_m: float, slope_rad: float = 0.0) -> DEM:
+    """The planar ground ``z = x tan(slope_rad)`` (site frame) around a station at the origin.
+
+    Parameters
+    ----------
+    max_distance_m : float
+        Farthest marker, metres; the ground reaches :data:`GROUND_MARGIN_M` beyond it in x and y.
+    slope_rad : float
+        Ground slope, radians (0: level ground of height 0).
+
+    Returns
+    -------
+    dem : DEM
+        :data:`GROUND_CELL_M` cells.
+    """
+    half_m = max_distance_m + GROUND_MARGIN_M
     n = int(2 * half_m / GROUND_CELL_M) + 1
     x = -half_m + GROUND_CELL_M * np.arange(n)
-    return DEM(np.tile(x * np.tan(slope_rad), (n, 1)), (-half_m, -half_m), GROUND_CELL_M)
+    heights = np.tile(x * np.tan(slope_rad), (n, 1)) + 0.0  # + 0.0: level ground has no -0.0
+    return DEM(heights, (-half_m, -half_m), GROUND_CELL_M)
 
 
 def write_range_study(study: RangeStudy, folder: Path) -> dict:

@@ -33,6 +33,7 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
+from markerplan.checks import require_non_negative
 from markerplan.errors import ConfigError
 from pipeline.rig import VLP16_ELEVATION_DEG, MountingOffsets
 from pipeline.scan_format import sensor_metadata
@@ -120,10 +121,7 @@ class SensorConfig:
                               f"{self.max_range_m}")
         if not 0 <= self.dropout_prob < 1:
             raise ConfigError(f"dropout_prob must be in [0, 1), got {self.dropout_prob}")
-        for name in ("laser_range_bias_m", "laser_angle_bias_rad"):
-            value = getattr(self, name)
-            if not (isinstance(value, int | float) and np.isfinite(value) and value >= 0):
-                raise ConfigError(f"{name} must be a number >= 0, got {value!r}")
+        require_non_negative(self, ("laser_range_bias_m", "laser_angle_bias_rad"))
         if not (isinstance(self.unit_seed, int | np.integer) and self.unit_seed >= 0):
             raise ConfigError(f"unit_seed must be an integer >= 0, got {self.unit_seed!r}")
         if not (isinstance(self.footprint_samples, int) and 1 <= self.footprint_samples <= 64):
@@ -199,9 +197,7 @@ class TurntableErrors:
     periodic_error_rad: float = 0.0
 
     def __post_init__(self) -> None:
-        for name, value in asdict(self).items():
-            if not (isinstance(value, int | float) and np.isfinite(value) and value >= 0):
-                raise ConfigError(f"turntable {name} must be a number >= 0, got {value!r}")
+        require_non_negative(self, asdict(self), "turntable ")
 
     @property
     def enabled(self) -> bool:

@@ -46,15 +46,11 @@ from pipeline.evaluation import Reference
 from pipeline.process import process_station
 from pipeline.range_study import marker_layout
 from pipeline.stages import build_config
-from visibility.dem import DEM
 from visibility.field_summary import FieldPosition
-from visibility.sensor import RigConfig
+from visibility.range_experiment import ground_dem
 from visibility.sensor_profile import SensorProfile, parameter_names
 from visibility.simulate import simulate_markers
 
-#: Level ground beyond the farthest marker, m, and its cell, m.
-FIELD_MARGIN_M = 5.0
-FIELD_CELL_M = 0.5
 #: Parameters ``calibrate-sensor`` fixes by default (``--fix`` replaces them all): values taken
 #: from instrument documentation and practice, not from the field data. Sources:
 #: reference — a reflectorless total station at <= 30 m measures a point to about 2 mm + 2 ppm
@@ -243,12 +239,11 @@ def simulate_position(profile: SensorProfile, position: FieldPosition, index: in
     radius = settings.marker_radius_m
     d = position.distances_m
     centres = marker_layout(d, radius, settings.lidar_height_m)
-    half = float(d.max()) + FIELD_MARGIN_M
-    dem = DEM(np.zeros((int(2 * half / FIELD_CELL_M) + 1,) * 2), (-half, -half), FIELD_CELL_M)
+    dem = ground_dem(float(d.max()))
     station = np.array([0.0, 0.0, settings.lidar_height_m])
     sensor = profile.sensor_config(settings.rpm, unit_seed=unit)
-    rig = RigConfig(lidar_height_m=settings.lidar_height_m, frames_per_turn=settings.frames,
-                    turntable=profile.turntable)
+    rig = profile.rig_config(lidar_height_m=settings.lidar_height_m,
+                             frames_per_turn=settings.frames)
     ids = [f"M{k + 1:02d}" for k in range(len(d))]
     scan, _ = simulate_markers(dem, station, 0.0, centres + station, sensor, rig,
                                seed=int(seeds[0]), marker_radius_m=radius, marker_ids=ids,

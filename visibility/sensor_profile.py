@@ -26,6 +26,7 @@ refused by name.
 
 from __future__ import annotations
 
+import functools
 import json
 from dataclasses import asdict, dataclass, fields, replace
 from pathlib import Path
@@ -33,7 +34,7 @@ from typing import Any
 
 from markerplan.errors import ConfigError, InputFileError
 from markerplan.reading import check_schema_version, load_json, require_type
-from visibility.sensor import SensorConfig, TurntableErrors
+from visibility.sensor import RigConfig, SensorConfig, TurntableErrors
 from visibility.total_station import TotalStationReference
 
 FORMAT = "markerplan-sensor-profile"
@@ -77,10 +78,7 @@ class SensorProfile:
         """
         blocks: dict[str, dict[str, Any]] = {}
         for key, value in values.items():
-            block, _, name = key.partition(".")
-            if block not in _BLOCKS or name not in _field_names(block):
-                raise ConfigError(f"unknown sensor-profile parameter {key!r}; parameters are "
-                                  f"{', '.join(parameter_names())}")
+            block, name = _split(key)
             blocks.setdefault(block, {})[name] = value
         return replace(self, **{b: replace(getattr(self, b), **v) for b, v in blocks.items()})
 
@@ -98,12 +96,14 @@ class SensorProfile:
         given = {k: v for k, v in overrides.items() if v is not None}
         return replace(self.sensor, rpm=rpm, **given)
 
+    def rig_config(self, **settings) -> RigConfig:
+        """A :class:`RigConfig` with this profile's turntable errors and the given ``settings``
+        (``lidar_height_m``, ``frames_per_turn``, ``offsets``)."""
+        return RigConfig(turntable=self.turntable, **settings)
+
     def value(self, key: str) -> float:
         """The parameter named ``block.field``."""
-        block, _, name = key.partition(".")
-        if block not in _BLOCKS or name not in _field_names(block):
-            raise ConfigError(f"unknown sensor-profile parameter {key!r}; parameters are "
-                              f"{', '.join(parameter_names())}")
+        block, name = _split(key)
         return getattr(getattr(self, block), name)
 
     def to_dict(self) -> dict:
@@ -122,6 +122,15 @@ _BLOCKS = {"sensor": SensorConfig, "turntable": TurntableErrors,
 
 def _field_names(block: str) -> list[str]:
     return [f.name for f in fields(_BLOCKS[block]) if f.name != "rpm"]
+
+
+def _split(key: str) -> tuple[str, str]:
+    """``block.field`` -> (block, field), refusing names a profile does not have."""
+    block, _, name = key.partition(".")
+    if block not in _BLOCKS or name not in _field_names(block):
+        raise ConfigError(f"unknown sensor-profile parameter {key!r}; parameters are "
+                          f"{', '.join(parameter_names())}")
+    return block, name
 
 
 def parameter_names() -> list[str]:
@@ -153,15 +162,15 @@ def load_profile(name_or_path: str | Path) -> SensorProfile:
                              f"expected {FORMAT!r}); write one with markerplan calibrate-sensor")
     check_schema_version(doc.get("format_version"), FORMAT_VERSION, what)
     blocks = {}
-    for block, cls in _BLOCKS.items():
+    datasheet = SensorProfile("")  # missing fields take its values
+    for block in _BLOCKS:
         values = require_type(doc.get(block, {}), dict, f"{what}: {block}")
         unknown = sorted(set(values) - set(_field_names(block)))
         if unknown:
             raise InputFileError(f"{what}: {block} has no field {unknown[0]!r}; its fields are "
                                  f"{', '.join(_field_names(block))}")
         try:
-            blocks[block] = cls(**values) if block != "sensor" else cls(**{
-                **asdict(SensorProfile("").sensor), **values})
+            blocks[block] = replace(getattr(datasheet, block), **values)
         except (ConfigError, TypeError) as exc:
             raise InputFileError(f"{what}: {exc}") from None
     calibration = doc.get("calibration")
@@ -169,6 +178,12 @@ def load_profile(name_or_path: str | Path) -> SensorProfile:
         require_type(calibration, dict, f"{what}: calibration")
     return SensorProfile(str(require_type(doc.get("name", path.stem), str, f"{what}: name")),
                          str(doc.get("description", "")), calibration=calibration, **blocks)
+
+
+@functools.cache
+def default_profile() -> SensorProfile:
+    """The shipped :data:`DEFAULT_PROFILE` (read once per process)."""
+    return load_profile(DEFAULT_PROFILE)
 
 
 def save_profile(profile: SensorProfile, path: str | Path, provenance: dict) -> Path:

@@ -49,9 +49,11 @@ Per-channel offsets (``SensorConfig.laser_range_bias_m``, ``laser_angle_bias_rad
     2017 measured per-laser range offsets of centimetres and angular offsets of a few tenths of
     a milliradian to milliradians on Velodyne HDL-32E/VLP-16 units; the datasheet's +-3 cm
     "accuracy" includes them). They are drawn once per unit
-    (:meth:`visibility.sensor.SensorConfig.laser_biases`), shared by every station of a run,
-    and do not average out over frames: every frame sees a far marker with the same few
-    lasers. The rays are cast along the true directions; the scan reports the nominal ones.
+    (:meth:`visibility.sensor.SensorConfig.laser_biases`) and shared by every station of a run.
+    On this rig all 16 lasers sweep every marker as the table turns, so a marker's centre
+    moves by the mean of the offsets, nearly alike for all markers: they change edge lengths
+    little (see docs/simulator.md, "Calibrating the sensor"). The rays are cast along the true
+    directions; the scan reports the nominal ones.
 
 Rays that provably cannot hit anything (steeper than the conservative
 :class:`visibility.scene.HorizonBound` in their azimuth bin, built around the lowest and widest
@@ -121,8 +123,8 @@ class _Setup:
     """(n,) nominal spin azimuth at phase 0, radians."""
     d0: np.ndarray
     """(n, 3) nominal sensor-frame unit directions at phase 0 (what the scan reports)."""
-    elevation: np.ndarray
-    """(n,) true elevation of each firing (the channel's, plus its offset), radians."""
+    channel_elevation: np.ndarray
+    """(16,) true elevation of each channel (nominal plus its offset), radians."""
     azimuth: np.ndarray
     """(n,) true spin azimuth at phase 0 (plus the channel's offset), radians."""
     d_true: np.ndarray
@@ -186,10 +188,11 @@ def simulate_scan(scene: RayScene, position_m: np.ndarray, heading_rad: float,
     laser, az0 = firing_pattern(sensor.rpm, 0.0)
     range_bias, elevation_bias, azimuth_bias = sensor.laser_biases()
     channel = laser.astype(np.int64)
-    elevation = VLP16_ELEVATION_RAD[channel] + elevation_bias[channel]
+    channel_elevation = VLP16_ELEVATION_RAD + elevation_bias
     azimuth = az0 + azimuth_bias[channel]
     setup = _Setup(scene, horizon, sensor, seed, laser, az0, sensor_directions(laser, az0),
-                   elevation, azimuth, beam_directions(elevation, azimuth), range_bias[channel],
+                   channel_elevation, azimuth,
+                   beam_directions(channel_elevation[channel], azimuth), range_bias[channel],
                    footprint_offsets_rad(sensor.footprint_samples) if sensor.beam_divergence
                    else np.zeros((0, 2)))
 
@@ -393,14 +396,10 @@ def _near_silhouette(setup: _Setup, rot: np.ndarray, origin: np.ndarray) -> np.n
     rho = np.arcsin(radius / dist[reach])
     half = 0.5 * max(BEAM_DIVERGENCE_RAD) + SILHOUETTE_MARGIN_RAD
     # cheap first cut: channels whose elevation is within the band of a sphere's elevation
-    channels = np.unique(setup.laser)
-    elevation = np.array([setup.elevation[setup.laser == c][0] for c in channels])
-    close = (np.abs(elevation[:, None] - np.arcsin(np.clip(v[2], -1, 1))[None, :])
+    close = (np.abs(setup.channel_elevation[:, None] - np.arcsin(np.clip(v[2], -1, 1))[None, :])
              <= (rho + half)[None, :])
     spheres = close.any(axis=0)
-    near_channel = np.zeros(256, dtype=bool)
-    near_channel[channels] = close[:, spheres].any(axis=1)
-    rows = np.flatnonzero(near_channel[setup.laser])
+    rows = np.flatnonzero(close[:, spheres].any(axis=1)[setup.laser])
     if not len(rows):
         return rows
     cosang = setup.d_true[rows] @ v[:, spheres]  # (k, m') cosines beam-to-centre
@@ -423,7 +422,7 @@ def _mixed_returns(setup: _Setup, beams: np.ndarray, rot: np.ndarray, origin: np
         Mean tan(incidence) of the group (0 without ``incidence``).
     """
     k = len(setup.footprint)
-    w = setup.elevation[beams]
+    w = setup.channel_elevation[setup.laser[beams]]
     el = (w[:, None] + setup.footprint[None, :, 1]).ravel()
     az = (setup.azimuth[beams][:, None] + setup.footprint[None, :, 0] / np.cos(w)[:, None]).ravel()
     d = beam_directions(el, az) @ rot.T

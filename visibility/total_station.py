@@ -19,7 +19,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from markerplan.errors import ConfigError
+from markerplan.checks import require_non_negative
 
 
 @dataclass(frozen=True)
@@ -38,9 +38,7 @@ class TotalStationReference:
     aim_sigma_m: float = 0.0
 
     def __post_init__(self) -> None:
-        for name, value in asdict(self).items():
-            if not (isinstance(value, int | float) and np.isfinite(value) and value >= 0):
-                raise ConfigError(f"reference {name} must be a number >= 0, got {value!r}")
+        require_non_negative(self, asdict(self), "reference ")
 
     def survey(self, centres_m: np.ndarray, radius_m: float, rng: np.random.Generator
                ) -> np.ndarray:
@@ -73,15 +71,3 @@ class TotalStationReference:
         if self.point_sigma_m:
             top = top + rng.normal(0.0, self.point_sigma_m, top.shape)
         return top - np.array([0.0, 0.0, radius_m])
-
-    def sigma_3d_m(self, radius_m: float) -> float:
-        """Approximate 3-D RMS error of one reference centre, metres (``d^2/2R`` to first order).
-
-        Examples
-        --------
-        >>> round(TotalStationReference(0.002, 0.003).sigma_3d_m(0.1), 5)
-        0.00548
-        """
-        drop_mean_square = 2 * self.aim_sigma_m ** 4 / radius_m ** 2  # E[(d^2 / 2R)^2]
-        return float(np.sqrt(3 * self.point_sigma_m ** 2 + 2 * self.aim_sigma_m ** 2
-                             + drop_mean_square))

@@ -86,14 +86,13 @@ def command(site_name: str, site_seed: int | None, dem_path: Path | None,
 
     from markerplan.output_folder import output_folder
     from planner.planning import select_stations
-    from visibility.sensor import RigConfig
     from visibility.simulate import simulate_site, write_site_json
 
     sensor = profile.sensor_config(rpm, range_noise_m=_metres(range_noise_mm),
                                    incidence_noise_m=_metres(incidence_noise_mm),
                                    beam_divergence=beam_divergence, dropout_prob=dropout_prob)
-    rig = RigConfig(lidar_height_m=lidar_height_m, frames_per_turn=frames, offsets=offsets,
-                    turntable=profile.turntable)
+    rig = profile.rig_config(lidar_height_m=lidar_height_m, frames_per_turn=frames,
+                             offsets=offsets)
     with output_folder(out, overwrite, "simulate",
                        inputs=given_paths(dem_path, stations_path)) as stage:
         site = _site(site_name, site_seed, dem_path, dem_fill, stations_path, marker_radius_m,
