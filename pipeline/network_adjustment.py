@@ -441,17 +441,21 @@ def _tie_order(obs: NetworkObservations, keep: np.ndarray, reference: int
     s, k = len(obs.station_ids), len(obs.marker_ids)
     seen = np.zeros((s, k), dtype=bool)
     seen[obs.station[keep], obs.marker[keep]] = True
-    placed = seen[reference].copy()
-    order, untied = [reference], np.ones(s, dtype=bool)
-    untied[reference] = False
-    while untied.any():
-        shared = np.where(untied, seen.astype(int) @ placed, -1)
-        best = int(np.argmax(shared))
-        if shared[best] < 2:
-            break
+    placed = np.zeros(k, dtype=bool)
+    shared = np.zeros(s, dtype=int)  # markers each station shares with the placed ones
+    order, untied = [], np.ones(s, dtype=bool)
+    best = reference
+    while True:
         order.append(best)
         untied[best] = False
-        placed |= seen[best]
+        new = seen[best] & ~placed
+        placed |= new
+        shared += seen[:, new].sum(axis=1)
+        if not untied.any():
+            break
+        best = int(np.argmax(np.where(untied, shared, -1)))
+        if shared[best] < 2:
+            break
     return order, np.flatnonzero(untied).tolist()
 
 
@@ -603,43 +607,91 @@ def _prior_misclosure(problem: _Problem, params: np.ndarray) -> np.ndarray:
     return np.where(problem.prior_is_heading, (f + np.pi) % (2 * np.pi) - np.pi, f)
 
 
-def _normal_system(problem: _Problem, blocks: np.ndarray, columns: np.ndarray, f: np.ndarray,
-                   fp: np.ndarray, b: np.ndarray) -> tuple[sp.csc_matrix, np.ndarray]:
+@dataclass
+class _Assembly:
+    """Sparsity pattern of the (bordered) normal matrix of one set of observations, the same in
+    every Gauss-Newton iteration: where each contribution goes in CSC storage."""
+
+    keep: np.ndarray     # (n, 9, 9) bool: block entries that touch no fixed parameter
+    prior: np.ndarray    # (q,) bool: pseudo-observations of parameters that are not fixed
+    n_fixed: int
+    slot: np.ndarray     # (e,) index into the CSC data of each contribution
+    indices: np.ndarray  # CSC row indices
+    indptr: np.ndarray   # CSC column pointers
+    size: int            # u + number of constraints
+
+
+def _assembly(problem: _Problem, columns: np.ndarray, b: np.ndarray) -> _Assembly:
+    """The pattern of :func:`_normal_system`: observation blocks, priors, a unit diagonal for
+    each fixed parameter, the border ``B`` (rows) and ``B^T`` (columns)."""
+    u = problem.fixed.size
+    size = u + b.shape[0]
+    keep = ~(problem.fixed[columns][:, :, None] | problem.fixed[columns][:, None, :])
+    fixed = np.flatnonzero(problem.fixed)
+    prior = ~problem.fixed[problem.prior_index]
+    border_r, border_c = np.nonzero(b)
+    row = np.concatenate([np.broadcast_to(columns[:, :, None], keep.shape)[keep],
+                          problem.prior_index[prior], fixed, u + border_r, border_c])
+    col = np.concatenate([np.broadcast_to(columns[:, None, :], keep.shape)[keep],
+                          problem.prior_index[prior], fixed, border_c, u + border_r])
+    unique, slot = np.unique(col * size + row, return_inverse=True)
+    return _Assembly(keep, prior, fixed.size, slot, unique % size,
+                     np.searchsorted(unique, np.arange(size + 1) * size), size)
+
+
+def _normal_system(problem: _Problem, assembly: _Assembly, blocks: np.ndarray,
+                   columns: np.ndarray, f: np.ndarray, fp: np.ndarray, b: np.ndarray
+                   ) -> tuple[sp.csc_matrix, np.ndarray]:
     """Normal equations of the Gauss-Newton step ``N dx = -A^T P f``, assembled from the
     observations' 9 x 9 blocks (sparse), bordered by the minimal constraints ``B`` when there
     are any. A parameter the datum fixes gets a unit row and column (its step is 0)."""
     u = problem.fixed.size
-    w = 3.0 / problem.obs.sigma_m**2
-    nb = np.einsum("n,nri,nrj->nij", w, blocks, blocks)
-    keep = ~(problem.fixed[columns][:, :, None] | problem.fixed[columns][:, None, :])
-    rows = np.broadcast_to(columns[:, :, None], nb.shape)[keep]
-    cols = np.broadcast_to(columns[:, None, :], nb.shape)[keep]
-    fixed = np.flatnonzero(problem.fixed)
-    prior = ~problem.fixed[problem.prior_index]
-    d = b.shape[0]
-    border_r, border_c = np.nonzero(b)
-    data = np.concatenate([nb[keep], problem.prior_weight[prior], np.ones(fixed.size),
-                           b[border_r, border_c], b[border_r, border_c]])
-    row = np.concatenate([rows, problem.prior_index[prior], fixed, u + border_r, border_c])
-    col = np.concatenate([cols, problem.prior_index[prior], fixed, border_c, u + border_r])
-    normal = sp.csc_matrix((data, (row, col)), shape=(u + d, u + d))
-    rhs = -(np.bincount(columns.ravel(), np.einsum("n,nri,nr->ni", w, blocks, f).ravel(),
+    weighted = blocks * (3.0 / problem.obs.sigma_m**2)[:, None, None]
+    border = b[b != 0]
+    values = np.concatenate([(weighted.transpose(0, 2, 1) @ blocks)[assembly.keep],
+                             problem.prior_weight[assembly.prior], np.ones(assembly.n_fixed),
+                             border, border])
+    normal = sp.csc_matrix((np.bincount(assembly.slot, values, minlength=assembly.indices.size),
+                            assembly.indices, assembly.indptr),
+                           shape=(assembly.size, assembly.size))
+    rhs = -(np.bincount(columns.ravel(), np.sum(weighted * f[:, :, None], axis=1).ravel(),
                         minlength=u)
             + np.bincount(problem.prior_index, problem.prior_weight * fp, minlength=u))
     rhs[problem.fixed] = 0.0
-    return normal, np.concatenate([rhs, np.zeros(d)])
+    return normal, np.concatenate([rhs, np.zeros(b.shape[0])])
 
 
-def _covariance(normal: sp.csc_matrix, u: int, fixed: np.ndarray) -> np.ndarray:
+def _covariance(normal: sp.csc_matrix, n_station_params: int, u: int, fixed: np.ndarray
+                ) -> np.ndarray:
     """(u, u) covariance: the upper-left block of the inverse of the (bordered) normal matrix,
-    with the fixed parameters' rows and columns zeroed."""
+    with the fixed parameters' rows and columns zeroed.
+
+    The markers are eliminated first (Schur complement, as in bundle adjustment): their block
+    ``N_mm`` is block-diagonal (3 x 3 per marker) and the border touches stations only, so
+    ``Q_ss = (N_ss - E N_ms)^-1`` with ``E = N_sm N_mm^-1``, ``Q_sm = -Q_ss E`` and
+    ``Q_mm = N_mm^-1 - E^T Q_sm`` — one dense inverse of the stations' size (plus border).
+    """
+    normal = normal.tocsr()
+    ns, k = n_station_params, (u - n_station_params) // 3
+    x = np.r_[0:ns, u:normal.shape[0]]  # stations and border
+    n_xm = normal[x][:, ns:u]
+    n_mm = normal[ns:u][:, ns:u].toarray().reshape(k, 3, k, 3)
+    m_inv = np.linalg.inv(n_mm[np.arange(k), :, np.arange(k), :])
+    e = n_xm @ sp.bsr_matrix((m_inv, np.arange(k), np.arange(k + 1)), shape=(3 * k, 3 * k))
+    schur = normal[x][:, x].toarray() - (e @ n_xm.T).toarray()
     try:
-        cov = np.linalg.inv(normal.toarray())[:u, :u]
+        q_ss = np.linalg.inv(schur)[:ns, :ns]
     except np.linalg.LinAlgError:
-        cov = np.full((u, u), np.nan)
-    if not (np.isfinite(np.diag(cov)).all() and (np.diag(cov)[~fixed] > 0).all()):
+        q_ss = np.full((ns, ns), np.nan)
+    if not (np.isfinite(np.diag(q_ss)).all() and (np.diag(q_ss)[~fixed[:ns]] > 0).all()):
         raise DataError("the network's normal matrix is singular (a station tied only by "
                         "markers on one vertical line?)")
+    e = e[:ns].tocsr()
+    q_sm = -np.asarray((e.T @ q_ss).T)
+    q_mm = -np.asarray(e.T @ q_sm)
+    q_mm.reshape(k, 3, k, 3)[np.arange(k), :, np.arange(k), :] += m_inv
+    cov = np.empty((u, u))
+    cov[:ns, :ns], cov[:ns, ns:], cov[ns:, :ns], cov[ns:, ns:] = q_ss, q_sm, q_sm.T, q_mm
     cov[fixed, :] = 0.0
     cov[:, fixed] = 0.0
     return cov
@@ -676,8 +728,10 @@ def _solve(problem: _Problem, pose: np.ndarray, markers: np.ndarray, max_iterati
     for iteration in range(1, max_iterations + 2):
         pose, markers = params[: 6 * s].reshape(s, 6), params[6 * s:].reshape(-1, 3)
         blocks, columns, f = _linearise(problem.obs, pose, markers)
+        if iteration == 1:
+            assembly = _assembly(problem, columns, b)
         fp = _prior_misclosure(problem, params)
-        normal, rhs = _normal_system(problem, blocks, columns, f, fp, b)
+        normal, rhs = _normal_system(problem, assembly, blocks, columns, f, fp, b)
         if np.abs(step).max() < _STEP_TOLERANCE:
             break
         if iteration > max_iterations:
@@ -689,7 +743,7 @@ def _solve(problem: _Problem, pose: np.ndarray, markers: np.ndarray, max_iterati
             raise DataError("the network's normal equations are singular (a station tied only "
                             "by markers on one vertical line?)") from None
         params = params + step
-    cov = _covariance(normal, u, problem.fixed) if covariance else None
+    cov = _covariance(normal, 6 * s, u, problem.fixed) if covariance else None
     return _Solution(pose, markers, blocks, columns, f, fp, cov, b.shape[0], iteration - 1)
 
 
