@@ -18,9 +18,14 @@ prior (sun sensor) observes each heading around its nominal value.
 
 Solution
 --------
-Gauss-Newton on the sparse normal equations (``scipy.sparse``, SuperLU) with the datum as
-constraints ``B dx = 0`` in a bordered system; the full covariance (dense, a priori: sigma0 = 1)
-is the upper-left block of the bordered system's inverse at convergence.
+Gauss-Newton on the sparse normal equations (``scipy.sparse``, SuperLU), assembled from each
+observation's 9 x 9 block into a sparsity pattern fixed across iterations. A parameter the datum
+fixes gets a unit row and column (its step is 0); the free datum's minimal constraints
+``B dx = 0`` border the system. The full covariance (dense, a priori: sigma0 = 1) comes from the
+normal matrix at convergence with the markers eliminated first (their block is 3 x 3
+block-diagonal, as in bundle adjustment), so only a matrix of the stations' size is inverted.
+Between data-snooping rounds the covariance is downdated for the removed observation
+(Sherman-Morrison-Woodbury); the final solution's covariance is computed afresh.
 
 Datum
 -----
@@ -864,6 +869,14 @@ def adjust(obs: NetworkObservations, datum: Datum = Datum(),
         a heading prior without nominal poses.
     DataError
         Singular normal equations or no convergence.
+
+    Notes
+    -----
+    Data snooping (``settings.snooping``) removes the point observation with the largest
+    ``|w| > Phi^-1(1 - alpha0 / 2)`` and re-adjusts, up to ``settings.max_rejections`` times. It
+    stops early, keeping the observation, when removing it would leave a station tied by fewer
+    than two markers or its marker with no observation; its ``|w|`` then stays above the critical
+    value in ``w_test`` for the report to show.
 
     Examples
     --------
