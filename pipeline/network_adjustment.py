@@ -85,6 +85,10 @@ ELLIPSOID_CHI2_95 = float(chi2.ppf(0.95, 3))
 _DEFECT_NAMES = ("translation x", "translation y", "translation z",
                  "heading (rotation about the vertical)")
 
+#: Between data-snooping rounds the covariance is downdated while no station angle moved more
+#: than this since it was computed (the design changes by about that fraction; w by less).
+_DOWNDATE_ANGLE_RAD = 1e-3
+
 #: A Gauss-Newton step below this (m or rad) ends the iteration: far below any sigma, and
 #: convergence is quadratic for exact data, so the truth is then recovered to ~1e-14 m.
 _STEP_TOLERANCE = 1e-8
@@ -531,9 +535,12 @@ class _Solution:
     columns: np.ndarray       # (n, 9) their parameter indices
     misclosure: np.ndarray    # (n, 3) f = t + R p - m at the solution
     prior_misclosure: np.ndarray
-    covariance: np.ndarray
+    covariance: np.ndarray | None
     n_constraints: int
     iterations: int
+    converged: bool
+    normal: sp.csc_matrix     # (bordered) normal matrix at the solution
+    covariance_angles: np.ndarray | None = None  # (s, 3) angles the covariance is linearised at
 
 
 def _linearise(obs: NetworkObservations, pose: np.ndarray, markers: np.ndarray
@@ -723,8 +730,13 @@ def _downdated(covariance: np.ndarray, blocks: np.ndarray, columns: np.ndarray,
 
 
 def _solve(problem: _Problem, pose: np.ndarray, markers: np.ndarray, max_iterations: int,
-           covariance: bool = True) -> _Solution:
-    """Gauss-Newton from ``pose``/``markers`` to convergence, with the covariance (or None)."""
+           must_converge: bool = True) -> _Solution:
+    """Gauss-Newton from ``pose``/``markers`` to convergence (covariance left to the caller).
+
+    Without convergence in ``max_iterations`` steps: DataError, or with ``must_converge=False``
+    the last iterate (``converged`` False) — a blunder of metres makes Gauss-Newton converge
+    slowly, and its w-tests at the iterate already point at it.
+    """
     s = pose.shape[0]
     params = np.concatenate([pose.ravel(), markers.ravel()])
     u = params.size
@@ -737,19 +749,21 @@ def _solve(problem: _Problem, pose: np.ndarray, markers: np.ndarray, max_iterati
             assembly = _assembly(problem, columns, b)
         fp = _prior_misclosure(problem, params)
         normal, rhs = _normal_system(problem, assembly, blocks, columns, f, fp, b)
-        if np.abs(step).max() < _STEP_TOLERANCE:
+        converged = np.abs(step).max() < _STEP_TOLERANCE
+        if converged or iteration > max_iterations:
             break
-        if iteration > max_iterations:
-            raise DataError(f"the adjustment did not converge in {max_iterations} iterations "
-                            f"(last step {np.abs(step).max():.3g})")
         try:
             step = scipy.sparse.linalg.splu(normal).solve(rhs)[:u]
         except RuntimeError:
             raise DataError("the network's normal equations are singular (a station tied only "
                             "by markers on one vertical line?)") from None
         params = params + step
-    cov = _covariance(normal, 6 * s, u, problem.fixed) if covariance else None
-    return _Solution(pose, markers, blocks, columns, f, fp, cov, b.shape[0], iteration - 1)
+    if must_converge and not converged:
+        raise DataError(f"the adjustment did not converge in {max_iterations} iterations "
+                        f"(last step {np.abs(step).max():.3g}); a blunder? (data snooping "
+                        "finds it)")
+    return _Solution(pose, markers, blocks, columns, f, fp, None, b.shape[0], iteration - 1,
+                     bool(converged), normal)
 
 
 def _adjust_iv(obs, datum, settings, nominal) -> int:
@@ -899,19 +913,25 @@ def adjust(obs: NetworkObservations, datum: Datum = Datum(),
                                       ) + np.arange(3)
 
     solved_keep = np.ones(obs.n, dtype=bool)
+    snooping = settings.snooping and settings.max_rejections > 0
 
     def solve(keep, previous):
-        # after a removal the covariance is downdated, not re-inverted (see _downdated)
+        # After a removal the covariance is downdated (see _downdated) while the solution's
+        # angles (the design depends on no other parameter) stay within _DOWNDATE_ANGLE_RAD of
+        # those it was computed at; otherwise, e.g. once a blunder of metres is out, afresh.
         problem.obs = obs.subset(keep)
-        if previous is None:
-            sol = _solve(problem, pose0, markers0, settings.max_iterations)
-        else:
-            sol = _solve(problem, previous.pose, previous.markers, settings.max_iterations,
-                         covariance=False)
+        start = (pose0, markers0) if previous is None else (previous.pose, previous.markers)
+        sol = _solve(problem, *start, settings.max_iterations, must_converge=not snooping)
+        if (previous is not None and np.abs(sol.pose[:, 3:] - previous.covariance_angles).max()
+                < _DOWNDATE_ANGLE_RAD):
             row = int(np.flatnonzero(solved_keep & ~keep)[0])
             i = int(np.count_nonzero(solved_keep[:row]))
             sol.covariance = _downdated(previous.covariance, previous.blocks[i],
                                         previous.columns[i], np.full(3, 3.0 / obs.sigma_m[row]**2))
+            sol.covariance_angles = previous.covariance_angles
+        else:
+            sol.covariance = _covariance(sol.normal, 6 * s, problem.fixed.size, problem.fixed)
+            sol.covariance_angles = sol.pose[:, 3:].copy()
         solved_keep[:] = keep
         weight = np.repeat(3.0 / problem.obs.sigma_m[:, None]**2, 3, axis=1)
         return sol, w_tests(sol.blocks, sol.columns, weight, sol.covariance, -sol.misclosure)
@@ -923,14 +943,19 @@ def adjust(obs: NetworkObservations, datum: Datum = Datum(),
                 and not _tie_order(obs, trial, reference)[1])
 
     sol, keep, rejected = data_snooping(
-        solve, obs.n, settings.alpha0, settings.max_rejections if settings.snooping else 0,
-        removable)
-    if rejected:  # the covariance afresh at the final solution
-        iterations = sol.iterations
-        sol = _solve(problem, sol.pose, sol.markers, settings.max_iterations)
-        sol.iterations = iterations
+        solve, obs.n, settings.alpha0, settings.max_rejections if snooping else 0, removable)
     kept = obs.subset(keep)
     w = np.repeat(3.0 / kept.sigma_m[:, None]**2, 3, axis=1)
+    if not sol.converged:
+        w_last = np.abs(w_tests(sol.blocks, sol.columns, w, sol.covariance, -sol.misclosure))
+        i = int(np.flatnonzero(keep)[np.argmax(w_last.max(axis=1))])
+        raise DataError(f"the adjustment did not converge in {settings.max_iterations} "
+                        f"iterations after {len(rejected)} removals by data snooping; the "
+                        f"largest |w| ({w_last.max():.3g}) is at station "
+                        f"{obs.station_ids[obs.station[i]]}, marker "
+                        f"{obs.marker_ids[obs.marker[i]]}")
+    if not np.array_equal(sol.covariance_angles, sol.pose[:, 3:]):  # downdated: afresh
+        sol.covariance = _covariance(sol.normal, 6 * s, problem.fixed.size, problem.fixed)
     rel = observation_reliability(sol.blocks, sol.columns, w, sol.covariance, -sol.misclosure,
                                   position_columns, delta0)
     dof = (3 * kept.n + problem.prior_index.size - problem.fixed.size + problem.fixed.sum()
