@@ -10,18 +10,21 @@ and the ratio b/a from the same run, with the network's size, the rounds of snoo
 machine's load average. Wall and CPU seconds are both printed: on a busy machine the wall time
 grows (BLAS threads wait for cores) while the CPU time shows the work done.
 
+``--blas-threads 1`` caps OpenBLAS (numpy's and scipy's) at one thread, set before numpy is
+imported: on a machine busy with other work its idle BLAS threads otherwise spin and wait for
+cores, and the wall time doubles.
+
 Usage: ``python benchmarks/adjust_network.py [--stations 100] [--markers-per-station 2.5]
-[--repeat 5] [--seed 3]``
+[--repeat 5] [--seed 3] [--blas-threads N]``
 """
 
 from __future__ import annotations
 
 import argparse
 import os
+import statistics
 import time
 from unittest import mock
-
-import numpy as np
 
 
 class _DenseFactor:
@@ -31,6 +34,8 @@ class _DenseFactor:
         self.matrix = matrix.toarray()
 
     def solve(self, rhs):
+        import numpy as np
+
         return np.linalg.solve(self.matrix, rhs)
 
 
@@ -42,7 +47,7 @@ def _median_time(fn, repeat: int) -> tuple[float, float, object]:
         out = fn()
         wall.append(time.perf_counter() - t0)
         cpu.append(time.process_time() - c0)
-    return float(np.median(wall)), float(np.median(cpu)), out
+    return statistics.median(wall), statistics.median(cpu), out
 
 
 def main() -> None:
@@ -51,7 +56,12 @@ def main() -> None:
     ap.add_argument("--markers-per-station", type=float, default=2.5)
     ap.add_argument("--repeat", type=int, default=5)
     ap.add_argument("--seed", type=int, default=3)
+    ap.add_argument("--blas-threads", type=int, default=None)
     args = ap.parse_args()
+    if args.blas_threads is not None:
+        os.environ["OPENBLAS_NUM_THREADS"] = os.environ["OMP_NUM_THREADS"] = str(args.blas_threads)
+
+    import numpy as np
 
     from pipeline.network_adjustment import adjust
     from pipeline.network_simulation import simulated_network
@@ -61,7 +71,8 @@ def main() -> None:
     unknowns = 6 * len(obs.station_ids) + 3 * len(obs.marker_ids)
     print(f"network: {len(obs.station_ids)} stations, {len(obs.marker_ids)} markers, "
           f"{obs.n} observations, {unknowns} unknowns; load average "
-          f"{os.getloadavg()[0]:.2f} on {os.cpu_count()} cores")
+          f"{os.getloadavg()[0]:.2f} on {os.cpu_count()} cores; BLAS threads "
+          f"{args.blas_threads or 'default'}")
 
     def shipped():
         return adjust(obs, nominal=truth.nominal)
