@@ -145,10 +145,12 @@ class NetworkObservations:
                 set_(self, name, np.asarray(getattr(self, name), dtype=dtype))
             except (TypeError, ValueError) as exc:
                 raise InputFileError(f"`{name}` must be numeric: {exc}") from None
-        n = self.station.shape[0] if self.station.ndim == 1 else -1
+        if self.station.ndim != 1:
+            raise InputFileError(f"`station` must have shape (n,), got {self.station.shape}")
+        n = self.station.shape[0]
         expected = {"station": (n,), "marker": (n,), "xyz_m": (n, 3), "sigma_m": (n,)}
         for name, shape in expected.items():
-            if getattr(self, name).shape != shape or n < 0:
+            if getattr(self, name).shape != shape:
                 raise InputFileError(f"`{name}` must have shape {shape} (n observations), "
                                      f"got {getattr(self, name).shape}")
         for name, ids in (("station", self.station_ids), ("marker", self.marker_ids)):
