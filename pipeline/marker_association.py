@@ -18,7 +18,7 @@ Without a plan (:func:`associate_by_geometry`)
     on that transform. For each pair of stations, pairs of detections whose two invariants
     agree (within their sigmas) give candidate transforms. The best-supported transform is
     refined by weighted 2-D Procrustes on its gated one-to-one correspondences. A rival
-    transform that explains as many other correspondences as half the best's makes the
+    transform with other correspondences, at least half as many as the best's, makes the
     pair ambiguous (a symmetric layout such as a regular grid), and the pair is left
     unmatched.
     Correspondences of all pairs are merged with union-find. A merge that would put two
@@ -51,8 +51,8 @@ from pipeline.rig import rot_z
 #: every alternative by at least these odds.
 AMBIGUITY_ODDS = 100.0
 
-#: A rival transform makes a station pair ambiguous when it explains at least this fraction
-#: of the best transform's correspondences (and at least ``min_correspondences``) others.
+#: A rival transform makes a station pair ambiguous when its correspondences outside the
+#: best transform's number at least this fraction of the best's (and ``min_correspondences``).
 #: On a regular grid the transforms shifted by one spacing keep most of the best's support.
 RIVAL_FRACTION = 0.5
 
@@ -407,7 +407,7 @@ def associate_by_geometry(stations: Sequence[tuple[str, np.ndarray]],
     Three detections then match three others whenever their three distances agree, which
     happens by chance in large layouts, hence the default of 4 correspondences. The cost
     grows with the fourth power of the detections per station: about 10 ms per station
-    pair at 10 detections, 0.5 s at 50 (flat ground), more for a repetitive layout.
+    pair at 10 detections, about 1 s at 50 (flat ground), more for a repetitive layout.
 
     Examples
     --------
