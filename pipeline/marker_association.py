@@ -44,7 +44,7 @@ from scipy.optimize import linear_sum_assignment
 from scipy.stats import chi2
 
 from markerplan.errors import ConfigError
-from pipeline.rig import rot_z
+from pipeline.rig import fit_heading_shift, rot_z
 
 #: Squared-distance margin of "clearly better": a match is kept only if no alternative is
 #: within ``2 ln(ambiguity_odds)``, i.e. the Gaussian likelihood of the best assignment beats
@@ -597,32 +597,9 @@ def _refine(a, b, var, hypotheses, h, gate):
         if np.array_equal(new, pairs):
             break
         pairs = new
-        heading, shift, spread, centre = _fit_heading_shift(
+        heading, shift, spread, centre = fit_heading_shift(
             a[pairs[:, 0]], b[pairs[:, 1]], 1.0 / var[pairs[:, 0], pairs[:, 1]])
     return pairs, float(heading), shift
-
-
-def _fit_heading_shift(src: np.ndarray, dst: np.ndarray, weight: np.ndarray
-                       ) -> tuple[float, np.ndarray, np.ndarray, np.ndarray]:
-    """Weighted least-squares ``dst ~ Rz(heading) src + shift`` (closed form, 4-DoF).
-
-    Returns
-    -------
-    heading : float
-    shift : (3,) float
-    spread : (2,) float
-        Heading variance (rad^2) and per-axis variance of the weighted centre (m^2), for
-        ``weight`` = 1 / per-axis variance.
-    centre : (3,) float
-        Weighted centre of ``src``.
-    """
-    total = weight.sum()
-    cs, cd = weight @ src / total, weight @ dst / total
-    s, d = src - cs, dst - cd
-    heading = math.atan2(float(weight @ (s[:, 0] * d[:, 1] - s[:, 1] * d[:, 0])),
-                         float(weight @ (s[:, 0] * d[:, 0] + s[:, 1] * d[:, 1])))
-    lever = float(weight @ (s[:, 0] ** 2 + s[:, 1] ** 2))
-    return heading, cd - rot_z(heading) @ cs, np.array([1.0 / max(lever, 1e-12), 1.0 / total]), cs
 
 
 def _geometry_iv(stations, sigma, station_pairs, min_support, probability, inclinometer):
