@@ -489,6 +489,9 @@ def accuracy_cuts(problem: PlanProblem, model: Model, selected: np.ndarray, conf
 _GROW_MAX_TIES = 250_000
 #: Network mode: exact evaluations a growth may spend.
 _GROW_MAX_EVALS = 14
+#: Network mode: tangent cuts per round for at most this many failing stations (the worst;
+#: their rows are dense over every tying site).
+_MAX_OA_STATIONS = 20
 #: Network mode: weight of the every-site information added to an undetermined layout's
 #: information before linearising (any positive definite point gives valid tangents).
 _REGULARISE = 0.05
@@ -606,7 +609,8 @@ def network_cuts(problem: PlanProblem, model: Model, selected: np.ndarray, confi
 
     cov0 = cov if cov.determined.all() else net.covariance(j_sel + _REGULARISE * j_all)
     rim = "spread" if failing.size <= 10 else "worst"
-    tangents = net.station_tangents(cov0, failing, req, rim=rim)
+    worst_first = failing[np.argsort(-np.nan_to_num(err[failing], posinf=1e300), kind="stable")]
+    tangents = net.station_tangents(cov0, worst_first[:_MAX_OA_STATIONS], req, rim=rim)
     for k, coef, rhs in tangents:
         pos = np.flatnonzero(in_model & (coef > 0))
         add(pos, coef[pos] / rhs, 1.0, RowKind("oa", k))
