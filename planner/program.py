@@ -74,7 +74,9 @@ class RowKind:
     family : str
         "count", "info", "sector", "sector2", "sector21", "directions", "directions-loss",
         "budget" (from :func:`build_model`), "heading", "oa0" (:func:`tightening_rows`), "cut",
-        "oa", "cut-loss", "oa-loss", "info-loss", "heading-loss" (:func:`accuracy_cuts`).
+        "oa", "cut-loss", "oa-loss", "info-loss", "heading-loss" (:func:`accuracy_cuts`);
+        network mode: "upper-bound", "cut", "connect", "oa", "cut-marker", "oa-marker"
+        (:func:`network_cuts`).
     station : int
         Index of the station the row belongs to, -1 for rows of no station (budget).
     """
@@ -492,6 +494,14 @@ _GROW_MAX_EVALS = 14
 #: Network mode: tangent cuts per round for at most this many failing stations (the worst;
 #: their rows are dense over every tying site).
 _MAX_OA_STATIONS = 20
+#: Network mode, large problems: most terms of a cut row (see :func:`network_cuts`).
+_MAX_TERMS = 3000
+#: Network mode: problems with more tying sites than this get sparse cut rows, under the
+#: upper bound of the greedy layout's count.
+_SPARSE_ABOVE_SITES = 8000
+#: Network mode, large problems: the greedy upper bound adds the best site of this many of the
+#: worst stations per step.
+_GREEDY_BATCH = 10
 #: Network mode: weight of the every-site information added to an undetermined layout's
 #: information before linearising (any positive definite point gives valid tangents).
 _REGULARISE = 0.05
@@ -559,8 +569,29 @@ def _raise_network_infeasible(problem: PlanProblem, config, net: NetworkModel,
             + "; relax the configuration, add candidate sites or a heading prior")
 
 
+def _sparse_tangent(coef: np.ndarray, rhs: float, upper_bound: int | None,
+                    max_terms: int) -> tuple[np.ndarray, np.ndarray, float] | None:
+    """A tangent cut ``sum_j coef_j x_j >= rhs`` with at most ``max_terms`` terms, valid for
+    every layout of at most ``upper_bound`` sites.
+
+    The dropped terms hold at most the ``upper_bound`` largest dropped coefficients, so
+    ``sum_{kept} coef_j x_j >= rhs - (sum of those)``. Returns ``(sites, coef / rhs', 1)``
+    normalised to ``>= 1``, or ``None`` when the cut would say nothing.
+    """
+    pos = np.flatnonzero(coef > 0)
+    if upper_bound is None or pos.size <= max_terms:
+        return pos, coef[pos] / rhs, 1.0
+    order = pos[np.argsort(-coef[pos], kind="stable")]
+    keep, drop = order[:max_terms], order[max_terms:]
+    slack = float(np.sum(coef[drop[:upper_bound]]))
+    if rhs - slack <= 1e-3 * rhs:
+        return None
+    keep = np.sort(keep)
+    return keep, coef[keep] / (rhs - slack), 1.0
+
+
 def network_cuts(problem: PlanProblem, model: Model, selected: np.ndarray, config,
-                 net: NetworkModel, j_all: np.ndarray
+                 net: NetworkModel, j_all: np.ndarray, upper_bound: int | None = None
                  ) -> tuple[sp.csr_array | None, list[float], list[RowKind]]:
     """Valid cuts for every station and selected marker that fails with ``selected`` in
     network mode.
@@ -576,10 +607,18 @@ def network_cuts(problem: PlanProblem, model: Model, selected: np.ndarray, confi
     failing selected marker ``m``: ``"cut-marker"`` ``sum_{j tying, not in T} x_j - x_m >= 0``
     and ``"oa-marker"`` ``sum_j c_j x_j - rhs x_m >= 0`` (enforced only when ``x_m = 1``).
 
+    On large problems (``upper_bound`` given: no layout of interest has more sites, e.g. a
+    feasible layout's count) tangent rows keep their ``_MAX_TERMS`` largest coefficients and
+    lower their right-hand side by the most the dropped terms can add
+    (:func:`_sparse_tangent`), and combinatorial rows over more than ``_MAX_TERMS`` sites are
+    left out (valid, merely weak): every row is still valid for those layouts.
+
     Parameters
     ----------
     j_all : (P, P) float
         Information of every allowed site (the regularisation).
+    upper_bound : int, optional
+        Most sites a layout of interest selects (enables the sparse rows).
 
     Returns
     -------
@@ -611,9 +650,12 @@ def network_cuts(problem: PlanProblem, model: Model, selected: np.ndarray, confi
     rim = "spread" if failing.size <= 10 else "worst"
     worst_first = failing[np.argsort(-np.nan_to_num(err[failing], posinf=1e300), kind="stable")]
     tangents = net.station_tangents(cov0, worst_first[:_MAX_OA_STATIONS], req, rim=rim)
+    dense_ok = upper_bound is None
+
     for k, coef, rhs in tangents:
-        pos = np.flatnonzero(in_model & (coef > 0))
-        add(pos, coef[pos] / rhs, 1.0, RowKind("oa", k))
+        cut = _sparse_tangent(np.where(in_model, coef, 0.0), rhs, upper_bound, _MAX_TERMS)
+        if cut is not None:
+            add(cut[0], cut[1], cut[2], RowKind("oa", k))
     grow = failing[np.argmax(err[failing])] if failing.size and \
         net.tie_a.size <= _GROW_MAX_TIES and np.isfinite(err[failing]).any() else -1
     linked = net.connected_to_reference(selected)
@@ -624,7 +666,9 @@ def network_cuts(problem: PlanProblem, model: Model, selected: np.ndarray, confi
             first = [c for kk, c, _ in tangents if kk == k]
             chosen = _grow_network(net, chosen, int(k), req, tying & ~selected, j_sel,
                                    first[0] if first else None)
-        add(np.flatnonzero(tying & ~chosen), 1.0, 1.0, RowKind("cut", int(k)))
+        rest = np.flatnonzero(tying & ~chosen)
+        if dense_ok or rest.size <= _MAX_TERMS:
+            add(rest, 1.0, 1.0, RowKind("cut", int(k)))
         if not linked[k]:
             comp = _component(net, selected, int(k))
             if comp in done_components:
@@ -635,14 +679,19 @@ def network_cuts(problem: PlanProblem, model: Model, selected: np.ndarray, confi
             a = np.bincount(net.pair_site, inside[net.pair_station], minlength=problem.n_sites)
             b = net.n_stations_seeing - a
             bridge = np.flatnonzero(tying & (a > 0) & (b > 0))
-            add(bridge, 1.0, 1.0, RowKind("connect", int(k)))
+            if dense_ok or bridge.size <= 4 * _MAX_TERMS:
+                add(bridge, 1.0, 1.0, RowKind("connect", int(k)))
     if bad_markers.size:
         for m, coef, rhs in net.marker_tangents(cov, bad_markers, req):
-            pos = np.flatnonzero(in_model & (coef > 0))
-            add(np.r_[pos, m], np.r_[coef[pos] / rhs, -1.0], 0.0, RowKind("oa-marker"))
-        for m in bad_markers:
-            rest = np.flatnonzero(tying & ~selected)
+            cut = _sparse_tangent(np.where(in_model, coef, 0.0), rhs, upper_bound, _MAX_TERMS)
+            if cut is not None:
+                add(np.r_[cut[0], m], np.r_[cut[1], -1.0], 0.0, RowKind("oa-marker"))
+        rest = np.flatnonzero(tying & ~selected)
+        for m in bad_markers if dense_ok or rest.size <= _MAX_TERMS else ():
             add(np.r_[rest, m], np.r_[np.ones(rest.size), -1.0], 0.0, RowKind("cut-marker"))
+    if not rows:
+        raise InfeasiblePlanError("network mode: the layout fails but no cut could be made "
+                                  "sparse enough; raise the marker upper bound")
     return sp.csr_array(sp.vstack(rows)), lower, kinds
 
 
@@ -756,9 +805,26 @@ def _plan_network(problem: PlanProblem, config, model: Model | None,
     model = replace(model, ub=ub)
     forbidden = problem.site_mask(config.forbidden, "forbidden")
     j_all = net.information(~forbidden & ~hopeless & (net.n_stations_seeing > 0))
+    upper_bound = None
+    existing = problem.site_mask(config.existing, "existing") | problem.site_existing
+    if int(net.tying.sum()) > _SPARSE_ABOVE_SITES and np.all(problem.site_cost[~existing] == 1):
+        # every layout at least as good as the greedy one has at most its number of sites
+        from planner.baselines import greedy_network
+
+        greedy = greedy_network(problem, config.replace(
+            forbidden=config.forbidden + tuple(problem.site_ids[j]
+                                               for j in np.flatnonzero(hopeless & ~forbidden))),
+            net, batch=_GREEDY_BATCH)
+        in_model = model.site_var >= 0
+        upper_bound = int((greedy.selected & in_model).sum())
+        nx = model.var_site.size
+        row = sp.csr_array((np.ones(nx), (np.zeros(nx, np.int64), np.arange(nx))),
+                           shape=(1, model.n_vars))
+        model = model.with_rows(row, [-np.inf], [float(upper_bound)],
+                                [RowKind("upper-bound")])
 
     def cuts(selected):
-        return network_cuts(problem, model, selected, config, net, j_all)
+        return network_cuts(problem, model, selected, config, net, j_all, upper_bound)
 
     def check(selected):
         return evaluate_layout(problem, selected, config, infos, net=net)

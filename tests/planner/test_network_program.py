@@ -61,3 +61,19 @@ def test_infeasible_network_names_the_station_and_why():
         plan_sites(make_problem([[0, 0], [15, 0]], sites[:5], max_range_m=12), cfg)
     with pytest.raises(ConfigError, match="redundant"):
         plan_sites(p, cfg.replace(redundant=True))
+
+
+def test_a_sparse_tangent_removes_no_layout_the_full_one_keeps():
+    from planner.program import _sparse_tangent
+
+    rng = np.random.default_rng(0)
+    coef = rng.exponential(1.0, 12) ** 3
+    rhs = float(np.sort(coef)[-3:].sum() * 0.8)
+    sites, c, lo = _sparse_tangent(coef, rhs, upper_bound=3, max_terms=5)
+    assert sites.size == 5
+    for combo in itertools.chain.from_iterable(itertools.combinations(range(12), k)
+                                               for k in range(4)):
+        x = np.zeros(12)
+        x[list(combo)] = 1.0
+        if x @ coef >= rhs:
+            assert x[sites] @ c >= lo - 1e-12
