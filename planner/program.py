@@ -495,7 +495,7 @@ _GROW_MAX_EVALS = 14
 #: their rows are dense over every tying site).
 _MAX_OA_STATIONS = 20
 #: Network mode, large problems: most terms of a cut row (see :func:`network_cuts`).
-_MAX_TERMS = 3000
+_MAX_TERMS = 2000
 #: Network mode: problems with more tying sites than this get sparse cut rows, under the
 #: upper bound of the greedy layout's count.
 _SPARSE_ABOVE_SITES = 8000
@@ -570,23 +570,26 @@ def _raise_network_infeasible(problem: PlanProblem, config, net: NetworkModel,
 
 
 def _sparse_tangent(coef: np.ndarray, rhs: float, upper_bound: int | None,
-                    max_terms: int) -> tuple[np.ndarray, np.ndarray, float] | None:
-    """A tangent cut ``sum_j coef_j x_j >= rhs`` with at most ``max_terms`` terms, valid for
-    every layout of at most ``upper_bound`` sites.
+                    max_terms: int) -> tuple[np.ndarray, np.ndarray, float]:
+    """A tangent cut ``sum_j coef_j x_j >= rhs`` with fewer terms, valid for every layout of at
+    most ``upper_bound`` sites.
 
-    The dropped terms hold at most the ``upper_bound`` largest dropped coefficients, so
-    ``sum_{kept} coef_j x_j >= rhs - (sum of those)``. Returns ``(sites, coef / rhs', 1)``
-    normalised to ``>= 1``, or ``None`` when the cut would say nothing.
+    The terms are kept largest first: at least ``max_terms``, and as many more as it takes
+    for the ``upper_bound`` largest dropped coefficients — the most the dropped terms can add
+    — to sum to at most half of ``rhs``; then ``sum_{kept} coef_j x_j >= rhs - (that sum)``.
+    Returns ``(sites, coefficients, 1.0)`` normalised to ``>= 1``.
     """
     pos = np.flatnonzero(coef > 0)
     if upper_bound is None or pos.size <= max_terms:
         return pos, coef[pos] / rhs, 1.0
     order = pos[np.argsort(-coef[pos], kind="stable")]
-    keep, drop = order[:max_terms], order[max_terms:]
-    slack = float(np.sum(coef[drop[:upper_bound]]))
-    if rhs - slack <= 1e-3 * rhs:
-        return None
-    keep = np.sort(keep)
+    c = np.r_[coef[order], np.zeros(upper_bound)]
+    cum = np.r_[0.0, np.cumsum(c)]
+    k = np.arange(max_terms, order.size + 1)
+    slack = cum[k + upper_bound] - cum[k]  # the upper_bound largest after the first k
+    k = int(k[np.argmax(slack <= 0.5 * rhs)])
+    slack = float(cum[k + upper_bound] - cum[k])
+    keep = np.sort(order[:k])
     return keep, coef[keep] / (rhs - slack), 1.0
 
 
@@ -654,8 +657,7 @@ def network_cuts(problem: PlanProblem, model: Model, selected: np.ndarray, confi
 
     for k, coef, rhs in tangents:
         cut = _sparse_tangent(np.where(in_model, coef, 0.0), rhs, upper_bound, _MAX_TERMS)
-        if cut is not None:
-            add(cut[0], cut[1], cut[2], RowKind("oa", k))
+        add(cut[0], cut[1], cut[2], RowKind("oa", k))
     grow = failing[np.argmax(err[failing])] if failing.size and \
         net.tie_a.size <= _GROW_MAX_TIES and np.isfinite(err[failing]).any() else -1
     linked = net.connected_to_reference(selected)
@@ -684,14 +686,12 @@ def network_cuts(problem: PlanProblem, model: Model, selected: np.ndarray, confi
     if bad_markers.size:
         for m, coef, rhs in net.marker_tangents(cov, bad_markers, req):
             cut = _sparse_tangent(np.where(in_model, coef, 0.0), rhs, upper_bound, _MAX_TERMS)
-            if cut is not None:
-                add(np.r_[cut[0], m], np.r_[cut[1], -1.0], 0.0, RowKind("oa-marker"))
+            add(np.r_[cut[0], m], np.r_[cut[1], -1.0], 0.0, RowKind("oa-marker"))
         rest = np.flatnonzero(tying & ~selected)
         for m in bad_markers if dense_ok or rest.size <= _MAX_TERMS else ():
             add(np.r_[rest, m], np.r_[np.ones(rest.size), -1.0], 0.0, RowKind("cut-marker"))
-    if not rows:
-        raise InfeasiblePlanError("network mode: the layout fails but no cut could be made "
-                                  "sparse enough; raise the marker upper bound")
+    if not rows:  # pragma: no cover - a failing station always yields a tangent
+        raise InfeasiblePlanError("network mode: the layout fails but no cut was found")
     return sp.csr_array(sp.vstack(rows)), lower, kinds
 
 
@@ -792,6 +792,7 @@ def _plan_network(problem: PlanProblem, config, model: Model | None,
     if config.redundant:
         raise ConfigError("redundant mode is not available in network mode yet; drop one of "
                           "--redundant and --network")
+    t0 = time.perf_counter()
     net = network_model(problem, config)
     hopeless = network_preflight(problem, config, net, infos)
     if model is None:
@@ -805,7 +806,7 @@ def _plan_network(problem: PlanProblem, config, model: Model | None,
     model = replace(model, ub=ub)
     forbidden = problem.site_mask(config.forbidden, "forbidden")
     j_all = net.information(~forbidden & ~hopeless & (net.n_stations_seeing > 0))
-    upper_bound = None
+    upper_bound = greedy_selected = None
     existing = problem.site_mask(config.existing, "existing") | problem.site_existing
     if int(net.tying.sum()) > _SPARSE_ABOVE_SITES and np.all(problem.site_cost[~existing] == 1):
         # every layout at least as good as the greedy one has at most its number of sites
@@ -816,6 +817,7 @@ def _plan_network(problem: PlanProblem, config, model: Model | None,
                                                for j in np.flatnonzero(hopeless & ~forbidden))),
             net, batch=_GREEDY_BATCH)
         in_model = model.site_var >= 0
+        greedy_selected = greedy.selected
         upper_bound = int((greedy.selected & in_model).sum())
         nx = model.var_site.size
         row = sp.csr_array((np.ones(nx), (np.zeros(nx, np.int64), np.arange(nx))),
@@ -829,20 +831,38 @@ def _plan_network(problem: PlanProblem, config, model: Model | None,
     def check(selected):
         return evaluate_layout(problem, selected, config, infos, net=net)
 
-    return _cut_loop(problem, config, model, cuts, check)
+    return _cut_loop(problem, config, model, cuts, check, incumbent=greedy_selected, t0=t0)
 
 
-def _cut_loop(problem: PlanProblem, config, model: Model, cuts, check) -> PlanResult:
+def _cut_loop(problem: PlanProblem, config, model: Model, cuts, check,
+              incumbent: np.ndarray | None = None, t0: float | None = None) -> PlanResult:
     """Solve, cut with ``cuts(selected) -> (rows, lower, kinds)`` (``rows`` None: passes),
-    re-solve until every check passes; ``check(selected) -> LayoutCheck``."""
-    t0 = time.perf_counter()
+    re-solve until every check passes; ``check(selected) -> LayoutCheck``.
+
+    ``incumbent`` ((n,) bool, a layout known to pass): when the time limit stops the loop, it
+    is the answer, with status ``"time_limit"``, the best lower bound any solve proved (every
+    cut is valid, so each solve's dual bound bounds the optimum) and their gap. ``t0``: when
+    the time limit started (default now).
+    """
+    t0 = time.perf_counter() if t0 is None else t0
     solve_time = 0.0
     n_cuts = 0
     history = []
     iteration = 0
+    bound = -np.inf
     while True:
         iteration += 1
         remaining = config.time_limit_s - (time.perf_counter() - t0)
+        if remaining <= 0 and incumbent is not None:
+            obj = float(problem.site_cost[incumbent].sum())
+            gap = (obj - bound) / max(abs(obj), 1e-9) if np.isfinite(bound) else float("nan")
+            sol = Solution(status="time_limit", selected=incumbent, objective=obj,
+                           dual_bound=float(bound), gap=float(gap), solve_time_s=0.0,
+                           message="time limit: the passing layout found first, with the best "
+                                   "proven bound")
+            return PlanResult(selected=incumbent, check=check(incumbent), solution=sol,
+                              iterations=iteration - 1, n_cuts=n_cuts,
+                              solve_time_s=solve_time, model=model, history=history)
         if remaining <= 0:
             raise InfeasiblePlanError(
                 f"time limit {config.time_limit_s:g} s reached after {iteration - 1} "
@@ -850,6 +870,8 @@ def _cut_loop(problem: PlanProblem, config, model: Model, cuts, check) -> PlanRe
                 "raise --time-limit")
         sol = solve(model, remaining, config.mip_gap)
         solve_time += sol.solve_time_s
+        if np.isfinite(sol.dual_bound):
+            bound = max(bound, sol.dual_bound)
         history.append({"iteration": iteration, "status": sol.status,
                         "objective": sol.objective, "dual_bound": sol.dual_bound,
                         "solve_time_s": sol.solve_time_s, "n_rows": int(model.A.shape[0])})
@@ -860,6 +882,8 @@ def _cut_loop(problem: PlanProblem, config, model: Model, cuts, check) -> PlanRe
                        "the stations' direction and accuracy requirements conflict")
                 raise InfeasiblePlanError(f"no layout is feasible: {why}; "
                                           "raise --budget or relax the configuration")
+            if incumbent is not None:
+                continue  # time limit: the incumbent is the answer
             raise InfeasiblePlanError(f"solver found no layout ({sol.status}: {sol.message}); "
                                       "raise --time-limit")
         rows, lower, kinds = cuts(sol.selected)
