@@ -492,10 +492,14 @@ _GROW_MAX_TIES = 250_000
 #: Network mode: exact evaluations a growth may spend.
 _GROW_MAX_EVALS = 14
 #: Network mode: tangent cuts per round for at most this many failing stations (the worst;
-#: their rows are dense over every tying site).
+#: their rows are dense over every tying site), and as many failing markers; a quarter of
+#: that on large problems.
 _MAX_OA_STATIONS = 20
 #: Network mode, large problems: most terms of a cut row (see :func:`network_cuts`).
-_MAX_TERMS = 2000
+_MAX_TERMS = 500
+#: Network mode, large problems: a sparse tangent row gives up at most this fraction of its
+#: right-hand side (weaker rows, fewer terms: HiGHS slows badly on dense rows).
+_SPARSE_SLACK = 0.9
 #: Network mode: problems with more tying sites than this get sparse cut rows, under the
 #: upper bound of the greedy layout's count.
 _SPARSE_ABOVE_SITES = 8000
@@ -576,7 +580,8 @@ def _sparse_tangent(coef: np.ndarray, rhs: float, upper_bound: int | None,
 
     The terms are kept largest first: at least ``max_terms``, and as many more as it takes
     for the ``upper_bound`` largest dropped coefficients — the most the dropped terms can add
-    — to sum to at most half of ``rhs``; then ``sum_{kept} coef_j x_j >= rhs - (that sum)``.
+    — to sum to at most ``_SPARSE_SLACK`` of ``rhs``; then
+    ``sum_{kept} coef_j x_j >= rhs - (that sum)``.
     Returns ``(sites, coefficients, 1.0)`` normalised to ``>= 1``.
     """
     pos = np.flatnonzero(coef > 0)
@@ -587,7 +592,7 @@ def _sparse_tangent(coef: np.ndarray, rhs: float, upper_bound: int | None,
     cum = np.r_[0.0, np.cumsum(c)]
     k = np.arange(max_terms, order.size + 1)
     slack = cum[k + upper_bound] - cum[k]  # the upper_bound largest after the first k
-    k = int(k[np.argmax(slack <= 0.5 * rhs)])
+    k = int(k[np.argmax(slack <= _SPARSE_SLACK * rhs)])
     slack = float(cum[k + upper_bound] - cum[k])
     keep = np.sort(order[:k])
     return keep, coef[keep] / (rhs - slack), 1.0
@@ -652,7 +657,8 @@ def network_cuts(problem: PlanProblem, model: Model, selected: np.ndarray, confi
     cov0 = cov if cov.determined.all() else net.covariance(j_sel + _REGULARISE * j_all)
     rim = "spread" if failing.size <= 10 else "worst"
     worst_first = failing[np.argsort(-np.nan_to_num(err[failing], posinf=1e300), kind="stable")]
-    tangents = net.station_tangents(cov0, worst_first[:_MAX_OA_STATIONS], req, rim=rim)
+    n_oa = _MAX_OA_STATIONS if upper_bound is None else _MAX_OA_STATIONS // 4
+    tangents = net.station_tangents(cov0, worst_first[:n_oa], req, rim=rim)
     dense_ok = upper_bound is None
 
     for k, coef, rhs in tangents:
@@ -684,7 +690,8 @@ def network_cuts(problem: PlanProblem, model: Model, selected: np.ndarray, confi
             if dense_ok or bridge.size <= 4 * _MAX_TERMS:
                 add(bridge, 1.0, 1.0, RowKind("connect", int(k)))
     if bad_markers.size:
-        for m, coef, rhs in net.marker_tangents(cov, bad_markers, req):
+        worst_m = bad_markers[np.argsort(-merr[merr > req], kind="stable")]
+        for m, coef, rhs in net.marker_tangents(cov, worst_m[:n_oa], req):
             cut = _sparse_tangent(np.where(in_model, coef, 0.0), rhs, upper_bound, _MAX_TERMS)
             add(np.r_[cut[0], m], np.r_[cut[1], -1.0], 0.0, RowKind("oa-marker"))
         rest = np.flatnonzero(tying & ~selected)
