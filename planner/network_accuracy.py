@@ -55,12 +55,10 @@ from scipy.sparse import csr_array
 from scipy.sparse.csgraph import connected_components
 
 from markerplan.errors import ConfigError
+from pipeline.network_adjustment import POSE_PARAMETERS  # noqa: F401 (re-exported)
 from planner import accuracy
 from planner.accuracy import CHI2_3_95, lambda_max_sym3
 from planner.usability import PlanProblem
-
-#: Pose parameters of a station, in this order (shared with the network adjustment).
-POSE_PARAMETERS = ("x_m", "y_m", "z_m", "heading_rad", "roll_rad", "pitch_rad")
 
 _CHUNK = 100_000
 

@@ -128,7 +128,8 @@ def plan_record(outcome) -> dict:
 def _network_record(outcome, stations: list[dict], markers: list[dict]) -> dict:
     """Network mode: the datum, per-station ties and per-marker errors (added in place to
     ``stations`` and ``markers``), and the weakest stations."""
-    from planner.network_accuracy import POSE_PARAMETERS, network_model
+    from pipeline.network_adjustment import POSE_PARAMETERS
+    from planner.network_accuracy import network_model
 
     cfg, prob, res = outcome.config, outcome.problem, outcome.result
     net = network_model(prob, cfg)
