@@ -108,18 +108,87 @@ def errors_from_information(j: np.ndarray, working_radius_m: float,
 def _worst_variance(cov: np.ndarray, working_radius_m: float,
                     inclinometer_sigma_rad: float) -> np.ndarray:
     """max over the station and the rim of lambda_max(Sigma(q)), for (k, 4, 4) covariances."""
+    sig = rim_covariances(cov, working_radius_m)
+    radius = np.full(sig.shape[1], working_radius_m)
+    radius[0] = 0.0
+    sig[..., 2, 2] += (radius * inclinometer_sigma_rad) ** 2
+    return lambda_max_sym3(sig).max(axis=1)
+
+
+def rim_covariances(cov: np.ndarray, working_radius_m: float) -> np.ndarray:
+    """``G(q) C G(q)^T`` at the station (``q = 0``) and at 72 rim points ``|q| = R``.
+
+    Parameters
+    ----------
+    cov : (k, 4, 4) or (k, 6, 6) float
+        Pose covariances: (x, y, z, heading) or (x, y, z, heading, roll, pitch)
+        (:data:`planner.network_accuracy.POSE_PARAMETERS`), m^2, m rad, rad^2.
+    working_radius_m : float
+        ``R``, m; the rim points lie at the station's height.
+
+    Returns
+    -------
+    sigma : (k, 73, 3, 3) float
+        Covariance of the registered position of each point, m^2. With 6 parameters the
+        roll and pitch columns ``(0, 0, q_y)``, ``(0, 0, -q_x)`` of ``G(q)``
+        (:func:`pose_design_blocks`) add their terms; the 4-parameter part is the same
+        arithmetic either way.
+
+    Examples
+    --------
+    >>> c = np.zeros((1, 6, 6)); c[0, 4, 4] = 1e-8
+    >>> s = rim_covariances(c, 10.0)
+    >>> float(s[0, 0, 2, 2]), round(float(s[0, :, 2, 2].max()), 12)
+    (0.0, 1e-06)
+    """
     g = _rim_blocks(working_radius_m)
     h = g[:, :, 3]  # (r, 3) heading columns (-q_y, q_x, 0)
-    radius = np.full(g.shape[0], working_radius_m)
-    radius[0] = 0.0
     c_tt = cov[:, None, :3, :3]
     c = cov[:, None, :3, 3]  # (k, 1, 3)
     cpp = cov[:, None, 3, 3, None, None]
     hh = h[None]
     sig = (c_tt + hh[..., :, None] * c[..., None, :] + c[..., :, None] * hh[..., None, :]
            + cpp * hh[..., :, None] * hh[..., None, :])
-    sig[..., 2, 2] += (radius * inclinometer_sigma_rad) ** 2
-    return lambda_max_sym3(sig).max(axis=1)
+    if cov.shape[-1] == 6:
+        t = -h[:, :2]  # (r, 2) tilt lever arm (q_y, -q_x) of the vertical component
+        m = (np.einsum("kab,rb->kra", cov[:, :3, 4:], t)
+             + hh * np.einsum("kb,rb->kr", cov[:, 3, 4:], t)[..., None])
+        sig[..., :, 2] += m
+        sig[..., 2, :] += m
+        sig[..., 2, 2] += np.einsum("ra,kab,rb->kr", t, cov[:, 4:, 4:], t)
+    return sig
+
+
+def pose_design_blocks(offset_xyz: np.ndarray) -> np.ndarray:
+    """(k, 3, 6) design blocks of points at levelled offsets ``p`` from a station (heading 0).
+
+    Columns: ``d m / d(x, y, z) = I3``, heading ``(-p_y, p_x, 0)``, roll ``(0, -p_z, p_y)``,
+    pitch ``(p_z, 0, -p_x)`` — the 6-parameter model of network mode (the first four columns
+    are those of the 4-parameter blocks of known-control mode).
+
+    Examples
+    --------
+    >>> pose_design_blocks(np.array([[1.0, 2.0, 3.0]]))[0]
+    array([[ 1.,  0.,  0., -2.,  0.,  3.],
+           [ 0.,  1.,  0.,  1., -3.,  0.],
+           [ 0.,  0.,  1.,  0.,  2., -1.]])
+    """
+    p = np.asarray(offset_xyz, dtype=float).reshape(-1, 3)
+    h = np.zeros((p.shape[0], 3, 6))
+    h[:, :, :4] = _design_blocks(p[:, :2])
+    h[:, 1, 4] = -p[:, 2]
+    h[:, 2, 4] = p[:, 1]
+    h[:, 0, 5] = p[:, 2]
+    h[:, 2, 5] = -p[:, 0]
+    return h
+
+
+def rim_design_blocks(working_radius_m: float) -> np.ndarray:
+    """(73, 3, 6) :func:`pose_design_blocks` of the station and the 72 rim points of
+    :func:`rim_covariances`, in the same order."""
+    g = _rim_blocks(working_radius_m)
+    q = np.column_stack([g[:, 1, 3], -g[:, 0, 3], np.zeros(g.shape[0])])
+    return pose_design_blocks(q)
 
 
 def lambda_max_sym3(a: np.ndarray) -> np.ndarray:

@@ -82,6 +82,14 @@ class PlanConfig:
         Ids of markers that already exist (fixed in the plan).
     forbidden : tuple of str
         Ids of candidate sites that must not be used.
+    network : bool
+        Network mode: markers are unknowns estimated with every station's pose, tied to the
+        reference station (:mod:`planner.network_accuracy`); default known control.
+    reference_station : str or None
+        Network mode: id of the datum station (x, y, z, heading fixed); ``None``: the first.
+    heading_prior_sigma_deg : float or None
+        Network mode: a heading prior on every station (e.g. a sun sensor), 1-sigma degrees;
+        ``None``: none; in (0, 10].
     """
 
     requirement_m: float = 0.10
@@ -104,6 +112,9 @@ class PlanConfig:
     mip_gap: float = 0.0
     existing: tuple[str, ...] = field(default_factory=tuple)
     forbidden: tuple[str, ...] = field(default_factory=tuple)
+    network: bool = False
+    reference_station: str | None = None
+    heading_prior_sigma_deg: float | None = None
 
     def __post_init__(self) -> None:
         _plan_config_iv(self)
@@ -127,6 +138,11 @@ class PlanConfig:
     @property
     def inclinometer_sigma_rad(self) -> float:
         return math.radians(self.inclinometer_sigma_deg)
+
+    @property
+    def heading_prior_sigma_rad(self) -> float | None:
+        return None if self.heading_prior_sigma_deg is None \
+            else math.radians(self.heading_prior_sigma_deg)
 
 
 def _field_names() -> list[str]:
@@ -162,9 +178,12 @@ BOUNDS: dict[str, tuple[float, bool, float, str]] = {
     "budget": (1, True, 100_000, ""),
     "time_limit_s": (0.0, False, 86_400.0, " s"),
     "mip_gap": (0.0, True, 1.0, ""),
+    "heading_prior_sigma_deg": (0.0, False, 10.0, " deg"),
 }
 _INTEGERS = ("n_sectors", "min_sectors", "min_markers", "rays_per_marker", "budget")
-_FLAGS = ("exclude_crater_interiors", "allow_out_of_domain", "redundant")
+_FLAGS = ("exclude_crater_interiors", "allow_out_of_domain", "redundant", "network")
+#: Settings that may be ``None`` (not set).
+_OPTIONAL = ("budget", "heading_prior_sigma_deg")
 #: Most ids accepted in ``existing`` / ``forbidden``.
 MAX_IDS = 100_000
 
@@ -197,7 +216,7 @@ def _plan_config_iv(c: PlanConfig) -> None:
     """Check every field against its type and documented bounds (:data:`BOUNDS`)."""
     for name in BOUNDS:
         v = getattr(c, name)
-        if name == "budget" and v is None:
+        if name in _OPTIONAL and v is None:
             continue
         _number_iv(name, v)
     if c.min_sectors > c.n_sectors:
@@ -218,6 +237,10 @@ def _plan_config_iv(c: PlanConfig) -> None:
     for name in _FLAGS:
         if not isinstance(getattr(c, name), bool):
             raise ConfigError(f"`{name}` must be true or false, got {getattr(c, name)!r:.40}")
+    if c.reference_station is not None and not (isinstance(c.reference_station, str)
+                                                and c.reference_station):
+        raise ConfigError(f"`reference_station` must be a station id (a non-empty string), "
+                          f"got {c.reference_station!r:.40}")
 
 
 def config_from_dict(values: dict[str, Any], base: PlanConfig | None = None,

@@ -1,0 +1,530 @@
+"""Predicted accuracy of stations and markers in network mode: the whole network's information.
+
+Model (shared with :mod:`pipeline.network_adjustment`, see ``POSE_PARAMETERS``)
+-------------------------------------------------------------------------------
+Every station has 6 pose parameters (x, y, z, heading, roll, pitch); roll and pitch carry the
+inclinometer's prior ``0 +- inclinometer_sigma_rad``; the datum is the reference station (the
+first by default) whose x, y, z and heading are fixed. Markers are unknowns. Station ``s``
+measures the marker at candidate site ``j`` at the levelled offset ``p = site - station``
+(planning evaluates the design at the nominal geometry, heading 0, in the site frame) with
+per-axis weight ``w_sj = 3 / sigma_sj^2``; its design block ``H_sj`` (3 x 6) is
+:func:`planner.accuracy.pose_design_blocks`.
+
+Eliminating the marker's 3 coordinates (Schur complement) leaves the fixed positive
+semi-definite contribution of site ``j`` on the poses of the stations ``S_j`` that can use it::
+
+    J^(j) = sum_s w_s H_s^T H_s - (1 / W_j) (sum_s w_s H_s)^T (sum_s w_s H_s),  W_j = sum_s w_s
+
+so the pose information of a layout ``x`` (0/1 per site) is ``J(x) = J_prior + sum_j x_j J^(j)``,
+linear in the selection. ``v^T J^(j) v = sum_s w_s |a_s - a_bar|^2`` with ``a_s = H_s v_s`` and
+``a_bar`` their ``w``-weighted mean: the weighted spread of what the stations would see of a
+pose change ``v`` (:meth:`NetworkModel.site_coefficients` vectorises it over all pairs). A site
+seen by one station only contributes nothing (its marker absorbs it): a network needs markers
+that tie stations together.
+
+Errors
+------
+Station ``k``'s error is known-control mode's 95 % bound ``sqrt(chi2_3(0.95) max_q
+lambda_max(G(q) C_k G(q)^T))`` over the station and its working-radius rim
+(:func:`pose_errors_from_covariance`, :func:`planner.accuracy.rim_covariances`), with the 6 x 6
+block ``C_k`` of ``C = J^-1`` (zero rows for the datum's fixed parameters). A selected marker at
+``j`` is estimated as the weighted mean of its stations' registered measurements: covariance
+``I / W_j + M_j C M_j^T`` with ``M_j = (1 / W_j) sum_s w_s H_s``
+(:meth:`NetworkModel.marker_errors`).
+
+Convexity and monotonicity
+--------------------------
+``h(J) = g^T J^-1 g`` is convex in ``J`` for every fixed ``g`` (``J -> J^-1`` is operator
+convex), and a station's worst-case variance is the maximum of such functions over rim points
+and directions (``g = G(q)^T u``), so its tangent at any ``J0`` (``v = J0^-1 g``,
+``h0 = g^T v``) bounds it from below: ``h(J) >= 2 h0 - v^T J v``. The requirement
+``h(J) <= b = requirement^2 / chi2_3(0.95)`` therefore implies the linear cut
+``sum_j (v^T J^(j) v) x_j >= 2 h0 - b - v^T J_prior v`` (:meth:`NetworkModel.tangent_cuts`),
+valid for every layout. Adding a site adds the PSD ``J^(j)``, so ``J`` grows in the Loewner
+order, ``C`` shrinks, and no station's (or selected marker's) error ever grows: every subset of a
+failing layout fails too, which makes the no-good cuts of :mod:`planner.program` valid.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.linalg
+from scipy.sparse import csr_array
+from scipy.sparse.csgraph import connected_components
+
+from markerplan.errors import ConfigError
+from planner import accuracy
+from planner.accuracy import CHI2_3_95, lambda_max_sym3
+from planner.usability import PlanProblem
+
+#: Pose parameters of a station, in this order (shared with the network adjustment).
+POSE_PARAMETERS = ("x_m", "y_m", "z_m", "heading_rad", "roll_rad", "pitch_rad")
+
+_CHUNK = 100_000
+
+
+def pose_errors_from_covariance(cov, working_radius_m: float) -> np.ndarray:
+    """95 % station error from 6 x 6 pose covariances, over the station and its rim, m.
+
+    Parameters
+    ----------
+    cov : (k, 6, 6) float
+        Covariance of ``POSE_PARAMETERS`` (m^2, m rad, rad^2), relative to the datum.
+    working_radius_m : float
+        Radius of the station's working disc, m (> 0).
+
+    Returns
+    -------
+    error_m : (k,) float
+        ``sqrt(chi2_3(0.95) * max_q lambda_max(G(q) C G(q)^T))`` over the station itself and
+        72 rim points at its height; ``inf`` where ``cov`` is not finite.
+
+    Examples
+    --------
+    >>> c = np.zeros((2, 6, 6)); c[0, :3, :3] = np.eye(3) * 1e-4; c[1, 3, 3] = 1e-6
+    >>> np.round(pose_errors_from_covariance(c, 10.0), 4).tolist()
+    [0.028, 0.028]
+    >>> pose_errors_from_covariance(np.zeros((0, 6, 6)), 10.0).shape
+    (0,)
+    """
+    cov = np.asarray(cov, dtype=float)
+    if cov.ndim != 3 or cov.shape[1:] != (6, 6):
+        raise ConfigError(f"`cov` must have shape (k, 6, 6), got {cov.shape}")
+    if not (np.isfinite(working_radius_m) and working_radius_m > 0):
+        raise ConfigError(f"`working_radius_m` must be finite and > 0, got {working_radius_m!r}")
+    out = np.full(cov.shape[0], np.inf)
+    ok = np.isfinite(cov).all(axis=(1, 2))
+    if ok.any():
+        sig = accuracy.rim_covariances(cov[ok], working_radius_m)
+        out[ok] = np.sqrt(CHI2_3_95 * np.maximum(lambda_max_sym3(sig).max(axis=1), 0.0))
+    return out
+
+
+@dataclass(frozen=True)
+class NetworkCovariance:
+    """Covariance of a layout's pose parameters.
+
+    Attributes
+    ----------
+    full : (6 s, 6 s) float
+        Covariance of every station's ``POSE_PARAMETERS`` (fixed parameters have zero rows);
+        rows of undetermined stations are meaningless (see ``determined``).
+    determined : (s,) bool
+        Stations whose pose the layout determines (tied to the datum).
+    """
+
+    full: np.ndarray
+    determined: np.ndarray
+
+    def station(self, k) -> np.ndarray:
+        """(6, 6) or (m, 6, 6) pose covariance blocks of station(s) ``k``."""
+        k = np.asarray(k)
+        idx = 6 * k[..., None] + np.arange(6)
+        return self.full[idx[..., :, None], idx[..., None, :]]
+
+
+class NetworkModel:
+    """A :class:`~planner.usability.PlanProblem` as a network tied to a reference station.
+
+    Parameters
+    ----------
+    problem : PlanProblem
+    working_radius_m : float
+        Radius of each station's working disc, m.
+    inclinometer_sigma_rad : float
+        Roll/pitch prior, rad (0: roll and pitch fixed).
+    reference : int
+        Index of the datum station (x, y, z, heading fixed).
+    heading_prior_sigma_rad : float, optional
+        A heading prior on every non-reference station (e.g. a sun sensor), rad.
+
+    Attributes
+    ----------
+    free : (P,) int
+        Index into the ``6 s`` pose parameters of each free (estimated) parameter.
+    prior : (P,) float
+        Diagonal prior information of the free parameters.
+    pair_station, pair_site : (p,) int
+        Usable pairs, sorted by site then station.
+    weight : (p,) float
+        ``3 / sigma^2`` per axis, 1/m^2.
+    design : (p, 3, 6) float
+        ``H`` of each pair.
+    site_weight : (n,) float
+        ``W_j``; 0 for sites no station can use.
+    n_stations_seeing : (n,) int
+        ``|S_j|``.
+    """
+
+    def __init__(self, problem: PlanProblem, working_radius_m: float,
+                 inclinometer_sigma_rad: float, reference: int = 0,
+                 heading_prior_sigma_rad: float | None = None) -> None:
+        if not 0 <= reference < problem.n_stations:
+            raise ConfigError(f"`reference` must index one of the {problem.n_stations} "
+                              f"stations, got {reference!r}")
+        self.problem = problem
+        self.radius = float(working_radius_m)
+        self.incl = float(inclinometer_sigma_rad)
+        self.reference = int(reference)
+        s = problem.n_stations
+        fixed = np.zeros((s, 6), bool)
+        fixed[reference, :4] = True
+        prior = np.zeros((s, 6))
+        if self.incl > 0:
+            prior[:, 4:] = 1.0 / self.incl**2
+        else:
+            fixed[:, 4:] = True
+        if heading_prior_sigma_rad is not None:
+            prior[:, 3] = 1.0 / heading_prior_sigma_rad**2
+        self.heading_prior = heading_prior_sigma_rad is not None
+        self.free = np.flatnonzero(~fixed.ravel())
+        self.prior = prior.ravel()[self.free]
+        idx = np.flatnonzero(problem.pair_usable)
+        idx = idx[np.lexsort((problem.pair_station[idx], problem.pair_site[idx]))]
+        self.pair_station = problem.pair_station[idx]
+        self.pair_site = problem.pair_site[idx]
+        self.weight = 3.0 / problem.pair_sigma_m[idx] ** 2
+        self.design = accuracy.pose_design_blocks(
+            problem.site_xyz[self.pair_site] - problem.station_xyz[self.pair_station])
+        n = problem.n_sites
+        self.site_weight = np.bincount(self.pair_site, self.weight, minlength=n)
+        self.n_stations_seeing = np.bincount(self.pair_site, minlength=n)
+        self.site_start = np.r_[0, np.cumsum(self.n_stations_seeing)]
+        # ordered pairs (a, b) of pairs of one site, for sites seen by >= 2 stations
+        k = self.n_stations_seeing
+        multi = np.flatnonzero(k >= 2)
+        reps = k[multi] ** 2
+        site = np.repeat(multi, reps)
+        off = np.arange(reps.sum()) - np.repeat(np.cumsum(reps) - reps, reps)
+        kk = k[site]
+        self.tie_site = site
+        self.tie_a = self.site_start[site] + off // kk
+        self.tie_b = self.site_start[site] + off % kk
+        wa, wb = self.weight[self.tie_a], self.weight[self.tie_b]
+        self.tie_coef = np.where(self.tie_a == self.tie_b, wa, 0.0) - wa * wb \
+            / self.site_weight[site]
+
+    # -- information and covariance ------------------------------------------------------------
+    @property
+    def n_params(self) -> int:
+        return self.free.size
+
+    @property
+    def tying(self) -> np.ndarray:
+        """(n,) bool: sites whose contribution ``J^(j)`` is not zero (seen by >= 2 stations)."""
+        return self.n_stations_seeing >= 2
+
+    def information(self, x) -> np.ndarray:
+        """Pose information ``J(x) = J_prior + sum_j x_j J^(j)`` of the free parameters.
+
+        Parameters
+        ----------
+        x : (n,) bool or float
+            Selection (or non-negative weights) of the candidate sites.
+
+        Returns
+        -------
+        J : (P, P) float
+        """
+        x = np.asarray(x, dtype=float)
+        n6 = 6 * self.problem.n_stations
+        acc = np.zeros(n6 * n6)
+        take = np.flatnonzero(x[self.tie_site] != 0)
+        for lo in range(0, take.size, _CHUNK):
+            t = take[lo:lo + _CHUNK]
+            a, b = self.tie_a[t], self.tie_b[t]
+            c = self.tie_coef[t] * x[self.tie_site[t]]
+            blocks = np.einsum("q,qia,qib->qab", c, self.design[a], self.design[b])
+            ra = 6 * self.pair_station[a][:, None] + np.arange(6)
+            rb = 6 * self.pair_station[b][:, None] + np.arange(6)
+            flat = ra[:, :, None] * n6 + rb[:, None, :]
+            acc += np.bincount(flat.ravel(), blocks.ravel(), minlength=n6 * n6)
+        full = acc.reshape(n6, n6)
+        j = full[np.ix_(self.free, self.free)]
+        j = 0.5 * (j + j.T)
+        j[np.diag_indices_from(j)] += self.prior
+        return j
+
+    def covariance(self, j: np.ndarray) -> NetworkCovariance:
+        """Covariance of the free parameters from the information ``j``, with undetermined
+        stations (a rank-deficient ``j``: not tied to the datum, or heading free) flagged."""
+        s = self.problem.n_stations
+        n6 = 6 * s
+        determined = np.ones(s, bool)
+        c = None
+        try:
+            factor = scipy.linalg.cho_factor(j)
+            # a pivot that is a vanishing fraction of its diagonal: numerically singular
+            if np.min(np.diag(factor[0]) ** 2 / np.diag(j)) > 1e-10:
+                c = scipy.linalg.cho_solve(factor, np.eye(j.shape[0]))
+        except np.linalg.LinAlgError:
+            pass
+        if c is None:
+            scale = np.sqrt(np.maximum(np.diag(j), 1e-300))
+            js = j / scale[:, None] / scale[None, :]
+            lam, vec = np.linalg.eigh(js)
+            null = lam <= 1e-10 * max(lam[-1], 1e-300)
+            inv = np.where(null, 0.0, 1.0 / np.where(null, 1.0, lam))
+            c = (vec * inv) @ vec.T / scale[:, None] / scale[None, :]
+            bad = np.zeros(n6)
+            bad[self.free] = np.linalg.norm(vec[:, null], axis=1)
+            determined = bad.reshape(s, 6).max(axis=1) < 1e-6
+        full = np.zeros((n6, n6))
+        full[np.ix_(self.free, self.free)] = 0.5 * (c + c.T)
+        return NetworkCovariance(full=full, determined=determined)
+
+    def station_errors_from(self, cov: NetworkCovariance) -> np.ndarray:
+        """(s,) 95 % station errors of a covariance, m (``inf`` where undetermined)."""
+        err = pose_errors_from_covariance(cov.station(np.arange(self.problem.n_stations)),
+                                          self.radius)
+        return np.where(cov.determined, err, np.inf)
+
+    def station_errors(self, selected) -> np.ndarray:
+        """(s,) predicted 95 % error of every station with the layout ``selected``, m."""
+        return self.station_errors_from(self.covariance(self.information(selected)))
+
+    def _pairs_of(self, sites: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Pair indices of ``sites`` and, for each, the position of its site in ``sites``."""
+        k = self.n_stations_seeing[sites]
+        pos = np.repeat(np.arange(sites.size), k)
+        start = np.repeat(self.site_start[sites], k)
+        off = np.arange(k.sum()) - np.repeat(np.cumsum(k) - k, k)
+        return start + off, pos
+
+    def marker_covariances(self, cov: NetworkCovariance, sites) -> np.ndarray:
+        """(m, 3, 3) covariance of the markers at candidate sites ``sites``, m^2: ``I / W_j +
+        M_j C M_j^T`` (every station that can use the site measures it). Sites no station
+        can use, or seen from an undetermined station, get ``inf``."""
+        sites = np.asarray(sites, dtype=np.int64).reshape(-1)
+        out = np.zeros((sites.size, 3, 3))
+        w_site = self.site_weight[sites]
+        pairs, pos = self._pairs_of(sites)
+        ka = self.n_stations_seeing[sites]
+        # ordered pairs of pairs within each site
+        reps = ka**2
+        site_pos = np.repeat(np.arange(sites.size), reps)
+        off = np.arange(reps.sum()) - np.repeat(np.cumsum(reps) - reps, reps)
+        first = np.repeat(np.cumsum(ka) - ka, reps)
+        kk = ka[site_pos]
+        a = pairs[first + off // kk]
+        b = pairs[first + off % kk]
+        for lo in range(0, a.size, _CHUNK):
+            aa, bb, sp_ = a[lo:lo + _CHUNK], b[lo:lo + _CHUNK], site_pos[lo:lo + _CHUNK]
+            ia = 6 * self.pair_station[aa][:, None] + np.arange(6)
+            ib = 6 * self.pair_station[bb][:, None] + np.arange(6)
+            cab = cov.full[ia[:, :, None], ib[:, None, :]]
+            f = self.weight[aa] * self.weight[bb] / w_site[sp_] ** 2
+            blk = np.einsum("q,qia,qab,qjb->qij", f, self.design[aa], cab, self.design[bb])
+            np.add.at(out, sp_, blk)
+        out += np.where(w_site > 0, 1.0 / np.where(w_site > 0, w_site, 1.0), 0.0)[:, None, None] \
+            * np.eye(3)
+        undetermined = np.zeros(sites.size, bool)
+        np.logical_or.at(undetermined, pos, ~cov.determined[self.pair_station[pairs]])
+        out[(w_site <= 0) | undetermined] = np.inf
+        return out
+
+    def marker_errors(self, cov: NetworkCovariance, sites) -> np.ndarray:
+        """(m,) 95 % error of the markers at ``sites``, relative to the datum, m."""
+        c = self.marker_covariances(cov, sites)
+        out = np.full(c.shape[0], np.inf)
+        ok = np.isfinite(c).all(axis=(1, 2))
+        out[ok] = np.sqrt(CHI2_3_95 * np.maximum(lambda_max_sym3(c[ok]), 0.0))
+        return out
+
+    # -- cuts ----------------------------------------------------------------------------------
+    def site_coefficients(self, v: np.ndarray) -> np.ndarray:
+        """``v^T J^(j) v`` for every site and every direction ``v``.
+
+        Parameters
+        ----------
+        v : (m, P) float
+            Directions in the free parameters.
+
+        Returns
+        -------
+        coef : (m, n) float, >= 0
+            The weighted spread ``sum_s w_s |a_s - a_bar|^2`` of ``a_s = H_s v_s``.
+        """
+        v = np.atleast_2d(np.asarray(v, dtype=float))
+        n6 = 6 * self.problem.n_stations
+        vf = np.zeros((v.shape[0], n6))
+        vf[:, self.free] = v
+        vs = vf.reshape(v.shape[0], -1, 6)[:, self.pair_station]  # (m, p, 6)
+        a = np.einsum("pia,mpa->mpi", self.design, vs)
+        n = self.problem.n_sites
+        w = self.weight
+        with np.errstate(invalid="ignore", divide="ignore"):
+            inv_w = np.where(self.site_weight > 0, 1.0 / self.site_weight, 0.0)
+        out = np.zeros((v.shape[0], n))
+        for m in range(v.shape[0]):
+            mean = np.column_stack([np.bincount(self.pair_site, w * a[m, :, i], minlength=n)
+                                    for i in range(3)]) * inv_w[:, None]
+            d = a[m] - mean[self.pair_site]
+            out[m] = np.bincount(self.pair_site, w * np.sum(d * d, axis=1), minlength=n)
+        return out
+
+    def station_tangents(self, cov: NetworkCovariance, stations, requirement_m: float,
+                         rim: str = "worst") -> list[tuple[int, np.ndarray, float]]:
+        """Tangent (outer-approximation) cuts of the station requirement at a covariance.
+
+        Parameters
+        ----------
+        cov : NetworkCovariance
+            ``J0^-1`` (must be determined for ``stations``).
+        stations : sequence of int
+        requirement_m : float
+        rim : {"worst", "spread"}
+            Tangent at the worst rim point, or at the station and 8 rim points.
+
+        Returns
+        -------
+        cuts : list of (station, coef (n,), rhs)
+            ``sum_j coef_j x_j >= rhs``; only cuts with ``rhs > 0``.
+        """
+        g_rim = accuracy.rim_design_blocks(self.radius)  # (r, 3, 6)
+        b = requirement_m**2 / CHI2_3_95
+        gs, owners = [], []
+        for k in stations:
+            if not cov.determined[k]:
+                continue
+            ck = cov.station(int(k))
+            sig = np.einsum("ria,ab,rjb->rij", g_rim, ck, g_rim)
+            lam, vec = np.linalg.eigh(sig)
+            if rim == "worst":
+                points = [int(np.argmax(lam[:, -1]))]
+            else:
+                points = [0, *range(1, g_rim.shape[0], (g_rim.shape[0] - 1) // 8)]
+            for r in points:
+                g = np.zeros(6 * self.problem.n_stations)
+                g[6 * int(k):6 * int(k) + 6] = g_rim[r].T @ vec[r, :, -1]
+                gs.append(g)
+                owners.append(int(k))
+        return self._tangents(cov, gs, owners, b, np.zeros(len(gs)))
+
+    def marker_tangents(self, cov: NetworkCovariance, sites, requirement_m: float
+                        ) -> list[tuple[int, np.ndarray, float]]:
+        """Tangent cuts of the marker requirement for markers at ``sites``: ``(site, coef,
+        rhs)`` meaning ``x_site = 1  =>  sum_j coef_j x_j >= rhs`` (``rhs > 0`` only)."""
+        sites = np.asarray(sites, dtype=np.int64).reshape(-1)
+        if sites.size == 0:
+            return []
+        c = self.marker_covariances(cov, sites)
+        b = requirement_m**2 / CHI2_3_95
+        gs, owners, const = [], [], []
+        for i, j in enumerate(sites):
+            if not np.isfinite(c[i]).all():
+                continue
+            u = np.linalg.eigh(c[i])[1][:, -1]
+            lo, hi = self.site_start[j], self.site_start[j + 1]
+            g = np.zeros(6 * self.problem.n_stations)
+            for p in range(lo, hi):
+                s = self.pair_station[p]
+                g[6 * s:6 * s + 6] += self.weight[p] / self.site_weight[j] * self.design[p].T @ u
+            gs.append(g)
+            owners.append(int(j))
+            const.append(1.0 / self.site_weight[j])
+        return self._tangents(cov, gs, owners, b, np.asarray(const))
+
+    def _tangents(self, cov, gs, owners, b, const):
+        if not gs:
+            return []
+        g = np.asarray(gs)
+        v = g @ cov.full  # (m, 6 s); rows of fixed parameters are zero
+        h0 = np.einsum("ma,ma->m", v, g)
+        vfree = v[:, self.free]
+        rhs = 2.0 * h0 - (b - const) - np.einsum("ma,a,ma->m", vfree, self.prior, vfree)
+        out = []
+        keep = np.flatnonzero(rhs > 0)
+        for lo in range(0, keep.size, 16):
+            sel = keep[lo:lo + 16]
+            coef = self.site_coefficients(vfree[sel])
+            for i, m in enumerate(sel):
+                out.append((owners[m], coef[i], float(rhs[m])))
+        return out
+
+    # -- structure -----------------------------------------------------------------------------
+    def ties(self, selected) -> np.ndarray:
+        """(s, s) int: number of selected sites each pair of stations shares (diagonal 0)."""
+        sel = np.asarray(selected, bool)
+        use = sel[self.pair_site]
+        st, si = self.pair_station[use], self.pair_site[use]
+        s, n = self.problem.n_stations, self.problem.n_sites
+        inc = csr_array((np.ones(st.size), (st, si)), shape=(s, n))
+        t = (inc @ inc.T).toarray().astype(np.int64)
+        np.fill_diagonal(t, 0)
+        return t
+
+    def connected_to_reference(self, selected) -> np.ndarray:
+        """(s,) bool: stations linked to the reference by a chain of shared selected sites."""
+        t = self.ties(selected)
+        _, comp = connected_components(csr_array(t > 0), directed=False)
+        return comp == comp[self.reference]
+
+    def diagnose(self, available, requirement_m: float) -> dict[str, str]:
+        """Stations no layout within ``available`` can tie to the reference well enough.
+
+        Parameters
+        ----------
+        available : (n,) bool
+            Sites a layout may use (every allowed site; by monotonicity the best case).
+        requirement_m : float
+
+        Returns
+        -------
+        reasons : dict of station id -> reason
+            "disconnected" (no chain of shared usable sites reaches the reference), "heading
+            undetermined" (tied through markers at one place only), "too far from the
+            reference" (the error at the station itself already exceeds the requirement) or
+            "heading too weak" (the lever arm to the working-radius rim does).
+        """
+        p = self.problem
+        ids = p.station_ids
+        ref = ids[self.reference]
+        linked = self.connected_to_reference(available)
+        out = {}
+        for k in np.flatnonzero(~linked):
+            out[ids[k]] = (f"disconnected: shares no usable marker site with the part of the "
+                           f"network holding the reference {ref}")
+        if out:
+            return out
+        cov = self.covariance(self.information(available))
+        err = self.station_errors_from(cov)
+        blocks = cov.station(np.arange(p.n_stations))
+        at_station = np.sqrt(CHI2_3_95 * np.maximum(lambda_max_sym3(blocks[:, :3, :3]), 0.0))
+        dist = np.linalg.norm(p.station_xyz[:, :2] - p.station_xyz[self.reference, :2], axis=1)
+        for k in range(p.n_stations):
+            if not cov.determined[k]:
+                out[ids[k]] = ("heading undetermined: tied to the network only through markers "
+                               "at one place; it needs two shared sites apart")
+            elif err[k] > requirement_m and at_station[k] > requirement_m:
+                out[ids[k]] = (f"too far from the reference: {at_station[k]:.3f} m at the station "
+                               f"itself with every usable site ({dist[k]:.0f} m from {ref}), "
+                               f"above {requirement_m:g} m")
+            elif err[k] > requirement_m:
+                out[ids[k]] = (f"heading too weak: {err[k]:.3f} m at the {self.radius:g} m "
+                               f"working-radius rim ({at_station[k]:.3f} m at the station "
+                               f"itself) with every usable site, above {requirement_m:g} m")
+        return out
+
+
+def network_model(problem: PlanProblem, config) -> NetworkModel:
+    """The :class:`NetworkModel` of a problem for a :class:`~planner.config.PlanConfig`
+    (``working_radius_m``, ``inclinometer_sigma_rad``, ``reference_station``,
+    ``heading_prior_sigma_rad``).
+
+    Raises
+    ------
+    ConfigError
+        ``reference_station`` names no station of the problem.
+    """
+    ref = 0
+    if config.reference_station is not None:
+        if config.reference_station not in problem.station_ids:
+            shown = ", ".join(problem.station_ids[:20])
+            raise ConfigError(f"`reference_station` {config.reference_station!r} is not a "
+                              f"station of this plan; valid ids are {shown}")
+        ref = problem.station_ids.index(config.reference_station)
+    return NetworkModel(problem, config.working_radius_m, config.inclinometer_sigma_rad,
+                        reference=ref, heading_prior_sigma_rad=config.heading_prior_sigma_rad)

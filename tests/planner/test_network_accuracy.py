@@ -1,0 +1,167 @@
+import itertools
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from markerplan.errors import ConfigError
+from planner import accuracy
+from planner.config import PlanConfig
+from planner.network_accuracy import (
+    NetworkModel,
+    network_model,
+    pose_errors_from_covariance,
+)
+from tests.planner.instances import make_problem, ring
+
+INCL = np.radians(0.01)
+
+
+def _line(n_stations=3, spacing=15.0, seed=0, n_sites=14):
+    """Stations on a line with random sites around them."""
+    rng = np.random.default_rng(seed)
+    st_xy = np.column_stack([np.arange(n_stations) * spacing, np.zeros(n_stations)])
+    x0, x1 = -10.0, (n_stations - 1) * spacing + 10.0
+    sites = np.column_stack([rng.uniform(x0, x1, n_sites), rng.uniform(-12, 12, n_sites)])
+    return make_problem(st_xy, sites, max_range_m=20.0)
+
+
+def _full_adjustment(model, selected):
+    """Pose and marker covariance of a layout from the full normal equations (poses + markers)."""
+    p = model.problem
+    sites = np.flatnonzero(selected & model.tying | selected & (model.n_stations_seeing > 0))
+    n6 = 6 * p.n_stations
+    npar = n6 + 3 * sites.size
+    n = np.zeros((npar, npar))
+    for m, j in enumerate(sites):
+        for q in range(model.site_start[j], model.site_start[j + 1]):
+            a = np.zeros((3, npar))
+            s = model.pair_station[q]
+            a[:, 6 * s:6 * s + 6] = model.design[q]
+            a[:, n6 + 3 * m:n6 + 3 * m + 3] = -np.eye(3)
+            n += model.weight[q] * a.T @ a
+    keep = np.r_[model.free, n6 + np.arange(3 * sites.size)]
+    nn = n[np.ix_(keep, keep)]
+    nn[np.arange(model.n_params), np.arange(model.n_params)] += model.prior
+    c = np.linalg.inv(nn)
+    return c, sites
+
+
+def test_schur_contribution_matches_the_full_adjustment():
+    p = _line()
+    model = NetworkModel(p, 10.0, INCL)
+    sel = np.zeros(p.n_sites, bool)
+    sel[:10] = True
+    c_full, sites = _full_adjustment(model, sel)
+    cov = model.covariance(model.information(sel))
+    assert cov.determined.all()
+    pp = model.n_params
+    np.testing.assert_allclose(cov.full[np.ix_(model.free, model.free)], c_full[:pp, :pp],
+                               rtol=1e-6, atol=1e-14)
+    mc = model.marker_covariances(cov, sites)
+    for m in range(sites.size):
+        blk = c_full[pp + 3 * m:pp + 3 * m + 3, pp + 3 * m:pp + 3 * m + 3]
+        np.testing.assert_allclose(mc[m], blk, rtol=1e-6, atol=1e-14)
+    # v^T J^(j) v, vectorised, equals the quadratic form of each site's own contribution
+    v = np.random.default_rng(1).normal(size=(2, pp))
+    coef = model.site_coefficients(v)
+    for j in range(p.n_sites):
+        one = np.zeros(p.n_sites)
+        one[j] = 1.0
+        jj = model.information(one) - np.diag(model.prior)
+        np.testing.assert_allclose(coef[:, j], np.einsum("ma,ab,mb->m", v, jj, v),
+                                   rtol=1e-8, atol=1e-6)
+
+
+def test_six_parameter_errors_equal_known_control_with_the_tilt_as_parameters():
+    rng = np.random.default_rng(2)
+    j = accuracy.pair_information([0, 0], rng.uniform(-20, 20, (5, 2)),
+                                  rng.uniform(0.005, 0.02, 5)).sum(axis=0)
+    c4 = np.linalg.inv(j)
+    c6 = np.zeros((1, 6, 6))
+    c6[0, :4, :4] = c4
+    c6[0, 4, 4] = c6[0, 5, 5] = INCL**2
+    e4 = accuracy.errors_from_information(j[None], 10.0, INCL)
+    np.testing.assert_allclose(pose_errors_from_covariance(c6, 10.0), e4, rtol=1e-9)
+    with pytest.raises(ConfigError, match="shape"):
+        pose_errors_from_covariance(np.zeros((2, 4, 4)), 10.0)
+
+
+def test_a_site_seen_by_one_station_adds_nothing_and_ties_are_counted():
+    p = make_problem([[0, 0], [15, 0]], [[-8, 0], [7, 3], [7, -3], [25, 0]], max_range_m=12)
+    model = NetworkModel(p, 10.0, INCL)
+    assert model.tying.tolist() == [False, True, True, False]
+    one = np.array([1.0, 0, 0, 1.0])
+    np.testing.assert_allclose(model.information(one), np.diag(model.prior))
+    assert model.ties(np.ones(4, bool))[0, 1] == 2
+    # one shared site: heading of S2 is free; two shared sites: determined
+    err1 = model.station_errors(np.array([True, True, False, True]))
+    assert err1[0] < 0.01 and np.isinf(err1[1])
+    err2 = model.station_errors(np.ones(4, bool))
+    assert np.isfinite(err2).all()
+
+
+def test_diagnose_names_disconnected_weak_and_far_stations():
+    sites = np.vstack([ring([0, 0], 8.0, [0, 120, 240]), [[7, 3], [7, -3]],
+                       ring([200, 0], 8.0, [0, 120, 240])])
+    p = make_problem([[0, 0], [15, 0], [200, 0]], sites, max_range_m=12)
+    model = NetworkModel(p, 10.0, INCL)
+    why = model.diagnose(np.ones(p.n_sites, bool), 0.10)
+    assert list(why) == ["S3"] and why["S3"].startswith("disconnected") and "S1" in why["S3"]
+    p2 = make_problem([[0, 0], [15, 0]], sites[:5], max_range_m=12)
+    m2 = NetworkModel(p2, 10.0, INCL)
+    assert m2.diagnose(np.ones(5, bool), 1.0) == {}
+    weak = m2.diagnose(np.ones(5, bool), 0.10)
+    assert list(weak) == ["S2"] and weak["S2"].split(":")[0] in ("heading too weak",
+                                                          "too far from the reference")
+    with pytest.raises(ConfigError, match="reference_station"):
+        network_model(p2, PlanConfig(network=True, reference_station="S9"))
+    assert network_model(p2, PlanConfig(network=True, reference_station="S2")).reference == 1
+
+
+@settings(max_examples=25, deadline=None)
+@given(seed=st.integers(0, 10_000), n_stations=st.integers(2, 4))
+def test_adding_a_site_never_worsens_any_station_or_marker(seed, n_stations):
+    p = _line(n_stations, seed=seed, n_sites=12)
+    model = NetworkModel(p, 10.0, INCL)
+    rng = np.random.default_rng(seed)
+    sel = rng.random(p.n_sites) < 0.5
+    extra = int(rng.integers(p.n_sites))
+    more = sel.copy()
+    more[extra] = True
+    c0 = model.covariance(model.information(sel))
+    c1 = model.covariance(model.information(more))
+    e0, e1 = model.station_errors_from(c0), model.station_errors_from(c1)
+    assert np.all((e1 <= e0 * (1 + 1e-9) + 1e-12) | np.isinf(e0))
+    markers = np.flatnonzero(sel & (model.n_stations_seeing > 0))
+    m0, m1 = model.marker_errors(c0, markers), model.marker_errors(c1, markers)
+    assert np.all((m1 <= m0 * (1 + 1e-9) + 1e-12) | np.isinf(m0))
+
+
+def test_tangent_cuts_never_remove_a_passing_layout():
+    """Brute force on a tiny network: every layout whose stations and markers pass satisfies
+    every tangent cut taken at any failing layout (marker cuts when the marker is selected)."""
+    p = _line(3, seed=5, n_sites=10)
+    model = NetworkModel(p, 10.0, INCL)
+    layouts = [np.array(b, bool) for b in itertools.product([0, 1], repeat=p.n_sites)]
+    best = model.covariance(model.information(np.ones(p.n_sites, bool)))
+    req = 1.3 * max(model.station_errors_from(best).max(),
+                    model.marker_errors(best, np.arange(p.n_sites)).max())
+    passing, cuts = [], []
+    for sel in layouts:
+        cov = model.covariance(model.information(sel))
+        e = model.station_errors_from(cov)
+        markers = np.flatnonzero(sel)
+        me = model.marker_errors(cov, markers)
+        if np.all(e <= req) and np.all(me <= req):
+            passing.append(sel)
+        elif len(cuts) < 80 and cov.determined.all():
+            cuts += [(None, c, r) for _, c, r in
+                     model.station_tangents(cov, np.flatnonzero(e > req), req, rim="spread")]
+            cuts += model.marker_tangents(cov, markers[me > req], req)
+    assert passing and any(c[0] is None for c in cuts) and any(c[0] is not None for c in cuts)
+    x = np.asarray(passing, float)
+    for owner, coef, rhs in cuts:
+        applies = np.ones(len(x), bool) if owner is None else x[:, owner] > 0
+        assert np.all(x[applies] @ coef >= rhs * (1 - 1e-9))
