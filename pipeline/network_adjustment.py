@@ -53,7 +53,6 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
-import scipy.linalg
 import scipy.sparse as sp
 import scipy.sparse.linalg
 from scipy.stats import chi2
@@ -64,6 +63,7 @@ from pipeline.reliability import (
     data_snooping,
     non_centrality,
     observation_reliability,
+    w_tests,
 )
 from pipeline.rig import rot_x, rot_y, rot_z
 
@@ -80,8 +80,9 @@ ELLIPSOID_CHI2_95 = float(chi2.ppf(0.95, 3))
 _DEFECT_NAMES = ("translation x", "translation y", "translation z",
                  "heading (rotation about the vertical)")
 
-#: A Gauss-Newton step below this (m or rad) ends the iteration.
-_STEP_TOLERANCE = 1e-10
+#: A Gauss-Newton step below this (m or rad) ends the iteration: far below any sigma, and
+#: convergence is quadratic for exact data, so the truth is then recovered to ~1e-14 m.
+_STEP_TOLERANCE = 1e-8
 
 
 def _ids(values, name: str) -> tuple[str, ...]:
@@ -508,8 +509,8 @@ class _Problem:
     prior_index: np.ndarray   # (q,) parameter observed directly by a pseudo-observation
     prior_value: np.ndarray   # (q,) its observed value (m or rad)
     prior_weight: np.ndarray  # (q,) 1 / sigma^2
-    prior_is_heading: np.ndarray  # (q,) bool: misclosure wrapped to (-pi, pi]
-    fixed: np.ndarray         # (f,) parameters the 'station' datum fixes
+    prior_is_heading: np.ndarray  # (q,) bool: misclosure wrapped to [-pi, pi)
+    fixed: np.ndarray         # (u,) bool: parameters the 'station' datum fixes
     free_defects: np.ndarray  # (d,) defect directions the 'free' datum constrains
 
 
@@ -517,8 +518,9 @@ class _Problem:
 class _Solution:
     pose: np.ndarray
     markers: np.ndarray
-    design: sp.csr_matrix
-    misclosure: np.ndarray    # (3n,) f = t + R p - m at the solution
+    blocks: np.ndarray        # (n, 3, 9) design blocks at the solution
+    columns: np.ndarray       # (n, 9) their parameter indices
+    misclosure: np.ndarray    # (n, 3) f = t + R p - m at the solution
     prior_misclosure: np.ndarray
     covariance: np.ndarray
     n_constraints: int
@@ -526,8 +528,9 @@ class _Solution:
 
 
 def _linearise(obs: NetworkObservations, pose: np.ndarray, markers: np.ndarray
-               ) -> tuple[sp.csr_matrix, np.ndarray]:
-    """Design matrix (3n, 6s + 3k) and misclosure ``f = t + R p - m`` (3n,) at a point."""
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Design blocks (n, 3, 9), their parameter columns (n, 9) (the station's 6 pose
+    parameters, then the marker's x, y, z) and the misclosure ``f = t + R p - m`` (n, 3)."""
     n, s = obs.n, len(obs.station_ids)
     rz, ry, rx = _rotations(pose[obs.station])
     a = np.einsum("nij,nj->ni", rx, obs.xyz_m)
@@ -543,12 +546,9 @@ def _linearise(obs: NetworkObservations, pose: np.ndarray, markers: np.ndarray
     block[:, :, 4] = np.einsum("nij,nj->ni", rz @ ry, d_roll)
     block[:, :, 5] = np.einsum("nij,nj->ni", rz, d_pitch)
     block[:, [0, 1, 2], [6, 7, 8]] = -1.0
-    cols = np.concatenate([6 * obs.station[:, None] + np.arange(6),
-                           6 * s + 3 * obs.marker[:, None] + np.arange(3)], axis=1)
-    rows = np.broadcast_to(np.arange(3 * n).reshape(n, 3, 1), (n, 3, 9))
-    design = sp.csr_matrix((block.ravel(), (rows.ravel(), np.broadcast_to(
-        cols[:, None, :], (n, 3, 9)).ravel())), shape=(3 * n, 6 * s + 3 * len(obs.marker_ids)))
-    return design, f.ravel()
+    columns = np.concatenate([6 * obs.station[:, None] + np.arange(6),
+                              6 * s + 3 * obs.marker[:, None] + np.arange(3)], axis=1)
+    return block, columns, f
 
 
 def _defect_basis(pose: np.ndarray, markers: np.ndarray) -> np.ndarray:
@@ -582,18 +582,15 @@ def _undetermined_defects(g: np.ndarray, prior_index: np.ndarray, prior_weight: 
 
 
 def _constraints(problem: _Problem, pose: np.ndarray, markers: np.ndarray) -> np.ndarray:
-    """(c, u) datum constraint rows ``B`` (``B dx = 0``)."""
+    """(d, u) minimal constraints ``B dx = 0`` of the free datum (d = 0 for the others): the
+    defect directions restricted to the stations' x, y, z and heading."""
     u = pose.shape[0] * 6 + markers.shape[0] * 3
-    if problem.fixed.size:
-        b = np.zeros((problem.fixed.size, u))
-        b[np.arange(problem.fixed.size), problem.fixed] = 1.0
-        return b
-    if problem.free_defects.size:
-        g = _defect_basis(pose, markers)[:, problem.free_defects]
-        on_stations = np.zeros(u, dtype=bool)
-        on_stations[: 6 * pose.shape[0]] = np.tile([1, 1, 1, 1, 0, 0], pose.shape[0]) > 0
-        return (g * on_stations[:, None]).T
-    return np.zeros((0, u))
+    if not problem.free_defects.size:
+        return np.zeros((0, u))
+    g = _defect_basis(pose, markers)[:, problem.free_defects]
+    on_stations = np.zeros(u, dtype=bool)
+    on_stations[: 6 * pose.shape[0]] = np.tile([1, 1, 1, 1, 0, 0], pose.shape[0]) > 0
+    return (g * on_stations[:, None]).T
 
 
 def _prior_misclosure(problem: _Problem, params: np.ndarray) -> np.ndarray:
@@ -601,54 +598,99 @@ def _prior_misclosure(problem: _Problem, params: np.ndarray) -> np.ndarray:
     return np.where(problem.prior_is_heading, (f + np.pi) % (2 * np.pi) - np.pi, f)
 
 
-def _normal_system(problem: _Problem, design: sp.csr_matrix, f: np.ndarray, fp: np.ndarray,
-                   b: np.ndarray) -> tuple[sp.csc_matrix, np.ndarray]:
-    """Bordered normal system ``[[N, B^T], [B, 0]]`` and right-hand side for the step."""
-    w = np.repeat(3.0 / problem.obs.sigma_m**2, 3)
-    u = design.shape[1]
-    prior = sp.csr_matrix((problem.prior_weight, (problem.prior_index, problem.prior_index)),
-                          shape=(u, u))
-    normal = design.T @ sp.diags(w) @ design + prior
-    rhs = -(design.T @ (w * f)) - np.bincount(problem.prior_index, problem.prior_weight * fp,
-                                               minlength=u)
-    bs = sp.csr_matrix(b)
-    bordered = sp.bmat([[normal, bs.T], [bs, None]], format="csc")
-    return bordered, np.concatenate([rhs, np.zeros(b.shape[0])])
+def _prior_misclosure(problem: _Problem, params: np.ndarray) -> np.ndarray:
+    f = params[problem.prior_index] - problem.prior_value
+    return np.where(problem.prior_is_heading, (f + np.pi) % (2 * np.pi) - np.pi, f)
 
 
-def _solve(problem: _Problem, pose: np.ndarray, markers: np.ndarray, max_iterations: int
-           ) -> _Solution:
-    """Gauss-Newton from ``pose``/``markers`` to convergence, with the covariance."""
+def _normal_system(problem: _Problem, blocks: np.ndarray, columns: np.ndarray, f: np.ndarray,
+                   fp: np.ndarray, b: np.ndarray) -> tuple[sp.csc_matrix, np.ndarray]:
+    """Normal equations of the Gauss-Newton step ``N dx = -A^T P f``, assembled from the
+    observations' 9 x 9 blocks (sparse), bordered by the minimal constraints ``B`` when there
+    are any. A parameter the datum fixes gets a unit row and column (its step is 0)."""
+    u = problem.fixed.size
+    w = 3.0 / problem.obs.sigma_m**2
+    nb = np.einsum("n,nri,nrj->nij", w, blocks, blocks)
+    keep = ~(problem.fixed[columns][:, :, None] | problem.fixed[columns][:, None, :])
+    rows = np.broadcast_to(columns[:, :, None], nb.shape)[keep]
+    cols = np.broadcast_to(columns[:, None, :], nb.shape)[keep]
+    fixed = np.flatnonzero(problem.fixed)
+    prior = ~problem.fixed[problem.prior_index]
+    d = b.shape[0]
+    border_r, border_c = np.nonzero(b)
+    data = np.concatenate([nb[keep], problem.prior_weight[prior], np.ones(fixed.size),
+                           b[border_r, border_c], b[border_r, border_c]])
+    row = np.concatenate([rows, problem.prior_index[prior], fixed, u + border_r, border_c])
+    col = np.concatenate([cols, problem.prior_index[prior], fixed, border_c, u + border_r])
+    normal = sp.csc_matrix((data, (row, col)), shape=(u + d, u + d))
+    rhs = -(np.bincount(columns.ravel(), np.einsum("n,nri,nr->ni", w, blocks, f).ravel(),
+                        minlength=u)
+            + np.bincount(problem.prior_index, problem.prior_weight * fp, minlength=u))
+    rhs[problem.fixed] = 0.0
+    return normal, np.concatenate([rhs, np.zeros(d)])
+
+
+def _covariance(normal: sp.csc_matrix, u: int, fixed: np.ndarray) -> np.ndarray:
+    """(u, u) covariance: the upper-left block of the inverse of the (bordered) normal matrix,
+    with the fixed parameters' rows and columns zeroed."""
+    try:
+        cov = np.linalg.inv(normal.toarray())[:u, :u]
+    except np.linalg.LinAlgError:
+        cov = np.full((u, u), np.nan)
+    if not (np.isfinite(np.diag(cov)).all() and (np.diag(cov)[~fixed] > 0).all()):
+        raise DataError("the network's normal matrix is singular (a station tied only by "
+                        "markers on one vertical line?)")
+    cov[fixed, :] = 0.0
+    cov[:, fixed] = 0.0
+    return cov
+
+
+def _downdated(covariance: np.ndarray, blocks: np.ndarray, columns: np.ndarray,
+               weight: np.ndarray) -> np.ndarray:
+    """Covariance after removing one point observation (Sherman-Morrison-Woodbury):
+    ``Q + Q U (W^-1 - U^T Q U)^-1 U^T Q`` with ``U = A_i^T`` (u, 3); also under minimal
+    constraints, since the border is unchanged.
+
+    Parameters
+    ----------
+    covariance : (u, u) float
+    blocks : (3, 9) float
+        The observation's design block.
+    columns : (9,) int
+    weight : (3,) float
+        Its component weights, 1/m^2.
+    """
+    qu = covariance[:, columns] @ blocks.T
+    residual_cov = np.diag(1.0 / weight) - blocks @ qu[columns]
+    return covariance + qu @ np.linalg.solve(residual_cov, qu.T)
+
+
+def _solve(problem: _Problem, pose: np.ndarray, markers: np.ndarray, max_iterations: int,
+           covariance: bool = True) -> _Solution:
+    """Gauss-Newton from ``pose``/``markers`` to convergence, with the covariance (or None)."""
     s = pose.shape[0]
-    pose, markers = pose.copy(), markers.copy()
-    iteration = 0
-    while iteration < max_iterations:
-        iteration += 1
-        design, f = _linearise(problem.obs, pose, markers)
-        fp = _prior_misclosure(problem, np.concatenate([pose.ravel(), markers.ravel()]))
-        b = _constraints(problem, pose, markers)
-        bordered, rhs = _normal_system(problem, design, f, fp, b)
+    params = np.concatenate([pose.ravel(), markers.ravel()])
+    u = params.size
+    b = _constraints(problem, pose, markers)
+    step = np.full(1, np.inf)
+    for iteration in range(1, max_iterations + 2):
+        pose, markers = params[: 6 * s].reshape(s, 6), params[6 * s:].reshape(-1, 3)
+        blocks, columns, f = _linearise(problem.obs, pose, markers)
+        fp = _prior_misclosure(problem, params)
+        normal, rhs = _normal_system(problem, blocks, columns, f, fp, b)
+        if np.abs(step).max() < _STEP_TOLERANCE:
+            break
+        if iteration > max_iterations:
+            raise DataError(f"the adjustment did not converge in {max_iterations} iterations "
+                            f"(last step {np.abs(step).max():.3g})")
         try:
-            lu = scipy.sparse.linalg.splu(bordered)
+            step = scipy.sparse.linalg.splu(normal).solve(rhs)[:u]
         except RuntimeError:
             raise DataError("the network's normal equations are singular (a station tied only "
                             "by markers on one vertical line?)") from None
-        step = lu.solve(rhs)[: design.shape[1]]
-        if not np.isfinite(step).all():
-            raise DataError("the network's normal equations are singular")
-        pose += step[: 6 * s].reshape(s, 6)
-        markers += step[6 * s:].reshape(-1, 3)
-        if np.abs(step).max() < _STEP_TOLERANCE:
-            break
-    if np.abs(step).max() >= _STEP_TOLERANCE:
-        raise DataError(f"the adjustment did not converge in {max_iterations} iterations "
-                        f"(last step {np.abs(step).max():.3g})")
-    design, f = _linearise(problem.obs, pose, markers)
-    fp = _prior_misclosure(problem, np.concatenate([pose.ravel(), markers.ravel()]))
-    bordered, _ = _normal_system(problem, design, f, fp, b)
-    u = design.shape[1]
-    cov = scipy.linalg.inv(bordered.toarray(), overwrite_a=True, check_finite=False)[:u, :u]
-    return _Solution(pose, markers, design, f, fp, 0.5 * (cov + cov.T), b.shape[0], iteration)
+        params = params + step
+    cov = _covariance(normal, u, problem.fixed) if covariance else None
+    return _Solution(pose, markers, blocks, columns, f, fp, cov, b.shape[0], iteration - 1)
 
 
 def _adjust_iv(obs, datum, settings, nominal) -> int:
@@ -695,9 +737,10 @@ def _problem(obs: NetworkObservations, datum: Datum, settings: AdjustmentSetting
         heading.append(np.zeros(3, dtype=bool))
     problem = _Problem(obs, np.concatenate(index), np.concatenate(value),
                        np.concatenate(weight), np.concatenate(heading),
-                       np.zeros(0, dtype=int), np.zeros(0, dtype=int))
+                       np.zeros(6 * s + 3 * len(obs.marker_ids), dtype=bool),
+                       np.zeros(0, dtype=int))
     if datum.kind == "station":
-        problem.fixed = 6 * reference + np.arange(4)
+        problem.fixed[6 * reference + np.arange(4)] = True
         return problem
     free = _undetermined_defects(_defect_basis(pose, markers), problem.prior_index,
                                  problem.prior_weight)
@@ -788,13 +831,23 @@ def adjust(obs: NetworkObservations, datum: Datum = Datum(),
     position_columns = np.concatenate([6 * np.arange(s)[:, None], 6 * s + 3 * np.arange(k)[:, None]]
                                       ) + np.arange(3)
 
+    solved_keep = np.ones(obs.n, dtype=bool)
+
     def solve(keep, previous):
+        # after a removal the covariance is downdated, not re-inverted (see _downdated)
         problem.obs = obs.subset(keep)
-        start = (pose0, markers0) if previous is None else (previous[0].pose, previous[0].markers)
-        sol = _solve(problem, *start, settings.max_iterations)
-        rel = observation_reliability(sol.design, np.repeat(3.0 / problem.obs.sigma_m**2, 3),
-                                      sol.covariance, -sol.misclosure, position_columns, delta0)
-        return (sol, rel), rel.w_test
+        if previous is None:
+            sol = _solve(problem, pose0, markers0, settings.max_iterations)
+        else:
+            sol = _solve(problem, previous.pose, previous.markers, settings.max_iterations,
+                         covariance=False)
+            row = int(np.flatnonzero(solved_keep & ~keep)[0])
+            i = int(np.count_nonzero(solved_keep[:row]))
+            sol.covariance = _downdated(previous.covariance, previous.blocks[i],
+                                        previous.columns[i], np.full(3, 3.0 / obs.sigma_m[row]**2))
+        solved_keep[:] = keep
+        weight = np.repeat(3.0 / problem.obs.sigma_m[:, None]**2, 3, axis=1)
+        return sol, w_tests(sol.blocks, sol.columns, weight, sol.covariance, -sol.misclosure)
 
     def removable(keep, i):
         trial = keep.copy()
@@ -802,19 +855,25 @@ def adjust(obs: NetworkObservations, datum: Datum = Datum(),
         return (np.any(obs.marker[trial] == obs.marker[i])
                 and not _tie_order(obs, trial, reference)[1])
 
-    (sol, rel), keep, rejected = data_snooping(
+    sol, keep, rejected = data_snooping(
         solve, obs.n, settings.alpha0, settings.max_rejections if settings.snooping else 0,
         removable)
+    if rejected:  # the covariance afresh at the final solution
+        iterations = sol.iterations
+        sol = _solve(problem, sol.pose, sol.markers, settings.max_iterations)
+        sol.iterations = iterations
     kept = obs.subset(keep)
-    w = np.repeat(3.0 / kept.sigma_m**2, 3)
-    u = 6 * s + 3 * k
-    dof = 3 * kept.n + problem.prior_index.size - u + sol.n_constraints
-    vpv = float(w @ sol.misclosure**2 + problem.prior_weight @ sol.prior_misclosure**2)
+    w = np.repeat(3.0 / kept.sigma_m[:, None]**2, 3, axis=1)
+    rel = observation_reliability(sol.blocks, sol.columns, w, sol.covariance, -sol.misclosure,
+                                  position_columns, delta0)
+    dof = (3 * kept.n + problem.prior_index.size - problem.fixed.size + problem.fixed.sum()
+           + sol.n_constraints)
+    vpv = float(np.sum(w * sol.misclosure**2) + problem.prior_weight @ sol.prior_misclosure**2)
     pose = sol.pose.copy()
     pose[:, 3] = (pose[:, 3] + np.pi) % (2 * np.pi) - np.pi
     return NetworkAdjustment(
         observations=kept, pose=pose, marker_xyz_m=sol.markers, covariance=sol.covariance,
-        residuals_m=-sol.misclosure.reshape(-1, 3), redundancy=rel.redundancy, w_test=rel.w_test,
+        residuals_m=-sol.misclosure, redundancy=rel.redundancy, w_test=rel.w_test,
         mdb_m=rel.mdb_m, mdb_effect_m=rel.mdb_effect_m,
         sigma0_squared=vpv / dof if dof > 0 else float("nan"), dof=int(dof),
         iterations=sol.iterations,

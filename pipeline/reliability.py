@@ -105,21 +105,46 @@ class ObservationReliability:
     mdb_effect_m: np.ndarray
 
 
-def observation_reliability(design: sp.csr_matrix, weight: np.ndarray, covariance: np.ndarray,
-                            residual: np.ndarray, position_columns: np.ndarray,
-                            delta0: float) -> ObservationReliability:
+def _redundancy(blocks: np.ndarray, columns: np.ndarray, weight: np.ndarray,
+                covariance: np.ndarray) -> np.ndarray:
+    """Redundancy numbers (n, 3) from the (c, c) covariance blocks of each observation."""
+    q = covariance[columns[:, :, None], columns[:, None, :]]
+    aqa = np.einsum("nrc,ncd,nrd->nr", blocks, q, blocks)
+    return np.clip(1.0 - weight * aqa, 0.0, 1.0)
+
+
+def _w(r: np.ndarray, weight: np.ndarray, residual: np.ndarray) -> np.ndarray:
+    controlled = r > _MIN_REDUNDANCY
+    return np.where(controlled, residual * np.sqrt(weight / np.where(controlled, r, 1.0)), 0.0)
+
+
+def w_tests(blocks: np.ndarray, columns: np.ndarray, weight: np.ndarray,
+            covariance: np.ndarray, residual: np.ndarray) -> np.ndarray:
+    """Baarda's w statistics ``v_i / sqrt(Q_vv,ii)`` of point observations, (n, 3).
+
+    Parameters as in :func:`observation_reliability`; 0 where a component is uncontrolled.
+    """
+    return _w(_redundancy(blocks, columns, weight, covariance), weight, residual)
+
+
+def observation_reliability(blocks: np.ndarray, columns: np.ndarray, weight: np.ndarray,
+                            covariance: np.ndarray, residual: np.ndarray,
+                            position_columns: np.ndarray, delta0: float
+                            ) -> ObservationReliability:
     """Redundancy, w-test, MDB and MDB effect of point observations.
 
     Parameters
     ----------
-    design : (3n, u) sparse float
-        Design matrix of the observation components (rows grouped by observation: 3i, 3i+1,
-        3i+2), in the units of the parameters (m, rad).
-    weight : (3n,) float
+    blocks : (n, 3, c) float
+        Design block of each observation: the derivatives of its 3 components with respect to
+        the ``c`` parameters it involves (m per m, m per rad).
+    columns : (n, c) int
+        Those parameters' indices.
+    weight : (n, 3) float
         Weights ``1 / sigma_component**2``, 1/m^2.
     covariance : (u, u) float
         A-priori covariance ``Q`` of the parameters (zero rows for parameters the datum fixes).
-    residual : (3n,) float
+    residual : (n, 3) float
         Residuals ``v``, m.
     position_columns : (p, 3) int
         Parameter columns of the station and marker positions whose shift is the MDB effect.
@@ -134,26 +159,24 @@ def observation_reliability(design: sp.csr_matrix, weight: np.ndarray, covarianc
     --------
     One unknown point observed twice with unit weight: each component has redundancy 1/2.
 
-    >>> a = sp.csr_matrix(np.vstack([np.eye(3), np.eye(3)]))
-    >>> rel = observation_reliability(a, np.ones(6), np.eye(3) / 2, np.zeros(6),
-    ...                               np.array([[0, 1, 2]]), 4.13)
+    >>> blocks, columns = np.stack([np.eye(3)] * 2), np.array([[0, 1, 2]] * 2)
+    >>> rel = observation_reliability(blocks, columns, np.ones((2, 3)), np.eye(3) / 2,
+    ...                               np.zeros((2, 3)), np.array([[0, 1, 2]]), 4.13)
     >>> rel.redundancy.tolist()
     [[0.5, 0.5, 0.5], [0.5, 0.5, 0.5]]
     >>> round(float(rel.mdb_effect_m[0]), 3)  # half of MDB = 4.13 / sqrt(0.5)
     2.92
     """
-    aq = np.asarray(design @ covariance)  # (3n, u): row i is (Q A_i^T)^T
-    aqa = np.asarray(design.multiply(aq).sum(axis=1)).ravel()
-    r = np.clip(1.0 - weight * aqa, 0.0, 1.0)
+    r = _redundancy(blocks, columns, weight, covariance)
     controlled = r > _MIN_REDUNDANCY
-    sigma_v = np.sqrt(np.where(controlled, r, 1.0) / weight)
-    w = np.where(controlled, residual / sigma_v, 0.0)
     mdb = np.where(controlled, delta0 / np.sqrt(weight * np.where(controlled, r, 1.0)), np.inf)
-    shift = aq[:, position_columns]  # (3n, p, 3) per unit bias, scaled by p_i below
-    per_unit = np.linalg.norm(shift, axis=2).max(axis=1) * weight
-    effect = np.where(controlled, per_unit * np.where(controlled, mdb, 0.0), np.inf)
-    return ObservationReliability(r.reshape(-1, 3), w.reshape(-1, 3), mdb.reshape(-1, 3),
-                                  effect.reshape(-1, 3).max(axis=1))
+    n, c = columns.shape
+    design = sp.csr_matrix((blocks.ravel(), np.repeat(columns, 3, axis=0).ravel(),
+                            np.arange(0, 3 * n * c + 1, c)), shape=(3 * n, covariance.shape[0]))
+    shift = np.asarray(design @ covariance[:, position_columns.ravel()])  # Q A_i^T per unit
+    per_unit = np.linalg.norm(shift.reshape(3 * n, -1, 3), axis=2).max(axis=1).reshape(n, 3)
+    effect = np.where(controlled, per_unit * weight * np.where(controlled, mdb, 0.0), np.inf)
+    return ObservationReliability(r, _w(r, weight, residual), mdb, effect.max(axis=1))
 
 
 def data_snooping(solve: Callable[[np.ndarray, Any], tuple[Any, np.ndarray]], n: int,
