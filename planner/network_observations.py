@@ -30,7 +30,7 @@ the station or the plan.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -91,16 +91,23 @@ class Identified:
         Marker id of every detection of every station (``None``: not identified, left out).
     method : str
         One of :data:`IDENTITIES`.
+    reasons : list of list of str, optional
+        Why each detection got its id or none (e.g. the association's ``outside_gate``,
+        ``ambiguous``); empty when the method gives no reasons.
     """
 
     stations: list[StationDetections]
     ids: list[list[str | None]]
     method: str
+    reasons: list[list[str]] = field(default_factory=list)
 
     @property
-    def unidentified(self) -> list[tuple[str, np.ndarray]]:
-        """``(station_id, xyz_m)`` of every detection left out (levelled station frame)."""
-        return [(s.station_id, s.xyz_m[k]) for s, ids in zip(self.stations, self.ids, strict=True)
+    def unidentified(self) -> list[tuple[str, np.ndarray, str]]:
+        """``(station_id, xyz_m, reason)`` of every detection left out (levelled station
+        frame; ``reason`` empty when the method gives none)."""
+        reasons = self.reasons or [[""] * len(ids) for ids in self.ids]
+        return [(s.station_id, s.xyz_m[k], why[k])
+                for s, ids, why in zip(self.stations, self.ids, reasons, strict=True)
                 for k, i in enumerate(ids) if i is None]
 
 
@@ -196,6 +203,10 @@ class PlanGeometry:
     requirement_m: float
     inclinometer_sigma_deg: float | None
     """The plan's configured inclinometer sigma, or ``None`` when it records none."""
+    heading_prior_sigma_deg: float | None
+    """The heading prior the plan assumed (network mode), or ``None``."""
+    reference_station: str | None
+    """The datum station the plan assumed (network mode), or ``None``."""
     dem: str | None
     """The ``--dem`` the plan was made on, or ``None`` for a preset's terrain."""
 
@@ -207,7 +218,10 @@ def read_plan_geometry(path: Path) -> PlanGeometry:
 
     doc = read_plan(path, "--plan", full=True)
     cfg = doc["provenance"].get("config", {})
-    incl = cfg.get("inclinometer_sigma_deg")
+    what = f"--plan {path}: provenance config"
+    incl, heading = (None if cfg.get(k) is None else finite_number(cfg[k], f"{what} {k}", 10.0)
+                     for k in ("inclinometer_sigma_deg", "heading_prior_sigma_deg"))
+    reference = cfg.get("reference_station")
     return PlanGeometry(
         Path(path), tuple(m["id"] for m in doc["markers"]),
         np.array([[m["x_m"], m["y_m"], m["z_m"]] for m in doc["markers"]], dtype=float),
@@ -215,7 +229,7 @@ def read_plan_geometry(path: Path) -> PlanGeometry:
         np.array([[s["x_m"], s["y_m"], s["z_m"]] for s in doc["stations"]], dtype=float),
         np.array([float(s.get("heading_rad") or 0.0) for s in doc["stations"]]),
         float(doc["requirement"]["working_radius_m"]), float(doc["requirement"]["requirement_m"]),
-        float(incl) if isinstance(incl, int | float) and not isinstance(incl, bool) else None,
+        incl or None, heading or None, reference if isinstance(reference, str) else None,
         doc["provenance"].get("inputs", {}).get("dem"))
 
 
@@ -231,38 +245,43 @@ def identify_with_plan(stations: list[StationDetections], plan: PlanGeometry,
         A station the plan does not hold, or a station none of whose detections matches a
         planned marker (both: a table from another site).
     """
-    from pipeline.marker_association import associate_with_plan
-
     foreign = [s.station_id for s in stations if s.station_id not in plan.station_ids]
     if foreign:
         raise InputFileError(
             f"station(s) {', '.join(foreign)} of the marker tables are not in --plan "
             f"{plan.path} (it holds {_id_range(plan.station_ids)}); are the tables from "
             "another site? Give that site's plan, or leave out --plan to associate by geometry")
-    ids = []
+    from pipeline.marker_association import associate_with_plan
+
+    ids, reasons = [], []
     for s in stations:
         k = plan.station_ids.index(s.station_id)
-        found = list(associate_with_plan(
+        found = associate_with_plan(
             s.xyz_m, plan.station_xyz_m[k], float(plan.station_heading_rad[k]),
             plan.marker_xyz_m, list(plan.marker_ids), s.sigma_m, odometry_sigma_m,
-            odometry_heading_sigma_rad))
-        if not any(i is not None for i in found):
+            odometry_heading_sigma_rad)
+        if not any(i is not None for i in found.ids):
             raise InputFileError(
-                f"none of the {len(found)} detection(s) of station {s.station_id} "
+                f"none of the {len(found.ids)} detection(s) of station {s.station_id} "
                 f"({s.table}) matches a marker of --plan {plan.path} within the odometry's "
                 f"sigma ({odometry_sigma_m:g} m, {math.degrees(odometry_heading_sigma_rad):g} "
                 "deg); is the table from another site, or is --odometry-sigma-m too small?")
-        ids.append(found)
-    return Identified(stations, ids, "plan")
+        ids.append(list(found.ids))
+        reasons.append(list(found.status))
+    return Identified(stations, ids, "plan", reasons)
 
 
-def identify_by_geometry(stations: list[StationDetections]) -> Identified:
+def identify_by_geometry(stations: list[StationDetections],
+                         inclinometer_sigma_rad: float) -> Identified:
     """Marker ids from consistent inter-marker distances across stations
-    (:func:`pipeline.marker_association.associate_by_geometry`)."""
+    (:func:`pipeline.marker_association.associate_by_geometry`, with each detection's sigma and
+    the inclinometer's residual tilt); a marker seen by one station gets an id of its own."""
     from pipeline.marker_association import associate_by_geometry
 
-    ids = associate_by_geometry([(s.station_id, s.xyz_m) for s in stations])
-    return Identified(stations, [list(i) for i in ids], "geometry")
+    found = associate_by_geometry([(s.station_id, s.xyz_m) for s in stations],
+                                  [s.sigma_m for s in stations],
+                                  inclinometer_sigma_rad=inclinometer_sigma_rad)
+    return Identified(stations, [list(i) for i in found.ids], "geometry")
 
 
 def identify_from_table(stations: list[StationDetections]) -> Identified:

@@ -85,8 +85,9 @@ class AdjustmentRun:
         The marker tables (and plan, control) read, with their SHA-256.
     error_model : str
         The error model's name.
-    unidentified : list of (str, (3,) float)
-        ``(station_id, xyz_m)`` of detections without a marker id (left out), station frame.
+    unidentified : list of (str, (3,) float, str)
+        ``(station_id, xyz_m, reason)`` of detections without a marker id (left out), station
+        frame.
     plan_markers : dict of str to (3,) float
         Planned centres by marker id (empty without a plan), site frame.
     """
@@ -398,7 +399,8 @@ def adjustment_record(run: AdjustmentRun, stations: list[dict], markers: list[di
                      "n_detections": len(observations) + len(run.unidentified),
                      "n_identified": len(observations),
                      "unidentified": [{"station_id": s, "x_m": float(p[0]), "y_m": float(p[1]),
-                                       "z_m": float(p[2])} for s, p in run.unidentified]},
+                                       "z_m": float(p[2]), "reason": why}
+                                      for s, p, why in run.unidentified]},
         "statistics": {**stats, "sigma0_squared": float(res.sigma0_squared),
                        "sigma0": math.sqrt(max(float(res.sigma0_squared), 0.0))},
         "global_test": test,
@@ -499,10 +501,11 @@ def frame_note(datum_kind: str, reference: str, plan_given: bool,
         return ("the control points' frame (x, y horizontal, z up, metres); "
                 "not geographic coordinates unless the control points are")
     if plan_given:
-        if plan_dem is None:
-            return FRAME_NOTE
-        return (f"site frame of the plan's DEM {Path(plan_dem).name}: its projected CRS when "
-                "it has one, else local metres (x, y horizontal, z up)")
+        frame = FRAME_NOTE if plan_dem is None else (
+            f"site frame of the plan's DEM {Path(plan_dem).name}: its projected CRS when it has "
+            "one, else local metres (x, y horizontal, z up)")
+        return frame + (f"; station {reference} held at its planned pose"
+                        if datum_kind == "station" else "")
     local = "(local metres, not geographic coordinates)"
     if datum_kind == "free":
         return (f"local frame of the network, chained from station {reference}'s levelled "

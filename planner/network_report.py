@@ -108,13 +108,14 @@ def _snooping(doc: dict) -> list[str]:
              f"Baarda's w-test per observation component, alpha0 = {ds['alpha0']:g} (critical "
              f"value {k:.2f}), beta0 = {ds['beta0']:g}; "
              + ("the observation with the largest |w| above it is removed and the network "
-                "adjusted again, until none is." if ds["enabled"] else
+                "adjusted again, until none is. A removed centre disagrees with the rest of the "
+                "network beyond its noise: a mis-identified or moved marker, or a bad sphere "
+                "fit." if ds["enabled"] else
                 "snooping was **off**: observations are flagged, never removed."), ""]
     if ds["rejected"]:
         lines += ["| round | station | marker | w | why |", "|---:|---|---|---:|---|"]
         lines += [f"| {r['round']} | {r['station_id']} | {r['marker_id']} | {r['w']:.2f} | "
-                  f"|w| {abs(r['w']):.1f} > {k:.2f}: this centre disagrees with the rest of the "
-                  "network beyond its noise (a mis-identified or moved marker, or a bad fit) |"
+                  f"|w| {abs(r['w']):.1f} > {k:.2f}, the largest in round {r['round']} |"
                   for r in ds["rejected"]]
         lines.append("")
     else:
@@ -209,11 +210,13 @@ def _identity(doc: dict) -> list[str]:
              f"{ident['n_identified']} of {ident['n_detections']} accepted detections identified "
              f"by {how.get(ident['method'], ident['method'])}."]
     if ident["unidentified"]:
-        by_station: dict[str, int] = {}
+        counts: dict[tuple[str, str], int] = {}
         for u in ident["unidentified"]:
-            by_station[u["station_id"]] = by_station.get(u["station_id"], 0) + 1
+            key = (u["station_id"], u["reason"].replace("_", " "))
+            counts[key] = counts.get(key, 0) + 1
         lines.append("Left out (no marker id): " + ", ".join(
-            f"{n} at {s}" for s, n in by_station.items()) + ".")
+            f"{n} at {s}" + (f" ({why})" if why else "") for (s, why), n in counts.items())
+            + "; observations.csv lists only identified detections, adjustment.json all.")
     return lines + [""]
 
 

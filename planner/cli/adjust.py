@@ -33,28 +33,30 @@ REQUIREMENT_M = FiniteRange(0.0, 10.0, min_open=True)
 PROBABILITY = FiniteRange(0.0, 1.0, min_open=True, max_open=True)
 
 
-def _datum_text(ctx, param, text: str | None) -> str | None:
-    """``station`` or ``station:ID`` -> the reference station id (``""``: the first)."""
+def _datum_text(ctx, param, text: str | None) -> tuple[str, str | None] | None:
+    """``station``, ``station:ID`` or ``free`` -> (kind, reference station or ``None``)."""
     if text is None:
         return None
-    kind, sep, sid = text.partition(":")
-    if kind.strip() != "station" or (sep and not sid.strip()):
-        raise click.BadParameter(f"give station or station:ID (e.g. station:S1); for control "
-                                 f"points use --control FILE, for a free network --free; got "
-                                 f"{text!r}", ctx, param)
-    return sid.strip()
+    kind, sep, sid = (t.strip() for t in text.partition(":"))
+    if kind == "free" and not sep:
+        return "free", None
+    if kind != "station" or (sep and not sid):
+        raise click.BadParameter(f"give station, station:ID (e.g. station:S1) or free; for "
+                                 f"control points use --control FILE; got {text!r}", ctx, param)
+    return "station", sid or None
 
 
-def _datum_choice(reference: str | None, control_path: Path | None, free: bool) -> str:
+def _datum_choice(datum: tuple[str, str | None] | None, control_path: Path | None
+                  ) -> tuple[str, str | None]:
+    """The datum's kind and reference station from ``--datum`` and ``--control``."""
     from markerplan.errors import ConfigError
 
-    given = [name for name, on in (("--datum", reference is not None),
-                                   ("--control", control_path is not None),
-                                   ("--free", free)) if on]
-    if len(given) > 1:
-        raise ConfigError(f"give one datum, got {' and '.join(given)}: --datum station[:ID] "
-                          "(default: the first station), --control FILE or --free")
-    return "control" if control_path is not None else "free" if free else "station"
+    if datum is not None and control_path is not None:
+        raise ConfigError("give one datum, got --datum and --control: --datum station[:ID] "
+                          "(default: the first station), --datum free, or --control FILE")
+    if control_path is not None:
+        return "control", None
+    return datum or ("station", None)
 
 
 @click.command("adjust")
@@ -76,18 +78,17 @@ def _datum_choice(reference: str | None, control_path: Path | None, free: bool) 
                    "(gates the association with --plan).")
 @click.option("--odometry-heading-sigma-deg", type=ODOMETRY_HEADING_SIGMA_DEG, default=2.0,
               show_default=True, help="1-sigma error of a station's planned heading, degrees.")
-@click.option("--datum", "reference", metavar="station[:ID]", callback=_datum_text,
-              help="Datum: the reference station's x, y, z and heading fixed (default: the first "
-                   "station of the tables).")
+@click.option("--datum", "datum", metavar="station[:ID]|free", callback=_datum_text,
+              help="Datum: station[:ID] fixes the reference station's x, y, z and heading "
+                   "(default: the plan's reference station, else the first station of the "
+                   "tables); free puts minimal constraints on the stations' centroid and mean "
+                   "heading.")
 @click.option("--control", "control_path", type=FILE,
               help="Datum: control points, CSV id,x_m,y_m,z_m,sigma_m (site frame; sigma_m per "
                    "coordinate), e.g. a lander's fiducials; they must fix position and heading.")
-@click.option("--free", is_flag=True,
-              help="Datum: free network, minimal constraints on the stations' centroid and mean "
-                   "heading.")
 @click.option("--heading-prior-sigma-deg", type=ANGLE_SIGMA_DEG,
               help="Heading observed at every station (sun sensor) around its planned heading, "
-                   "1-sigma degrees (needs --plan). Default: none.")
+                   "1-sigma degrees (needs --plan; default: the plan's, else none).")
 @click.option("--inclinometer-sigma-deg", type=ANGLE_SIGMA_DEG,
               help="1-sigma roll and pitch prior of every station, degrees (default: the plan's, "
                    "else 0.01).")
@@ -105,7 +106,7 @@ def _datum_choice(reference: str | None, control_path: Path | None, free: bool) 
               help="Required 95 % station error, m (default: the plan's, else 0.1).")
 @json_option
 def command(tables, out, overwrite, error_model, plan_path, identity, odometry_sigma_m,
-            odometry_heading_sigma_deg, reference, control_path, free, heading_prior_sigma_deg,
+            odometry_heading_sigma_deg, datum, control_path, heading_prior_sigma_deg,
             inclinometer_sigma_deg, snooping, alpha0, beta0, working_radius_m, requirement_m,
             as_json):
     """Adjust a network: estimate every station's pose and every marker's centre together
@@ -123,83 +124,113 @@ def command(tables, out, overwrite, error_model, plan_path, identity, odometry_s
       markerplan adjust tables/markers.csv --plan plan/plan.json --out network/
       markerplan adjust s1/markers.csv s2/markers.csv --control lander.csv --out net/
     """
-    import hashlib
     import time
 
     from markerplan.output_folder import output_folder
 
-    kind = _datum_choice(reference, control_path, free)
+    kind, reference = _datum_choice(datum, control_path)
     if identity is None:
         identity = "plan" if plan_path is not None else "geometry"
     _check_identity(identity, plan_path, control_path, heading_prior_sigma_deg)
     timings: dict[str, float] = {}
     inputs = given_paths(*tables, plan_path, control_path, error_model.path)
     with output_folder(out, overwrite, "adjust", inputs=inputs) as stage:
-        t0 = time.perf_counter()
-        from planner import network_observations as no
-        from planner.config import PlanConfig
-
-        plan = no.read_plan_geometry(plan_path) if plan_path is not None else None
-        control = no.read_control(control_path) if control_path is not None else ()
-        stations = no.read_detections(list(tables), error_model.model)
-        if reference:
-            _check_reference(reference, stations)
-        timings["read"] = time.perf_counter() - t0
-        t0 = time.perf_counter()
-        identified = _identify(identity, stations, plan, odometry_sigma_m,
-                               math.radians(odometry_heading_sigma_deg))
-        obs = no.network_observations(identified)
-        timings["identify"] = time.perf_counter() - t0
-        defaults = PlanConfig()
-        incl = (inclinometer_sigma_deg if inclinometer_sigma_deg is not None else
-                plan.inclinometer_sigma_deg if plan and plan.inclinometer_sigma_deg else
-                defaults.inclinometer_sigma_deg)
-        radius = working_radius_m or (plan.working_radius_m if plan else
-                                      defaults.working_radius_m)
-        requirement = requirement_m or (plan.requirement_m if plan else defaults.requirement_m)
         from pipeline.network_adjustment import AdjustmentSettings, Datum, adjust
-
-        settings = AdjustmentSettings(
-            inclinometer_sigma_rad=math.radians(incl),
-            heading_prior_sigma_rad=(None if heading_prior_sigma_deg is None else
-                                     math.radians(heading_prior_sigma_deg)),
-            alpha0=alpha0, beta0=beta0, snooping=snooping)
-        datum = Datum(kind, reference or None, control)
-        t0 = time.perf_counter()
-        result = adjust(obs, datum, settings, _nominal(plan, obs))
-        timings["adjust"] = time.perf_counter() - t0
-        config = {"tables": [str(t) for t in tables], "plan": _str(plan_path),
-                  "error_model": error_model.name, "marker_ids": identity,
-                  "odometry_sigma_m": odometry_sigma_m,
-                  "odometry_heading_sigma_deg": odometry_heading_sigma_deg,
-                  "datum": kind, "reference_station": reference or None,
-                  "control": _str(control_path), "heading_prior_sigma_deg":
-                  heading_prior_sigma_deg, "inclinometer_sigma_deg": incl,
-                  "snooping": snooping, "alpha0": alpha0, "beta0": beta0,
-                  "max_rejections": settings.max_rejections,
-                  "max_iterations": settings.max_iterations, "working_radius_m": radius,
-                  "requirement_m": requirement}
-        files = [("marker table", t) for t in tables] + [
-            (k, p) for k, p in (("plan", plan_path), ("control", control_path)) if p]
+        from planner import network_observations as no
         from planner.network_files import write_network_files
         from planner.network_record import AdjustmentRun, frame_note
 
+        t0 = time.perf_counter()
+        plan = no.read_plan_geometry(plan_path) if plan_path is not None else None
+        control = no.read_control(control_path) if control_path is not None else ()
+        stations = no.read_detections(list(tables), error_model.model)
+        config = _configuration(
+            tables=[str(t) for t in tables], plan=_str(plan_path), control=_str(control_path),
+            error_model=error_model.name, marker_ids=identity, datum=kind,
+            reference_station=_reference(reference, kind, plan, stations),
+            odometry_sigma_m=odometry_sigma_m,
+            odometry_heading_sigma_deg=odometry_heading_sigma_deg,
+            heading_prior_sigma_deg=heading_prior_sigma_deg,
+            inclinometer_sigma_deg=inclinometer_sigma_deg, working_radius_m=working_radius_m,
+            requirement_m=requirement_m, snooping=snooping, alpha0=alpha0, beta0=beta0,
+            plan_geometry=plan)
+        timings["read"] = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        identified = _identify(identity, stations, plan, odometry_sigma_m,
+                               math.radians(odometry_heading_sigma_deg),
+                               math.radians(config["inclinometer_sigma_deg"]))
+        obs = no.network_observations(identified)
+        timings["identify"] = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        settings = AdjustmentSettings(
+            inclinometer_sigma_rad=math.radians(config["inclinometer_sigma_deg"]),
+            heading_prior_sigma_rad=_radians(config["heading_prior_sigma_deg"]),
+            alpha0=alpha0, beta0=beta0, snooping=snooping)
+        datum = Datum(kind, config["reference_station"], control)
+        result = adjust(obs, datum, settings, _nominal(plan, obs))
+        timings["adjust"] = time.perf_counter() - t0
+        config.update(max_rejections=settings.max_rejections,
+                      max_iterations=settings.max_iterations)
+        t0 = time.perf_counter()
         run = AdjustmentRun(
-            result=result, observations=obs, config=config, working_radius_m=radius,
-            requirement_m=requirement, identity=identity,
-            frame=frame_note(kind, result.observations.station_ids[0] if not reference
-                             else reference, plan is not None, plan.dem if plan else None),
-            inputs=[{"kind": k, "path": str(p),
-                     "sha256": hashlib.sha256(Path(p).read_bytes()).hexdigest()}
-                    for k, p in files],
+            result=result, observations=obs, config=config,
+            working_radius_m=config["working_radius_m"], requirement_m=config["requirement_m"],
+            identity=identity, frame=frame_note(
+                kind, config["reference_station"] or obs.station_ids[0], plan is not None,
+                plan.dem if plan else None),
+            inputs=_input_files(tables, plan_path, control_path),
             error_model=error_model.name, unidentified=identified.unidentified,
             plan_markers=(dict(zip(plan.marker_ids, plan.marker_xyz_m, strict=True))
                           if plan and identity != "geometry" else {}))
-        t0 = time.perf_counter()
         doc = write_network_files(stage, run)
         timings["write"] = time.perf_counter() - t0
     report_timings(timings)
     emit_summary(_summary(doc, out, timings), as_json, _human(doc, out))
+
+
+def _configuration(plan_geometry, **options) -> dict:
+    """The resolved configuration: the options, with the plan's settings (else
+    :class:`planner.config.PlanConfig`'s defaults) where an option was not given."""
+    from planner.config import PlanConfig
+
+    plan, defaults = plan_geometry, PlanConfig()
+    for key in ("inclinometer_sigma_deg", "working_radius_m", "requirement_m",
+                "heading_prior_sigma_deg"):
+        if options[key] is None:
+            from_plan = getattr(plan, key) if plan is not None else None
+            options[key] = from_plan if from_plan is not None else getattr(defaults, key)
+    return options
+
+
+def _reference(reference: str | None, kind: str, plan, stations) -> str | None:
+    """The reference station: ``--datum station:ID`` (checked against the tables' stations),
+    else the plan's reference station when the tables hold it, else ``None`` (the first)."""
+    from markerplan.errors import ConfigError
+
+    ids = [s.station_id for s in stations]
+    if reference:
+        if reference not in ids:
+            shown = ", ".join(ids[:10]) + (", ..." if len(ids) > 10 else "")
+            raise ConfigError(f"--datum station:{reference}: no station {reference} in the "
+                              f"marker tables (stations with accepted detections: {shown})")
+        return reference
+    if kind == "station" and plan is not None and plan.reference_station in ids:
+        return plan.reference_station
+    return None
+
+
+def _radians(degrees: float | None) -> float | None:
+    return None if degrees is None else math.radians(degrees)
+
+
+def _input_files(tables, plan_path, control_path) -> list[dict]:
+    """Kind, path and SHA-256 of every input file, for the outputs' provenance."""
+    import hashlib
+
+    files = [("marker table", t) for t in tables] + [
+        (k, p) for k, p in (("plan", plan_path), ("control", control_path)) if p is not None]
+    return [{"kind": k, "path": str(p), "sha256": hashlib.sha256(Path(p).read_bytes())
+             .hexdigest()} for k, p in files]
 
 
 def _str(path: Path | None) -> str | None:
@@ -220,18 +251,8 @@ def _check_identity(identity: str, plan_path, control_path, heading_prior) -> No
                           "on each station's planned heading")
 
 
-def _check_reference(reference: str, stations) -> None:
-    from markerplan.errors import ConfigError
-
-    ids = [s.station_id for s in stations]
-    if reference not in ids:
-        shown = ", ".join(ids[:10]) + (", ..." if len(ids) > 10 else "")
-        raise ConfigError(f"--datum station:{reference}: no station {reference} in the marker "
-                          f"tables (stations with accepted detections: {shown})")
-
-
 def _identify(identity: str, stations, plan, odometry_sigma_m: float,
-              odometry_heading_sigma_rad: float):
+              odometry_heading_sigma_rad: float, inclinometer_sigma_rad: float):
     from markerplan.errors import InputFileError
     from planner import network_observations as no
 
@@ -241,7 +262,7 @@ def _identify(identity: str, stations, plan, odometry_sigma_m: float,
     elif identity == "table":
         identified = no.identify_from_table(stations)
     else:
-        identified = no.identify_by_geometry(stations)
+        identified = no.identify_by_geometry(stations, inclinometer_sigma_rad)
     lost = [s.station_id for s, ids in zip(identified.stations, identified.ids, strict=True)
             if all(i is None for i in ids)]
     if lost:

@@ -63,7 +63,7 @@ def hand_built(snooping: bool = True) -> nr.AdjustmentRun:
         result=result, observations=given, config={"datum": "station"}, working_radius_m=10.0,
         requirement_m=0.1, identity="table", frame=nr.frame_note("station", "S1", False),
         inputs=[{"kind": "marker table", "path": "t.csv", "sha256": "0" * 64}],
-        error_model="test", unidentified=[("S2", np.array([1.0, 2.0, 3.0]))],
+        error_model="test", unidentified=[("S2", np.array([1.0, 2.0, 3.0]), "outside_gate")],
         plan_markers={"M1": np.array([5.0, 0.0, -0.9])})
 
 
