@@ -12,10 +12,10 @@ from pathlib import Path
 
 import numpy as np
 
-from planner.plan_map import MAX_LABELS, _nice_125
+from planner.plan_map import MAX_LABELS, _nice_125, draw_stations
 
 #: The largest ellipse is drawn at about this fraction of the map's width.
-ELLIPSE_FRACTION = 0.04
+ELLIPSE_FRACTION = 0.06
 
 
 def exaggeration(largest_semi_axis_m: float, extent_m: float) -> float:
@@ -53,7 +53,6 @@ def draw_network_map(run, stations: list[dict], markers: list[dict], observation
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    from matplotlib.colors import Normalize
     from matplotlib.lines import Line2D
     from matplotlib.patches import Ellipse
     from mpl_toolkits.axes_grid1.anchored_artists import AnchoredSizeBar
@@ -94,24 +93,13 @@ def draw_network_map(run, stations: list[dict], markers: list[dict], observation
                marker="o", edgecolors="white", linewidths=0.8, zorder=7)
     err_mm = np.array([1e3 * s["station_error_95_m"] for s in stations])
     req_mm = 1e3 * run.requirement_m
-    top = req_mm if not err_mm.size else min(req_mm, _nice_125(1.2 * err_mm.max(), up=True))
-    sc = ax.scatter(s_xy[:, 0], s_xy[:, 1], c=err_mm, cmap="viridis",
-                    norm=Normalize(vmin=0.0, vmax=top), marker="^", s=120, edgecolors="black",
-                    linewidths=0.8, zorder=8)
     failing = np.array([not s["meets_requirement"] for s in stations], dtype=bool)
-    if failing.any():
-        ax.scatter(s_xy[failing, 0], s_xy[failing, 1], marker="^", s=300, facecolors="none",
-                   edgecolors="#d62728", linewidths=2.0, zorder=8)
+    sc = draw_stations(ax, s_xy, [s["station_id"] for s in stations], err_mm, req_mm, failing,
+                       len(stations) <= MAX_LABELS)
     ref = [i for i, s in enumerate(stations) if s["reference"]]
     if ref:
         ax.scatter(s_xy[ref, 0], s_xy[ref, 1], marker="s", s=260, facecolors="none",
                    edgecolors="black", linewidths=1.6, zorder=9)
-    if len(stations) <= MAX_LABELS:
-        for s, (x, y) in zip(stations, s_xy, strict=True):
-            ax.annotate(f"{s['station_id']} {1e3 * s['station_error_95_m']:.0f} mm", (x, y),
-                        xytext=(7, -12), textcoords="offset points", fontsize=8, weight="bold",
-                        zorder=10, bbox={"boxstyle": "round,pad=0.15", "fc": "white",
-                                         "alpha": 0.7, "lw": 0})
     if len(markers) <= MAX_LABELS:
         for m, (x, y) in zip(markers, m_xy, strict=True):
             ax.annotate(m["marker_id"], (x, y), xytext=(5, 5), textcoords="offset points",
@@ -129,7 +117,7 @@ def draw_network_map(run, stations: list[dict], markers: list[dict], observation
     ax.add_artist(AnchoredSizeBar(ax.transData, bar, f"{bar:g} m (positions)", "lower right",
                                   pad=0.5, color="black", frameon=True,
                                   size_vertical=extent / 300))
-    ell_bar = _nice_125(largest) if largest > 0.0 else bar
+    ell_bar = _nice_125(2.0 * largest) if largest > 0.0 else bar  # the largest axis
     ax.add_artist(AnchoredSizeBar(ax.transData, ell_bar * factor,
                                   f"{1e3 * ell_bar:g} mm (ellipses, ×{factor:g})", "lower left",
                                   pad=0.5, color="#1f3b73", frameon=True,
@@ -141,7 +129,7 @@ def draw_network_map(run, stations: list[dict], markers: list[dict], observation
                label=f"marker ({len(markers)})"),
         Line2D([], [], color="#ffbf00", lw=1.2, label="tie (kept observation)"),
         Line2D([], [], color="#1f3b73", lw=1.0,
-               label=f"95 % horizontal error ellipse, drawn ×{factor:g}"),
+               label=f"95 % horizontal error ellipse ×{factor:g} (station blue, marker red)"),
     ]
     if ref:
         handles.append(Line2D([], [], marker="s", ls="", mfc="none", mec="black", ms=12,
