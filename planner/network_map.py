@@ -53,6 +53,7 @@ def draw_network_map(run, stations: list[dict], markers: list[dict], observation
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from matplotlib.collections import LineCollection
     from matplotlib.lines import Line2D
     from matplotlib.patches import Ellipse
     from mpl_toolkits.axes_grid1.anchored_artists import AnchoredSizeBar
@@ -75,15 +76,15 @@ def draw_network_map(run, stations: list[dict], markers: list[dict], observation
     factor = exaggeration(largest, extent)
 
     fig, ax = plt.subplots(figsize=(9.0, 8.6), layout="constrained")
+    ties = {"kept": [], "removed": []}
     for o in observations:
         i, j = s_index.get(o["station_id"]), m_index.get(o["marker_id"])
-        if i is None or j is None:
-            continue
-        removed = o["status"] == "removed"
-        ax.plot([s_xy[i, 0], m_xy[j, 0]], [s_xy[i, 1], m_xy[j, 1]],
-                color="#d62728" if removed else "#ffbf00", ls="--" if removed else "-",
-                lw=1.4 if removed else 0.8, alpha=0.9 if removed else 0.7,
-                zorder=4 if removed else 3)
+        if i is not None and j is not None:
+            ties["removed" if o["status"] == "removed" else "kept"].append((s_xy[i], m_xy[j]))
+    ax.add_collection(LineCollection(ties["kept"], colors="#ffbf00", linewidths=0.8, alpha=0.7,
+                                     zorder=3))
+    ax.add_collection(LineCollection(ties["removed"], colors="#d62728", linestyles="--",
+                                     linewidths=1.4, alpha=0.9, zorder=4))
     for group, xy, colour in ((ellipses[0], s_xy, "#1f3b73"), (ellipses[1], m_xy, "#e41a1c")):
         for (a, b, angle), (x, y) in zip(group, xy, strict=True):
             ax.add_patch(Ellipse((x, y), 2 * a * factor, 2 * b * factor, angle=angle,
@@ -137,7 +138,7 @@ def draw_network_map(run, stations: list[dict], markers: list[dict], observation
     if any(control):
         handles.append(Line2D([], [], marker="o", ls="", mfc="#7b3294", mec="white", ms=8,
                               label="control point"))
-    if any(o["status"] == "removed" for o in observations):
+    if ties["removed"]:
         handles.append(Line2D([], [], color="#d62728", ls="--", lw=1.4,
                               label="removed by data snooping"))
     if failing.any():

@@ -50,7 +50,7 @@ def _verdict(doc: dict) -> str:
     st, req, test = doc["statistics"], doc["requirement"], doc["global_test"]
     fit = ("no redundancy: the fit cannot be tested" if test["passed"] is None else
            f"the data agree with the error model (global test passed, sigma0² = "
-           f"{test['statistic']:.3f})" if test["passed"] else
+           f"{test['statistic']:.3f}{_pessimistic(test)})" if test["passed"] else
            f"**global test failed**: sigma0² = {test['statistic']:.3f} outside "
            f"[{test['lower']:.3f}, {test['upper']:.3f}], {test['verdict']}")
     rejected = st["n_rejected"]
@@ -60,6 +60,11 @@ def _verdict(doc: dict) -> str:
             f"{_mm(req['worst_station_error_95_m'])}. Relative to the datum "
             f"({doc['datum']['description']}), {fit}; data snooping removed "
             f"{rejected} observation{'s' if rejected != 1 else ''}.")
+
+
+def _pessimistic(test: dict) -> str:
+    return "; below the range: the error model is pessimistic" \
+        if test["verdict"] == "error model pessimistic" else ""
 
 
 def _datum(doc: dict) -> list[str]:
@@ -81,10 +86,11 @@ def _fit(doc: dict) -> list[str]:
         verdict = "not testable (no redundancy)"
     else:
         verdict = (f"{'passed' if test['passed'] else 'FAILED'}: sigma0² = "
-                   f"{test['statistic']:.3f}, accepted range [{test['lower']:.3f}, "
-                   f"{test['upper']:.3f}] (two-sided chi²({test['dof']}) test at "
-                   f"{100 * test['alpha']:g} %)" + ("" if test["passed"] else
-                                                     f": {test['verdict']}"))
+                   f"{test['statistic']:.3f}, range [{test['lower']:.3f}, "
+                   f"{test['upper']:.3f}] (chi²({test['dof']}) / dof, two-sided "
+                   f"{100 * test['alpha']:g} %; above it fails, below it the error model is "
+                   "pessimistic)" + ("" if test["verdict"] == "ok" else
+                                     f": {test['verdict']}"))
     return ["## Fit", "", "| quantity | value |", "|---|---:|",
             f"| observations (marker centres) | {st['n_observations']} "
             f"({st['n_observation_components']} components) |",

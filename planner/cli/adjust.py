@@ -300,7 +300,9 @@ def _summary(doc: dict, out: Path, timings: dict[str, float]) -> dict:
 def _human(doc: dict, out: Path) -> str:
     st, req, test = doc["statistics"], doc["requirement"], doc["global_test"]
     fit = ("untestable (no redundancy)" if test["passed"] is None else
-           "global test passed" if test["passed"] else "GLOBAL TEST FAILED")
+           "GLOBAL TEST FAILED: noisier than the error model" if not test["passed"] else
+           "global test passed" + ("; error model pessimistic" if test["verdict"] != "ok"
+                                   else ""))
     rejected = doc["data_snooping"]["rejected"]
     removed = ("; removed " + ", ".join(f"{r['station_id']}->{r['marker_id']} (w {r['w']:.1f})"
                                         for r in rejected)) if rejected else ""

@@ -134,6 +134,7 @@ def test_global_test_against_chi2():
     assert nr.global_test(float("nan"), 0)["passed"] is None
     assert nr.global_test(3.0, 50)["verdict"] == "noisier than the error model"
     assert nr.global_test(0.3, 50)["verdict"] == "error model pessimistic"
+    assert nr.global_test(0.3, 50)["passed"]  # conservative errors: reported, not failed
 
 
 def _digests(folder):
