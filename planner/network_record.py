@@ -228,7 +228,7 @@ def global_test(sigma0_squared: float, dof: int, alpha: float = GLOBAL_TEST_ALPH
     verdict = ("noisier than the error model" if sigma0_squared > upper else
                "error model pessimistic" if sigma0_squared < lower else "ok")
     return {"statistic": float(sigma0_squared), "dof": int(dof), "alpha": alpha,
-            "lower": lower, "upper": upper, "passed": sigma0_squared <= upper,
+            "lower": lower, "upper": upper, "passed": bool(sigma0_squared <= upper),
             "verdict": verdict}
 
 

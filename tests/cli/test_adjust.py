@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import csv
 import hashlib
-import importlib.util
 import json
 
 import numpy as np
@@ -18,11 +17,6 @@ from tests.cli.invoke import run_cli
 from tests.cli.network_inputs import write_network_inputs
 
 CHI2_3_95 = chi2.ppf(0.95, 3)
-
-#: Plan and geometry association come from branch net-assoc (pipeline/marker_association.py).
-needs_association = pytest.mark.skipif(
-    importlib.util.find_spec("pipeline.marker_association") is None,
-    reason="pipeline.marker_association (branch net-assoc) not merged yet")
 
 
 @pytest.fixture(scope="module")
@@ -59,7 +53,6 @@ def _mahalanobis(folder, truth_station_xyz, truth_marker_xyz, station_ids, marke
     return np.array(d2)
 
 
-@needs_association
 def test_plan_association_within_ellipsoids_and_reproducible(network, tmp_path, capsys,
                                                              monkeypatch):
     monkeypatch.chdir(tmp_path)
@@ -108,7 +101,6 @@ def test_swapped_marker_id_is_removed_and_named(tmp_path, capsys, monkeypatch):
         "global_test"]["passed"] is True
 
 
-@needs_association
 def test_geometry_without_plan(network, tmp_path, capsys, monkeypatch):
     monkeypatch.chdir(tmp_path)
     code, out, err = run_cli(capsys, ["adjust", *_tables(network), "--json", "--out", "o"])
@@ -123,7 +115,6 @@ def test_geometry_without_plan(network, tmp_path, capsys, monkeypatch):
     assert "reference station S01's levelled frame" in (tmp_path / "o" / "report.md").read_text()
 
 
-@needs_association
 def test_control_and_free_datum(network, tmp_path, capsys, monkeypatch):
     monkeypatch.chdir(tmp_path)
     truth = dict(zip(network.marker_ids, network.truth.marker_xyz_m, strict=True))

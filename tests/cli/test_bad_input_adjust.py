@@ -9,7 +9,6 @@ written into each case's working folder as ``net/table_1.csv`` (S01, S02) and
 from __future__ import annotations
 
 import csv
-import importlib.util
 import json
 from pathlib import Path
 
@@ -121,8 +120,6 @@ def _cases() -> list[Case]:
 
 
 CASES = _cases() + _cases_for("adjust", ["adjust", "{inputs}/markers.csv"])
-if importlib.util.find_spec("pipeline.marker_association") is None:  # branch net-assoc
-    CASES = [c for c in CASES if c.name != "adjust-detections-match-no-planned-marker"]
 
 
 @pytest.mark.parametrize("case", CASES, ids=str)
