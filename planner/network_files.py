@@ -115,6 +115,17 @@ def network_geojson(doc: dict, stations: list[dict], markers: list[dict],
     coordinates are *not* WGS84: ``coordinate_frame`` says which frame they are in (GeoJSON
     readers that assume longitude/latitude must be told), as the plan's ``markers.geojson``
     does.
+
+    Parameters
+    ----------
+    doc : dict
+        The ``adjustment.json`` document (frame, datum, provenance).
+    stations, markers, observations : list of dict
+        Rows of :mod:`planner.network_record`.
+
+    Returns
+    -------
+    geojson : dict
     """
     where = {s["station_id"]: _point(s) for s in stations}
     where.update({("marker", m["marker_id"]): _point(m) for m in markers})

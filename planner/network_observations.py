@@ -213,7 +213,23 @@ class PlanGeometry:
 
 def read_plan_geometry(path: Path) -> PlanGeometry:
     """Markers, stations and requirement of a ``plan.json`` (checked by
-    :func:`planner.plan_file.read_plan`; the terrain is not loaded)."""
+    :func:`planner.plan_file.read_plan`; the terrain is not loaded).
+
+    Parameters
+    ----------
+    path : Path
+        The ``plan.json`` written by ``markerplan plan``.
+
+    Returns
+    -------
+    PlanGeometry
+
+    Raises
+    ------
+    InputFileError
+        As :func:`planner.plan_file.read_plan`, or a non-numeric inclinometer or heading-prior
+        sigma in its configuration.
+    """
     from planner.plan_file import read_plan
 
     doc = read_plan(path, "--plan", full=True)
@@ -305,6 +321,15 @@ def network_observations(identified: Identified):
     Stations keep the order of ``identified.stations`` (those with no identified detection are
     left out); markers are numbered in order of first sight. Unidentified detections are left
     out.
+
+    Parameters
+    ----------
+    identified : Identified
+
+    Returns
+    -------
+    obs : pipeline.network_adjustment.NetworkObservations
+        Levelled station frames, m; ``sigma_m`` the error model's.
     """
     from pipeline.network_adjustment import NetworkObservations
 

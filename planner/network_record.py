@@ -250,7 +250,18 @@ def _reference_station(result) -> str | None:
 
 
 def station_rows(run: AdjustmentRun) -> list[dict]:
-    """One row per station (:data:`STATION_COLUMNS`), in the adjustment's order."""
+    """One row per station (:data:`STATION_COLUMNS`), in the adjustment's order.
+
+    Parameters
+    ----------
+    run : AdjustmentRun
+
+    Returns
+    -------
+    rows : list of dict
+        Positions in m (site frame), angles and their sigmas in degrees, the 95 % ellipsoid's
+        semi-axes and the 95 % station error over ``run.working_radius_m`` in m.
+    """
     res = run.result
     obs = res.observations
     cov = _pose_covariances(res)
@@ -276,7 +287,18 @@ def station_rows(run: AdjustmentRun) -> list[dict]:
 
 
 def marker_rows(run: AdjustmentRun) -> list[dict]:
-    """One row per marker (:data:`MARKER_COLUMNS`), in the adjustment's order."""
+    """One row per marker (:data:`MARKER_COLUMNS`), in the adjustment's order.
+
+    Parameters
+    ----------
+    run : AdjustmentRun
+
+    Returns
+    -------
+    rows : list of dict
+        Centres, sigmas and 95 % ellipsoid semi-axes in m (site frame); the stations that saw
+        the marker; its distance from the plan's centre (``None`` without one).
+    """
     res = run.result
     obs = res.observations
     cov = _marker_covariances(res)
@@ -306,6 +328,17 @@ def observation_rows(run: AdjustmentRun, critical_value: float) -> list[dict]:
     ``status`` is ``removed`` (data snooping took it out; its statistics are those of the round
     it was removed in: only ``max_abs_w``), ``flagged`` (kept although some ``|w|`` exceeds
     ``critical_value``: snooping was off or stopped) or ``kept``.
+
+    Parameters
+    ----------
+    run : AdjustmentRun
+    critical_value : float
+        Critical value of the w-test (:func:`pipeline.reliability.critical_value`).
+
+    Returns
+    -------
+    rows : list of dict
+        In the order of ``run.observations``; residuals in site-frame axes, m.
     """
     res = run.result
     given, kept = run.observations, res.observations
@@ -347,7 +380,17 @@ def _same(obs, j: int, sid: str, mid: str, xyz: np.ndarray) -> bool:
 
 def parameter_rows(result) -> list[dict]:
     """The unknowns in the order of the covariance matrix (:data:`PARAMETER_COLUMNS`): the
-    stations' poses first, then the markers' centres; ``value`` and ``sigma`` in m or rad."""
+    stations' poses first, then the markers' centres; ``value`` and ``sigma`` in m or rad.
+
+    Parameters
+    ----------
+    result : pipeline.network_adjustment.NetworkAdjustment
+
+    Returns
+    -------
+    rows : list of dict
+        ``parameter`` is ``<id>.<name>``, e.g. ``S1.heading_rad``, ``M3.z_m``.
+    """
     from pipeline.network_adjustment import POSE_PARAMETERS
 
     obs = result.observations
@@ -430,7 +473,18 @@ def adjustment_record(run: AdjustmentRun, stations: list[dict], markers: list[di
 
 
 def datum_record(result) -> dict:
-    """The datum: kind, reference station, control points and a line naming it."""
+    """The datum: kind, reference station, control points and a line naming it.
+
+    Parameters
+    ----------
+    result : pipeline.network_adjustment.NetworkAdjustment
+
+    Returns
+    -------
+    datum : dict
+        ``kind``, ``reference_station`` (``None`` unless ``station``), ``control``,
+        ``description``.
+    """
     datum = result.datum
     return {"kind": datum.kind, "reference_station": _reference_station(result),
             "control": [{"marker_id": c.marker_id, "xyz_m": c.xyz_m.tolist(),
