@@ -18,7 +18,7 @@ Without a plan (:func:`associate_by_geometry`)
     on that transform. For each pair of stations, pairs of detections whose two invariants
     agree (within their sigmas) give candidate transforms. The best-supported transform is
     refined by weighted 2-D Procrustes on its gated one-to-one correspondences. A rival
-    transform that explains as many other correspondences as half the best's makes the
+    transform with other correspondences, at least half as many as the best's, makes the
     pair ambiguous (a symmetric layout such as a regular grid), and the pair is left
     unmatched.
     Correspondences of all pairs are merged with union-find. A merge that would put two
@@ -44,15 +44,15 @@ from scipy.optimize import linear_sum_assignment
 from scipy.stats import chi2
 
 from markerplan.errors import ConfigError
-from pipeline.rig import rot_z
+from pipeline.rig import fit_heading_shift, rot_z
 
 #: Squared-distance margin of "clearly better": a match is kept only if no alternative is
 #: within ``2 ln(ambiguity_odds)``, i.e. the Gaussian likelihood of the best assignment beats
 #: every alternative by at least these odds.
 AMBIGUITY_ODDS = 100.0
 
-#: A rival transform makes a station pair ambiguous when it explains at least this fraction
-#: of the best transform's correspondences (and at least ``min_correspondences``) others.
+#: A rival transform makes a station pair ambiguous when its correspondences outside the
+#: best transform's number at least this fraction of the best's (and ``min_correspondences``).
 #: On a regular grid the transforms shifted by one spacing keep most of the best's support.
 RIVAL_FRACTION = 0.5
 
@@ -407,7 +407,7 @@ def associate_by_geometry(stations: Sequence[tuple[str, np.ndarray]],
     Three detections then match three others whenever their three distances agree, which
     happens by chance in large layouts, hence the default of 4 correspondences. The cost
     grows with the fourth power of the detections per station: about 10 ms per station
-    pair at 10 detections, 0.5 s at 50 (flat ground), more for a repetitive layout.
+    pair at 10 detections, about 1 s at 50 (flat ground), more for a repetitive layout.
 
     Examples
     --------
@@ -597,32 +597,9 @@ def _refine(a, b, var, hypotheses, h, gate):
         if np.array_equal(new, pairs):
             break
         pairs = new
-        heading, shift, spread, centre = _fit_heading_shift(
+        heading, shift, spread, centre = fit_heading_shift(
             a[pairs[:, 0]], b[pairs[:, 1]], 1.0 / var[pairs[:, 0], pairs[:, 1]])
     return pairs, float(heading), shift
-
-
-def _fit_heading_shift(src: np.ndarray, dst: np.ndarray, weight: np.ndarray
-                       ) -> tuple[float, np.ndarray, np.ndarray, np.ndarray]:
-    """Weighted least-squares ``dst ~ Rz(heading) src + shift`` (closed form, 4-DoF).
-
-    Returns
-    -------
-    heading : float
-    shift : (3,) float
-    spread : (2,) float
-        Heading variance (rad^2) and per-axis variance of the weighted centre (m^2), for
-        ``weight`` = 1 / per-axis variance.
-    centre : (3,) float
-        Weighted centre of ``src``.
-    """
-    total = weight.sum()
-    cs, cd = weight @ src / total, weight @ dst / total
-    s, d = src - cs, dst - cd
-    heading = math.atan2(float(weight @ (s[:, 0] * d[:, 1] - s[:, 1] * d[:, 0])),
-                         float(weight @ (s[:, 0] * d[:, 0] + s[:, 1] * d[:, 1])))
-    lever = float(weight @ (s[:, 0] ** 2 + s[:, 1] ** 2))
-    return heading, cd - rot_z(heading) @ cs, np.array([1.0 / max(lever, 1e-12), 1.0 / total]), cs
 
 
 def _geometry_iv(stations, sigma, station_pairs, min_support, probability, inclinometer):
