@@ -82,14 +82,14 @@ def test_plan_association_within_ellipsoids_and_reproducible(network, tmp_path, 
 
 def test_swapped_marker_id_is_removed_and_named(tmp_path, capsys, monkeypatch):
     net = write_network_inputs(tmp_path / "net", n_stations=6, seed=3,
-                               swap=("S03", "M010", "M016"))  # 2.4 m apart
+                               swap=("S03", "M005", "M006"))  # 21 m apart
     monkeypatch.chdir(tmp_path)
     code, out, err = run_cli(capsys, ["adjust", *_tables(net), "--marker-ids", "table",
                                       "--json", "--out", "out"])
     assert code == 0, err
     rejected = json.loads(out)["rejected"]
     assert rejected and {(r["station_id"], r["marker_id"]) for r in rejected} <= {
-        ("S03", "M010"), ("S03", "M016")}
+        ("S03", "M005"), ("S03", "M006")}
     report = (tmp_path / "out" / "report.md").read_text()
     first = rejected[0]
     assert f"| 1 | S03 | {first['marker_id']} |" in report
