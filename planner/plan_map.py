@@ -21,7 +21,7 @@ def draw_plan_map(outcome, path: Path, dpi: int = 150) -> Path:
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    from matplotlib.colors import LightSource, Normalize
+    from matplotlib.colors import LightSource
     from matplotlib.lines import Line2D
     from matplotlib.patches import Circle, Polygon
     from mpl_toolkits.axes_grid1.anchored_artists import AnchoredSizeBar
@@ -75,24 +75,9 @@ def draw_plan_map(outcome, path: Path, dpi: int = 150) -> Path:
                     zorder=11)
     err_mm = 1e3 * res.check.error_m
     req_mm = 1e3 * cfg.requirement_m
-    finite = err_mm[np.isfinite(err_mm)]
-    # colour range: up to the requirement, or tighter when every station is far inside it, so
-    # that stations stay distinguishable (their errors are also written beside them)
-    top = req_mm if not finite.size else min(req_mm, _nice_125(1.2 * finite.max(), up=True))
-    norm = Normalize(vmin=0.0, vmax=top)
-    sc = ax.scatter(prob.station_xyz[:, 0], prob.station_xyz[:, 1],
-                    c=np.where(np.isfinite(err_mm), err_mm, 2 * req_mm), cmap="viridis",
-                    norm=norm, marker="^", s=140, edgecolors="black", linewidths=0.8, zorder=8)
     failing = ~res.check.ok
-    if failing.any():
-        ax.scatter(prob.station_xyz[failing, 0], prob.station_xyz[failing, 1], marker="^",
-                   s=320, facecolors="none", edgecolors="#d62728", linewidths=2.0, zorder=8)
-    for s in range(prob.n_stations) if label_stations else ():
-        text = (f"{prob.station_ids[s]} {err_mm[s]:.0f} mm" if np.isfinite(err_mm[s])
-                else f"{prob.station_ids[s]} unregistrable")
-        ax.annotate(text, prob.station_xyz[s, :2], xytext=(7, -12),
-                    textcoords="offset points", fontsize=8, weight="bold", zorder=9,
-                    bbox={"boxstyle": "round,pad=0.15", "fc": "white", "alpha": 0.7, "lw": 0})
+    sc = draw_stations(ax, prob.station_xyz[:, :2], prob.station_ids, err_mm, req_mm, failing,
+                       label_stations)
     cb = fig.colorbar(sc, ax=ax, shrink=0.8, pad=0.01,
                       extend="max" if failing.any() else "neither")
     cb.set_label(f"predicted station error, 95 % (mm); requirement {req_mm:g} mm")
@@ -131,6 +116,48 @@ def draw_plan_map(outcome, path: Path, dpi: int = 150) -> Path:
     fig.savefig(path, dpi=dpi, metadata={"Software": None})
     plt.close(fig)
     return path
+
+
+def draw_stations(ax, xy: np.ndarray, ids, error_mm: np.ndarray, requirement_mm: float,
+                  failing: np.ndarray, labels: bool):
+    """Stations as triangles coloured by their 95 % error (viridis from 0 to the requirement,
+    or tighter when every station is far inside it), failing ones ringed in red, each labelled
+    with its id and error; returns the scatter for the colour bar.
+
+    Parameters
+    ----------
+    ax : matplotlib Axes
+    xy : (s, 2) float
+        Station positions, site frame, m.
+    ids : sequence of str
+    error_mm : (s,) float
+        95 % station errors, mm (non-finite: unregistrable).
+    requirement_mm : float
+    failing : (s,) bool
+    labels : bool
+        Write id and error beside every station.
+    """
+    from matplotlib.colors import Normalize
+
+    finite = error_mm[np.isfinite(error_mm)]
+    # colour range: up to the requirement, or tighter when every station is far inside it, so
+    # that stations stay distinguishable (their errors are also written beside them)
+    top = (requirement_mm if not finite.size else
+           min(requirement_mm, _nice_125(1.2 * finite.max(), up=True)))
+    sc = ax.scatter(xy[:, 0], xy[:, 1],
+                    c=np.where(np.isfinite(error_mm), error_mm, 2 * requirement_mm),
+                    cmap="viridis", norm=Normalize(vmin=0.0, vmax=top), marker="^", s=140,
+                    edgecolors="black", linewidths=0.8, zorder=8)
+    if failing.any():
+        ax.scatter(xy[failing, 0], xy[failing, 1], marker="^", s=320, facecolors="none",
+                   edgecolors="#d62728", linewidths=2.0, zorder=8)
+    for s in range(len(ids)) if labels else ():
+        text = (f"{ids[s]} {error_mm[s]:.0f} mm" if np.isfinite(error_mm[s])
+                else f"{ids[s]} unregistrable")
+        ax.annotate(text, xy[s], xytext=(7, -12), textcoords="offset points", fontsize=8,
+                    weight="bold", zorder=9,
+                    bbox={"boxstyle": "round,pad=0.15", "fc": "white", "alpha": 0.7, "lw": 0})
+    return sc
 
 
 def _view(inp, prob) -> tuple[float, float, float, float]:

@@ -26,6 +26,7 @@ COMMANDS: dict[str, str] = {
     "verify": "verify",
     "reduce": "reduce",
     "calibrate-sensor": "calibrate_sensor",
+    "adjust": "adjust",
 }
 
 
@@ -55,6 +56,7 @@ def cli() -> None:
       markerplan fit-error-model tables/markers.csv --out model/ --plot
       markerplan plan --error-model model/model.json --out plan/
       markerplan verify plan/plan.json --out verify/
+      markerplan adjust tables/markers.csv --plan plan/plan.json --out network/
     """
 
 

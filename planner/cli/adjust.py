@@ -1,0 +1,316 @@
+"""``markerplan adjust``: marker tables of many stations -> network adjustment, reliability,
+tables, GeoJSON, report and map."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import click
+
+from planner.cli._common import (
+    FILE,
+    FiniteRange,
+    emit_summary,
+    error_model_option,
+    given_paths,
+    json_option,
+    out_option,
+    overwrite_option,
+    report_timings,
+)
+
+#: Bounds of the angle sigmas, degrees: above 10 deg an inclinometer or sun sensor measures
+#: nothing, and the small-angle tilt model stops holding.
+ANGLE_SIGMA_DEG = FiniteRange(0.0, 10.0, min_open=True)
+#: Rover odometry, 1-sigma position error, m (up to 50 m of drift between stations).
+ODOMETRY_SIGMA_M = FiniteRange(0.0, 50.0, min_open=True)
+#: Odometry heading, 1-sigma, degrees.
+ODOMETRY_HEADING_SIGMA_DEG = FiniteRange(0.0, 90.0, min_open=True)
+#: Working radius and requirement, m (the plan's bounds: planner.config.BOUNDS).
+RADIUS_M = FiniteRange(0.0, 100.0, min_open=True)
+REQUIREMENT_M = FiniteRange(0.0, 10.0, min_open=True)
+PROBABILITY = FiniteRange(0.0, 1.0, min_open=True, max_open=True)
+
+
+def _datum_text(ctx, param, text: str | None) -> tuple[str, str | None] | None:
+    """``station``, ``station:ID`` or ``free`` -> (kind, reference station or ``None``)."""
+    if text is None:
+        return None
+    kind, sep, sid = (t.strip() for t in text.partition(":"))
+    if kind == "free" and not sep:
+        return "free", None
+    if kind != "station" or (sep and not sid):
+        raise click.BadParameter(f"give station, station:ID (e.g. station:S1) or free; for "
+                                 f"control points use --control FILE; got {text!r}", ctx, param)
+    return "station", sid or None
+
+
+def _datum_choice(datum: tuple[str, str | None] | None, control_path: Path | None
+                  ) -> tuple[str, str | None]:
+    """The datum's kind and reference station from ``--datum`` and ``--control``."""
+    from markerplan.errors import ConfigError
+
+    if datum is not None and control_path is not None:
+        raise ConfigError("give one datum, got --datum and --control: --datum station[:ID] "
+                          "(default: the first station), --datum free, or --control FILE")
+    if control_path is not None:
+        return "control", None
+    return datum or ("station", None)
+
+
+@click.command("adjust")
+@click.argument("tables", nargs=-1, required=True, type=click.Path(path_type=Path))
+@out_option(required=True)
+@overwrite_option
+@error_model_option
+@click.option("--plan", "plan_path", type=FILE,
+              help="plan.json of the survey: its markers and the stations' planned poses "
+                   "identify the detections (gated association), give initial values, the "
+                   "working radius and the requirement.")
+@click.option("--marker-ids", "identity", type=click.Choice(("plan", "geometry", "table")),
+              help="How markers are identified across stations: plan (association with --plan's "
+                   "markers; the default with --plan), geometry (consistent inter-marker "
+                   "distances; the default without), table (the tables' marker_id column: ids "
+                   "assigned in the field; for simulated scans that is the simulator's truth).")
+@click.option("--odometry-sigma-m", type=ODOMETRY_SIGMA_M, default=0.5, show_default=True,
+              help="1-sigma error of a station's planned position as the rover reaches it, m "
+                   "(gates the association with --plan).")
+@click.option("--odometry-heading-sigma-deg", type=ODOMETRY_HEADING_SIGMA_DEG, default=2.0,
+              show_default=True, help="1-sigma error of a station's planned heading, degrees.")
+@click.option("--datum", "datum", metavar="station[:ID]|free", callback=_datum_text,
+              help="Datum: station[:ID] fixes the reference station's x, y, z and heading "
+                   "(default: the plan's reference station, else the first station of the "
+                   "tables); free puts minimal constraints on the stations' centroid and mean "
+                   "heading.")
+@click.option("--control", "control_path", type=FILE,
+              help="Datum: control points, CSV id,x_m,y_m,z_m,sigma_m (site frame; sigma_m per "
+                   "coordinate), e.g. a lander's fiducials; they must fix position and heading.")
+@click.option("--heading-prior-sigma-deg", type=ANGLE_SIGMA_DEG,
+              help="Heading observed at every station (sun sensor) around its planned heading, "
+                   "1-sigma degrees (needs --plan; default: the plan's, else none).")
+@click.option("--inclinometer-sigma-deg", type=ANGLE_SIGMA_DEG,
+              help="1-sigma roll and pitch prior of every station, degrees (default: the plan's, "
+                   "else 0.01).")
+@click.option("--snooping/--no-snooping", default=True, show_default=True,
+              help="Data snooping: remove the observation with the largest |w| above the "
+                   "critical value and adjust again, until none is (off: only flag).")
+@click.option("--alpha0", type=PROBABILITY, default=0.001, show_default=True,
+              help="Significance level of the w-test.")
+@click.option("--beta0", type=PROBABILITY, default=0.80, show_default=True,
+              help="Power of the w-test (for the minimal detectable biases).")
+@click.option("--working-radius", "working_radius_m", type=RADIUS_M,
+              help="Radius around a station over which its station error is assessed, m "
+                   "(default: the plan's, else 10).")
+@click.option("--requirement", "requirement_m", type=REQUIREMENT_M,
+              help="Required 95 % station error, m (default: the plan's, else 0.1).")
+@json_option
+def command(tables, out, overwrite, error_model, plan_path, identity, odometry_sigma_m,
+            odometry_heading_sigma_deg, datum, control_path, heading_prior_sigma_deg,
+            inclinometer_sigma_deg, snooping, alpha0, beta0, working_radius_m, requirement_m,
+            as_json):
+    """Adjust a network: estimate every station's pose and every marker's centre together
+    from the marker tables (markers.csv of `markerplan process`, accepted detections only) of
+    several stations, relative to a datum; test the fit and remove blunders (data snooping).
+
+    Each detection is weighted by the error model's sigma at its distance and elevation.
+    Roll and pitch are unknowns with the inclinometer as prior. Writes stations.csv,
+    markers.csv, observations.csv, parameters.csv + covariance.npy (full covariance),
+    network.geojson, adjustment.json, report.md and network.png into --out.
+
+    \b
+    Example:
+      markerplan process scans/ --out tables/
+      markerplan adjust tables/markers.csv --plan plan/plan.json --out network/
+      markerplan adjust s1/markers.csv s2/markers.csv --control lander.csv --out net/
+    """
+    import time
+
+    from markerplan.output_folder import output_folder
+
+    kind, reference = _datum_choice(datum, control_path)
+    if identity is None:
+        identity = "plan" if plan_path is not None else "geometry"
+    _check_identity(identity, plan_path, control_path, heading_prior_sigma_deg)
+    timings: dict[str, float] = {}
+    inputs = given_paths(*tables, plan_path, control_path, error_model.path)
+    with output_folder(out, overwrite, "adjust", inputs=inputs) as stage:
+        from pipeline.network_adjustment import AdjustmentSettings, Datum, adjust
+        from planner import network_observations as no
+        from planner.network_files import write_network_files
+        from planner.network_record import AdjustmentRun, frame_note
+
+        t0 = time.perf_counter()
+        plan = no.read_plan_geometry(plan_path) if plan_path is not None else None
+        control = no.read_control(control_path) if control_path is not None else ()
+        stations = no.read_detections(list(tables), error_model.model)
+        config = _configuration(
+            tables=[str(t) for t in tables], plan=_str(plan_path), control=_str(control_path),
+            error_model=error_model.name, marker_ids=identity, datum=kind,
+            reference_station=_reference(reference, kind, plan, stations),
+            odometry_sigma_m=odometry_sigma_m,
+            odometry_heading_sigma_deg=odometry_heading_sigma_deg,
+            heading_prior_sigma_deg=heading_prior_sigma_deg,
+            inclinometer_sigma_deg=inclinometer_sigma_deg, working_radius_m=working_radius_m,
+            requirement_m=requirement_m, snooping=snooping, alpha0=alpha0, beta0=beta0,
+            plan_geometry=plan)
+        timings["read"] = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        identified = _identify(identity, stations, plan, odometry_sigma_m,
+                               math.radians(odometry_heading_sigma_deg),
+                               math.radians(config["inclinometer_sigma_deg"]))
+        obs = no.network_observations(identified)
+        timings["identify"] = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        settings = AdjustmentSettings(
+            inclinometer_sigma_rad=math.radians(config["inclinometer_sigma_deg"]),
+            heading_prior_sigma_rad=_radians(config["heading_prior_sigma_deg"]),
+            alpha0=alpha0, beta0=beta0, snooping=snooping)
+        datum = Datum(kind, config["reference_station"], control)
+        result = adjust(obs, datum, settings, _nominal(plan, obs))
+        timings["adjust"] = time.perf_counter() - t0
+        config.update(max_rejections=settings.max_rejections,
+                      max_iterations=settings.max_iterations)
+        t0 = time.perf_counter()
+        run = AdjustmentRun(
+            result=result, observations=obs, config=config,
+            working_radius_m=config["working_radius_m"], requirement_m=config["requirement_m"],
+            identity=identity, frame=frame_note(
+                kind, config["reference_station"] or obs.station_ids[0], plan is not None,
+                plan.dem if plan else None),
+            inputs=_input_files(tables, plan_path, control_path),
+            error_model=error_model.name, unidentified=identified.unidentified,
+            plan_markers=(dict(zip(plan.marker_ids, plan.marker_xyz_m, strict=True))
+                          if plan and identity != "geometry" else {}))
+        doc = write_network_files(stage, run)
+        timings["write"] = time.perf_counter() - t0
+    report_timings(timings)
+    emit_summary(_summary(doc, out, timings), as_json, _human(doc, out))
+
+
+def _configuration(plan_geometry, **options) -> dict:
+    """The resolved configuration: the options, with the plan's settings (else
+    :class:`planner.config.PlanConfig`'s defaults) where an option was not given."""
+    from planner.config import PlanConfig
+
+    plan, defaults = plan_geometry, PlanConfig()
+    for key in ("inclinometer_sigma_deg", "working_radius_m", "requirement_m",
+                "heading_prior_sigma_deg"):
+        if options[key] is None:
+            from_plan = getattr(plan, key) if plan is not None else None
+            options[key] = from_plan if from_plan is not None else getattr(defaults, key)
+    return options
+
+
+def _reference(reference: str | None, kind: str, plan, stations) -> str | None:
+    """The reference station: ``--datum station:ID`` (checked against the tables' stations),
+    else the plan's reference station when the tables hold it, else ``None`` (the first)."""
+    from markerplan.errors import ConfigError
+
+    ids = [s.station_id for s in stations]
+    if reference:
+        if reference not in ids:
+            shown = ", ".join(ids[:10]) + (", ..." if len(ids) > 10 else "")
+            raise ConfigError(f"--datum station:{reference}: no station {reference} in the "
+                              f"marker tables (stations with accepted detections: {shown})")
+        return reference
+    if kind == "station" and plan is not None and plan.reference_station in ids:
+        return plan.reference_station
+    return None
+
+
+def _radians(degrees: float | None) -> float | None:
+    return None if degrees is None else math.radians(degrees)
+
+
+def _input_files(tables, plan_path, control_path) -> list[dict]:
+    """Kind, path and SHA-256 of every input file, for the outputs' provenance."""
+    import hashlib
+
+    files = [("marker table", t) for t in tables] + [
+        (k, p) for k, p in (("plan", plan_path), ("control", control_path)) if p is not None]
+    return [{"kind": k, "path": str(p), "sha256": hashlib.sha256(Path(p).read_bytes())
+             .hexdigest()} for k, p in files]
+
+
+def _str(path: Path | None) -> str | None:
+    return None if path is None else str(path)
+
+
+def _check_identity(identity: str, plan_path, control_path, heading_prior) -> None:
+    from markerplan.errors import ConfigError
+
+    if identity == "plan" and plan_path is None:
+        raise ConfigError("--marker-ids plan needs --plan PLAN.json; without a plan use "
+                          "--marker-ids geometry (or table)")
+    if identity == "geometry" and control_path is not None:
+        raise ConfigError("--control names markers by id, which association by geometry does "
+                          "not know (it names them M001, ...); give --plan or --marker-ids table")
+    if heading_prior is not None and plan_path is None:
+        raise ConfigError("--heading-prior-sigma-deg needs --plan: the heading prior is centred "
+                          "on each station's planned heading")
+
+
+def _identify(identity: str, stations, plan, odometry_sigma_m: float,
+              odometry_heading_sigma_rad: float, inclinometer_sigma_rad: float):
+    from markerplan.errors import InputFileError
+    from planner import network_observations as no
+
+    if identity == "plan":
+        identified = no.identify_with_plan(stations, plan, odometry_sigma_m,
+                                           odometry_heading_sigma_rad)
+    elif identity == "table":
+        identified = no.identify_from_table(stations)
+    else:
+        identified = no.identify_by_geometry(stations, inclinometer_sigma_rad)
+    lost = [s.station_id for s, ids in zip(identified.stations, identified.ids, strict=True)
+            if all(i is None for i in ids)]
+    if lost:
+        raise InputFileError(f"station(s) {', '.join(lost)}: no detection identified with a "
+                             f"marker (--marker-ids {identity}), so they share no markers with "
+                             "the network; leave their tables out or check the identification")
+    return identified
+
+
+def _nominal(plan, obs):
+    """Planned poses of the network's stations (the plan's order is not the tables'), or
+    ``None`` without a plan."""
+    if plan is None:
+        return None
+    from pipeline.network_adjustment import NominalPoses
+
+    k = [plan.station_ids.index(s) for s in obs.station_ids]
+    return NominalPoses(plan.station_xyz_m[k], plan.station_heading_rad[k])
+
+
+def _summary(doc: dict, out: Path, timings: dict[str, float]) -> dict:
+    st, req, test = doc["statistics"], doc["requirement"], doc["global_test"]
+    return {"out": str(out), "n_stations": st["n_stations"], "n_markers": st["n_markers"],
+            "n_observations": st["n_observations"], "dof": st["dof"],
+            "sigma0_squared": st["sigma0_squared"], "global_test_passed": test["passed"],
+            "datum": doc["datum"]["description"], "marker_ids": doc["identity"]["method"],
+            "rejected": doc["data_snooping"]["rejected"],
+            "n_stations_meeting_requirement": req["n_stations_meeting"],
+            "requirement_m": req["requirement_m"], "worst_station": req["worst_station"],
+            "worst_station_error_95_m": req["worst_station_error_95_m"],
+            "stations": {s["id"]: s["station_error_95_m"] for s in doc["stations"]},
+            "timings_s": {k: round(v, 3) for k, v in timings.items()}}
+
+
+def _human(doc: dict, out: Path) -> str:
+    st, req, test = doc["statistics"], doc["requirement"], doc["global_test"]
+    fit = ("untestable (no redundancy)" if test["passed"] is None else
+           "GLOBAL TEST FAILED: noisier than the error model" if not test["passed"] else
+           "global test passed" + ("; error model pessimistic" if test["verdict"] != "ok"
+                                   else ""))
+    rejected = doc["data_snooping"]["rejected"]
+    removed = ("; removed " + ", ".join(f"{r['station_id']}->{r['marker_id']} (w {r['w']:.1f})"
+                                        for r in rejected)) if rejected else ""
+    sigma0 = st["sigma0_squared"]
+    return (f"adjusted {st['n_stations']} stations, {st['n_markers']} markers "
+            f"({st['n_observations']} observations, dof {st['dof']}): sigma0^2 "
+            f"{'n/a' if sigma0 is None else f'{sigma0:.3f}'} ({fit}){removed}\n"
+            f"worst station {req['worst_station']}: "
+            f"{1e3 * req['worst_station_error_95_m']:.1f} mm (95 %); "
+            f"{req['n_stations_meeting']}/{st['n_stations']} within {req['requirement_m']:g} m"
+            f"\nwrote {out}/")

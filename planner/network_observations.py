@@ -1,0 +1,395 @@
+"""From ``markers.csv`` tables to the observations of a network adjustment.
+
+Three steps, each a function, so ``markerplan adjust`` only strings them together:
+
+1. :func:`read_detections` — the accepted detections of every station in the marker tables of
+   ``markerplan process`` (:func:`pipeline.marker_table.read_marker_table`), each with its
+   1-sigma 3D centre error from the error model at its distance and elevation (as ``verify``
+   weighs them);
+2. marker identity, one of :data:`IDENTITIES`:
+
+   - ``plan``: gated association of each station's detections with the plan's markers from the
+     station's nominal pose (the plan's, standing in for rover odometry, with its sigma):
+     :func:`identify_with_plan`;
+   - ``geometry``: consistent inter-marker distances across stations, no plan needed; markers are
+     named ``M001``... (:func:`identify_by_geometry`);
+   - ``table``: the table's ``marker_id`` column, i.e. ids assigned in the field (coded targets, a
+     hand-made list). ``process`` fills that column from the reference it was given, which for
+     simulated scans is the simulator's truth, so ``plan`` and ``geometry`` are the ones that
+     test identification (:func:`identify_from_table`);
+3. :func:`network_observations` — the identified detections as
+   :class:`pipeline.network_adjustment.NetworkObservations` (stations in the order the tables
+   give them, so the first station is the default datum).
+
+Frames: detections are in each station's levelled station frame (origin at the LiDAR centre, z
+up, x along the station's nominal heading); the plan's markers and stations are in the site
+frame. Every refusal is one :class:`~markerplan.errors.InputFileError` line naming the table,
+the station or the plan.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from markerplan.errors import InputFileError
+from markerplan.reading import finite_number, read_csv, unique_ids
+
+#: Ways to establish marker identity across stations (``adjust --marker-ids``).
+IDENTITIES = ("plan", "geometry", "table")
+
+#: Smallest 1-sigma centre error given to a detection, m: an error model predicting ~0 (a
+#: marker at the sensor) would otherwise give it an infinite weight (``verify`` floors it so).
+MIN_SIGMA_M = 1e-4
+
+#: Largest distance of a detection from its LiDAR centre, m: beyond any LiDAR's range, a
+#: table holding it is corrupt.
+MAX_DISTANCE_M = 1_000.0
+
+CONTROL_COLUMNS = ("id", "x_m", "y_m", "z_m", "sigma_m")
+
+
+@dataclass(frozen=True)
+class StationDetections:
+    """The accepted detections of one station.
+
+    Attributes
+    ----------
+    station_id : str
+    table : Path
+        The marker table they come from.
+    xyz_m : (n, 3) float
+        Marker centres, levelled station frame, m.
+    sigma_m : (n,) float
+        1-sigma 3D centre error from the error model, m.
+    table_ids : tuple of str
+        The table's ``marker_id`` of each detection (``""`` when unmatched).
+    in_domain : (n,) bool
+        Whether the error model was fitted at that distance and elevation.
+    """
+
+    station_id: str
+    table: Path
+    xyz_m: np.ndarray
+    sigma_m: np.ndarray
+    table_ids: tuple[str, ...]
+    in_domain: np.ndarray
+
+
+@dataclass(frozen=True)
+class Identified:
+    """Detections with their marker ids: the observations, and what could not be identified.
+
+    Attributes
+    ----------
+    stations : list of StationDetections
+        In table order.
+    ids : list of list of (str or None)
+        Marker id of every detection of every station (``None``: not identified, left out).
+    method : str
+        One of :data:`IDENTITIES`.
+    reasons : list of list of str, optional
+        Why each detection got its id or none (e.g. the association's ``outside_gate``,
+        ``ambiguous``); empty when the method gives no reasons.
+    """
+
+    stations: list[StationDetections]
+    ids: list[list[str | None]]
+    method: str
+    reasons: list[list[str]] = field(default_factory=list)
+
+    @property
+    def unidentified(self) -> list[tuple[str, np.ndarray, str]]:
+        """``(station_id, xyz_m, reason)`` of every detection left out (levelled station
+        frame; ``reason`` empty when the method gives none)."""
+        reasons = self.reasons or [[""] * len(ids) for ids in self.ids]
+        return [(s.station_id, s.xyz_m[k], why[k])
+                for s, ids, why in zip(self.stations, self.ids, reasons, strict=True)
+                for k, i in enumerate(ids) if i is None]
+
+
+def read_detections(tables: list[Path], error_model) -> list[StationDetections]:
+    """The accepted detections of every station in ``tables``, weighted by ``error_model``.
+
+    Parameters
+    ----------
+    tables : list of Path
+        ``markers.csv`` files of ``markerplan process`` (one or more stations each).
+    error_model : error_model.model.ErrorModel
+        Gives each detection's 1-sigma 3D error at its ``distance_m`` and ``elevation_deg``
+        (floored at :data:`MIN_SIGMA_M`).
+
+    Returns
+    -------
+    stations : list of StationDetections
+        In the order the stations first appear (tables in the order given); stations whose
+        detections were all rejected by the quality gate are left out.
+
+    Raises
+    ------
+    InputFileError
+        Missing or unreadable table, wrong columns (:func:`read_marker_table`), a table given
+        twice, a table without any accepted detection, a station in two tables, or a
+        non-finite or absurd number in an accepted row.
+    """
+    from pipeline.marker_table import read_marker_table
+
+    seen: dict[Path, Path] = {}
+    per_station: dict[str, list[tuple[Path, dict[str, str], int]]] = {}
+    source: dict[str, Path] = {}
+    for table in tables:
+        key = Path(table).resolve()
+        if key in seen:
+            first = seen[key]
+            raise InputFileError(f"marker table {table} is given twice (also as {first}); give "
+                                 "each table once")
+        seen[key] = Path(table)
+        rows = read_marker_table(table)
+        accepted = [(row, line) for line, row in enumerate(rows, start=2)
+                    if row["accepted"].strip().lower() == "true"]
+        if not accepted:
+            raise InputFileError(f"marker table {table} holds no accepted detection "
+                                 f"({len(rows)} row(s), none with accepted=true); give the "
+                                 "markers.csv of `markerplan process` for stations that saw "
+                                 "markers")
+        for row, line in accepted:
+            sid = row["station_id"].strip()
+            if not sid:
+                raise InputFileError(f"marker table {table} row {line}: station_id is empty")
+            owner = source.setdefault(sid, table)
+            if owner != table:
+                raise InputFileError(f"station {sid} is in marker tables {owner} and {table}; "
+                                     "give each station's detections once")
+            per_station.setdefault(sid, []).append((table, row, line))
+    return [_station(sid, items, error_model) for sid, items in per_station.items()]
+
+
+def _station(sid: str, items: list[tuple[Path, dict[str, str], int]],
+             error_model) -> StationDetections:
+    table = items[0][0]
+    xyz, dist, elev = [], [], []
+    for _, row, line in items:
+        what = f"marker table {table} row {line}"
+        xyz.append([finite_number(row[c], f"{what} {c}") for c in ("x_m", "y_m", "z_m")])
+        dist.append(finite_number(row["distance_m"], f"{what} distance_m", MAX_DISTANCE_M))
+        elev.append(finite_number(row["elevation_deg"], f"{what} elevation_deg", 90.0))
+        if dist[-1] <= 0.0:
+            raise InputFileError(f"{what} distance_m: must be > 0, got {dist[-1]:g}")
+    pred = error_model.predict(np.array(dist), np.radians(elev))
+    return StationDetections(
+        sid, Path(table), np.array(xyz, dtype=float),
+        np.maximum(np.asarray(pred.sigma_m, dtype=float), MIN_SIGMA_M),
+        tuple(row["marker_id"].strip() for _, row, _ in items),
+        np.asarray(pred.in_domain, dtype=bool))
+
+
+@dataclass(frozen=True)
+class PlanGeometry:
+    """What association and the report take from a ``plan.json`` (site frame, m, rad)."""
+
+    path: Path
+    marker_ids: tuple[str, ...]
+    marker_xyz_m: np.ndarray
+    """(k, 3) planned marker centres."""
+    station_ids: tuple[str, ...]
+    station_xyz_m: np.ndarray
+    """(s, 3) planned LiDAR centres."""
+    station_heading_rad: np.ndarray
+    """(s,) planned headings."""
+    working_radius_m: float
+    requirement_m: float
+    inclinometer_sigma_deg: float | None
+    """The plan's configured inclinometer sigma, or ``None`` when it records none."""
+    heading_prior_sigma_deg: float | None
+    """The heading prior the plan assumed (network mode), or ``None``."""
+    reference_station: str | None
+    """The datum station the plan assumed (network mode), or ``None``."""
+    dem: str | None
+    """The ``--dem`` the plan was made on, or ``None`` for a preset's terrain."""
+
+
+def read_plan_geometry(path: Path) -> PlanGeometry:
+    """Markers, stations and requirement of a ``plan.json`` (checked by
+    :func:`planner.plan_file.read_plan`; the terrain is not loaded).
+
+    Parameters
+    ----------
+    path : Path
+        The ``plan.json`` written by ``markerplan plan``.
+
+    Returns
+    -------
+    PlanGeometry
+
+    Raises
+    ------
+    InputFileError
+        As :func:`planner.plan_file.read_plan`, or a non-numeric inclinometer or heading-prior
+        sigma in its configuration.
+    """
+    from planner.plan_file import read_plan
+
+    doc = read_plan(path, "--plan", full=True)
+    cfg = doc["provenance"].get("config", {})
+    what = f"--plan {path}: provenance config"
+    incl, heading = (None if cfg.get(k) is None else finite_number(cfg[k], f"{what} {k}", 10.0)
+                     for k in ("inclinometer_sigma_deg", "heading_prior_sigma_deg"))
+    reference = cfg.get("reference_station")
+    return PlanGeometry(
+        Path(path), tuple(m["id"] for m in doc["markers"]),
+        np.array([[m["x_m"], m["y_m"], m["z_m"]] for m in doc["markers"]], dtype=float),
+        tuple(s["id"] for s in doc["stations"]),
+        np.array([[s["x_m"], s["y_m"], s["z_m"]] for s in doc["stations"]], dtype=float),
+        np.array([float(s.get("heading_rad") or 0.0) for s in doc["stations"]]),
+        float(doc["requirement"]["working_radius_m"]), float(doc["requirement"]["requirement_m"]),
+        incl or None, heading or None, reference if isinstance(reference, str) else None,
+        doc["provenance"].get("inputs", {}).get("dem"))
+
+
+def identify_with_plan(stations: list[StationDetections], plan: PlanGeometry,
+                       odometry_sigma_m: float, odometry_heading_sigma_rad: float) -> Identified:
+    """Marker ids by gated association with the plan's markers, from each station's nominal
+    (planned) pose with the odometry's sigma
+    (:func:`pipeline.marker_association.associate_with_plan`).
+
+    Raises
+    ------
+    InputFileError
+        A station the plan does not hold, or a station none of whose detections matches a
+        planned marker (both: a table from another site).
+    """
+    foreign = [s.station_id for s in stations if s.station_id not in plan.station_ids]
+    if foreign:
+        raise InputFileError(
+            f"station(s) {', '.join(foreign)} of the marker tables are not in --plan "
+            f"{plan.path} (it holds {_id_range(plan.station_ids)}); are the tables from "
+            "another site? Give that site's plan, or leave out --plan to associate by geometry")
+    from pipeline.marker_association import associate_with_plan
+
+    ids, reasons = [], []
+    for s in stations:
+        k = plan.station_ids.index(s.station_id)
+        found = associate_with_plan(
+            s.xyz_m, plan.station_xyz_m[k], float(plan.station_heading_rad[k]),
+            plan.marker_xyz_m, list(plan.marker_ids), s.sigma_m, odometry_sigma_m,
+            odometry_heading_sigma_rad)
+        if not any(i is not None for i in found.ids):
+            raise InputFileError(
+                f"none of the {len(found.ids)} detection(s) of station {s.station_id} "
+                f"({s.table}) matches a marker of --plan {plan.path} within the odometry's "
+                f"sigma ({odometry_sigma_m:g} m, {math.degrees(odometry_heading_sigma_rad):g} "
+                "deg); is the table from another site, or is --odometry-sigma-m too small?")
+        ids.append(list(found.ids))
+        reasons.append(list(found.status))
+    return Identified(stations, ids, "plan", reasons)
+
+
+def identify_by_geometry(stations: list[StationDetections],
+                         inclinometer_sigma_rad: float) -> Identified:
+    """Marker ids from consistent inter-marker distances across stations
+    (:func:`pipeline.marker_association.associate_by_geometry`, with each detection's sigma and
+    the inclinometer's residual tilt); a marker seen by one station gets an id of its own."""
+    from pipeline.marker_association import associate_by_geometry
+
+    found = associate_by_geometry([(s.station_id, s.xyz_m) for s in stations],
+                                  [s.sigma_m for s in stations],
+                                  inclinometer_sigma_rad=inclinometer_sigma_rad)
+    return Identified(stations, [list(i) for i in found.ids], "geometry")
+
+
+def identify_from_table(stations: list[StationDetections]) -> Identified:
+    """Marker ids from the tables' ``marker_id`` column (empty: not identified).
+
+    Raises
+    ------
+    InputFileError
+        No detection of any station carries a marker id.
+    """
+    ids = [[i or None for i in s.table_ids] for s in stations]
+    if not any(i is not None for row in ids for i in row):
+        raise InputFileError("--marker-ids table: no accepted detection in the tables has a "
+                             "marker_id; give --plan, or use --marker-ids geometry")
+    return Identified(stations, ids, "table")
+
+
+def network_observations(identified: Identified):
+    """The identified detections as :class:`pipeline.network_adjustment.NetworkObservations`.
+
+    Stations keep the order of ``identified.stations`` (those with no identified detection are
+    left out); markers are numbered in order of first sight. Unidentified detections are left
+    out.
+
+    Parameters
+    ----------
+    identified : Identified
+
+    Returns
+    -------
+    obs : pipeline.network_adjustment.NetworkObservations
+        Levelled station frames, m; ``sigma_m`` the error model's.
+    """
+    from pipeline.network_adjustment import NetworkObservations
+
+    station_ids, marker_ids = [], {}
+    st, mk, xyz, sig = [], [], [], []
+    for s, ids in zip(identified.stations, identified.ids, strict=True):
+        keep = [k for k, i in enumerate(ids) if i is not None]
+        if not keep:
+            continue
+        station_ids.append(s.station_id)
+        for k in keep:
+            st.append(len(station_ids) - 1)
+            mk.append(marker_ids.setdefault(ids[k], len(marker_ids)))
+            xyz.append(s.xyz_m[k])
+            sig.append(s.sigma_m[k])
+    return NetworkObservations(tuple(station_ids), tuple(marker_ids), np.array(st, dtype=int),
+                               np.array(mk, dtype=int), np.array(xyz, dtype=float).reshape(-1, 3),
+                               np.array(sig, dtype=float))
+
+
+def read_control(path: Path):
+    """Control points from a CSV ``id,x_m,y_m,z_m,sigma_m`` (site frame, m; ``sigma_m`` the
+    1-sigma error of each coordinate).
+
+    Returns
+    -------
+    control : tuple of pipeline.network_adjustment.ControlPoint
+
+    Raises
+    ------
+    InputFileError
+        Missing file, missing columns, no rows, repeated or empty ids, non-finite numbers or a
+        sigma that is not > 0.
+    """
+    from pipeline.network_adjustment import ControlPoint
+
+    what = f"--control {path}"
+    header, rows = read_csv(path, what, CONTROL_COLUMNS,
+                            "give one row per control point: id,x_m,y_m,z_m,sigma_m")
+    if not rows:
+        raise InputFileError(f"{what}: no control points; give one row per point "
+                             "(id,x_m,y_m,z_m,sigma_m)")
+    col = {c: header.index(c) for c in CONTROL_COLUMNS}
+    ids = unique_ids([r[col["id"]].strip() for r in rows], what)
+    points = []
+    for line, (cid, r) in enumerate(zip(ids, rows, strict=True), start=2):
+        xyz = [finite_number(r[col[c]], f"{what} row {line} {c}") for c in ("x_m", "y_m", "z_m")]
+        sigma = finite_number(r[col["sigma_m"]], f"{what} row {line} sigma_m")
+        if sigma <= 0.0:
+            raise InputFileError(f"{what} row {line} sigma_m: must be > 0, got {sigma:g}")
+        points.append(ControlPoint(cid, np.array(xyz), np.full(3, sigma)))
+    return tuple(points)
+
+
+def _id_range(ids: tuple[str, ...]) -> str:
+    """A short list of ids for messages.
+
+    >>> _id_range(("S1", "S2")), _id_range(tuple(f"S{i}" for i in range(1, 9)))
+    ('S1, S2', 'S1, S2, S3, ..., S8 (8 stations)')
+    """
+    if len(ids) <= 4:
+        return ", ".join(ids)
+    return f"{', '.join(ids[:3])}, ..., {ids[-1]} ({len(ids)} stations)"

@@ -1,0 +1,142 @@
+"""``markerplan adjust`` end to end on marker tables written from a simulated network
+(:mod:`tests.cli.network_inputs`): the adjusted stations and markers lie within their 95 %
+ellipsoids, a swapped marker id is removed by data snooping and named in the report, and a
+second run writes the same bytes."""
+
+from __future__ import annotations
+
+import csv
+import hashlib
+import json
+
+import numpy as np
+import pytest
+from scipy.stats import chi2
+
+from tests.cli.invoke import run_cli
+from tests.cli.network_inputs import write_network_inputs
+
+CHI2_3_95 = chi2.ppf(0.95, 3)
+
+
+@pytest.fixture(scope="module")
+def network(tmp_path_factory):
+    return write_network_inputs(tmp_path_factory.mktemp("network"), n_stations=6, seed=3)
+
+
+def _tables(net) -> list[str]:
+    return [str(t) for t in net.tables]
+
+
+def _digests(folder):
+    return {str(p.relative_to(folder)): hashlib.sha256(p.read_bytes()).hexdigest()
+            for p in sorted(folder.rglob("*")) if p.is_file()}
+
+
+def _mahalanobis(folder, truth_station_xyz, truth_marker_xyz, station_ids, marker_ids):
+    """Squared Mahalanobis distances of the adjusted station positions and marker centres from
+    the truth, with the covariance adjust wrote."""
+    cov = np.load(folder / "covariance.npy")
+    params = {p["parameter"]: (int(p["index"]), float(p["value"]))
+              for p in csv.DictReader((folder / "parameters.csv").open())}
+    d2 = []
+    for ids, truth in ((station_ids, truth_station_xyz), (marker_ids, truth_marker_xyz)):
+        for pid, true in zip(ids, truth, strict=True):
+            idx = [params[f"{pid}.{a}_m"][0] for a in "xyz"]
+            est = np.array([params[f"{pid}.{a}_m"][1] for a in "xyz"])
+            c = cov[np.ix_(idx, idx)]
+            if np.allclose(c, 0.0):  # the datum station: fixed
+                assert np.allclose(est, true, atol=1e-6)
+                continue
+            e = est - true
+            d2.append(float(e @ np.linalg.solve(c, e)))
+    return np.array(d2)
+
+
+def test_plan_association_within_ellipsoids_and_reproducible(network, tmp_path, capsys,
+                                                             monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    args = ["adjust", *_tables(network), "--plan", str(network.plan), "--json"]
+    code, out, err = run_cli(capsys, args + ["--out", "first"])
+    assert code == 0, err
+    summary = json.loads(out)
+    assert summary["n_stations"] == 6 and summary["n_markers"] == len(network.marker_ids)
+    assert summary["marker_ids"] == "plan" and summary["rejected"] == []
+    assert summary["global_test_passed"] is True
+    folder = tmp_path / "first"
+    d2 = _mahalanobis(folder, network.truth.pose[:, :3], network.truth.marker_xyz_m,
+                      network.station_ids, network.marker_ids)
+    assert len(d2) == 5 + len(network.marker_ids)
+    # one network: its points' errors are correlated, so coverage of the 95 % ellipsoids is
+    # checked loosely here (the library's Monte-Carlo test checks 93-97 %); none is far out
+    assert np.mean(d2 <= CHI2_3_95) >= 0.7, d2
+    assert d2.max() <= chi2.ppf(0.999, 3), d2
+    doc = json.loads((folder / "adjustment.json").read_text())
+    assert doc["identity"]["n_identified"] == doc["statistics"]["n_observations"]
+    assert doc["datum"]["reference_station"] == "S01"
+    assert doc["provenance"]["config"]["marker_ids"] == "plan"
+    code, _, err = run_cli(capsys, args + ["--out", "second"])
+    assert code == 0, err
+    assert _digests(folder) == _digests(tmp_path / "second")
+
+
+def test_swapped_marker_id_is_removed_and_named(tmp_path, capsys, monkeypatch):
+    net = write_network_inputs(tmp_path / "net", n_stations=6, seed=3,
+                               swap=("S03", "M005", "M006"))  # 21 m apart
+    monkeypatch.chdir(tmp_path)
+    code, out, err = run_cli(capsys, ["adjust", *_tables(net), "--marker-ids", "table",
+                                      "--json", "--out", "out"])
+    assert code == 0, err
+    rejected = json.loads(out)["rejected"]
+    assert rejected and {(r["station_id"], r["marker_id"]) for r in rejected} <= {
+        ("S03", "M005"), ("S03", "M006")}
+    report = (tmp_path / "out" / "report.md").read_text()
+    first = rejected[0]
+    assert f"| 1 | S03 | {first['marker_id']} |" in report
+    rows = list(csv.DictReader((tmp_path / "out" / "observations.csv").open()))
+    removed = [(r["station_id"], r["marker_id"]) for r in rows if r["status"] == "removed"]
+    assert removed == [(r["station_id"], r["marker_id"]) for r in rejected] or \
+        sorted(removed) == sorted((r["station_id"], r["marker_id"]) for r in rejected)
+    assert json.loads((tmp_path / "out" / "adjustment.json").read_text())[
+        "global_test"]["passed"] is True
+
+
+def test_geometry_without_plan(network, tmp_path, capsys, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    code, out, err = run_cli(capsys, ["adjust", *_tables(network), "--json", "--out", "o"])
+    assert code == 0, err
+    summary = json.loads(out)
+    assert summary["marker_ids"] == "geometry" and summary["rejected"] == []
+    stations = list(csv.DictReader((tmp_path / "o" / "stations.csv").open()))
+    # the frame is S01's levelled frame: station distances from S01 are the truth's
+    true = np.linalg.norm(network.truth.pose[:, :2] - network.truth.pose[0, :2], axis=1)
+    got = np.array([np.hypot(float(s["x_m"]), float(s["y_m"])) for s in stations])
+    assert np.abs(got - true).max() < 0.1
+    assert "reference station S01's levelled frame" in (tmp_path / "o" / "report.md").read_text()
+
+
+def test_control_and_free_datum(network, tmp_path, capsys, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    truth = dict(zip(network.marker_ids, network.truth.marker_xyz_m, strict=True))
+    (tmp_path / "lander.csv").write_text("id,x_m,y_m,z_m,sigma_m\n" + "".join(
+        f"{m},{x},{y},{z},0.005\n" for m, (x, y, z) in truth.items()
+        if m in ("M002", "M005", "M011")))
+    code, out, err = run_cli(capsys, ["adjust", *_tables(network), "--plan", str(network.plan),
+                                      "--control", "lander.csv", "--json", "--out", "c"])
+    assert code == 0, err
+    assert json.loads(out)["datum"].startswith("control points M002")
+    d2 = _mahalanobis(tmp_path / "c", network.truth.pose[:, :3], network.truth.marker_xyz_m,
+                      network.station_ids, network.marker_ids)
+    assert np.mean(d2 <= CHI2_3_95) >= 0.7 and d2.max() <= chi2.ppf(0.999, 3), d2
+    code, out, err = run_cli(capsys, ["adjust", *_tables(network), "--plan", str(network.plan),
+                                      "--datum", "free", "--heading-prior-sigma-deg", "2", "--json",
+                                      "--out", "f"])
+    assert code == 0, err
+    doc = json.loads((tmp_path / "f" / "adjustment.json").read_text())
+    assert doc["datum"]["kind"] == "free"
+    assert doc["provenance"]["config"]["heading_prior_sigma_deg"] == 2.0
+
+
+def test_help_has_an_example(capsys):
+    code, out, _ = run_cli(capsys, ["adjust", "--help"])
+    assert code == 0 and "Example:" in out and "markerplan adjust" in out

@@ -1,0 +1,127 @@
+"""Bad input to ``markerplan adjust``: refused in one line that names the stations, tables or
+option, exit 1 (2 for click usage errors), nothing written (:mod:`tests.cli.bad_input`).
+
+The marker tables come from a simulated 4-station network (:mod:`tests.cli.network_inputs`),
+written into each case's working folder as ``net/table_1.csv`` (S01, S02) and
+``net/table_2.csv`` (S03, S04) with ``net/plan.json``.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+from pathlib import Path
+
+import pytest
+
+from tests.cli.bad_input import Case, check_refused
+from tests.cli.network_inputs import write_network_inputs
+from tests.cli.test_bad_input_output import _cases_for
+
+T1, T2, PLAN = "net/table_1.csv", "net/table_2.csv", "net/plan.json"
+TABLES = [T1, T2]
+
+
+def net(cwd: Path, inputs: Path) -> None:
+    write_network_inputs(cwd / "net", n_stations=4, seed=3)
+
+
+def _edit_table(path: Path, edit) -> None:
+    with path.open() as fh:
+        rows = list(csv.DictReader(fh))
+    rows = edit(rows)
+    with path.open("w", newline="") as fh:
+        w = csv.DictWriter(fh, fieldnames=list(rows[0]), lineterminator="\n")
+        w.writeheader()
+        w.writerows(rows)
+
+
+def with_net(edit_table2=None, edit_plan=None):
+    """A ``setup``: the network, then ``edit_table2(rows)`` on table 2 and ``edit_plan(doc)``
+    on the plan."""
+    def setup(cwd: Path, inputs: Path) -> None:
+        net(cwd, inputs)
+        if edit_table2 is not None:
+            _edit_table(cwd / T2, edit_table2)
+        if edit_plan is not None:
+            doc = json.loads((cwd / PLAN).read_text())
+            edit_plan(doc)
+            (cwd / PLAN).write_text(json.dumps(doc))
+    return setup
+
+
+def _foreign_markers(rows):
+    for r in rows:
+        r["marker_id"] = "X" + r["marker_id"] if r["marker_id"] else ""
+    return rows
+
+
+def _moved_plan(doc):
+    for m in doc["markers"]:
+        m["x_m"] += 500.0
+
+
+def _nan(rows):
+    rows[0]["x_m"] = "nan"
+    return rows
+
+
+def _all_rejected(rows):
+    for r in rows:
+        r["accepted"] = "false"
+    return rows
+
+
+def _station_s01(rows):
+    for r in rows:
+        r["station_id"] = "S01"
+    return rows
+
+
+def _cases() -> list[Case]:
+    a = ["adjust", *TABLES, "--out", "o"]
+    return [
+        Case("adjust-disconnected-stations", a + ["--marker-ids", "table"],
+             "stations S03, S04 share", setup=with_net(_foreign_markers)),
+        Case("adjust-control-leaves-heading-free", a + ["--marker-ids", "table", "--control",
+                                                        "one.csv"], "heading",
+             files={"one.csv": "id,x_m,y_m,z_m,sigma_m\nM005,1,2,3,0.01\n"}, setup=net),
+        Case("adjust-tables-of-another-site", a + ["--plan", "{inputs}/plan/plan.json"],
+             "S01, S02, S03, S04 of the marker tables are not in --plan", setup=net),
+        Case("adjust-detections-match-no-planned-marker", a + ["--plan", PLAN],
+             "matches a marker of --plan", setup=with_net(edit_plan=_moved_plan)),
+        Case("adjust-missing-table", ["adjust", "nothere.csv", "--out", "o"], "file not found"),
+        Case("adjust-wrong-columns", ["adjust", "bad.csv", "--out", "o"], "missing column",
+             files={"bad.csv": "id,x,y\nM1,2,3\n"}),
+        Case("adjust-no-accepted-detection", a, "table_2.csv holds no accepted detection",
+             setup=with_net(_all_rejected)),
+        Case("adjust-unknown-datum-station", a + ["--datum", "station:S99"], "no station S99",
+             setup=net),
+        Case("adjust-datum-syntax", a + ["--datum", "lander"], "station:ID", code=2),
+        Case("adjust-two-datums", a + ["--control", "c.csv", "--datum", "free"],
+             "give one datum"),
+        Case("adjust-table-twice", ["adjust", T1, f"./{T1}", "--out", "o"], "given twice",
+             setup=net),
+        Case("adjust-station-in-two-tables", a, "station S01 is in marker tables",
+             setup=with_net(_station_s01)),
+        Case("adjust-non-finite-centre", a, "x_m: must be a finite number", setup=with_net(_nan)),
+        Case("adjust-plan-identity-without-plan", a + ["--marker-ids", "plan"], "needs --plan"),
+        Case("adjust-control-by-geometry", a + ["--control", "c.csv"], "--control names markers",
+             files={"c.csv": "id,x_m,y_m,z_m,sigma_m\nM1,0,0,0,0.01\n"}),
+        Case("adjust-control-zero-sigma", a + ["--plan", PLAN, "--control", "c.csv"],
+             "sigma_m: must be > 0", files={"c.csv": "id,x_m,y_m,z_m,sigma_m\nM001,0,0,0,0\n"},
+             setup=net),
+        Case("adjust-heading-prior-without-plan", a + ["--heading-prior-sigma-deg", "1"],
+             "needs --plan"),
+        Case("adjust-bad-alpha0", a + ["--alpha0", "0"], "--alpha0", code=2),
+        Case("adjust-out-holds-the-table", ["adjust", "{inputs}/markers.csv", "--out",
+                                            "{inputs}", "--overwrite"], "holds the input"),
+    ]
+
+
+CASES = _cases() + _cases_for("adjust", ["adjust", "{inputs}/markers.csv"])
+
+
+@pytest.mark.parametrize("case", CASES, ids=str)
+def test_adjust_refuses(case, capsys, monkeypatch, tmp_path, valid_inputs):
+    check_refused(case, capsys, monkeypatch, tmp_path, valid_inputs)
