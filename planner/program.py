@@ -45,6 +45,7 @@ row ``sum_j x_j <= budget``.
 
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import dataclass, field, replace
 
@@ -503,6 +504,10 @@ _SPARSE_SLACK = 0.9
 #: Network mode: problems with more tying sites than this get sparse cut rows, under the
 #: upper bound of the greedy layout's count.
 _SPARSE_ABOVE_SITES = 8000
+#: Network mode: most tying sites the integer program takes. Above it (``large`` at its 1 m grid
+#: has about 86,000) the tangent rows touch tens of thousands of sites and HiGHS did not return
+#: at its time limit in our runs; ``large`` at a 3 m grid (about 10,000) returns at the limit.
+MAX_NETWORK_TYING_SITES = 20_000
 #: Network mode, large problems: the greedy upper bound adds the best site of this many of the
 #: worst stations per step.
 _GREEDY_BATCH = 10
@@ -801,6 +806,13 @@ def _plan_network(problem: PlanProblem, config, model: Model | None,
                           "--redundant and --network")
     t0 = time.perf_counter()
     net = network_model(problem, config)
+    n_tying = int(net.tying.sum())
+    if n_tying > MAX_NETWORK_TYING_SITES:
+        raise ConfigError(
+            f"network mode takes at most {MAX_NETWORK_TYING_SITES:,} candidate sites seen by two "
+            f"or more stations; this site has {n_tying:,}: coarsen the candidate grid "
+            f"(grid_spacing_m in --config; {config.grid_spacing_m:g} m now, try "
+            f"{config.grid_spacing_m * math.sqrt(n_tying / MAX_NETWORK_TYING_SITES) * 1.2:.1f} m)")
     hopeless = network_preflight(problem, config, net, infos)
     if model is None:
         model = build_model(problem, config)

@@ -63,6 +63,19 @@ def test_infeasible_network_names_the_station_and_why():
         plan_sites(p, cfg.replace(redundant=True))
 
 
+def test_too_many_tying_sites_are_refused_with_the_grid_to_use(monkeypatch):
+    import planner.program as program
+
+    p = _instance(2)
+    cfg = PlanConfig(network=True, min_markers=3, min_sectors=2, max_range_m=16)
+    n_tying = int(network_model(p, cfg).tying.sum())
+    monkeypatch.setattr(program, "MAX_NETWORK_TYING_SITES", n_tying - 1)
+    spacing = f"{1.2 * np.sqrt(n_tying / (n_tying - 1)):.1f}".replace(".", r"\.")
+    with pytest.raises(ConfigError, match=f"this site has {n_tying}: coarsen the candidate grid "
+                       rf"\(grid_spacing_m .* 1 m now, try {spacing} m\)"):
+        plan_sites(p, cfg)
+
+
 def test_a_sparse_tangent_removes_no_layout_the_full_one_keeps():
     from planner.program import _sparse_tangent
 
