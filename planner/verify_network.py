@@ -285,7 +285,9 @@ def adjust_and_compare(tables: list[Path], plan_path: Path, error_model,
                        truth: dict[str, TrueStation], predicted_station: dict[str, float | None],
                        predicted_marker: dict[str, float | None] | None = None,
                        settings: NetworkVerifySettings = NetworkVerifySettings(),
-                       error_model_name: str = "") -> NetworkVerification:
+                       error_model_name: str = "",
+                       planned_markers: dict[str, tuple[str, ...]] | None = None
+                       ) -> NetworkVerification:
     """Identify, adjust and compare (step 2 of the module docstring).
 
     Parameters
@@ -304,6 +306,9 @@ def adjust_and_compare(tables: list[Path], plan_path: Path, error_model,
     settings : NetworkVerifySettings
     error_model_name : str
         Recorded in the configuration.
+    planned_markers : dict of str to tuple of str, optional
+        The markers the plan gives each station: those the association did not identify are
+        named in its ``reason``.
 
     Returns
     -------
@@ -319,7 +324,7 @@ def adjust_and_compare(tables: list[Path], plan_path: Path, error_model,
     """
     from pipeline.network_adjustment import AdjustmentSettings, Datum, adjust
     from planner import network_observations as no
-    from planner.cli.adjust import _configuration, _identify, _nominal
+    from planner.cli.adjust import _configuration, _nominal
     from planner.network_record import ellipsoid_axes, station_errors
 
     plan = no.read_plan_geometry(plan_path)
@@ -338,9 +343,7 @@ def adjust_and_compare(tables: list[Path], plan_path: Path, error_model,
         heading_prior_sigma_deg=None, inclinometer_sigma_deg=None, working_radius_m=None,
         requirement_m=None, snooping=settings.snooping, alpha0=settings.alpha0,
         beta0=settings.beta0, plan_geometry=plan)
-    identified = _identify("plan", stations, plan, settings.odometry_sigma_m,
-                           math.radians(settings.odometry_heading_sigma_deg),
-                           math.radians(config["inclinometer_sigma_deg"]))
+    identified, left_out = tied_network(stations, plan, reference, settings)
     obs = no.network_observations(identified)
     heading_prior = config["heading_prior_sigma_deg"]
     result = adjust(obs, Datum("station", reference), AdjustmentSettings(
@@ -354,23 +357,28 @@ def adjust_and_compare(tables: list[Path], plan_path: Path, error_model,
     s_ids = kept.station_ids
     stated = station_errors(np.stack([result.station_covariance(i) for i in range(len(s_ids))]),
                             result.pose[:, 3], radius)
-    accepted = {s.station_id: len(s.xyz_m) for s in identified.stations}
-    named = {s.station_id: sum(i is not None for i in ids)
+    accepted = {s.station_id: len(s.xyz_m) for s in stations}
+    named = {s.station_id: {i for i in ids if i is not None}
              for s, ids in zip(identified.stations, identified.ids, strict=True)}
     outcomes = []
     for sid in truth:
         pred = predicted_station.get(sid)
         if sid not in s_ids:
+            why = left_out.get(sid, "no accepted detection")
             outcomes.append(StationOutcome(sid, pred, None, None, accepted.get(sid, 0),
-                                           named.get(sid, 0), 0, False,
-                                           "not in the adjustment (no identified detection)"))
+                                           len(named.get(sid, ())), 0, False,
+                                           f"not in the adjustment: {why}"))
             continue
         i = s_ids.index(sid)
         achieved = pose_difference_m(result.pose[i], truth[sid].pose, radius)
         ok = achieved <= requirement
         reason = "ok" if ok else f"achieved {achieved:.3f} m > requirement {requirement:g} m"
+        missing = sorted(set((planned_markers or {}).get(sid, ())) - named[sid])
+        if missing:
+            reason += f" (planned markers not identified: {', '.join(missing)})"
         outcomes.append(StationOutcome(sid, pred, float(stated[i]), achieved, accepted[sid],
-                                       named[sid], int(np.sum(kept.station == i)), ok, reason))
+                                       len(named[sid]), int(np.sum(kept.station == i)), ok,
+                                       reason))
 
     true_centres = {m: c for t in truth.values() for m, c in t.marker_xyz_m.items()}
     axes = ellipsoid_axes(np.stack([result.marker_covariance(j)
@@ -390,6 +398,72 @@ def adjust_and_compare(tables: list[Path], plan_path: Path, error_model,
     sigma0 = None if not np.isfinite(result.sigma0_squared) else float(result.sigma0_squared)
     return NetworkVerification(outcomes, markers, reference, config, rejected,
                                len(identified.unidentified), sigma0, int(result.dof))
+
+
+def tied_network(stations: list, plan, reference: str, settings: NetworkVerifySettings):
+    """Identify every station's detections with the plan's markers and keep the stations tied to
+    the reference; a station that is not is a failed station of the verification, not an error.
+
+    Parameters
+    ----------
+    stations : list of planner.network_observations.StationDetections
+    plan : planner.network_observations.PlanGeometry
+    reference : str
+        The datum station.
+    settings : NetworkVerifySettings
+        The odometry sigmas of the gated association.
+
+    Returns
+    -------
+    identified : planner.network_observations.Identified
+        The stations kept (tied to the reference through chains of >= 2 shared identified
+        markers, as :func:`pipeline.network_adjustment.adjust` requires) and their ids.
+    left_out : dict of str to str
+        Why each other station was left out.
+
+    Raises
+    ------
+    InputFileError
+        The reference station has no identified detection (the network has no datum).
+    """
+    from pipeline.network_adjustment import _tie_order
+    from planner import network_observations as no
+
+    left_out: dict[str, str] = {}
+    kept, ids, reasons = [], [], []
+    for s in stations:
+        try:
+            one = no.identify_with_plan([s], plan, settings.odometry_sigma_m,
+                                        math.radians(settings.odometry_heading_sigma_deg))
+        except InputFileError:  # no detection inside the odometry gate of a planned marker
+            left_out[s.station_id] = ("none of its detections matches a planned marker within "
+                                      "the odometry's sigma")
+            continue
+        if any(i is not None for i in one.ids[0]):
+            kept.append(s)
+            ids += one.ids
+            reasons += one.reasons
+        else:
+            left_out[s.station_id] = "no detection identified (ambiguous association)"
+    identified = no.Identified(kept, ids, "plan", reasons)
+    obs = no.network_observations(identified)
+    if reference not in obs.station_ids:
+        why = left_out.get(reference, "no accepted detection")
+        raise InputFileError(f"the reference station {reference} (the datum) has no detection "
+                             f"identified with a planned marker ({why}), so the network has no "
+                             "datum and cannot be verified")
+    _, untied = _tie_order(obs, np.ones(obs.n, dtype=bool), obs.station_ids.index(reference))
+    if untied:
+        names = {obs.station_ids[i] for i in untied}
+        for k, sid in enumerate(obs.station_ids):
+            if sid in names:
+                n = len(set(obs.marker[obs.station == k]))
+                left_out[sid] = (f"{n} identified marker(s), fewer than 2 shared with the part "
+                                 f"of the network holding the reference {reference}")
+        keep = [k for k, s in enumerate(kept) if s.station_id not in names]
+        identified = no.Identified([kept[k] for k in keep], [ids[k] for k in keep], "plan",
+                                   [reasons[k] for k in keep])
+    return identified, left_out
 
 
 def network_record(plan: SurveyPlan, check: NetworkVerification, seed: int, model_name: str,

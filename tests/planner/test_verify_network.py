@@ -30,11 +30,11 @@ def network(tmp_path_factory):
     return inputs, truth
 
 
-def _compare(inputs, truth, **kw):
+def _compare(inputs, truth, planned=None, **kw):
     predicted = {sid: 0.05 for sid in truth}
     return adjust_and_compare(inputs.tables, inputs.plan, default_model(), truth, predicted,
                               {inputs.marker_ids[0]: 0.02}, NetworkVerifySettings(**kw),
-                              "default")
+                              "default", planned)
 
 
 class _Plan:
@@ -81,12 +81,12 @@ def test_a_station_off_its_true_pose_fails_with_the_reason(network):
     pose = truth[sid].pose.copy()
     pose[3] += 0.02  # 2 cm per metre: 20 cm at the 10 m rim
     moved[sid] = TrueStation(sid, pose, truth[sid].marker_xyz_m)
-    check = _compare(inputs, moved)
+    check = _compare(inputs, moved, planned={sid: ("M_never_placed",)})
     failed = [s for s in check.stations if not s.passed]
     assert not check.passed and [s.station_id for s in failed] == [sid]
     assert failed[0].achieved_error_m == pytest.approx(0.2, abs=0.02)
     assert failed[0].reason.startswith("achieved 0.") and failed[0].reason.endswith(
-        "> requirement 0.1 m")
+        "> requirement 0.1 m (planned markers not identified: M_never_placed)")
     assert _record(check)["worst"]["achieved_station"] == sid
 
 
@@ -108,3 +108,36 @@ def test_pose_difference_counts_the_tilt():
     tilt = np.array([0, 0, 0, 0, 1e-3, 0])  # 1 mrad roll: 1 cm vertical at the 10 m rim
     assert pose_difference_m(tilt, np.zeros(6), 10.0) == pytest.approx(0.01, rel=1e-3)
     assert pose_difference_m(np.zeros(6), np.zeros(6), 10.0) == 0.0
+
+
+def test_stations_not_tied_to_the_reference_fail_without_stopping_the_rest(network, tmp_path):
+    """One station keeps a single detection (not tied: fewer than 2 shared markers), another
+    sees its markers 50 m from where the plan puts them (nothing inside the gate)."""
+    from markerplan.reading import read_csv
+
+    inputs, truth = network
+    header, rows = read_csv(inputs.tables[0], "table", ())
+    col = header.index("station_id")
+    last, far = inputs.station_ids[-1], inputs.station_ids[-2]
+    lines = [",".join(header)]
+    n_last = 0
+    for r in rows:
+        if r[col] == last:
+            n_last += 1
+            if n_last > 1:
+                continue
+        if r[col] == far:
+            r[header.index("x_m")] = str(float(r[header.index("x_m")]) + 50.0)
+        lines.append(",".join(r))
+    table = tmp_path / "markers.csv"
+    table.write_text("\n".join(lines) + "\n")
+    check = adjust_and_compare([table], inputs.plan, default_model(), truth, {})
+    out = {s.station_id: s for s in check.stations}
+    assert not check.passed
+    assert out[last].reason == (f"not in the adjustment: 1 identified marker(s), fewer than 2 "
+                                f"shared with the part of the network holding the reference "
+                                f"{inputs.station_ids[0]}")
+    assert out[far].reason.startswith("not in the adjustment: none of its detections matches")
+    assert out[far].achieved_error_m is None and out[far].n_accepted > 0
+    assert all(out[sid].passed for sid in inputs.station_ids[:-2])
+    assert "not in the adjustment" in network_markdown(_record(check))
