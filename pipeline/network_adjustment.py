@@ -18,9 +18,14 @@ prior (sun sensor) observes each heading around its nominal value.
 
 Solution
 --------
-Gauss-Newton on the sparse normal equations (``scipy.sparse``, SuperLU) with the datum as
-constraints ``B dx = 0`` in a bordered system; the full covariance (dense, a priori: sigma0 = 1)
-is the upper-left block of the bordered system's inverse at convergence.
+Gauss-Newton on the sparse normal equations (``scipy.sparse``, SuperLU), assembled from each
+observation's 9 x 9 block into a sparsity pattern fixed across iterations. A parameter the datum
+fixes gets a unit row and column (its step is 0); the free datum's minimal constraints
+``B dx = 0`` border the system. The full covariance (dense, a priori: sigma0 = 1) comes from the
+normal matrix at convergence with the markers eliminated first (their block is 3 x 3
+block-diagonal, as in bundle adjustment), so only a matrix of the stations' size is inverted.
+Between data-snooping rounds the covariance is downdated for the removed observation
+(Sherman-Morrison-Woodbury); the final solution's covariance is computed afresh.
 
 Datum
 -----
@@ -80,6 +85,10 @@ ELLIPSOID_CHI2_95 = float(chi2.ppf(0.95, 3))
 _DEFECT_NAMES = ("translation x", "translation y", "translation z",
                  "heading (rotation about the vertical)")
 
+#: Between data-snooping rounds the covariance is downdated while no station angle moved more
+#: than this since it was computed (the design changes by about that fraction; w by less).
+_DOWNDATE_ANGLE_RAD = 1e-3
+
 #: A Gauss-Newton step below this (m or rad) ends the iteration: far below any sigma, and
 #: convergence is quadratic for exact data, so the truth is then recovered to ~1e-14 m.
 _STEP_TOLERANCE = 1e-8
@@ -136,10 +145,12 @@ class NetworkObservations:
                 set_(self, name, np.asarray(getattr(self, name), dtype=dtype))
             except (TypeError, ValueError) as exc:
                 raise InputFileError(f"`{name}` must be numeric: {exc}") from None
-        n = self.station.shape[0] if self.station.ndim == 1 else -1
+        if self.station.ndim != 1:
+            raise InputFileError(f"`station` must have shape (n,), got {self.station.shape}")
+        n = self.station.shape[0]
         expected = {"station": (n,), "marker": (n,), "xyz_m": (n, 3), "sigma_m": (n,)}
         for name, shape in expected.items():
-            if getattr(self, name).shape != shape or n < 0:
+            if getattr(self, name).shape != shape:
                 raise InputFileError(f"`{name}` must have shape {shape} (n observations), "
                                      f"got {getattr(self, name).shape}")
         for name, ids in (("station", self.station_ids), ("marker", self.marker_ids)):
@@ -441,17 +452,21 @@ def _tie_order(obs: NetworkObservations, keep: np.ndarray, reference: int
     s, k = len(obs.station_ids), len(obs.marker_ids)
     seen = np.zeros((s, k), dtype=bool)
     seen[obs.station[keep], obs.marker[keep]] = True
-    placed = seen[reference].copy()
-    order, untied = [reference], np.ones(s, dtype=bool)
-    untied[reference] = False
-    while untied.any():
-        shared = np.where(untied, seen.astype(int) @ placed, -1)
-        best = int(np.argmax(shared))
-        if shared[best] < 2:
-            break
+    placed = np.zeros(k, dtype=bool)
+    shared = np.zeros(s, dtype=int)  # markers each station shares with the placed ones
+    order, untied = [], np.ones(s, dtype=bool)
+    best = reference
+    while True:
         order.append(best)
         untied[best] = False
-        placed |= seen[best]
+        new = seen[best] & ~placed
+        placed |= new
+        shared += seen[:, new].sum(axis=1)
+        if not untied.any():
+            break
+        best = int(np.argmax(np.where(untied, shared, -1)))
+        if shared[best] < 2:
+            break
     return order, np.flatnonzero(untied).tolist()
 
 
@@ -522,9 +537,12 @@ class _Solution:
     columns: np.ndarray       # (n, 9) their parameter indices
     misclosure: np.ndarray    # (n, 3) f = t + R p - m at the solution
     prior_misclosure: np.ndarray
-    covariance: np.ndarray
+    covariance: np.ndarray | None
     n_constraints: int
     iterations: int
+    converged: bool
+    normal: sp.csc_matrix     # (bordered) normal matrix at the solution
+    covariance_angles: np.ndarray | None = None  # (s, 3) angles the covariance is linearised at
 
 
 def _linearise(obs: NetworkObservations, pose: np.ndarray, markers: np.ndarray
@@ -603,43 +621,91 @@ def _prior_misclosure(problem: _Problem, params: np.ndarray) -> np.ndarray:
     return np.where(problem.prior_is_heading, (f + np.pi) % (2 * np.pi) - np.pi, f)
 
 
-def _normal_system(problem: _Problem, blocks: np.ndarray, columns: np.ndarray, f: np.ndarray,
-                   fp: np.ndarray, b: np.ndarray) -> tuple[sp.csc_matrix, np.ndarray]:
+@dataclass
+class _Assembly:
+    """Sparsity pattern of the (bordered) normal matrix of one set of observations, the same in
+    every Gauss-Newton iteration: where each contribution goes in CSC storage."""
+
+    keep: np.ndarray     # (n, 9, 9) bool: block entries that touch no fixed parameter
+    prior: np.ndarray    # (q,) bool: pseudo-observations of parameters that are not fixed
+    n_fixed: int
+    slot: np.ndarray     # (e,) index into the CSC data of each contribution
+    indices: np.ndarray  # CSC row indices
+    indptr: np.ndarray   # CSC column pointers
+    size: int            # u + number of constraints
+
+
+def _assembly(problem: _Problem, columns: np.ndarray, b: np.ndarray) -> _Assembly:
+    """The pattern of :func:`_normal_system`: observation blocks, priors, a unit diagonal for
+    each fixed parameter, the border ``B`` (rows) and ``B^T`` (columns)."""
+    u = problem.fixed.size
+    size = u + b.shape[0]
+    keep = ~(problem.fixed[columns][:, :, None] | problem.fixed[columns][:, None, :])
+    fixed = np.flatnonzero(problem.fixed)
+    prior = ~problem.fixed[problem.prior_index]
+    border_r, border_c = np.nonzero(b)
+    row = np.concatenate([np.broadcast_to(columns[:, :, None], keep.shape)[keep],
+                          problem.prior_index[prior], fixed, u + border_r, border_c])
+    col = np.concatenate([np.broadcast_to(columns[:, None, :], keep.shape)[keep],
+                          problem.prior_index[prior], fixed, border_c, u + border_r])
+    unique, slot = np.unique(col * size + row, return_inverse=True)
+    return _Assembly(keep, prior, fixed.size, slot, unique % size,
+                     np.searchsorted(unique, np.arange(size + 1) * size), size)
+
+
+def _normal_system(problem: _Problem, assembly: _Assembly, blocks: np.ndarray,
+                   columns: np.ndarray, f: np.ndarray, fp: np.ndarray, b: np.ndarray
+                   ) -> tuple[sp.csc_matrix, np.ndarray]:
     """Normal equations of the Gauss-Newton step ``N dx = -A^T P f``, assembled from the
     observations' 9 x 9 blocks (sparse), bordered by the minimal constraints ``B`` when there
     are any. A parameter the datum fixes gets a unit row and column (its step is 0)."""
     u = problem.fixed.size
-    w = 3.0 / problem.obs.sigma_m**2
-    nb = np.einsum("n,nri,nrj->nij", w, blocks, blocks)
-    keep = ~(problem.fixed[columns][:, :, None] | problem.fixed[columns][:, None, :])
-    rows = np.broadcast_to(columns[:, :, None], nb.shape)[keep]
-    cols = np.broadcast_to(columns[:, None, :], nb.shape)[keep]
-    fixed = np.flatnonzero(problem.fixed)
-    prior = ~problem.fixed[problem.prior_index]
-    d = b.shape[0]
-    border_r, border_c = np.nonzero(b)
-    data = np.concatenate([nb[keep], problem.prior_weight[prior], np.ones(fixed.size),
-                           b[border_r, border_c], b[border_r, border_c]])
-    row = np.concatenate([rows, problem.prior_index[prior], fixed, u + border_r, border_c])
-    col = np.concatenate([cols, problem.prior_index[prior], fixed, border_c, u + border_r])
-    normal = sp.csc_matrix((data, (row, col)), shape=(u + d, u + d))
-    rhs = -(np.bincount(columns.ravel(), np.einsum("n,nri,nr->ni", w, blocks, f).ravel(),
+    weighted = blocks * (3.0 / problem.obs.sigma_m**2)[:, None, None]
+    border = b[b != 0]
+    values = np.concatenate([(weighted.transpose(0, 2, 1) @ blocks)[assembly.keep],
+                             problem.prior_weight[assembly.prior], np.ones(assembly.n_fixed),
+                             border, border])
+    normal = sp.csc_matrix((np.bincount(assembly.slot, values, minlength=assembly.indices.size),
+                            assembly.indices, assembly.indptr),
+                           shape=(assembly.size, assembly.size))
+    rhs = -(np.bincount(columns.ravel(), np.sum(weighted * f[:, :, None], axis=1).ravel(),
                         minlength=u)
             + np.bincount(problem.prior_index, problem.prior_weight * fp, minlength=u))
     rhs[problem.fixed] = 0.0
-    return normal, np.concatenate([rhs, np.zeros(d)])
+    return normal, np.concatenate([rhs, np.zeros(b.shape[0])])
 
 
-def _covariance(normal: sp.csc_matrix, u: int, fixed: np.ndarray) -> np.ndarray:
+def _covariance(normal: sp.csc_matrix, n_station_params: int, u: int, fixed: np.ndarray
+                ) -> np.ndarray:
     """(u, u) covariance: the upper-left block of the inverse of the (bordered) normal matrix,
-    with the fixed parameters' rows and columns zeroed."""
+    with the fixed parameters' rows and columns zeroed.
+
+    The markers are eliminated first (Schur complement, as in bundle adjustment): their block
+    ``N_mm`` is block-diagonal (3 x 3 per marker) and the border touches stations only, so
+    ``Q_ss = (N_ss - E N_ms)^-1`` with ``E = N_sm N_mm^-1``, ``Q_sm = -Q_ss E`` and
+    ``Q_mm = N_mm^-1 - E^T Q_sm`` — one dense inverse of the stations' size (plus border).
+    """
+    normal = normal.tocsr()
+    ns, k = n_station_params, (u - n_station_params) // 3
+    x = np.r_[0:ns, u:normal.shape[0]]  # stations and border
+    n_xm = normal[x][:, ns:u]
+    n_mm = normal[ns:u][:, ns:u].toarray().reshape(k, 3, k, 3)
+    m_inv = np.linalg.inv(n_mm[np.arange(k), :, np.arange(k), :])
+    e = n_xm @ sp.bsr_matrix((m_inv, np.arange(k), np.arange(k + 1)), shape=(3 * k, 3 * k))
+    schur = normal[x][:, x].toarray() - (e @ n_xm.T).toarray()
     try:
-        cov = np.linalg.inv(normal.toarray())[:u, :u]
+        q_ss = np.linalg.inv(schur)[:ns, :ns]
     except np.linalg.LinAlgError:
-        cov = np.full((u, u), np.nan)
-    if not (np.isfinite(np.diag(cov)).all() and (np.diag(cov)[~fixed] > 0).all()):
+        q_ss = np.full((ns, ns), np.nan)
+    if not (np.isfinite(np.diag(q_ss)).all() and (np.diag(q_ss)[~fixed[:ns]] > 0).all()):
         raise DataError("the network's normal matrix is singular (a station tied only by "
                         "markers on one vertical line?)")
+    e = e[:ns].tocsr()
+    q_sm = -np.asarray((e.T @ q_ss).T)
+    q_mm = -np.asarray(e.T @ q_sm)
+    q_mm.reshape(k, 3, k, 3)[np.arange(k), :, np.arange(k), :] += m_inv
+    cov = np.empty((u, u))
+    cov[:ns, :ns], cov[:ns, ns:], cov[ns:, :ns], cov[ns:, ns:] = q_ss, q_sm, q_sm.T, q_mm
     cov[fixed, :] = 0.0
     cov[:, fixed] = 0.0
     return cov
@@ -666,8 +732,13 @@ def _downdated(covariance: np.ndarray, blocks: np.ndarray, columns: np.ndarray,
 
 
 def _solve(problem: _Problem, pose: np.ndarray, markers: np.ndarray, max_iterations: int,
-           covariance: bool = True) -> _Solution:
-    """Gauss-Newton from ``pose``/``markers`` to convergence, with the covariance (or None)."""
+           must_converge: bool = True) -> _Solution:
+    """Gauss-Newton from ``pose``/``markers`` to convergence (covariance left to the caller).
+
+    Without convergence in ``max_iterations`` steps: DataError, or with ``must_converge=False``
+    the last iterate (``converged`` False) — a blunder of metres makes Gauss-Newton converge
+    slowly, and its w-tests at the iterate already point at it.
+    """
     s = pose.shape[0]
     params = np.concatenate([pose.ravel(), markers.ravel()])
     u = params.size
@@ -676,21 +747,25 @@ def _solve(problem: _Problem, pose: np.ndarray, markers: np.ndarray, max_iterati
     for iteration in range(1, max_iterations + 2):
         pose, markers = params[: 6 * s].reshape(s, 6), params[6 * s:].reshape(-1, 3)
         blocks, columns, f = _linearise(problem.obs, pose, markers)
+        if iteration == 1:
+            assembly = _assembly(problem, columns, b)
         fp = _prior_misclosure(problem, params)
-        normal, rhs = _normal_system(problem, blocks, columns, f, fp, b)
-        if np.abs(step).max() < _STEP_TOLERANCE:
+        normal, rhs = _normal_system(problem, assembly, blocks, columns, f, fp, b)
+        converged = np.abs(step).max() < _STEP_TOLERANCE
+        if converged or iteration > max_iterations:
             break
-        if iteration > max_iterations:
-            raise DataError(f"the adjustment did not converge in {max_iterations} iterations "
-                            f"(last step {np.abs(step).max():.3g})")
         try:
             step = scipy.sparse.linalg.splu(normal).solve(rhs)[:u]
         except RuntimeError:
             raise DataError("the network's normal equations are singular (a station tied only "
                             "by markers on one vertical line?)") from None
         params = params + step
-    cov = _covariance(normal, u, problem.fixed) if covariance else None
-    return _Solution(pose, markers, blocks, columns, f, fp, cov, b.shape[0], iteration - 1)
+    if must_converge and not converged:
+        raise DataError(f"the adjustment did not converge in {max_iterations} iterations "
+                        f"(last step {np.abs(step).max():.3g}); a blunder? (data snooping "
+                        "finds it)")
+    return _Solution(pose, markers, blocks, columns, f, fp, None, b.shape[0], iteration - 1,
+                     bool(converged), normal)
 
 
 def _adjust_iv(obs, datum, settings, nominal) -> int:
@@ -811,6 +886,14 @@ def adjust(obs: NetworkObservations, datum: Datum = Datum(),
     DataError
         Singular normal equations or no convergence.
 
+    Notes
+    -----
+    Data snooping (``settings.snooping``) removes the point observation with the largest
+    ``|w| > Phi^-1(1 - alpha0 / 2)`` and re-adjusts, up to ``settings.max_rejections`` times. It
+    stops early, keeping the observation, when removing it would leave a station tied by fewer
+    than two markers or its marker with no observation; its ``|w|`` then stays above the critical
+    value in ``w_test`` for the report to show.
+
     Examples
     --------
     >>> from pipeline.network_simulation import simulated_network
@@ -832,19 +915,25 @@ def adjust(obs: NetworkObservations, datum: Datum = Datum(),
                                       ) + np.arange(3)
 
     solved_keep = np.ones(obs.n, dtype=bool)
+    snooping = settings.snooping and settings.max_rejections > 0
 
     def solve(keep, previous):
-        # after a removal the covariance is downdated, not re-inverted (see _downdated)
+        # After a removal the covariance is downdated (see _downdated) while the solution's
+        # angles (the design depends on no other parameter) stay within _DOWNDATE_ANGLE_RAD of
+        # those it was computed at; otherwise, e.g. once a blunder of metres is out, afresh.
         problem.obs = obs.subset(keep)
-        if previous is None:
-            sol = _solve(problem, pose0, markers0, settings.max_iterations)
-        else:
-            sol = _solve(problem, previous.pose, previous.markers, settings.max_iterations,
-                         covariance=False)
+        start = (pose0, markers0) if previous is None else (previous.pose, previous.markers)
+        sol = _solve(problem, *start, settings.max_iterations, must_converge=not snooping)
+        if (previous is not None and np.abs(sol.pose[:, 3:] - previous.covariance_angles).max()
+                < _DOWNDATE_ANGLE_RAD):
             row = int(np.flatnonzero(solved_keep & ~keep)[0])
             i = int(np.count_nonzero(solved_keep[:row]))
             sol.covariance = _downdated(previous.covariance, previous.blocks[i],
                                         previous.columns[i], np.full(3, 3.0 / obs.sigma_m[row]**2))
+            sol.covariance_angles = previous.covariance_angles
+        else:
+            sol.covariance = _covariance(sol.normal, 6 * s, problem.fixed.size, problem.fixed)
+            sol.covariance_angles = sol.pose[:, 3:].copy()
         solved_keep[:] = keep
         weight = np.repeat(3.0 / problem.obs.sigma_m[:, None]**2, 3, axis=1)
         return sol, w_tests(sol.blocks, sol.columns, weight, sol.covariance, -sol.misclosure)
@@ -856,14 +945,19 @@ def adjust(obs: NetworkObservations, datum: Datum = Datum(),
                 and not _tie_order(obs, trial, reference)[1])
 
     sol, keep, rejected = data_snooping(
-        solve, obs.n, settings.alpha0, settings.max_rejections if settings.snooping else 0,
-        removable)
-    if rejected:  # the covariance afresh at the final solution
-        iterations = sol.iterations
-        sol = _solve(problem, sol.pose, sol.markers, settings.max_iterations)
-        sol.iterations = iterations
+        solve, obs.n, settings.alpha0, settings.max_rejections if snooping else 0, removable)
     kept = obs.subset(keep)
     w = np.repeat(3.0 / kept.sigma_m[:, None]**2, 3, axis=1)
+    if not sol.converged:
+        w_last = np.abs(w_tests(sol.blocks, sol.columns, w, sol.covariance, -sol.misclosure))
+        i = int(np.flatnonzero(keep)[np.argmax(w_last.max(axis=1))])
+        raise DataError(f"the adjustment did not converge in {settings.max_iterations} "
+                        f"iterations after {len(rejected)} removals by data snooping; the "
+                        f"largest |w| ({w_last.max():.3g}) is at station "
+                        f"{obs.station_ids[obs.station[i]]}, marker "
+                        f"{obs.marker_ids[obs.marker[i]]}")
+    if not np.array_equal(sol.covariance_angles, sol.pose[:, 3:]):  # downdated: afresh
+        sol.covariance = _covariance(sol.normal, 6 * s, problem.fixed.size, problem.fixed)
     rel = observation_reliability(sol.blocks, sol.columns, w, sol.covariance, -sol.misclosure,
                                   position_columns, delta0)
     dof = (3 * kept.n + problem.prior_index.size - problem.fixed.size + problem.fixed.sum()

@@ -109,7 +109,7 @@ def _redundancy(blocks: np.ndarray, columns: np.ndarray, weight: np.ndarray,
                 covariance: np.ndarray) -> np.ndarray:
     """Redundancy numbers (n, 3) from the (c, c) covariance blocks of each observation."""
     q = covariance[columns[:, :, None], columns[:, None, :]]
-    aqa = np.einsum("nrc,ncd,nrd->nr", blocks, q, blocks)
+    aqa = np.sum((blocks @ q) * blocks, axis=2)
     return np.clip(1.0 - weight * aqa, 0.0, 1.0)
 
 
@@ -174,7 +174,8 @@ def observation_reliability(blocks: np.ndarray, columns: np.ndarray, weight: np.
     design = sp.csr_matrix((blocks.ravel(), np.repeat(columns, 3, axis=0).ravel(),
                             np.arange(0, 3 * n * c + 1, c)), shape=(3 * n, covariance.shape[0]))
     shift = np.asarray(design @ covariance[:, position_columns.ravel()])  # Q A_i^T per unit
-    per_unit = np.linalg.norm(shift.reshape(3 * n, -1, 3), axis=2).max(axis=1).reshape(n, 3)
+    per_unit = np.sqrt(np.max(np.sum(shift.reshape(3 * n, -1, 3) ** 2, axis=2), axis=1)
+                       ).reshape(n, 3)
     effect = np.where(controlled, per_unit * weight * np.where(controlled, mdb, 0.0), np.inf)
     return ObservationReliability(r, _w(r, weight, residual), mdb, effect.max(axis=1))
 

@@ -326,13 +326,15 @@ def test_malformed_observations_and_settings_are_refused():
 
 def test_hundred_stations_thousand_observations_adjust_in_well_under_three_seconds():
     """The issue asks < 1 s (benchmarks/adjust_network.py prints the figure); the guard here is
-    generous for a loaded machine. Data snooping is on, the data clean."""
+    generous, and on the smaller of wall and CPU time, since on a machine busy with other work
+    the wall time of threaded BLAS grows while the work does not. Data snooping is on, the data
+    clean."""
     obs, truth = simulated_network(n_stations=100, markers_per_station=2.5, seed=3)
     assert 900 <= obs.n <= 1100
     adjust(obs, nominal=truth.nominal)  # warm-up (imports, BLAS threads)
-    start = time.perf_counter()
+    start, cpu = time.perf_counter(), time.process_time()
     result = adjust(obs, nominal=truth.nominal)
-    elapsed = time.perf_counter() - start
+    elapsed = min(time.perf_counter() - start, time.process_time() - cpu)
     assert elapsed < 3.0, elapsed
     assert result.covariance.shape == (6 * 100 + 3 * len(obs.marker_ids),) * 2
     assert len(result.rejected) <= 6
