@@ -383,11 +383,23 @@ class NetworkModel:
         cuts : list of (station, coef (n,), rhs)
             ``sum_j coef_j x_j >= rhs``; only cuts with ``rhs > 0``.
         """
+        gs, owners = self._station_gradients(cov, stations, rim)
+        return self._tangents(cov, gs, owners, requirement_m**2 / CHI2_3_95, np.zeros(len(gs)))
+
+    def worst_direction_gain(self, cov: NetworkCovariance, k: int) -> np.ndarray:
+        """(n,) ``v^T J^(j) v`` at station ``k``'s worst rim point and direction: the first-order
+        reduction of its worst variance that adding each site brings (``v = C g``)."""
+        gs, _ = self._station_gradients(cov, [k], "worst", force=True)
+        v = (np.asarray(gs) @ cov.full)[:, self.free]
+        return self.site_coefficients(v)[0]
+
+    def _station_gradients(self, cov, stations, rim, force=False):
+        """``g = G_k(q)^T u`` (in all ``6 s`` parameters) at the chosen rim points of each
+        station's worst direction ``u``; undetermined stations are skipped unless ``force``."""
         g_rim = accuracy.rim_design_blocks(self.radius)  # (r, 3, 6)
-        b = requirement_m**2 / CHI2_3_95
         gs, owners = [], []
         for k in stations:
-            if not cov.determined[k]:
+            if not cov.determined[k] and not force:
                 continue
             ck = cov.station(int(k))
             sig = np.einsum("ria,ab,rjb->rij", g_rim, ck, g_rim)
@@ -401,7 +413,7 @@ class NetworkModel:
                 g[6 * int(k):6 * int(k) + 6] = g_rim[r].T @ vec[r, :, -1]
                 gs.append(g)
                 owners.append(int(k))
-        return self._tangents(cov, gs, owners, b, np.zeros(len(gs)))
+        return gs, owners
 
     def marker_tangents(self, cov: NetworkCovariance, sites, requirement_m: float
                         ) -> list[tuple[int, np.ndarray, float]]:

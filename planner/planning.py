@@ -25,7 +25,7 @@ from markerplan.reading import (
     require_type,
     unique_ids,
 )
-from planner.baselines import Baseline, greedy_cover, regular_grid
+from planner.baselines import Baseline, greedy_cover, greedy_network, regular_grid
 from planner.candidates import Candidates, candidate_sites, load_polygons
 from planner.config import MAX_MARKERS, MAX_STATIONS
 from planner.program import PlanResult, plan_sites
@@ -480,9 +480,12 @@ def make_plan(inputs: PlanInputs, config, error_model, model_name: str = "defaul
     result = plan_sites(problem, config)
     timings["program"] = time.perf_counter() - t
     t = time.perf_counter()
-    baselines = [greedy_cover(problem, config)]
-    x0, y0, x1, y1 = _plan_bounds(inputs, problem)
-    baselines.append(regular_grid(problem, config, (x0, y0, x1, y1)))
+    if config.network:
+        baselines = [greedy_network(problem, config)]
+    else:
+        baselines = [greedy_cover(problem, config)]
+        x0, y0, x1, y1 = _plan_bounds(inputs, problem)
+        baselines.append(regular_grid(problem, config, (x0, y0, x1, y1)))
     timings["baselines"] = time.perf_counter() - t
     as_built = None
     if scene is not None and len(inputs.as_built_ids):

@@ -54,6 +54,7 @@ from scipy.optimize import Bounds, LinearConstraint, milp
 
 from markerplan.errors import ConfigError, InfeasiblePlanError
 from planner import accuracy
+from planner.network_accuracy import NetworkModel, network_model
 from planner.station_checks import (
     LayoutCheck,
     StationInfo,
@@ -73,7 +74,9 @@ class RowKind:
     family : str
         "count", "info", "sector", "sector2", "sector21", "directions", "directions-loss",
         "budget" (from :func:`build_model`), "heading", "oa0" (:func:`tightening_rows`), "cut",
-        "oa", "cut-loss", "oa-loss", "info-loss", "heading-loss" (:func:`accuracy_cuts`).
+        "oa", "cut-loss", "oa-loss", "info-loss", "heading-loss" (:func:`accuracy_cuts`);
+        network mode: "upper-bound", "cut", "connect", "oa", "cut-marker", "oa-marker"
+        (:func:`network_cuts`).
     station : int
         Index of the station the row belongs to, -1 for rows of no station (budget).
     """
@@ -242,12 +245,14 @@ def build_model(problem: PlanProblem, config) -> Model:
         kinds.append(kind)
 
     min_count = config.min_markers + (1 if config.redundant else 0)
+    reference = _reference_index(problem, config)
     for s in range(problem.n_stations):
         idx = problem.usable_pairs(s)
         cols = site_var[problem.pair_site[idx]]
         add_row(cols, np.ones(cols.size), min_count, np.inf, RowKind("count", s))
-        w_t, _ = info_weights(problem, idx, config)
-        add_row(cols, w_t, 1.0, np.inf, RowKind("info", s))
+        if s != reference:
+            w_t, _ = info_weights(problem, idx, config)
+            add_row(cols, w_t, 1.0, np.inf, RowKind("info", s))
         sec = sector_index(problem.pair_bearing_rad[idx], config.n_sectors)
         present = np.unique(sec)
         y = {}
@@ -290,6 +295,18 @@ def build_model(problem: PlanProblem, config) -> Model:
                  site_var=site_var, row_kind=tuple(kinds))
 
 
+def _reference_index(problem: PlanProblem, config) -> int:
+    """Index of the datum station in network mode, -1 in known-control mode."""
+    if not config.network:
+        return -1
+    if config.reference_station is None:
+        return 0
+    if config.reference_station not in problem.station_ids:
+        raise ConfigError(f"`reference_station` {config.reference_station!r} is not a station "
+                          f"of this plan; valid ids are {', '.join(problem.station_ids[:20])}")
+    return problem.station_ids.index(config.reference_station)
+
+
 def _boundary_oa_cuts(problem: PlanProblem, s: int, config) -> list:
     """Initial outer-approximation cuts of station ``s``: tangents at the information of all its
     usable sites scaled down onto the requirement's boundary, at 9 rim points."""
@@ -314,14 +331,18 @@ def tightening_rows(problem: PlanProblem, model: Model, config
     requirement level must leave them out. Returns ``(rows, lower, kinds)``.
     """
     rows, lower, kinds = [], [], []
+    reference = _reference_index(problem, config)
     for s in range(problem.n_stations):
         idx = problem.usable_pairs(s)
-        if idx.size == 0:
+        if idx.size == 0 or s == reference:
             continue
-        _, w_h = info_weights(problem, idx, config)
-        rows.append(model.site_row(problem.pair_site[idx], w_h))
-        lower.append(1.0)
-        kinds.append(RowKind("heading", s))
+        if not (config.network and config.heading_prior_sigma_deg is not None):
+            _, w_h = info_weights(problem, idx, config)
+            rows.append(model.site_row(problem.pair_site[idx], w_h))
+            lower.append(1.0)
+            kinds.append(RowKind("heading", s))
+        if config.network:
+            continue
         for sites, coef, rhs in _boundary_oa_cuts(problem, s, config):
             rows.append(model.site_row(sites, coef))
             lower.append(rhs)
@@ -335,9 +356,18 @@ def info_weights(problem: PlanProblem, pairs: np.ndarray, config
 
     Returns ``(w_t, w_h)``, each scaled so that a passing station needs ``sum w x >= 1``
     (:func:`planner.accuracy.information_lower_bound` and
-    :func:`planner.accuracy.heading_information_lower_bound`).
+    :func:`planner.accuracy.heading_information_lower_bound`). In network mode the weight of
+    a pair is the station's diagonal share of the site's contribution, ``w (1 - w / W_j)``
+    (``W_j`` the site's total weight): the station's information in the network is at most its
+    diagonal, so the same two bounds stay necessary (and a site seen by this station alone
+    counts nothing).
     """
     w = 3.0 / problem.pair_sigma_m[pairs] ** 2
+    if config.network:
+        usable = problem.pair_usable
+        total = np.bincount(problem.pair_site[usable], 3.0 / problem.pair_sigma_m[usable] ** 2,
+                            minlength=problem.n_sites)
+        w = w * (1.0 - w / total[problem.pair_site[pairs]])
     d = problem.site_xyz[problem.pair_site[pairs], :2] \
         - problem.station_xyz[problem.pair_station[pairs], :2]
     w_t = w / accuracy.information_lower_bound(config.requirement_m)
@@ -456,6 +486,260 @@ def accuracy_cuts(problem: PlanProblem, model: Model, selected: np.ndarray, conf
     return block, lower, kinds
 
 
+#: Network mode: grow a failing station's set only when the problem's tie entries are fewer
+#: (each growth step evaluates the network exactly).
+_GROW_MAX_TIES = 250_000
+#: Network mode: exact evaluations a growth may spend.
+_GROW_MAX_EVALS = 14
+#: Network mode: tangent cuts per round for at most this many failing stations (the worst;
+#: their rows are dense over every tying site).
+_MAX_OA_STATIONS = 20
+#: Network mode, large problems: most terms of a cut row (see :func:`network_cuts`).
+_MAX_TERMS = 3000
+#: Network mode: problems with more tying sites than this get sparse cut rows, under the
+#: upper bound of the greedy layout's count.
+_SPARSE_ABOVE_SITES = 8000
+#: Network mode, large problems: the greedy upper bound adds the best site of this many of the
+#: worst stations per step.
+_GREEDY_BATCH = 10
+#: Network mode: weight of the every-site information added to an undetermined layout's
+#: information before linearising (any positive definite point gives valid tangents).
+_REGULARISE = 0.05
+
+
+def network_preflight(problem: PlanProblem, config, net: NetworkModel,
+                      infos: list[StationInfo] | None = None) -> np.ndarray:
+    """Network mode: sites whose marker can never meet the requirement, after checking that
+    every station can.
+
+    By monotonicity the best any layout can do is every allowed site selected: a marker whose
+    error then exceeds the requirement can never be part of a passing layout (it is left out),
+    and a station that then fails — or that no chain of shared sites ties to the reference —
+    makes the plan infeasible.
+
+    Returns
+    -------
+    hopeless : (n,) bool
+        Sites to leave out.
+
+    Raises
+    ------
+    InfeasiblePlanError
+        Naming each station that cannot be satisfied and why (directions, disconnected,
+        heading undetermined or too weak, too far from the reference), or an existing marker
+        that cannot meet the requirement.
+    """
+    req = config.requirement_m
+    forbidden = problem.site_mask(config.forbidden, "forbidden")
+    existing = problem.site_mask(config.existing, "existing") | problem.site_existing
+    allowed = ~forbidden & (net.n_stations_seeing > 0)
+    infos = infos or station_infos(problem, config)
+    _raise_network_infeasible(problem, config, net, diagnose(problem, config, infos,
+                                                              accuracy_check=False)
+                              or net.diagnose(allowed, req))
+    cov = net.covariance(net.information(allowed))
+    sites = np.flatnonzero(allowed)
+    err = net.marker_errors(cov, sites)
+    hopeless = np.zeros(problem.n_sites, bool)
+    hopeless[sites[err > req]] = True
+    bad_existing = np.flatnonzero(hopeless & existing)
+    if bad_existing.size:
+        names = ", ".join(problem.site_ids[j] for j in bad_existing[:10])
+        raise InfeasiblePlanError(f"existing marker(s) {names} cannot meet {req:g} m relative to "
+                                  f"the reference {problem.station_ids[net.reference]} even with "
+                                  "every usable site; relax the requirement")
+    if hopeless.any():
+        extra = tuple(problem.site_ids[j] for j in np.flatnonzero(hopeless & ~forbidden))
+        _raise_network_infeasible(problem, config, net, diagnose(
+            problem, config.replace(forbidden=config.forbidden + extra), infos,
+            accuracy_check=False) or net.diagnose(allowed & ~hopeless, req))
+    return hopeless
+
+
+def _raise_network_infeasible(problem: PlanProblem, config, net: NetworkModel,
+                              failing: dict[str, str]) -> None:
+    """One-line :class:`InfeasiblePlanError` naming each failing station (none: return)."""
+    req = config.requirement_m
+    if failing:
+        raise InfeasiblePlanError(
+            f"no layout meets the requirement in network mode ({req:g} m relative to the "
+            f"reference {problem.station_ids[net.reference]}, >= {config.min_markers} markers in "
+            f">= {config.min_sectors} of {config.n_sectors} sectors) at station(s): "
+            + "; ".join(f"{k}: {v}" for k, v in failing.items())
+            + "; relax the configuration, add candidate sites or a heading prior")
+
+
+def _sparse_tangent(coef: np.ndarray, rhs: float, upper_bound: int | None,
+                    max_terms: int) -> tuple[np.ndarray, np.ndarray, float] | None:
+    """A tangent cut ``sum_j coef_j x_j >= rhs`` with at most ``max_terms`` terms, valid for
+    every layout of at most ``upper_bound`` sites.
+
+    The dropped terms hold at most the ``upper_bound`` largest dropped coefficients, so
+    ``sum_{kept} coef_j x_j >= rhs - (sum of those)``. Returns ``(sites, coef / rhs', 1)``
+    normalised to ``>= 1``, or ``None`` when the cut would say nothing.
+    """
+    pos = np.flatnonzero(coef > 0)
+    if upper_bound is None or pos.size <= max_terms:
+        return pos, coef[pos] / rhs, 1.0
+    order = pos[np.argsort(-coef[pos], kind="stable")]
+    keep, drop = order[:max_terms], order[max_terms:]
+    slack = float(np.sum(coef[drop[:upper_bound]]))
+    if rhs - slack <= 1e-3 * rhs:
+        return None
+    keep = np.sort(keep)
+    return keep, coef[keep] / (rhs - slack), 1.0
+
+
+def network_cuts(problem: PlanProblem, model: Model, selected: np.ndarray, config,
+                 net: NetworkModel, j_all: np.ndarray, upper_bound: int | None = None
+                 ) -> tuple[sp.csr_array | None, list[float], list[RowKind]]:
+    """Valid cuts for every station and selected marker that fails with ``selected`` in
+    network mode.
+
+    Per failing station ``k`` (families): ``"cut"`` — the no-good cut: the selected tying
+    sites ``T`` (grown to a larger failing ``T'`` on small problems) need one more site,
+    ``sum_{j tying, j not in T'} x_j >= 1`` (monotonicity: every subset of ``T'`` fails);
+    ``"connect"`` — a station cut off from the reference needs a selected site tying its
+    component to the rest; ``"oa"`` — tangents of its convex worst-case variance
+    (:meth:`planner.network_accuracy.NetworkModel.station_tangents`), linearised at the
+    layout's information (plus ``_REGULARISE`` x the every-site information when the layout
+    leaves a station undetermined; any positive definite point gives a valid tangent). Per
+    failing selected marker ``m``: ``"cut-marker"`` ``sum_{j tying, not in T} x_j - x_m >= 0``
+    and ``"oa-marker"`` ``sum_j c_j x_j - rhs x_m >= 0`` (enforced only when ``x_m = 1``).
+
+    On large problems (``upper_bound`` given: no layout of interest has more sites, e.g. a
+    feasible layout's count) tangent rows keep their ``_MAX_TERMS`` largest coefficients and
+    lower their right-hand side by the most the dropped terms can add
+    (:func:`_sparse_tangent`), and combinatorial rows over more than ``_MAX_TERMS`` sites are
+    left out (valid, merely weak): every row is still valid for those layouts.
+
+    Parameters
+    ----------
+    j_all : (P, P) float
+        Information of every allowed site (the regularisation).
+    upper_bound : int, optional
+        Most sites a layout of interest selects (enables the sparse rows).
+
+    Returns
+    -------
+    rows, lower, kinds
+        As :func:`accuracy_cuts`; ``rows`` is ``None`` when everything passes.
+    """
+    req = config.requirement_m
+    in_model = model.site_var >= 0
+    open_site = in_model.copy()
+    open_site[model.var_site[model.ub[:model.var_site.size] == 0]] = False
+    tying = net.tying & open_site
+    j_sel = net.information(selected)
+    cov = net.covariance(j_sel)
+    err = net.station_errors_from(cov)
+    failing = np.flatnonzero(err > req)
+    markers = np.flatnonzero(selected & open_site)
+    merr = net.marker_errors(cov, markers)
+    bad_markers = markers[merr > req]
+    if failing.size == 0 and bad_markers.size == 0:
+        return None, [], []
+    rows, lower, kinds = [], [], []
+
+    def add(sites, coef, lo, kind):
+        rows.append(model.site_row(sites, coef))
+        lower.append(lo)
+        kinds.append(kind)
+
+    cov0 = cov if cov.determined.all() else net.covariance(j_sel + _REGULARISE * j_all)
+    rim = "spread" if failing.size <= 10 else "worst"
+    worst_first = failing[np.argsort(-np.nan_to_num(err[failing], posinf=1e300), kind="stable")]
+    tangents = net.station_tangents(cov0, worst_first[:_MAX_OA_STATIONS], req, rim=rim)
+    dense_ok = upper_bound is None
+
+    for k, coef, rhs in tangents:
+        cut = _sparse_tangent(np.where(in_model, coef, 0.0), rhs, upper_bound, _MAX_TERMS)
+        if cut is not None:
+            add(cut[0], cut[1], cut[2], RowKind("oa", k))
+    grow = failing[np.argmax(err[failing])] if failing.size and \
+        net.tie_a.size <= _GROW_MAX_TIES and np.isfinite(err[failing]).any() else -1
+    linked = net.connected_to_reference(selected)
+    done_components = set()
+    for k in failing:
+        chosen = selected & tying
+        if k == grow:
+            first = [c for kk, c, _ in tangents if kk == k]
+            chosen = _grow_network(net, chosen, int(k), req, tying & ~selected, j_sel,
+                                   first[0] if first else None)
+        rest = np.flatnonzero(tying & ~chosen)
+        if dense_ok or rest.size <= _MAX_TERMS:
+            add(rest, 1.0, 1.0, RowKind("cut", int(k)))
+        if not linked[k]:
+            comp = _component(net, selected, int(k))
+            if comp in done_components:
+                continue
+            done_components.add(comp)
+            inside = np.zeros(problem.n_stations, bool)
+            inside[list(comp)] = True
+            a = np.bincount(net.pair_site, inside[net.pair_station], minlength=problem.n_sites)
+            b = net.n_stations_seeing - a
+            bridge = np.flatnonzero(tying & (a > 0) & (b > 0))
+            if dense_ok or bridge.size <= 4 * _MAX_TERMS:
+                add(bridge, 1.0, 1.0, RowKind("connect", int(k)))
+    if bad_markers.size:
+        for m, coef, rhs in net.marker_tangents(cov, bad_markers, req):
+            cut = _sparse_tangent(np.where(in_model, coef, 0.0), rhs, upper_bound, _MAX_TERMS)
+            if cut is not None:
+                add(np.r_[cut[0], m], np.r_[cut[1], -1.0], 0.0, RowKind("oa-marker"))
+        rest = np.flatnonzero(tying & ~selected)
+        for m in bad_markers if dense_ok or rest.size <= _MAX_TERMS else ():
+            add(np.r_[rest, m], np.r_[np.ones(rest.size), -1.0], 0.0, RowKind("cut-marker"))
+    if not rows:
+        raise InfeasiblePlanError("network mode: the layout fails but no cut could be made "
+                                  "sparse enough; raise the marker upper bound")
+    return sp.csr_array(sp.vstack(rows)), lower, kinds
+
+
+def _component(net: NetworkModel, selected: np.ndarray, k: int) -> frozenset:
+    """Stations linked to station ``k`` by shared selected sites."""
+    from scipy.sparse.csgraph import connected_components
+
+    _, comp = connected_components(sp.csr_array(net.ties(selected) > 0), directed=False)
+    return frozenset(np.flatnonzero(comp == comp[k]).tolist())
+
+
+def _grow_network(net: NetworkModel, chosen: np.ndarray, k: int, requirement_m: float,
+                  candidates: np.ndarray, j_chosen: np.ndarray, coef) -> np.ndarray:
+    """Grow station ``k``'s failing set ``chosen`` by the candidate sites that help its worst
+    direction least (``coef`` ascending; by site order without one), as far as it keeps
+    failing: by monotonicity "the set plus the first ``m`` candidates fails" is monotone in
+    ``m``, so the largest such ``m`` is found by bisection (at most ``_GROW_MAX_EVALS`` exact
+    evaluations). Returns the grown (still failing) set, (n,) bool."""
+    cand = np.flatnonzero(candidates)
+    if cand.size == 0:
+        return chosen
+    order = cand[np.argsort(coef[cand], kind="stable")] if coef is not None else cand
+    prior = np.diag(net.prior)
+
+    def fails(m: int) -> bool:
+        x = np.zeros(net.problem.n_sites)
+        x[order[:m]] = 1.0
+        j = j_chosen + net.information(x) - prior
+        cov = net.covariance(j)
+        if not cov.determined[k]:
+            return True
+        e = net.station_errors_from(cov)[k]
+        return bool(e > requirement_m)
+
+    lo, hi = 0, order.size
+    for _ in range(_GROW_MAX_EVALS):
+        if lo >= hi:
+            break
+        mid = (lo + hi + 1) // 2
+        if fails(mid):
+            lo = mid
+        else:
+            hi = mid - 1
+    grown = chosen.copy()
+    grown[order[:lo]] = True
+    return grown
+
+
 def plan_sites(problem: PlanProblem, config, model: Model | None = None) -> PlanResult:
     """The accuracy-cut loop: solve, check stations exactly, cut, re-solve until all pass.
 
@@ -477,6 +761,8 @@ def plan_sites(problem: PlanProblem, config, model: Model | None = None) -> Plan
         Naming each station that cannot be satisfied and why, or the budget / time limit.
     """
     infos = station_infos(problem, config)
+    if config.network:
+        return _plan_network(problem, config, model, infos)
     failing = diagnose(problem, config, infos)
     if failing:
         raise InfeasiblePlanError(
@@ -490,6 +776,65 @@ def plan_sites(problem: PlanProblem, config, model: Model | None = None) -> Plan
         rows, lower, kinds = tightening_rows(problem, model, config)
         if rows is not None:
             model = model.with_rows(rows, lower, np.full(len(lower), np.inf), kinds)
+
+    def cuts(selected):
+        return accuracy_cuts(problem, model, selected, config, infos, outer_approximation=True)
+
+    def check(selected):
+        return evaluate_layout(problem, selected, config, infos)
+
+    return _cut_loop(problem, config, model, cuts, check)
+
+def _plan_network(problem: PlanProblem, config, model: Model | None,
+                  infos: list[StationInfo]) -> PlanResult:
+    """:func:`plan_sites` in network mode: the same build/solve/cut loop with the network's
+    accuracy checks and cuts (:func:`network_cuts`)."""
+    if config.redundant:
+        raise ConfigError("redundant mode is not available in network mode yet; drop one of "
+                          "--redundant and --network")
+    net = network_model(problem, config)
+    hopeless = network_preflight(problem, config, net, infos)
+    if model is None:
+        model = build_model(problem, config)
+        rows, lower, kinds = tightening_rows(problem, model, config)
+        if rows is not None:
+            model = model.with_rows(rows, lower, np.full(len(lower), np.inf), kinds)
+    ub = model.ub.copy()
+    var = model.site_var[np.flatnonzero(hopeless)]
+    ub[var[var >= 0]] = 0.0
+    model = replace(model, ub=ub)
+    forbidden = problem.site_mask(config.forbidden, "forbidden")
+    j_all = net.information(~forbidden & ~hopeless & (net.n_stations_seeing > 0))
+    upper_bound = None
+    existing = problem.site_mask(config.existing, "existing") | problem.site_existing
+    if int(net.tying.sum()) > _SPARSE_ABOVE_SITES and np.all(problem.site_cost[~existing] == 1):
+        # every layout at least as good as the greedy one has at most its number of sites
+        from planner.baselines import greedy_network
+
+        greedy = greedy_network(problem, config.replace(
+            forbidden=config.forbidden + tuple(problem.site_ids[j]
+                                               for j in np.flatnonzero(hopeless & ~forbidden))),
+            net, batch=_GREEDY_BATCH)
+        in_model = model.site_var >= 0
+        upper_bound = int((greedy.selected & in_model).sum())
+        nx = model.var_site.size
+        row = sp.csr_array((np.ones(nx), (np.zeros(nx, np.int64), np.arange(nx))),
+                           shape=(1, model.n_vars))
+        model = model.with_rows(row, [-np.inf], [float(upper_bound)],
+                                [RowKind("upper-bound")])
+
+    def cuts(selected):
+        return network_cuts(problem, model, selected, config, net, j_all, upper_bound)
+
+    def check(selected):
+        return evaluate_layout(problem, selected, config, infos, net=net)
+
+    return _cut_loop(problem, config, model, cuts, check)
+
+
+def _cut_loop(problem: PlanProblem, config, model: Model, cuts, check) -> PlanResult:
+    """Solve, cut with ``cuts(selected) -> (rows, lower, kinds)`` (``rows`` None: passes),
+    re-solve until every check passes; ``check(selected) -> LayoutCheck``."""
     t0 = time.perf_counter()
     solve_time = 0.0
     n_cuts = 0
@@ -517,11 +862,9 @@ def plan_sites(problem: PlanProblem, config, model: Model | None = None) -> Plan
                                           "raise --budget or relax the configuration")
             raise InfeasiblePlanError(f"solver found no layout ({sol.status}: {sol.message}); "
                                       "raise --time-limit")
-        rows, lower, kinds = accuracy_cuts(problem, model, sol.selected, config, infos,
-                                           outer_approximation=True)
+        rows, lower, kinds = cuts(sol.selected)
         if rows is None:
-            check = evaluate_layout(problem, sol.selected, config, infos)
-            return PlanResult(selected=sol.selected, check=check, solution=sol,
+            return PlanResult(selected=sol.selected, check=check(sol.selected), solution=sol,
                               iterations=iteration, n_cuts=n_cuts, solve_time_s=solve_time,
                               model=model, history=history)
         n_cuts += rows.shape[0]

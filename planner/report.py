@@ -94,6 +94,7 @@ def plan_record(outcome) -> dict:
               "time_limit_s": cfg.time_limit_s, "target_gap": cfg.mip_gap,
               "proven_optimal": sol.status == "optimal"}
     vis = outcome.visibility
+    network = _network_record(outcome, stations, markers) if cfg.network else None
     doc = {
         "schema": SCHEMA, "schema_version": SCHEMA_VERSION,
         "provenance": provenance(cfg.to_dict(), error_model=outcome.model_name,
@@ -119,7 +120,34 @@ def plan_record(outcome) -> dict:
                        "n_usable": int(prob.pair_usable.sum()),
                        "n_rays": int(vis.n_rays) if vis is not None else 0},
     }
+    if network is not None:
+        doc["network"] = network
     return doc
+
+
+def _network_record(outcome, stations: list[dict], markers: list[dict]) -> dict:
+    """Network mode: the datum, per-station ties and per-marker errors (added in place to
+    ``stations`` and ``markers``), and the weakest stations."""
+    from planner.network_accuracy import POSE_PARAMETERS, network_model
+
+    cfg, prob, res = outcome.config, outcome.problem, outcome.result
+    net = network_model(prob, cfg)
+    ties = net.ties(res.selected)
+    for k, rec in enumerate(stations):
+        rec["tied_to"] = {prob.station_ids[o]: int(ties[k, o]) for o in np.flatnonzero(ties[k])}
+    for rec, j in zip(markers, np.flatnonzero(res.selected), strict=True):
+        rec["predicted_error_m"] = _num(res.check.marker_error_m[j])
+    order = np.argsort(-np.nan_to_num(res.check.error_m, posinf=1e300), kind="stable")
+    return {"datum": {"kind": "station", "reference_station": prob.station_ids[net.reference],
+                      "fixed": list(POSE_PARAMETERS[:4]),
+                      "inclinometer_sigma_deg": cfg.inclinometer_sigma_deg,
+                      "heading_prior_sigma_deg": cfg.heading_prior_sigma_deg},
+            "weakest_stations": [{"id": prob.station_ids[k],
+                                  "predicted_error_m": _num(res.check.error_m[k])}
+                                 for k in order[:5]],
+            "worst_marker_error_m": _num(np.nanmax(res.check.marker_error_m))
+            if res.selected.any() else None,
+            "n_station_ties": int((np.triu(ties) > 0).sum())}
 
 
 def plan_timings(outcome) -> dict[str, float]:
@@ -129,7 +157,8 @@ def plan_timings(outcome) -> dict[str, float]:
 
 
 def write_plan_files(outcome, folder: Path) -> dict:
-    """Write plan.json, markers.csv, markers.geojson and report.md into ``folder``.
+    """Write plan.json, markers.csv, markers.geojson and report.md into ``folder`` (network
+    mode: also stations.csv, each station's error relative to the datum and its ties).
 
     Returns the ``plan.json`` document.
     """
@@ -137,6 +166,8 @@ def write_plan_files(outcome, folder: Path) -> dict:
     doc = plan_record(outcome)
     write_plan(doc, folder / "plan.json")
     _write_markers_csv(doc, folder / "markers.csv")
+    if "network" in doc:
+        _write_stations_csv(doc, folder / "stations.csv")
     _write_geojson(doc, folder / "markers.geojson")
     (folder / "report.md").write_text(report_markdown(doc))
     return doc
@@ -150,6 +181,21 @@ def _write_markers_csv(doc: dict, path: Path) -> None:
         for m in doc["markers"]:
             w.writerow([m["id"], f"{m['x_m']:.3f}", f"{m['y_m']:.3f}", f"{m['z_m']:.3f}",
                         int(m["existing"]), len(m["stations"]), " ".join(m["stations"])])
+
+
+def _write_stations_csv(doc: dict, path: Path) -> None:
+    ref = doc["network"]["datum"]["reference_station"]
+    with path.open("w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow([f"# markerplan plan stations, network mode (datum: station {ref}); "
+                    + FRAME_NOTE])
+        w.writerow(["id", "x_m", "y_m", "z_m", "network_error_m", "meets_requirement",
+                    "n_markers", "tied_to"])
+        for s in doc["stations"]:
+            err = s["predicted_error_m"]
+            w.writerow([s["id"], f"{s['x_m']:.3f}", f"{s['y_m']:.3f}", f"{s['z_m']:.3f}",
+                        "inf" if err is None else f"{err:.4f}", int(s["meets_requirement"]),
+                        s["n_markers"], " ".join(f"{k}:{v}" for k, v in s["tied_to"].items())])
 
 
 def _write_geojson(doc: dict, path: Path) -> None:
@@ -198,6 +244,21 @@ def report_markdown(doc: dict) -> str:
         saved = b.get("saved_by_plan")
         lines.append(f"| {label} | {b['n_markers']} | {'yes' if b['meets_requirement'] else 'no'}"
                      f" | {saved if saved is not None else '—'} |")
+    if "network" in doc:
+        net = doc["network"]
+        lines += ["", "## Network", "",
+                  f"Network mode: markers are unknowns; every error is relative to the datum, "
+                  f"station **{net['datum']['reference_station']}** (x, y, z and heading fixed; "
+                  "roll and pitch from the inclinometer, "
+                  f"{net['datum']['inclinometer_sigma_deg']:g} deg 1-sigma). "
+                  f"{net['n_station_ties']} station pairs share markers; worst "
+                  f"marker {_fmt(net['worst_marker_error_m'])}.", "",
+                  "Weakest stations: " + ", ".join(f"{w['id']} ({_fmt(w['predicted_error_m'])})"
+                                                   for w in net["weakest_stations"]) + ".", "",
+                  "| station | tied to (shared markers) |", "|---|---|"]
+        for s in doc["stations"]:
+            lines.append(f"| {s['id']} | " + (", ".join(f"{k} ({v})" for k, v in
+                                                         s["tied_to"].items()) or "—") + " |")
     lines += ["", "## Stations", "",
               "| station | predicted error | markers | sectors | markers used |",
               "|---|---:|---:|---:|---|"]
@@ -230,4 +291,8 @@ def summary(doc: dict, out: Path) -> dict:
             "baselines": {k: {"n_markers": v["n_markers"],
                               "meets_requirement": v["meets_requirement"]}
                           for k, v in doc["baselines"].items()},
-            "markers": [m["id"] for m in doc["markers"]]}
+            "markers": [m["id"] for m in doc["markers"]],
+            **({"mode": "network",
+                "reference_station": doc["network"]["datum"]["reference_station"],
+                "worst_marker_error_m": doc["network"]["worst_marker_error_m"]}
+               if "network" in doc else {})}

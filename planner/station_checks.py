@@ -142,13 +142,15 @@ def station_infos(problem: PlanProblem, config) -> list[StationInfo]:
     return [StationInfo(problem, s, config) for s in range(problem.n_stations)]
 
 
-def diagnose(problem: PlanProblem, config, infos: list[StationInfo] | None = None
-             ) -> dict[str, str]:
+def diagnose(problem: PlanProblem, config, infos: list[StationInfo] | None = None,
+             accuracy_check: bool = True) -> dict[str, str]:
     """Stations that no layout can satisfy, with the reason (empty dict: none found).
 
     Checks, per station and with every allowed usable site selected: any site in range, any
     unoccluded, enough usable sites, enough sectors, accuracy reachable (and, in redundant mode,
-    reachable after losing any one site).
+    reachable after losing any one site). ``accuracy_check=False`` leaves out the two accuracy
+    checks (network mode judges accuracy with
+    :meth:`planner.network_accuracy.NetworkModel.diagnose`).
     """
     infos = infos or station_infos(problem, config)
     forbidden = problem.site_mask(config.forbidden, "forbidden")
@@ -193,6 +195,8 @@ def diagnose(problem: PlanProblem, config, infos: list[StationInfo] | None = Non
                             f"leave {left} of {config.n_sectors} sectors (needs "
                             f"{config.min_sectors})")
                 continue
+        if not accuracy_check:
+            continue
         err = infos[s].error(sites)
         if err > config.requirement_m:
             out[sid] = (f"accuracy unreachable: all {sites.size} usable sites give "
@@ -221,6 +225,11 @@ class LayoutCheck:
     worst_loss_sectors : (s,) int or None
         Redundant mode: fewest occupied sectors after losing any one marker.
     ok : (s,) bool
+    marker_error_m : (n,) float or None
+        Network mode: predicted 95 % error of each selected marker relative to the datum
+        (nan where no marker is selected), m.
+    markers_ok : bool
+        Network mode: every selected marker meets the requirement (always True otherwise).
     """
 
     count: np.ndarray
@@ -229,14 +238,16 @@ class LayoutCheck:
     worst_loss_error_m: np.ndarray | None
     worst_loss_sectors: np.ndarray | None
     ok: np.ndarray
+    marker_error_m: np.ndarray | None = None
+    markers_ok: bool = True
 
     @property
     def all_ok(self) -> bool:
-        return bool(self.ok.all())
+        return bool(self.ok.all()) and self.markers_ok
 
 
 def evaluate_layout(problem: PlanProblem, selected: np.ndarray, config,
-                    infos: list[StationInfo] | None = None) -> LayoutCheck:
+                    infos: list[StationInfo] | None = None, net=None) -> LayoutCheck:
     """Check directions and predicted accuracy of a layout at every station.
 
     Parameters
@@ -245,12 +256,18 @@ def evaluate_layout(problem: PlanProblem, selected: np.ndarray, config,
     selected : (n,) bool
         Candidate sites holding a marker.
     config : PlanConfig
-        In redundant mode the layout must also survive the loss of any one marker.
+        In redundant mode the layout must also survive the loss of any one marker; in network
+        mode (``config.network``) the accuracy of every station and selected marker is the
+        network's (:mod:`planner.network_accuracy`).
     infos : list of StationInfo, optional
         Cache from :func:`station_infos`.
+    net : planner.network_accuracy.NetworkModel, optional
+        Network mode: cache from :func:`planner.network_accuracy.network_model`.
     """
-    infos = infos or station_infos(problem, config)
     selected = np.asarray(selected, dtype=bool)
+    if config.network:
+        return _evaluate_network(problem, selected, config, net)
+    infos = infos or station_infos(problem, config)
     count, sectors = direction_status(problem, selected, config.n_sectors)
     err = np.array([infos[s].error(infos[s].sites[selected[infos[s].sites]])
                     for s in range(problem.n_stations)])
@@ -277,3 +294,27 @@ def evaluate_layout(problem: PlanProblem, selected: np.ndarray, config,
             & (worst_err <= config.requirement_m)
     return LayoutCheck(count=count, sectors=sectors, error_m=err, worst_loss_error_m=worst_err,
                        worst_loss_sectors=worst_sec, ok=ok)
+
+
+def _evaluate_network(problem: PlanProblem, selected: np.ndarray, config, net) -> LayoutCheck:
+    """:func:`evaluate_layout` in network mode (directions as always, accuracy of the whole
+    network: every station and every selected marker relative to the datum)."""
+    from planner.network_accuracy import network_model
+
+    if config.redundant:
+        from markerplan.errors import ConfigError
+
+        raise ConfigError("redundant mode is not available in network mode yet; drop one of "
+                          "--redundant and --network")
+    net = net or network_model(problem, config)
+    count, sectors = direction_status(problem, selected, config.n_sectors)
+    cov = net.covariance(net.information(selected))
+    err = net.station_errors_from(cov)
+    markers = np.flatnonzero(selected)
+    merr = np.full(problem.n_sites, np.nan)
+    merr[markers] = net.marker_errors(cov, markers)
+    ok = (count >= config.min_markers) & (sectors >= config.min_sectors) \
+        & (err <= config.requirement_m)
+    return LayoutCheck(count=count, sectors=sectors, error_m=err, worst_loss_error_m=None,
+                       worst_loss_sectors=None, ok=ok, marker_error_m=merr,
+                       markers_ok=bool(np.all(merr[markers] <= config.requirement_m)))

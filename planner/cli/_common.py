@@ -26,6 +26,8 @@ option                      meaning (and the value the command receives)
                             argument ``offsets``)
 ``--config FILE``           TOML plan settings; ``--boundary``, ``--exclude``: GeoJSON polygons
 ``--time-limit S``          solver time limit, seconds
+``--network``               network mode: markers and stations estimated together, tied to
+                            the reference station (:mod:`planner.network_accuracy`)
 ==========================  =====================================================================
 
 Helpers: :func:`emit_summary` (JSON or human summary), :func:`report_timings` (step timings on
@@ -283,6 +285,12 @@ boundary_option = click.option(
 exclude_option = click.option(
     "--exclude", "exclude_paths", type=FILE, multiple=True,
     help="GeoJSON polygon(s) where no marker may go (repeatable).")
+
+network_option = click.option(
+    "--network", is_flag=True, default=None,
+    help="Network mode: markers are unknowns estimated with every station's pose, tied to "
+         "the reference station (the first, or reference_station in --config); no total "
+         "station needed.")
 
 time_limit_option = click.option(
     "--time-limit", "time_limit_s", type=TIME_LIMIT_S,

@@ -17,6 +17,7 @@ from planner.cli._common import (
     given_paths,
     json_option,
     marker_radius_option,
+    network_option,
     out_option,
     overwrite_option,
     report_timings,
@@ -48,23 +49,27 @@ from planner.cli._common import (
               help="Markers already in the field, fixed: 'as-built' or a CSV (id,x_m,y_m[,z_m]).")
 @click.option("--budget", type=click.IntRange(1, 100_000),
               help="Largest number of markers allowed.")
+@network_option
 @time_limit_option
 @out_option(default="markerplan-out")
 @overwrite_option
 @json_option
 def command(site_name, site_seed, dem_path, stations_path, station_ids, boundary_path,
             exclude_paths, marker_radius_m, error_model, config_path, visibility_path, redundant,
-            existing, budget, time_limit_s, out, overwrite, as_json):
+            existing, budget, network, time_limit_s, out, overwrite, as_json):
     """Plan the fewest marker sites so that every station meets the accuracy requirement.
 
     Writes plan.json, markers.csv, markers.geojson (site frame, local metres), map.png and
-    report.md under --out. With no arguments: the default site, into ./markerplan-out/.
+    report.md under --out (with --network also stations.csv: each station's error relative to
+    the reference station and the stations it is tied to). With no arguments: the default
+    site, into ./markerplan-out/.
 
     \b
     Examples:
       markerplan plan
       markerplan plan --site default --redundant --out plan-redundant/
       markerplan plan --site large --site-seed 3 --marker-radius 0.15 --out plan-large/
+      markerplan plan --network --out plan-network/
       markerplan plan --dem site.tif --stations stations.csv --exclude paths.geojson --out p/
     """
     from markerplan.output_folder import output_folder
@@ -78,7 +83,7 @@ def command(site_name, site_seed, dem_path, stations_path, station_ids, boundary
         outcome, config = _plan(site_name, site_seed, dem_path, stations_path, station_ids,
                                 boundary_path, exclude_paths, marker_radius_m, error_model,
                                 config_path, visibility_path, redundant, existing, budget,
-                                time_limit_s, as_json)
+                                time_limit_s, as_json, network)
         doc = write_plan_files(outcome, stage)
         draw_plan_map(outcome, stage / "map.png")
     timings = plan_timings(outcome)
@@ -88,13 +93,15 @@ def command(site_name, site_seed, dem_path, stations_path, station_ids, boundary
              f"{info['worst_station_error_m']:.3f} m <= {config.requirement_m:g} m; "
              + "; ".join(f"{k.replace('_', ' ')}: {v['n_markers']}"
                          for k, v in doc["baselines"].items())
+             + (f"; network mode, datum {info['reference_station']}, worst marker "
+                f"{info['worst_marker_error_m']:.3f} m" if "mode" in info else "")
              + f" -> {out}/")
     emit_summary(info, as_json, human)
 
 
 def _plan(site_name, site_seed, dem_path, stations_path, station_ids, boundary_path,
           exclude_paths, marker_radius_m, error_model, config_path, visibility_path, redundant,
-          existing, budget, time_limit_s, as_json):
+          existing, budget, time_limit_s, as_json, network=None):
     """Read the inputs and make the plan; return ``(outcome, config)``."""
     from markerplan.errors import ConfigError
     from planner.config import PlanConfig, load_config
@@ -108,6 +115,8 @@ def _plan(site_name, site_seed, dem_path, stations_path, station_ids, boundary_p
         overrides["budget"] = budget
     if time_limit_s is not None:
         overrides["time_limit_s"] = time_limit_s
+    if network:
+        overrides["network"] = True
     try:
         config = config.replace(**overrides)
     except ConfigError as exc:

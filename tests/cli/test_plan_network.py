@@ -1,0 +1,60 @@
+"""``markerplan plan --network``: outputs on the default site, the datum, one-line errors."""
+
+import csv
+import json
+
+import pytest
+
+from tests.cli.invoke import run_cli
+
+
+@pytest.fixture(scope="module")
+def network_plan(tmp_path_factory):
+    import contextlib
+    import io
+
+    from planner.cli import main
+
+    out = tmp_path_factory.mktemp("plan-network") / "p"
+    buf = io.StringIO()
+    with contextlib.redirect_stdout(buf):
+        main(["plan", "--network", "--json", "--out", str(out)])
+    return out, json.loads(buf.getvalue())
+
+
+@pytest.mark.slow
+def test_network_plan_records_the_mode_datum_ties_and_errors(network_plan):
+    out, summary = network_plan
+    assert sorted(p.name for p in out.iterdir()) == [
+        "map.png", "markers.csv", "markers.geojson", "plan.json", "provenance.json",
+        "report.md", "stations.csv"]
+    assert summary["mode"] == "network" and summary["reference_station"] == "S1"
+    assert summary["status"] == "optimal" and summary["meets_requirement"]
+    doc = json.loads((out / "plan.json").read_text())
+    assert doc["provenance"]["config"]["network"] is True
+    assert doc["network"]["datum"] == {"kind": "station", "reference_station": "S1",
+                                       "fixed": ["x_m", "y_m", "z_m", "heading_rad"],
+                                       "inclinometer_sigma_deg": 0.01,
+                                       "heading_prior_sigma_deg": None}
+    for s in doc["stations"]:
+        assert s["predicted_error_m"] <= 0.10 and s["tied_to"]
+    for m in doc["markers"]:
+        assert m["predicted_error_m"] <= 0.10
+    assert doc["network"]["weakest_stations"][0]["predicted_error_m"] == pytest.approx(
+        summary["worst_station_error_m"])
+    assert doc["baselines"]["greedy"]["meets_requirement"]
+    assert doc["n_markers"] <= doc["baselines"]["greedy"]["n_markers"]
+    rows = list(csv.reader((out / "stations.csv").read_text().splitlines()))
+    assert rows[0][0].startswith("# markerplan plan stations, network mode (datum: station S1)")
+    assert rows[1][:5] == ["id", "x_m", "y_m", "z_m", "network_error_m"]
+    assert len(rows) == 2 + len(doc["stations"])
+    assert "## Network" in (out / "report.md").read_text()
+
+
+def test_network_bad_configuration_is_one_line(tmp_path, capsys):
+    cfg = tmp_path / "c.toml"
+    cfg.write_text('reference_station = "S9"\n')
+    out = tmp_path / "o"
+    code, _, err = run_cli(capsys, ["plan", "--network", "--config", str(cfg), "--out", str(out)])
+    assert code == 1 and err.count("\n") == 1 and "reference_station" in err and "S9" in err
+    assert not out.exists()

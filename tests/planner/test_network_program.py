@@ -1,0 +1,79 @@
+import itertools
+
+import numpy as np
+import pytest
+
+from markerplan.errors import ConfigError, InfeasiblePlanError
+from planner.config import PlanConfig
+from planner.network_accuracy import network_model
+from planner.program import plan_sites
+from planner.station_checks import evaluate_layout
+from planner.usability import directions_ok
+from tests.planner.instances import make_problem, ring
+
+
+def _instance(seed):
+    rng = np.random.default_rng(seed)
+    stations = [[0, 0], [14, 0], [28, 0]]
+    sites = np.vstack([rng.uniform([-8, -9], [36, 9], (9, 2)), [[7, 4], [21, -4]]])
+    return make_problem(stations, sites, max_range_m=16)
+
+
+def _brute_force(problem, config):
+    net = network_model(problem, config)
+    for k in range(1, problem.n_sites + 1):
+        for combo in itertools.combinations(range(problem.n_sites), k):
+            sel = np.zeros(problem.n_sites, bool)
+            sel[list(combo)] = True
+            if directions_ok(problem, sel, config).all() and \
+                    evaluate_layout(problem, sel, config, net=net).all_ok:
+                return k
+    return None
+
+
+@pytest.mark.parametrize("seed", [2, 5])
+def test_network_plan_matches_the_brute_force_optimum(seed):
+    p = _instance(seed)
+    base = PlanConfig(network=True, min_markers=3, min_sectors=2, max_range_m=16,
+                      working_radius_m=10, time_limit_s=60)
+    net = network_model(p, base)
+    best = net.station_errors(np.ones(p.n_sites, bool)).max()
+    cfg = base.replace(requirement_m=float(1.15 * best))  # some markers cannot meet it
+    r = plan_sites(p, cfg)
+    assert r.check.all_ok and r.status == "optimal"
+    assert r.selected.sum() == _brute_force(p, cfg)
+    # the known-control optimum fails the network's requirement here, or needs as many
+    kc = plan_sites(p, cfg.replace(network=False)).selected
+    assert kc.sum() <= r.selected.sum()
+    assert kc.sum() == r.selected.sum() or not evaluate_layout(p, kc, cfg, net=net).all_ok
+
+
+def test_infeasible_network_names_the_station_and_why():
+    sites = np.vstack([ring([0, 0], 8.0, [0, 120, 240]), [[7, 3], [7, -3]],
+                       ring([200, 0], 8.0, [0, 120, 240])])
+    p = make_problem([[0, 0], [15, 0], [200, 0]], sites, max_range_m=12)
+    cfg = PlanConfig(network=True, max_range_m=12, min_markers=2, min_sectors=1)
+    with pytest.raises(InfeasiblePlanError) as exc:
+        plan_sites(p, cfg)
+    msg = str(exc.value)
+    assert "\n" not in msg and "S3: disconnected" in msg and "reference S1" in msg
+    with pytest.raises(InfeasiblePlanError, match="S2: (heading too weak|too far)"):
+        plan_sites(make_problem([[0, 0], [15, 0]], sites[:5], max_range_m=12), cfg)
+    with pytest.raises(ConfigError, match="redundant"):
+        plan_sites(p, cfg.replace(redundant=True))
+
+
+def test_a_sparse_tangent_removes_no_layout_the_full_one_keeps():
+    from planner.program import _sparse_tangent
+
+    rng = np.random.default_rng(0)
+    coef = rng.exponential(1.0, 12) ** 3
+    rhs = float(np.sort(coef)[-3:].sum() * 0.8)
+    sites, c, lo = _sparse_tangent(coef, rhs, upper_bound=3, max_terms=5)
+    assert sites.size == 5
+    for combo in itertools.chain.from_iterable(itertools.combinations(range(12), k)
+                                               for k in range(4)):
+        x = np.zeros(12)
+        x[list(combo)] = 1.0
+        if x @ coef >= rhs:
+            assert x[sites] @ c >= lo - 1e-12
