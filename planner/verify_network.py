@@ -343,7 +343,7 @@ def adjust_and_compare(tables: list[Path], plan_path: Path, error_model,
         heading_prior_sigma_deg=None, inclinometer_sigma_deg=None, working_radius_m=None,
         requirement_m=None, snooping=settings.snooping, alpha0=settings.alpha0,
         beta0=settings.beta0, plan_geometry=plan)
-    identified, left_out = tied_network(stations, plan, reference, settings)
+    identified, left_out, n_named = tied_network(stations, plan, reference, settings)
     obs = no.network_observations(identified)
     heading_prior = config["heading_prior_sigma_deg"]
     result = adjust(obs, Datum("station", reference), AdjustmentSettings(
@@ -360,13 +360,14 @@ def adjust_and_compare(tables: list[Path], plan_path: Path, error_model,
     accepted = {s.station_id: len(s.xyz_m) for s in stations}
     named = {s.station_id: {i for i in ids if i is not None}
              for s, ids in zip(identified.stations, identified.ids, strict=True)}
+    named_count = {**n_named, **{sid: len(ids) for sid, ids in named.items()}}
     outcomes = []
     for sid in truth:
         pred = predicted_station.get(sid)
         if sid not in s_ids:
             why = left_out.get(sid, "no accepted detection")
             outcomes.append(StationOutcome(sid, pred, None, None, accepted.get(sid, 0),
-                                           len(named.get(sid, ())), 0, False,
+                                           named_count.get(sid, 0), 0, False,
                                            f"not in the adjustment: {why}"))
             continue
         i = s_ids.index(sid)
@@ -420,6 +421,8 @@ def tied_network(stations: list, plan, reference: str, settings: NetworkVerifySe
         markers, as :func:`pipeline.network_adjustment.adjust` requires) and their ids.
     left_out : dict of str to str
         Why each other station was left out.
+    n_identified : dict of str to int
+        Identified detections of every station, kept or not.
 
     Raises
     ------
@@ -430,6 +433,7 @@ def tied_network(stations: list, plan, reference: str, settings: NetworkVerifySe
     from planner import network_observations as no
 
     left_out: dict[str, str] = {}
+    n_identified: dict[str, int] = {}
     kept, ids, reasons = [], [], []
     for s in stations:
         try:
@@ -439,7 +443,8 @@ def tied_network(stations: list, plan, reference: str, settings: NetworkVerifySe
             left_out[s.station_id] = ("none of its detections matches a planned marker within "
                                       "the odometry's sigma")
             continue
-        if any(i is not None for i in one.ids[0]):
+        n_identified[s.station_id] = sum(i is not None for i in one.ids[0])
+        if n_identified[s.station_id]:
             kept.append(s)
             ids += one.ids
             reasons += one.reasons
@@ -463,7 +468,7 @@ def tied_network(stations: list, plan, reference: str, settings: NetworkVerifySe
         keep = [k for k, s in enumerate(kept) if s.station_id not in names]
         identified = no.Identified([kept[k] for k in keep], [ids[k] for k in keep], "plan",
                                    [reasons[k] for k in keep])
-    return identified, left_out
+    return identified, left_out, n_identified
 
 
 def network_record(plan: SurveyPlan, check: NetworkVerification, seed: int, model_name: str,
@@ -495,6 +500,8 @@ def network_record(plan: SurveyPlan, check: NetworkVerification, seed: int, mode
                   "adjustment_error_95_m": _worst(s.stated_error_m for s in check.stations),
                   "achieved_error_m": _worst(s.achieved_error_m for s in check.stations),
                   "achieved_station": _worst_id(check.stations),
+                  "not_adjusted": [s.station_id for s in check.stations
+                                   if s.achieved_error_m is None],
                   "marker_achieved_error_m": _worst(m.achieved_error_m for m in check.markers),
                   "marker_predicted_error_m": _worst(m.predicted_error_m
                                                      for m in check.markers)},
@@ -517,12 +524,9 @@ def _worst(values) -> float | None:
 
 
 def _worst_id(stations: list[StationOutcome]) -> str | None:
-    """The station with the largest achieved error (a station left out of the adjustment
-    counts as the worst)."""
-    if not stations:
-        return None
-    return max(stations, key=lambda s: math.inf if s.achieved_error_m is None
-               else s.achieved_error_m).station_id
+    """The adjusted station with the largest achieved error (``None`` if none was adjusted)."""
+    done = [s for s in stations if s.achieved_error_m is not None]
+    return max(done, key=lambda s: s.achieved_error_m).station_id if done else None
 
 
 def network_markdown(rec: dict) -> str:
@@ -539,7 +543,9 @@ def network_markdown(rec: dict) -> str:
              "gated association with the plan from the planned poses; network adjustment).", "",
              f"Worst station: predicted {mm(w['predicted_error_m'])}, adjustment's 95 % "
              f"{mm(w['adjustment_error_95_m'])}, achieved {mm(w['achieved_error_m'])} "
-             f"({w['achieved_station']}).", "",
+             f"({w['achieved_station']})"
+             + (f"; not in the adjustment: {', '.join(w['not_adjusted'])}."
+                if w["not_adjusted"] else "."), "",
              "| station | predicted | adjustment 95 % | achieved | detected / identified / used "
              "| result |", "|---|---:|---:|---:|---:|---|"]
     for s in rec["stations"]:
@@ -570,7 +576,7 @@ def network_summary_line(rec: dict, out) -> str:
     >>> rec = {"passed": True, "requirement_m": 0.1, "datum": "station S1 (...)",
     ...        "worst": {"achieved_error_m": 0.012, "achieved_station": "S5",
     ...                  "predicted_error_m": 0.03, "adjustment_error_95_m": 0.02,
-    ...                  "marker_achieved_error_m": 0.004}}
+    ...                  "marker_achieved_error_m": 0.004, "not_adjusted": []}}
     >>> print(network_summary_line(rec, "v"))  # doctest: +NORMALIZE_WHITESPACE
     PASSED (network mode, datum station S1): worst station error achieved 0.0120 m (S5),
     predicted 0.0300 m, adjustment's 95 % 0.0200 m (requirement 0.1 m); worst marker achieved
@@ -586,4 +592,6 @@ def network_summary_line(rec: dict, out) -> str:
             f"{m(w['achieved_error_m'])} ({w['achieved_station']}), predicted "
             f"{m(w['predicted_error_m'])}, adjustment's 95 % {m(w['adjustment_error_95_m'])} "
             f"(requirement {rec['requirement_m']:g} m); worst marker achieved "
-            f"{m(w['marker_achieved_error_m'])} -> {out}/")
+            f"{m(w['marker_achieved_error_m'])}"
+            + (f"; not adjusted: {', '.join(w['not_adjusted'])}" if w["not_adjusted"] else "")
+            + f" -> {out}/")

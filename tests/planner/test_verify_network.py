@@ -140,4 +140,8 @@ def test_stations_not_tied_to_the_reference_fail_without_stopping_the_rest(netwo
     assert out[far].reason.startswith("not in the adjustment: none of its detections matches")
     assert out[far].achieved_error_m is None and out[far].n_accepted > 0
     assert all(out[sid].passed for sid in inputs.station_ids[:-2])
-    assert "not in the adjustment" in network_markdown(_record(check))
+    assert out[last].n_identified == 1 and out[last].n_used == 0
+    rec = _record(check)
+    assert rec["worst"]["not_adjusted"] == [far, last] and rec["worst"]["achieved_station"] \
+        in inputs.station_ids[:-2]
+    assert f"not in the adjustment: {far}, {last}." in network_markdown(rec)
