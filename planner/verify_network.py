@@ -30,7 +30,13 @@ The closed loop of issue 12 (``markerplan verify --network``), in two steps:
 The plan passes when every chosen station took part in the adjustment and its achieved error
 is within the requirement (markers are reported, not judged: the requirement is the stations').
 Because the plan's markers are simulated at their planned centres and the stations at their
-planned poses, the truth is the plan; the pipeline and the adjustment never see it.
+planned poses, the truth is the plan; the pipeline and the adjustment never see it. Two
+consequences: the odometry error only widens the association's gate (the rover is exactly where
+it was planned to be), and a plan's heading prior (sun sensor) is centred on the true heading,
+an exact sun sensor, so with a heading prior the achieved errors are somewhat optimistic.
+A station that identifies no planned marker, or shares fewer than two identified markers with
+the part of the network holding the reference, fails with that reason and is left out of the
+adjustment (:func:`tied_network`); the others are still adjusted and compared.
 """
 
 from __future__ import annotations
@@ -325,7 +331,7 @@ def adjust_and_compare(tables: list[Path], plan_path: Path, error_model,
     from pipeline.network_adjustment import AdjustmentSettings, Datum, adjust
     from planner import network_observations as no
     from planner.cli.adjust import _configuration, _nominal
-    from planner.network_record import ellipsoid_axes, station_errors
+    from planner.network_record import station_errors
 
     plan = no.read_plan_geometry(plan_path)
     reference = reference_station(plan.reference_station, plan.station_ids, list(truth))
@@ -381,24 +387,33 @@ def adjust_and_compare(tables: list[Path], plan_path: Path, error_model,
                                        len(named[sid]), int(np.sum(kept.station == i)), ok,
                                        reason))
 
-    true_centres = {m: c for t in truth.values() for m, c in t.marker_xyz_m.items()}
-    axes = ellipsoid_axes(np.stack([result.marker_covariance(j)
-                                    for j in range(len(kept.marker_ids))]))
-    markers = []
-    in_plan_order = sorted(range(len(kept.marker_ids)),
-                           key=lambda j: plan.marker_ids.index(kept.marker_ids[j]))
-    for j in in_plan_order:
-        mid = kept.marker_ids[j]
-        diff = result.marker_xyz_m[j] - true_centres[mid]
-        seen = tuple(s_ids[i] for i in np.unique(kept.station[kept.marker == j]))
-        markers.append(MarkerOutcome(mid, (predicted_marker or {}).get(mid), float(axes[j, 0]),
-                                     float(np.linalg.norm(diff)),
-                                     tuple(float(v) for v in diff), seen))
+    markers = _marker_outcomes(result, plan.marker_ids, truth, predicted_marker or {})
     rejected = [{"station_id": r.station_id, "marker_id": r.marker_id, "w": float(r.w)}
                 for r in result.rejected]
     sigma0 = None if not np.isfinite(result.sigma0_squared) else float(result.sigma0_squared)
     return NetworkVerification(outcomes, markers, reference, config, rejected,
                                len(identified.unidentified), sigma0, int(result.dof))
+
+
+def _marker_outcomes(result, plan_marker_ids: tuple[str, ...], truth: dict[str, TrueStation],
+                     predicted: dict[str, float | None]) -> list[MarkerOutcome]:
+    """Every adjusted marker against its true centre and its prediction, in the plan's order."""
+    from planner.network_record import ellipsoid_axes
+
+    kept = result.observations
+    true_centres = {m: c for t in truth.values() for m, c in t.marker_xyz_m.items()}
+    axes = ellipsoid_axes(np.stack([result.marker_covariance(j)
+                                    for j in range(len(kept.marker_ids))]))
+    out = []
+    for j in sorted(range(len(kept.marker_ids)),
+                    key=lambda j: plan_marker_ids.index(kept.marker_ids[j])):
+        mid = kept.marker_ids[j]
+        diff = result.marker_xyz_m[j] - true_centres[mid]
+        seen = tuple(kept.station_ids[i] for i in np.unique(kept.station[kept.marker == j]))
+        out.append(MarkerOutcome(mid, predicted.get(mid), float(axes[j, 0]),
+                                 float(np.linalg.norm(diff)), tuple(float(v) for v in diff),
+                                 seen))
+    return out
 
 
 def tied_network(stations: list, plan, reference: str, settings: NetworkVerifySettings):

@@ -151,7 +151,6 @@ def _verify_network(plan_path, plan, ids, inputs, error_model, seed, offsets, pr
             {s["id"]: s.get("predicted_error_m") for s in doc["stations"]},
             {m["id"]: m.get("predicted_error_m") for m in doc["markers"]}, settings,
             error_model.name, {s["id"]: tuple(s.get("markers", ())) for s in doc["stations"]})
-        check.config["tables"] = ["markers.csv"]
         rec = network_record(plan, check, seed, error_model.name, offsets, profile)
         (stage / "verify.json").write_text(json.dumps(rec, indent=2) + "\n")
         (stage / "verify.md").write_text(network_markdown(rec))
