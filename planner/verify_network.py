@@ -580,8 +580,9 @@ def network_markdown(rec: dict) -> str:
     s0 = "n/a" if adj["sigma0_squared"] is None else f"{adj['sigma0_squared']:.3f}"
     lines += ["", f"Adjustment: sigma0² {s0}, dof {adj['dof']}; removed by data snooping: "
               f"{removed}; detections left unidentified: {adj['unidentified_detections']}.",
-              "", "The marker table is `markers.csv`; `markerplan adjust markers.csv --plan "
-              "PLAN --out DIR` repeats the adjustment with the full report."]
+              "", "`markers.csv` holds every station's detections: with every station tied, "
+              "`markerplan adjust markers.csv --plan PLAN --out DIR` repeats the adjustment "
+              "with its full report."]
     return "\n".join(lines) + "\n"
 
 

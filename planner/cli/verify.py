@@ -67,7 +67,9 @@ def command(plan_path, error_model, seed, station_ids, offsets, profile, network
     adjusted together tied to the plan's reference station (which --station-ids must
     include), and verify.json / verify.md set each station's predicted, adjusted (95 %) and
     achieved error side by side (and the worst), and every marker's; markers.csv holds the
-    detections (`markerplan adjust markers.csv --plan PLAN` repeats the adjustment).
+    detections (the input of `markerplan adjust markers.csv --plan PLAN`). A station that
+    cannot be tied to the reference (fewer than 2 shared identified markers) fails and is
+    left out of the adjustment.
 
     \b
     Example:
