@@ -70,7 +70,7 @@ from pipeline.reliability import (
     observation_reliability,
     w_tests,
 )
-from pipeline.rig import rot_x, rot_y, rot_z
+from pipeline.rig import fit_heading_shift, rot_x, rot_y, rot_z
 
 #: Order of a station's pose parameters (site frame; m and rad).
 POSE_PARAMETERS = ("x_m", "y_m", "z_m", "heading_rad", "roll_rad", "pitch_rad")
@@ -436,15 +436,6 @@ class NetworkAdjustment:
         return np.sqrt(ELLIPSOID_CHI2_95 * np.clip(lam, 0.0, None)), vec
 
 
-def _procrustes_2d(p: np.ndarray, m: np.ndarray, w: np.ndarray) -> tuple[float, np.ndarray]:
-    """Heading and translation minimising ``sum w |t + Rz(heading) p - m|^2`` (closed form)."""
-    pc, mc = np.average(p, axis=0, weights=w), np.average(m, axis=0, weights=w)
-    a, b = p - pc, m - mc
-    heading = math.atan2(float(w @ (a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0])),
-                         float(w @ (a[:, 0] * b[:, 0] + a[:, 1] * b[:, 1])))
-    return heading, mc - rot_z(heading) @ pc
-
-
 def _tie_order(obs: NetworkObservations, keep: np.ndarray, reference: int
                ) -> tuple[list[int], list[int]]:
     """Stations in the order they can be tied to the reference (>= 2 shared markers), and the
@@ -492,8 +483,8 @@ def _chained_initial(obs: NetworkObservations, order: list[int], reference_pose:
         if position == 0:
             pose[i, :4] = reference_pose
         else:
-            heading, t = _procrustes_2d(obs.xyz_m[known], markers[obs.marker[known]],
-                                        weight[known])
+            heading, t, _, _ = fit_heading_shift(obs.xyz_m[known],
+                                                 markers[obs.marker[known]], weight[known])
             pose[i, :3], pose[i, 3] = t, heading
         new = rows[np.isnan(markers[obs.marker[rows], 0])]
         markers[obs.marker[new]] = pose[i, :3] + obs.xyz_m[new] @ rot_z(pose[i, 3]).T
@@ -841,9 +832,9 @@ def _initial(obs: NetworkObservations, datum: Datum, nominal: NominalPoses | Non
         pose, markers = _chained_initial(obs, order, reference_pose)
         if datum.control:
             idx = [obs.marker_ids.index(c.marker_id) for c in datum.control]
-            heading, t = _procrustes_2d(markers[idx], np.array([c.xyz_m for c in datum.control]),
-                                        np.array([1.0 / np.sum(c.sigma_m**2)
-                                                  for c in datum.control]))
+            control_xyz = np.array([c.xyz_m for c in datum.control])
+            control_weight = np.array([1.0 / np.sum(c.sigma_m**2) for c in datum.control])
+            heading, t, _, _ = fit_heading_shift(markers[idx], control_xyz, control_weight)
             pose[:, :3] = t + pose[:, :3] @ rot_z(heading).T
             pose[:, 3] += heading
             markers = t + markers @ rot_z(heading).T

@@ -184,3 +184,43 @@ def station_to_site_matrix(heading_rad: float, roll_rad: float = 0.0,
                            pitch_rad: float = 0.0) -> np.ndarray:
     """Rotation P -> W: ``Rz(heading) @ Ry(pitch) @ Rx(roll)``, shape (3, 3)."""
     return rot_z(heading_rad) @ rot_y(pitch_rad) @ rot_x(roll_rad)
+
+
+def fit_heading_shift(src: np.ndarray, dst: np.ndarray, weight: np.ndarray
+                      ) -> tuple[float, np.ndarray, np.ndarray, np.ndarray]:
+    """Weighted least-squares 4-DoF fit ``dst ~ Rz(heading) src + shift`` (closed form).
+
+    The rotation is about the vertical only (levelled frames); z enters the shift alone.
+
+    Parameters
+    ----------
+    src, dst : (n, 3) float
+        Corresponding points in the two frames, m.
+    weight : (n,) float
+        Weights, 1 / per-axis variance (1/m^2).
+
+    Returns
+    -------
+    heading : float
+        Rotation about z from ``src`` to ``dst``, rad.
+    shift : (3,) float
+        Translation, m.
+    spread : (2,) float
+        Heading variance (rad^2) and per-axis variance of the weighted centre (m^2).
+    centre : (3,) float
+        Weighted centre of ``src``, m.
+
+    Examples
+    --------
+    >>> src = np.array([[1.0, 0, 0], [0, 1, 0], [-1, 0, 0]])
+    >>> h, t, _, _ = fit_heading_shift(src, src @ rot_z(0.5).T + [1, 2, 3], np.ones(3))
+    >>> round(h, 6), [round(float(v), 6) for v in t]
+    (0.5, [1.0, 2.0, 3.0])
+    """
+    total = weight.sum()
+    cs, cd = weight @ src / total, weight @ dst / total
+    s, d = src - cs, dst - cd
+    heading = float(np.arctan2(weight @ (s[:, 0] * d[:, 1] - s[:, 1] * d[:, 0]),
+                               weight @ (s[:, 0] * d[:, 0] + s[:, 1] * d[:, 1])))
+    lever = float(weight @ (s[:, 0] ** 2 + s[:, 1] ** 2))
+    return heading, cd - rot_z(heading) @ cs, np.array([1.0 / max(lever, 1e-12), 1.0 / total]), cs
