@@ -13,6 +13,7 @@ from planner.cli._common import (
     given_paths,
     json_option,
     mounting_offset_options,
+    network_option,
     out_option,
     overwrite_option,
     seed_option,
@@ -41,12 +42,7 @@ def _adjust_options(*names: str):
 @station_ids_option
 @mounting_offset_options
 @sensor_profile_option
-@click.option("--network/--known-control", "network", default=None,
-              help="Network mode: identify the markers by gated association with the plan "
-                   "(planned poses as odometry), adjust all stations and markers together tied "
-                   "to the plan's reference station, and compare achieved station and marker "
-                   "errors with the predicted ones. Default: the plan's mode (network for a "
-                   "`plan --network` plan, else known control).")
+@network_option
 @_adjust_options("odometry_sigma_m", "odometry_heading_sigma_deg")
 @out_option(required=True)
 @overwrite_option
@@ -62,7 +58,8 @@ def command(plan_path, error_model, seed, station_ids, offsets, profile, network
     each station's scan before detecting the markers, as in the field. The simulated sensor
     and turntable errors come from --sensor-profile.
 
-    With --network (the default for a network plan) no marker is known control: the
+    With --network, or with a plan made by `plan --network` (which is always verified in
+    network mode, the mode its predictions are for), no marker is known control: the
     detections are identified without the simulator's truth, all stations and markers are
     adjusted together tied to the plan's reference station (which --station-ids must
     include), and verify.json / verify.md set each station's predicted, adjusted (95 %) and
