@@ -22,6 +22,7 @@ The plan passes only if every station's achieved error is within the requirement
 from __future__ import annotations
 
 import sys
+from collections.abc import Iterator
 from dataclasses import dataclass
 
 import numpy as np
@@ -31,9 +32,10 @@ from markerplan.provenance import provenance
 from pipeline.evaluation import Reference
 from pipeline.process import process_station
 from pipeline.rig import MountingOffsets, station_to_site_matrix
+from pipeline.scan_format import StationScan
 from pipeline.stages import build_config
 from planner import accuracy
-from planner.plan_file import SurveyPlan
+from planner.plan_file import PlannedStation, SurveyPlan
 from visibility.sensor_profile import SensorProfile, default_profile
 from visibility.simulate import simulate_markers
 
@@ -88,17 +90,9 @@ def verify_plan(plan: SurveyPlan, error_model, seed: int = 0, progress: bool = T
     ids = list(plan.marker_ids)
     centres = plan.marker_xyz_m
     cfg = build_config({"fit": {"radius_m": plan.marker_radius_m}})
-    profile = profile or default_profile()
-    rig = profile.rig_config(offsets=offsets or MountingOffsets())
-    chosen = [(k, st) for k, st in enumerate(plan.stations)
-              if station_ids is None or st.id in station_ids]
     checks = []
-    for k, st in tqdm(chosen, desc="verify", unit="station", file=sys.stderr,
-                      disable=None if progress else True):
-        scan, truth = simulate_markers(plan.dem, st.position_m, st.heading_rad, centres,
-                                       profile.sensor_config(), rig, seed=seed + k,
-                                       marker_radius_m=plan.marker_radius_m, marker_ids=ids,
-                                       station_id=st.id, sensor_profile=profile.name)
+    for st, scan, truth in simulated_stations(plan, seed, progress, offsets, station_ids,
+                                              profile):
         rot = station_to_site_matrix(st.heading_rad)
         nominal = (centres - st.position_m) @ rot  # planned markers in the planned station frame
         ref = Reference(tuple(ids), nominal, st.id, "plan (nominal pose)")
@@ -130,6 +124,36 @@ def verify_plan(plan: SurveyPlan, error_model, seed: int = 0, progress: bool = T
         checks.append(StationCheck(st.id, st.predicted_error_m, achieved, n_planned, len(rows),
                                    ok, reason, marker_err))
     return checks
+
+
+def simulated_stations(plan: SurveyPlan, seed: int = 0, progress: bool = True,
+                       offsets: MountingOffsets | None = None,
+                       station_ids: list[str] | None = None,
+                       profile: SensorProfile | None = None
+                       ) -> Iterator[tuple[PlannedStation, StationScan, dict]]:
+    """Simulate the chosen stations of a plan at their planned poses, one at a time (step 1 of
+    the module docstring; parameters as :func:`verify_plan`).
+
+    Yields
+    ------
+    station : PlannedStation
+    scan : StationScan
+        The full turntable scan with only the planned markers.
+    truth : dict
+        The simulator's truth (:func:`visibility.simulate.simulate_markers`).
+    """
+    ids = list(plan.marker_ids)
+    profile = profile or default_profile()
+    rig = profile.rig_config(offsets=offsets or MountingOffsets())
+    chosen = [(k, st) for k, st in enumerate(plan.stations)
+              if station_ids is None or st.id in station_ids]
+    for k, st in tqdm(chosen, desc="verify", unit="station", file=sys.stderr,
+                      disable=None if progress else True):
+        scan, truth = simulate_markers(plan.dem, st.position_m, st.heading_rad, plan.marker_xyz_m,
+                                       profile.sensor_config(), rig, seed=seed + k,
+                                       marker_radius_m=plan.marker_radius_m, marker_ids=ids,
+                                       station_id=st.id, sensor_profile=profile.name)
+        yield st, scan, truth
 
 
 def verify_record(plan: SurveyPlan, checks: list[StationCheck], seed: int, model_name: str,

@@ -13,12 +13,26 @@ from planner.cli._common import (
     given_paths,
     json_option,
     mounting_offset_options,
+    network_option,
     out_option,
     overwrite_option,
     seed_option,
     sensor_profile_option,
     station_ids_option,
 )
+from planner.cli.adjust import command as _adjust
+
+
+def _adjust_options(*names: str):
+    """Give a command ``markerplan adjust``'s options of these parameter names (defined once,
+    there; in network mode they mean the same)."""
+    shared = [next(p for p in _adjust.params if p.name == n) for n in names]
+
+    def decorate(f):
+        f.__click_params__ = getattr(f, "__click_params__", []) + shared[::-1]
+        return f
+
+    return decorate
 
 
 @click.command("verify")
@@ -28,11 +42,13 @@ from planner.cli._common import (
 @station_ids_option
 @mounting_offset_options
 @sensor_profile_option
+@network_option
+@_adjust_options("odometry_sigma_m", "odometry_heading_sigma_deg")
 @out_option(required=True)
 @overwrite_option
 @json_option
-def command(plan_path, error_model, seed, station_ids, offsets, profile, out, overwrite,
-            as_json):
+def command(plan_path, error_model, seed, station_ids, offsets, profile, network,
+            odometry_sigma_m, odometry_heading_sigma_deg, out, overwrite, as_json):
     """Check a plan by simulation: scan each station with the planned markers, process the
     scans, register each station to its detected markers, and compare achieved with predicted
     error. Exit code 1 when any station's achieved error exceeds the requirement. The plan's
@@ -42,12 +58,23 @@ def command(plan_path, error_model, seed, station_ids, offsets, profile, out, ov
     each station's scan before detecting the markers, as in the field. The simulated sensor
     and turntable errors come from --sensor-profile.
 
+    With --network, or with a plan made by `plan --network` (which is always verified in
+    network mode, the mode its predictions are for), no marker is known control: the
+    detections are identified without the simulator's truth, all stations and markers are
+    adjusted together tied to the plan's reference station (which --station-ids must
+    include), and verify.json / verify.md set each station's predicted, adjusted (95 %) and
+    achieved error side by side (and the worst), and every marker's; markers.csv holds the
+    detections (the input of `markerplan adjust markers.csv --plan PLAN`). A station that
+    cannot be tied to the reference (fewer than 2 shared identified markers) fails and is
+    left out of the adjustment.
+
     \b
     Example:
       markerplan plan --out plan/
       markerplan verify plan/plan.json --out verify/
       markerplan verify plan/plan.json --vertical-axis-error-deg 0.3 --lframe-tilt-deg 0.3 \\
           --axis-offset-mm 15,0 --out verify-offsets/
+      markerplan verify plan/plan.json --network --out verify-network/
     """
     import json
 
@@ -60,6 +87,15 @@ def command(plan_path, error_model, seed, station_ids, offsets, profile, out, ov
     plan = load_plan(plan_path)
     ids = select_stations([s.id for s in plan.stations], station_ids)
     inputs = given_paths(plan_path, plan.dem_path, error_model.path)
+    if network is None:
+        network = bool(plan.provenance.get("config", {}).get("network"))
+    if network:
+        from planner.verify_network import NetworkVerifySettings
+
+        settings = NetworkVerifySettings(odometry_sigma_m, odometry_heading_sigma_deg)
+        _verify_network(plan_path, plan, ids, inputs, error_model, seed, offsets, profile,
+                        settings, out, overwrite, as_json)
+        return
     with output_folder(out, overwrite, "verify", inputs=inputs) as stage:
         checks = verify_plan(plan, error_model.model, seed=seed,
                              progress=not as_json or sys.stderr.isatty(), offsets=offsets,
@@ -75,6 +111,59 @@ def command(plan_path, error_model, seed, station_ids, offsets, profile, out, ov
                 for s in rec["stations"])
     emit_summary(summary, as_json, f"{'PASSED' if rec['passed'] else 'FAILED'}: worst achieved "
                  f"error {worst:.4f} m (requirement {rec['requirement_m']:g} m) -> {out}/")
+    if not rec["passed"]:
+        failing = [f"{s['id']}: {s['reason']}" for s in rec["stations"] if not s["passed"]]
+        raise InfeasiblePlanError("verification failed at " + "; ".join(failing))
+
+
+def _verify_network(plan_path, plan, ids, inputs, error_model, seed, offsets, profile, settings,
+                    out, overwrite, as_json):
+    """``verify --network``: scan, write the marker table, adjust and compare
+    (:mod:`planner.verify_network`); exit code 1 when a station fails."""
+    import json
+
+    from markerplan.errors import InfeasiblePlanError
+    from markerplan.output_folder import output_folder
+    from pipeline.marker_table import write_marker_table
+    from planner.plan_file import read_plan
+    from planner.verify_network import (
+        adjust_and_compare,
+        network_markdown,
+        network_record,
+        network_summary_line,
+        reference_station,
+        scan_plan,
+    )
+    from visibility.sensor_profile import default_profile
+
+    doc = read_plan(plan_path, "PLAN", full=True)
+    named = doc["provenance"].get("config", {}).get("reference_station")
+    reference_station(named if isinstance(named, str) else None,
+                      [s["id"] for s in doc["stations"]], ids)
+    profile = profile or default_profile()
+    with output_folder(out, overwrite, "verify", inputs=inputs) as stage:
+        rows, truth = scan_plan(plan, seed, progress=not as_json or sys.stderr.isatty(),
+                                offsets=offsets, station_ids=ids, profile=profile)
+        table = write_marker_table(stage / "markers.csv", rows)
+        check = adjust_and_compare(
+            [table], plan_path, error_model.model, truth,
+            {s["id"]: s.get("predicted_error_m") for s in doc["stations"]},
+            {m["id"]: m.get("predicted_error_m") for m in doc["markers"]}, settings,
+            error_model.name, {s["id"]: tuple(s.get("markers", ())) for s in doc["stations"]})
+        rec = network_record(plan, check, seed, error_model.name, offsets, profile)
+        (stage / "verify.json").write_text(json.dumps(rec, indent=2) + "\n")
+        (stage / "verify.md").write_text(network_markdown(rec))
+    w = rec["worst"]
+    summary = {"out": str(out), "mode": "network", "passed": rec["passed"],
+               "requirement_m": rec["requirement_m"], "datum": rec["datum"], "worst": w,
+               "stations": {s["id"]: {"predicted_error_m": s["predicted_error_m"],
+                                      "adjustment_error_95_m": s["adjustment_error_95_m"],
+                                      "achieved_error_m": s["achieved_error_m"],
+                                      "passed": s["passed"]} for s in rec["stations"]},
+               "markers": {m["id"]: {"predicted_error_m": m["predicted_error_m"],
+                                     "achieved_error_m": m["achieved_error_m"]}
+                           for m in rec["markers"]}}
+    emit_summary(summary, as_json, network_summary_line(rec, out))
     if not rec["passed"]:
         failing = [f"{s['id']}: {s['reason']}" for s in rec["stations"] if not s["passed"]]
         raise InfeasiblePlanError("verification failed at " + "; ".join(failing))

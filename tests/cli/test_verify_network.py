@@ -1,0 +1,64 @@
+"""``markerplan verify --network``: the closed loop on three stations of the default plan, and
+plans it refuses in one line before simulating anything."""
+
+import json
+
+import pytest
+
+from tests.cli.invoke import run_cli
+from tests.cli.network_inputs import plan_document
+
+
+def _hand_made_plan(tmp_path, **config):
+    doc = plan_document(["S1", "S2"], [[0, 0, 1], [10, 0, 1]], [0.0, 0.0], ["M1", "M2"],
+                        [[5, 5, 0.1], [5, -5, 0.1]])
+    doc["provenance"]["config"].update(config)
+    path = tmp_path / "plan.json"
+    path.write_text(json.dumps(doc))
+    return path
+
+
+@pytest.mark.parametrize("args,config,needle", [
+    (["--network", "--station-ids", "S2"], {}, "reference station S1 (the datum of network "
+                                               "mode) is not among the stations verified (S2)"),
+    ([], {"network": True, "reference_station": "S9"}, "reference station S9 is not one of its "
+                                                        "stations (S1, S2)"),
+    (["--network", "--odometry-sigma-m", "0"], {}, "--odometry-sigma-m"),
+])
+def test_refused_in_one_line(tmp_path, capsys, args, config, needle):
+    out = tmp_path / "v"
+    code, _, err = run_cli(capsys, ["verify", str(_hand_made_plan(tmp_path, **config)),
+                                    *args, "--out", str(out)])
+    assert code != 0 and needle in err, err
+    assert "Traceback" not in err and not out.exists()
+    if code == 1:  # ours; click's usage errors (exit 2) carry their usage lines
+        assert err.count("\n") == 1
+
+
+@pytest.mark.slow
+def test_network_verify_of_three_default_stations(tmp_path, capsys):
+    plan_dir = tmp_path / "plan"
+    code, _, err = run_cli(capsys, ["plan", "--out", str(plan_dir)])
+    assert code == 0, err
+    out = tmp_path / "v"
+    code, stdout, err = run_cli(capsys, ["verify", str(plan_dir / "plan.json"), "--network",
+                                         "--station-ids", "S1,S2,S3", "--out", str(out),
+                                         "--json"])
+    assert code == 0, err
+    summary = json.loads(stdout)
+    assert summary["mode"] == "network" and summary["passed"]
+    assert list(summary["stations"]) == ["S1", "S2", "S3"]
+    worst = summary["worst"]
+    # the must-show: achieved worst station error against predicted, both given
+    assert 0.0 < worst["achieved_error_m"] <= 0.10 and 0.0 < worst["predicted_error_m"] <= 0.10
+    rec = json.loads((out / "verify.json").read_text())
+    assert rec["datum"].startswith("station S1") and rec["adjustment"]["rejected"] == []
+    assert {m["id"] for m in rec["markers"]} <= {m["id"] for m in json.loads(
+        (plan_dir / "plan.json").read_text())["markers"]}
+    assert all(m["achieved_error_m"] < 0.05 for m in rec["markers"])
+    assert rec["provenance"]["config"]["sensor_profile"]["name"]
+    table = (out / "markers.csv").read_text().splitlines()
+    assert table[0].startswith("station_id,marker_id,") and len(table) > 6
+    assert all(line.split(",")[1] == "" for line in table[1:])  # ids never from the truth
+    md = (out / "verify.md").read_text()
+    assert "Worst station: predicted" in md and "achieved" in md
