@@ -436,10 +436,27 @@ class NetworkAdjustment:
         return np.sqrt(ELLIPSOID_CHI2_95 * np.clip(lam, 0.0, None)), vec
 
 
-def _tie_order(obs: NetworkObservations, keep: np.ndarray, reference: int
-               ) -> tuple[list[int], list[int]]:
-    """Stations in the order they can be tied to the reference (>= 2 shared markers), and the
-    stations that cannot."""
+def tie_order(obs: NetworkObservations, keep: np.ndarray, reference: int
+              ) -> tuple[list[int], list[int]]:
+    """Stations in the order they can be tied to the reference, and those that cannot.
+
+    A station is tied when it shares at least 2 markers with the stations already tied.
+
+    Parameters
+    ----------
+    obs : NetworkObservations
+    keep : (n,) bool
+        Observations to use.
+    reference : int
+        Index of the reference station.
+
+    Returns
+    -------
+    order : list of int
+        Tied station indices, reference first, in the order they are tied.
+    untied : list of int
+        The other station indices.
+    """
     s, k = len(obs.station_ids), len(obs.marker_ids)
     seen = np.zeros((s, k), dtype=bool)
     seen[obs.station[keep], obs.marker[keep]] = True
@@ -462,7 +479,7 @@ def _tie_order(obs: NetworkObservations, keep: np.ndarray, reference: int
 
 
 def _check_tied(obs: NetworkObservations, keep: np.ndarray, reference: int) -> list[int]:
-    order, untied = _tie_order(obs, keep, reference)
+    order, untied = tie_order(obs, keep, reference)
     if untied:
         names = ", ".join(obs.station_ids[i] for i in untied)
         raise InputFileError(f"stations {names} share fewer than 2 markers with the part of the "
@@ -933,7 +950,7 @@ def adjust(obs: NetworkObservations, datum: Datum = Datum(),
         trial = keep.copy()
         trial[i] = False
         return (np.any(obs.marker[trial] == obs.marker[i])
-                and not _tie_order(obs, trial, reference)[1])
+                and not tie_order(obs, trial, reference)[1])
 
     sol, keep, rejected = data_snooping(
         solve, obs.n, settings.alpha0, settings.max_rejections if snooping else 0, removable)

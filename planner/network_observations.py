@@ -393,3 +393,54 @@ def _id_range(ids: tuple[str, ...]) -> str:
     if len(ids) <= 4:
         return ", ".join(ids)
     return f"{', '.join(ids[:3])}, ..., {ids[-1]} ({len(ids)} stations)"
+
+
+def resolved_configuration(plan_geometry, **options) -> dict:
+    """The resolved configuration of an adjustment (``adjust``, ``verify --network``).
+
+    Parameters
+    ----------
+    plan_geometry : PlanGeometry or None
+        The plan's settings, when a plan is given.
+    **options
+        The command's options; ``inclinometer_sigma_deg``, ``working_radius_m``,
+        ``requirement_m`` and ``heading_prior_sigma_deg`` are required keys (``None``: not
+        given).
+
+    Returns
+    -------
+    config : dict
+        ``options`` with each of those four not given taken from the plan, else from
+        :class:`planner.config.PlanConfig`'s defaults.
+    """
+    from planner.config import PlanConfig
+
+    plan, defaults = plan_geometry, PlanConfig()
+    for key in ("inclinometer_sigma_deg", "working_radius_m", "requirement_m",
+                "heading_prior_sigma_deg"):
+        if options[key] is None:
+            from_plan = getattr(plan, key) if plan is not None else None
+            options[key] = from_plan if from_plan is not None else getattr(defaults, key)
+    return options
+
+
+def nominal_poses(plan, obs):
+    """Planned poses of the network's stations, the adjustment's odometry.
+
+    Parameters
+    ----------
+    plan : PlanGeometry or None
+    obs : pipeline.network_adjustment.NetworkObservations
+
+    Returns
+    -------
+    nominal : pipeline.network_adjustment.NominalPoses or None
+        Positions (s, 3), site frame, m, and headings (s,), rad, in ``obs.station_ids``'
+        order (the plan's order is not the tables'); ``None`` without a plan.
+    """
+    if plan is None:
+        return None
+    from pipeline.network_adjustment import NominalPoses
+
+    k = [plan.station_ids.index(s) for s in obs.station_ids]
+    return NominalPoses(plan.station_xyz_m[k], plan.station_heading_rad[k])

@@ -330,7 +330,6 @@ def adjust_and_compare(tables: list[Path], plan_path: Path, error_model,
     """
     from pipeline.network_adjustment import AdjustmentSettings, Datum, adjust
     from planner import network_observations as no
-    from planner.cli.adjust import _configuration, _nominal
     from planner.network_record import station_errors
 
     plan = no.read_plan_geometry(plan_path)
@@ -340,7 +339,7 @@ def adjust_and_compare(tables: list[Path], plan_path: Path, error_model,
         raise InputFileError(f"the reference station {reference} (the datum) has no accepted "
                              "detection, so the network has no datum; the plan cannot be "
                              "verified in network mode")
-    config = _configuration(
+    config = no.resolved_configuration(
         tables=[str(t) for t in tables], plan=str(plan_path), control=None,
         error_model=error_model_name, marker_ids="plan", datum="station",
         reference_station=reference,
@@ -356,7 +355,7 @@ def adjust_and_compare(tables: list[Path], plan_path: Path, error_model,
         inclinometer_sigma_rad=math.radians(config["inclinometer_sigma_deg"]),
         heading_prior_sigma_rad=None if heading_prior is None else math.radians(heading_prior),
         alpha0=settings.alpha0, beta0=settings.beta0, snooping=settings.snooping),
-        _nominal(plan, obs))
+        no.nominal_poses(plan, obs))
     radius, requirement = config["working_radius_m"], config["requirement_m"]
 
     kept = result.observations
@@ -444,7 +443,7 @@ def tied_network(stations: list, plan, reference: str, settings: NetworkVerifySe
     InputFileError
         The reference station has no identified detection (the network has no datum).
     """
-    from pipeline.network_adjustment import _tie_order
+    from pipeline.network_adjustment import tie_order
     from planner import network_observations as no
 
     left_out: dict[str, str] = {}
@@ -472,7 +471,7 @@ def tied_network(stations: list, plan, reference: str, settings: NetworkVerifySe
         raise InputFileError(f"the reference station {reference} (the datum) has no detection "
                              f"identified with a planned marker ({why}), so the network has no "
                              "datum and cannot be verified")
-    _, untied = _tie_order(obs, np.ones(obs.n, dtype=bool), obs.station_ids.index(reference))
+    _, untied = tie_order(obs, np.ones(obs.n, dtype=bool), obs.station_ids.index(reference))
     if untied:
         names = {obs.station_ids[i] for i in untied}
         for k, sid in enumerate(obs.station_ids):

@@ -144,7 +144,7 @@ def command(tables, out, overwrite, error_model, plan_path, identity, odometry_s
         plan = no.read_plan_geometry(plan_path) if plan_path is not None else None
         control = no.read_control(control_path) if control_path is not None else ()
         stations = no.read_detections(list(tables), error_model.model)
-        config = _configuration(
+        config = no.resolved_configuration(
             tables=[str(t) for t in tables], plan=_str(plan_path), control=_str(control_path),
             error_model=error_model.name, marker_ids=identity, datum=kind,
             reference_station=_reference(reference, kind, plan, stations),
@@ -167,7 +167,7 @@ def command(tables, out, overwrite, error_model, plan_path, identity, odometry_s
             heading_prior_sigma_rad=_radians(config["heading_prior_sigma_deg"]),
             alpha0=alpha0, beta0=beta0, snooping=snooping)
         datum = Datum(kind, config["reference_station"], control)
-        result = adjust(obs, datum, settings, _nominal(plan, obs))
+        result = adjust(obs, datum, settings, no.nominal_poses(plan, obs))
         timings["adjust"] = time.perf_counter() - t0
         config.update(max_rejections=settings.max_rejections,
                       max_iterations=settings.max_iterations)
@@ -186,20 +186,6 @@ def command(tables, out, overwrite, error_model, plan_path, identity, odometry_s
         timings["write"] = time.perf_counter() - t0
     report_timings(timings)
     emit_summary(_summary(doc, out, timings), as_json, _human(doc, out))
-
-
-def _configuration(plan_geometry, **options) -> dict:
-    """The resolved configuration: the options, with the plan's settings (else
-    :class:`planner.config.PlanConfig`'s defaults) where an option was not given."""
-    from planner.config import PlanConfig
-
-    plan, defaults = plan_geometry, PlanConfig()
-    for key in ("inclinometer_sigma_deg", "working_radius_m", "requirement_m",
-                "heading_prior_sigma_deg"):
-        if options[key] is None:
-            from_plan = getattr(plan, key) if plan is not None else None
-            options[key] = from_plan if from_plan is not None else getattr(defaults, key)
-    return options
 
 
 def _reference(reference: str | None, kind: str, plan, stations) -> str | None:
@@ -270,17 +256,6 @@ def _identify(identity: str, stations, plan, odometry_sigma_m: float,
                              f"marker (--marker-ids {identity}), so they share no markers with "
                              "the network; leave their tables out or check the identification")
     return identified
-
-
-def _nominal(plan, obs):
-    """Planned poses of the network's stations (the plan's order is not the tables'), or
-    ``None`` without a plan."""
-    if plan is None:
-        return None
-    from pipeline.network_adjustment import NominalPoses
-
-    k = [plan.station_ids.index(s) for s in obs.station_ids]
-    return NominalPoses(plan.station_xyz_m[k], plan.station_heading_rad[k])
 
 
 def _summary(doc: dict, out: Path, timings: dict[str, float]) -> dict:
