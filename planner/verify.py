@@ -39,6 +39,10 @@ from planner.plan_file import PlannedStation, SurveyPlan
 from visibility.sensor_profile import SensorProfile, default_profile
 from visibility.simulate import simulate_markers
 
+#: Schema of ``verify.json``, both modes (``mode`` tells a network verification apart).
+VERIFY_SCHEMA = "markerplan-verify"
+VERIFY_SCHEMA_VERSION = 1
+
 #: Smallest number of matched markers that can fix x, y, z and heading.
 MIN_MATCHED = 2
 
@@ -164,7 +168,7 @@ def verify_record(plan: SurveyPlan, checks: list[StationCheck], seed: int, model
     true_offsets = (offsets or MountingOffsets()).to_dict()
     profile = profile or default_profile()
     return {
-        "schema": "markerplan-verify", "schema_version": 1,
+        "schema": VERIFY_SCHEMA, "schema_version": VERIFY_SCHEMA_VERSION,
         "provenance": provenance({"seed": seed, "error_model": model_name,
                                   "mounting_offsets": true_offsets,
                                   "sensor_profile": profile.to_dict(),

@@ -19,7 +19,7 @@ The closed loop of issue 12 (``markerplan verify --network``), in two steps:
 
    - achieved station error: the largest 3D difference over the station and its working-radius
      rim (at its height) between the adjusted and the true mapping of the levelled station frame
-     into the site frame, all six pose parameters (:func:`pose_difference_m`);
+     into the site frame, all six pose parameters (:func:`planner.accuracy.pose_difference_m`);
    - achieved marker error: the adjusted minus the true centre, its length.
 
    Each is set beside the plan's prediction (the station's ``predicted_error_m``; a marker's
@@ -50,17 +50,11 @@ import numpy as np
 from markerplan.errors import ConfigError, InputFileError
 from markerplan.provenance import provenance
 from pipeline.marker_table import MarkerRow
-from pipeline.rig import MountingOffsets, rot_x, rot_y, rot_z
+from pipeline.rig import MountingOffsets
+from planner import accuracy
 from planner.plan_file import SurveyPlan
+from planner.verify import VERIFY_SCHEMA, VERIFY_SCHEMA_VERSION
 from visibility.sensor_profile import SensorProfile
-
-#: Schema of ``verify.json`` (shared with known-control mode; ``mode`` tells them apart).
-SCHEMA = "markerplan-verify"
-SCHEMA_VERSION = 1
-
-#: Rim points of the achieved station error (one per degree, as
-#: :func:`planner.accuracy.registration_error`).
-_RIM_POINTS = 360
 
 
 @dataclass(frozen=True)
@@ -176,47 +170,6 @@ class NetworkVerification:
     @property
     def passed(self) -> bool:
         return all(s.passed for s in self.stations)
-
-
-def pose_difference_m(pose_est: np.ndarray, pose_true: np.ndarray,
-                      working_radius_m: float) -> float:
-    """Largest 3D difference, over a station and its working-radius rim, between two 6-parameter
-    mappings of its levelled station frame into the site frame, m.
-
-    A levelled point ``p`` maps to ``t + Rz(heading) Ry(pitch) Rx(roll) p`` (the network
-    adjustment's model); ``p`` runs over the station itself and 360 rim points at its height.
-
-    Parameters
-    ----------
-    pose_est, pose_true : (6,) float
-        ``POSE_PARAMETERS``: x, y, z (m), heading, roll, pitch (rad).
-    working_radius_m : float
-        > 0.
-
-    Returns
-    -------
-    error_m : float
-
-    Examples
-    --------
-    A 1 mrad heading error at a 10 m radius, and a 1 cm shift:
-
-    >>> t = np.zeros(6)
-    >>> round(pose_difference_m(np.array([0, 0, 0, 1e-3, 0, 0]), t, 10.0), 6)
-    0.01
-    >>> round(pose_difference_m(np.array([0, 0.01, 0, 0, 0, 0]), t, 10.0), 6)
-    0.01
-    """
-    phi = np.linspace(0.0, 2.0 * np.pi, _RIM_POINTS, endpoint=False)
-    p = np.vstack([np.zeros((1, 3)), working_radius_m * np.column_stack(
-        [np.cos(phi), np.sin(phi), np.zeros_like(phi)])])
-
-    def mapped(pose):
-        pose = np.asarray(pose, dtype=float)
-        r = rot_z(pose[3]) @ rot_y(pose[5]) @ rot_x(pose[4])
-        return pose[:3] + p @ r.T
-
-    return float(np.linalg.norm(mapped(pose_est) - mapped(pose_true), axis=1).max())
 
 
 def reference_station(named: str | None, plan_stations, chosen) -> str:
@@ -376,7 +329,7 @@ def adjust_and_compare(tables: list[Path], plan_path: Path, error_model,
                                            f"not in the adjustment: {why}"))
             continue
         i = s_ids.index(sid)
-        achieved = pose_difference_m(result.pose[i], truth[sid].pose, radius)
+        achieved = accuracy.pose_difference_m(result.pose[i], truth[sid].pose, radius)
         ok = achieved <= requirement
         reason = "ok" if ok else f"achieved {achieved:.3f} m > requirement {requirement:g} m"
         missing = sorted(set((planned_markers or {}).get(sid, ())) - named[sid])
@@ -500,7 +453,7 @@ def network_record(plan: SurveyPlan, check: NetworkVerification, seed: int, mode
                 "achieved_xyz_m": list(m.achieved_xyz_m), "stations": list(m.stations)}
                for m in check.markers]
     return {
-        "schema": SCHEMA, "schema_version": SCHEMA_VERSION, "mode": "network",
+        "schema": VERIFY_SCHEMA, "schema_version": VERIFY_SCHEMA_VERSION, "mode": "network",
         "provenance": provenance({"seed": seed, "error_model": model_name,
                                   "mounting_offsets": (offsets or MountingOffsets()).to_dict(),
                                   "sensor_profile": profile.to_dict(),

@@ -8,13 +8,13 @@ import pytest
 
 from error_model import default_model
 from markerplan.errors import ConfigError
+from planner.accuracy import pose_difference_m
 from planner.verify_network import (
     NetworkVerifySettings,
     TrueStation,
     adjust_and_compare,
     network_markdown,
     network_record,
-    pose_difference_m,
 )
 from tests.cli.network_inputs import write_network_inputs
 
