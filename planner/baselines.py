@@ -172,7 +172,8 @@ def greedy_network(problem: PlanProblem, config, net=None, max_steps: int = 5000
     reduction ``v^T J^(j) v`` of the worst variance of the worst station relative to the
     datum (:meth:`planner.network_accuracy.NetworkModel.worst_direction_gain`; a station not
     yet tied is linearised at a regularised information), or of the worst selected marker once
-    every station passes, until every station and marker meets the requirement. ``batch > 1``
+    every station passes, until every station and marker meets the requirement; in redundant
+    mode then also of the station that fails worst after losing one marker. ``batch > 1``
     adds, per step, the best site of each of the ``batch`` worst failing stations (for large
     networks: fewer exact evaluations).
 
@@ -195,9 +196,25 @@ def greedy_network(problem: PlanProblem, config, net=None, max_steps: int = 5000
         err = net.station_errors_from(cov)
         markers = np.flatnonzero(selected)
         merr = net.marker_errors(cov, markers)
+        loss = None
         if np.all(err <= req) and np.all(merr <= req):
-            return Baseline("greedy", selected, True)
-        if np.any(err > req):
+            if config.redundant:
+                lost, loss_err, loss_cov = net.loss_station_errors(selected)
+                if np.any(loss_err > req):
+                    i, k = np.unravel_index(np.argmax(np.nan_to_num(loss_err, posinf=1e300)),
+                                            loss_err.shape)
+                    loss = (loss_cov[i], int(k), int(lost[i]))
+            if loss is None:
+                return Baseline("greedy", selected, True)
+        if loss is not None:  # redundant: the station that fails worst after a loss
+            cov, k, m = loss
+            if not cov.determined.all():
+                if j_all is None:
+                    j_all = net.information(open_site)
+                without = selected & (np.arange(problem.n_sites) != m)
+                cov = net.covariance(net.information(without) + 0.05 * j_all)
+            gains = [net.worst_direction_gain(cov, k)]
+        elif np.any(err > req):
             worst = np.argsort(-np.nan_to_num(err, posinf=1e300), kind="stable")
             worst = worst[:min(batch, int(np.sum(err > req)))]
             if not cov.determined.all():

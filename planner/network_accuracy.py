@@ -286,6 +286,39 @@ class NetworkModel:
         """(s,) predicted 95 % error of every station with the layout ``selected``, m."""
         return self.station_errors_from(self.covariance(self.information(selected)))
 
+    def loss_station_errors(self, selected) -> tuple[np.ndarray, np.ndarray, list]:
+        """Station errors after losing each one of a layout's selected tying markers.
+
+        A marker seen by one station only adds nothing to the network's information, so
+        losing it changes no station's accuracy; only tying markers are tried.
+
+        Parameters
+        ----------
+        selected : (n,) bool
+
+        Returns
+        -------
+        markers : (m,) int
+            The selected tying sites, in site order.
+        errors : (m, s) float
+            95 % error of every station without marker ``markers[i]``, m (``inf`` where the
+            loss leaves a station undetermined).
+        covariances : list of NetworkCovariance, (m,)
+            The pose covariance without each marker (for tangent cuts).
+        """
+        sel = np.asarray(selected, bool)
+        markers = np.flatnonzero(sel & self.tying)
+        j = self.information(sel)
+        errors = np.empty((markers.size, self.problem.n_stations))
+        covariances = []
+        for i, m in enumerate(markers):
+            one = np.zeros(self.problem.n_sites)
+            one[m] = 1.0
+            cov = self.covariance(j - (self.information(one) - np.diag(self.prior)))
+            errors[i] = self.station_errors_from(cov)
+            covariances.append(cov)
+        return markers, errors, covariances
+
     def _pairs_of(self, sites: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Pair indices of ``sites`` and, for each, the position of its site in ``sites``."""
         k = self.n_stations_seeing[sites]

@@ -77,7 +77,7 @@ class RowKind:
         "budget" (from :func:`build_model`), "heading", "oa0" (:func:`tightening_rows`), "cut",
         "oa", "cut-loss", "oa-loss", "info-loss", "heading-loss" (:func:`accuracy_cuts`);
         network mode: "upper-bound", "cut", "connect", "oa", "cut-marker", "oa-marker"
-        (:func:`network_cuts`).
+        (:func:`network_cuts`), redundant: "cut-loss", "oa-loss" (:func:`_network_loss_cuts`).
     station : int
         Index of the station the row belongs to, -1 for rows of no station (budget).
     """
@@ -651,6 +651,8 @@ def network_cuts(problem: PlanProblem, model: Model, selected: np.ndarray, confi
     merr = net.marker_errors(cov, markers)
     bad_markers = markers[merr > req]
     if failing.size == 0 and bad_markers.size == 0:
+        if config.redundant:
+            return _network_loss_cuts(model, selected, config, net, tying, in_model, upper_bound)
         return None, [], []
     rows, lower, kinds = [], [], []
 
@@ -704,6 +706,42 @@ def network_cuts(problem: PlanProblem, model: Model, selected: np.ndarray, confi
             add(np.r_[rest, m], np.r_[np.ones(rest.size), -1.0], 0.0, RowKind("cut-marker"))
     if not rows:  # pragma: no cover - a failing station always yields a tangent
         raise InfeasiblePlanError("network mode: the layout fails but no cut was found")
+    return sp.csr_array(sp.vstack(rows)), lower, kinds
+
+
+def _network_loss_cuts(model: Model, selected: np.ndarray, config, net: NetworkModel,
+                       tying: np.ndarray, in_model: np.ndarray, upper_bound: int | None
+                       ) -> tuple[sp.csr_array | None, list[float], list[RowKind]]:
+    """Redundant network mode: valid cuts for a layout that passes whole but fails at some
+    station after losing one tying marker ``m``.
+
+    ``"cut-loss"``: ``sum_{j tying, not selected} x_j - x_m >= 0`` (with ``m`` the layout needs a
+    site outside the selected ones: every subset of the selected sites without ``m`` fails, by
+    monotonicity); ``"oa-loss"``: the failing stations' tangents at the information without
+    ``m``, enforced only when ``x_m = 1``: ``sum_{j != m} c_j x_j - x_m >= 0`` (normalised).
+    Arguments as :func:`network_cuts` (``tying``: open tying sites, ``in_model``: sites that
+    are variables). Returns ``(None, [], [])`` when every loss passes.
+    """
+    req = config.requirement_m
+    markers, errors, covariances = net.loss_station_errors(selected)
+    rest = np.flatnonzero(tying & ~selected)
+    rows, lower, kinds = [], [], []
+    for m, err, cov in zip(markers, errors, covariances, strict=True):
+        bad = np.flatnonzero(err > req)
+        if bad.size == 0:
+            continue
+        rows.append(model.site_row(np.r_[rest, m], np.r_[np.ones(rest.size), -1.0]))
+        lower.append(0.0)
+        kinds.append(RowKind("cut-loss", int(bad[0])))
+        for k, coef, rhs in net.station_tangents(cov, bad, req):
+            coef = np.where(in_model, coef, 0.0)
+            coef[m] = 0.0
+            sites, c, _ = _sparse_tangent(coef, rhs, upper_bound, _MAX_TERMS)
+            rows.append(model.site_row(np.r_[sites, m], np.r_[c, -1.0]))
+            lower.append(0.0)
+            kinds.append(RowKind("oa-loss", k))
+    if not rows:
+        return None, [], []
     return sp.csr_array(sp.vstack(rows)), lower, kinds
 
 
@@ -801,9 +839,6 @@ def _plan_network(problem: PlanProblem, config, model: Model | None,
                   infos: list[StationInfo]) -> PlanResult:
     """:func:`plan_sites` in network mode: the same build/solve/cut loop with the network's
     accuracy checks and cuts (:func:`network_cuts`)."""
-    if config.redundant:
-        raise ConfigError("redundant mode is not available in network mode yet; drop one of "
-                          "--redundant and --network")
     t0 = time.perf_counter()
     net = network_model(problem, config)
     n_tying = int(net.tying.sum())
@@ -827,7 +862,8 @@ def _plan_network(problem: PlanProblem, config, model: Model | None,
     j_all = net.information(~forbidden & ~hopeless & (net.n_stations_seeing > 0))
     upper_bound = greedy_selected = None
     existing = problem.site_mask(config.existing, "existing") | problem.site_existing
-    if int(net.tying.sum()) > _SPARSE_ABOVE_SITES and np.all(problem.site_cost[~existing] == 1):
+    if int(net.tying.sum()) > _SPARSE_ABOVE_SITES and not config.redundant \
+            and np.all(problem.site_cost[~existing] == 1):
         # every layout at least as good as the greedy one has at most its number of sites
         from planner.baselines import greedy_network
 
