@@ -48,6 +48,15 @@ def _per_site(text: str, sites: list[str]) -> dict[str, float]:
     return given
 
 
+def _log(letter: str, doc: dict) -> None:
+    """Progress on stderr: each study's table as soon as it is done."""
+    from planner import network_studies as ns
+
+    lines = ns.report_lines(doc, letter, header=False)
+    print(f"[{doc['site']}, {time.strftime('%H:%M:%S')}]" + "\n".join(lines), file=sys.stderr,
+          flush=True)
+
+
 def run_site(site: str, args, grid_spacing_m: float) -> dict:
     from error_model import default_model
     from planner import network_studies as ns
@@ -65,7 +74,7 @@ def run_site(site: str, args, grid_spacing_m: float) -> dict:
                             args.studies, args.grid_step,
                             info={"site": site, "n_candidates": len(cand)},
                             prior_requirements_m=_floats(args.prior_requirements)
-                            if args.prior_requirements else None)
+                            if args.prior_requirements else None, on_study=_log)
     doc["build_time_s"] = round(t_build, 2)
     doc["total_time_s"] = round(time.perf_counter() - t0, 2)
     print("\n".join(ns.report_lines(doc)))

@@ -340,8 +340,11 @@ def run_studies(problem: PlanProblem, config, bounds_xy, requirements_m=(0.06, 0
                                                                          0.12, 0.15, 0.20),
                 sigmas_deg=(None, 2.0, 1.0, 0.5, 0.1), studies: str = "abcde",
                 grid_step_m: float = 0.5, info: dict | None = None,
-                prior_requirements_m=None) -> tuple[dict, dict]:
+                prior_requirements_m=None, on_study=None) -> tuple[dict, dict]:
     """Run the chosen studies (letters of :data:`STUDIES`) on one problem.
+
+    ``on_study(letter, doc)``, when given, is called after each study (e.g. to log partial
+    results of a long run).
 
     ``requirements_m``: the trade-off curve's points (c); ``sigmas_deg`` and
     ``prior_requirements_m`` (default ``config.requirement_m``): the heading-prior study (d).
@@ -368,18 +371,24 @@ def run_studies(problem: PlanProblem, config, bounds_xy, requirements_m=(0.06, 0
            "time_limit_s": config.time_limit_s, "reference": problem.station_ids[net.reference],
            "heading_prior_sigma_deg": config.heading_prior_sigma_deg, "studies": studies}
     layouts: dict = {}
+    done = on_study or (lambda letter, doc: None)
     if {"a", "b", "d", "e"} & set(studies):
         doc["modes"], layouts = compare_modes(problem, config, net)
+        done("a", doc)
     if "b" in studies:
         doc["distance"] = error_vs_distance(problem, net, layouts)
+        done("b", doc)
     if "c" in studies:
         doc["tradeoff"] = tradeoff(problem, config, requirements_m)
+        done("c", doc)
     if "d" in studies:
         doc["heading_prior"] = heading_prior(problem, config, sigmas_deg, prior_requirements_m,
                                              layouts.get("network"))
+        done("d", doc)
     if "e" in studies:
         doc["baselines"] = baselines(problem, config, net, bounds_xy, doc["modes"]["network"],
                                      grid_step_m)
+        done("e", doc)
     return doc, layouts
 
 
