@@ -95,14 +95,23 @@ def plan_text(rec: dict) -> str:
 
 def judge_as_network(problem: PlanProblem, selected: np.ndarray, config, net) -> dict:
     """A layout judged as ``plan --network`` judges a plan (``config.network`` must be set):
-    worst station and marker error, and how many of each exceed ``requirement_m``."""
+    worst station and marker error (None when some are undetermined: not tied to the reference,
+    or heading free), the worst among the determined ones, and how many of each exceed
+    ``requirement_m`` (undetermined ones included) or are undetermined."""
     check = evaluate_layout(problem, selected, config, net=net)
     req = config.requirement_m
     merr = check.marker_error_m[np.asarray(selected, bool)]
-    return {"worst_station_error_m": _num(check.error_m.max()),
+    serr = check.error_m
+    return {"worst_station_error_m": _num(serr.max()),
             "worst_marker_error_m": _num(merr.max()) if merr.size else None,
-            "stations_failing": int(np.sum(check.error_m > req)),
+            "worst_determined_station_error_m": _num(serr[np.isfinite(serr)].max())
+            if np.isfinite(serr).any() else None,
+            "worst_determined_marker_error_m": _num(merr[np.isfinite(merr)].max())
+            if np.isfinite(merr).any() else None,
+            "stations_failing": int(np.sum(serr > req)),
             "markers_failing": int(np.sum(merr > req)),
+            "stations_undetermined": int(np.sum(~np.isfinite(serr))),
+            "markers_undetermined": int(np.sum(~np.isfinite(merr))),
             "n_stations": problem.n_stations, "markers": int(np.sum(selected))}
 
 
@@ -246,6 +255,14 @@ def _cm(x) -> str:
     return "-" if x is None else f"{100 * x:.1f}"
 
 
+def _worst(rec: dict, what: str) -> str:
+    """Worst error in cm; ``inf`` (and the worst determined one) when some are undetermined."""
+    if rec.get(f"worst_{what}_error_m") is not None or \
+            rec.get(f"worst_determined_{what}_error_m") is None:
+        return _cm(rec.get(f"worst_{what}_error_m"))
+    return f"inf (else {_cm(rec[f'worst_determined_{what}_error_m'])})"
+
+
 def _table(header: list[str], rows: list[list[str]]) -> list[str]:
     w = [max(len(h), *(len(r[i]) for r in rows)) if rows else len(h)
          for i, h in enumerate(header)]
@@ -269,10 +286,13 @@ def report_lines(doc: dict, studies: str = "abcde", header: bool = True) -> list
         rows = [["known control", plan_text(kc), _cm(kc.get("worst_station_error_m")), "-",
                  f"{kc['time_s']:.1f}"]]
         if asn:
+            und = [f"{asn[f'{k}s_undetermined']} {k}s" for k in ("station", "marker")
+                   if asn.get(f"{k}s_undetermined")]
             rows.append(["known-control plan as a network", str(asn["markers"]),
-                         _cm(asn["worst_station_error_m"]), _cm(asn["worst_marker_error_m"]),
+                         _worst(asn, "station"), _worst(asn, "marker"),
                          f"{asn['stations_failing']}/{asn['n_stations']} stations, "
-                         f"{asn['markers_failing']}/{asn['markers']} markers fail"])
+                         f"{asn['markers_failing']}/{asn['markers']} markers fail"
+                         + (f" ({', '.join(und)} undetermined)" if und else "")])
         rows.append(["network mode", plan_text(nw), _cm(nw.get("worst_station_error_m")),
                      _cm(nw.get("worst_marker_error_m")), f"{nw['time_s']:.1f}"])
         out += _table(["plan", "markers", "worst station cm", "worst marker cm",

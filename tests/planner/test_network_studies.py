@@ -4,6 +4,7 @@ import numpy as np
 
 from planner import network_studies as ns
 from planner.config import PlanConfig
+from planner.network_accuracy import network_model
 from tests.planner.instances import make_problem
 
 
@@ -55,3 +56,15 @@ def test_plan_text_never_calls_a_time_limited_plan_optimal():
                          "gap": 0.89}) == "<= 763 (time limit, bound 81, gap 89 %)"
     assert ns.plan_text({"status": "no_solution"}) == "no layout in the time limit"
     assert ns.plan_text({"status": "infeasible"}) == "infeasible"
+
+
+def test_an_untied_station_is_reported_as_undetermined():
+    # S3 shares no marker with S1 and S2: as a network it is not tied to the reference
+    p = make_problem([[0.0, 0.0], [6.0, 0.0], [60.0, 0.0]],
+                     [[3.0, 4.0], [3.0, -4.0], [-3.0, 0.0], [60.0, 5.0]], max_range_m=10)
+    cfg = PlanConfig(network=True, min_markers=1, min_sectors=1, max_range_m=10)
+    j = ns.judge_as_network(p, np.ones(4, bool), cfg, network_model(p, cfg))
+    assert j["stations_undetermined"] == 1 and j["worst_station_error_m"] is None
+    assert j["worst_determined_station_error_m"] is not None
+    assert j["stations_failing"] >= 1
+    assert ns._worst(j, "station").startswith("inf (else ")
