@@ -55,8 +55,9 @@ print(f"{problem.n_stations} stations, {problem.n_sites} candidate sites, "
 # ## (a) The known-control plan, judged as a network — and the network plan
 # The known-control optimum is what `markerplan plan` gives without `--network`. Judged as a
 # network tied to the reference, every station's error grows: the markers it relies on are no
-# longer perfect control. On this small site the same count still passes; on `large` (100
-# stations over ~200 m) the known-control optimum fails at most stations (`docs/planner.md`).
+# longer perfect control. On this small site the same three markers still pass; on `large`
+# (100 stations reaching 380 m from the first) the known-control optimum judged as a network
+# fails at 96 of them (`docs/planner.md`, "Network mode studies").
 
 # %%
 modes, layouts = ns.compare_modes(problem, config, net)

@@ -97,10 +97,13 @@ def judge_as_network(problem: PlanProblem, selected: np.ndarray, config, net) ->
     """A layout judged as ``plan --network`` judges a plan (``config.network`` must be set):
     worst station and marker error (None when some are undetermined: not tied to the reference,
     or heading free), the worst among the determined ones, and how many of each exceed
-    ``requirement_m`` (undetermined ones included) or are undetermined."""
+    ``requirement_m`` (undetermined ones included) or are undetermined. Markers on sites no
+    station can use (a regular grid's) are counted in ``markers`` and ``markers_unseen`` but
+    not judged, as :func:`planner.baselines.regular_grid` does."""
     check = evaluate_layout(problem, selected, config, net=net)
     req = config.requirement_m
-    merr = check.marker_error_m[np.asarray(selected, bool)]
+    selected = np.asarray(selected, bool)
+    merr = check.marker_error_m[selected & (net.n_stations_seeing > 0)]
     serr = check.error_m
     return {"worst_station_error_m": _num(serr.max()),
             "worst_marker_error_m": _num(merr.max()) if merr.size else None,
@@ -112,6 +115,7 @@ def judge_as_network(problem: PlanProblem, selected: np.ndarray, config, net) ->
             "markers_failing": int(np.sum(merr > req)),
             "stations_undetermined": int(np.sum(~np.isfinite(serr))),
             "markers_undetermined": int(np.sum(~np.isfinite(merr))),
+            "markers_unseen": int(np.sum(selected & (net.n_stations_seeing == 0))),
             "n_stations": problem.n_stations, "markers": int(np.sum(selected))}
 
 
@@ -246,8 +250,7 @@ def baselines(problem: PlanProblem, config, net, bounds_xy, optimum: dict | None
 
 def _judged(problem, selected, cfg, net) -> dict:
     j = judge_as_network(problem, selected, cfg, net)
-    return {"worst_station_error_m": j["worst_station_error_m"],
-            "worst_marker_error_m": j["worst_marker_error_m"]}
+    return {k: j[k] for k in ("worst_station_error_m", "worst_marker_error_m", "markers_unseen")}
 
 
 # -- report -------------------------------------------------------------------------------------
@@ -346,7 +349,9 @@ def report_lines(doc: dict, studies: str = "abcde", header: bool = True) -> list
                      f"{g['time_s']:.1f}"])
         r = e["regular_grid"]
         spacing = f", {r['spacing_m']:g} m" if r["spacing_m"] else ", no spacing passes"
-        rows.append([f"regular grid (network{spacing})", str(r["markers"]),
+        unseen = r.get("markers_unseen")
+        rows.append([f"regular grid (network{spacing})", str(r["markers"])
+                     + (f" ({unseen} unseen)" if unseen else ""),
                      "yes" if r["meets_requirement"] else "no",
                      _cm(r["worst_station_error_m"]), _cm(r["worst_marker_error_m"]),
                      f"{r['time_s']:.1f}"])
