@@ -3,7 +3,8 @@
 - :func:`greedy_cover`: repeatedly add the site that removes the most unmet requirement
   (missing markers, missing sectors, failing accuracy) over all stations.
 - :func:`regular_grid`: markers on a square grid, each grid point moved to the nearest
-  candidate site; the widest spacing whose layout meets the requirement at every station.
+  candidate site; the widest spacing whose layout meets the requirement at every station
+  (in network mode: every station and marker, relative to the reference station).
 - :func:`greedy_network`: network mode — the greedy cover's directions, then the site that
   most reduces the worst station's (or marker's) variance, until all pass.
 """
@@ -108,11 +109,14 @@ def greedy_cover(problem: PlanProblem, config) -> Baseline:
 
 
 def regular_grid(problem: PlanProblem, config, bounds_xy: tuple[float, float, float, float],
-                 spacings_m: np.ndarray | None = None) -> Baseline:
+                 spacings_m: np.ndarray | None = None, net=None) -> Baseline:
     """Widest square-grid layout that meets the requirement at every station.
 
     At each spacing four grid phases per axis are tried (the grid is not favoured or
     penalised by where its corner happens to fall); the passing phase with fewest markers wins.
+    In network mode (``config.network``) a grid passes as ``plan --network`` judges a plan:
+    directions as always, and every station and every marker within the requirement relative
+    to the reference station, from the whole network's covariance (:func:`_grid_passes`).
 
     Parameters
     ----------
@@ -123,6 +127,8 @@ def regular_grid(problem: PlanProblem, config, bounds_xy: tuple[float, float, fl
     spacings_m : (k,) float, optional
         Spacings to try, widest first (default: ``max_range_m`` down to ``grid_spacing_m`` in
         0.5 m steps).
+    net : planner.network_accuracy.NetworkModel, optional
+        Network mode: cache from :func:`planner.network_accuracy.network_model`.
 
     Returns
     -------
@@ -131,6 +137,10 @@ def regular_grid(problem: PlanProblem, config, bounds_xy: tuple[float, float, fl
         spacing works.
     """
     infos = station_infos(problem, config)
+    if config.network and net is None:
+        from planner.network_accuracy import network_model
+
+        net = network_model(problem, config)
     forbidden = problem.site_mask(config.forbidden, "forbidden")
     existing = problem.site_existing | problem.site_mask(config.existing, "existing")
     pool = np.flatnonzero(~forbidden & ~problem.site_existing)
@@ -155,12 +165,27 @@ def regular_grid(problem: PlanProblem, config, bounds_xy: tuple[float, float, fl
                     continue
                 count, sectors = direction_status(problem, trial, config.n_sectors)
                 if np.all((count >= min_count) & (sectors >= config.min_sectors)) and \
-                        evaluate_layout(problem, trial, config, infos).all_ok:
+                        _grid_passes(problem, trial, config, infos, net):
                     best = trial
                 selected = trial
         if best is not None:
             return Baseline("regular grid", best, True, float(a))
     return Baseline("regular grid", selected, False, None)
+
+
+def _grid_passes(problem: PlanProblem, selected: np.ndarray, config, infos, net) -> bool:
+    """Whether a grid layout meets the requirement: known control as
+    :func:`~planner.station_checks.evaluate_layout` judges it; network mode as ``plan
+    --network`` does (every station, and every selected marker the network estimates, within
+    ``requirement_m`` relative to the reference station). A grid marker on a site no station
+    can use (occluded from all, out of range) is counted but not judged: it has no position in
+    the network, and the integer program never picks such a site."""
+    check = evaluate_layout(problem, selected, config, infos, net=net)
+    if not config.network:
+        return check.all_ok
+    judged = selected & (net.n_stations_seeing > 0)
+    return bool(check.ok.all()) and bool(np.all(check.marker_error_m[judged]
+                                                <= config.requirement_m))
 
 
 def greedy_network(problem: PlanProblem, config, net=None, max_steps: int = 5000,
