@@ -220,7 +220,8 @@ def greedy_network(problem: PlanProblem, config, net=None, max_steps: int = 5000
         cov = net.covariance(j)
         err = net.station_errors_from(cov)
         markers = np.flatnonzero(selected)
-        merr = net.marker_errors(cov, markers)
+        # markers are judged once every station passes (until then the stations lead)
+        merr = net.marker_errors(cov, markers) if np.all(err <= req) else np.zeros(0)
         loss = None
         if np.all(err <= req) and np.all(merr <= req):
             if config.redundant:

@@ -481,7 +481,7 @@ def make_plan(inputs: PlanInputs, config, error_model, model_name: str = "defaul
     timings["program"] = time.perf_counter() - t
     t = time.perf_counter()
     if config.network:
-        baselines = [greedy_network(problem, config)]
+        baselines = [result.greedy or greedy_network(problem, config)]
     else:
         baselines = [greedy_cover(problem, config)]
         x0, y0, x1, y1 = plan_bounds(inputs, problem)

@@ -192,6 +192,11 @@ class PlanResult:
         Total time in the solver over all iterations.
     model : Model
         The final model including every cut.
+    history : list of dict
+        Per solve: iteration, status, objective, dual bound, solve time, rows.
+    greedy : planner.baselines.Baseline or None
+        Network mode on large problems: the greedy layout the loop started from (its
+        incumbent and upper bound), so callers need not run the greedy baseline again.
     """
 
     selected: np.ndarray
@@ -202,6 +207,7 @@ class PlanResult:
     solve_time_s: float
     model: Model
     history: list = field(default_factory=list)
+    greedy: object = None
 
     @property
     def status(self) -> str:
@@ -508,9 +514,6 @@ _SPARSE_ABOVE_SITES = 8000
 #: has about 86,000) the tangent rows touch tens of thousands of sites and HiGHS did not return
 #: at its time limit in our runs; ``large`` at a 3 m grid (about 10,000) returns at the limit.
 MAX_NETWORK_TYING_SITES = 20_000
-#: Network mode, large problems: the greedy upper bound adds the best site of this many of the
-#: worst stations per step.
-_GREEDY_BATCH = 10
 #: Network mode: weight of the every-site information added to an undetermined layout's
 #: information before linearising (any positive definite point gives valid tangents).
 _REGULARISE = 0.05
@@ -860,7 +863,7 @@ def _plan_network(problem: PlanProblem, config, model: Model | None,
     model = replace(model, ub=ub)
     forbidden = problem.site_mask(config.forbidden, "forbidden")
     j_all = net.information(~forbidden & ~hopeless & (net.n_stations_seeing > 0))
-    upper_bound = greedy_selected = None
+    upper_bound = greedy_selected = greedy = None
     existing = problem.site_mask(config.existing, "existing") | problem.site_existing
     if int(net.tying.sum()) > _SPARSE_ABOVE_SITES and not config.redundant \
             and np.all(problem.site_cost[~existing] == 1):
@@ -870,7 +873,7 @@ def _plan_network(problem: PlanProblem, config, model: Model | None,
         greedy = greedy_network(problem, config.replace(
             forbidden=config.forbidden + tuple(problem.site_ids[j]
                                                for j in np.flatnonzero(hopeless & ~forbidden))),
-            net, batch=_GREEDY_BATCH)
+            net)
         in_model = model.site_var >= 0
         greedy_selected = greedy.selected
         upper_bound = int((greedy.selected & in_model).sum())
@@ -886,7 +889,8 @@ def _plan_network(problem: PlanProblem, config, model: Model | None,
     def check(selected):
         return evaluate_layout(problem, selected, config, infos, net=net)
 
-    return _cut_loop(problem, config, model, cuts, check, incumbent=greedy_selected, t0=t0)
+    result = _cut_loop(problem, config, model, cuts, check, incumbent=greedy_selected, t0=t0)
+    return replace(result, greedy=greedy)
 
 
 def _cut_loop(problem: PlanProblem, config, model: Model, cuts, check,
