@@ -313,24 +313,32 @@ def require_network(reference_station: str | None, network: bool) -> None:
                           "mode; add --network or drop --reference-station")
 
 
+def with_options(config, **overrides):
+    """``config.replace(**overrides)`` with the command-line values (``None``: not given, left
+    out); a value the configuration refuses is a one-line error that names the command line.
+
+    >>> from planner.config import PlanConfig
+    >>> with_options(PlanConfig(), budget=None, time_limit_s=5.0).time_limit_s
+    5.0
+    """
+    from markerplan.errors import ConfigError
+
+    try:
+        return config.replace(**{k: v for k, v in overrides.items() if v is not None})
+    except ConfigError as exc:
+        raise ConfigError(f"{exc} (from the command-line options)") from exc
+
+
 def network_settings(config, network: bool | None, reference_station: str | None):
     """``config`` (a :class:`~planner.config.PlanConfig`) with ``--network`` and
     ``--reference-station`` applied; :func:`require_network` refuses the datum outside
     network mode. Whether the station exists is checked where the stations are known
     (:func:`planner.network_accuracy.network_model`)."""
-    from markerplan.errors import ConfigError
-
-    overrides = {}
-    if network:
-        overrides["network"] = True
-    if reference_station is not None:
-        overrides["reference_station"] = reference_station
-    try:
-        config = config.replace(**overrides)
-    except ConfigError as exc:
-        raise ConfigError(f"{exc} (from the command-line options)") from exc
+    config = with_options(config, network=True if network else None,
+                          reference_station=reference_station)
     require_network(reference_station, config.network)
     return config
+
 
 time_limit_option = click.option(
     "--time-limit", "time_limit_s", type=TIME_LIMIT_S,

@@ -28,6 +28,7 @@ from planner.cli._common import (
     station_ids_option,
     stations_option,
     time_limit_option,
+    with_options,
 )
 
 
@@ -112,18 +113,9 @@ def _plan(site_name, site_seed, dem_path, stations_path, station_ids, boundary_p
     from planner.config import PlanConfig, load_config
     from planner.planning import load_inputs, make_plan
 
-    config = load_config(config_path) if config_path else PlanConfig()
-    overrides = {}
-    if redundant:
-        overrides["redundant"] = True
-    if budget is not None:
-        overrides["budget"] = budget
-    if time_limit_s is not None:
-        overrides["time_limit_s"] = time_limit_s
-    try:
-        config = config.replace(**overrides)
-    except ConfigError as exc:
-        raise ConfigError(f"{exc} (from the command-line options)") from exc
+    config = with_options(load_config(config_path) if config_path else PlanConfig(),
+                          redundant=True if redundant else None, budget=budget,
+                          time_limit_s=time_limit_s)
     config = network_settings(config, network, reference_station)
     inputs = load_inputs(site_name, site_seed, dem_path=dem_path, stations_path=stations_path,
                          boundary_path=boundary_path, exclude_paths=exclude_paths,
