@@ -31,6 +31,15 @@ shared equally by the counts still to do. A solve that stops at its time limit w
 answer cannot prove a bound infeasible; the point is then marked ``proven=False`` (never called
 optimal) and keeps its best subset found — or, if a smaller count's subset is better, that
 subset plus its best additions, so the curve stays monotone.
+
+Network mode
+------------
+With ``config.network`` the errors are the network's relative to the datum
+(:mod:`planner.network_accuracy`) and a count's worst error is the worst of its stations and its
+kept markers, as ``plan --network`` judges a layout. Each question "is there a ``k``-subset with
+everything <= ``eps``?" is then the planner's own network program
+(:func:`planner.program.plan_sites`, requirement ``eps``, budget row ``= k``): see
+:class:`_NetworkMinimax`. A kept marker's own error counts, so the curve need not be monotone.
 """
 
 from __future__ import annotations
@@ -504,7 +513,8 @@ def tradeoff_curve(problem: PlanProblem, config, k_max: int | None = None,
     Returns
     -------
     curve : Curve
-        Points from ``k_max`` down to ``k_min``; ``worst_error_m`` never decreases as k falls.
+        Points from ``k_max`` down to ``k_min``; ``worst_error_m`` never decreases as k falls
+        (known control; in network mode a kept marker's own error may break that).
 
     Raises
     ------

@@ -2,6 +2,7 @@
 layout), a network plan's mode and datum followed, and the datum named in every output."""
 
 import csv
+import functools
 import json
 
 from tests.cli.invoke import run_cli
@@ -10,6 +11,7 @@ from tests.cli.invoke import run_cli
 KEEP = ("M04", "M06", "M07", "M08", "M09", "M10", "M11")
 
 
+@functools.cache
 def _layout():
     """(id, x, y, z) of the :data:`KEEP` markers, as the site preset's as-built layout (seated
     on its DEM)."""
@@ -69,3 +71,18 @@ def test_a_network_plan_is_reduced_in_network_mode_with_its_datum(tmp_path, caps
     doc = json.loads((tmp_path / "o" / "reduce.json").read_text())
     assert doc["provenance"]["config"]["plan"]["reference_station"] == "S3"
     assert min(doc["curve"][0]["stations"], key=lambda s: s["error_m"])["id"] == "S3"
+
+
+def test_a_network_plans_mode_survives_another_config(tmp_path):
+    from planner.config import PlanConfig
+    from planner.reduction.study import resolve_inputs
+
+    plan = {"schema": "markerplan-plan", "site": {"name": "default", "seed": 0},
+            "provenance": {"config": {"network": True, "reference_station": "S3",
+                                      "heading_prior_sigma_deg": 0.5}, "inputs": {}},
+            "markers": [{"id": i, "x_m": x, "y_m": y, "z_m": z} for i, x, y, z in _layout()]}
+    path = tmp_path / "plan.json"
+    path.write_text(json.dumps(plan))
+    _, _, config = resolve_inputs(str(path), config=PlanConfig(requirement_m=0.08))
+    assert (config.network, config.reference_station, config.heading_prior_sigma_deg,
+            config.requirement_m) == (True, "S3", 0.5, 0.08)
