@@ -54,7 +54,8 @@ def plot_tradeoff(doc: dict, path: str | Path) -> Path:
     drop = doc.get("drop_order", [])
     if drop:
         ax.plot([d["k"] for d in drop], [100 * d["worst_error_m"] for d in drop], ":",
-                color="0.4", label="drop order, worst station (nested)")
+                color="0.4", label="drop order, worst " + ("station or kept marker" if network
+                                                           else "station") + " (nested)")
     ax.axhline(100 * req, color="k", lw=1.2, ls="-.", label=f"requirement {100 * req:g} cm")
     if doc["k_feasible"] is not None:
         ax.axvline(doc["k_feasible"], color="C2", lw=1, alpha=0.6,
