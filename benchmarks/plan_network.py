@@ -74,8 +74,10 @@ def _run(site: str, grid_spacing: float, time_limit: float, greedy_batch: int,
     t = time.perf_counter()
     try:
         g = greedy_network(problem, net_cfg, net, batch=greedy_batch)
-        out["greedy"] = {"markers": g.n_markers, "time_s": round(time.perf_counter() - t, 2)}
-        print(f"  greedy (network): {g.n_markers} markers in {out['greedy']['time_s']:.1f} s")
+        out["greedy"] = {"markers": g.n_markers, "time_s": round(time.perf_counter() - t, 2),
+                         "batch": greedy_batch}
+        print(f"  greedy (network, batch {greedy_batch}): {g.n_markers} markers in "
+              f"{out['greedy']['time_s']:.1f} s")
     except InfeasiblePlanError as exc:
         out["greedy"] = {"error": str(exc)}
         print(f"  greedy (network): {exc}")

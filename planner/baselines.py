@@ -3,7 +3,8 @@
 - :func:`greedy_cover`: repeatedly add the site that removes the most unmet requirement
   (missing markers, missing sectors, failing accuracy) over all stations.
 - :func:`regular_grid`: markers on a square grid, each grid point moved to the nearest
-  candidate site; the widest spacing whose layout meets the requirement at every station.
+  candidate site; the widest spacing whose layout meets the requirement at every station
+  (in network mode: every station and marker, relative to the reference station).
 - :func:`greedy_network`: network mode — the greedy cover's directions, then the site that
   most reduces the worst station's (or marker's) variance, until all pass.
 """
@@ -108,11 +109,14 @@ def greedy_cover(problem: PlanProblem, config) -> Baseline:
 
 
 def regular_grid(problem: PlanProblem, config, bounds_xy: tuple[float, float, float, float],
-                 spacings_m: np.ndarray | None = None) -> Baseline:
+                 spacings_m: np.ndarray | None = None, net=None) -> Baseline:
     """Widest square-grid layout that meets the requirement at every station.
 
     At each spacing four grid phases per axis are tried (the grid is not favoured or
     penalised by where its corner happens to fall); the passing phase with fewest markers wins.
+    In network mode (``config.network``) a grid passes as ``plan --network`` judges a plan:
+    directions as always, and every station and every marker within the requirement relative
+    to the reference station, from the whole network's covariance (:func:`_grid_passes`).
 
     Parameters
     ----------
@@ -123,6 +127,8 @@ def regular_grid(problem: PlanProblem, config, bounds_xy: tuple[float, float, fl
     spacings_m : (k,) float, optional
         Spacings to try, widest first (default: ``max_range_m`` down to ``grid_spacing_m`` in
         0.5 m steps).
+    net : planner.network_accuracy.NetworkModel, optional
+        Network mode: cache from :func:`planner.network_accuracy.network_model`.
 
     Returns
     -------
@@ -131,6 +137,10 @@ def regular_grid(problem: PlanProblem, config, bounds_xy: tuple[float, float, fl
         spacing works.
     """
     infos = station_infos(problem, config)
+    if config.network and net is None:
+        from planner.network_accuracy import network_model
+
+        net = network_model(problem, config)
     forbidden = problem.site_mask(config.forbidden, "forbidden")
     existing = problem.site_existing | problem.site_mask(config.existing, "existing")
     pool = np.flatnonzero(~forbidden & ~problem.site_existing)
@@ -155,12 +165,27 @@ def regular_grid(problem: PlanProblem, config, bounds_xy: tuple[float, float, fl
                     continue
                 count, sectors = direction_status(problem, trial, config.n_sectors)
                 if np.all((count >= min_count) & (sectors >= config.min_sectors)) and \
-                        evaluate_layout(problem, trial, config, infos).all_ok:
+                        _grid_passes(problem, trial, config, infos, net):
                     best = trial
                 selected = trial
         if best is not None:
             return Baseline("regular grid", best, True, float(a))
     return Baseline("regular grid", selected, False, None)
+
+
+def _grid_passes(problem: PlanProblem, selected: np.ndarray, config, infos, net) -> bool:
+    """Whether a grid layout meets the requirement: known control as
+    :func:`~planner.station_checks.evaluate_layout` judges it; network mode as ``plan
+    --network`` does (every station, and every selected marker the network estimates, within
+    ``requirement_m`` relative to the reference station). A grid marker on a site no station
+    can use (occluded from all, out of range) is counted but not judged: it has no position in
+    the network, and the integer program never picks such a site."""
+    check = evaluate_layout(problem, selected, config, infos, net=net)
+    if not config.network:
+        return check.all_ok
+    judged = selected & (net.n_stations_seeing > 0)
+    return bool(check.ok.all()) and bool(np.all(check.marker_error_m[judged]
+                                                <= config.requirement_m))
 
 
 def greedy_network(problem: PlanProblem, config, net=None, max_steps: int = 5000,
@@ -172,7 +197,8 @@ def greedy_network(problem: PlanProblem, config, net=None, max_steps: int = 5000
     reduction ``v^T J^(j) v`` of the worst variance of the worst station relative to the
     datum (:meth:`planner.network_accuracy.NetworkModel.worst_direction_gain`; a station not
     yet tied is linearised at a regularised information), or of the worst selected marker once
-    every station passes, until every station and marker meets the requirement. ``batch > 1``
+    every station passes, until every station and marker meets the requirement; in redundant
+    mode then also of the station that fails worst after losing one marker. ``batch > 1``
     adds, per step, the best site of each of the ``batch`` worst failing stations (for large
     networks: fewer exact evaluations).
 
@@ -194,10 +220,27 @@ def greedy_network(problem: PlanProblem, config, net=None, max_steps: int = 5000
         cov = net.covariance(j)
         err = net.station_errors_from(cov)
         markers = np.flatnonzero(selected)
-        merr = net.marker_errors(cov, markers)
+        # markers are judged once every station passes (until then the stations lead)
+        merr = net.marker_errors(cov, markers) if np.all(err <= req) else np.zeros(0)
+        loss = None
         if np.all(err <= req) and np.all(merr <= req):
-            return Baseline("greedy", selected, True)
-        if np.any(err > req):
+            if config.redundant:
+                lost, loss_err, loss_cov = net.loss_station_errors(selected)
+                if np.any(loss_err > req):
+                    i, k = np.unravel_index(np.argmax(np.nan_to_num(loss_err, posinf=1e300)),
+                                            loss_err.shape)
+                    loss = (loss_cov[i], int(k), int(lost[i]))
+            if loss is None:
+                return Baseline("greedy", selected, True)
+        if loss is not None:  # redundant: the station that fails worst after a loss
+            cov, k, m = loss
+            if not cov.determined.all():
+                if j_all is None:
+                    j_all = net.information(open_site)
+                without = selected & (np.arange(problem.n_sites) != m)
+                cov = net.covariance(net.information(without) + 0.05 * j_all)
+            gains = [net.worst_direction_gain(cov, k)]
+        elif np.any(err > req):
             worst = np.argsort(-np.nan_to_num(err, posinf=1e300), kind="stable")
             worst = worst[:min(batch, int(np.sum(err > req)))]
             if not cov.determined.all():

@@ -190,6 +190,9 @@ class NetworkModel:
         self.site_weight = np.bincount(self.pair_site, self.weight, minlength=n)
         self.n_stations_seeing = np.bincount(self.pair_site, minlength=n)
         self.site_start = np.r_[0, np.cumsum(self.n_stations_seeing)]
+        self._site_sum = csr_array((np.ones(self.pair_site.size),
+                                    (self.pair_site, np.arange(self.pair_site.size))),
+                                   shape=(n, self.pair_site.size))  # (n, p): sum over a site
         # ordered pairs (a, b) of pairs of one site, for sites seen by >= 2 stations
         k = self.n_stations_seeing
         multi = np.flatnonzero(k >= 2)
@@ -283,6 +286,39 @@ class NetworkModel:
         """(s,) predicted 95 % error of every station with the layout ``selected``, m."""
         return self.station_errors_from(self.covariance(self.information(selected)))
 
+    def loss_station_errors(self, selected) -> tuple[np.ndarray, np.ndarray, list]:
+        """Station errors after losing each one of a layout's selected tying markers.
+
+        A marker seen by one station only adds nothing to the network's information, so
+        losing it changes no station's accuracy; only tying markers are tried.
+
+        Parameters
+        ----------
+        selected : (n,) bool
+
+        Returns
+        -------
+        markers : (m,) int
+            The selected tying sites, in site order.
+        errors : (m, s) float
+            95 % error of every station without marker ``markers[i]``, m (``inf`` where the
+            loss leaves a station undetermined).
+        covariances : list of NetworkCovariance, (m,)
+            The pose covariance without each marker (for tangent cuts).
+        """
+        sel = np.asarray(selected, bool)
+        markers = np.flatnonzero(sel & self.tying)
+        j = self.information(sel)
+        errors = np.empty((markers.size, self.problem.n_stations))
+        covariances = []
+        for i, m in enumerate(markers):
+            one = np.zeros(self.problem.n_sites)
+            one[m] = 1.0
+            cov = self.covariance(j - (self.information(one) - np.diag(self.prior)))
+            errors[i] = self.station_errors_from(cov)
+            covariances.append(cov)
+        return markers, errors, covariances
+
     def _pairs_of(self, sites: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Pair indices of ``sites`` and, for each, the position of its site in ``sites``."""
         k = self.n_stations_seeing[sites]
@@ -346,22 +382,18 @@ class NetworkModel:
             The weighted spread ``sum_s w_s |a_s - a_bar|^2`` of ``a_s = H_s v_s``.
         """
         v = np.atleast_2d(np.asarray(v, dtype=float))
-        n6 = 6 * self.problem.n_stations
-        vf = np.zeros((v.shape[0], n6))
-        vf[:, self.free] = v
-        vs = vf.reshape(v.shape[0], -1, 6)[:, self.pair_station]  # (m, p, 6)
-        a = np.einsum("pia,mpa->mpi", self.design, vs)
-        n = self.problem.n_sites
-        w = self.weight
+        m = v.shape[0]
+        vf = np.zeros((6 * self.problem.n_stations, m))
+        vf[self.free] = v.T
+        vs = vf.reshape(-1, 6, m)[self.pair_station]  # (p, 6, m)
+        a = np.matmul(self.design, vs).reshape(-1, 3 * m)  # (p, 3 m): a_s for every direction
+        w = self.weight[:, None]
         with np.errstate(invalid="ignore", divide="ignore"):
             inv_w = np.where(self.site_weight > 0, 1.0 / self.site_weight, 0.0)
-        out = np.zeros((v.shape[0], n))
-        for m in range(v.shape[0]):
-            mean = np.column_stack([np.bincount(self.pair_site, w * a[m, :, i], minlength=n)
-                                    for i in range(3)]) * inv_w[:, None]
-            d = a[m] - mean[self.pair_site]
-            out[m] = np.bincount(self.pair_site, w * np.sum(d * d, axis=1), minlength=n)
-        return out
+        mean = (self._site_sum @ (w * a)) * inv_w[:, None]  # (n, 3 m)
+        d = a - mean[self.pair_site]
+        spread = (w * d * d).reshape(-1, 3, m).sum(axis=1)  # (p, m)
+        return (self._site_sum @ spread).T
 
     def station_tangents(self, cov: NetworkCovariance, stations, requirement_m: float,
                          rim: str = "worst") -> list[tuple[int, np.ndarray, float]]:

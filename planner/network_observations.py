@@ -213,7 +213,8 @@ class PlanGeometry:
 
 def read_plan_geometry(path: Path) -> PlanGeometry:
     """Markers, stations and requirement of a ``plan.json`` (checked by
-    :func:`planner.plan_file.read_plan`; the terrain is not loaded).
+    :func:`planner.plan_file.read_plan`, typed by :func:`planner.plan_file.plan_layout`; the
+    terrain is not loaded).
 
     Parameters
     ----------
@@ -227,26 +228,42 @@ def read_plan_geometry(path: Path) -> PlanGeometry:
     Raises
     ------
     InputFileError
-        As :func:`planner.plan_file.read_plan`, or a non-numeric inclinometer or heading-prior
-        sigma in its configuration.
+        As :func:`planner.plan_file.read_plan`, or an inclinometer or heading-prior sigma in its
+        configuration that is not a number in (0, 10] degrees.
     """
-    from planner.plan_file import read_plan
+    from planner.plan_file import plan_dem_path, plan_layout, read_plan
 
     doc = read_plan(path, "--plan", full=True)
     cfg = doc["provenance"].get("config", {})
     what = f"--plan {path}: provenance config"
-    incl, heading = (None if cfg.get(k) is None else finite_number(cfg[k], f"{what} {k}", 10.0)
+    incl, heading = (_plan_sigma_deg(cfg, k, what)
                      for k in ("inclinometer_sigma_deg", "heading_prior_sigma_deg"))
     reference = cfg.get("reference_station")
+    layout = plan_layout(doc)
     return PlanGeometry(
-        Path(path), tuple(m["id"] for m in doc["markers"]),
-        np.array([[m["x_m"], m["y_m"], m["z_m"]] for m in doc["markers"]], dtype=float),
-        tuple(s["id"] for s in doc["stations"]),
-        np.array([[s["x_m"], s["y_m"], s["z_m"]] for s in doc["stations"]], dtype=float),
-        np.array([float(s.get("heading_rad") or 0.0) for s in doc["stations"]]),
+        Path(path), layout.marker_ids, layout.marker_xyz_m,
+        tuple(s.id for s in layout.stations),
+        np.array([s.position_m for s in layout.stations], dtype=float),
+        np.array([s.heading_rad for s in layout.stations]),
         float(doc["requirement"]["working_radius_m"]), float(doc["requirement"]["requirement_m"]),
-        incl or None, heading or None, reference if isinstance(reference, str) else None,
-        doc["provenance"].get("inputs", {}).get("dem"))
+        incl, heading, reference if isinstance(reference, str) else None,
+        plan_dem_path(doc["provenance"]))
+
+
+def _plan_sigma_deg(cfg: dict, key: str, what: str) -> float | None:
+    """The plan's angle sigma ``cfg[key]``, degrees, in (0, 10]; ``None`` when it records none.
+
+    A sigma of 0 would make the prior exact (an infinite weight), so it is refused rather than
+    read as "not set"."""
+    if cfg.get(key) is None:
+        return None
+    sigma = finite_number(cfg[key], f"{what} {key}", 10.0)
+    if sigma <= 0.0:
+        raise InputFileError(
+            f"{what} {key}: must be > 0 deg for an adjustment (0 would make the prior exact), "
+            f"got {sigma:g}; plan again with a --config setting {key} to the sensor's 1-sigma "
+            "(e.g. 0.01)")
+    return sigma
 
 
 def identify_with_plan(stations: list[StationDetections], plan: PlanGeometry,

@@ -17,7 +17,7 @@ import json
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -86,10 +86,36 @@ class SurveyPlan:
     @property
     def dem_path(self) -> str | None:
         """The ``--dem`` file the plan was made on, or ``None`` for a preset's terrain."""
-        return _dem_path(self.provenance)
+        return plan_dem_path(self.provenance)
 
 
-def _dem_path(provenance: dict) -> str | None:
+class PlanLayout(NamedTuple):
+    """A checked plan's markers and stations, site frame (:func:`plan_layout`)."""
+
+    marker_ids: tuple[str, ...]
+    marker_xyz_m: np.ndarray
+    """(m, 3) marker centres, metres."""
+    stations: tuple[PlannedStation, ...]
+
+
+def plan_layout(doc: dict) -> PlanLayout:
+    """The markers and stations of a plan document checked by :func:`read_plan` (``full=True``);
+    the terrain is not loaded.
+
+    A station without ``heading_rad`` (or with null) faces site x (heading 0); one without
+    ``markers`` uses none.
+    """
+    stations = tuple(PlannedStation(
+        s["id"], np.array([s["x_m"], s["y_m"], s["z_m"]], float),
+        float(s.get("heading_rad") or 0.0), s.get("predicted_error_m"),
+        tuple(s.get("markers", ()))) for s in doc["stations"])
+    return PlanLayout(
+        tuple(m["id"] for m in doc["markers"]),
+        np.array([[m["x_m"], m["y_m"], m["z_m"]] for m in doc["markers"]], float), stations)
+
+
+def plan_dem_path(provenance: dict) -> str | None:
+    """The ``--dem`` file a plan's provenance names, or ``None`` for a preset's terrain."""
     return provenance.get("inputs", {}).get("dem")
 
 
@@ -108,19 +134,16 @@ def load_plan(path: str | Path) -> SurveyPlan:
     """
     doc = read_plan(path, "PLAN", full=True)
     site = doc["site"]
-    dem_path = _dem_path(doc["provenance"])
+    dem_path = plan_dem_path(doc["provenance"])
     if dem_path is not None:
         dem = read_dem(dem_path, what=f"DEM {dem_path} (named by the plan)",
                        nodata_fix="fix the DEM the plan names, or plan again on a filled DEM")
     else:
         dem = load_site(site["name"], site.get("seed")).dem
-    stations = tuple(PlannedStation(
-        s["id"], np.array([s["x_m"], s["y_m"], s["z_m"]], float),
-        float(s.get("heading_rad") or 0.0), s.get("predicted_error_m"),
-        tuple(s.get("markers", ()))) for s in doc["stations"])
+    layout = plan_layout(doc)
     return SurveyPlan(
-        dem=dem, stations=stations, marker_ids=tuple(m["id"] for m in doc["markers"]),
-        marker_xyz_m=np.array([[m["x_m"], m["y_m"], m["z_m"]] for m in doc["markers"]], float),
+        dem=dem, stations=layout.stations, marker_ids=layout.marker_ids,
+        marker_xyz_m=layout.marker_xyz_m,
         marker_radius_m=float(site.get("marker_radius_m", MARKER_RADIUS_M)),
         requirement_m=float(doc["requirement"]["requirement_m"]),
         working_radius_m=float(doc["requirement"]["working_radius_m"]),

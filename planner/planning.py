@@ -481,10 +481,10 @@ def make_plan(inputs: PlanInputs, config, error_model, model_name: str = "defaul
     timings["program"] = time.perf_counter() - t
     t = time.perf_counter()
     if config.network:
-        baselines = [greedy_network(problem, config)]
+        baselines = [result.greedy or greedy_network(problem, config)]
     else:
         baselines = [greedy_cover(problem, config)]
-        x0, y0, x1, y1 = _plan_bounds(inputs, problem)
+        x0, y0, x1, y1 = plan_bounds(inputs, problem)
         baselines.append(regular_grid(problem, config, (x0, y0, x1, y1)))
     timings["baselines"] = time.perf_counter() - t
     as_built = None
@@ -498,7 +498,9 @@ def make_plan(inputs: PlanInputs, config, error_model, model_name: str = "defaul
                        as_built=as_built, timings_s=timings)
 
 
-def _plan_bounds(inputs: PlanInputs, problem: PlanProblem) -> tuple[float, float, float, float]:
+def plan_bounds(inputs: PlanInputs, problem: PlanProblem) -> tuple[float, float, float, float]:
+    """(xmin, ymin, xmax, ymax) the regular-grid baseline covers, site frame, m: the site's
+    boundary when it has one, else the candidate sites' extent."""
     if inputs.boundary_xy is not None:
         b = np.asarray(inputs.boundary_xy)
         return float(b[:, 0].min()), float(b[:, 1].min()), float(b[:, 0].max()), \

@@ -77,7 +77,7 @@ class RowKind:
         "budget" (from :func:`build_model`), "heading", "oa0" (:func:`tightening_rows`), "cut",
         "oa", "cut-loss", "oa-loss", "info-loss", "heading-loss" (:func:`accuracy_cuts`);
         network mode: "upper-bound", "cut", "connect", "oa", "cut-marker", "oa-marker"
-        (:func:`network_cuts`).
+        (:func:`network_cuts`), redundant: "cut-loss", "oa-loss" (:func:`_network_loss_cuts`).
     station : int
         Index of the station the row belongs to, -1 for rows of no station (budget).
     """
@@ -192,6 +192,11 @@ class PlanResult:
         Total time in the solver over all iterations.
     model : Model
         The final model including every cut.
+    history : list of dict
+        Per solve: iteration, status, objective, dual bound, solve time, rows.
+    greedy : planner.baselines.Baseline or None
+        Network mode on large problems: the greedy layout the loop started from (its
+        incumbent and upper bound), so callers need not run the greedy baseline again.
     """
 
     selected: np.ndarray
@@ -202,6 +207,7 @@ class PlanResult:
     solve_time_s: float
     model: Model
     history: list = field(default_factory=list)
+    greedy: object = None
 
     @property
     def status(self) -> str:
@@ -508,9 +514,16 @@ _SPARSE_ABOVE_SITES = 8000
 #: has about 86,000) the tangent rows touch tens of thousands of sites and HiGHS did not return
 #: at its time limit in our runs; ``large`` at a 3 m grid (about 10,000) returns at the limit.
 MAX_NETWORK_TYING_SITES = 20_000
-#: Network mode, large problems: the greedy upper bound adds the best site of this many of the
-#: worst stations per step.
-_GREEDY_BATCH = 10
+#: Network mode, large problems: the root relaxation (:func:`_root_relaxation`) spends at most
+#: this fraction of the time left after the greedy incumbent, at most this many LP solves, and
+#: stops when its bound rose less than this (relative) over 5 solves; its rows in the integer
+#: program give up at most this fraction of their right-hand side.
+_ROOT_TIME_FRACTION = 0.5
+_ROOT_MAX_ROUNDS = 100
+_ROOT_STALL = 2e-3
+_ROOT_SPARSE_SLACK = 0.05
+#: Network mode, root relaxation: most moves of the in-point towards one LP solution.
+_ROOT_MAX_STEPS = 8
 #: Network mode: weight of the every-site information added to an undetermined layout's
 #: information before linearising (any positive definite point gives valid tangents).
 _REGULARISE = 0.05
@@ -579,13 +592,14 @@ def _raise_network_infeasible(problem: PlanProblem, config, net: NetworkModel,
 
 
 def _sparse_tangent(coef: np.ndarray, rhs: float, upper_bound: int | None,
-                    max_terms: int) -> tuple[np.ndarray, np.ndarray, float]:
+                    max_terms: int, slack: float = _SPARSE_SLACK
+                    ) -> tuple[np.ndarray, np.ndarray, float]:
     """A tangent cut ``sum_j coef_j x_j >= rhs`` with fewer terms, valid for every layout of at
     most ``upper_bound`` sites.
 
     The terms are kept largest first: at least ``max_terms``, and as many more as it takes
     for the ``upper_bound`` largest dropped coefficients — the most the dropped terms can add
-    — to sum to at most ``_SPARSE_SLACK`` of ``rhs``; then
+    — to sum to at most ``slack`` of ``rhs``; then
     ``sum_{kept} coef_j x_j >= rhs - (that sum)``.
     Returns ``(sites, coefficients, 1.0)`` normalised to ``>= 1``.
     """
@@ -596,11 +610,11 @@ def _sparse_tangent(coef: np.ndarray, rhs: float, upper_bound: int | None,
     c = np.r_[coef[order], np.zeros(upper_bound)]
     cum = np.r_[0.0, np.cumsum(c)]
     k = np.arange(max_terms, order.size + 1)
-    slack = cum[k + upper_bound] - cum[k]  # the upper_bound largest after the first k
-    k = int(k[np.argmax(slack <= _SPARSE_SLACK * rhs)])
-    slack = float(cum[k + upper_bound] - cum[k])
+    given_up = cum[k + upper_bound] - cum[k]  # the upper_bound largest after the first k
+    k = int(k[np.argmax(given_up <= slack * rhs)])
+    given_up = float(cum[k + upper_bound] - cum[k])
     keep = np.sort(order[:k])
-    return keep, coef[keep] / (rhs - slack), 1.0
+    return keep, coef[keep] / (rhs - given_up), 1.0
 
 
 def network_cuts(problem: PlanProblem, model: Model, selected: np.ndarray, config,
@@ -651,6 +665,8 @@ def network_cuts(problem: PlanProblem, model: Model, selected: np.ndarray, confi
     merr = net.marker_errors(cov, markers)
     bad_markers = markers[merr > req]
     if failing.size == 0 and bad_markers.size == 0:
+        if config.redundant:
+            return _network_loss_cuts(model, selected, config, net, tying, in_model, upper_bound)
         return None, [], []
     rows, lower, kinds = [], [], []
 
@@ -704,6 +720,42 @@ def network_cuts(problem: PlanProblem, model: Model, selected: np.ndarray, confi
             add(np.r_[rest, m], np.r_[np.ones(rest.size), -1.0], 0.0, RowKind("cut-marker"))
     if not rows:  # pragma: no cover - a failing station always yields a tangent
         raise InfeasiblePlanError("network mode: the layout fails but no cut was found")
+    return sp.csr_array(sp.vstack(rows)), lower, kinds
+
+
+def _network_loss_cuts(model: Model, selected: np.ndarray, config, net: NetworkModel,
+                       tying: np.ndarray, in_model: np.ndarray, upper_bound: int | None
+                       ) -> tuple[sp.csr_array | None, list[float], list[RowKind]]:
+    """Redundant network mode: valid cuts for a layout that passes whole but fails at some
+    station after losing one tying marker ``m``.
+
+    ``"cut-loss"``: ``sum_{j tying, not selected} x_j - x_m >= 0`` (with ``m`` the layout needs a
+    site outside the selected ones: every subset of the selected sites without ``m`` fails, by
+    monotonicity); ``"oa-loss"``: the failing stations' tangents at the information without
+    ``m``, enforced only when ``x_m = 1``: ``sum_{j != m} c_j x_j - x_m >= 0`` (normalised).
+    Arguments as :func:`network_cuts` (``tying``: open tying sites, ``in_model``: sites that
+    are variables). Returns ``(None, [], [])`` when every loss passes.
+    """
+    req = config.requirement_m
+    markers, errors, covariances = net.loss_station_errors(selected)
+    rest = np.flatnonzero(tying & ~selected)
+    rows, lower, kinds = [], [], []
+    for m, err, cov in zip(markers, errors, covariances, strict=True):
+        bad = np.flatnonzero(err > req)
+        if bad.size == 0:
+            continue
+        rows.append(model.site_row(np.r_[rest, m], np.r_[np.ones(rest.size), -1.0]))
+        lower.append(0.0)
+        kinds.append(RowKind("cut-loss", int(bad[0])))
+        for k, coef, rhs in net.station_tangents(cov, bad, req):
+            coef = np.where(in_model, coef, 0.0)
+            coef[m] = 0.0
+            sites, c, _ = _sparse_tangent(coef, rhs, upper_bound, _MAX_TERMS)
+            rows.append(model.site_row(np.r_[sites, m], np.r_[c, -1.0]))
+            lower.append(0.0)
+            kinds.append(RowKind("oa-loss", k))
+    if not rows:
+        return None, [], []
     return sp.csr_array(sp.vstack(rows)), lower, kinds
 
 
@@ -801,9 +853,6 @@ def _plan_network(problem: PlanProblem, config, model: Model | None,
                   infos: list[StationInfo]) -> PlanResult:
     """:func:`plan_sites` in network mode: the same build/solve/cut loop with the network's
     accuracy checks and cuts (:func:`network_cuts`)."""
-    if config.redundant:
-        raise ConfigError("redundant mode is not available in network mode yet; drop one of "
-                          "--redundant and --network")
     t0 = time.perf_counter()
     net = network_model(problem, config)
     n_tying = int(net.tying.sum())
@@ -825,16 +874,18 @@ def _plan_network(problem: PlanProblem, config, model: Model | None,
     model = replace(model, ub=ub)
     forbidden = problem.site_mask(config.forbidden, "forbidden")
     j_all = net.information(~forbidden & ~hopeless & (net.n_stations_seeing > 0))
-    upper_bound = greedy_selected = None
+    upper_bound = greedy_selected = greedy = None
+    root_bound = -np.inf
     existing = problem.site_mask(config.existing, "existing") | problem.site_existing
-    if int(net.tying.sum()) > _SPARSE_ABOVE_SITES and np.all(problem.site_cost[~existing] == 1):
+    if int(net.tying.sum()) > _SPARSE_ABOVE_SITES and not config.redundant \
+            and np.all(problem.site_cost[~existing] == 1):
         # every layout at least as good as the greedy one has at most its number of sites
         from planner.baselines import greedy_network
 
         greedy = greedy_network(problem, config.replace(
             forbidden=config.forbidden + tuple(problem.site_ids[j]
                                                for j in np.flatnonzero(hopeless & ~forbidden))),
-            net, batch=_GREEDY_BATCH)
+            net)
         in_model = model.site_var >= 0
         greedy_selected = greedy.selected
         upper_bound = int((greedy.selected & in_model).sum())
@@ -843,6 +894,8 @@ def _plan_network(problem: PlanProblem, config, model: Model | None,
                            shape=(1, model.n_vars))
         model = model.with_rows(row, [-np.inf], [float(upper_bound)],
                                 [RowKind("upper-bound")])
+        budget_s = _ROOT_TIME_FRACTION * (config.time_limit_s - (time.perf_counter() - t0))
+        model, root_bound = _root_relaxation(problem, model, config, net, upper_bound, budget_s)
 
     def cuts(selected):
         return network_cuts(problem, model, selected, config, net, j_all, upper_bound)
@@ -850,17 +903,110 @@ def _plan_network(problem: PlanProblem, config, model: Model | None,
     def check(selected):
         return evaluate_layout(problem, selected, config, infos, net=net)
 
-    return _cut_loop(problem, config, model, cuts, check, incumbent=greedy_selected, t0=t0)
+    result = _cut_loop(problem, config, model, cuts, check, incumbent=greedy_selected, t0=t0,
+                       bound=root_bound)
+    return replace(result, greedy=greedy)
+
+
+def _root_relaxation(problem: PlanProblem, model: Model, config, net: NetworkModel,
+                     upper_bound: int, budget_s: float) -> tuple[Model, float]:
+    """Tighten a large network model at its LP relaxation before branching; a lower bound.
+
+    With ``x`` relaxed to ``[0, 1]``: first one tangent per station at the every-site
+    information scaled onto the requirement's boundary, ``J_t = J_prior + t (J_all - J_prior)``
+    with ``t = (e_all / requirement)^2``; then an in-out cutting-plane loop: linearise at
+    ``x_lin = (x_LP + x_in) / 2`` (``x_in`` the last point where every station passes, at
+    first every open site); where ``x_lin`` passes it becomes ``x_in``, otherwise its failing
+    stations' tangents (:meth:`~planner.network_accuracy.NetworkModel.station_tangents`, worst
+    rim point) are added and the LP is solved again. Linearising between the two points keeps
+    the tangents informative where the LP solution alone leaves stations untied. Every
+    tangent is valid for every layout (the error is convex in the information), so each LP
+    optimum bounds the fewest markers from below. Stops after ``budget_s``, ``_ROOT_MAX_ROUNDS``
+    solves, when the bound rose less than ``_ROOT_STALL`` (relative) over 5 solves, or when
+    the LP solution passes every station (to ``_ROOT_MAX_STEPS`` halvings).
+
+    The integer program gets the rows sparsified under ``upper_bound``
+    (:func:`_sparse_tangent`, giving up at most ``_ROOT_SPARSE_SLACK`` of each right-hand
+    side); the returned bound is the LP's with the full rows.
+
+    Returns
+    -------
+    model : Model
+        ``model`` with the rows (family ``"oa-root"``).
+    bound : float
+        Proven lower bound on the objective (``-inf`` when no LP solved).
+    """
+    t0 = time.perf_counter()
+    req = config.requirement_m
+    nx = model.var_site.size
+    in_model = model.site_var >= 0
+    x_in = np.zeros(problem.n_sites)
+    x_in[model.var_site] = model.ub[:nx]
+    x_in *= net.tying
+    j_all = net.information(x_in)
+    prior = np.diag(net.prior)
+    e_all = net.station_errors(x_in)
+    cuts = []  # (station, coefficients (n,), rhs)
+    for k in np.flatnonzero(np.isfinite(e_all)):
+        if k == net.reference:
+            continue
+        cov_t = net.covariance(prior + (e_all[k] / req) ** 2 * (j_all - prior))
+        cuts += net.station_tangents(cov_t, [int(k)], req)
+    lp = replace(model, integrality=np.zeros_like(model.integrality))
+    bound, history = -np.inf, []
+    added = 0
+    for _ in range(_ROOT_MAX_ROUNDS):
+        if cuts[added:]:
+            rows = sp.vstack([model.site_row(np.flatnonzero(in_model & (c > 0)),
+                                             c[in_model & (c > 0)] / rhs)
+                              for _, c, rhs in cuts[added:]])
+            n = len(cuts) - added
+            lp = lp.with_rows(rows, np.ones(n), np.full(n, np.inf), [RowKind("oa-root")] * n)
+            added = len(cuts)
+        remaining = budget_s - (time.perf_counter() - t0)
+        if remaining <= 0:
+            break
+        sol = solve(lp, remaining, 0.0)
+        if sol.status != "optimal" or sol.x is None:
+            break
+        bound = max(bound, sol.objective)
+        history.append(bound)
+        if len(history) > 5 and history[-1] - history[-6] < _ROOT_STALL * abs(history[-1]):
+            break
+        x_lp = np.zeros(problem.n_sites)
+        x_lp[model.var_site] = sol.x[:nx]
+        failing = np.zeros(0, np.int64)
+        for _ in range(_ROOT_MAX_STEPS):
+            x_lin = 0.5 * (x_lp + x_in)
+            cov = net.covariance(net.information(x_lin))
+            failing = np.flatnonzero(net.station_errors_from(cov) > req)
+            if failing.size:
+                break
+            x_in = x_lin
+        if failing.size == 0:  # the LP solution (nearly) passes: the relaxation is solved
+            break
+        cuts += net.station_tangents(cov, failing, req)
+    kept = []
+    for k, c, rhs in cuts:
+        sites, coef, lo = _sparse_tangent(np.where(in_model, c, 0.0), rhs, upper_bound,
+                                          _MAX_TERMS, _ROOT_SPARSE_SLACK)
+        kept.append((model.site_row(sites, coef), lo, RowKind("oa-root", int(k))))
+    if kept:
+        rows, lower, kinds = zip(*kept, strict=True)
+        model = model.with_rows(sp.vstack(rows), lower, np.full(len(lower), np.inf), kinds)
+    return model, bound
 
 
 def _cut_loop(problem: PlanProblem, config, model: Model, cuts, check,
-              incumbent: np.ndarray | None = None, t0: float | None = None) -> PlanResult:
+              incumbent: np.ndarray | None = None, t0: float | None = None,
+              bound: float = -np.inf) -> PlanResult:
     """Solve, cut with ``cuts(selected) -> (rows, lower, kinds)`` (``rows`` None: passes),
     re-solve until every check passes; ``check(selected) -> LayoutCheck``.
 
-    ``incumbent`` ((n,) bool, a layout known to pass): when the time limit stops the loop, it
-    is the answer, with status ``"time_limit"``, the best lower bound any solve proved (every
-    cut is valid, so each solve's dual bound bounds the optimum) and their gap. ``t0``: when
+    ``incumbent`` ((n,) bool, a layout known to pass): when the time limit stops the loop, or
+    when a proven lower bound reaches its cost (then with status ``"optimal"``), it is the
+    answer, with status ``"time_limit"``, the best lower bound proved (``bound``, proved before
+    the loop, and every solve's dual bound: every cut is valid) and their gap. ``t0``: when
     the time limit started (default now).
     """
     t0 = time.perf_counter() if t0 is None else t0
@@ -868,16 +1014,21 @@ def _cut_loop(problem: PlanProblem, config, model: Model, cuts, check,
     n_cuts = 0
     history = []
     iteration = 0
-    bound = -np.inf
     while True:
         iteration += 1
         remaining = config.time_limit_s - (time.perf_counter() - t0)
-        if remaining <= 0 and incumbent is not None:
+        proven = incumbent is not None and np.isfinite(bound) \
+            and math.ceil(bound - 1e-6) >= problem.site_cost[incumbent].sum() - 1e-9
+        if (remaining <= 0 or proven) and incumbent is not None:
             obj = float(problem.site_cost[incumbent].sum())
-            gap = (obj - bound) / max(abs(obj), 1e-9) if np.isfinite(bound) else float("nan")
-            sol = Solution(status="time_limit", selected=incumbent, objective=obj,
-                           dual_bound=float(bound), gap=float(gap), solve_time_s=0.0,
-                           message="time limit: the passing layout found first, with the best "
+            gap = max(obj - bound, 0.0) / max(abs(obj), 1e-9) if np.isfinite(bound) \
+                else float("nan")
+            sol = Solution(status="optimal" if proven else "time_limit", selected=incumbent,
+                           objective=obj, dual_bound=float(bound), gap=0.0 if proven else gap,
+                           solve_time_s=0.0,
+                           message="the passing layout found first: proven optimal by the "
+                                   "lower bound" if proven else
+                                   "time limit: the passing layout found first, with the best "
                                    "proven bound")
             return PlanResult(selected=incumbent, check=check(incumbent), solution=sol,
                               iterations=iteration - 1, n_cuts=n_cuts,

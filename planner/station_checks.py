@@ -276,7 +276,6 @@ def evaluate_layout(problem: PlanProblem, selected: np.ndarray, config,
     worst_err = worst_sec = None
     if config.redundant:
         worst_err = err.copy()
-        worst_sec = sectors.copy()
         for s in range(problem.n_stations):
             info = infos[s]
             chosen = info.sites[selected[info.sites]]
@@ -285,27 +284,40 @@ def evaluate_layout(problem: PlanProblem, selected: np.ndarray, config,
                 without = parts.sum(axis=0)[None] - parts  # J after losing each marker
                 worst_err[s] = max(worst_err[s], float(accuracy.errors_from_information(
                     without, info.radius, info.incl).max()))
-            sel_pairs = problem.selected_pairs(s, selected)
-            sec = sector_index(problem.pair_bearing_rad[sel_pairs], config.n_sectors)
-            per = np.bincount(sec, minlength=config.n_sectors)
-            if chosen.size:
-                worst_sec[s] = int((per > 0).sum()) - int(np.any(per == 1))
-        ok &= (count >= config.min_markers + 1) & (worst_sec >= config.min_sectors) \
-            & (worst_err <= config.requirement_m)
+        worst_sec = _worst_loss_sectors(problem, selected, config, sectors)
+        ok &= _survives_loss(count, worst_sec, worst_err, config)
     return LayoutCheck(count=count, sectors=sectors, error_m=err, worst_loss_error_m=worst_err,
                        worst_loss_sectors=worst_sec, ok=ok)
 
 
+def _worst_loss_sectors(problem: PlanProblem, selected: np.ndarray, config,
+                        sectors: np.ndarray) -> np.ndarray:
+    """(s,) int: fewest occupied sectors of each station after losing any one selected marker
+    (``sectors``, the occupied sectors of the whole layout, where a station has none)."""
+    worst = sectors.copy()
+    for s in range(problem.n_stations):
+        sel_pairs = problem.selected_pairs(s, selected)
+        if sel_pairs.size:
+            sec = sector_index(problem.pair_bearing_rad[sel_pairs], config.n_sectors)
+            per = np.bincount(sec, minlength=config.n_sectors)
+            worst[s] = int((per > 0).sum()) - int(np.any(per == 1))
+    return worst
+
+
+def _survives_loss(count: np.ndarray, worst_sectors: np.ndarray, worst_error_m: np.ndarray,
+                   config) -> np.ndarray:
+    """(s,) bool: the redundant-mode rule, given each station's marker count, fewest sectors
+    and worst error after losing any one marker."""
+    return (count >= config.min_markers + 1) & (worst_sectors >= config.min_sectors) \
+        & (worst_error_m <= config.requirement_m)
+
+
 def _evaluate_network(problem: PlanProblem, selected: np.ndarray, config, net) -> LayoutCheck:
     """:func:`evaluate_layout` in network mode (directions as always, accuracy of the whole
-    network: every station and every selected marker relative to the datum)."""
+    network: every station and every selected marker relative to the datum; redundant mode:
+    every station also after losing any one marker)."""
     from planner.network_accuracy import network_model
 
-    if config.redundant:
-        from markerplan.errors import ConfigError
-
-        raise ConfigError("redundant mode is not available in network mode yet; drop one of "
-                          "--redundant and --network")
     net = net or network_model(problem, config)
     count, sectors = direction_status(problem, selected, config.n_sectors)
     cov = net.covariance(net.information(selected))
@@ -315,6 +327,12 @@ def _evaluate_network(problem: PlanProblem, selected: np.ndarray, config, net) -
     merr[markers] = net.marker_errors(cov, markers)
     ok = (count >= config.min_markers) & (sectors >= config.min_sectors) \
         & (err <= config.requirement_m)
-    return LayoutCheck(count=count, sectors=sectors, error_m=err, worst_loss_error_m=None,
-                       worst_loss_sectors=None, ok=ok, marker_error_m=merr,
+    worst_err = worst_sec = None
+    if config.redundant:
+        _, loss, _ = net.loss_station_errors(selected)
+        worst_err = np.max(np.vstack([err[None], loss]), axis=0)
+        worst_sec = _worst_loss_sectors(problem, selected, config, sectors)
+        ok &= _survives_loss(count, worst_sec, worst_err, config)
+    return LayoutCheck(count=count, sectors=sectors, error_m=err, worst_loss_error_m=worst_err,
+                       worst_loss_sectors=worst_sec, ok=ok, marker_error_m=merr,
                        markers_ok=bool(np.all(merr[markers] <= config.requirement_m)))

@@ -14,10 +14,10 @@ NOTEBOOKS = sorted((Path(__file__).resolve().parents[1] / "notebooks").glob("[0-
 BUDGET_S = float(os.environ.get("MARKERPLAN_NB_BUDGET_S", "60"))
 
 
-def test_all_five_notebooks_are_present():
+def test_all_six_notebooks_are_present():
     assert [p.stem for p in NOTEBOOKS] == [
         "01_terrain_and_sensor", "02_processing_a_station", "03_error_model", "04_planning",
-        "05_marker_reduction"]
+        "05_marker_reduction", "06_network_mode"]
 
 
 @pytest.mark.parametrize("notebook", NOTEBOOKS, ids=lambda p: p.stem)

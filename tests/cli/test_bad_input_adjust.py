@@ -61,6 +61,12 @@ def _moved_plan(doc):
         m["x_m"] += 500.0
 
 
+def _inclinometer_sigma(value):
+    def edit(doc):
+        doc["provenance"]["config"]["inclinometer_sigma_deg"] = value
+    return edit
+
+
 def _nan(rows):
     rows[0]["x_m"] = "nan"
     return rows
@@ -111,6 +117,13 @@ def _cases() -> list[Case]:
         Case("adjust-control-zero-sigma", a + ["--plan", PLAN, "--control", "c.csv"],
              "sigma_m: must be > 0", files={"c.csv": "id,x_m,y_m,z_m,sigma_m\nM001,0,0,0,0\n"},
              setup=net),
+        *(Case(f"adjust-plan-inclinometer-sigma-{name}", a + ["--plan", PLAN],
+               "inclinometer_sigma_deg: must be > 0 deg",
+               setup=with_net(edit_plan=_inclinometer_sigma(value)))
+          for name, value in (("zero", 0), ("negative", -0.01))),
+        Case("adjust-plan-inclinometer-sigma-nan", a + ["--plan", PLAN],
+             "inclinometer_sigma_deg: must be a finite number", setup=with_net(
+                 edit_plan=_inclinometer_sigma("nan"))),
         Case("adjust-heading-prior-without-plan", a + ["--heading-prior-sigma-deg", "1"],
              "needs --plan"),
         Case("adjust-bad-alpha0", a + ["--alpha0", "0"], "--alpha0", code=2),

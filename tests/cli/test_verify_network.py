@@ -42,10 +42,8 @@ def test_refused_in_one_line(tmp_path, capsys, args, config, needle):
 
 
 @pytest.mark.slow
-def test_network_verify_of_three_default_stations(tmp_path, capsys):
-    plan_dir = tmp_path / "plan"
-    code, _, err = run_cli(capsys, ["plan", "--out", str(plan_dir)])
-    assert code == 0, err
+def test_network_verify_of_three_default_stations(tmp_path, capsys, valid_inputs):
+    plan_dir = valid_inputs / "plan"  # the default plan
     out = tmp_path / "v"
     code, stdout, err = run_cli(capsys, ["verify", str(plan_dir / "plan.json"), "--network",
                                          "--station-ids", "S1,S2,S3", "--out", str(out),

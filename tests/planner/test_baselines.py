@@ -2,6 +2,7 @@ import numpy as np
 
 from planner.baselines import greedy_cover, regular_grid
 from planner.config import PlanConfig
+from planner.network_accuracy import network_model
 from planner.program import plan_sites
 from planner.station_checks import evaluate_layout
 from tests.planner.instances import make_problem
@@ -26,3 +27,27 @@ def test_baselines_meet_the_requirement_and_never_beat_the_optimum():
     wider = regular_grid(p, cfg, (0.0, 0.0, 30.0, 30.0),
                          spacings_m=np.array([grid.spacing_m + 0.5]))
     assert not wider.meets_requirement or grid.spacing_m + 0.5 > cfg.max_range_m
+
+
+def test_regular_grid_in_network_mode_judges_the_network():
+    # four stations in a row, 9 m apart: registered to known control a 13 m grid is enough,
+    # but as a network tied to S1 the far stations drift and the grid must be denser
+    g, h = np.arange(0.5, 40, 1.0), np.arange(0.5, 16, 1.0)
+    xx, yy = np.meshgrid(g, h)
+    p = make_problem(np.column_stack([np.arange(6.0, 40, 9.0), np.full(4, 8.0)]),
+                     np.column_stack([xx.ravel(), yy.ravel()]), max_range_m=14)
+    cfg = PlanConfig(requirement_m=0.06, working_radius_m=6, max_range_m=14)
+    net_cfg = cfg.replace(network=True)
+    net = network_model(p, net_cfg)
+    bounds, spacings = (0.0, 0.0, 40.0, 16.0), np.arange(14.0, 1.9, -1.0)
+    known = regular_grid(p, cfg, bounds, spacings_m=spacings)
+    assert known.meets_requirement and known.spacing_m == 13.0
+    assert not evaluate_layout(p, known.selected, net_cfg, net=net).all_ok
+    grid = regular_grid(p, net_cfg, bounds, spacings_m=spacings, net=net)
+    assert grid.meets_requirement and grid.spacing_m < known.spacing_m
+    check = evaluate_layout(p, grid.selected, net_cfg, net=net)
+    assert check.all_ok and np.nanmax(check.marker_error_m) <= 0.06
+    assert grid.n_markers > known.n_markers
+    # the next wider spacing fails the network at every phase tried
+    assert not regular_grid(p, net_cfg, bounds, spacings_m=np.array([grid.spacing_m + 1.0]),
+                            net=net).meets_requirement

@@ -48,6 +48,28 @@ def test_network_plan_matches_the_brute_force_optimum(seed):
     assert kc.sum() == r.selected.sum() or not evaluate_layout(p, kc, cfg, net=net).all_ok
 
 
+def test_redundant_network_plan_survives_any_loss_and_matches_the_brute_force():
+    p = _instance(5)
+    base = PlanConfig(network=True, redundant=True, min_markers=3, min_sectors=2,
+                      max_range_m=16, working_radius_m=10, time_limit_s=60)
+    net = network_model(p, base)
+    every = np.ones(p.n_sites, bool)
+    worst_loss = max(net.station_errors(every & (np.arange(p.n_sites) != j)).max()
+                     for j in range(p.n_sites))
+    cfg = base.replace(requirement_m=float(1.1 * worst_loss))
+    r = plan_sites(p, cfg)
+    assert r.check.all_ok and r.status == "optimal"
+    assert r.selected.sum() == _brute_force(p, cfg)
+    # independently of the loss check: without any one marker, every station still passes
+    plain = cfg.replace(redundant=False)
+    for j in np.flatnonzero(r.selected):
+        without = r.selected & (np.arange(p.n_sites) != j)
+        assert (net.station_errors(without) <= cfg.requirement_m).all()
+        assert directions_ok(p, without, plain).all()
+    # and it needs more markers than the plain network plan
+    assert plan_sites(p, plain).selected.sum() < r.selected.sum()
+
+
 def test_infeasible_network_names_the_station_and_why():
     sites = np.vstack([ring([0, 0], 8.0, [0, 120, 240]), [[7, 3], [7, -3]],
                        ring([200, 0], 8.0, [0, 120, 240])])
@@ -59,8 +81,6 @@ def test_infeasible_network_names_the_station_and_why():
     assert "\n" not in msg and "S3: disconnected" in msg and "reference S1" in msg
     with pytest.raises(InfeasiblePlanError, match="S2: (heading too weak|too far)"):
         plan_sites(make_problem([[0, 0], [15, 0]], sites[:5], max_range_m=12), cfg)
-    with pytest.raises(ConfigError, match="redundant"):
-        plan_sites(p, cfg.replace(redundant=True))
 
 
 def test_too_many_tying_sites_are_refused_with_the_grid_to_use(monkeypatch):
@@ -110,3 +130,39 @@ def test_time_limit_returns_the_incumbent_with_the_proven_bound():
     assert r.solution.objective == p.n_sites and r.iterations >= 1
     assert r.solution.dual_bound == pytest.approx(plan_sites(p, cfg).selected.sum())
     assert r.solution.gap == pytest.approx((p.n_sites - r.solution.dual_bound) / p.n_sites)
+
+
+def test_network_greedy_in_redundant_mode_survives_any_loss():
+    from planner.baselines import greedy_network
+
+    p = _instance(5)
+    cfg = PlanConfig(network=True, redundant=True, min_markers=3, min_sectors=2,
+                     max_range_m=16, working_radius_m=10, requirement_m=0.2)
+    g = greedy_network(p, cfg)
+    assert evaluate_layout(p, g.selected, cfg).all_ok
+    assert not evaluate_layout(p, greedy_network(p, cfg.replace(redundant=False)).selected,
+                               cfg).all_ok
+
+
+@pytest.mark.parametrize("seed", [2, 7, 13])
+def test_large_problem_path_bound_never_exceeds_the_brute_force_optimum(seed, monkeypatch):
+    """The path for large problems (greedy incumbent, root relaxation, sparse rows), forced on
+    a small instance: its proven lower bound is at most the true optimum, and the answer
+    passes and is optimal or reports its gap honestly."""
+    import planner.program as program
+
+    monkeypatch.setattr(program, "_SPARSE_ABOVE_SITES", 0)
+    p = _instance(seed)
+    base = PlanConfig(network=True, min_markers=3, min_sectors=2, max_range_m=16,
+                      working_radius_m=10, time_limit_s=60)
+    net = network_model(p, base)
+    cfg = base.replace(requirement_m=float(1.15 * net.station_errors(np.ones(p.n_sites,
+                                                                           bool)).max()))
+    best = _brute_force(p, cfg)
+    r = plan_sites(p, cfg)
+    assert r.greedy is not None and r.check.all_ok
+    assert r.solution.dual_bound <= best + 1e-6
+    assert r.selected.sum() >= best and r.selected.sum() <= r.greedy.n_markers
+    if r.status == "optimal":
+        assert r.selected.sum() == best
+    assert any(k.family == "oa-root" for k in r.model.row_kind)
