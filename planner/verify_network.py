@@ -245,8 +245,8 @@ def adjust_and_compare(tables: list[Path], plan_path: Path, error_model,
                        predicted_marker: dict[str, float | None] | None = None,
                        settings: NetworkVerifySettings = NetworkVerifySettings(),
                        error_model_name: str = "",
-                       planned_markers: dict[str, tuple[str, ...]] | None = None
-                       ) -> NetworkVerification:
+                       planned_markers: dict[str, tuple[str, ...]] | None = None,
+                       reference: str | None = None) -> NetworkVerification:
     """Identify, adjust and compare (step 2 of the module docstring).
 
     Parameters
@@ -268,6 +268,8 @@ def adjust_and_compare(tables: list[Path], plan_path: Path, error_model,
     planned_markers : dict of str to tuple of str, optional
         The markers the plan gives each station: those the association did not identify are
         named in its ``reason``.
+    reference : str, optional
+        The datum station (``verify --reference-station``); default the plan's.
 
     Returns
     -------
@@ -286,7 +288,8 @@ def adjust_and_compare(tables: list[Path], plan_path: Path, error_model,
     from planner.network_record import station_errors
 
     plan = no.read_plan_geometry(plan_path)
-    reference = reference_station(plan.reference_station, plan.station_ids, list(truth))
+    reference = reference_station(reference or plan.reference_station, plan.station_ids,
+                                  list(truth))
     stations = no.read_detections(list(tables), error_model)
     if reference not in [s.station_id for s in stations]:
         raise InputFileError(f"the reference station {reference} (the datum) has no accepted "

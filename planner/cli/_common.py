@@ -28,6 +28,8 @@ option                      meaning (and the value the command receives)
 ``--time-limit S``          solver time limit, seconds
 ``--network``               network mode: markers and stations estimated together, tied to
                             the reference station (:mod:`planner.network_accuracy`)
+``--reference-station ID``  the datum station of network mode (default the first station);
+                            refused outside network mode (:func:`network_settings`)
 ==========================  =====================================================================
 
 Helpers: :func:`emit_summary` (JSON or human summary), :func:`report_timings` (step timings on
@@ -289,8 +291,54 @@ exclude_option = click.option(
 network_option = click.option(
     "--network", is_flag=True, default=None,
     help="Network mode: markers are unknowns estimated with every station's pose, tied to "
-         "the reference station (the first, or reference_station in --config); no total "
-         "station needed.")
+         "the reference station (--reference-station, default the first); no total station "
+         "needed.")
+
+reference_station_option = click.option(
+    "--reference-station", "reference_station", metavar="ID",
+    help="The datum station in network mode (its x, y, z and heading fixed; every error is "
+         "relative to it); default the first station. Only with network mode.")
+
+
+def require_network(reference_station: str | None, network: bool) -> None:
+    """Refuse ``--reference-station`` outside network mode (one-line :class:`ConfigError`).
+
+    ``network`` is the resolved mode: ``--network``, ``network = true`` in ``--config``, or a
+    plan made with ``plan --network``.
+    """
+    from markerplan.errors import ConfigError
+
+    if reference_station is not None and not network:
+        raise ConfigError(f"--reference-station {reference_station} names the datum of network "
+                          "mode; add --network or drop --reference-station")
+
+
+def with_options(config, **overrides):
+    """``config.replace(**overrides)`` with the command-line values (``None``: not given, left
+    out); a value the configuration refuses is a one-line error that names the command line.
+
+    >>> from planner.config import PlanConfig
+    >>> with_options(PlanConfig(), budget=None, time_limit_s=5.0).time_limit_s
+    5.0
+    """
+    from markerplan.errors import ConfigError
+
+    try:
+        return config.replace(**{k: v for k, v in overrides.items() if v is not None})
+    except ConfigError as exc:
+        raise ConfigError(f"{exc} (from the command-line options)") from exc
+
+
+def network_settings(config, network: bool | None, reference_station: str | None):
+    """``config`` (a :class:`~planner.config.PlanConfig`) with ``--network`` and
+    ``--reference-station`` applied; :func:`require_network` refuses the datum outside
+    network mode. Whether the station exists is checked where the stations are known
+    (:func:`planner.network_accuracy.network_model`)."""
+    config = with_options(config, network=True if network else None,
+                          reference_station=reference_station)
+    require_network(reference_station, config.network)
+    return config
+
 
 time_limit_option = click.option(
     "--time-limit", "time_limit_s", type=TIME_LIMIT_S,

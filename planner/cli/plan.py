@@ -18,14 +18,17 @@ from planner.cli._common import (
     json_option,
     marker_radius_option,
     network_option,
+    network_settings,
     out_option,
     overwrite_option,
+    reference_station_option,
     report_timings,
     site_option,
     site_seed_option,
     station_ids_option,
     stations_option,
     time_limit_option,
+    with_options,
 )
 
 
@@ -50,13 +53,15 @@ from planner.cli._common import (
 @click.option("--budget", type=click.IntRange(1, 100_000),
               help="Largest number of markers allowed.")
 @network_option
+@reference_station_option
 @time_limit_option
 @out_option(default="markerplan-out")
 @overwrite_option
 @json_option
 def command(site_name, site_seed, dem_path, stations_path, station_ids, boundary_path,
             exclude_paths, marker_radius_m, error_model, config_path, visibility_path, redundant,
-            existing, budget, network, time_limit_s, out, overwrite, as_json):
+            existing, budget, network, reference_station, time_limit_s, out, overwrite,
+            as_json):
     """Plan the fewest marker sites so that every station meets the accuracy requirement.
 
     Writes plan.json, markers.csv, markers.geojson (site frame, local metres), map.png and
@@ -70,6 +75,7 @@ def command(site_name, site_seed, dem_path, stations_path, station_ids, boundary
       markerplan plan --site default --redundant --out plan-redundant/
       markerplan plan --site large --site-seed 3 --marker-radius 0.15 --out plan-large/
       markerplan plan --network --out plan-network/
+      markerplan plan --network --reference-station S4 --out plan-network-s4/
       markerplan plan --dem site.tif --stations stations.csv --exclude paths.geojson --out p/
     """
     from markerplan.output_folder import output_folder
@@ -83,7 +89,7 @@ def command(site_name, site_seed, dem_path, stations_path, station_ids, boundary
         outcome, config = _plan(site_name, site_seed, dem_path, stations_path, station_ids,
                                 boundary_path, exclude_paths, marker_radius_m, error_model,
                                 config_path, visibility_path, redundant, existing, budget,
-                                time_limit_s, as_json, network)
+                                time_limit_s, as_json, network, reference_station)
         doc = write_plan_files(outcome, stage)
         draw_plan_map(outcome, stage / "map.png")
     timings = plan_timings(outcome)
@@ -101,26 +107,16 @@ def command(site_name, site_seed, dem_path, stations_path, station_ids, boundary
 
 def _plan(site_name, site_seed, dem_path, stations_path, station_ids, boundary_path,
           exclude_paths, marker_radius_m, error_model, config_path, visibility_path, redundant,
-          existing, budget, time_limit_s, as_json, network=None):
+          existing, budget, time_limit_s, as_json, network=None, reference_station=None):
     """Read the inputs and make the plan; return ``(outcome, config)``."""
     from markerplan.errors import ConfigError
     from planner.config import PlanConfig, load_config
     from planner.planning import load_inputs, make_plan
 
-    config = load_config(config_path) if config_path else PlanConfig()
-    overrides = {}
-    if redundant:
-        overrides["redundant"] = True
-    if budget is not None:
-        overrides["budget"] = budget
-    if time_limit_s is not None:
-        overrides["time_limit_s"] = time_limit_s
-    if network:
-        overrides["network"] = True
-    try:
-        config = config.replace(**overrides)
-    except ConfigError as exc:
-        raise ConfigError(f"{exc} (from the command-line options)") from exc
+    config = with_options(load_config(config_path) if config_path else PlanConfig(),
+                          redundant=True if redundant else None, budget=budget,
+                          time_limit_s=time_limit_s)
+    config = network_settings(config, network, reference_station)
     inputs = load_inputs(site_name, site_seed, dem_path=dem_path, stations_path=stations_path,
                          boundary_path=boundary_path, exclude_paths=exclude_paths,
                          existing=existing, marker_radius_m=marker_radius_m,

@@ -18,8 +18,11 @@ from planner.cli._common import (
     json_option,
     marker_radius_option,
     mounting_offset_options,
+    network_option,
+    network_settings,
     out_option,
     overwrite_option,
+    reference_station_option,
     report_timings,
     seed_option,
     site_option,
@@ -27,6 +30,7 @@ from planner.cli._common import (
     station_ids_option,
     stations_option,
     time_limit_option,
+    with_options,
 )
 
 
@@ -50,6 +54,8 @@ from planner.cli._common import (
               help="Marker ids that must go, comma-separated.")
 @click.option("--k-min", "k_min", type=click.IntRange(1, 100_000),
               help="Fewest markers on the curve (default: the fewest meeting the directions).")
+@network_option
+@reference_station_option
 @time_limit_option
 @click.option("--verify", is_flag=True,
               help="Simulate + process the stations at chosen counts; achieved vs predicted.")
@@ -63,8 +69,8 @@ from planner.cli._common import (
 @json_option
 def command(layout_spec, site_name, site_seed, dem_path, stations_path, station_ids,
             boundary_path, exclude_paths, marker_radius_m, error_model, config_path, free,
-            keep_ids, drop_ids, k_min, time_limit_s, verify, seed, verify_k, offsets, out,
-            overwrite, as_json):
+            keep_ids, drop_ids, k_min, network, reference_station, time_limit_s, verify, seed,
+            verify_k, offsets, out, overwrite, as_json):
     """Trade-off between the number of markers and the worst station's predicted error.
 
     INPUT is a plan.json from `markerplan plan`, a markers CSV (id,x_m,y_m[,z_m], site frame)
@@ -78,9 +84,17 @@ def command(layout_spec, site_name, site_seed, dem_path, stations_path, station_
       markerplan reduce as-built --site default --out reduce/
       markerplan reduce plan/plan.json --free --out reduce-free/
       markerplan reduce markers.csv --keep M01 --verify --verify-k 11,6 --out reduce/
+      markerplan reduce plan-network/plan.json --out reduce-network/
+      markerplan reduce as-built --network --reference-station S4 --out reduce-s4/
 
     --seed and the mounting-offset options set the noise and the mis-mounted rig that --verify
     simulates (the pipeline self-calibrates it).
+
+    With --network, or for a plan made by `plan --network` (always studied in network mode,
+    the mode its errors are for), every station's and every kept marker's error is the
+    network's, relative to the reference station (--reference-station, else the plan's, else
+    the first), as `plan --network` judges it; --verify is then refused (use
+    `markerplan verify PLAN --network`).
     """
     from markerplan.output_folder import output_folder
     from planner.reduction.plot import plot_tradeoff
@@ -96,7 +110,7 @@ def command(layout_spec, site_name, site_seed, dem_path, stations_path, station_
     with output_folder(out, overwrite, "reduce", inputs=inputs_given) as stage:
         study, doc, config = _study(
             layout_spec, sources, error_model, config_path, free, keep_ids, drop_ids, k_min,
-            time_limit_s, verify, seed, verify_k, offsets,
+            time_limit_s, verify, seed, verify_k, offsets, network, reference_station,
             progress=not as_json or sys.stderr.isatty())
         write_reduce_files(doc, stage)
         plot_tradeoff(doc, stage / "tradeoff.png")
@@ -110,11 +124,13 @@ def command(layout_spec, site_name, site_seed, dem_path, stations_path, station_
              f"{kf} meet {config.requirement_m:g} m at every station"
              if kf is not None else "no count meets the requirement at every station")
     human += ("" if doc["solver"]["proven_optimal"] else " (time limit: not proven optimal)")
+    if "network" in doc:
+        human += f"; network mode, datum {doc['network']['datum']['reference_station']}"
     emit_summary(info, as_json, human + f" -> {out}/")
 
 
 def _study(layout_spec, sources, error_model, config_path, free, keep_ids, drop_ids, k_min,
-           time_limit_s, verify, seed, verify_k, offsets, progress):
+           time_limit_s, verify, seed, verify_k, offsets, network, reference_station, progress):
     """Read the inputs, run the study (and ``--verify``); return ``(study, doc, config)``.
 
     ``sources`` holds the site options as :func:`planner.reduction.study.resolve_inputs`
@@ -128,14 +144,14 @@ def _study(layout_spec, sources, error_model, config_path, free, keep_ids, drop_
 
     config = load_config(config_path) if config_path else None
     inputs, layout, config = resolve_inputs(layout_spec, config=config, **sources)
-    overrides = {"existing": known_ids(keep_ids or (), layout.ids, "--keep", "marker"),
-                 "forbidden": known_ids(drop_ids or (), layout.ids, "--drop", "marker")}
-    if time_limit_s is not None:
-        overrides["time_limit_s"] = time_limit_s
-    try:
-        config = config.replace(**overrides)
-    except ConfigError as exc:
-        raise ConfigError(f"{exc} (from the command-line options)") from exc
+    config = with_options(config,
+                          existing=known_ids(keep_ids or (), layout.ids, "--keep", "marker"),
+                          forbidden=known_ids(drop_ids or (), layout.ids, "--drop", "marker"),
+                          time_limit_s=time_limit_s)
+    config = network_settings(config, network, reference_station)
+    if config.network and verify:
+        raise ConfigError("reduce --verify simulates known-control registration; in network "
+                          "mode verify a plan with `markerplan verify PLAN --network` instead")
     ks = _verify_counts(verify_k, verify, len(layout.ids))
     if offsets != MountingOffsets() and not verify:
         raise ConfigError("the mounting-offset options set the rig that --verify simulates; "

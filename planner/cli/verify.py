@@ -16,6 +16,8 @@ from planner.cli._common import (
     network_option,
     out_option,
     overwrite_option,
+    reference_station_option,
+    require_network,
     seed_option,
     sensor_profile_option,
     station_ids_option,
@@ -43,12 +45,14 @@ def _adjust_options(*names: str):
 @mounting_offset_options
 @sensor_profile_option
 @network_option
+@reference_station_option
 @_adjust_options("odometry_sigma_m", "odometry_heading_sigma_deg")
 @out_option(required=True)
 @overwrite_option
 @json_option
 def command(plan_path, error_model, seed, station_ids, offsets, profile, network,
-            odometry_sigma_m, odometry_heading_sigma_deg, out, overwrite, as_json):
+            reference_station, odometry_sigma_m, odometry_heading_sigma_deg, out, overwrite,
+            as_json):
     """Check a plan by simulation: scan each station with the planned markers, process the
     scans, register each station to its detected markers, and compare achieved with predicted
     error. Exit code 1 when any station's achieved error exceeds the requirement. The plan's
@@ -66,7 +70,8 @@ def command(plan_path, error_model, seed, station_ids, offsets, profile, network
     achieved error side by side (and the worst), and every marker's; markers.csv holds the
     detections (the input of `markerplan adjust markers.csv --plan PLAN`). A station that
     cannot be tied to the reference (fewer than 2 shared identified markers) fails and is
-    left out of the adjustment.
+    left out of the adjustment. --reference-station names the datum: a network plan's
+    predictions are relative to its own datum, so for such a plan it may only repeat it.
 
     \b
     Example:
@@ -87,14 +92,15 @@ def command(plan_path, error_model, seed, station_ids, offsets, profile, network
     plan = load_plan(plan_path)
     ids = select_stations([s.id for s in plan.stations], station_ids)
     inputs = given_paths(plan_path, plan.dem_path, error_model.path)
-    if network is None:
-        network = bool(plan.provenance.get("config", {}).get("network"))
+    planned_network = bool(plan.provenance.get("config", {}).get("network"))
+    network = network or planned_network
+    require_network(reference_station, network)
     if network:
         from planner.verify_network import NetworkVerifySettings
 
         settings = NetworkVerifySettings(odometry_sigma_m, odometry_heading_sigma_deg)
         _verify_network(plan_path, plan, ids, inputs, error_model, seed, offsets, profile,
-                        settings, out, overwrite, as_json)
+                        settings, out, overwrite, as_json, reference_station)
         return
     with output_folder(out, overwrite, "verify", inputs=inputs) as stage:
         checks = verify_plan(plan, error_model.model, seed=seed,
@@ -117,12 +123,13 @@ def command(plan_path, error_model, seed, station_ids, offsets, profile, network
 
 
 def _verify_network(plan_path, plan, ids, inputs, error_model, seed, offsets, profile, settings,
-                    out, overwrite, as_json):
+                    out, overwrite, as_json, datum=None):
     """``verify --network``: scan, write the marker table, adjust and compare
-    (:mod:`planner.verify_network`); exit code 1 when a station fails."""
+    (:mod:`planner.verify_network`); exit code 1 when a station fails. ``datum``: the
+    ``--reference-station`` given (a network plan's own datum only)."""
     import json
 
-    from markerplan.errors import InfeasiblePlanError
+    from markerplan.errors import ConfigError, InfeasiblePlanError
     from markerplan.output_folder import output_folder
     from pipeline.marker_table import write_marker_table
     from planner.plan_file import read_plan
@@ -137,9 +144,18 @@ def _verify_network(plan_path, plan, ids, inputs, error_model, seed, offsets, pr
     from visibility.sensor_profile import default_profile
 
     doc = read_plan(plan_path, "PLAN", full=True)
-    named = doc["provenance"].get("config", {}).get("reference_station")
-    reference_station(named if isinstance(named, str) else None,
-                      [s["id"] for s in doc["stations"]], ids)
+    planned = doc["provenance"].get("config", {})
+    named = planned.get("reference_station")
+    named = named if isinstance(named, str) else None
+    station_list = [s["id"] for s in doc["stations"]]
+    if datum is not None and planned.get("network") and datum != (named or station_list[0]):
+        raise ConfigError(f"--reference-station {datum}: the plan's predictions are relative to "
+                          f"its datum {named or station_list[0]}; verify against that datum, or "
+                          f"re-plan with `markerplan plan --network --reference-station {datum}`")
+    if datum is not None and datum not in station_list:
+        raise ConfigError(f"`reference_station` {datum!r} is not a station of this plan; valid "
+                          f"ids are {', '.join(station_list[:20])}")
+    reference_station(datum or named, station_list, ids)
     profile = profile or default_profile()
     with output_folder(out, overwrite, "verify", inputs=inputs) as stage:
         rows, truth = scan_plan(plan, seed, progress=not as_json or sys.stderr.isatty(),
@@ -149,7 +165,8 @@ def _verify_network(plan_path, plan, ids, inputs, error_model, seed, offsets, pr
             [table], plan_path, error_model.model, truth,
             {s["id"]: s.get("predicted_error_m") for s in doc["stations"]},
             {m["id"]: m.get("predicted_error_m") for m in doc["markers"]}, settings,
-            error_model.name, {s["id"]: tuple(s.get("markers", ())) for s in doc["stations"]})
+            error_model.name, {s["id"]: tuple(s.get("markers", ())) for s in doc["stations"]},
+            reference=datum)
         rec = network_record(plan, check, seed, error_model.name, offsets, profile)
         (stage / "verify.json").write_text(json.dumps(rec, indent=2) + "\n")
         (stage / "verify.md").write_text(network_markdown(rec))

@@ -31,6 +31,15 @@ shared equally by the counts still to do. A solve that stops at its time limit w
 answer cannot prove a bound infeasible; the point is then marked ``proven=False`` (never called
 optimal) and keeps its best subset found — or, if a smaller count's subset is better, that
 subset plus its best additions, so the curve stays monotone.
+
+Network mode
+------------
+With ``config.network`` the errors are the network's relative to the datum
+(:mod:`planner.network_accuracy`) and a count's worst error is the worst of its stations and its
+kept markers, as ``plan --network`` judges a layout. Each question "is there a ``k``-subset with
+everything <= ``eps``?" is then the planner's own network program
+(:func:`planner.program.plan_sites`, requirement ``eps``, budget row ``= k``): see
+:class:`_NetworkMinimax`. A kept marker's own error counts, so the curve need not be monotone.
 """
 
 from __future__ import annotations
@@ -41,7 +50,16 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from markerplan.errors import ConfigError, InfeasiblePlanError
-from planner.program import Model, RowKind, accuracy_cuts, build_model, solve
+from planner.network_accuracy import network_model
+from planner.program import (
+    Model,
+    RowKind,
+    accuracy_cuts,
+    build_model,
+    plan_sites,
+    solve,
+    tightening_rows,
+)
 from planner.station_checks import LayoutCheck, diagnose, evaluate_layout, station_infos
 from planner.usability import PlanProblem, directions_ok
 
@@ -73,6 +91,11 @@ class CurvePoint:
         MILP solves spent on this point.
     statuses : tuple of str
         Status of each solve (``optimal``, ``infeasible``, ``time_limit``, ``no_solution``).
+    marker_error_m : (n,) float or None
+        Network mode: predicted error of each kept marker relative to the datum (nan for the
+        others), m.
+    markers_ok : bool
+        Network mode: every kept marker meets the requirement (always True otherwise).
     """
 
     k: int
@@ -85,10 +108,25 @@ class CurvePoint:
     proven: bool
     n_solves: int
     statuses: tuple[str, ...]
+    marker_error_m: np.ndarray | None = None
+    markers_ok: bool = True
 
     @property
     def worst_error_m(self) -> float:
+        """Worst station error, m; in network mode the worst of the stations and the kept
+        markers (what the requirement applies to)."""
+        markers = self.worst_marker_error_m
+        return self.worst_station_error_m if markers is None \
+            else max(self.worst_station_error_m, markers)
+
+    @property
+    def worst_station_error_m(self) -> float:
         return float(self.error_m.max())
+
+    @property
+    def worst_marker_error_m(self) -> float | None:
+        """Network mode: worst kept marker's error, m (``None`` otherwise)."""
+        return _worst_marker(self.marker_error_m)
 
     @property
     def mean_error_m(self) -> float:
@@ -96,7 +134,22 @@ class CurvePoint:
 
     @property
     def meets_requirement(self) -> bool:
-        return bool(self.ok.all())
+        return bool(self.ok.all()) and self.markers_ok
+
+
+def _worst_marker(marker_error_m) -> float | None:
+    """Largest error among the selected markers (nan: not selected); ``None`` if none."""
+    if marker_error_m is None or np.isnan(marker_error_m).all():
+        return None
+    return float(np.nanmax(marker_error_m))
+
+
+def check_worst(check: LayoutCheck) -> float:
+    """Worst error of a :class:`~planner.station_checks.LayoutCheck`, m: the worst station,
+    and in network mode also the worst selected marker (both relative to the datum)."""
+    markers = _worst_marker(check.marker_error_m)
+    worst = float(check.error_m.max())
+    return worst if markers is None else max(worst, markers)
 
 
 @dataclass(frozen=True)
@@ -107,7 +160,9 @@ class Curve:
     ----------
     points : list of CurvePoint
     k_directions : int
-        Fewest markers meeting count and direction rows at every station (accuracy ignored).
+        Fewest markers meeting count and direction rows at every station (accuracy ignored);
+        in network mode, if the curve found that fewer cannot tie every station to the datum,
+        the fewest that do.
     k_feasible : int or None
         Fewest markers on the curve meeting the requirement at every station (``None``: no
         point does).
@@ -166,7 +221,8 @@ class DropStep:
 
     @property
     def worst_error_m(self) -> float:
-        return float(self.check.error_m.max())
+        """As :attr:`CurvePoint.worst_error_m`."""
+        return check_worst(self.check)
 
     @property
     def mean_error_m(self) -> float:
@@ -193,7 +249,8 @@ class MarkerLoss:
 
     @property
     def worst_error_m(self) -> float:
-        return float(self.check.error_m.max())
+        """As :attr:`CurvePoint.worst_error_m`."""
+        return check_worst(self.check)
 
 
 def _reduction_iv(problem: PlanProblem, config, layout: np.ndarray) -> np.ndarray:
@@ -215,13 +272,21 @@ def _reduction_iv(problem: PlanProblem, config, layout: np.ndarray) -> np.ndarra
 
 
 class _MinimaxModel:
-    """One integer program answering "is there a k-subset with every station <= eps?"."""
+    """One integer program answering "is there a k-subset with every station <= eps?"
+    (known-control mode)."""
+
+    #: The worst error never grows when a marker is added (so W*(k+1) bounds W*(k) below).
+    monotone = True
+    #: Bisect on eps (cheap queries); else descend from the incumbent, each query asking for
+    #: a strictly better subset, until one is infeasible.
+    bisect = True
 
     def __init__(self, problem: PlanProblem, config, deadline: float) -> None:
         self.problem = problem
         self.config = config
         self.deadline = deadline
         self.infos = station_infos(problem, config)
+        self.net = None
         base = build_model(problem, config)
         nx = base.var_site.size
         self.nx = nx
@@ -234,6 +299,23 @@ class _MinimaxModel:
         self.cut_threshold: list[float] = []
         self.solve_time_s = 0.0
         self.solve_cap_s = np.inf  # longest single solve, s
+
+    @property
+    def n_cuts(self) -> int:
+        """Accuracy cuts generated so far."""
+        return len(self.cut_rows)
+
+    def check(self, selected: np.ndarray) -> LayoutCheck:
+        """Count, directions and predicted errors of a subset."""
+        return evaluate_layout(self.problem, selected, self.config, self.infos, net=self.net)
+
+    def worst(self, selected: np.ndarray) -> float:
+        """Worst predicted error of a subset, m (:func:`check_worst`)."""
+        return float(max(info.error(info.sites[selected[info.sites]]) for info in self.infos))
+
+    def floor(self, allowed: np.ndarray) -> float:
+        """No subset of ``allowed`` has a worst error below this, m."""
+        return self.worst(allowed)
 
     def _bounded(self, k: int | None, eps: float, count_objective: bool) -> Model:
         lb, ub = self.model.row_lb.copy(), self.model.row_ub.copy()
@@ -303,11 +385,94 @@ class _MinimaxModel:
         return info.error(np.setdiff1d(info.sites, support))
 
     def pad(self, selected: np.ndarray, k: int, pool: np.ndarray) -> np.ndarray:
-        """Add unused ``pool`` sites (in order) until ``k`` are selected (never hurts)."""
+        """Add unused ``pool`` sites (in order) until ``k`` are selected (never hurts a
+        station)."""
         out = selected.copy()
         for j in np.flatnonzero(pool & ~out)[: max(0, k - int(out.sum()))]:
             out[j] = True
         return out
+
+
+#: Requirement standing for "none" when the network oracle is asked for any k-subset, m (as
+#: the planner's own "no requirement").
+_NO_REQUIREMENT_M = 1e9
+#: A network query that raised before this fraction of its time limit proved infeasibility.
+_PROVEN_BEFORE = 0.9
+
+
+class _NetworkMinimax(_MinimaxModel):
+    """Network mode: "is there a k-subset with every station and every kept marker <= eps,
+    relative to the datum?", answered by the planner's own network program
+    (:func:`planner.program.plan_sites`, its network accuracy cuts) with the requirement set to
+    eps and the budget row bounded to exactly ``k`` on both sides.
+
+    The known-control model's count and sector rows still answer the direction questions
+    (:meth:`min_count_directions`). A kept marker's own error counts, so adding a marker may
+    raise the worst error: the curve need not be monotone and no count's optimum bounds
+    another's (:attr:`monotone` is False). A query is a whole cut loop, and one near the
+    optimum that proves infeasibility costs the most, so the search descends from the
+    incumbent instead of bisecting (:attr:`bisect` is False): on the default site's as-built
+    layout that takes less than half the queries.
+    """
+
+    monotone = False
+    bisect = False
+
+    def __init__(self, problem: PlanProblem, config, deadline: float) -> None:
+        super().__init__(problem, config, deadline)
+        self.net = network_model(problem, config)
+        self._n_cuts = 0
+
+    @property
+    def n_cuts(self) -> int:
+        return self._n_cuts
+
+    def worst(self, selected: np.ndarray) -> float:
+        return check_worst(self.check(selected))
+
+    def floor(self, allowed: np.ndarray) -> float:
+        """The stations' worst error with every allowed site (a marker's own error may make a
+        larger set worse, never a station's)."""
+        return float(self.net.station_errors(allowed).max())
+
+    def _exact_model(self, k: int, cfg) -> Model:
+        """The planner's model for ``cfg`` with ``sum x = k`` and its tightening rows."""
+        model = build_model(self.problem, cfg)
+        lb = model.row_lb.copy()
+        lb[[i for i, r in enumerate(model.row_kind) if r.family == "budget"]] = float(k)
+        model = replace(model, row_lb=lb)
+        rows, lower, kinds = tightening_rows(self.problem, model, cfg)
+        if rows is not None:
+            model = model.with_rows(rows, lower, np.full(len(lower), np.inf), kinds)
+        return model
+
+    def query(self, k: int, eps: float, statuses: list[str]):
+        """As :meth:`_MinimaxModel.query`. ``plan_sites`` raises when no layout exists or
+        when its time limit ends the search: raised well before the limit, the bound is proven
+        infeasible; at the limit it is not proven."""
+        limit = min(self.deadline - time.perf_counter(), self.solve_cap_s)
+        if limit <= 0:
+            statuses.append("time_limit")
+            return None, False
+        k = min(k, self.nx)
+        cfg = self.config.replace(
+            requirement_m=float(eps) if np.isfinite(eps) else _NO_REQUIREMENT_M, budget=k,
+            time_limit_s=float(limit))
+        t = time.perf_counter()
+        try:
+            result = plan_sites(self.problem, cfg, self._exact_model(k, cfg))
+        except InfeasiblePlanError:
+            elapsed = time.perf_counter() - t
+            self.solve_time_s += elapsed
+            proven = elapsed < _PROVEN_BEFORE * limit
+            statuses.append("infeasible" if proven else "time_limit")
+            return None, proven
+        self.solve_time_s += result.solve_time_s
+        self._n_cuts += result.n_cuts
+        statuses.append(result.status)
+        if int(result.selected.sum()) != k:  # a time-limited incumbent of another size
+            return None, False
+        return result.selected, True
 
 
 def tradeoff_curve(problem: PlanProblem, config, k_max: int | None = None,
@@ -348,7 +513,8 @@ def tradeoff_curve(problem: PlanProblem, config, k_max: int | None = None,
     Returns
     -------
     curve : Curve
-        Points from ``k_max`` down to ``k_min``; ``worst_error_m`` never decreases as k falls.
+        Points from ``k_max`` down to ``k_min``; ``worst_error_m`` never decreases as k falls
+        (known control; in network mode a kept marker's own error may break that).
 
     Raises
     ------
@@ -360,7 +526,9 @@ def tradeoff_curve(problem: PlanProblem, config, k_max: int | None = None,
     _reduction_iv(problem, config, np.ones(problem.n_sites, bool))
     limit = config.time_limit_s if time_limit_s is None else float(time_limit_s)
     deadline = time.perf_counter() + limit
-    mm = _MinimaxModel(problem, config, deadline)
+    mm = (_NetworkMinimax if config.network else _MinimaxModel)(problem, config, deadline)
+    if not mm.bisect:  # descent: a point is proven optimal (to REL_TOL) or not at all
+        tol_m, exact = np.inf, True
     k_dir = mm.min_count_directions()
     if k_dir is None:
         why = diagnose(problem, config.replace(requirement_m=1e9), mm.infos)
@@ -378,7 +546,7 @@ def tradeoff_curve(problem: PlanProblem, config, k_max: int | None = None,
     if start is not None and not directions_ok(problem, start, config).all():
         start = None  # not a valid incumbent: some station lacks its count or directions
     allowed = np.isin(np.arange(n), mm.model.var_site) & pool
-    floor = _worst(mm, allowed) * (1 - REL_TOL)  # no subset beats keeping every site
+    floor = mm.floor(allowed) * (1 - REL_TOL)  # no subset beats keeping every site
     kept = problem.site_mask(config.existing, "existing")
     points: list[CurvePoint] = []
     complete = True
@@ -398,30 +566,36 @@ def tradeoff_curve(problem: PlanProblem, config, k_max: int | None = None,
             lo = max(floor, -np.inf if best_above is None else best_above * (1 - REL_TOL))
             best, lo, proven = _minimax(mm, k, incumbent, lo, best_above, tol_m, exact,
                                         statuses)
-            if best is None:  # the time limit ran out before any k-subset was found
-                complete = False
+            if best is None:
+                if proven:  # no k-subset meets the directions and (network mode) ties every
+                    k_dir = k + 1  # station to the datum; fewer markers cannot either
+                else:  # the time limit ran out before any k-subset was found
+                    complete = False
                 break
         best = mm.pad(best, k, pool)
-        check = evaluate_layout(problem, best, config, mm.infos)
+        check = mm.check(best)
         points.append(CurvePoint(k=k, selected=best, error_m=check.error_m, count=check.count,
                                  sectors=check.sectors, ok=check.ok, lower_bound_m=float(lo),
                                  proven=bool(proven), n_solves=len(statuses),
-                                 statuses=tuple(statuses)))
-        best_above = float(check.error_m.max()) if proven and exact else None
+                                 statuses=tuple(statuses), marker_error_m=check.marker_error_m,
+                                 markers_ok=check.markers_ok))
+        best_above = check_worst(check) if proven and exact and mm.monotone else None
         previous = best
     points = _monotone(mm, points, allowed)
     feasible = [p.k for p in points if p.meets_requirement]
     k_feasible = min(feasible) if feasible else None
     return Curve(points=points, k_directions=k_dir, k_feasible=k_feasible,
-                 k_feasible_minimal=_minimal(points, k_feasible, k_dir, config.requirement_m),
-                 n_cuts=len(mm.cut_rows), solve_time_s=mm.solve_time_s, complete=complete)
+                 k_feasible_minimal=_minimal(points, k_feasible, k_dir, config.requirement_m,
+                                             mm.monotone),
+                 n_cuts=mm.n_cuts, solve_time_s=mm.solve_time_s, complete=complete)
 
 
 def _monotone(mm: _MinimaxModel, points: list[CurvePoint], allowed: np.ndarray
               ) -> list[CurvePoint]:
-    """Adding markers never hurts: where a smaller count's subset beats a larger count's (only
-    possible when the larger one is not proven optimal), replace the larger one by the smaller
-    plus its best additions, from the fewest markers up."""
+    """Adding markers never hurts a station: where a smaller count's subset beats a larger
+    count's (only possible when the larger one is not proven optimal, or in network mode, where
+    a kept marker's own error counts), replace the larger one by the smaller plus its best
+    additions, from the fewest markers up, if that is better."""
     out = list(points)
     for i in range(len(out) - 2, -1, -1):  # out[i + 1] has one marker fewer than out[i]
         small, big = out[i + 1], out[i]
@@ -432,11 +606,14 @@ def _monotone(mm: _MinimaxModel, points: list[CurvePoint], allowed: np.ndarray
             free = np.flatnonzero(allowed & ~sel)
             if free.size == 0:
                 break
-            errs = [_worst(mm, np.where(np.arange(sel.size) == j, True, sel)) for j in free]
+            errs = [mm.worst(np.where(np.arange(sel.size) == j, True, sel)) for j in free]
             sel[free[int(np.argmin(errs))]] = True
-        chk = evaluate_layout(mm.problem, sel, mm.config, mm.infos)
+        chk = mm.check(sel)
+        if not check_worst(chk) < big.worst_error_m:
+            continue
         out[i] = replace(big, selected=sel, error_m=chk.error_m, count=chk.count,
-                         sectors=chk.sectors, ok=chk.ok)
+                         sectors=chk.sectors, ok=chk.ok, marker_error_m=chk.marker_error_m,
+                         markers_ok=chk.markers_ok)
     return out
 
 
@@ -451,21 +628,24 @@ def _start_iv(start, n: int, k_max: int) -> np.ndarray | None:
 
 
 def _minimal(points: list[CurvePoint], k_feasible: int | None, k_dir: int,
-             requirement_m: float) -> bool:
-    """Whether no count below ``k_feasible`` can pass (proven)."""
+             requirement_m: float, monotone: bool = True) -> bool:
+    """Whether no count below ``k_feasible`` can pass (proven): the count just below on a
+    monotone curve, else every count down to ``k_dir``."""
     if k_feasible is None:
         return False
     if k_feasible == k_dir:
         return True
-    below = [p for p in points if p.k == k_feasible - 1]
-    return bool(below) and (below[0].proven or below[0].lower_bound_m >= requirement_m)
+    lowest = k_feasible - 1 if monotone else k_dir
+    below = [p for p in points if lowest <= p.k < k_feasible]
+    return len(below) == k_feasible - lowest and all(
+        p.proven or p.lower_bound_m >= requirement_m for p in below)
 
 
 def _best_of(mm: _MinimaxModel, subsets) -> np.ndarray | None:
     """The subset with the lowest worst-station error among those meeting the direction rows."""
     ok = [np.asarray(x, bool) for x in subsets
           if x is not None and directions_ok(mm.problem, np.asarray(x, bool), mm.config).all()]
-    return min(ok, key=lambda x: _worst(mm, x)) if ok else None
+    return min(ok, key=lambda x: mm.worst(x)) if ok else None
 
 
 def _drop_one(mm: _MinimaxModel, selected: np.ndarray | None, kept: np.ndarray
@@ -478,7 +658,7 @@ def _drop_one(mm: _MinimaxModel, selected: np.ndarray | None, kept: np.ndarray
         trial = selected.copy()
         trial[m] = False
         if directions_ok(mm.problem, trial, mm.config).all():
-            key = _worst(mm, trial)
+            key = mm.worst(trial)
             if best_key is None or key < best_key:
                 best, best_key = trial, key
     return best
@@ -490,19 +670,23 @@ def _minimax(mm: _MinimaxModel, k: int, incumbent: np.ndarray | None, lo: float,
     """Bisection for one k: (best subset, proven lower bound, proven optimal).
 
     ``lo`` is a proven lower bound (W*(k) > lo); ``incumbent`` a feasible k-subset or None.
+    The subset is ``None`` when no k-subset was found: proven (no k-subset exists) or not
+    (the time limit).
     """
     proven = True
     best = incumbent
     mm.solve_cap_s = np.inf
+    if best is not None and not np.isfinite(mm.worst(best)):
+        best = None  # network mode: the incumbent leaves a station untied to the datum
     if best is None:
         best, proven = mm.query(k, np.inf, statuses)
-        if best is None:
-            return None, lo, False
-    hi = _worst(mm, best)
+        if best is None:  # proven: no k-subset at all (network: none ties every station)
+            return None, lo, proven
+    hi = mm.worst(best)
     if best_above is not None and hi > best_above:  # W*(k) >= W*(k+1): try that first
         sel, ok = mm.query(k, best_above, statuses)
         if sel is not None:
-            best, hi = sel, _worst(mm, sel)
+            best, hi = sel, mm.worst(sel)
         elif ok:
             lo = best_above
         else:
@@ -526,7 +710,7 @@ def _minimax(mm: _MinimaxModel, k: int, incumbent: np.ndarray | None, lo: float,
         mm.solve_cap_s = (mm.deadline - time.perf_counter()) / 3.0
         sel, ok = mm.query(k, eps, statuses)
         if sel is not None:
-            best, hi = sel, _worst(mm, sel)
+            best, hi = sel, mm.worst(sel)
             if final:
                 width /= 16.0
         elif ok:
@@ -540,17 +724,13 @@ def _minimax(mm: _MinimaxModel, k: int, incumbent: np.ndarray | None, lo: float,
                 mm.solve_cap_s = (mm.deadline - time.perf_counter()) / 3.0
                 sel, ok = mm.query(k, eps, statuses)
                 if sel is not None:
-                    best, hi = sel, _worst(mm, sel)
+                    best, hi = sel, mm.worst(sel)
                 elif not ok:
                     hard = eps
                 else:
                     lo = eps
                     break
             return best, lo, False
-
-
-def _worst(mm: _MinimaxModel, selected: np.ndarray) -> float:
-    return float(max(info.error(info.sites[selected[info.sites]]) for info in mm.infos))
 
 
 def _k_range_iv(k_min: int, k_max: int, k_dir: int, n: int) -> None:
@@ -590,17 +770,17 @@ def drop_order(problem: PlanProblem, config, layout: np.ndarray) -> list[DropSte
     current = _reduction_iv(problem, config, layout) \
         & ~problem.site_mask(config.forbidden, "forbidden")
     kept = problem.site_mask(config.existing, "existing")
-    infos = station_infos(problem, config)
+    check = layout_checker(problem, config)
     steps = []
     while (current & ~kept).any():
         best = None
         for m in np.flatnonzero(current & ~kept):
             trial = current.copy()
             trial[m] = False
-            chk = evaluate_layout(problem, trial, config, infos)
+            chk = check(trial)
             directions = bool(np.all((chk.count >= config.min_markers)
                                      & (chk.sectors >= config.min_sectors)))
-            key = (not directions, float(chk.error_m.max()), float(chk.error_m.mean()), int(m))
+            key = (not directions, check_worst(chk), float(chk.error_m.mean()), int(m))
             if best is None or key < best[0]:
                 best = (key, m, trial, chk)
         if best[0][0]:  # every removal breaks directions somewhere
@@ -626,15 +806,23 @@ def marker_losses(problem: PlanProblem, config, layout: np.ndarray) -> list[Mark
         In site order.
     """
     layout = _reduction_iv(problem, config, layout)
-    infos = station_infos(problem, config)
+    check = layout_checker(problem, config)
     out = []
     for m in np.flatnonzero(layout):
         trial = layout.copy()
         trial[m] = False
-        chk = evaluate_layout(problem, trial, config, infos)
+        chk = check(trial)
         out.append(MarkerLoss(marker=int(m), check=chk,
                               failing=tuple(int(s) for s in np.flatnonzero(~chk.ok))))
     return out
+
+
+def layout_checker(problem: PlanProblem, config):
+    """``selected -> LayoutCheck`` for one problem (:func:`evaluate_layout` with its caches;
+    in network mode the network's accuracy relative to the datum)."""
+    infos = station_infos(problem, config)
+    net = network_model(problem, config) if config.network else None
+    return lambda selected: evaluate_layout(problem, selected, config, infos, net=net)
 
 
 def failure_reason(check, s: int, config) -> str:

@@ -39,7 +39,9 @@ def plot_tradeoff(doc: dict, path: str | Path) -> Path:
     k = [p["k"] for p in curve]
     cm = [100 * (p["worst_error_m"] or float("nan")) for p in curve]
     mean = [100 * (p["mean_error_m"] or float("nan")) for p in curve]
-    ax.plot(k, cm, "o-", color="C3", label="worst station (minimax optimum)")
+    network = "network" in doc
+    ax.plot(k, cm, "o-", color="C3", label=("worst station or kept marker" if network else
+                                            "worst station") + " (minimax optimum)")
     ax.plot(k, mean, "s--", color="C0", label="mean over stations (same subsets)")
     unproven = [i for i, p in enumerate(curve) if not p["proven_optimal"]]
     if unproven:
@@ -52,7 +54,8 @@ def plot_tradeoff(doc: dict, path: str | Path) -> Path:
     drop = doc.get("drop_order", [])
     if drop:
         ax.plot([d["k"] for d in drop], [100 * d["worst_error_m"] for d in drop], ":",
-                color="0.4", label="drop order, worst station (nested)")
+                color="0.4", label="drop order, worst " + ("station or kept marker" if network
+                                                           else "station") + " (nested)")
     ax.axhline(100 * req, color="k", lw=1.2, ls="-.", label=f"requirement {100 * req:g} cm")
     if doc["k_feasible"] is not None:
         ax.axvline(doc["k_feasible"], color="C2", lw=1, alpha=0.6,
@@ -62,13 +65,16 @@ def plot_tradeoff(doc: dict, path: str | Path) -> Path:
         ax.plot([v["k"] for v in done], [100 * v["achieved_worst_error_m"] for v in done], "D",
                 color="C1", ms=8, label="achieved worst (simulator + pipeline)")
     ax.set_xlabel("markers kept")
-    _log_error_axis(ax, "predicted 95 % station error (cm, log scale)")
+    _log_error_axis(ax, "predicted 95 % error relative to the datum (cm, log scale)"
+                    if network else "predicted 95 % station error (cm, log scale)")
     ax.invert_xaxis()
     ax.set_xticks(k)
     ax.grid(alpha=0.3)
     ax.legend(fontsize=8)
+    from planner.reduction.report import accuracy_mode
+
     ax.set_title(f"site {doc['site']['name']}: {doc['layout']['n_markers']} markers "
-                 f"({doc['layout']['mode']})")
+                 f"({doc['layout']['mode']}; {accuracy_mode(doc)})")
     if verify:
         _plot_verify(axes[0, 1], verify, req)
     fig.tight_layout()

@@ -13,6 +13,11 @@
 - ``k_directions``, ``k_feasible``, ``markers_that_can_go``;
 - ``drop_order`` and ``marker_losses``;
 - ``verify`` (with ``--verify``): achieved against predicted errors at chosen counts;
+- ``network`` (network mode only): the datum (reference station, fixed parameters,
+  inclinometer and heading prior). Every error is then relative to it, and each curve point
+  also holds ``worst_station_error_m``, ``worst_marker_error_m`` and ``marker_errors_m`` (its
+  ``worst_error_m`` is the worst of stations and kept markers, which the requirement applies
+  to); ``tradeoff.csv`` gains the two worst-error columns;
 
 No file holds a timing (the same inputs give byte-identical files): :func:`reduce_timings`
 gives them to the command's stderr and ``--json`` summary.
@@ -29,12 +34,15 @@ import numpy as np
 
 from markerplan.provenance import provenance
 from markerplan.writing import write_csv
-from planner.reduction.curve import failure_reason
+from planner.reduction.curve import check_worst, failure_reason
 
 SCHEMA = "markerplan-reduce"
 SCHEMA_VERSION = 1
 FRAME_NOTE = "site frame: local metres (x, y horizontal, z up)"
 SOLVER = "HiGHS via scipy.optimize.milp (bisection on the worst-station error)"
+#: Network mode: each query is the planner's network program (:func:`planner.program.plan_sites`).
+NETWORK_SOLVER = ("HiGHS via scipy.optimize.milp (network mode: descent on the worst station or "
+                  "kept-marker error, each query the planner's network program)")
 
 
 def _num(v):
@@ -53,6 +61,31 @@ def _stations(problem, check, config) -> list[dict]:
             for s, sid in enumerate(problem.station_ids)]
 
 
+def _failing(prob, check, cfg) -> dict[str, str]:
+    """Failing station id -> reason, and in network mode failing kept marker id -> its error."""
+    out = {prob.station_ids[t]: failure_reason(check, t, cfg) for t in np.flatnonzero(~check.ok)}
+    if check.marker_error_m is not None:
+        for j in np.flatnonzero(check.marker_error_m > cfg.requirement_m):
+            out[prob.site_ids[j]] = (f"marker error {check.marker_error_m[j]:.4f} m > "
+                                     f"{cfg.requirement_m:g} m")
+    return out
+
+
+def _network(prob, cfg) -> dict:
+    """The datum of a network-mode study (as ``plan.json``'s ``network.datum``)."""
+    from pipeline.network_adjustment import POSE_PARAMETERS
+    from planner.network_accuracy import network_model
+
+    ref = prob.station_ids[network_model(prob, cfg).reference]
+    return {"datum": {"kind": "station", "reference_station": ref,
+                      "fixed": list(POSE_PARAMETERS[:4]),
+                      "inclinometer_sigma_deg": cfg.inclinometer_sigma_deg,
+                      "heading_prior_sigma_deg": cfg.heading_prior_sigma_deg},
+            "errors": "95 % bounds relative to the datum, from the whole network's information "
+                      "(markers are unknowns); a point's worst error is the worst of its "
+                      "stations and kept markers"}
+
+
 def reduce_record(study, layout, inputs, model_name: str, options: dict,
                   verify: dict | None = None) -> dict:
     """The ``reduce.json`` document of a :class:`~planner.reduction.study.ReductionStudy`."""
@@ -60,8 +93,14 @@ def reduce_record(study, layout, inputs, model_name: str, options: dict,
     statuses = Counter(s for p in curve.points for s in p.statuses)
     points = []
     for p in curve.points:
+        network = {} if p.marker_error_m is None else {
+            "worst_station_error_m": _num(p.worst_station_error_m),
+            "worst_marker_error_m": _num(p.worst_marker_error_m),
+            "marker_errors_m": {prob.site_ids[j]: _num(p.marker_error_m[j])
+                                for j in np.flatnonzero(p.selected)}}
         points.append({
             "k": p.k, "markers": _ids(prob, p.selected), "worst_error_m": _num(p.worst_error_m),
+            **network,
             "mean_error_m": _num(p.mean_error_m), "lower_bound_m": _num(p.lower_bound_m),
             "meets_requirement": p.meets_requirement,
             "directions_ok": bool(np.all((p.count >= cfg.min_markers)
@@ -80,14 +119,13 @@ def reduce_record(study, layout, inputs, model_name: str, options: dict,
                      "worst_error_m": _num(s.worst_error_m), "mean_error_m": _num(s.mean_error_m),
                      "meets_requirement": bool(s.check.all_ok),
                      "optimal_worst_error_m": _num(best.worst_error_m) if best else None,
-                     "failing": {prob.station_ids[t]: failure_reason(s.check, t, cfg)
-                                 for t in np.flatnonzero(~s.check.ok)}})
-    losses = [{"marker": prob.site_ids[m.marker], "worst_error_m": _num(m.worst_error_m),
+                     "failing": _failing(prob, s.check, cfg)})
+    losses = [{"marker": prob.site_ids[m.marker], "worst_error_m": _num(check_worst(m.check)),
                "mean_error_m": _num(m.check.error_m.mean()),
-               "failing": {prob.station_ids[t]: failure_reason(m.check, t, cfg)
-                           for t in m.failing}} for m in study.losses]
-    solver = {"name": SOLVER, "statuses": dict(statuses), "proven_optimal": curve.proven,
-              "optimality": ("within 0.1 mm (free mode)" if study.free
+               "failing": _failing(prob, m.check, cfg)} for m in study.losses]
+    name = NETWORK_SOLVER if cfg.network else SOLVER
+    solver = {"name": name, "statuses": dict(statuses), "proven_optimal": curve.proven,
+              "optimality": ("within 0.1 mm (free mode)" if study.free and not cfg.network
                              else "exact (relative 1e-9)"),
               "complete": curve.complete, "time_limit_s": cfg.time_limit_s,
               "n_solves": int(sum(p.n_solves for p in curve.points)),
@@ -96,7 +134,7 @@ def reduce_record(study, layout, inputs, model_name: str, options: dict,
         "schema": SCHEMA, "schema_version": SCHEMA_VERSION,
         "provenance": provenance({"plan": cfg.to_dict(), "reduce": options},
                                  error_model=model_name,
-                                 solver={"name": SOLVER, "statuses": dict(statuses),
+                                 solver={"name": name, "statuses": dict(statuses),
                                          "proven_optimal": curve.proven},
                                  inputs=dict(inputs.sources, layout=layout.source)),
         "frame": FRAME_NOTE,
@@ -112,6 +150,8 @@ def reduce_record(study, layout, inputs, model_name: str, options: dict,
         "markers_that_can_go": study.markers_that_can_go,
         "curve": points, "drop_order": drop, "marker_losses": losses,
     }
+    if cfg.network:
+        doc["network"] = _network(prob, cfg)
     if verify is not None:
         doc["verify"] = verify
     return doc
@@ -124,13 +164,16 @@ PER_STATION_COLUMNS = ("k", "station", "error_m", "n_markers", "n_sectors", "mee
 DROP_ORDER_COLUMNS = ("step", "removed", "k", "worst_error_m", "mean_error_m",
                       "meets_requirement", "optimal_worst_error_m", "failing")
 MARKER_LOSS_COLUMNS = ("marker", "worst_error_m", "mean_error_m", "n_failing", "failing")
+#: ``tradeoff.csv``'s extra columns in network mode.
+NETWORK_COLUMNS = ("worst_station_error_m", "worst_marker_error_m")
 
 
 def write_reduce_files(doc: dict, folder: Path) -> None:
     """Write reduce.json, the four CSV tables and report.md into ``folder``."""
     folder = Path(folder)
     (folder / "reduce.json").write_text(json.dumps(doc, indent=2) + "\n")
-    write_csv(folder / "tradeoff.csv", TRADEOFF_COLUMNS, (
+    columns = TRADEOFF_COLUMNS + (NETWORK_COLUMNS if "network" in doc else ())
+    write_csv(folder / "tradeoff.csv", columns, (
         {**p, "meets_requirement": int(p["meets_requirement"]),
          "directions_ok": int(p["directions_ok"]),
          "n_failing": sum(not s["meets_requirement"] for s in p["stations"]),
@@ -141,19 +184,27 @@ def write_reduce_files(doc: dict, folder: Path) -> None:
         for p in doc["curve"] for s in p["stations"]))
     write_csv(folder / "drop_order.csv", DROP_ORDER_COLUMNS, (
         {**d, "meets_requirement": int(d["meets_requirement"]),
-         "failing": _failing(d["failing"])} for d in doc["drop_order"]))
+         "failing": _failing_text(d["failing"])} for d in doc["drop_order"]))
     write_csv(folder / "marker_loss.csv", MARKER_LOSS_COLUMNS, (
-        {**m, "n_failing": len(m["failing"]), "failing": _failing(m["failing"])}
+        {**m, "n_failing": len(m["failing"]), "failing": _failing_text(m["failing"])}
         for m in doc["marker_losses"]))
     (folder / "report.md").write_text(report_markdown(doc))
 
 
-def _failing(failing: dict) -> str:
+def _failing_text(failing: dict) -> str:
     return "; ".join(f"{k}: {v}" for k, v in failing.items())
 
 
 def _cm(v) -> str:
     return "n/a" if v is None else f"{100 * v:.2f} cm"
+
+
+def accuracy_mode(doc: dict) -> str:
+    """How a ``reduce.json`` document judges accuracy, in words ("network mode, datum S1" or
+    "known control")."""
+    net = doc.get("network")
+    return "known control" if net is None else \
+        f"network mode, datum {net['datum']['reference_station']}"
 
 
 def report_markdown(doc: dict) -> str:
@@ -175,12 +226,31 @@ def report_markdown(doc: dict) -> str:
              "Mode: " + ("free (any candidate site)" if lay["mode"] == "free"
                          else "subsets of the layout")
              + f"; error: 95 % registered-position error over a {req['working_radius_m']:g} m "
-             "working radius, predicted from the error model and the station geometry.", "",
-             "## Trade-off curve (fewest-markers-first minimax subsets)", "",
-             "| markers | worst station | mean | meets requirement | proven optimal | kept |",
-             "|---:|---:|---:|---|---|---|"]
+             "working radius, predicted from the error model and the station geometry.", ""]
+    net = doc.get("network")
+    if net is not None:
+        d = net["datum"]
+        prior = ("no heading prior" if d["heading_prior_sigma_deg"] is None
+                 else f"heading prior {d['heading_prior_sigma_deg']:g} deg 1-sigma")
+        lines += [f"Accuracy: **{accuracy_mode(doc)}** — markers are unknowns estimated with "
+                  f"every station's pose; every error is relative to station "
+                  f"{d['reference_station']} (x, y, z and heading fixed; inclinometer "
+                  f"{d['inclinometer_sigma_deg']:g} deg 1-sigma; {prior}), as `plan --network` "
+                  "judges a layout: a count's worst error is the worst of its stations and "
+                  "its kept markers.", ""]
+    lines += ["## Trade-off curve (fewest-markers-first minimax subsets)", ""]
+    if net is None:
+        lines += ["| markers | worst station | mean | meets requirement | proven optimal | kept |",
+                  "|---:|---:|---:|---|---|---|"]
+    else:
+        lines += ["| markers | worst | worst station | worst marker | mean station | "
+                  "meets requirement | proven optimal | kept |",
+                  "|---:|---:|---:|---:|---:|---|---|---|"]
     for p in doc["curve"]:
-        lines.append(f"| {p['k']} | {_cm(p['worst_error_m'])} | {_cm(p['mean_error_m'])} | "
+        extra = "" if net is None else \
+            f"{_cm(p['worst_station_error_m'])} | {_cm(p['worst_marker_error_m'])} | "
+        lines.append(f"| {p['k']} | {_cm(p['worst_error_m'])} | {extra}"
+                     f"{_cm(p['mean_error_m'])} | "
                      f"{'yes' if p['meets_requirement'] else 'no'} | "
                      f"{'yes' if p['proven_optimal'] else 'NO (time limit)'} | "
                      f"{', '.join(p['markers'])} |")
@@ -203,7 +273,7 @@ def report_markdown(doc: dict) -> str:
               "| marker lost | worst station | stations that fail |", "|---|---:|---|"]
     for m in doc["marker_losses"]:
         lines.append(f"| {m['marker']} | {_cm(m['worst_error_m'])} | "
-                     f"{_failing(m['failing']) or '—'} |")
+                     f"{_failing_text(m['failing']) or '—'} |")
     if "verify" in doc:
         lines += ["", "## Verification (simulator + pipeline)", "",
                   "| markers | station | predicted | achieved |", "|---:|---|---:|---:|"]
@@ -225,8 +295,11 @@ def reduce_timings(study) -> dict[str, float]:
 
 def summary(doc: dict, out: Path) -> dict:
     """The one-object ``--json`` summary."""
+    net = doc.get("network")
     return {"out": str(out), "site": doc["site"]["name"], "layout": doc["layout"]["source"],
-            "mode": doc["layout"]["mode"], "n_markers": doc["layout"]["n_markers"],
+            "mode": doc["layout"]["mode"], "accuracy": accuracy_mode(doc),
+            "reference_station": None if net is None else net["datum"]["reference_station"],
+            "n_markers": doc["layout"]["n_markers"],
             "k_feasible": doc["k_feasible"], "k_feasible_minimal": doc["k_feasible_minimal"],
             "k_directions": doc["k_directions"],
             "markers_that_can_go": doc["markers_that_can_go"],

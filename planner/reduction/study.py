@@ -133,7 +133,10 @@ def resolve_inputs(spec: str, site_name: str | None = None, site_seed: int | Non
     A ``plan.json`` supplies its own site, terrain seed, DEM and stations files, stations,
     marker radius and configuration unless they are given here. The plan-only settings
     ``budget``, ``existing``, ``forbidden`` and ``redundant`` are reset: the study decides which
-    markers stay.
+    markers stay. A plan made in network mode (``plan --network``) is studied in network mode,
+    the mode its errors are for, even with another ``config``: its ``reference_station`` and
+    ``heading_prior_sigma_deg`` apply unless ``config`` sets them (as ``verify`` follows a
+    network plan's mode).
 
     Parameters
     ----------
@@ -162,9 +165,14 @@ def resolve_inputs(spec: str, site_name: str | None = None, site_seed: int | Non
         station_ids = station_ids or recorded.get("station_ids")
         if marker_radius_m is None:
             marker_radius_m = plan.get("site", {}).get("marker_radius_m")
+        recorded = plan.get("provenance", {}).get("config", {})
         if config is None:
-            config = config_from_dict(plan.get("provenance", {}).get("config", {}),
-                                      where=f"INPUT {spec} (its configuration)")
+            config = config_from_dict(recorded, where=f"INPUT {spec} (its configuration)")
+        elif recorded.get("network") is True and not config.network:
+            datum = {k: recorded[k] for k in ("reference_station", "heading_prior_sigma_deg")
+                     if getattr(config, k) is None and recorded.get(k) is not None}
+            config = config_from_dict({"network": True, **datum}, base=config,
+                                      where=f"INPUT {spec} (its network settings)")
     config = (config or PlanConfig()).replace(budget=None, existing=(), forbidden=(),
                                               redundant=False)
     inputs = load_inputs(site_name or "default", site_seed, dem_path=dem_path,

@@ -58,3 +58,18 @@ def test_network_bad_configuration_is_one_line(tmp_path, capsys):
     code, _, err = run_cli(capsys, ["plan", "--network", "--config", str(cfg), "--out", str(out)])
     assert code == 1 and err.count("\n") == 1 and "reference_station" in err and "S9" in err
     assert not out.exists()
+
+
+def test_reference_station_option_names_the_datum(tmp_path, capsys):
+    out = tmp_path / "p"
+    code, stdout, err = run_cli(capsys, ["plan", "--network", "--reference-station", "S3",
+                                         "--station-ids", "S2,S3", "--json", "--out",
+                                         str(out)])
+    assert code == 0, err
+    summary = json.loads(stdout)
+    assert summary["reference_station"] == "S3"
+    doc = json.loads((out / "plan.json").read_text())
+    assert doc["provenance"]["config"]["reference_station"] == "S3"
+    assert doc["network"]["datum"]["reference_station"] == "S3"
+    rows = list(csv.reader((out / "stations.csv").read_text().splitlines()))
+    assert "network mode (datum: station S3)" in rows[0][0]

@@ -45,6 +45,9 @@ COMMANDS = {
     "plan": lambda inputs, cwd: ["plan"],
     "verify": lambda inputs, cwd: ["verify", one_station_plan(inputs, cwd), "--seed", "2"],
     "reduce": lambda inputs, cwd: ["reduce", "as-built", "--k-min", "8"],
+    "reduce-network": lambda inputs, cwd: ["reduce", "as-built", "--network", "--station-ids",
+                                           "S1,S2", "--reference-station", "S2", "--k-min",
+                                           "10"],
 }
 
 

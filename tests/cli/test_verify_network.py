@@ -24,6 +24,12 @@ def _hand_made_plan(tmp_path, **config):
     ([], {"network": True, "reference_station": "S9"}, "reference station S9 is not one of its "
                                                         "stations (S1, S2)"),
     (["--network", "--odometry-sigma-m", "0"], {}, "--odometry-sigma-m"),
+    # --reference-station: a network plan's predictions are relative to its own datum ...
+    (["--reference-station", "S2"], {"network": True}, "the plan's predictions are relative "
+                                                       "to its datum S1"),
+    # ... a known-control plan verified in network mode takes the datum given
+    (["--network", "--reference-station", "S2", "--station-ids", "S1"], {},
+     "reference station S2 (the datum of network mode) is not among the stations verified"),
 ])
 def test_refused_in_one_line(tmp_path, capsys, args, config, needle):
     out = tmp_path / "v"

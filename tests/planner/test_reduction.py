@@ -219,3 +219,88 @@ def test_an_unproven_point_is_repaired_from_a_better_smaller_subset(tiny):
     fixed = _monotone(mm, points, np.ones(8, bool))
     assert fixed[2].selected.sum() == 6 and (fixed[2].selected >= points[3].selected).all()
     assert fixed[2].worst_error_m == pytest.approx(curve.at(6).worst_error_m, rel=1e-9)
+
+
+# --- network mode --------------------------------------------------------------------------
+
+def _network_instance():
+    """Three stations in a row, 9 sites (as tests/planner/test_network_program.py's)."""
+    rng = np.random.default_rng(5)
+    sites = np.vstack([rng.uniform([-8, -9], [36, 9], (7, 2)), [[7, 4], [21, -4]]])
+    return make_problem([[0, 0], [14, 0], [28, 0]], sites, max_range_m=16)
+
+
+NETWORK = PlanConfig(network=True, min_markers=3, min_sectors=2, max_range_m=16,
+                     working_radius_m=10.0, requirement_m=1.0)
+
+
+def _network_brute_force(problem, config, k):
+    """Least worst error (stations and kept markers, relative to the datum) over all k-subsets
+    meeting count and directions."""
+    from planner.network_accuracy import network_model
+
+    net = network_model(problem, config)
+    best = np.inf
+    for sub in itertools.combinations(range(problem.n_sites), k):
+        sel = np.zeros(problem.n_sites, bool)
+        sel[list(sub)] = True
+        chk = evaluate_layout(problem, sel, config, net=net)
+        if np.all((chk.count >= config.min_markers) & (chk.sectors >= config.min_sectors)):
+            best = min(best, max(float(chk.error_m.max()), float(np.nanmax(chk.marker_error_m))))
+    return best
+
+
+@pytest.fixture(scope="module")
+def network_curves():
+    problem = _network_instance()
+    return problem, tradeoff_curve(problem, NETWORK), tradeoff_curve(
+        problem, NETWORK.replace(network=False))
+
+
+def test_network_curve_is_the_exact_minimax_of_the_networks_errors(network_curves):
+    from planner.network_accuracy import network_model
+
+    problem, curve, _ = network_curves
+    net = network_model(problem, NETWORK)
+    assert curve.proven and curve.k_directions == curve.points[-1].k
+    for p in curve.points:
+        assert p.selected.sum() == p.k
+        assert p.worst_error_m == pytest.approx(_network_brute_force(problem, NETWORK, p.k),
+                                                rel=1e-9)
+        # every station's and kept marker's error is NetworkModel's, relative to S1
+        cov = net.covariance(net.information(p.selected))
+        np.testing.assert_allclose(p.error_m, net.station_errors_from(cov), rtol=1e-12)
+        kept = np.flatnonzero(p.selected)
+        np.testing.assert_allclose(p.marker_error_m[kept], net.marker_errors(cov, kept),
+                                   rtol=1e-12)
+        assert np.isnan(p.marker_error_m[~p.selected]).all()
+        assert p.worst_error_m == max(p.error_m.max(), p.marker_error_m[kept].max())
+
+
+def test_network_curve_needs_more_markers_and_its_fewest_passing_is_the_network_plan(
+        network_curves):
+    problem, curve, known = network_curves
+    by_k = {p.k: p for p in known.points}
+    # the network's errors exceed known control's at every count (markers are unknowns)
+    for p in curve.points:
+        assert p.worst_station_error_m > by_k[p.k].worst_error_m
+    # worst errors (m), network / known control: 9-7 markers 0.114 / 0.033, 6: 0.116 / 0.033,
+    # 5: 0.124 / 0.035; at 0.12 m known control needs 5 markers, the network 6
+    config = NETWORK.replace(requirement_m=0.12)
+    net_curve = tradeoff_curve(problem, config)
+    kc_curve = tradeoff_curve(problem, config.replace(network=False))
+    assert (kc_curve.k_feasible, net_curve.k_feasible) == (5, 6)
+    assert net_curve.k_feasible_minimal
+    assert net_curve.k_feasible == int(plan_sites(problem, config).selected.sum())
+
+
+def test_network_drop_order_and_losses_judge_the_network(network_curves):
+    problem, curve, _ = network_curves
+    layout = np.ones(problem.n_sites, bool)
+    steps = drop_order(problem, NETWORK, layout)
+    assert steps and all(s.check.marker_error_m is not None for s in steps)
+    for s in steps:
+        best = next(p for p in curve.points if p.k == s.k)
+        assert s.worst_error_m >= best.worst_error_m * (1 - 1e-9)
+    losses = marker_losses(problem, NETWORK, layout)
+    assert all(m.worst_error_m >= curve.points[0].worst_error_m * (1 - 1e-9) for m in losses)
