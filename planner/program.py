@@ -895,8 +895,7 @@ def _plan_network(problem: PlanProblem, config, model: Model | None,
         model = model.with_rows(row, [-np.inf], [float(upper_bound)],
                                 [RowKind("upper-bound")])
         budget_s = _ROOT_TIME_FRACTION * (config.time_limit_s - (time.perf_counter() - t0))
-        model, root_bound, _ = _root_relaxation(problem, model, config, net, upper_bound,
-                                                budget_s)
+        model, root_bound = _root_relaxation(problem, model, config, net, upper_bound, budget_s)
 
     def cuts(selected):
         return network_cuts(problem, model, selected, config, net, j_all, upper_bound)
@@ -910,8 +909,7 @@ def _plan_network(problem: PlanProblem, config, model: Model | None,
 
 
 def _root_relaxation(problem: PlanProblem, model: Model, config, net: NetworkModel,
-                     upper_bound: int, budget_s: float
-                     ) -> tuple[Model, float, np.ndarray | None]:
+                     upper_bound: int, budget_s: float) -> tuple[Model, float]:
     """Tighten a large network model at its LP relaxation before branching; a lower bound.
 
     With ``x`` relaxed to ``[0, 1]``: first one tangent per station at the every-site
@@ -937,8 +935,6 @@ def _root_relaxation(problem: PlanProblem, model: Model, config, net: NetworkMod
         ``model`` with the rows (family ``"oa-root"``).
     bound : float
         Proven lower bound on the objective (``-inf`` when no LP solved).
-    x_lp : (n,) float or None
-        The last LP solution (per candidate site), None when no LP solved.
     """
     t0 = time.perf_counter()
     req = config.requirement_m
@@ -959,7 +955,6 @@ def _root_relaxation(problem: PlanProblem, model: Model, config, net: NetworkMod
     lp = replace(model, integrality=np.zeros_like(model.integrality))
     bound, history = -np.inf, []
     added = 0
-    x_lp = None
     for _ in range(_ROOT_MAX_ROUNDS):
         if cuts[added:]:
             rows = sp.vstack([model.site_row(np.flatnonzero(in_model & (c > 0)),
@@ -999,7 +994,7 @@ def _root_relaxation(problem: PlanProblem, model: Model, config, net: NetworkMod
     if kept:
         rows, lower, kinds = zip(*kept, strict=True)
         model = model.with_rows(sp.vstack(rows), lower, np.full(len(lower), np.inf), kinds)
-    return model, bound, x_lp
+    return model, bound
 
 
 def _cut_loop(problem: PlanProblem, config, model: Model, cuts, check,
