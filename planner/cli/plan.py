@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import sys
 
 import click
@@ -95,7 +96,7 @@ def command(site_name, site_seed, dem_path, stations_path, station_ids, boundary
     timings = plan_timings(outcome)
     report_timings(timings)
     info = {**summary(doc, out), "timings_s": timings}
-    human = (f"{doc['n_markers']} markers ({doc['solver']['status']}); worst station "
+    human = (f"{doc['n_markers']} markers ({solver_status_text(doc['solver'])}); worst station "
              f"{info['worst_station_error_m']:.3f} m <= {config.requirement_m:g} m; "
              + "; ".join(f"{k.replace('_', ' ')}: {v['n_markers']}"
                          for k, v in doc["baselines"].items())
@@ -103,6 +104,23 @@ def command(site_name, site_seed, dem_path, stations_path, station_ids, boundary
                 f"{info['worst_marker_error_m']:.3f} m" if "mode" in info else "")
              + f" -> {out}/")
     emit_summary(info, as_json, human)
+
+
+def solver_status_text(solver: dict) -> str:
+    """The solver's status for the summary line; a plan not proven optimal also states its
+    proven lower bound and gap, e.g. ``"time_limit, no layout has fewer than 684, gap 5.4 %"``.
+
+    Parameters
+    ----------
+    solver : dict
+        ``plan.json``'s ``solver`` section (``status``, ``dual_bound``, ``gap``; None when
+        unknown).
+    """
+    text = solver["status"]
+    bound, gap = solver.get("dual_bound"), solver.get("gap")
+    if text != "optimal" and bound is not None and gap is not None and math.isfinite(bound):
+        text += f", no layout has fewer than {math.ceil(bound - 1e-6)}, gap {100 * gap:.1f} %"
+    return text
 
 
 def _plan(site_name, site_seed, dem_path, stations_path, station_ids, boundary_path,

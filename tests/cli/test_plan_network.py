@@ -73,3 +73,14 @@ def test_reference_station_option_names_the_datum(tmp_path, capsys):
     assert doc["network"]["datum"]["reference_station"] == "S3"
     rows = list(csv.reader((out / "stations.csv").read_text().splitlines()))
     assert "network mode (datum: station S3)" in rows[0][0]
+
+
+def test_a_plan_not_proven_optimal_states_its_bound_and_gap():
+    from planner.cli.plan import solver_status_text
+
+    assert solver_status_text({"status": "optimal", "dual_bound": 3.0, "gap": 0.0}) == "optimal"
+    assert solver_status_text({"status": "time_limit", "dual_bound": 683.6,
+                               "gap": 0.0545}) == \
+        "time_limit, no layout has fewer than 684, gap 5.5 %"
+    assert solver_status_text({"status": "time_limit", "dual_bound": None, "gap": None}) == \
+        "time_limit"
