@@ -79,7 +79,7 @@ def run_plan(problem: PlanProblem, config) -> tuple[dict, np.ndarray | None]:
 
 
 def plan_text(rec: dict) -> str:
-    """Marker count with its status: ``3 (optimal)``, ``<= 763 (time limit, bound 81, gap 89 %)``,
+    """Marker count with its status: ``3 (optimal)``, ``<= 723 (time limit, bound 684, gap 5 %)``,
     ``infeasible`` or ``no layout in the time limit``."""
     if rec.get("markers") is None:
         return {"no_solution": "no layout in the time limit"}.get(rec.get("status"),
