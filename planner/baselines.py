@@ -225,7 +225,7 @@ def greedy_network(problem: PlanProblem, config, net=None, max_steps: int = 5000
         loss = None
         if np.all(err <= req) and np.all(merr <= req):
             if config.redundant:
-                lost, loss_err, loss_cov = net.loss_station_errors(selected)
+                lost, loss_err, loss_cov = net.loss_station_errors(selected, j)
                 if np.any(loss_err > req):
                     i, k = np.unravel_index(np.argmax(np.nan_to_num(loss_err, posinf=1e300)),
                                             loss_err.shape)
@@ -237,8 +237,9 @@ def greedy_network(problem: PlanProblem, config, net=None, max_steps: int = 5000
             if not cov.determined.all():
                 if j_all is None:
                     j_all = net.information(open_site)
-                without = selected & (np.arange(problem.n_sites) != m)
-                cov = net.covariance(net.information(without) + 0.05 * j_all)
+                one = np.zeros(problem.n_sites)
+                one[m] = 1.0
+                cov = net.covariance(j - net.site_information(one) + 0.05 * j_all)
             gains = [net.worst_direction_gain(cov, k)]
         elif np.any(err > req):
             worst = np.argsort(-np.nan_to_num(err, posinf=1e300), kind="stable")

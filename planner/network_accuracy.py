@@ -229,6 +229,13 @@ class NetworkModel:
         -------
         J : (P, P) float
         """
+        j = self.site_information(x)
+        j[np.diag_indices_from(j)] += self.prior
+        return j
+
+    def site_information(self, x) -> np.ndarray:
+        """The sites' share of the information, ``sum_j x_j J^(j)`` (no prior), (P, P); ``x``
+        as in :meth:`information`."""
         x = np.asarray(x, dtype=float)
         n6 = 6 * self.problem.n_stations
         acc = np.zeros(n6 * n6)
@@ -244,9 +251,7 @@ class NetworkModel:
             acc += np.bincount(flat.ravel(), blocks.ravel(), minlength=n6 * n6)
         full = acc.reshape(n6, n6)
         j = full[np.ix_(self.free, self.free)]
-        j = 0.5 * (j + j.T)
-        j[np.diag_indices_from(j)] += self.prior
-        return j
+        return 0.5 * (j + j.T)
 
     def covariance(self, j: np.ndarray) -> NetworkCovariance:
         """Covariance of the free parameters from the information ``j``, with undetermined
@@ -286,7 +291,8 @@ class NetworkModel:
         """(s,) predicted 95 % error of every station with the layout ``selected``, m."""
         return self.station_errors_from(self.covariance(self.information(selected)))
 
-    def loss_station_errors(self, selected) -> tuple[np.ndarray, np.ndarray, list]:
+    def loss_station_errors(self, selected, j: np.ndarray
+                            ) -> tuple[np.ndarray, np.ndarray, list]:
         """Station errors after losing each one of a layout's selected tying markers.
 
         A marker seen by one station only adds nothing to the network's information, so
@@ -295,6 +301,8 @@ class NetworkModel:
         Parameters
         ----------
         selected : (n,) bool
+        j : (P, P) float
+            The layout's information, ``information(selected)`` (callers have it already).
 
         Returns
         -------
@@ -308,13 +316,12 @@ class NetworkModel:
         """
         sel = np.asarray(selected, bool)
         markers = np.flatnonzero(sel & self.tying)
-        j = self.information(sel)
         errors = np.empty((markers.size, self.problem.n_stations))
         covariances = []
         for i, m in enumerate(markers):
             one = np.zeros(self.problem.n_sites)
             one[m] = 1.0
-            cov = self.covariance(j - (self.information(one) - np.diag(self.prior)))
+            cov = self.covariance(j - self.site_information(one))
             errors[i] = self.station_errors_from(cov)
             covariances.append(cov)
         return markers, errors, covariances

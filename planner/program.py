@@ -48,6 +48,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, field, replace
+from typing import TYPE_CHECKING
 
 import numpy as np
 import scipy.sparse as sp
@@ -64,6 +65,9 @@ from planner.station_checks import (
     station_infos,
 )
 from planner.usability import PlanProblem, sector_index
+
+if TYPE_CHECKING:
+    from planner.baselines import Baseline
 
 
 @dataclass(frozen=True)
@@ -146,6 +150,12 @@ class Model:
         data = np.broadcast_to(np.asarray(coef, float), var.shape)
         return sp.csr_array((data, (np.zeros_like(var), var)), shape=(1, self.n_vars))
 
+    def implied_row(self, site: int, site_index, coef=1.0, rhs: float = 1.0) -> sp.csr_array:
+        """One row for "a marker at ``site`` implies ``sum coef x >= rhs``" over the given
+        sites: ``sum coef x - rhs x_site``, to be bounded below by 0."""
+        coef = np.broadcast_to(np.asarray(coef, float), np.shape(site_index))
+        return self.site_row(np.r_[site_index, site], np.r_[coef, -rhs])
+
 
 @dataclass(frozen=True)
 class Solution:
@@ -207,7 +217,7 @@ class PlanResult:
     solve_time_s: float
     model: Model
     history: list = field(default_factory=list)
-    greedy: object = None
+    greedy: Baseline | None = None
 
     @property
     def status(self) -> str:
@@ -472,21 +482,21 @@ def accuracy_cuts(problem: PlanProblem, model: Model, selected: np.ndarray, conf
             if info.error(left) > config.requirement_m:
                 grown = info.grow_failing(left, int(m), config.requirement_m)
                 rest = np.setdiff1d(info.sites, np.r_[grown, m])
-                rows.append(model.site_row(np.r_[rest, m], np.r_[np.ones(rest.size), -1.0]))
+                rows.append(model.implied_row(m, rest))
                 lower.append(0.0)
                 kinds.append(RowKind("cut-loss", s))
                 if not outer_approximation:
                     continue
                 for oa in info.oa_cuts(left, config.requirement_m, exclude=int(m)):
                     # if m is selected, the others alone must pass
-                    rows.append(model.site_row(np.r_[oa[0], m], np.r_[oa[1], -oa[2]]))
+                    rows.append(model.implied_row(m, oa[0], oa[1], oa[2]))
                     lower.append(0.0)
                     kinds.append(RowKind("oa-loss", s))
                 # if m is selected, the others alone must carry the information cuts
                 others = np.flatnonzero(problem.pair_site[info.pairs] != m)
                 for w, name in zip(info_weights(problem, info.pairs[others], config),
                                    ("info", "heading"), strict=True):
-                    rows.append(model.site_row(np.r_[info.sites[others], m], np.r_[w, -1.0]))
+                    rows.append(model.implied_row(m, info.sites[others], w))
                     lower.append(0.0)
                     kinds.append(RowKind(f"{name}-loss", s))
     block = sp.csr_array(sp.vstack(rows)) if rows else None
@@ -666,12 +676,13 @@ def network_cuts(problem: PlanProblem, model: Model, selected: np.ndarray, confi
     bad_markers = markers[merr > req]
     if failing.size == 0 and bad_markers.size == 0:
         if config.redundant:
-            return _network_loss_cuts(model, selected, config, net, tying, in_model, upper_bound)
+            return _network_loss_cuts(model, selected, j_sel, config, net, tying, in_model,
+                                      upper_bound)
         return None, [], []
     rows, lower, kinds = [], [], []
 
-    def add(sites, coef, lo, kind):
-        rows.append(model.site_row(sites, coef))
+    def add(row, lo, kind):
+        rows.append(row)
         lower.append(lo)
         kinds.append(kind)
 
@@ -684,7 +695,7 @@ def network_cuts(problem: PlanProblem, model: Model, selected: np.ndarray, confi
 
     for k, coef, rhs in tangents:
         cut = _sparse_tangent(np.where(in_model, coef, 0.0), rhs, upper_bound, _MAX_TERMS)
-        add(cut[0], cut[1], cut[2], RowKind("oa", k))
+        add(model.site_row(cut[0], cut[1]), cut[2], RowKind("oa", k))
     grow = failing[np.argmax(err[failing])] if failing.size and \
         net.tie_a.size <= _GROW_MAX_TIES and np.isfinite(err[failing]).any() else -1
     linked = net.connected_to_reference(selected)
@@ -697,7 +708,7 @@ def network_cuts(problem: PlanProblem, model: Model, selected: np.ndarray, confi
                                    first[0] if first else None)
         rest = np.flatnonzero(tying & ~chosen)
         if dense_ok or rest.size <= _MAX_TERMS:
-            add(rest, 1.0, 1.0, RowKind("cut", int(k)))
+            add(model.site_row(rest), 1.0, RowKind("cut", int(k)))
         if not linked[k]:
             comp = _component(net, selected, int(k))
             if comp in done_components:
@@ -709,22 +720,23 @@ def network_cuts(problem: PlanProblem, model: Model, selected: np.ndarray, confi
             b = net.n_stations_seeing - a
             bridge = np.flatnonzero(tying & (a > 0) & (b > 0))
             if dense_ok or bridge.size <= 4 * _MAX_TERMS:
-                add(bridge, 1.0, 1.0, RowKind("connect", int(k)))
+                add(model.site_row(bridge), 1.0, RowKind("connect", int(k)))
     if bad_markers.size:
         worst_m = bad_markers[np.argsort(-merr[merr > req], kind="stable")]
         for m, coef, rhs in net.marker_tangents(cov, worst_m[:n_oa], req):
             cut = _sparse_tangent(np.where(in_model, coef, 0.0), rhs, upper_bound, _MAX_TERMS)
-            add(np.r_[cut[0], m], np.r_[cut[1], -1.0], 0.0, RowKind("oa-marker"))
+            add(model.implied_row(m, cut[0], cut[1]), 0.0, RowKind("oa-marker"))
         rest = np.flatnonzero(tying & ~selected)
         for m in bad_markers if dense_ok or rest.size <= _MAX_TERMS else ():
-            add(np.r_[rest, m], np.r_[np.ones(rest.size), -1.0], 0.0, RowKind("cut-marker"))
+            add(model.implied_row(m, rest), 0.0, RowKind("cut-marker"))
     if not rows:  # pragma: no cover - a failing station always yields a tangent
         raise InfeasiblePlanError("network mode: the layout fails but no cut was found")
     return sp.csr_array(sp.vstack(rows)), lower, kinds
 
 
-def _network_loss_cuts(model: Model, selected: np.ndarray, config, net: NetworkModel,
-                       tying: np.ndarray, in_model: np.ndarray, upper_bound: int | None
+def _network_loss_cuts(model: Model, selected: np.ndarray, j_sel: np.ndarray, config,
+                       net: NetworkModel, tying: np.ndarray, in_model: np.ndarray,
+                       upper_bound: int | None
                        ) -> tuple[sp.csr_array | None, list[float], list[RowKind]]:
     """Redundant network mode: valid cuts for a layout that passes whole but fails at some
     station after losing one tying marker ``m``.
@@ -733,25 +745,26 @@ def _network_loss_cuts(model: Model, selected: np.ndarray, config, net: NetworkM
     site outside the selected ones: every subset of the selected sites without ``m`` fails, by
     monotonicity); ``"oa-loss"``: the failing stations' tangents at the information without
     ``m``, enforced only when ``x_m = 1``: ``sum_{j != m} c_j x_j - x_m >= 0`` (normalised).
-    Arguments as :func:`network_cuts` (``tying``: open tying sites, ``in_model``: sites that
-    are variables). Returns ``(None, [], [])`` when every loss passes.
+    Arguments as :func:`network_cuts` (``j_sel``: the layout's information, ``tying``: open
+    tying sites, ``in_model``: sites that are variables). Returns ``(None, [], [])`` when
+    every loss passes.
     """
     req = config.requirement_m
-    markers, errors, covariances = net.loss_station_errors(selected)
+    markers, errors, covariances = net.loss_station_errors(selected, j_sel)
     rest = np.flatnonzero(tying & ~selected)
     rows, lower, kinds = [], [], []
     for m, err, cov in zip(markers, errors, covariances, strict=True):
         bad = np.flatnonzero(err > req)
         if bad.size == 0:
             continue
-        rows.append(model.site_row(np.r_[rest, m], np.r_[np.ones(rest.size), -1.0]))
+        rows.append(model.implied_row(m, rest))
         lower.append(0.0)
         kinds.append(RowKind("cut-loss", int(bad[0])))
         for k, coef, rhs in net.station_tangents(cov, bad, req):
             coef = np.where(in_model, coef, 0.0)
             coef[m] = 0.0
             sites, c, _ = _sparse_tangent(coef, rhs, upper_bound, _MAX_TERMS)
-            rows.append(model.site_row(np.r_[sites, m], np.r_[c, -1.0]))
+            rows.append(model.implied_row(m, sites, c))
             lower.append(0.0)
             kinds.append(RowKind("oa-loss", k))
     if not rows:
@@ -778,12 +791,10 @@ def _grow_network(net: NetworkModel, chosen: np.ndarray, k: int, requirement_m: 
     if cand.size == 0:
         return chosen
     order = cand[np.argsort(coef[cand], kind="stable")] if coef is not None else cand
-    prior = np.diag(net.prior)
-
     def fails(m: int) -> bool:
         x = np.zeros(net.problem.n_sites)
         x[order[:m]] = 1.0
-        j = j_chosen + net.information(x) - prior
+        j = j_chosen + net.site_information(x)
         cov = net.covariance(j)
         if not cov.determined[k]:
             return True
@@ -943,14 +954,14 @@ def _root_relaxation(problem: PlanProblem, model: Model, config, net: NetworkMod
     x_in = np.zeros(problem.n_sites)
     x_in[model.var_site] = model.ub[:nx]
     x_in *= net.tying
-    j_all = net.information(x_in)
+    sites_all = net.site_information(x_in)
     prior = np.diag(net.prior)
-    e_all = net.station_errors(x_in)
+    e_all = net.station_errors_from(net.covariance(prior + sites_all))
     cuts = []  # (station, coefficients (n,), rhs)
     for k in np.flatnonzero(np.isfinite(e_all)):
         if k == net.reference:
             continue
-        cov_t = net.covariance(prior + (e_all[k] / req) ** 2 * (j_all - prior))
+        cov_t = net.covariance(prior + (e_all[k] / req) ** 2 * sites_all)
         cuts += net.station_tangents(cov_t, [int(k)], req)
     lp = replace(model, integrality=np.zeros_like(model.integrality))
     bound, history = -np.inf, []

@@ -320,7 +320,8 @@ def _evaluate_network(problem: PlanProblem, selected: np.ndarray, config, net) -
 
     net = net or network_model(problem, config)
     count, sectors = direction_status(problem, selected, config.n_sectors)
-    cov = net.covariance(net.information(selected))
+    j = net.information(selected)
+    cov = net.covariance(j)
     err = net.station_errors_from(cov)
     markers = np.flatnonzero(selected)
     merr = np.full(problem.n_sites, np.nan)
@@ -329,7 +330,7 @@ def _evaluate_network(problem: PlanProblem, selected: np.ndarray, config, net) -
         & (err <= config.requirement_m)
     worst_err = worst_sec = None
     if config.redundant:
-        _, loss, _ = net.loss_station_errors(selected)
+        _, loss, _ = net.loss_station_errors(selected, j)
         worst_err = np.max(np.vstack([err[None], loss]), axis=0)
         worst_sec = _worst_loss_sectors(problem, selected, config, sectors)
         ok &= _survives_loss(count, worst_sec, worst_err, config)
