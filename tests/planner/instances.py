@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 
 from planner.usability import OCCLUDED, USABLE, PlanProblem
@@ -57,3 +59,21 @@ class AnalyticModel:
         sigma = analytic_sigma(d)
         return SimpleNamespace(sigma_m=sigma, q95_m=2.0 * sigma,
                                in_domain=d <= self.max_distance_m)
+
+
+def brute_force_optimum(problem: PlanProblem, config) -> int | None:
+    """Fewest sites of any layout that passes :func:`planner.station_checks.evaluate_layout`
+    (known-control or network mode, as ``config`` says), by enumerating every subset; None
+    when none passes."""
+    from planner.network_accuracy import network_model
+    from planner.station_checks import evaluate_layout, station_infos
+
+    infos = None if config.network else station_infos(problem, config)
+    net = network_model(problem, config) if config.network else None
+    for k in range(1, problem.n_sites + 1):
+        for combo in itertools.combinations(range(problem.n_sites), k):
+            sel = np.zeros(problem.n_sites, bool)
+            sel[list(combo)] = True
+            if evaluate_layout(problem, sel, config, infos, net=net).all_ok:
+                return k
+    return None

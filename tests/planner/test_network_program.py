@@ -9,7 +9,7 @@ from planner.network_accuracy import network_model
 from planner.program import plan_sites
 from planner.station_checks import evaluate_layout
 from planner.usability import directions_ok
-from tests.planner.instances import make_problem, ring
+from tests.planner.instances import brute_force_optimum, make_problem, ring
 
 
 def _instance(seed):
@@ -17,18 +17,6 @@ def _instance(seed):
     stations = [[0, 0], [14, 0], [28, 0]]
     sites = np.vstack([rng.uniform([-8, -9], [36, 9], (9, 2)), [[7, 4], [21, -4]]])
     return make_problem(stations, sites, max_range_m=16)
-
-
-def _brute_force(problem, config):
-    net = network_model(problem, config)
-    for k in range(1, problem.n_sites + 1):
-        for combo in itertools.combinations(range(problem.n_sites), k):
-            sel = np.zeros(problem.n_sites, bool)
-            sel[list(combo)] = True
-            if directions_ok(problem, sel, config).all() and \
-                    evaluate_layout(problem, sel, config, net=net).all_ok:
-                return k
-    return None
 
 
 @pytest.mark.parametrize("seed", [2, 5])
@@ -41,14 +29,14 @@ def test_network_plan_matches_the_brute_force_optimum(seed):
     cfg = base.replace(requirement_m=float(1.15 * best))  # some markers cannot meet it
     r = plan_sites(p, cfg)
     assert r.check.all_ok and r.status == "optimal"
-    assert r.selected.sum() == _brute_force(p, cfg)
+    assert r.selected.sum() == brute_force_optimum(p, cfg)
     # the known-control optimum fails the network's requirement here, or needs as many
     kc = plan_sites(p, cfg.replace(network=False)).selected
     assert kc.sum() <= r.selected.sum()
     assert kc.sum() == r.selected.sum() or not evaluate_layout(p, kc, cfg, net=net).all_ok
 
 
-def test_redundant_network_plan_survives_any_loss_and_matches_the_brute_force():
+def test_redundant_network_plan_survives_any_loss_and_matches_thebrute_force_optimum():
     p = _instance(5)
     base = PlanConfig(network=True, redundant=True, min_markers=3, min_sectors=2,
                       max_range_m=16, working_radius_m=10, time_limit_s=60)
@@ -59,7 +47,7 @@ def test_redundant_network_plan_survives_any_loss_and_matches_the_brute_force():
     cfg = base.replace(requirement_m=float(1.1 * worst_loss))
     r = plan_sites(p, cfg)
     assert r.check.all_ok and r.status == "optimal"
-    assert r.selected.sum() == _brute_force(p, cfg)
+    assert r.selected.sum() == brute_force_optimum(p, cfg)
     # independently of the loss check: without any one marker, every station still passes
     plain = cfg.replace(redundant=False)
     for j in np.flatnonzero(r.selected):
@@ -158,7 +146,7 @@ def test_large_problem_path_bound_never_exceeds_the_brute_force_optimum(seed, mo
     net = network_model(p, base)
     cfg = base.replace(requirement_m=float(1.15 * net.station_errors(np.ones(p.n_sites,
                                                                            bool)).max()))
-    best = _brute_force(p, cfg)
+    best = brute_force_optimum(p, cfg)
     r = plan_sites(p, cfg)
     assert r.greedy is not None and r.check.all_ok
     assert r.solution.dual_bound <= best + 1e-6

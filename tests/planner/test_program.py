@@ -1,4 +1,3 @@
-import itertools
 
 import numpy as np
 import pytest
@@ -6,21 +5,10 @@ import pytest
 from markerplan.errors import ConfigError, InfeasiblePlanError
 from planner.config import PlanConfig
 from planner.program import RowKind, build_model, plan_sites, solve
-from planner.station_checks import evaluate_layout, station_infos
-from tests.planner.instances import make_problem, ring
+from planner.station_checks import evaluate_layout
+from tests.planner.instances import brute_force_optimum, make_problem, ring
 
 LOOSE = PlanConfig(requirement_m=0.10, working_radius_m=10.0, max_range_m=30.0)
-
-
-def brute_force_optimum(problem, config):
-    infos = station_infos(problem, config)
-    for k in range(1, problem.n_sites + 1):
-        for combo in itertools.combinations(range(problem.n_sites), k):
-            sel = np.zeros(problem.n_sites, bool)
-            sel[list(combo)] = True
-            if evaluate_layout(problem, sel, config, infos).all_ok:
-                return k
-    return None
 
 
 def test_one_station_six_sectors_needs_exactly_three():
