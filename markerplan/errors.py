@@ -29,3 +29,8 @@ class OutputError(MarkerPlanError, OSError):
 
 class InfeasiblePlanError(MarkerPlanError, RuntimeError):
     """No marker layout can satisfy the requirement; the message names failing stations and why."""
+
+
+class PlanTimeLimitError(InfeasiblePlanError):
+    """The search ended (its time limit, or the solver returned no layout) before any layout
+    passed: nothing is proven infeasible, more time may find one."""

@@ -27,7 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
-from markerplan.errors import InfeasiblePlanError
+from markerplan.errors import InfeasiblePlanError, PlanTimeLimitError
 from planner.baselines import greedy_network, regular_grid
 from planner.program import plan_sites
 from planner.station_checks import evaluate_layout
@@ -64,9 +64,8 @@ def run_plan(problem: PlanProblem, config) -> tuple[dict, np.ndarray | None]:
     try:
         r = plan_sites(problem, config)
     except InfeasiblePlanError as exc:
-        msg = str(exc)
-        status = "no_solution" if ("time limit" in msg or "time-limit" in msg) else "infeasible"
-        return {"status": status, "error": msg,
+        status = "no_solution" if isinstance(exc, PlanTimeLimitError) else "infeasible"
+        return {"status": status, "error": str(exc),
                 "time_s": round(time.perf_counter() - t, 2)}, None
     sol = r.solution
     merr = r.check.marker_error_m

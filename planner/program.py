@@ -54,7 +54,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.optimize import Bounds, LinearConstraint, milp
 
-from markerplan.errors import ConfigError, InfeasiblePlanError
+from markerplan.errors import ConfigError, InfeasiblePlanError, PlanTimeLimitError
 from planner import accuracy
 from planner.network_accuracy import NetworkModel, network_model
 from planner.station_checks import (
@@ -833,7 +833,9 @@ def plan_sites(problem: PlanProblem, config, model: Model | None = None) -> Plan
     Raises
     ------
     InfeasiblePlanError
-        Naming each station that cannot be satisfied and why, or the budget / time limit.
+        Naming each station that cannot be satisfied and why, or the budget;
+        :class:`~markerplan.errors.PlanTimeLimitError` (a subclass) when the time limit ended
+        the search before any layout passed.
     """
     infos = station_infos(problem, config)
     if config.network:
@@ -1045,7 +1047,7 @@ def _cut_loop(problem: PlanProblem, config, model: Model, cuts, check,
                               iterations=iteration - 1, n_cuts=n_cuts,
                               solve_time_s=solve_time, model=model, history=history)
         if remaining <= 0:
-            raise InfeasiblePlanError(
+            raise PlanTimeLimitError(
                 f"time limit {config.time_limit_s:g} s reached after {iteration - 1} "
                 "iteration(s) before every station met the accuracy requirement; "
                 "raise --time-limit")
@@ -1065,8 +1067,8 @@ def _cut_loop(problem: PlanProblem, config, model: Model, cuts, check,
                                           "raise --budget or relax the configuration")
             if incumbent is not None:
                 continue  # time limit: the incumbent is the answer
-            raise InfeasiblePlanError(f"solver found no layout ({sol.status}: {sol.message}); "
-                                      "raise --time-limit")
+            raise PlanTimeLimitError(f"solver found no layout ({sol.status}: {sol.message}); "
+                                     "raise --time-limit")
         rows, lower, kinds = cuts(sol.selected)
         if rows is None:
             return PlanResult(selected=sol.selected, check=check(sol.selected), solution=sol,

@@ -49,7 +49,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from markerplan.errors import ConfigError, InfeasiblePlanError
+from markerplan.errors import ConfigError, InfeasiblePlanError, PlanTimeLimitError
 from planner.network_accuracy import network_model
 from planner.program import (
     Model,
@@ -342,7 +342,7 @@ class _MinimaxModel:
         infeasible."""
         sol = self._solve(self._bounded(None, np.inf, count_objective=True))
         if sol is None or sol.status not in ("optimal", "infeasible"):
-            raise InfeasiblePlanError(
+            raise PlanTimeLimitError(
                 "time limit reached before the fewest markers meeting the direction rows were "
                 "proven; raise --time-limit")
         return None if sol.selected is None else int(sol.selected.sum())
@@ -396,8 +396,6 @@ class _MinimaxModel:
 #: Requirement standing for "none" when the network oracle is asked for any k-subset, m (as
 #: the planner's own "no requirement").
 _NO_REQUIREMENT_M = 1e9
-#: A network query that raised before this fraction of its time limit proved infeasibility.
-_PROVEN_BEFORE = 0.9
 
 
 class _NetworkMinimax(_MinimaxModel):
@@ -447,9 +445,9 @@ class _NetworkMinimax(_MinimaxModel):
         return model
 
     def query(self, k: int, eps: float, statuses: list[str]):
-        """As :meth:`_MinimaxModel.query`. ``plan_sites`` raises when no layout exists or
-        when its time limit ends the search: raised well before the limit, the bound is proven
-        infeasible; at the limit it is not proven."""
+        """As :meth:`_MinimaxModel.query`. ``plan_sites`` raises when no layout exists (proven
+        infeasible) or :class:`~markerplan.errors.PlanTimeLimitError` when its time limit ends
+        the search (not proven)."""
         limit = min(self.deadline - time.perf_counter(), self.solve_cap_s)
         if limit <= 0:
             statuses.append("time_limit")
@@ -461,10 +459,9 @@ class _NetworkMinimax(_MinimaxModel):
         t = time.perf_counter()
         try:
             result = plan_sites(self.problem, cfg, self._exact_model(k, cfg))
-        except InfeasiblePlanError:
-            elapsed = time.perf_counter() - t
-            self.solve_time_s += elapsed
-            proven = elapsed < _PROVEN_BEFORE * limit
+        except InfeasiblePlanError as exc:
+            self.solve_time_s += time.perf_counter() - t
+            proven = not isinstance(exc, PlanTimeLimitError)
             statuses.append("infeasible" if proven else "time_limit")
             return None, proven
         self.solve_time_s += result.solve_time_s

@@ -3,7 +3,7 @@ import itertools
 import numpy as np
 import pytest
 
-from markerplan.errors import ConfigError, InfeasiblePlanError
+from markerplan.errors import ConfigError, InfeasiblePlanError, PlanTimeLimitError
 from planner.config import PlanConfig
 from planner.network_accuracy import network_model
 from planner.program import plan_sites
@@ -66,6 +66,7 @@ def test_infeasible_network_names_the_station_and_why():
     with pytest.raises(InfeasiblePlanError) as exc:
         plan_sites(p, cfg)
     msg = str(exc.value)
+    assert not isinstance(exc.value, PlanTimeLimitError)
     assert "\n" not in msg and "S3: disconnected" in msg and "reference S1" in msg
     with pytest.raises(InfeasiblePlanError, match="S2: (heading too weak|too far)"):
         plan_sites(make_problem([[0, 0], [15, 0]], sites[:5], max_range_m=12), cfg)
@@ -118,6 +119,9 @@ def test_time_limit_returns_the_incumbent_with_the_proven_bound():
     assert r.solution.objective == p.n_sites and r.iterations >= 1
     assert r.solution.dual_bound == pytest.approx(plan_sites(p, cfg).selected.sum())
     assert r.solution.gap == pytest.approx((p.n_sites - r.solution.dual_bound) / p.n_sites)
+    # without an incumbent the time limit is its own error type (not "proven infeasible")
+    with pytest.raises(PlanTimeLimitError, match="raise --time-limit"):
+        _cut_loop(p, cfg, model, never_done, lambda sel: evaluate_layout(p, sel, cfg))
 
 
 def test_network_greedy_in_redundant_mode_survives_any_loss():
