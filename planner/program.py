@@ -27,9 +27,10 @@ mode also ``z_sk`` "... at least two". For every station ``s`` with usable sites
 - information (necessary, valid): ``sum_j (3 / sigma_sj^2) x_j >= chi2_3(0.95) / requirement^2``
   (:func:`planner.accuracy.information_lower_bound`); its coefficients are scaled so the row
   reads ``>= 1`` and a what-if study can move the requirement by changing that bound alone;
-- tightening rows added by :func:`plan_sites` (:func:`tightening_rows`, valid for the configured
-  requirement only): heading information ``sum_j (3 |d_sj|^2 / sigma_sj^2) x_j >= chi2_3(0.95)
-  R^2 / requirement^2`` and outer-approximation tangents at 9 rim points;
+- tightening rows added by :func:`plan_sites` (:func:`with_tightening_rows`, valid for the
+  configured requirement only): heading information
+  ``sum_j (3 |d_sj|^2 / sigma_sj^2) x_j >= chi2_3(0.95) R^2 / requirement^2`` and
+  outer-approximation tangents at 9 rim points;
 - accuracy cuts (added lazily): the predicted error is monotone in the marker set, so when
   station ``s`` fails with a set ``T`` every subset of ``T`` fails too. ``T`` is first grown
   greedily to a larger failing set ``T'`` (a stronger cut), then
@@ -78,7 +79,7 @@ class RowKind:
     ----------
     family : str
         "count", "info", "sector", "sector2", "sector21", "directions", "directions-loss",
-        "budget" (from :func:`build_model`), "heading", "oa0" (:func:`tightening_rows`), "cut",
+        "budget" (from :func:`build_model`), "heading", "oa0" (:func:`with_tightening_rows`), "cut",
         "oa", "cut-loss", "oa-loss", "info-loss", "heading-loss" (:func:`accuracy_cuts`);
         network mode: "upper-bound", "cut", "connect", "oa", "cut-marker", "oa-marker"
         (:func:`network_cuts`), redundant: "cut-loss", "oa-loss" (:func:`_network_loss_cuts`).
@@ -337,15 +338,15 @@ def _boundary_oa_cuts(problem: PlanProblem, s: int, config) -> list:
                         ** 2, rim="spread")
 
 
-def tightening_rows(problem: PlanProblem, model: Model, config
-                    ) -> tuple[sp.csr_array | None, list[float], list[RowKind]]:
-    """Valid rows that tighten the model for ``config.requirement_m`` before the first solve.
+def with_tightening_rows(problem: PlanProblem, model: Model, config) -> Model:
+    """``model`` with valid rows that tighten it for ``config.requirement_m`` before the first
+    solve.
 
     Per station: the heading-information row
     (:func:`planner.accuracy.heading_information_lower_bound`) and outer-approximation tangents
     at 9 rim points (families ``"heading"``, ``"oa0"``). Unlike the ``info:`` rows of
     :func:`build_model` they do not rescale with the requirement, so a model re-used for another
-    requirement level must leave them out. Returns ``(rows, lower, kinds)``.
+    requirement level must leave them out.
     """
     rows, lower, kinds = [], [], []
     reference = _reference_index(problem, config)
@@ -364,7 +365,9 @@ def tightening_rows(problem: PlanProblem, model: Model, config
             rows.append(model.site_row(sites, coef))
             lower.append(rhs)
             kinds.append(RowKind("oa0", s))
-    return (sp.csr_array(sp.vstack(rows)) if rows else None), lower, kinds
+    if not rows:
+        return model
+    return model.with_rows(sp.vstack(rows), lower, np.full(len(lower), np.inf), kinds)
 
 
 def info_weights(problem: PlanProblem, pairs: np.ndarray, config
@@ -849,10 +852,7 @@ def plan_sites(problem: PlanProblem, config, model: Model | None = None) -> Plan
             + "; ".join(f"{k}: {v}" for k, v in failing.items())
             + "; relax the configuration or add candidate sites")
     if model is None:
-        model = build_model(problem, config)
-        rows, lower, kinds = tightening_rows(problem, model, config)
-        if rows is not None:
-            model = model.with_rows(rows, lower, np.full(len(lower), np.inf), kinds)
+        model = with_tightening_rows(problem, build_model(problem, config), config)
 
     def cuts(selected):
         return accuracy_cuts(problem, model, selected, config, infos, outer_approximation=True)
@@ -877,10 +877,7 @@ def _plan_network(problem: PlanProblem, config, model: Model | None,
             f"{config.grid_spacing_m * math.sqrt(n_tying / MAX_NETWORK_TYING_SITES) * 1.2:.1f} m)")
     hopeless = network_preflight(problem, config, net, infos)
     if model is None:
-        model = build_model(problem, config)
-        rows, lower, kinds = tightening_rows(problem, model, config)
-        if rows is not None:
-            model = model.with_rows(rows, lower, np.full(len(lower), np.inf), kinds)
+        model = with_tightening_rows(problem, build_model(problem, config), config)
     ub = model.ub.copy()
     var = model.site_var[np.flatnonzero(hopeless)]
     ub[var[var >= 0]] = 0.0

@@ -58,7 +58,7 @@ from planner.program import (
     build_model,
     plan_sites,
     solve,
-    tightening_rows,
+    with_tightening_rows,
 )
 from planner.station_checks import LayoutCheck, diagnose, evaluate_layout, station_infos
 from planner.usability import PlanProblem, directions_ok
@@ -438,11 +438,7 @@ class _NetworkMinimax(_MinimaxModel):
         model = build_model(self.problem, cfg)
         lb = model.row_lb.copy()
         lb[[i for i, r in enumerate(model.row_kind) if r.family == "budget"]] = float(k)
-        model = replace(model, row_lb=lb)
-        rows, lower, kinds = tightening_rows(self.problem, model, cfg)
-        if rows is not None:
-            model = model.with_rows(rows, lower, np.full(len(lower), np.inf), kinds)
-        return model
+        return with_tightening_rows(self.problem, replace(model, row_lb=lb), cfg)
 
     def query(self, k: int, eps: float, statuses: list[str]):
         """As :meth:`_MinimaxModel.query`. ``plan_sites`` raises when no layout exists (proven
