@@ -37,12 +37,17 @@ class DEM:
         Grid spacing, metres (square cells).
     crs : str or None
         Coordinate reference system as WKT, when known.
+    valid : (ny, nx) bool or None
+        Which cells hold measured terrain; ``None``: every cell. Heights under invalid
+        (nodata) cells are filled (e.g. :func:`fill_nodata`) so that a mesh is complete, but
+        they are not terrain: nothing may stand on them (see :meth:`valid_at`).
     """
 
     heights_m: np.ndarray
     origin_m: tuple[float, float]
     cell_size_m: float
     crs: str | None = None
+    valid: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         self.heights_m = np.asarray(self.heights_m, dtype=np.float64)
@@ -54,6 +59,15 @@ class DEM:
         self.origin_m = (float(self.origin_m[0]), float(self.origin_m[1]))
         self.cell_size_m = float(self.cell_size_m)
         _refuse_nan(self.heights_m, "DEM")
+        if self.valid is not None:
+            self.valid = np.asarray(self.valid, dtype=bool)
+            if self.valid.shape != self.heights_m.shape:
+                raise DataError(f"DEM valid mask has shape {self.valid.shape}, heights_m "
+                                f"{self.heights_m.shape}; give one flag per cell")
+            if not self.valid.any():
+                raise DataError("DEM has no valid cell at all; check the nodata value")
+            if self.valid.all():
+                self.valid = None
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -151,6 +165,45 @@ class DEM:
         h = self.heights_m
         return ((1 - u) * (1 - v) * h[j, i] + u * (1 - v) * h[j, i + 1]
                 + (1 - u) * v * h[j + 1, i] + u * v * h[j + 1, i + 1])
+
+    def valid_mask(self) -> np.ndarray:
+        """(ny, nx) bool: which cells hold measured terrain (all of them when
+        :attr:`valid` is ``None``)."""
+        if self.valid is None:
+            return np.ones(self.shape, dtype=bool)
+        return self.valid
+
+    def valid_at(self, xy: np.ndarray) -> np.ndarray:
+        """Whether each point lies on measured terrain: inside the grid (:meth:`contains`)
+        and every cell of its bilinear stencil valid.
+
+        Parameters
+        ----------
+        xy : (n, 2) float
+            Site-frame points, metres.
+
+        Returns
+        -------
+        on_data : (n,) bool
+
+        Examples
+        --------
+        >>> valid = np.ones((3, 3), bool); valid[2, 2] = False
+        >>> dem = DEM(np.zeros((3, 3)), (0.0, 0.0), 1.0, valid=valid)
+        >>> dem.valid_at(np.array([[0.5, 0.5], [1.5, 1.5], [5.0, 0.0]])).tolist()
+        [True, False, False]
+        """
+        xy = np.atleast_2d(np.asarray(xy, dtype=float))
+        inside = self.contains(xy)
+        if self.valid is None:
+            return inside
+        ny, nx = self.shape
+        fx = (xy[:, 0] - self.origin_m[0]) / self.cell_size_m
+        fy = (xy[:, 1] - self.origin_m[1]) / self.cell_size_m
+        i = np.clip(np.floor(np.nan_to_num(fx)).astype(np.int64), 0, nx - 2)
+        j = np.clip(np.floor(np.nan_to_num(fy)).astype(np.int64), 0, ny - 2)
+        v = self.valid
+        return inside & v[j, i] & v[j, i + 1] & v[j + 1, i] & v[j + 1, i + 1]
 
     def slope_rad(self) -> np.ndarray:
         """Terrain slope of each cell (central differences), radians, shape (ny, nx)."""
