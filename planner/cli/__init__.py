@@ -18,6 +18,7 @@ from markerplan.output_folder import Terminated
 # name -> module under planner.cli that defines a click command called ``command``
 COMMANDS: dict[str, str] = {
     "simulate": "simulate",
+    "import-pcap": "import_pcap",
     "process": "process",
     "fit-sphere": "fit_sphere",
     "range-study": "range_study",
