@@ -247,8 +247,8 @@ class TurntableLog:
             if n_rows != n_frames:
                 fix = ("give one row per frame" if n_rows < n_frames else
                        "drop the extra rows, or log time_s to interpolate")
-                raise DataError(f"{self.what} has {n_rows} rows but the capture has {n_frames} "
-                                f"frames (revolutions kept); {fix}")
+                raise DataError(f"{self.what} has {n_rows} row(s) but the capture has "
+                                f"{n_frames} frame(s) (revolutions kept); {fix}")
             return self.angle_rad.copy()
         outside = np.flatnonzero((frame_time_s < self.time_s[0])
                                  | (frame_time_s > self.time_s[-1]))

@@ -1,30 +1,64 @@
-"""Real VLP-16 capture (btlad/ScanParser, CC0) read into the scan structure."""
+"""Real VLP-16 capture (btlad/ScanParser, CC0) read into the scan structure, and the turntable
+log's two forms.
+
+Figures of my.pcap (from its packet headers): 79 records, 41 VLP-16 data packets; the first data
+packet is stamped 1599213599.872340 s, the last of the first revolution 1599213600.072244 s and
+the capture's last 1599213600.236023 s. The decoder makes two revolutions of it: a complete one
+(35 packets x 384 = 13440 returns) and the 6-packet remainder (2304 returns).
+"""
 
 import numpy as np
 import pytest
 
 from markerplan.errors import DataError, InputFileError
-from pipeline.pcap import read_turntable_csv, read_vlp16_pcap
+from pipeline.pcap import (
+    TurntableLog,
+    decode_vlp16_pcap,
+    read_turntable_log,
+    scan_from_revolutions,
+)
 from pipeline.rig import VLP16_ELEVATION_DEG
 from pipeline.scan_format import read_scan, write_scan
 
+FIRST_PACKET_S = 1599213599.872340
+END_OF_FIRST_REVOLUTION_S = 1599213600.072244
+LAST_PACKET_S = 1599213600.236023
+#: one data packet's firings last 1.3 ms after its stamp
+PACKET_S = 1.33e-3
+
 
 @pytest.fixture
-def pcap(real_data):
-    return real_data / "vlp16_pcap" / "my.pcap"
+def revolutions(real_data):
+    return decode_vlp16_pcap(real_data / "vlp16_pcap" / "my.pcap")
 
 
-def test_single_frame_without_angles(pcap):
-    scan = read_vlp16_pcap(pcap)
+@pytest.fixture
+def scan(revolutions):
+    return scan_from_revolutions(revolutions, None, "my", "my.pcap")
+
+
+def test_revolutions_of_the_capture(revolutions):
+    assert [len(r.points) for r in revolutions] == [13440, 2304]
+    assert [r.complete for r in revolutions] == [True, False]
+    first, last = revolutions
+    # the host stamps plus the firings' offsets: the revolution spans its packets
+    assert first.start_s == pytest.approx(FIRST_PACKET_S, abs=2e-4)
+    assert first.end_s == pytest.approx(END_OF_FIRST_REVOLUTION_S + PACKET_S, abs=5e-5)
+    assert last.end_s == pytest.approx(LAST_PACKET_S + PACKET_S, abs=5e-5)
+    assert first.time_s == pytest.approx(0.5 * (first.start_s + first.end_s))
+    # packets are missing inside the first revolution: returns over ~110 of 360 degrees
+    assert 0.2 < first.coverage < 0.35
+
+
+def test_single_frame_without_angles(scan):
     assert scan.n_frames == 1
-    assert scan.n_points > 10_000
+    assert scan.n_points == 15744
     assert set(np.unique(scan.laser_id)) == set(range(16))
     # indoor capture: ranges up to ~4 m
     assert 0.3 < scan.range_m.min() and scan.range_m.max() < 6.0
 
 
-def test_channels_have_their_datasheet_elevation(pcap):
-    scan = read_vlp16_pcap(pcap)
+def test_channels_have_their_datasheet_elevation(scan):
     xyz = scan.xyz_sensor_m.astype(float)
     elev = np.degrees(np.arcsin(xyz[:, 2] / np.linalg.norm(xyz, axis=1)))
     for ch in range(16):
@@ -33,31 +67,87 @@ def test_channels_have_their_datasheet_elevation(pcap):
         assert abs(median - VLP16_ELEVATION_DEG[ch]) < 0.3, ch
 
 
-def test_azimuth_matches_xyz_convention(pcap):
-    scan = read_vlp16_pcap(pcap)
+def test_azimuth_matches_xyz_convention(scan):
     x, y = scan.xyz_sensor_m[:, 0], scan.xyz_sensor_m[:, 1]
     np.testing.assert_allclose(np.sin(scan.spin_azimuth_rad), x / np.hypot(x, y), atol=1e-5)
 
 
-def test_turntable_angles_per_revolution(pcap, tmp_path):
+def test_one_frame_per_revolution(revolutions, tmp_path):
     csv = tmp_path / "tt.csv"
     csv.write_text("frame,turntable_angle_deg\n0,0\n1,180\n")
-    scan = read_vlp16_pcap(pcap, read_turntable_csv(csv))
+    angles = read_turntable_log(csv).frame_angles(np.array([r.time_s for r in revolutions]))
+    scan = scan_from_revolutions(revolutions, angles, "S1", "my.pcap")
     assert scan.n_frames == 2
     np.testing.assert_allclose(scan.turntable_angle_rad, [0, np.pi])
+    assert np.bincount(scan.frame_index).tolist() == [13440, 2304]
     out = write_scan(tmp_path / "real.scan.npz", scan)
-    assert read_scan(out).n_points == scan.n_points
+    back = read_scan(out)
+    assert back.n_points == scan.n_points and back.station_id == "S1"
+    assert back.metadata["capture"]["revolution_time_s"] == [r.time_s for r in revolutions]
 
 
-def test_wrong_angle_count(pcap):
-    with pytest.raises(DataError, match="revolutions"):
-        read_vlp16_pcap(pcap, np.zeros(5))
+def test_wrong_angle_count(revolutions):
+    with pytest.raises(DataError, match="2 revolutions but 5 turntable angles"):
+        scan_from_revolutions(revolutions, np.zeros(5), "S1", "my.pcap")
 
 
-def test_bad_csv_and_missing_file(tmp_path):
+def test_timed_log_is_unwrapped_and_interpolated(tmp_path):
+    csv = tmp_path / "tt.csv"
+    csv.write_text("time_s,turntable_angle_deg\n100,350\n102,10\n104,30\n")
+    log = read_turntable_log(csv)
+    np.testing.assert_allclose(np.degrees(log.angle_rad), [350, 370, 390])
+    # 350 + 10 deg/s x 0.5 s; 370 + 10 deg/s x 1.5 s; the ends themselves
+    np.testing.assert_allclose(np.degrees(log.frame_angles(np.array([100.5, 103.5, 100, 104]))),
+                               [355, 385, 350, 390])
+
+
+def test_timed_log_refuses_frames_outside_its_span():
+    log = TurntableLog(np.zeros(2), np.array([10.0, 20.0]), "turntable log t.csv")
+    with pytest.raises(DataError, match=r"spans 10.000-20.000 s but 2 frame\(s\) lie outside"):
+        log.frame_angles(np.array([9.0, 15.0, 21.0]))
+
+
+@pytest.mark.parametrize("n_rows, fix", [(1, "give one row per frame"),
+                                         (3, "drop the extra rows")])
+def test_per_frame_log_needs_one_row_per_frame(n_rows, fix):
+    log = TurntableLog(np.zeros(n_rows), None, "turntable log t.csv")
+    with pytest.raises(DataError, match=f"has {n_rows} row\\(s\\) but the capture has 2 frame"
+                                        f"\\(s\\).*{fix}"):
+        log.frame_angles(np.array([1.0, 2.0]))
+
+
+@pytest.mark.parametrize("text, match", [
+    ("angle\n1\n", "missing column.*turntable_angle_deg"),
+    ("turntable_angle_deg\n", "no rows"),
+    ("turntable_angle_deg\nnan\n", "line 2, turntable_angle_deg: must be a finite number"),
+    ("turntable_angle_deg\n1\nabc\n", "line 3, turntable_angle_deg: must be a number"),
+    ("frame,turntable_angle_deg\n0,1\n2,3\n", "line 3 has '2'"),
+    ("time_s,turntable_angle_deg\n5,1\n", "at least two rows"),
+    ("time_s,turntable_angle_deg\n5,1\n6,2\n6,3\n", "line 4 has 6 after 6"),
+    ("time_s,turntable_angle_deg\n5,1\ninf,2\n", "line 3, time_s: must be a finite"),
+])
+def test_bad_logs(tmp_path, text, match):
     bad = tmp_path / "tt.csv"
-    bad.write_text("angle\n1\n")
-    with pytest.raises(InputFileError, match="turntable_angle_deg"):
-        read_turntable_csv(bad)
+    bad.write_text(text)
+    with pytest.raises(InputFileError, match=match):
+        read_turntable_log(bad)
+
+
+def test_missing_files(tmp_path):
+    with pytest.raises(InputFileError, match="file not found"):
+        read_turntable_log(tmp_path / "none.csv")
     with pytest.raises(InputFileError, match="does not exist"):
-        read_vlp16_pcap(tmp_path / "none.pcap")
+        decode_vlp16_pcap(tmp_path / "none.pcap")
+
+
+def test_bad_captures(tmp_path):
+    empty, garbage, header = tmp_path / "e.pcap", tmp_path / "g.pcap", tmp_path / "h.pcap"
+    empty.write_bytes(b"")
+    garbage.write_bytes(b"not a capture at all, but long enough to hold a header")
+    header.write_bytes(bytes.fromhex("d4c3b2a1020004000000000000000000ffff000001000000"))
+    with pytest.raises(InputFileError, match="is empty"):
+        decode_vlp16_pcap(empty)
+    with pytest.raises(InputFileError, match="not a readable packet capture"):
+        decode_vlp16_pcap(garbage)
+    with pytest.raises(DataError, match="no VLP-16 returns"):
+        decode_vlp16_pcap(header)
