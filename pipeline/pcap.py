@@ -59,7 +59,7 @@ class Revolution:
     ----------
     points : (n, 8) float32
         The decoder's rows in firing order: x, y, z (ROS convention, metres), intensity,
-        time (seconds from the stamp), column, ring, return type.
+        time (seconds from the decoder's stamp of the revolution), column, ring, return type.
     start_s, end_s : float
         Capture-computer times of the first and last firing, UNIX seconds (module docstring).
     complete : bool
@@ -105,7 +105,6 @@ def decode_vlp16_pcap(path: str | Path) -> list[Revolution]:
     DataError
         A readable capture without VLP-16 returns.
     """
-
     path = Path(path)
     if not path.is_file():
         raise InputFileError(f"pcap file {path} does not exist; check the path")
@@ -240,6 +239,12 @@ class TurntableLog:
         DataError
             A per-frame log with fewer or more rows than frames; a frame outside a timed
             log's time span.
+
+        Examples
+        --------
+        >>> log = TurntableLog(np.radians([350.0, 370.0]), np.array([0.0, 2.0]), "log")
+        >>> np.degrees(log.frame_angles(np.array([0.5, 2.0]))).round(9).tolist()
+        [355.0, 370.0]
         """
         frame_time_s = np.asarray(frame_time_s, dtype=float)
         n_frames, n_rows = frame_time_s.size, self.angle_rad.size
