@@ -94,6 +94,36 @@ def direct_face(scan: StationScan) -> np.ndarray:
     return scan.xyz_sensor_m[:, 0] >= 0
 
 
+#: Largest gap in the turntable's angles self-calibration accepts, radians: beyond half a
+#: turn the direct and reverse faces no longer see the same scene.
+MAX_TURN_GAP_RAD = np.pi
+
+
+def largest_turn_gap_rad(turntable_angle_rad: np.ndarray) -> float:
+    """Largest angle of the turn that no frame starts in, radians.
+
+    Parameters
+    ----------
+    turntable_angle_rad : (F,) float
+        Turntable angle of each frame, radians (any order, any number of turns).
+
+    Returns
+    -------
+    gap : float
+        In ``(0, 2 pi]``; ``2 pi`` for a single angle.
+
+    Examples
+    --------
+    >>> round(float(np.degrees(largest_turn_gap_rad(np.radians([0.0, 90.0, 180.0])))), 6)
+    180.0
+    >>> round(float(np.degrees(largest_turn_gap_rad(np.zeros(3)))), 6)
+    360.0
+    """
+    a = np.sort(np.mod(np.asarray(turntable_angle_rad, dtype=float), 2 * np.pi))
+    gaps = np.diff(np.append(a, a[0] + 2 * np.pi))
+    return float(gaps.max())
+
+
 def _with_angles(offsets: MountingOffsets, p: np.ndarray) -> MountingOffsets:
     return replace(offsets, vertical_axis_error_rad=float(p[0]), lframe_tilt_rad=float(p[1]))
 
@@ -130,10 +160,17 @@ def estimate_rotation_offsets(scan: StationScan, offsets: MountingOffsets | None
     Raises
     ------
     DataError
-        If either face has too few points in the range band for a plane fit.
+        If the frames leave more than half a turn unscanned (:data:`MAX_TURN_GAP_RAD`), or
+        either face has too few points in the range band for a plane fit.
     """
     cfg = (config or CalibrationConfig()).validate()
     offsets = MountingOffsets() if offsets is None else offsets
+    gap = largest_turn_gap_rad(scan.turntable_angle_rad)
+    if gap > MAX_TURN_GAP_RAD:
+        raise DataError(f"scan {scan.station_id}: its {scan.n_frames} frame(s) leave "
+                        f"{np.degrees(gap):.0f} deg of the turn unscanned; self-calibration "
+                        "needs frames over a full turn: pass --no-calibrate (known or zero "
+                        "offsets) or give the turntable's angle log")
     face = direct_face(scan)
     band = (scan.range_m >= cfg.min_range_m) & (scan.range_m <= cfg.max_range_m)
     idx_a = np.flatnonzero(band & face)

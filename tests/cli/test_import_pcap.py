@@ -90,6 +90,16 @@ def test_process_runs_on_the_imported_scan(capture, capsys, tmp_path):
     assert all(",false," in row for row in rows[1:])
 
 
+def test_self_calibration_refused_on_a_single_angle(capture, capsys, tmp_path):
+    """One frame at one turntable angle cannot calibrate the mounting: a one-line error
+    naming --no-calibrate, not meaningless offsets."""
+    _import(capsys, "--out", "scans")
+    code, out, err = run_cli(capsys, ["process", "scans", "--out", "tables"])
+    assert code == 1 and "Traceback" not in err
+    assert "360 deg of the turn unscanned" in err and "--no-calibrate" in err
+    assert not (tmp_path / "tables").exists()
+
+
 def _first_records(n: int):
     """Setup: ``part.pcap``, the capture's global header and first ``n`` records."""
     def setup(cwd, inputs):
