@@ -21,8 +21,10 @@ member                 shape/dtype   meaning
 list of 16 in channel order, ``firing_order``, ``range_noise_m``, ...), ``rig``
 (``lidar_height_m`` nominal height of the LiDAR centre above ground, ``frames_per_turn``,
 ``turntable_errors`` the sigmas of the simulated turntable), ``sensor_profile`` (simulated
-scans: the name of the sensor profile, or ``null``) and ``provenance``
-(:func:`markerplan.provenance.provenance`). Mounting offsets are *not* stored here: the
+scans: the name of the sensor profile, or ``null``), ``provenance``
+(:func:`markerplan.provenance.provenance`) and, for a scan imported from a packet capture
+(:mod:`pipeline.pcap`), ``source_file`` and ``capture`` (``revolution_time_s``: each frame's
+time, UNIX seconds on the capturing computer's clock). Mounting offsets are *not* stored here: the
 processor must estimate them (simulation truth goes to the truth file).
 
 A simulated scan has a sibling truth file ``<name>.truth.json`` (see :func:`write_truth`).

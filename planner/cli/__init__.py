@@ -51,7 +51,8 @@ def cli() -> None:
     """Plan where to put spherical markers for LiDAR surveys on lunar-like terrain.
 
     \b
-    Typical flow:
+    Typical flow (with a real rig, `markerplan import-pcap capture.pcap --turntable-log
+    angles.csv --out scans/` makes the scans):
       markerplan simulate --site default --out scans/
       markerplan process scans/station_*.scan.npz --reference scans/ --out tables/
       markerplan fit-error-model tables/markers.csv --out model/ --plot
