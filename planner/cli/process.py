@@ -171,7 +171,9 @@ def command(scans, out, overwrite, references, estimator, marker_radius_m, no_ca
     docs/pipeline.md), stations.csv (per-station summary with calibration estimates), edges.csv
     (edge-length residuals when a reference is given) and summary.json (configuration and
     provenance). Gates and fit follow the range noise the scan records (simulated scans), else
-    the one of --sensor-profile.
+    the one of --sensor-profile. With --cloud, also each station's calibrated cloud, marker and
+    ground points classified, in the station frame and (pose known) the site frame, with the
+    CRS a site.json among SCANS records.
 
     \b
     Example:

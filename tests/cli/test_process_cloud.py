@@ -3,6 +3,7 @@
 import dataclasses
 import hashlib
 import json
+import shutil
 
 import laspy
 import numpy as np
@@ -111,6 +112,17 @@ def test_bad_format_refused(scans, tmp_path, capsys, formats, message):
                                     str(tmp_path / "o")])
     assert code != 0 and message in err and "Traceback" not in err
     assert not (tmp_path / "o").exists()
+
+
+@pytest.mark.parametrize("site, message", [("{", "not valid JSON"), ('{"dem": 5}', "'dem'")])
+def test_bad_site_json_refused(scans, tmp_path, capsys, site, message):
+    folder = tmp_path / "scans"
+    folder.mkdir()
+    shutil.copy(scans / "station_S1.scan.npz", folder)
+    (folder / "site.json").write_text(site)
+    code, _, err = run_cli(capsys, ["process", str(folder), "--cloud", "las", "--out",
+                                    str(tmp_path / "o")])
+    assert code == 1 and "site.json" in err and message in err and "Traceback" not in err
 
 
 @pytest.mark.slow
