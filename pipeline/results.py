@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import json
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -43,7 +44,8 @@ def station_record(result: StationResult) -> dict[str, Any]:
     }
 
 
-def write_results(folder, results: list[StationResult], prov: dict[str, Any]) -> dict[str, Any]:
+def write_results(folder, results: list[StationResult], prov: dict[str, Any],
+                  other_files: Sequence[str] = ()) -> dict[str, Any]:
     """Write ``markers.csv``, ``stations.csv``, ``edges.csv`` and ``summary.json``.
 
     Parameters
@@ -53,6 +55,9 @@ def write_results(folder, results: list[StationResult], prov: dict[str, Any]) ->
     results : list of StationResult
     prov : dict
         :func:`markerplan.provenance.provenance` record.
+    other_files : sequence of str
+        Files the command wrote into ``folder`` besides these (e.g. point clouds), listed in
+        ``summary.json`` after them.
 
     Returns
     -------
@@ -64,7 +69,8 @@ def write_results(folder, results: list[StationResult], prov: dict[str, Any]) ->
     write_csv(folder / "stations.csv", STATION_COLUMNS, [station_record(res) for res in results])
     write_csv(folder / "edges.csv", EDGE_COLUMNS, [e for res in results for e in res.edges])
     summary = {"stations": [res.summary for res in results],
-               "files": ["markers.csv", "stations.csv", "edges.csv", "summary.json"],
+               "files": ["markers.csv", "stations.csv", "edges.csv", "summary.json",
+                         *other_files],
                "provenance": prov}
     (folder / "summary.json").write_text(json.dumps(summary, indent=1, sort_keys=True,
                                                     default=json_default) + "\n")

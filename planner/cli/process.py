@@ -11,6 +11,7 @@ from planner.cli._common import (
     FiniteRange,
     emit_summary,
     estimator_option,
+    id_list,
     json_option,
     marker_radius_option,
     mounting_offset_options,
@@ -102,6 +103,33 @@ def _marker_radius(given: float | None, references: list) -> float:
     return float(radii.pop()) if radii else MARKER_RADIUS_M
 
 
+def _site_crs(paths: tuple[Path, ...]) -> str | None:
+    """The CRS (WKT) of the DEM the ``site.json`` among SCANS (or in their folders) records,
+    else None. ``simulate`` writes that file beside its scans."""
+    from markerplan.errors import InputFileError
+    from markerplan.reading import load_json, require_type
+
+    sites = [p / "site.json" if p.is_dir() else p for p in paths]
+    found = {require_type(load_json(s, f"site file {s}").get("dem", {}), dict,
+                          f"site file {s}: 'dem'").get("crs") or None
+             for s in sites if s.name == "site.json" and s.is_file()} - {None}
+    if len(found) > 1:
+        raise InputFileError("the site.json files among SCANS record different CRSs; process "
+                             "each site separately")
+    return found.pop() if found else None
+
+
+def _station_poses(truth_files: list[Path]) -> dict:
+    """{station id: :class:`~pipeline.point_cloud_io.StationPose`} of the truths among
+    ``truth_files`` (the references that are JSON) that record the station's position."""
+    from pipeline.point_cloud_io import StationPose
+    from pipeline.scan_format import read_truth
+
+    truths = [read_truth(p) for p in truth_files if p.suffix.lower() == ".json"]
+    return {t["station_id"]: StationPose.from_truth(t) for t in truths
+            if "position_m" in t["station_pose"]}
+
+
 @click.command("process")
 @click.argument("scans", nargs=-1, required=True, type=click.Path(path_type=Path))
 @out_option(required=True)
@@ -126,10 +154,16 @@ def _marker_radius(given: float | None, references: list) -> float:
 @click.option("--set", "stage_options", multiple=True, metavar="STAGE.OPTION=VALUE",
               help="Any stage option, e.g. --set ground.min_height_m=0.1 "
                    "--set gate.max_box_m=0.3 (unknown names are refused).")
+@click.option("--cloud", "cloud_formats", callback=id_list, metavar="las,ply",
+              help="Also write each station's calibrated, classified cloud in these formats "
+                   "(comma-separated: las = LAS 1.4, ply = binary PLY) as "
+                   "<station>.station.<format>, and <station>.site.<format> when the station's "
+                   "truth gives its pose in the site. Classes in docs/pipeline.md.")
 @sensor_profile_option
 @json_option
 def command(scans, out, overwrite, references, estimator, marker_radius_m, no_calibrate, offsets,
-            min_points, max_rms_m, min_visible_fraction, stage_options, profile, as_json) -> None:
+            min_points, max_rms_m, min_visible_fraction, stage_options, cloud_formats, profile,
+            as_json) -> None:
     """Process station scans into a marker table.
 
     SCANS are .scan.npz files or the folder `markerplan simulate` wrote (its scans, with
@@ -137,13 +171,16 @@ def command(scans, out, overwrite, references, estimator, marker_radius_m, no_ca
     docs/pipeline.md), stations.csv (per-station summary with calibration estimates), edges.csv
     (edge-length residuals when a reference is given) and summary.json (configuration and
     provenance). Gates and fit follow the range noise the scan records (simulated scans), else
-    the one of --sensor-profile.
+    the one of --sensor-profile. With --cloud, also each station's calibrated cloud, marker and
+    ground points classified, in the station frame and (pose known) the site frame, with the
+    CRS a site.json among SCANS records.
 
     \b
     Example:
       markerplan process scans/ --out tables/
       markerplan process scans/station_S1.scan.npz --reference scans/ --out tables/
       markerplan process s1.scan.npz --reference total_station.csv --out t/
+      markerplan process scans/ --cloud las,ply --out tables/
     """
     import dataclasses
 
@@ -153,12 +190,14 @@ def command(scans, out, overwrite, references, estimator, marker_radius_m, no_ca
     from markerplan.output_folder import output_folder
     from markerplan.provenance import fingerprint_arrays, provenance
     from pipeline.evaluation import check_references, pick_reference, read_reference
+    from pipeline.point_cloud_io import check_formats, classify_cloud, write_station_clouds
     from pipeline.process import process_station
     from pipeline.results import write_results
     from pipeline.scan_format import read_scan
     from pipeline.sensor_noise import RangeNoise
     from pipeline.stages import build_config, with_offsets
 
+    scans_given = scans
     scans, truths = _scan_inputs(scans)
     options = _parse_stage_options(stage_options)
     options.setdefault("fit", {}).update(method=estimator)
@@ -178,8 +217,12 @@ def command(scans, out, overwrite, references, estimator, marker_radius_m, no_ca
     if marker_radius_m is not None or "radius_m" not in options["fit"]:
         options["fit"]["radius_m"] = _marker_radius(marker_radius_m, refs)
     cfg = with_offsets(build_config(options), offsets, enabled=not no_calibrate)
+    poses, crs_wkt = {}, None
+    if cloud_formats:
+        check_formats(cloud_formats)
+        poses, crs_wkt = _station_poses(ref_files), _site_crs(scans_given)
     with output_folder(out, overwrite, "process", inputs=[*scans, *truths, *references]) as stage:
-        results, inputs = [], []
+        results, inputs, cloud_files = [], [], []
         for path in tqdm(scans, desc="stations", file=sys.stderr, disable=None):
             scan = read_scan(path)
             noise = RangeNoise.recorded(scan.metadata.get("sensor", {}))
@@ -191,10 +234,14 @@ def command(scans, out, overwrite, references, estimator, marker_radius_m, no_ca
                            "range_noise": {**dataclasses.asdict(noise), "source": source}})
             results.append(process_station(scan, cfg, pick_reference(refs, scan.station_id),
                                            noise=noise))
+            if cloud_formats:
+                cloud_files += write_station_clouds(
+                    stage, classify_cloud(scan, results[-1], cfg.ground), cloud_formats,
+                    poses.get(scan.station_id), crs_wkt)
             del scan
         prov = provenance(cfg.to_dict(), inputs=inputs,
                           references=[r.source for r in refs], command="process")
-        summary = write_results(stage, results, prov)
+        summary = write_results(stage, results, prov, cloud_files)
     timings = {f"{res.summary['station_id']} {step}": t
                for res in results for step, t in res.timings_s.items()}
     report_timings({"total": sum(timings.values())})
