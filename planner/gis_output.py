@@ -19,6 +19,7 @@ The same inputs give byte-identical files: GPKG's timestamps are fixed by GDAL's
 from __future__ import annotations
 
 import re
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -189,12 +190,28 @@ def write_plan_gpkg(outcome, doc: dict, path: Path) -> Path:
         layers["boundary"] = ("Polygon", shapely.polygons([np.asarray(outcome.inputs.boundary_xy,
                                                                      float)]),
                               {"site": np.array([doc["site"]["name"]], object)})
-    return _write_layers(path, layers, crs)
+    return write_gpkg_layers(path, layers, crs)
 
 
-def _write_layers(path: Path, layers: dict, crs: str | None) -> Path:
-    """Write ``{name: (geometry type, geometries, {field: array})}`` as one GPKG, timestamps
-    fixed (:data:`GPKG_DATE`)."""
+def write_gpkg_layers(path: Path, layers: dict, crs: str | None) -> Path:
+    """Write layers into one GeoPackage (GDAL's GPKG driver), timestamps fixed
+    (:data:`GPKG_DATE`) so that the same layers give the same bytes.
+
+    Parameters
+    ----------
+    path : Path
+        A GeoPackage not yet written (each layer is added to it).
+    layers : dict
+        ``{name: (geometry type, geometries, {field: array})}``: an OGR geometry type name
+        (``"Point Z"``, ``"LineString Z"``, ``"Polygon"``), (k,) shapely geometries (site
+        frame / CRS metres) and (k,) numpy arrays of the attributes, in column order.
+    crs : str or None
+        WKT of every layer's CRS; None: layers without a CRS.
+
+    Returns
+    -------
+    path : Path
+    """
     import pyogrio
     import shapely
     from pyogrio.raw import write
@@ -202,11 +219,14 @@ def _write_layers(path: Path, layers: dict, crs: str | None) -> Path:
     path = Path(path)
     pyogrio.set_gdal_config_options({"OGR_CURRENT_DATE": GPKG_DATE})
     try:
-        for name, (gtype, geoms, fields) in layers.items():
-            dim = 3 if gtype.endswith(" Z") else 2
-            write(path, shapely.to_wkb(geoms, output_dimension=dim, include_srid=False),
-                  field_data=list(fields.values()), fields=list(fields), layer=name,
-                  driver="GPKG", geometry_type=gtype, crs=crs)
+        with warnings.catch_warnings():
+            # no CRS is deliberate (a synthetic site's local frame; docs/planner.md says so)
+            warnings.filterwarnings("ignore", "'crs' was not provided", UserWarning)
+            for name, (gtype, geoms, fields) in layers.items():
+                dim = 3 if gtype.endswith(" Z") else 2
+                write(path, shapely.to_wkb(geoms, output_dimension=dim, include_srid=False),
+                      field_data=list(fields.values()), fields=list(fields), layer=name,
+                      driver="GPKG", geometry_type=gtype, crs=crs)
     finally:
         pyogrio.set_gdal_config_options({"OGR_CURRENT_DATE": None})
     return path

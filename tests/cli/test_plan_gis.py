@@ -165,3 +165,44 @@ def test_two_runs_give_byte_identical_files(planned):
     da, db = digests(a), digests(b)
     assert {"plan.gpkg", "usable_markers.tif", "station_error.tif"} <= set(da)
     assert da == db
+
+
+def test_network_mode_writes_the_gpkg_relative_to_the_reference_station(planned, tmp_path):
+    from pyogrio.raw import read
+
+    from planner.cli import main
+
+    root = planned[0]
+    main(["plan", "--dem", str(root / "dem.tif"), "--stations", str(root / "stations.csv"),
+          "--network", "--reference-station", "S2", "--stand-map-cell", "2",
+          "--out", str(tmp_path / "n")])
+    doc = _plan(tmp_path / "n")
+    _, _, geom, fields = read(tmp_path / "n" / "plan.gpkg", layer="stations")
+    assert [str(v) for v in fields[2]] == ["station S2"] * 4
+    np.testing.assert_allclose(fields[1], [np.nan if s["predicted_error_m"] is None
+                                           else s["predicted_error_m"] for s in doc["stations"]],
+                               rtol=1e-12)
+    _, _, geom, _ = read(tmp_path / "n" / "plan.gpkg", layer="markers")
+    assert len(geom) == doc["n_markers"]
+
+
+def test_default_site_without_crs_keeps_its_local_frame(valid_inputs):
+    """The session's default plan (no CRS): GPKG layers without CRS, GeoJSON in the site
+    frame, stand maps written."""
+    import pyogrio
+    import rasterio
+
+    from planner.report import FRAME_NOTE
+
+    out = valid_inputs / "plan"
+    doc = _plan(out)
+    assert doc["frame"] == FRAME_NOTE and doc["site"]["crs"] is None
+    assert all(pyogrio.read_info(out / "plan.gpkg", layer=name)["crs"] is None
+               for name in ("markers", "stations", "sight_lines"))
+    gj = json.loads((out / "markers.geojson").read_text())
+    assert gj["coordinate_frame"] == FRAME_NOTE and "crs" not in gj
+    assert [f["geometry"]["coordinates"] for f in gj["features"]][:len(doc["markers"])] == \
+        [[m["x_m"], m["y_m"], m["z_m"]] for m in doc["markers"]]
+    with rasterio.open(out / "usable_markers.tif") as src:
+        assert src.crs is None and src.width * src.height <= 40_000
+        assert np.nanmax(src.read(1)) == len(doc["markers"])
