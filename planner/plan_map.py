@@ -87,6 +87,7 @@ def draw_plan_map(outcome, path: Path, dpi: int = 150) -> Path:
     frame = axis_frame(dem.crs)
     ax.set_xlabel(f"x (m, {frame})")
     ax.set_ylabel(f"y (m, {frame})")
+    ax.ticklabel_format(useOffset=False, style="plain")  # CRS coordinates in full, no "+5e5"
     bar = _nice_125((xmax - xmin) / 5)
     ax.add_artist(AnchoredSizeBar(ax.transData, bar, f"{bar:g} m", "lower right", pad=0.5,
                                   color="black", frameon=True, size_vertical=(ymax - ymin) / 200))
