@@ -1,7 +1,7 @@
 """The placement map (``map.png``): hillshaded terrain, craters, stations coloured by predicted
 error, chosen markers, the lines of sight each station uses, legend and scale bar.
 
-Site frame, local metres (x to the right, y up).
+Site frame (x to the right, y up), metres: the DEM's CRS, named on the axes, when it has one.
 """
 
 from __future__ import annotations
@@ -84,8 +84,10 @@ def draw_plan_map(outcome, path: Path, dpi: int = 150) -> Path:
     ax.set_xlim(xmin, xmax)
     ax.set_ylim(ymin, ymax)
     ax.set_aspect("equal")
-    ax.set_xlabel("x (m, site frame — local metres)")
-    ax.set_ylabel("y (m, site frame — local metres)")
+    frame = axis_frame(dem.crs)
+    ax.set_xlabel(f"x (m, {frame})")
+    ax.set_ylabel(f"y (m, {frame})")
+    ax.ticklabel_format(useOffset=False, style="plain")  # CRS coordinates in full, no "+5e5"
     bar = _nice_125((xmax - xmin) / 5)
     ax.add_artist(AnchoredSizeBar(ax.transData, bar, f"{bar:g} m", "lower right", pad=0.5,
                                   color="black", frameon=True, size_vertical=(ymax - ymin) / 200))
@@ -116,6 +118,17 @@ def draw_plan_map(outcome, path: Path, dpi: int = 150) -> Path:
     fig.savefig(path, dpi=dpi, metadata={"Software": None})
     plt.close(fig)
     return path
+
+
+def axis_frame(crs: str | None) -> str:
+    """The frame named on a map's axes: the DEM's CRS by name, or the local site frame.
+
+    >>> axis_frame(None)
+    'site frame — local metres'
+    """
+    from planner.gis_output import crs_name
+
+    return "site frame — local metres" if crs is None else crs_name(crs)
 
 
 def draw_stations(ax, xy: np.ndarray, ids, error_mm: np.ndarray, requirement_mm: float,

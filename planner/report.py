@@ -1,12 +1,15 @@
 """Plan outputs: ``plan.json`` (versioned schema), ``markers.csv``, ``markers.geojson``,
 ``report.md``, and the one-object JSON summary of ``markerplan plan --json``.
 
-``plan.json`` schema ``markerplan-plan`` version 1 (all lengths in metres, site frame):
+``plan.json`` schema ``markerplan-plan`` version 1 (all lengths in metres, site frame = the
+DEM's CRS when it has one):
 
 - ``schema``, ``schema_version``
 - ``provenance``: :func:`markerplan.provenance.provenance` of the resolved configuration, with
   the error model, solver and inputs;
-- ``site``: name, seed, marker radius, boundary;
+- ``frame``: the coordinate frame in words (:func:`frame_note`: the DEM's CRS by name, or the
+  local site frame);
+- ``site``: name, seed, CRS name (None: local site frame), marker radius, boundary;
 - ``requirement``: requirement_m, sectors, markers, working radius, redundant;
 - ``solver``: name, status, objective, dual bound, gap, iterations, cuts, time limit;
 - ``markers``: id, x_m, y_m, z_m, existing, stations that use it;
@@ -29,11 +32,24 @@ from pathlib import Path
 import numpy as np
 
 from markerplan.provenance import provenance
+from planner.gis_output import crs_name, geojson_crs_members, geojson_positions, write_plan_gpkg
 from planner.plan_file import SCHEMA, SCHEMA_VERSION, write_plan
 from planner.usability import sector_index
 
 FRAME_NOTE = ("site frame: local metres (x, y horizontal, z up); not geographic coordinates, "
               "not WGS84")
+
+
+def frame_note(crs: str | None) -> str:
+    """The plan's coordinate frame in words: :data:`FRAME_NOTE` without a CRS, else the DEM's
+    CRS by name.
+
+    >>> frame_note(None) == FRAME_NOTE
+    True
+    """
+    if crs is None:
+        return FRAME_NOTE
+    return f"the DEM's CRS, {crs_name(crs)}: x, y in metres of that CRS, z up (DEM heights, m)"
 
 
 def _num(v):
@@ -100,8 +116,8 @@ def plan_record(outcome) -> dict:
         "provenance": provenance(cfg.to_dict(), error_model=outcome.model_name,
                                  solver={"name": solver["name"], "status": sol.status},
                                  inputs=inp.sources),
-        "frame": FRAME_NOTE,
-        "site": {"name": inp.site_name, "seed": inp.site_seed,
+        "frame": frame_note(inp.dem.crs),
+        "site": {"name": inp.site_name, "seed": inp.site_seed, "crs": crs_name(inp.dem.crs),
                  "marker_radius_m": inp.marker_radius_m,
                  "boundary_xy_m": None if inp.boundary_xy is None
                  else np.asarray(inp.boundary_xy).tolist()},
@@ -158,8 +174,9 @@ def plan_timings(outcome) -> dict[str, float]:
 
 
 def write_plan_files(outcome, folder: Path) -> dict:
-    """Write plan.json, markers.csv, markers.geojson and report.md into ``folder`` (network
-    mode: also stations.csv, each station's error relative to the datum and its ties).
+    """Write plan.json, markers.csv, markers.geojson, plan.gpkg
+    (:func:`planner.gis_output.write_plan_gpkg`) and report.md into ``folder`` (network mode:
+    also stations.csv, each station's error relative to the datum and its ties).
 
     Returns the ``plan.json`` document.
     """
@@ -169,7 +186,8 @@ def write_plan_files(outcome, folder: Path) -> dict:
     _write_markers_csv(doc, folder / "markers.csv")
     if "network" in doc:
         _write_stations_csv(doc, folder / "stations.csv")
-    _write_geojson(doc, folder / "markers.geojson")
+    _write_geojson(doc, outcome.inputs.dem.crs, folder / "markers.geojson")
+    write_plan_gpkg(outcome, doc, folder / "plan.gpkg")
     (folder / "report.md").write_text(report_markdown(doc))
     return doc
 
@@ -177,7 +195,7 @@ def write_plan_files(outcome, folder: Path) -> dict:
 def _write_markers_csv(doc: dict, path: Path) -> None:
     with path.open("w", newline="") as fh:
         w = csv.writer(fh)
-        w.writerow(["# markerplan plan markers; " + FRAME_NOTE])
+        w.writerow(["# markerplan plan markers; " + doc["frame"]])
         w.writerow(["id", "x_m", "y_m", "z_m", "existing", "n_stations", "stations"])
         for m in doc["markers"]:
             w.writerow([m["id"], f"{m['x_m']:.3f}", f"{m['y_m']:.3f}", f"{m['z_m']:.3f}",
@@ -189,7 +207,7 @@ def _write_stations_csv(doc: dict, path: Path) -> None:
     with path.open("w", newline="") as fh:
         w = csv.writer(fh)
         w.writerow([f"# markerplan plan stations, network mode (datum: station {ref}); "
-                    + FRAME_NOTE])
+                    + doc["frame"]])
         w.writerow(["id", "x_m", "y_m", "z_m", "network_error_m", "meets_requirement",
                     "n_markers", "tied_to"])
         for s in doc["stations"]:
@@ -199,18 +217,21 @@ def _write_stations_csv(doc: dict, path: Path) -> None:
                         s["n_markers"], " ".join(f"{k}:{v}" for k, v in s["tied_to"].items())])
 
 
-def _write_geojson(doc: dict, path: Path) -> None:
-    feats = [{"type": "Feature",
-              "geometry": {"type": "Point", "coordinates": [m["x_m"], m["y_m"], m["z_m"]]},
-              "properties": {"id": m["id"], "kind": "marker", "existing": m["existing"],
-                             "stations": m["stations"]}} for m in doc["markers"]]
-    feats += [{"type": "Feature",
-               "geometry": {"type": "Point", "coordinates": [s["x_m"], s["y_m"], s["z_m"]]},
-               "properties": {"id": s["id"], "kind": "station",
-                              "predicted_error_m": s["predicted_error_m"]}}
+def _write_geojson(doc: dict, crs: str | None, path: Path) -> None:
+    """Markers and stations as GeoJSON Points: WGS84 longitude/latitude when the DEM's CRS is an
+    Earth CRS, else site frame / DEM CRS (:mod:`planner.gis_output`); ``x_m``, ``y_m`` are
+    always in the plan's frame."""
+    rows = doc["markers"] + doc["stations"]
+    where = geojson_positions(crs, [[r["x_m"], r["y_m"], r["z_m"]] for r in rows])
+    props = [{"id": m["id"], "kind": "marker", "existing": m["existing"],
+              "stations": m["stations"]} for m in doc["markers"]]
+    props += [{"id": s["id"], "kind": "station", "predicted_error_m": s["predicted_error_m"]}
               for s in doc["stations"]]
+    feats = [{"type": "Feature", "geometry": {"type": "Point", "coordinates": xyz},
+              "properties": {**p, "x_m": r["x_m"], "y_m": r["y_m"]}}
+             for xyz, p, r in zip(where, props, rows, strict=True)]
     gj = {"type": "FeatureCollection", "name": f"markerplan plan ({doc['site']['name']})",
-          "coordinate_frame": FRAME_NOTE, "units": "m", "features": feats}
+          **geojson_crs_members(crs, doc["frame"]), "features": feats}
     path.write_text(json.dumps(gj, indent=2) + "\n")
 
 
@@ -266,7 +287,7 @@ def report_markdown(doc: dict) -> str:
     for s in doc["stations"]:
         lines.append(f"| {s['id']} | {_fmt(s['predicted_error_m'])} | {s['n_markers']} | "
                      f"{s['n_sectors']} | {', '.join(s['markers'])} |")
-    lines += ["", "## Markers (" + FRAME_NOTE + ")", "", "| id | x | y | z | used by |",
+    lines += ["", "## Markers (" + doc["frame"] + ")", "", "| id | x | y | z | used by |",
               "|---|---:|---:|---:|---|"]
     for m in doc["markers"]:
         lines.append(f"| {m['id']}{' (existing)' if m['existing'] else ''} | {m['x_m']:.2f} | "

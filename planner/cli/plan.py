@@ -56,19 +56,25 @@ from planner.cli._common import (
 @network_option
 @reference_station_option
 @time_limit_option
+@click.option("--stand-map-cell", "stand_map_cell_m", type=click.FloatRange(min=0, min_open=True),
+              help="Cell size (m, rounded to whole DEM cells) of usable_markers.tif and "
+                   "station_error.tif. Default: the finest with at most 40,000 cells.")
 @out_option(default="markerplan-out")
 @overwrite_option
 @json_option
 def command(site_name, site_seed, dem_path, stations_path, station_ids, boundary_path,
             exclude_paths, marker_radius_m, error_model, config_path, visibility_path, redundant,
-            existing, budget, network, reference_station, time_limit_s, out, overwrite,
-            as_json):
+            existing, budget, network, reference_station, time_limit_s, stand_map_cell_m, out,
+            overwrite, as_json):
     """Plan the fewest marker sites so that every station meets the accuracy requirement.
 
-    Writes plan.json, markers.csv, markers.geojson (site frame, local metres), map.png and
-    report.md under --out (with --network also stations.csv: each station's error relative to
-    the reference station and the stations it is tied to). With no arguments: the default
-    site, into ./markerplan-out/.
+    Writes under --out: plan.json, markers.csv, report.md, map.png; markers.geojson (WGS84
+    lon/lat when the DEM has an Earth CRS, else the DEM's CRS or local site frame); plan.gpkg
+    (layers markers, stations, sight_lines, boundary; the DEM's CRS) and the "where can the
+    rover stand" GeoTIFFs usable_markers.tif (markers a station at each cell could use) and
+    station_error.tif (its predicted error, m; not with --visibility). With --network also
+    stations.csv: each station's error relative to the reference station and the stations it
+    is tied to. With no arguments: the default site, into ./markerplan-out/.
 
     \b
     Examples:
@@ -78,10 +84,13 @@ def command(site_name, site_seed, dem_path, stations_path, station_ids, boundary
       markerplan plan --network --out plan-network/
       markerplan plan --network --reference-station S4 --out plan-network-s4/
       markerplan plan --dem site.tif --stations stations.csv --exclude paths.geojson --out p/
+      markerplan plan --dem site.tif --stations stations.csv --stand-map-cell 2 --out p/
     """
     from markerplan.output_folder import output_folder
+    from planner.gis_output import write_stand_map
     from planner.plan_map import draw_plan_map
     from planner.report import plan_timings, summary, write_plan_files
+    from planner.stand_map import stand_map
 
     inputs_given = given_paths(dem_path, stations_path, boundary_path, error_model.path,
                                config_path, visibility_path, *exclude_paths,
@@ -93,7 +102,13 @@ def command(site_name, site_seed, dem_path, stations_path, station_ids, boundary
                                 time_limit_s, as_json, network, reference_station)
         doc = write_plan_files(outcome, stage)
         draw_plan_map(outcome, stage / "map.png")
-    timings = plan_timings(outcome)
+        stand_s = {}
+        if visibility_path is None:
+            stand = stand_map(outcome, error_model.model, stand_map_cell_m,
+                              progress=not as_json or sys.stderr.isatty())
+            write_stand_map(stand, stage)
+            stand_s = {"stand_map": round(stand.elapsed_s, 3)}
+    timings = {**plan_timings(outcome), **stand_s}
     report_timings(timings)
     info = {**summary(doc, out), "timings_s": timings}
     human = (f"{doc['n_markers']} markers ({solver_status_text(doc['solver'])}); worst station "

@@ -31,8 +31,8 @@ def default_plan(tmp_path_factory):
 def test_default_plan_meets_the_requirement_with_fewer_markers(default_plan):
     out, summary = default_plan
     assert sorted(p.name for p in out.iterdir()) == [
-        "map.png", "markers.csv", "markers.geojson", "plan.json", "provenance.json",
-        "report.md"]
+        "map.png", "markers.csv", "markers.geojson", "plan.gpkg", "plan.json", "provenance.json",
+        "report.md", "station_error.tif", "usable_markers.tif"]
     doc = json.loads((out / "plan.json").read_text())
     assert doc["schema"] == "markerplan-plan" and doc["schema_version"] == 1
     assert summary["status"] == "optimal" and summary["meets_requirement"]

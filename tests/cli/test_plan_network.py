@@ -26,8 +26,8 @@ def network_plan(tmp_path_factory):
 def test_network_plan_records_the_mode_datum_ties_and_errors(network_plan):
     out, summary = network_plan
     assert sorted(p.name for p in out.iterdir()) == [
-        "map.png", "markers.csv", "markers.geojson", "plan.json", "provenance.json",
-        "report.md", "stations.csv"]
+        "map.png", "markers.csv", "markers.geojson", "plan.gpkg", "plan.json", "provenance.json",
+        "report.md", "station_error.tif", "stations.csv", "usable_markers.tif"]
     assert summary["mode"] == "network" and summary["reference_station"] == "S1"
     assert summary["status"] == "optimal" and summary["meets_requirement"]
     doc = json.loads((out / "plan.json").read_text())
