@@ -131,8 +131,23 @@ def geojson_crs_members(crs: str | None, frame_note: str) -> dict:
                 "source_crs": crs_name(crs)}
     out = {"coordinate_frame": frame_note, "units": "m"}
     if crs is not None:
-        out["crs"] = {"type": "name", "properties": {"name": crs_name(crs)}}
+        out["crs"] = {"type": "name", "properties": {"name": crs_urn(crs)}}
     return out
+
+
+def crs_urn(crs: str) -> str:
+    """The OGC URN of a WKT CRS (``urn:ogc:def:crs:AUTH::CODE``), which GDAL and QGIS read in
+    a GeoJSON ``crs`` member; the CRS's name when GDAL finds no authority code for it (e.g.
+    the lunar IAU_2015 CRSs, whose WKT1 carries an ``IAU`` authority GDAL does not resolve).
+
+    >>> from rasterio.crs import CRS
+    >>> crs_urn(CRS.from_epsg(32633).to_wkt())
+    'urn:ogc:def:crs:EPSG::32633'
+    """
+    from rasterio.crs import CRS
+
+    auth = CRS.from_user_input(crs).to_authority()
+    return f"urn:ogc:def:crs:{auth[0]}::{auth[1]}" if auth else crs_name(crs)
 
 
 def write_plan_gpkg(outcome, doc: dict, path: Path) -> Path:

@@ -33,6 +33,7 @@ import numpy as np
 
 from markerplan.writing import json_default, write_csv
 from planner import network_record as nr
+from planner.gis_output import geojson_crs_members, geojson_positions
 
 FILES = ("stations.csv", "markers.csv", "observations.csv", "parameters.csv", "covariance.npy",
          "network.geojson", "adjustment.json", "report.md", "network.png")
@@ -72,7 +73,8 @@ def write_network_files(folder: str | Path, run: nr.AdjustmentRun, draw_map: boo
     write_csv(folder / "parameters.csv", nr.PARAMETER_COLUMNS, nr.parameter_rows(run.result))
     np.save(folder / "covariance.npy", np.ascontiguousarray(run.result.covariance,
                                                             dtype=np.float64))
-    write_json(folder / "network.geojson", network_geojson(doc, stations, markers, observations))
+    write_json(folder / "network.geojson",
+               network_geojson(doc, stations, markers, observations, run.crs))
     write_json(folder / "adjustment.json", doc)
     (folder / "report.md").write_text(report_markdown(doc, stations, markers, observations),
                                       encoding="utf-8")
@@ -107,14 +109,14 @@ def _point(row: dict) -> list[float]:
 
 
 def network_geojson(doc: dict, stations: list[dict], markers: list[dict],
-                    observations: list[dict]) -> dict:
-    """The network as a GeoJSON FeatureCollection in the site frame.
+                    observations: list[dict], crs: str | None = None) -> dict:
+    """The network as a GeoJSON FeatureCollection.
 
     Stations and markers are Points (x, y, z, m) with their 95 % figures; every identified
-    observation is a LineString from its station to its marker, with its ``status``. The
-    coordinates are *not* WGS84: ``coordinate_frame`` says which frame they are in (GeoJSON
-    readers that assume longitude/latitude must be told), as the plan's ``markers.geojson``
-    does.
+    observation is a LineString from its station to its marker, with its ``status``. As the
+    plan's ``markers.geojson`` (:func:`planner.gis_output.geojson_positions`): WGS84
+    longitude/latitude when ``crs`` is an Earth CRS, else the site frame's metres, and
+    ``coordinate_frame`` says which.
 
     Parameters
     ----------
@@ -122,13 +124,16 @@ def network_geojson(doc: dict, stations: list[dict], markers: list[dict],
         The ``adjustment.json`` document (frame, datum, provenance).
     stations, markers, observations : list of dict
         Rows of :mod:`planner.network_record`.
+    crs : str, optional
+        WKT of the coordinates' CRS (:attr:`planner.network_record.AdjustmentRun.crs`).
 
     Returns
     -------
     geojson : dict
     """
-    where = {s["station_id"]: _point(s) for s in stations}
-    where.update({("marker", m["marker_id"]): _point(m) for m in markers})
+    keys = [s["station_id"] for s in stations] + [("marker", m["marker_id"]) for m in markers]
+    where = dict(zip(keys, geojson_positions(crs, [_point(r) for r in stations + markers]),
+                     strict=True))
     feats = [{"type": "Feature",
               "geometry": {"type": "Point", "coordinates": where[s["station_id"]]},
               "properties": {"id": s["station_id"], "kind": "station",
@@ -153,7 +158,7 @@ def network_geojson(doc: dict, stations: list[dict], markers: list[dict],
               for o in observations if ("marker", o["marker_id"]) in where]
     prov = doc["provenance"]
     return {"type": "FeatureCollection", "name": "markerplan adjust: network",
-            "coordinate_frame": doc["frame"], "units": "m", "datum": doc["datum"]["description"],
+            **geojson_crs_members(crs, doc["frame"]), "datum": doc["datum"]["description"],
             "markerplan_version": prov["markerplan_version"],
             "config_sha256": prov["config_sha256"], "features": feats}
 

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from planner.plan_map import MAX_LABELS, _nice_125, draw_stations
+from planner.plan_map import MAX_LABELS, _nice_125, axis_frame, draw_stations
 
 #: The largest ellipse is drawn at about this fraction of the map's width.
 ELLIPSE_FRACTION = 0.06
@@ -112,8 +112,9 @@ def draw_network_map(run, stations: list[dict], markers: list[dict], observation
     ax.set_xlim(lo[0] - pad, hi[0] + pad)
     ax.set_ylim(lo[1] - 2 * pad, hi[1] + pad)  # room for the scale bars
     ax.set_aspect("equal")
-    ax.set_xlabel("x (m, site frame)")
-    ax.set_ylabel("y (m, site frame)")
+    frame = "site frame" if run.crs is None else axis_frame(run.crs)
+    ax.set_xlabel(f"x (m, {frame})")
+    ax.set_ylabel(f"y (m, {frame})")
     bar = _nice_125(extent / 5)
     ax.add_artist(AnchoredSizeBar(ax.transData, bar, f"{bar:g} m (positions)", "lower right",
                                   pad=0.5, color="black", frameon=True,

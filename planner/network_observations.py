@@ -36,7 +36,7 @@ from pathlib import Path
 import numpy as np
 
 from markerplan.errors import InputFileError
-from markerplan.reading import finite_number, read_csv, unique_ids
+from markerplan.reading import finite_number, read_csv, require_type, unique_ids
 
 #: Ways to establish marker identity across stations (``adjust --marker-ids``).
 IDENTITIES = ("plan", "geometry", "table")
@@ -209,6 +209,8 @@ class PlanGeometry:
     """The datum station the plan assumed (network mode), or ``None``."""
     dem: str | None
     """The ``--dem`` the plan was made on, or ``None`` for a preset's terrain."""
+    crs: str | None = None
+    """The CRS (WKT) of the plan's site frame, or ``None`` for local metres."""
 
 
 def read_plan_geometry(path: Path) -> PlanGeometry:
@@ -247,7 +249,23 @@ def read_plan_geometry(path: Path) -> PlanGeometry:
         np.array([s.heading_rad for s in layout.stations]),
         float(doc["requirement"]["working_radius_m"]), float(doc["requirement"]["requirement_m"]),
         incl, heading, reference if isinstance(reference, str) else None,
-        plan_dem_path(doc["provenance"]))
+        plan_dem_path(doc["provenance"]), _plan_crs(doc["site"], path))
+
+
+def _plan_crs(site: dict, path: Path) -> str | None:
+    """The plan's ``site.crs_wkt`` (``None`` when absent or null), checked to be a CRS."""
+    wkt = site.get("crs_wkt")
+    if wkt is None:
+        return None
+    from rasterio.crs import CRS
+    from rasterio.errors import CRSError
+
+    try:
+        require_type(wkt, str, f"--plan {path}: site crs_wkt")
+        return CRS.from_user_input(wkt).to_wkt()
+    except CRSError as exc:
+        raise InputFileError(f"--plan {path}: site crs_wkt is not a CRS ({exc}); plan again "
+                             "or remove the member") from exc
 
 
 def _plan_sigma_deg(cfg: dict, key: str, what: str) -> float | None:

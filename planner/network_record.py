@@ -90,6 +90,9 @@ class AdjustmentRun:
         frame.
     plan_markers : dict of str to (3,) float
         Planned centres by marker id (empty without a plan), site frame.
+    crs : str or None
+        The CRS (WKT) the coordinates are in: the plan's, when a station is held at its
+        planned pose; else ``None`` (a local frame).
     """
 
     result: Any
@@ -103,6 +106,7 @@ class AdjustmentRun:
     error_model: str = ""
     unidentified: list = field(default_factory=list)
     plan_markers: dict = field(default_factory=dict)
+    crs: str | None = None
 
 
 def ellipsoid_axes(cov3: np.ndarray) -> np.ndarray:
@@ -539,13 +543,13 @@ def reliability_summary(kept: list[dict]) -> dict:
 
 
 def frame_note(datum_kind: str, reference: str, plan_given: bool,
-               plan_dem: str | None = None) -> str:
+               plan_dem: str | None = None, crs: str | None = None) -> str:
     """The site frame of an adjustment, in words.
 
     With a plan (or control points) it is theirs: the plan's frame
     (:data:`planner.report.FRAME_NOTE`, or its DEM's); without either, the network defines it:
     the reference station's levelled frame, or for a free network the frame the stations were
-    chained into from the reference.
+    chained into from the reference. ``crs`` (WKT) names the plan's CRS when it has one.
 
     Examples
     --------
@@ -557,6 +561,12 @@ def frame_note(datum_kind: str, reference: str, plan_given: bool,
     if datum_kind == "control":
         return ("the control points' frame (x, y horizontal, z up, metres); "
                 "not geographic coordinates unless the control points are")
+    if plan_given and crs is not None:
+        from planner.gis_output import crs_name
+
+        return (f"site frame of the plan's DEM {Path(plan_dem or 'DEM').name}: its CRS, "
+                f"{crs_name(crs)}" + (f"; station {reference} held at its planned pose"
+                                      if datum_kind == "station" else ""))
     if plan_given:
         frame = FRAME_NOTE if plan_dem is None else (
             f"site frame of the plan's DEM {Path(plan_dem).name}: its projected CRS when it has "

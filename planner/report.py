@@ -118,6 +118,7 @@ def plan_record(outcome) -> dict:
                                  inputs=inp.sources),
         "frame": frame_note(inp.dem.crs),
         "site": {"name": inp.site_name, "seed": inp.site_seed, "crs": crs_name(inp.dem.crs),
+                 "crs_wkt": inp.dem.crs,
                  "marker_radius_m": inp.marker_radius_m,
                  "boundary_xy_m": None if inp.boundary_xy is None
                  else np.asarray(inp.boundary_xy).tolist()},

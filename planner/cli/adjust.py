@@ -177,11 +177,12 @@ def command(tables, out, overwrite, error_model, plan_path, identity, odometry_s
             working_radius_m=config["working_radius_m"], requirement_m=config["requirement_m"],
             identity=identity, frame=frame_note(
                 kind, config["reference_station"] or obs.station_ids[0], plan is not None,
-                plan.dem if plan else None),
+                plan.dem if plan else None, plan.crs if plan else None),
             inputs=_input_files(tables, plan_path, control_path),
             error_model=error_model.name, unidentified=identified.unidentified,
             plan_markers=(dict(zip(plan.marker_ids, plan.marker_xyz_m, strict=True))
-                          if plan and identity != "geometry" else {}))
+                          if plan and identity != "geometry" else {}),
+            crs=plan.crs if plan is not None and kind == "station" else None)
         doc = write_network_files(stage, run)
         timings["write"] = time.perf_counter() - t0
     report_timings(timings)

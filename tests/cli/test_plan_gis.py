@@ -206,3 +206,32 @@ def test_default_site_without_crs_keeps_its_local_frame(valid_inputs):
     with rasterio.open(out / "usable_markers.tif") as src:
         assert src.crs is None and src.width * src.height <= 40_000
         assert np.nanmax(src.read(1)) == len(doc["markers"])
+
+
+def test_the_plans_crs_reaches_the_network_geojson(planned):
+    """``adjust --plan`` takes the plan's CRS (plan.json ``site.crs_wkt``): its GeoJSON is in
+    WGS84 lon/lat like markers.geojson, and names the CRS."""
+    from rasterio.crs import CRS
+
+    from planner.network_files import network_geojson
+    from planner.network_observations import read_plan_geometry
+
+    _, out, _, dem = planned
+    geometry = read_plan_geometry(out / "plan.json")
+    assert CRS.from_wkt(geometry.crs) == CRS.from_wkt(dem.crs)
+    markers = [{"marker_id": m, "x_m": x, "y_m": y, "z_m": z, "control": False,
+                "ellipsoid_major_m": 0.01, "n_stations": 1, "stations": "S1"}
+               for m, (x, y, z) in zip(geometry.marker_ids, geometry.marker_xyz_m, strict=True)]
+    doc = {"frame": "plan frame", "datum": {"description": "station S1"},
+           "provenance": {"markerplan_version": "x", "config_sha256": "y"}}
+    gj = network_geojson(doc, [], markers, [], geometry.crs)
+    plan_gj = json.loads((out / "markers.geojson").read_text())
+    planned_lonlat = {f["properties"]["id"]: f["geometry"]["coordinates"]
+                      for f in plan_gj["features"] if f["properties"]["kind"] == "marker"}
+    network_lonlat = {f["properties"]["id"]: f["geometry"]["coordinates"] for f in gj["features"]}
+    assert network_lonlat.keys() == planned_lonlat.keys() and planned_lonlat
+    for marker_id, (lon, lat, z) in network_lonlat.items():
+        # 1e-8 deg is about 1 mm; the network rounds its metres to 0.1 mm first
+        assert [lon, lat] == pytest.approx(planned_lonlat[marker_id][:2], abs=1e-8)
+        assert z == pytest.approx(planned_lonlat[marker_id][2], abs=1e-4)
+    assert "WGS84" in gj["coordinate_frame"] and "EPSG:32633" in gj["source_crs"]
