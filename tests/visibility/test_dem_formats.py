@@ -259,6 +259,18 @@ def test_real_geographic_dem_reprojected(tmp_path):
     hi = np.array([h[a - 1:a + 2, b - 1:b + 2].max() for a, b in zip(r, c, strict=True)])
     assert np.all((got >= lo - 1e-6) & (got <= hi + 1e-6))
     assert np.median(np.abs(got - h[r, c])) < 5.0  # metres, on relief of 236..1076 m
+    # a window in the file's own units (degrees), read then reprojected around its centre
+    part = read_dem(path, reproject=True, window=(-84.30, -84.25, 36.55, 36.60))
+    local = CRS.from_wkt(part.crs).to_dict()
+    assert (local["lon_0"], local["lat_0"]) == pytest.approx((-84.275, 36.575), abs=2 * deg)
+    assert part.cell_size_m == pytest.approx(dem.cell_size_m, rel=1e-3)
+    assert part.shape[0] * part.shape[1] < 0.04 * dem.shape[0] * dem.shape[1]  # 64 x 64 read
+    inside = (lon > -84.30) & (lon < -84.25) & (lat > 36.55) & (lat < 36.60)
+    assert inside.sum() >= 2
+    xy = to_dem_xy(part, np.column_stack([lon[inside], lat[inside]]))
+    assert part.valid_at(xy).all()
+    assert np.all((part.height_at(xy) >= lo[inside] - 1e-6)
+                  & (part.height_at(xy) <= hi[inside] + 1e-6))
 
 
 def test_dem_source_crs_needs_crs():
