@@ -334,15 +334,19 @@ def read_dem(path: str | Path, fill: str | None = None, what: str | None = None,
         Every cell nodata, heights beyond +-1e8 m, a grid smaller than 2 x 2 or larger than
         :data:`MAX_DEM_CELLS`, a ``window`` that misses the raster.
     ConfigError
-        Unknown ``fill``; a ``window`` that is not 4 finite numbers with min < max.
+        Unknown ``fill``; a ``window`` that is not 4 finite numbers with min <= max.
 
     Examples
     --------
-    >>> import tempfile, os
-    >>> dem = DEM(np.arange(12.0).reshape(3, 4), (500.5, 20.5), 1.0)
-    >>> path = write_dem(os.path.join(tempfile.mkdtemp(), "d.npz"), dem)
-    >>> read_dem(path, window=(501.0, 501.2, 21.0, 21.0)).heights_m.shape  # padded, clipped
-    (3, 4)
+    A window of one cell's width (column 1, row 1), padded by 2 cells and clipped:
+
+    >>> import os, tempfile
+    >>> dem = DEM(np.arange(30.0).reshape(5, 6), (500.5, 20.5), 1.0)
+    >>> with tempfile.TemporaryDirectory() as folder:
+    ...     path = write_dem(os.path.join(folder, "d.npz"), dem)
+    ...     part = read_dem(path, window=(501.2, 501.4, 21.6, 21.8))
+    >>> part.origin_m, part.shape
+    ((500.5, 20.5), (4, 4))
     """
     del nodata_fix
     path = Path(path)
@@ -403,7 +407,10 @@ def _read_dem_iv(path: Path, fill: str | None, window, what: str) -> None:
     if fill is not None and fill not in FILL_POLICIES:
         raise ConfigError(f"fill must be one of {', '.join(FILL_POLICIES)} or None, got {fill!r}")
     if window is not None:
-        w = np.asarray(window, dtype=float) if np.ndim(window) == 1 else np.zeros(0)
+        try:
+            w = np.asarray(window, dtype=float)
+        except (TypeError, ValueError):
+            w = np.zeros(0)
         if w.shape != (4,) or not np.isfinite(w).all() or w[0] > w[1] or w[2] > w[3]:
             raise ConfigError(f"window must be 4 finite numbers (xmin, xmax, ymin, ymax) with "
                               f"min <= max, got {window!r:.80}")

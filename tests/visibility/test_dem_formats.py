@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from markerplan.errors import DataError, InputFileError
+from markerplan.errors import ConfigError, DataError, InputFileError
 from visibility.dem import DEM, WINDOW_PAD_CELLS, read_dem, to_dem_xy, write_dem
 
 UTM = "EPSG:32633"
@@ -304,6 +304,9 @@ def test_window_read_is_the_crop_of_the_full_read(tmp_path, suffix):
     assert corner.origin_m == full.origin_m and corner.shape == (1 + pad, 1 + pad)
     with pytest.raises(DataError, match="misses the DEM"):
         read_dem(path, window=(0.0, 10.0, 0.0, 10.0))
+    for bad in ((1.0, 0.0, 0.0, 1.0), (0.0, 1.0, 0.0), (0.0, np.nan, 0.0, 1.0), "abcd"):
+        with pytest.raises(ConfigError, match="window must be 4 finite numbers"):
+            read_dem(path, window=bad)
 
 
 def test_big_raster_read_by_window_stays_small(tmp_path):
