@@ -55,7 +55,7 @@ def test_esri_ascii_grid_reads_as_the_geotiff(tmp_path):
 
     tif = write_dem(tmp_path / "d.tif", _dem())
     rasterio.shutil.copy(tif, tmp_path / "d.asc", driver="AAIGrid")
-    assert (tmp_path / "d.asc").read_text().startswith("ncols        8\nnrows        6\n")
+    assert (tmp_path / "d.asc").read_text().split()[:4] == ["ncols", "8", "nrows", "6"]
     _same(read_dem(tmp_path / "d.asc"), read_dem(tif))
 
 
