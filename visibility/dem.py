@@ -4,21 +4,33 @@ A :class:`DEM` stores heights at cell centres: cell ``[j, i]`` (row ``j``, colum
 site coordinates ``(x0 + i * cell, y0 + j * cell)``. Rows run along +y, columns along +x
 (so a GeoTIFF, whose first row is the northern edge, is flipped on reading and writing).
 
-Files: ``.tif``/``.tiff`` through rasterio (CRS kept as WKT), ``.npz`` with members
-``heights_m``, ``origin_m``, ``cell_size_m`` and ``crs``.
+Files (:func:`read_dem`): any one-band raster GDAL reads, through rasterio (GeoTIFF, ESRI ASCII
+grid, VRT, ISIS3/PDS cubes; CRS kept as WKT; read whole or by window; reprojected to a local
+metric grid on request), and ``.npz`` with members ``heights_m``, ``origin_m``,
+``cell_size_m``, ``crs`` and optionally ``valid``. Nodata is a mask (:attr:`DEM.valid`).
+:func:`write_dem` writes GeoTIFF or ``.npz``.
 """
 
 from __future__ import annotations
 
-import zipfile
-import zlib
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from markerplan.errors import ConfigError, DataError, InputFileError, OutputError
-from markerplan.reading import MAX_ABS_COORDINATE_M, finite_number
+from markerplan.reading import MAX_ABS_COORDINATE_M
+from visibility.dem_raster import (
+    MAX_DEM_CELLS,
+    WINDOW_PAD_CELLS,
+    metric_square,
+    read_gdal,
+    read_npz,
+    site_grid,
+)
+
+__all__ = ["DEM", "FILL_POLICIES", "MAX_DEM_CELLS", "WINDOW_PAD_CELLS", "fill_nodata",
+           "read_dem", "to_dem_xy", "write_dem"]
 
 FILL_POLICIES = ("nearest",)
 
@@ -41,6 +53,10 @@ class DEM:
         Which cells hold measured terrain; ``None``: every cell. Heights under invalid
         (nodata) cells are filled (e.g. :func:`fill_nodata`) so that a mesh is complete, but
         they are not terrain: nothing may stand on them (see :meth:`valid_at`).
+    source_crs : str or None
+        WKT of the file's own CRS when :func:`read_dem` reprojected it into ``crs`` (a local
+        metric CRS), else ``None``; :func:`to_dem_xy` maps that CRS's coordinates into the
+        DEM's. Not written by :func:`write_dem` (the written file is in ``crs``).
     """
 
     heights_m: np.ndarray
@@ -48,6 +64,7 @@ class DEM:
     cell_size_m: float
     crs: str | None = None
     valid: np.ndarray | None = None
+    source_crs: str | None = None
 
     def __post_init__(self) -> None:
         self.heights_m = np.asarray(self.heights_m, dtype=np.float64)
@@ -68,6 +85,9 @@ class DEM:
                 raise DataError("DEM has no valid cell at all; check the nodata value")
             if self.valid.all():
                 self.valid = None
+        if self.source_crs is not None and self.crs is None:
+            raise DataError("DEM source_crs is set but crs is not; a reprojected DEM knows "
+                            "the CRS it was reprojected into")
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -103,7 +123,8 @@ class DEM:
                 & (xy[:, 1] >= ymin) & (xy[:, 1] <= ymax))
 
     def require_inside(self, xy: np.ndarray, ids, label: str, fix: str) -> None:
-        """Raise unless every point lies on the grid (:meth:`contains`).
+        """Raise unless every point lies on the grid (:meth:`contains`) and on measured
+        terrain (:meth:`valid_at`): stations and markers stand on data, never on nodata.
 
         Parameters
         ----------
@@ -119,7 +140,8 @@ class DEM:
         Raises
         ------
         DataError
-            Names the first point outside, its position and the DEM's extent.
+            Names the first point outside (with the DEM's extent and ``fix``) or on nodata,
+            and its position.
         """
         xy = np.atleast_2d(np.asarray(xy, dtype=float))
         inside = self.contains(xy)
@@ -129,6 +151,13 @@ class DEM:
             raise DataError(f"{label} {ids[k]} at ({xy[k, 0]:.2f}, {xy[k, 1]:.2f}) m lies "
                             f"outside the DEM [{xmin:.1f}, {xmax:.1f}] x [{ymin:.1f}, "
                             f"{ymax:.1f}] m; {fix}")
+        on_data = self.valid_at(xy)
+        if not on_data.all():
+            k = int(np.flatnonzero(~on_data)[0])
+            raise DataError(f"{label} {ids[k]} at ({xy[k, 0]:.2f}, {xy[k, 1]:.2f}) m stands on "
+                            f"DEM nodata (no measured terrain there); a {label} must stand on "
+                            "data: move it onto the DEM's valid area or use a DEM with data "
+                            "there")
 
     def height_at(self, xy: np.ndarray) -> np.ndarray:
         """Bilinear height at site-frame points.
@@ -212,13 +241,8 @@ class DEM:
 
 
 #: Fix named by :class:`DEM` for NaN cells (library users build DEMs from arrays).
-_ARRAY_NODATA_FIX = ("fill them (visibility.dem.fill_nodata, or read_dem(..., fill='nearest')) "
-                     "or crop the DEM")
-#: Fix :func:`read_dem` names for NaN/nodata cells unless its caller gives its own.
-DEFAULT_NODATA_FIX = ("fill them (e.g. gdal_fillnodata.py) or crop the DEM to its valid cells, "
-                      "or read it with fill='nearest'")
-#: Largest grid read (cells); 1e8 float64 heights are 800 MB.
-MAX_DEM_CELLS = 100_000_000
+_ARRAY_NODATA_FIX = ("fill them and mark them invalid (DEM(fill_nodata(h, 'nearest'), ..., "
+                     "valid=np.isfinite(h))), or read the file with visibility.dem.read_dem")
 
 
 def _refuse_nan(heights: np.ndarray, source: str, fix: str = _ARRAY_NODATA_FIX) -> None:
@@ -257,78 +281,151 @@ def fill_nodata(heights: np.ndarray, policy: str) -> np.ndarray:
 
 
 def read_dem(path: str | Path, fill: str | None = None, what: str | None = None,
-             nodata_fix: str | None = None) -> DEM:
-    """Read a DEM from a GeoTIFF (``.tif``/``.tiff``, one band) or ``.npz``.
+             nodata_fix: str | None = None, *, reproject: bool = False,
+             window: tuple[float, float, float, float] | None = None) -> DEM:
+    """Read a DEM from any one-band raster GDAL reads, or from our ``.npz``.
+
+    Rasters (through rasterio): GeoTIFF, ESRI ASCII grid (``.asc``), VRT, ISIS3 cubes
+    (``.cub``), PDS labels (``.lbl``/``.img``) and every other GDAL raster format; the CRS is
+    kept as WKT (projected Earth CRSs such as UTM, lunar CRSs of the ``IAU_2015:301xx``
+    family, or none: the site frame). Nodata (the file's nodata value, NaN, inf) is a mask,
+    not an error: those cells get the height of the nearest valid cell (:func:`fill_nodata`),
+    so that meshes are complete, and :attr:`DEM.valid` marks the measured ones.
 
     Parameters
     ----------
     path : str or Path
-        DEM file: heights in metres on square cells in a projected (metric) CRS or the site
-        frame; a GeoTIFF's CRS is kept.
+        DEM file: heights in metres. Cells must be square, north-up and in metres (a
+        projected CRS or none) unless ``reproject``.
     fill : {None, "nearest"}
-        Policy for NaN/inf/nodata cells; ``None`` refuses them.
+        ``None``: nodata cells are filled and marked invalid. ``"nearest"``: they are filled
+        the same way and taken as terrain (``valid`` is ``None``: every cell).
     what : str, optional
         How messages name the input (default ``"DEM <path>"``), e.g. ``"--dem dem.tif"``.
     nodata_fix : str, optional
-        How the NaN/nodata message tells the user to fix it; a command passes the options
-        it really has (e.g. ``"pass --dem-fill nearest, or fill them ..."``). The default,
-        :data:`DEFAULT_NODATA_FIX`, names no command-line option.
+        Ignored (nodata is no longer refused); kept until every caller drops it.
+    reproject : bool
+        Resample a grid that is not metric and square: a geographic (degree) or non-metre
+        CRS goes to a local transverse Mercator CRS centred on the grid, on the CRS's own
+        ellipsoid or sphere (Earth or Moon), with square cells of the smaller native cell
+        side in metres; rotated or non-square cells in a metric CRS go to square cells of
+        the smaller side in the same CRS. Bilinear; nodata and cells outside the source
+        footprint become invalid. :attr:`DEM.source_crs` then records the file's CRS
+        (:func:`to_dem_xy` maps its coordinates into the DEM's).
+    window : (xmin, xmax, ymin, ymax) float, optional
+        Read only the cells covering this rectangle, in the file's own CRS units (metres, or
+        degrees for a geographic file), plus a :data:`WINDOW_PAD_CELLS` pad, clipped to the
+        raster; large rasters are read by window without loading the rest.
 
     Returns
     -------
     dem : DEM
-        Site frame = the file's map coordinates (GeoTIFF) or stored origin (``.npz``).
+        Site frame = the file's map coordinates (or the local CRS when reprojected), or the
+        stored origin (``.npz``).
 
     Raises
     ------
     InputFileError
-        Missing, empty, corrupt or unreadable file, unsupported suffix, several bands, a
-        non-numeric band, a geographic (degree) or non-metre CRS, no georeferencing,
-        rotated or non-square cells, ``.npz`` members missing or of the wrong shape or type,
-        non-finite or absurd origin or cell size.
+        Missing, empty, corrupt or unreadable file, several bands, a non-numeric band, no
+        georeferencing; unless ``reproject``: a geographic or non-metre CRS, rotated or
+        non-square cells (the message names ``--reproject`` and gdalwarp); ``.npz`` members
+        missing or of the wrong shape or type; non-finite or absurd origin or cell size.
     DataError
-        NaN/inf/nodata cells and ``fill=None``, no valid cell at all, heights beyond
-        +-1e8 m, a grid smaller than 2 x 2 or larger than :data:`MAX_DEM_CELLS`.
+        Every cell nodata, heights beyond +-1e8 m, a grid smaller than 2 x 2 or larger than
+        :data:`MAX_DEM_CELLS`, a ``window`` that misses the raster.
     ConfigError
-        Unknown ``fill``.
+        Unknown ``fill``; a ``window`` that is not 4 finite numbers with min <= max.
+
+    Examples
+    --------
+    A window of one cell's width (column 1, row 1), padded by 2 cells and clipped:
+
+    >>> import os, tempfile
+    >>> dem = DEM(np.arange(30.0).reshape(5, 6), (500.5, 20.5), 1.0)
+    >>> with tempfile.TemporaryDirectory() as folder:
+    ...     path = write_dem(os.path.join(folder, "d.npz"), dem)
+    ...     part = read_dem(path, window=(501.2, 501.4, 21.6, 21.8))
+    >>> part.origin_m, part.shape
+    ((500.5, 20.5), (4, 4))
     """
+    del nodata_fix
     path = Path(path)
     what = what or f"DEM {path}"
-    _read_dem_iv(path, fill, what)
-    if path.suffix.lower() in (".tif", ".tiff"):
-        heights, origin, cell, crs = _read_tif(path, what)
+    _read_dem_iv(path, fill, window, what)
+    if path.suffix.lower() == ".npz":
+        raster = read_npz(path, what, window)
     else:
-        heights, origin, cell, crs = _read_npz(path, what)
-    origin = (finite_number(origin[0], f"{what}: origin x"),
-              finite_number(origin[1], f"{what}: origin y"))
-    cell = finite_number(cell, f"{what}: cell size")
-    if cell <= 0:
-        raise InputFileError(f"{what}: cell size must be > 0 m, got {cell:g}; check the file's "
-                             "georeferencing")
+        raster = read_gdal(path, what, window)
+    raster, source_crs = metric_square(raster, reproject, what)
+    heights, origin, cell = site_grid(raster, what)
     _heights_iv(heights, what)
-    if fill is None:
-        _refuse_nan(heights, what, nodata_fix or DEFAULT_NODATA_FIX)
-    else:
-        heights = fill_nodata(heights, fill)
-    return DEM(heights, origin, cell, crs)
+    valid = np.isfinite(heights)
+    if not valid.any():
+        raise DataError(f"{what}: every cell is nodata (NaN/inf or the nodata value); check "
+                        "the nodata value (e.g. gdal_edit.py -a_nodata) and the file")
+    heights = fill_nodata(np.where(valid, heights, np.nan), "nearest")
+    crs = None if raster.crs is None else raster.crs.to_wkt()
+    return DEM(heights, origin, cell, crs, valid=None if fill == "nearest" else valid,
+               source_crs=source_crs)
 
 
-def _read_dem_iv(path: Path, fill: str | None, what: str) -> None:
+def to_dem_xy(dem: DEM, xy: np.ndarray) -> np.ndarray:
+    """Points given in the DEM file's own CRS, in the DEM's site frame.
+
+    Identity unless :func:`read_dem` reprojected the file (``dem.source_crs`` set): then
+    e.g. station longitudes/latitudes in degrees become local metres.
+
+    Parameters
+    ----------
+    dem : DEM
+    xy : (n, 2) float
+        Points in the file's CRS units (metres, or degrees for a geographic file).
+
+    Returns
+    -------
+    xy_dem : (n, 2) float64
+        The points in the DEM's frame (``dem.crs``), metres.
+
+    Examples
+    --------
+    >>> to_dem_xy(DEM(np.zeros((2, 2)), (0.0, 0.0), 1.0), [[1.0, 2.0]]).tolist()
+    [[1.0, 2.0]]
+    """
+    xy = np.array(xy, dtype=np.float64, ndmin=2)
+    if xy.ndim != 2 or xy.shape[1] != 2:
+        raise DataError(f"xy must have shape (n, 2), got {xy.shape}")
+    if dem.source_crs is None or len(xy) == 0:
+        return xy
+    from rasterio.crs import CRS
+    from rasterio.warp import transform
+
+    xs, ys = transform(CRS.from_wkt(dem.source_crs), CRS.from_wkt(dem.crs), xy[:, 0], xy[:, 1])
+    return np.column_stack([xs, ys])
+
+
+def _read_dem_iv(path: Path, fill: str | None, window, what: str) -> None:
     if fill is not None and fill not in FILL_POLICIES:
         raise ConfigError(f"fill must be one of {', '.join(FILL_POLICIES)} or None, got {fill!r}")
+    if window is not None:
+        try:
+            w = np.asarray(window, dtype=float)
+        except (TypeError, ValueError):
+            w = np.zeros(0)
+        if w.shape != (4,) or not np.isfinite(w).all() or w[0] > w[1] or w[2] > w[3]:
+            raise ConfigError(f"window must be 4 finite numbers (xmin, xmax, ymin, ymax) with "
+                              f"min <= max, got {window!r:.80}")
     if not path.exists():
         raise InputFileError(f"{what}: file does not exist; check the path")
     if path.is_dir():
-        raise InputFileError(f"{what}: is a folder; give a .tif, .tiff or .npz file")
-    suffix = path.suffix.lower()
-    if suffix not in (".tif", ".tiff", ".npz"):
-        raise InputFileError(f"{what}: has suffix {suffix!r}; use .tif, .tiff or .npz")
+        raise InputFileError(f"{what}: is a folder; give the raster file (for an ArcInfo "
+                             "binary grid, its hdr.adf) or an .npz")
     if path.stat().st_size == 0:
-        raise InputFileError(f"{what}: file is empty; give a GeoTIFF or .npz DEM")
+        raise InputFileError(f"{what}: file is empty; give a raster GDAL reads (GeoTIFF, .asc, "
+                             "VRT, ISIS3/PDS cube) or an .npz DEM")
 
 
 def _heights_iv(heights: np.ndarray, what: str) -> None:
-    """Shape, size and magnitude of a height grid (NaN/nodata are the fill policy's)."""
+    """Shape, size and magnitude of a height grid (NaN/nodata cells are the mask's)."""
     if heights.ndim != 2 or min(heights.shape) < 2:
         raise DataError(f"{what}: a DEM needs a 2-D grid of at least 2 x 2 cells, got shape "
                         f"{heights.shape}")
@@ -338,166 +435,14 @@ def _heights_iv(heights: np.ndarray, what: str) -> None:
         raise DataError(f"{what}: heights must lie within +-{MAX_ABS_COORDINATE_M:g} m, got "
                         f"{worst:g}; check the units, and declare the nodata value if that is "
                         "one (e.g. gdal_edit.py -a_nodata)")
-    if finite.size == 0:
-        raise DataError(f"{what}: no valid height at all (every cell is NaN/nodata); check the "
-                        "file")
-
-
-def _check_cells(ny: int, nx: int, what: str) -> None:
-    if ny * nx > MAX_DEM_CELLS:
-        raise DataError(f"{what}: {ny} x {nx} cells is more than the {MAX_DEM_CELLS:.0e} this "
-                        "reads; crop or coarsen it (e.g. gdalwarp -te ... or -tr ...)")
-
-
-def _check_crs(crs, what: str) -> None:
-    """Refuse a geographic (degree) or non-metre projected CRS (a rasterio ``CRS``)."""
-    from rasterio.errors import CRSError
-
-    if crs is None:
-        return
-    name = (crs.to_string() or "of the file")[:60]
-    if crs.is_geographic:
-        raise InputFileError(f"{what}: CRS {name} is geographic (degrees), but DEM cells and "
-                             "heights must be metres; reproject it to a projected CRS first, "
-                             "e.g. gdalwarp -t_srs EPSG:326NN in.tif out.tif (NN: your UTM "
-                             "zone)")
-    try:
-        unit, factor = crs.linear_units_factor
-    except CRSError:  # no linear unit to read (local or engineering CRS): taken as metres
-        return
-    if not np.isclose(factor, 1.0):
-        raise InputFileError(f"{what}: CRS {name} has units of {unit}, not metres; reproject it "
-                             "to a metric CRS first (gdalwarp -t_srs ...)")
-
-
-def _read_tif(path: Path, what: str
-              ) -> tuple[np.ndarray, tuple[float, float], float, str | None]:
-    import warnings
-
-    import rasterio
-    from rasterio.errors import NotGeoreferencedWarning, RasterioError
-    from rasterio.transform import Affine
-
-    try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", NotGeoreferencedWarning)
-            with rasterio.open(path) as src:
-                if src.count != 1:
-                    raise InputFileError(f"{what}: has {src.count} bands; a DEM is one band of "
-                                         "heights, extract it first (e.g. gdal_translate -b 1 "
-                                         "in.tif heights.tif)")
-                try:
-                    kind = np.dtype(src.dtypes[0]).kind
-                except TypeError:
-                    kind = "c"
-                if kind not in "iuf":
-                    raise InputFileError(f"{what}: band type {src.dtypes[0]} is not a real "
-                                         "number; heights must be integers or floats")
-                _check_crs(src.crs, what)
-                t = src.transform
-                if src.crs is None and t == Affine.identity() and not src.gcps[0]:
-                    raise InputFileError(f"{what}: has no georeferencing (no geotransform); "
-                                         "set it (e.g. gdal_translate -a_ullr) or write the DEM "
-                                         "with visibility.dem.write_dem")
-                _check_cells(src.height, src.width, what)
-                band = src.read(1, masked=True).astype(np.float64)
-                crs = src.crs.to_wkt() if src.crs is not None else None
-    except RasterioError as exc:
-        raise InputFileError(f"{what}: not a readable GeoTIFF ({_one_line(exc)}); check the "
-                             "file") from exc
-    except MemoryError:
-        raise DataError(f"{what}: too large to read into memory; crop or coarsen it") from None
-    if not all(np.isfinite(v) for v in tuple(t)[:6]):
-        raise InputFileError(f"{what}: geotransform {tuple(t)[:6]} is not finite; fix the "
-                             "file's georeferencing")
-    if t.b != 0 or t.d != 0:
-        raise InputFileError(f"{what}: cells must be north-up, got a rotated or sheared "
-                             f"transform {tuple(t)[:6]}; resample it first (e.g. gdalwarp)")
-    if not np.isclose(abs(t.a), abs(t.e), rtol=1e-9) or t.a == 0:
-        raise InputFileError(f"{what}: cells must be square, got {abs(t.a):g} x {abs(t.e):g}; "
-                             "resample to square cells first (e.g. gdalwarp -tr 1 1 in.tif "
-                             "out.tif)")
-    heights = np.ma.filled(band, np.nan)
-    cell = abs(t.a)
-    ny, nx = heights.shape
-    if t.a > 0:
-        x0 = t.c + 0.5 * t.a
-    else:  # first column is the right edge (max x): flip so columns run along +x
-        heights = heights[:, ::-1]
-        x0 = t.c + (nx - 0.5) * t.a
-    if t.e < 0:  # first row is the top (max y): flip so rows run along +y
-        heights = heights[::-1]
-        y0 = t.f + (ny - 0.5) * t.e
-    else:
-        y0 = t.f + 0.5 * t.e
-    return heights, (x0, y0), cell, crs
-
-
-#: Exceptions numpy and zipfile raise on a corrupt ``.npz``.
-_NPZ_ERRORS = (OSError, ValueError, EOFError, KeyError, TypeError, NotImplementedError,
-               zipfile.BadZipFile, zlib.error)
-_NPZ_MEMBERS = ("heights_m", "origin_m", "cell_size_m")
-
-
-def _read_npz(path: Path, what: str
-              ) -> tuple[np.ndarray, tuple[float, float], float, str | None]:
-    fix = "write it with visibility.dem.write_dem"
-    try:
-        z = np.load(path, allow_pickle=False)
-    except _NPZ_ERRORS as exc:
-        raise InputFileError(f"{what}: not a readable .npz ({_one_line(exc)}); {fix}") from exc
-    if not isinstance(z, np.lib.npyio.NpzFile):
-        raise InputFileError(f"{what}: is a single .npy array, not an .npz archive with members "
-                             f"{', '.join(_NPZ_MEMBERS)}; {fix}")
-    with z:
-        missing = [k for k in _NPZ_MEMBERS if k not in z.files]
-        if missing:
-            raise InputFileError(f"{what}: lacks member(s) {', '.join(missing)} (has "
-                                 f"{', '.join(z.files)[:80] or 'none'}); {fix}")
-        try:
-            arrays = {k: z[k] for k in (*_NPZ_MEMBERS, "crs") if k in z.files}
-        except _NPZ_ERRORS as exc:
-            raise InputFileError(f"{what}: a member cannot be read ({_one_line(exc)}); "
-                                 f"{fix}") from exc
-    heights, origin, cell = (arrays[k] for k in _NPZ_MEMBERS)
-    if heights.ndim != 2 or heights.dtype.kind not in "iuf":
-        raise InputFileError(f"{what}: heights_m must be a 2-D array of numbers, got shape "
-                             f"{heights.shape} dtype {heights.dtype}; {fix}")
-    _check_cells(*heights.shape, what)
-    if origin.shape != (2,) or origin.dtype.kind not in "iuf":
-        raise InputFileError(f"{what}: origin_m must be 2 numbers (x0, y0), got shape "
-                             f"{origin.shape} dtype {origin.dtype}; {fix}")
-    if cell.size != 1 or cell.dtype.kind not in "iuf":
-        raise InputFileError(f"{what}: cell_size_m must be one number, got shape {cell.shape} "
-                             f"dtype {cell.dtype}; {fix}")
-    crs = None
-    if "crs" in arrays:
-        c = arrays["crs"]
-        if c.size != 1 or c.dtype.kind not in "US":
-            raise InputFileError(f"{what}: crs must be one string (WKT, or empty), got shape "
-                                 f"{c.shape} dtype {c.dtype}; {fix}")
-        crs = str(c.reshape(()).item().decode("utf-8", "replace") if c.dtype.kind == "S"
-                  else c.reshape(()).item()) or None
-    if crs is not None:
-        from rasterio.crs import CRS
-        from rasterio.errors import CRSError
-
-        try:
-            parsed = CRS.from_user_input(crs)
-        except CRSError as exc:
-            raise InputFileError(f"{what}: crs {crs[:40]!r} is not a CRS (give WKT, an EPSG "
-                                 f"code or an empty string); {fix}") from exc
-        _check_crs(parsed, what)
-    return (heights.astype(np.float64), (float(origin[0]), float(origin[1])),
-            float(cell.reshape(())), crs)
-
-
-def _one_line(exc: BaseException) -> str:
-    return " ".join(str(exc).split())[:200] or type(exc).__name__
 
 
 def write_dem(path: str | Path, dem: DEM) -> Path:
     """Write ``dem`` as a GeoTIFF (``.tif``/``.tiff``, float64, CRS kept) or ``.npz``.
+
+    The valid mask is kept: a GeoTIFF holds NaN under invalid cells and declares NaN its
+    nodata value; an ``.npz`` holds the filled heights and a ``valid`` member (only when some
+    cell is invalid). :func:`read_dem` reads both back to the same DEM.
 
     Raises
     ------
@@ -510,8 +455,10 @@ def write_dem(path: str | Path, dem: DEM) -> Path:
         if suffix in (".tif", ".tiff"):
             _write_tif(path, dem)
         elif suffix == ".npz":
+            mask = {} if dem.valid is None else {"valid": dem.valid}
             np.savez(path, heights_m=dem.heights_m, origin_m=np.array(dem.origin_m),
-                     cell_size_m=np.array(dem.cell_size_m), crs=np.array(dem.crs or ""))
+                     cell_size_m=np.array(dem.cell_size_m), crs=np.array(dem.crs or ""),
+                     **mask)
         else:
             raise OutputError(f"DEM output {path} has suffix {suffix!r}; use .tif, .tiff or .npz")
     except OSError as exc:
@@ -531,6 +478,8 @@ def _write_tif(path: Path, dem: DEM) -> None:
     top = y0 + (ny - 0.5) * c
     transform = Affine(c, 0.0, x0 - 0.5 * c, 0.0, -c, top)
     profile = dict(driver="GTiff", height=ny, width=nx, count=1, dtype="float64",
-                   transform=transform, crs=dem.crs)
+                   transform=transform, crs=dem.crs,
+                   nodata=None if dem.valid is None else np.nan)
+    heights = np.where(dem.valid_mask(), dem.heights_m, np.nan)
     with rasterio.open(path, "w", **profile) as dst:
-        dst.write(dem.heights_m[::-1], 1)
+        dst.write(heights[::-1], 1)
