@@ -115,8 +115,24 @@ def plan_layout(doc: dict) -> PlanLayout:
 
 
 def plan_dem_path(provenance: dict) -> str | None:
-    """The ``--dem`` file a plan's provenance names, or ``None`` for a preset's terrain."""
+    """The ``--dem`` file a plan's provenance names (an absolute path since plans record
+    their inputs so), or ``None`` for a preset's terrain."""
     return provenance.get("inputs", {}).get("dem")
+
+
+def plan_dem(provenance: dict) -> DEM | None:
+    """The terrain of a plan made on a ``--dem`` file, read as the plan read it; ``None`` for
+    a preset's terrain.
+
+    Raises
+    ------
+    InputFileError, DataError
+        The DEM the plan names cannot be read (see :func:`visibility.dem.read_dem`).
+    """
+    path = plan_dem_path(provenance)
+    if path is None:
+        return None
+    return read_dem(path, what=f"DEM {path} (named by the plan)")
 
 
 def write_plan(doc: dict, path: Path) -> None:
@@ -134,11 +150,8 @@ def load_plan(path: str | Path) -> SurveyPlan:
     """
     doc = read_plan(path, "PLAN", full=True)
     site = doc["site"]
-    dem_path = plan_dem_path(doc["provenance"])
-    if dem_path is not None:
-        dem = read_dem(dem_path, what=f"DEM {dem_path} (named by the plan)",
-                       nodata_fix="fix the DEM the plan names, or plan again on a filled DEM")
-    else:
+    dem = plan_dem(doc["provenance"])
+    if dem is None:
         dem = load_site(site["name"], site.get("seed")).dem
     layout = plan_layout(doc)
     return SurveyPlan(
@@ -266,7 +279,7 @@ def _provenance_iv(prov: Any, what: str, full: bool) -> None:
         require_type(prov["config"], dict, f"{what} config")
     if "inputs" in prov:
         inputs = require_type(prov["inputs"], dict, f"{what} inputs")
-        for key in ("dem", "stations"):
+        for key in ("site", "dem", "stations"):
             if inputs.get(key) is not None:
                 require_type(inputs[key], str, f"{what} inputs {key}")
         if "station_ids" in inputs:

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from markerplan.errors import ConfigError, InputFileError
+from markerplan.errors import ConfigError, DataError, InputFileError
 from markerplan.reading import (
     MAX_ABS_COORDINATE_M,
     finite_number,
@@ -26,7 +26,13 @@ from markerplan.reading import (
     unique_ids,
 )
 from planner.baselines import Baseline, greedy_cover, greedy_network, regular_grid
-from planner.candidates import Candidates, candidate_sites, load_polygons
+from planner.candidates import (
+    Candidates,
+    candidate_sites,
+    edge_margin_m,
+    load_polygons,
+    valid_area,
+)
 from planner.config import MAX_MARKERS, MAX_STATIONS
 from planner.program import PlanResult, plan_sites
 from planner.sight import sight_problem
@@ -43,15 +49,17 @@ class PlanInputs:
     Attributes
     ----------
     site_name : str
+        The site preset's name, or the DEM file's stem (``mydem`` for ``mydem.tif``).
     site_seed : int or None
-        Terrain seed of the site preset.
+        Terrain seed of the site preset (None on a DEM file).
     dem : visibility.dem.DEM
     station_ids : list of str
     station_xyz : (s, 3) float
         LiDAR centres, m.
     station_heading_rad : (s,) float
     boundary_xy : (k, 2) float or None
-        Where markers may go (None: the whole DEM).
+        Where markers may go (None: the whole DEM; on a DEM with nodata and no
+        ``--boundary``, :func:`default_boundary`).
     exclusions : list of shapely Polygon
     craters : list
         Objects with ``centre_xy_m`` and ``diameter_m`` (for the map and crater exclusion).
@@ -63,7 +71,8 @@ class PlanInputs:
         Markers already in the field, fixed in the plan, m.
     marker_radius_m : float
     sources : dict
-        Where each input came from (for provenance).
+        Where each input came from (for provenance): the preset, and input files as absolute
+        paths.
     """
 
     site_name: str
@@ -151,8 +160,11 @@ def load_inputs(site: str = "default", site_seed: int | None = None, dem_path=No
         Terrain seed of the preset (default 0).
     dem_path : path, optional
         GeoTIFF / npz DEM in the site frame (replaces the preset terrain; the preset's craters
-        and as-built layout are then dropped). Needs ``stations_path``: the preset's stations
-        belong to the preset's terrain.
+        and as-built layout are then dropped, the site is named after the file). Needs
+        ``stations_path``: the preset's stations belong to the preset's terrain. Stations and
+        existing markers must stand on its measured terrain; where it has nodata, markers may
+        go only inside :func:`default_boundary` (or ``boundary_path``, kept
+        :func:`~planner.candidates.edge_margin_m` off nodata).
     stations_path : path, optional
         Stations CSV (``id, x_m, y_m[, z_m][, heading_deg]``; ``z_m`` is the LiDAR centre, default
         ground + rig height) or GeoJSON Points with an ``id`` property.
@@ -175,7 +187,7 @@ def load_inputs(site: str = "default", site_seed: int | None = None, dem_path=No
         ``dem_path`` without ``stations_path``, or an unknown preset.
     InputFileError, DataError
         A malformed input file (see :func:`read_stations`, :func:`read_markers`,
-        :func:`planner.candidates.load_polygons`), or a point outside the DEM.
+        :func:`planner.candidates.load_polygons`), or a point outside the DEM or on nodata.
     """
     if dem_path is not None and stations_path is None:
         raise ConfigError(f"--dem {dem_path} needs --stations: the preset's stations belong to "
@@ -189,17 +201,21 @@ def load_inputs(site: str = "default", site_seed: int | None = None, dem_path=No
     craters = list(preset.craters)
     as_built_ids, as_built_xyz = list(preset.marker_ids), np.asarray(preset.marker_centres_m)
     boundary = np.asarray(preset.boundary_xy_m, float) if len(preset.boundary_xy_m) else None
+    site_name, site_seed = site, preset.seed
     if dem_path is not None:
         dem = read_dem(dem_path, what=f"--dem {dem_path}",
                        nodata_fix="fill them (e.g. gdal_fillnodata.py) or crop the DEM to its "
                                   "valid cells")
-        sources["dem"] = str(dem_path)
-        craters, boundary = [], None
+        sources["dem"] = _absolute(dem_path)
+        site_name, site_seed = Path(dem_path).stem, None
+        craters = []
+        boundary = None if boundary_path is not None else default_boundary(
+            dem, float(preset.marker_radius_m))
         as_built_ids, as_built_xyz = [], np.zeros((0, 3))
     lidar_h = float(preset.lidar_height_m)
     if stations_path is not None:
         ids, xyz, heading = read_stations(stations_path, dem, lidar_h)
-        sources["stations"] = str(stations_path)
+        sources["stations"] = _absolute(stations_path)
         as_built_ids, as_built_xyz = [], np.zeros((0, 3))
     else:
         ids = list(preset.station_ids)
@@ -209,12 +225,12 @@ def load_inputs(site: str = "default", site_seed: int | None = None, dem_path=No
         heading = np.asarray(preset.station_heading_rad, float)
     if boundary_path is not None:
         boundary = _boundary_iv(load_polygons(boundary_path, "--boundary"), boundary_path)
-        sources["boundary"] = str(boundary_path)
+        sources["boundary"] = _absolute(boundary_path)
     exclusions = []
     for p in exclude_paths:
         exclusions += load_polygons(p, "--exclude")
     if exclude_paths:
-        sources["exclude"] = [str(p) for p in exclude_paths]
+        sources["exclude"] = [_absolute(p) for p in exclude_paths]
     ex_ids, ex_xyz = [], np.zeros((0, 3))
     if existing == "as-built":
         if not as_built_ids:
@@ -224,8 +240,8 @@ def load_inputs(site: str = "default", site_seed: int | None = None, dem_path=No
     elif existing is not None:
         ex_ids, ex_xyz = read_markers(existing, dem, float(preset.marker_radius_m))
     if existing is not None:
-        sources["existing"] = existing
-    inputs = PlanInputs(site_name=site, site_seed=preset.seed, dem=dem, station_ids=ids,
+        sources["existing"] = existing if existing == "as-built" else _absolute(existing)
+    inputs = PlanInputs(site_name=site_name, site_seed=site_seed, dem=dem, station_ids=ids,
                         station_xyz=xyz, station_heading_rad=heading, boundary_xy=boundary,
                         exclusions=exclusions, craters=craters, as_built_ids=as_built_ids,
                         as_built_xyz=as_built_xyz, existing_ids=ex_ids, existing_xyz=ex_xyz,
@@ -234,6 +250,30 @@ def load_inputs(site: str = "default", site_seed: int | None = None, dem_path=No
     if station_ids is None:
         return inputs
     return inputs.with_stations(select_stations(inputs.station_ids, station_ids))
+
+
+def _absolute(path) -> str:
+    """``path`` made absolute (symbolic links resolved), as provenance records an input file,
+    so that ``verify`` and ``reduce`` find it from any folder."""
+    return str(Path(path).resolve())
+
+
+def default_boundary(dem, marker_radius_m: float) -> np.ndarray | None:
+    """Where markers may go on a DEM when no ``--boundary`` is given: the outline of its
+    largest piece of measured terrain, :func:`~planner.candidates.edge_margin_m` inside it
+    (:func:`~planner.candidates.valid_area`); ``None`` (the whole DEM) when it has no nodata.
+
+    Returns
+    -------
+    corners : (k, 2) float or None
+        Site frame, m. Holes in that piece and other pieces of measured terrain are not part
+        of it; :func:`~planner.candidates.candidate_sites` keeps markers off nodata anyway.
+    """
+    if dem.valid is None:
+        return None
+    area = valid_area(dem, edge_margin_m(dem, marker_radius_m))
+    largest = max(getattr(area, "geoms", [area]), key=lambda g: g.area)
+    return np.asarray(largest.exterior.coords, float)
 
 
 def _boundary_iv(polygons: list, path) -> np.ndarray:
@@ -357,14 +397,15 @@ def read_stations(path, dem, lidar_height_m: float) -> tuple[list[str], np.ndarr
         CSV ``id, x_m, y_m[, z_m][, heading_deg]`` or GeoJSON Points (see :func:`_read_points`);
         at most :data:`planner.config.MAX_STATIONS` stations.
     dem : visibility.dem.DEM
-        Terrain; every station must lie on it.
+        Terrain; every station must stand on its measured terrain.
     lidar_height_m : float
         LiDAR centre above the ground where ``z_m`` is not given, m.
 
     Raises
     ------
     InputFileError, DataError
-        Unreadable or malformed file (see :func:`_read_points`), or a station outside the DEM.
+        Unreadable or malformed file (see :func:`_read_points`), or a station outside the DEM
+        or on nodata.
     """
     pts = _read_points(path, "--stations", MAX_STATIONS)
     ids, xyz = _points_on_dem(pts, dem, lidar_height_m, "station")
@@ -381,7 +422,7 @@ def read_markers(path, dem, marker_radius_m: float, option: str = "--existing"
     path : str or Path
         See :func:`_read_points`; at most :data:`planner.config.MAX_MARKERS` markers.
     dem : visibility.dem.DEM
-        Terrain; every marker must lie on it.
+        Terrain; every marker must stand on its measured terrain.
     marker_radius_m : float
         Default ``z``: ground + this radius, m.
     option : str
@@ -390,7 +431,8 @@ def read_markers(path, dem, marker_radius_m: float, option: str = "--existing"
     Raises
     ------
     InputFileError, DataError
-        Unreadable or malformed file (see :func:`_read_points`), or a marker outside the DEM.
+        Unreadable or malformed file (see :func:`_read_points`), or a marker outside the DEM
+        or on nodata.
     """
     return _points_on_dem(_read_points(path, option, MAX_MARKERS), dem, marker_radius_m,
                           "marker")
@@ -398,11 +440,18 @@ def read_markers(path, dem, marker_radius_m: float, option: str = "--existing"
 
 def _points_on_dem(points: list[dict], dem, height_m: float, label: str
                    ) -> tuple[list[str], np.ndarray]:
-    """Ids and (k, 3) positions of :func:`_read_points` rows that must lie on the DEM, m; a
-    missing ``z_m`` is the ground plus ``height_m``."""
+    """Ids and (k, 3) positions of :func:`_read_points` rows that must stand on the DEM's
+    measured terrain (:meth:`~visibility.dem.DEM.valid_at`), m; a missing ``z_m`` is the ground
+    plus ``height_m``."""
     ids = [p["id"] for p in points]
     xy = np.array([[p["x_m"], p["y_m"]] for p in points], float)
     _check_inside(dem, xy, ids, label)
+    on_data = dem.valid_at(xy)
+    if not on_data.all():
+        k = int(np.flatnonzero(~on_data)[0])
+        raise DataError(f"{label} {ids[k]} at ({xy[k, 0]:.2f}, {xy[k, 1]:.2f}) m stands on "
+                        "nodata (the DEM has no measured terrain under it); move it onto "
+                        "measured terrain or give a DEM that covers it")
     ground = dem.height_at(xy)
     z = np.array([g + height_m if p["z_m"] is None else p["z_m"]
                   for p, g in zip(points, ground, strict=True)], float)

@@ -158,7 +158,8 @@ def resolve_inputs(spec: str, site_name: str | None = None, site_seed: int | Non
     plan = _read_plan(Path(spec)) if _is_plan(spec) else None
     if plan is not None:
         recorded = plan.get("provenance", {}).get("inputs", {})
-        site_name = site_name or plan.get("site", {}).get("name")
+        # the preset that supplied the defaults (a plan on a DEM is named after the DEM file)
+        site_name = site_name or recorded.get("site") or plan.get("site", {}).get("name")
         site_seed = plan.get("site", {}).get("seed") if site_seed is None else site_seed
         dem_path = dem_path or recorded.get("dem")
         stations_path = stations_path or recorded.get("stations")
