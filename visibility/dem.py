@@ -103,7 +103,8 @@ class DEM:
                 & (xy[:, 1] >= ymin) & (xy[:, 1] <= ymax))
 
     def require_inside(self, xy: np.ndarray, ids, label: str, fix: str) -> None:
-        """Raise unless every point lies on the grid (:meth:`contains`).
+        """Raise unless every point lies on the grid (:meth:`contains`) and on measured
+        terrain (:meth:`valid_at`): stations and markers stand on data, never on nodata.
 
         Parameters
         ----------
@@ -119,7 +120,8 @@ class DEM:
         Raises
         ------
         DataError
-            Names the first point outside, its position and the DEM's extent.
+            Names the first point outside (with the DEM's extent and ``fix``) or on nodata,
+            and its position.
         """
         xy = np.atleast_2d(np.asarray(xy, dtype=float))
         inside = self.contains(xy)
@@ -129,6 +131,13 @@ class DEM:
             raise DataError(f"{label} {ids[k]} at ({xy[k, 0]:.2f}, {xy[k, 1]:.2f}) m lies "
                             f"outside the DEM [{xmin:.1f}, {xmax:.1f}] x [{ymin:.1f}, "
                             f"{ymax:.1f}] m; {fix}")
+        on_data = self.valid_at(xy)
+        if not on_data.all():
+            k = int(np.flatnonzero(~on_data)[0])
+            raise DataError(f"{label} {ids[k]} at ({xy[k, 0]:.2f}, {xy[k, 1]:.2f}) m stands on "
+                            f"DEM nodata (no measured terrain there); a {label} must stand on "
+                            "data: move it onto the DEM's valid area or use a DEM with data "
+                            "there")
 
     def height_at(self, xy: np.ndarray) -> np.ndarray:
         """Bilinear height at site-frame points.
@@ -212,11 +221,8 @@ class DEM:
 
 
 #: Fix named by :class:`DEM` for NaN cells (library users build DEMs from arrays).
-_ARRAY_NODATA_FIX = ("fill them (visibility.dem.fill_nodata, or read_dem(..., fill='nearest')) "
-                     "or crop the DEM")
-#: Fix :func:`read_dem` names for NaN/nodata cells unless its caller gives its own.
-DEFAULT_NODATA_FIX = ("fill them (e.g. gdal_fillnodata.py) or crop the DEM to its valid cells, "
-                      "or read it with fill='nearest'")
+_ARRAY_NODATA_FIX = ("fill them and mark them invalid (DEM(fill_nodata(h, 'nearest'), ..., "
+                     "valid=np.isfinite(h))), or read the file with visibility.dem.read_dem")
 #: Largest grid read (cells); 1e8 float64 heights are 800 MB.
 MAX_DEM_CELLS = 100_000_000
 
@@ -260,19 +266,22 @@ def read_dem(path: str | Path, fill: str | None = None, what: str | None = None,
              nodata_fix: str | None = None) -> DEM:
     """Read a DEM from a GeoTIFF (``.tif``/``.tiff``, one band) or ``.npz``.
 
+    Nodata (the file's nodata value, NaN, inf) is a mask, not an error: those cells get the
+    height of the nearest valid cell (:func:`fill_nodata`), so that meshes are complete, and
+    :attr:`DEM.valid` marks the measured ones.
+
     Parameters
     ----------
     path : str or Path
         DEM file: heights in metres on square cells in a projected (metric) CRS or the site
         frame; a GeoTIFF's CRS is kept.
     fill : {None, "nearest"}
-        Policy for NaN/inf/nodata cells; ``None`` refuses them.
+        ``None``: nodata cells are filled and marked invalid. ``"nearest"``: they are filled
+        the same way and taken as terrain (``valid`` is ``None``: every cell).
     what : str, optional
         How messages name the input (default ``"DEM <path>"``), e.g. ``"--dem dem.tif"``.
     nodata_fix : str, optional
-        How the NaN/nodata message tells the user to fix it; a command passes the options
-        it really has (e.g. ``"pass --dem-fill nearest, or fill them ..."``). The default,
-        :data:`DEFAULT_NODATA_FIX`, names no command-line option.
+        Ignored (nodata is no longer refused); kept until every caller drops it.
 
     Returns
     -------
@@ -287,18 +296,20 @@ def read_dem(path: str | Path, fill: str | None = None, what: str | None = None,
         rotated or non-square cells, ``.npz`` members missing or of the wrong shape or type,
         non-finite or absurd origin or cell size.
     DataError
-        NaN/inf/nodata cells and ``fill=None``, no valid cell at all, heights beyond
-        +-1e8 m, a grid smaller than 2 x 2 or larger than :data:`MAX_DEM_CELLS`.
+        Every cell nodata, heights beyond +-1e8 m, a grid smaller than 2 x 2 or larger than
+        :data:`MAX_DEM_CELLS`.
     ConfigError
         Unknown ``fill``.
     """
+    del nodata_fix
     path = Path(path)
     what = what or f"DEM {path}"
     _read_dem_iv(path, fill, what)
     if path.suffix.lower() in (".tif", ".tiff"):
         heights, origin, cell, crs = _read_tif(path, what)
+        stored_valid = None
     else:
-        heights, origin, cell, crs = _read_npz(path, what)
+        heights, origin, cell, crs, stored_valid = _read_npz(path, what)
     origin = (finite_number(origin[0], f"{what}: origin x"),
               finite_number(origin[1], f"{what}: origin y"))
     cell = finite_number(cell, f"{what}: cell size")
@@ -306,11 +317,14 @@ def read_dem(path: str | Path, fill: str | None = None, what: str | None = None,
         raise InputFileError(f"{what}: cell size must be > 0 m, got {cell:g}; check the file's "
                              "georeferencing")
     _heights_iv(heights, what)
-    if fill is None:
-        _refuse_nan(heights, what, nodata_fix or DEFAULT_NODATA_FIX)
-    else:
-        heights = fill_nodata(heights, fill)
-    return DEM(heights, origin, cell, crs)
+    valid = np.isfinite(heights)
+    if stored_valid is not None:
+        valid &= stored_valid
+    if not valid.any():
+        raise DataError(f"{what}: every cell is nodata (NaN/inf or the nodata value); check "
+                        "the nodata value (e.g. gdal_edit.py -a_nodata) and the file")
+    heights = fill_nodata(np.where(valid, heights, np.nan), "nearest")
+    return DEM(heights, origin, cell, crs, valid=None if fill == "nearest" else valid)
 
 
 def _read_dem_iv(path: Path, fill: str | None, what: str) -> None:
@@ -328,7 +342,7 @@ def _read_dem_iv(path: Path, fill: str | None, what: str) -> None:
 
 
 def _heights_iv(heights: np.ndarray, what: str) -> None:
-    """Shape, size and magnitude of a height grid (NaN/nodata are the fill policy's)."""
+    """Shape, size and magnitude of a height grid (NaN/nodata cells are the mask's)."""
     if heights.ndim != 2 or min(heights.shape) < 2:
         raise DataError(f"{what}: a DEM needs a 2-D grid of at least 2 x 2 cells, got shape "
                         f"{heights.shape}")
@@ -338,9 +352,6 @@ def _heights_iv(heights: np.ndarray, what: str) -> None:
         raise DataError(f"{what}: heights must lie within +-{MAX_ABS_COORDINATE_M:g} m, got "
                         f"{worst:g}; check the units, and declare the nodata value if that is "
                         "one (e.g. gdal_edit.py -a_nodata)")
-    if finite.size == 0:
-        raise DataError(f"{what}: no valid height at all (every cell is NaN/nodata); check the "
-                        "file")
 
 
 def _check_cells(ny: int, nx: int, what: str) -> None:
@@ -440,7 +451,8 @@ _NPZ_MEMBERS = ("heights_m", "origin_m", "cell_size_m")
 
 
 def _read_npz(path: Path, what: str
-              ) -> tuple[np.ndarray, tuple[float, float], float, str | None]:
+              ) -> tuple[np.ndarray, tuple[float, float], float, str | None, np.ndarray | None]:
+    """Heights, origin, cell size, CRS (WKT or None) and the optional ``valid`` member."""
     fix = "write it with visibility.dem.write_dem"
     try:
         z = np.load(path, allow_pickle=False)
@@ -455,7 +467,7 @@ def _read_npz(path: Path, what: str
             raise InputFileError(f"{what}: lacks member(s) {', '.join(missing)} (has "
                                  f"{', '.join(z.files)[:80] or 'none'}); {fix}")
         try:
-            arrays = {k: z[k] for k in (*_NPZ_MEMBERS, "crs") if k in z.files}
+            arrays = {k: z[k] for k in (*_NPZ_MEMBERS, "crs", "valid") if k in z.files}
         except _NPZ_ERRORS as exc:
             raise InputFileError(f"{what}: a member cannot be read ({_one_line(exc)}); "
                                  f"{fix}") from exc
@@ -470,6 +482,11 @@ def _read_npz(path: Path, what: str
     if cell.size != 1 or cell.dtype.kind not in "iuf":
         raise InputFileError(f"{what}: cell_size_m must be one number, got shape {cell.shape} "
                              f"dtype {cell.dtype}; {fix}")
+    valid = arrays.get("valid")
+    if valid is not None and (valid.shape != heights.shape or valid.dtype != bool):
+        raise InputFileError(f"{what}: valid must be a bool array shaped like heights_m "
+                             f"{heights.shape}, got shape {valid.shape} dtype {valid.dtype}; "
+                             f"{fix}")
     crs = None
     if "crs" in arrays:
         c = arrays["crs"]
@@ -489,7 +506,7 @@ def _read_npz(path: Path, what: str
                                  f"code or an empty string); {fix}") from exc
         _check_crs(parsed, what)
     return (heights.astype(np.float64), (float(origin[0]), float(origin[1])),
-            float(cell.reshape(())), crs)
+            float(cell.reshape(())), crs, valid)
 
 
 def _one_line(exc: BaseException) -> str:
@@ -498,6 +515,10 @@ def _one_line(exc: BaseException) -> str:
 
 def write_dem(path: str | Path, dem: DEM) -> Path:
     """Write ``dem`` as a GeoTIFF (``.tif``/``.tiff``, float64, CRS kept) or ``.npz``.
+
+    The valid mask is kept: a GeoTIFF holds NaN under invalid cells and declares NaN its
+    nodata value; an ``.npz`` holds the filled heights and a ``valid`` member (only when some
+    cell is invalid). :func:`read_dem` reads both back to the same DEM.
 
     Raises
     ------
@@ -510,8 +531,10 @@ def write_dem(path: str | Path, dem: DEM) -> Path:
         if suffix in (".tif", ".tiff"):
             _write_tif(path, dem)
         elif suffix == ".npz":
+            mask = {} if dem.valid is None else {"valid": dem.valid}
             np.savez(path, heights_m=dem.heights_m, origin_m=np.array(dem.origin_m),
-                     cell_size_m=np.array(dem.cell_size_m), crs=np.array(dem.crs or ""))
+                     cell_size_m=np.array(dem.cell_size_m), crs=np.array(dem.crs or ""),
+                     **mask)
         else:
             raise OutputError(f"DEM output {path} has suffix {suffix!r}; use .tif, .tiff or .npz")
     except OSError as exc:
@@ -531,6 +554,8 @@ def _write_tif(path: Path, dem: DEM) -> None:
     top = y0 + (ny - 0.5) * c
     transform = Affine(c, 0.0, x0 - 0.5 * c, 0.0, -c, top)
     profile = dict(driver="GTiff", height=ny, width=nx, count=1, dtype="float64",
-                   transform=transform, crs=dem.crs)
+                   transform=transform, crs=dem.crs,
+                   nodata=None if dem.valid is None else np.nan)
+    heights = np.where(dem.valid_mask(), dem.heights_m, np.nan)
     with rasterio.open(path, "w", **profile) as dst:
-        dst.write(dem.heights_m[::-1], 1)
+        dst.write(heights[::-1], 1)

@@ -37,7 +37,8 @@ from planner.cli._common import (
 @site_seed_option
 @dem_option
 @click.option("--dem-fill", type=click.Choice(["nearest"]),
-              help="Fill NaN/nodata DEM cells (default: refuse them).")
+              help="Take NaN/nodata DEM cells as terrain, filled from the nearest valid "
+                   "cell (default: they are nodata, where no station or marker may stand).")
 @stations_option
 @station_ids_option
 @marker_radius_option(default_help=" Default: the preset's (0.1).")
@@ -131,10 +132,8 @@ def _site(site_name, site_seed, dem_path, dem_fill, stations_path, marker_radius
     )
 
     site = load_site(site_name, seed=site_seed)
-    dem = site.dem if dem_path is None else read_dem(
-        dem_path, fill=dem_fill, what=f"--dem {dem_path}",
-        nodata_fix="pass --dem-fill nearest, or fill them (e.g. gdal_fillnodata.py) or crop "
-                   "the DEM")
+    dem = site.dem if dem_path is None else read_dem(dem_path, fill=dem_fill,
+                                                     what=f"--dem {dem_path}")
     if stations_path is not None:  # before site_with_dem, which checks the stations it keeps
         ids, xyz, heading = read_stations(stations_path, dem, lidar_height_m)
         if np.any(np.abs(xyz[:, 2] - dem.height_at(xyz[:, :2]) - lidar_height_m) > 1e-3):

@@ -162,15 +162,18 @@ TABLE_CASES = [
 
 def _tif(name: str = "bad.tif", *, crs: str | None = "EPSG:32633", bands: int = 1,
          cell: tuple[float, float] = (1.0, 1.0), heights: np.ndarray | None = None,
-         rotated: bool = False, dtype: str = "float64") -> Callable[[Path, Path], None]:
-    """Setup: a small GeoTIFF with the given defect."""
+         rotated: bool = False, dtype: str = "float64",
+         west_north: tuple[float, float] = (500000.0, 4000000.0)
+         ) -> Callable[[Path, Path], None]:
+    """Setup: a small GeoTIFF with the given defect (``west_north``: its top-left corner)."""
 
     def setup(cwd: Path, inputs: Path) -> None:
         import rasterio
         from rasterio.transform import Affine
 
         h = np.full((6, 8), 1.0) if heights is None else heights
-        t = Affine(cell[0], 0.3 if rotated else 0.0, 500000.0, 0.0, -cell[1], 4000000.0)
+        t = Affine(cell[0], 0.3 if rotated else 0.0, west_north[0], 0.0, -cell[1],
+                   west_north[1])
         with rasterio.open(cwd / name, "w", driver="GTiff", height=h.shape[0],
                            width=h.shape[1], count=bands, dtype=dtype, crs=crs,
                            transform=t) as dst:
@@ -198,6 +201,17 @@ def _with_nan() -> np.ndarray:
     return h
 
 
+def _nodata_under_s1() -> np.ndarray:
+    """Flat 61 x 61 heights (1 m cells over the default site, -30..30 m) with nodata at the
+    centre cell, under station S1 at (0, 0)."""
+    h = np.zeros((61, 61))
+    h[30, 30] = np.nan
+    return h
+
+
+_NODATA_UNDER_S1 = _tif(heights=_nodata_under_s1(), west_north=(-30.5, 30.5))
+
+
 SIM = ["simulate", "--dem", "bad.tif", "--out", "out"]
 SIM_NPZ = ["simulate", "--dem", "bad.npz", "--out", "out"]
 PLAN_DEM = ["plan", "--dem", "bad.tif", "--stations", "{inputs}/stations.csv", "--out", "out"]
@@ -211,13 +225,15 @@ DEM_CASES = [
     Case("plan-dem-three-bands", PLAN_DEM, "3 bands", setup=_tif(bands=3)),
     Case("simulate-dem-non-square", SIM, "square", setup=_tif(cell=(1.0, 2.0))),
     Case("plan-dem-rotated", PLAN_DEM, "north-up", setup=_tif(rotated=True)),
-    Case("simulate-dem-nan", SIM, "nodata", setup=_tif(heights=_with_nan())),
-    Case("plan-dem-nan", PLAN_DEM, "nodata", setup=_tif(heights=_with_nan())),
-    Case("simulate-dem-inf", SIM, "nodata", setup=_tif(heights=np.r_[[np.full(8, np.inf)],
-                                                                    np.ones((5, 8))])),
+    Case("simulate-station-on-nodata", SIM, "station S1 at (0.00, 0.00) m stands on DEM nodata",
+         setup=_NODATA_UNDER_S1),
+    Case("plan-station-on-nodata", PLAN_DEM, "station S1 at (0.00, 0.00) m stands on DEM "
+         "nodata", setup=_NODATA_UNDER_S1),
+    Case("simulate-dem-all-inf", SIM, "every cell is nodata",
+         setup=_tif(heights=np.full((6, 8), np.inf))),
     Case("plan-dem-1e300", PLAN_DEM, "within",
          setup=_tif(heights=np.r_[[np.full(8, 1e300)], np.ones((5, 8))])),
-    Case("simulate-dem-all-nan", SIM, "no valid height",
+    Case("simulate-dem-all-nan", SIM, "every cell is nodata",
          setup=_tif(heights=np.full((6, 8), np.nan))),
     Case("simulate-dem-complex", SIM, "not a real number", setup=_tif(dtype="complex64")),
     Case("simulate-dem-empty", SIM, "empty", files={"bad.tif": b""}),
@@ -259,8 +275,8 @@ def test_refused(case, capsys, monkeypatch, tmp_path, valid_inputs):
 
 def test_dem_nodata_message_names_no_option_plan_lacks(capsys, monkeypatch, tmp_path,
                                                        valid_inputs):
-    """``plan`` has no ``--dem-fill``: its NaN message must not suggest it."""
-    _tif(heights=_with_nan())(tmp_path, valid_inputs)
+    """``plan`` has no ``--dem-fill``: its nodata message must not suggest it."""
+    _NODATA_UNDER_S1(tmp_path, valid_inputs)
     monkeypatch.chdir(tmp_path)
     code, _, err = run_cli(capsys, [a.replace("{inputs}", str(valid_inputs)) for a in PLAN_DEM])
     assert code == 1 and "nodata" in err

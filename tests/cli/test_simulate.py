@@ -61,15 +61,25 @@ def _assert_clean_failure(tmp_path, code, stdout, err, fix):
     assert leftovers == []
 
 
-def test_nan_dem_refused(tmp_path, capsys):
+def test_station_on_nodata_refused_and_nodata_elsewhere_read(tmp_path, capsys):
     h = np.zeros((61, 61))
-    h[5, 5] = np.nan
-    np.savez(tmp_path / "nan.npz", heights_m=h, origin_m=np.array([-30.0, -30.0]),
+    h[0, 0] = np.nan  # a corner, away from every station and marker of the default site
+    np.savez(tmp_path / "corner.npz", heights_m=h, origin_m=np.array([-30.0, -30.0]),
              cell_size_m=np.array(1.0), crs=np.array(""))
-    code, stdout, err = run_cli(capsys, ["simulate", "--dem", str(tmp_path / "nan.npz"),
-                                         "--frames", "2",
-                                         "--out", str(tmp_path / "out")])
-    _assert_clean_failure(tmp_path, code, stdout, err, "--dem-fill nearest")
+    h[30, 30] = np.nan  # under station S1 at (0, 0)
+    np.savez(tmp_path / "s1.npz", heights_m=h, origin_m=np.array([-30.0, -30.0]),
+             cell_size_m=np.array(1.0), crs=np.array(""))
+    args = ["simulate", "--frames", "2", "--station-ids", "S2", "--json", "--dem"]
+    code, stdout, err = run_cli(capsys, [*args, str(tmp_path / "s1.npz"), "--out",
+                                         str(tmp_path / "out")])
+    _assert_clean_failure(tmp_path, code, stdout, err, "station S1 at (0.00, 0.00) m stands on "
+                                                       "DEM nodata")
+    code, stdout, _ = run_cli(capsys, [*args, str(tmp_path / "corner.npz"), "--out",
+                                       str(tmp_path / "corner")])
+    assert code == 0 and json.loads(stdout)["stations"][0]["station_id"] == "S2"
+    code, _, _ = run_cli(capsys, [*args, str(tmp_path / "s1.npz"), "--dem-fill", "nearest",
+                                  "--out", str(tmp_path / "filled")])
+    assert code == 0  # --dem-fill nearest takes the filled cells as terrain
 
 
 def test_station_outside_dem_refused(tmp_path, capsys):

@@ -29,18 +29,35 @@ def test_outside_points_refused():
         dem.height_at(np.array([[9.0, 0.0]]))
 
 
-def test_nan_refused_with_the_fix_named(tmp_path):
+def test_nan_array_refused_but_nan_file_cells_are_a_mask(tmp_path):
     h = _plane().heights_m.copy()
     h[3, 4] = np.nan
-    with pytest.raises(DataError, match="fill='nearest'"):
+    with pytest.raises(DataError, match="1 NaN/nodata cells of 231; fill them and mark them"):
         DEM(h, (0, 0), 1.0)
     np.savez(tmp_path / "d.npz", heights_m=h, origin_m=np.array([0.0, 0.0]),
              cell_size_m=np.array(1.0), crs=np.array(""))
-    with pytest.raises(DataError, match="1 NaN"):
-        read_dem(tmp_path / "d.npz")
-    filled = read_dem(tmp_path / "d.npz", fill="nearest")
-    assert np.isfinite(filled.heights_m).all()
-    assert filled.heights_m[3, 4] in {h[2, 4], h[4, 4], h[3, 3], h[3, 5]}
+    masked = read_dem(tmp_path / "d.npz")
+    assert np.isfinite(masked.heights_m).all()
+    assert masked.heights_m[3, 4] in {h[2, 4], h[4, 4], h[3, 3], h[3, 5]}
+    assert np.flatnonzero(~masked.valid_mask()).tolist() == [3 * 21 + 4]
+    np.testing.assert_array_equal(masked.heights_m[masked.valid], h[np.isfinite(h)])
+    # the point at the cell and its stencil neighbours are off data, one cell away is on it
+    assert masked.valid_at(np.array([[4.0, 3.0], [3.5, 2.5], [5.5, 3.0], [2.0, 3.0]])
+                           ).tolist() == [False, False, True, True]
+    filled = read_dem(tmp_path / "d.npz", fill="nearest")  # filled cells taken as terrain
+    assert filled.valid is None
+    np.testing.assert_array_equal(filled.heights_m, masked.heights_m)
+
+
+def test_station_on_nodata_refused_naming_it():
+    valid = np.ones((11, 21), bool)
+    valid[5, 10] = False
+    dem = DEM(np.zeros((11, 21)), (0.0, 0.0), 1.0, valid=valid)
+    dem.require_inside(np.array([[1.0, 1.0], [12.0, 5.0]]), ["A", "B"], "station", "fix")
+    with pytest.raises(DataError, match=r"^station B at \(9.50, 5.00\) m stands on DEM nodata"):
+        dem.require_inside(np.array([[1.0, 1.0], [9.5, 5.0]]), ["A", "B"], "station", "fix")
+    with pytest.raises(DataError, match="outside the DEM .* fix$"):
+        dem.require_inside(np.array([[30.0, 1.0]]), ["A"], "station", "fix")
 
 
 # a terrestrial UTM zone and the lunar south-pole stereographic projection of LOLA DEMs
@@ -62,19 +79,40 @@ def test_geotiff_round_trip_keeps_crs_and_geometry(tmp_path, crs):
     np.testing.assert_array_equal(back.heights_m, dem.heights_m)
 
 
-def test_geotiff_nodata_refused(tmp_path):
+def _nodata_tif(path, h, nodata):
     import rasterio
     from rasterio.transform import Affine
 
-    h = np.ones((4, 5), dtype="float32")
-    h[0, 0] = -9999
-    with rasterio.open(tmp_path / "n.tif", "w", driver="GTiff", height=4, width=5, count=1,
-                       dtype="float32", nodata=-9999,
-                       transform=Affine(1.0, 0.0, 0.0, 0.0, -1.0, 4.0)) as dst:
+    with rasterio.open(path, "w", driver="GTiff", height=h.shape[0], width=h.shape[1], count=1,
+                       dtype=h.dtype, nodata=nodata,
+                       transform=Affine(1.0, 0.0, 0.0, 0.0, -1.0, h.shape[0])) as dst:
         dst.write(h, 1)
-    with pytest.raises(DataError, match="nodata"):
+
+
+def test_geotiff_nodata_is_a_mask_and_round_trips(tmp_path):
+    h = np.arange(20, dtype="float32").reshape(4, 5)
+    h[0, 0] = h[3, 4] = -9999  # file rows run north to south: DEM rows 3 and 0
+    _nodata_tif(tmp_path / "n.tif", h, -9999)
+    dem = read_dem(tmp_path / "n.tif")
+    assert np.argwhere(~dem.valid).tolist() == [[0, 4], [3, 0]]
+    # filled from one of the two nearest valid cells (file [0, 1], [1, 0]; [3, 3], [2, 4])
+    assert dem.heights_m[3, 0] in (1.0, 5.0) and dem.heights_m[0, 4] in (18.0, 14.0)
+    np.testing.assert_array_equal(dem.heights_m[dem.valid], h[::-1][h[::-1] != -9999])
+    for suffix in (".tif", ".npz"):
+        back = read_dem(write_dem(tmp_path / f"back{suffix}", dem))
+        np.testing.assert_array_equal(back.valid, dem.valid)
+        np.testing.assert_array_equal(back.heights_m, dem.heights_m)
+    assert read_dem(tmp_path / "n.tif", fill="nearest").valid is None
+    import rasterio
+
+    with rasterio.open(tmp_path / "back.tif") as src:
+        assert np.isnan(src.nodata) and np.isnan(src.read(1)[0, 0])
+
+
+def test_all_nodata_refused(tmp_path):
+    _nodata_tif(tmp_path / "n.tif", np.full((3, 4), -9999, dtype="int16"), -9999)
+    with pytest.raises(DataError, match="every cell is nodata.*check the nodata value"):
         read_dem(tmp_path / "n.tif")
-    assert read_dem(tmp_path / "n.tif", fill="nearest").heights_m.min() == 1.0
 
 
 def test_npz_round_trip_and_bad_files(tmp_path):

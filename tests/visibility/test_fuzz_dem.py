@@ -1,5 +1,5 @@
 """Fuzzing :func:`visibility.dem.read_dem`: a damaged or odd DEM file either reads into a DEM
-with finite heights on square metric cells, or raises a one-line
+with finite heights on square metric cells (nodata as a mask), or raises a one-line
 :class:`~markerplan.errors.MarkerPlanError`, never anything else (issue 9)."""
 
 from __future__ import annotations
@@ -29,6 +29,8 @@ def _check(path, fill=None):
     assert dem.heights_m.ndim == 2 and min(dem.shape) >= 2
     assert np.isfinite(dem.cell_size_m) and dem.cell_size_m > 0
     assert all(np.isfinite(dem.origin_m))
+    if dem.valid is not None:  # nodata is a mask: some cells, never all or none, are invalid
+        assert fill is None and dem.valid.shape == dem.shape and 0 < dem.valid.sum() < dem.size
     return dem
 
 
