@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from markerplan.errors import ConfigError, DataError, InputFileError
+from markerplan.errors import ConfigError, InputFileError
 from markerplan.reading import (
     MAX_ABS_COORDINATE_M,
     finite_number,
@@ -203,9 +203,7 @@ def load_inputs(site: str = "default", site_seed: int | None = None, dem_path=No
     boundary = np.asarray(preset.boundary_xy_m, float) if len(preset.boundary_xy_m) else None
     site_name, site_seed = site, preset.seed
     if dem_path is not None:
-        dem = read_dem(dem_path, what=f"--dem {dem_path}",
-                       nodata_fix="fill them (e.g. gdal_fillnodata.py) or crop the DEM to its "
-                                  "valid cells")
+        dem = read_dem(dem_path, what=f"--dem {dem_path}")
         sources["dem"] = _absolute(dem_path)
         site_name, site_seed = Path(dem_path).stem, None
         craters = []
@@ -446,12 +444,6 @@ def _points_on_dem(points: list[dict], dem, height_m: float, label: str
     ids = [p["id"] for p in points]
     xy = np.array([[p["x_m"], p["y_m"]] for p in points], float)
     _check_inside(dem, xy, ids, label)
-    on_data = dem.valid_at(xy)
-    if not on_data.all():
-        k = int(np.flatnonzero(~on_data)[0])
-        raise DataError(f"{label} {ids[k]} at ({xy[k, 0]:.2f}, {xy[k, 1]:.2f}) m stands on "
-                        "nodata (the DEM has no measured terrain under it); move it onto "
-                        "measured terrain or give a DEM that covers it")
     ground = dem.height_at(xy)
     z = np.array([g + height_m if p["z_m"] is None else p["z_m"]
                   for p, g in zip(points, ground, strict=True)], float)

@@ -9,8 +9,9 @@ from visibility.dem import DEM
 ORIGIN = (500_000.0, 4_100_000.0)
 #: Cell size, m; the grid is 80 m x 80 m.
 CELL = 0.5
-#: Stations on measured terrain: (id, easting offset, northing offset) from ORIGIN, m.
-STATIONS = (("S1", 22.0, 40.0), ("S2", 40.0, 30.0), ("S3", 50.0, 44.0))
+#: Stations on measured terrain: (id, easting offset, northing offset) from ORIGIN, m; S4
+#: stands east of the nodata gap, the others west of it.
+STATIONS = (("S1", 22.0, 40.0), ("S2", 40.0, 30.0), ("S3", 50.0, 44.0), ("S4", 67.0, 40.0))
 
 
 def local_grid() -> tuple[np.ndarray, np.ndarray]:
