@@ -4,8 +4,11 @@ A :class:`DEM` stores heights at cell centres: cell ``[j, i]`` (row ``j``, colum
 site coordinates ``(x0 + i * cell, y0 + j * cell)``. Rows run along +y, columns along +x
 (so a GeoTIFF, whose first row is the northern edge, is flipped on reading and writing).
 
-Files: ``.tif``/``.tiff`` through rasterio (CRS kept as WKT), ``.npz`` with members
-``heights_m``, ``origin_m``, ``cell_size_m`` and ``crs``.
+Files (:func:`read_dem`): any one-band raster GDAL reads, through rasterio (GeoTIFF, ESRI ASCII
+grid, VRT, ISIS3/PDS cubes; CRS kept as WKT; read whole or by window; reprojected to a local
+metric grid on request), and ``.npz`` with members ``heights_m``, ``origin_m``,
+``cell_size_m``, ``crs`` and optionally ``valid``. Nodata is a mask (:attr:`DEM.valid`).
+:func:`write_dem` writes GeoTIFF or ``.npz``.
 """
 
 from __future__ import annotations
@@ -14,6 +17,7 @@ import zipfile
 import zlib
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -41,6 +45,10 @@ class DEM:
         Which cells hold measured terrain; ``None``: every cell. Heights under invalid
         (nodata) cells are filled (e.g. :func:`fill_nodata`) so that a mesh is complete, but
         they are not terrain: nothing may stand on them (see :meth:`valid_at`).
+    source_crs : str or None
+        WKT of the file's own CRS when :func:`read_dem` reprojected it into ``crs`` (a local
+        metric CRS), else ``None``; :func:`to_dem_xy` maps that CRS's coordinates into the
+        DEM's. Not written by :func:`write_dem` (the written file is in ``crs``).
     """
 
     heights_m: np.ndarray
@@ -48,6 +56,7 @@ class DEM:
     cell_size_m: float
     crs: str | None = None
     valid: np.ndarray | None = None
+    source_crs: str | None = None
 
     def __post_init__(self) -> None:
         self.heights_m = np.asarray(self.heights_m, dtype=np.float64)
@@ -68,6 +77,9 @@ class DEM:
                 raise DataError("DEM has no valid cell at all; check the nodata value")
             if self.valid.all():
                 self.valid = None
+        if self.source_crs is not None and self.crs is None:
+            raise DataError("DEM source_crs is set but crs is not; a reprojected DEM knows "
+                            "the CRS it was reprojected into")
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -263,18 +275,22 @@ def fill_nodata(heights: np.ndarray, policy: str) -> np.ndarray:
 
 
 def read_dem(path: str | Path, fill: str | None = None, what: str | None = None,
-             nodata_fix: str | None = None) -> DEM:
-    """Read a DEM from a GeoTIFF (``.tif``/``.tiff``, one band) or ``.npz``.
+             nodata_fix: str | None = None, *, reproject: bool = False,
+             window: tuple[float, float, float, float] | None = None) -> DEM:
+    """Read a DEM from any one-band raster GDAL reads, or from our ``.npz``.
 
-    Nodata (the file's nodata value, NaN, inf) is a mask, not an error: those cells get the
-    height of the nearest valid cell (:func:`fill_nodata`), so that meshes are complete, and
-    :attr:`DEM.valid` marks the measured ones.
+    Rasters (through rasterio): GeoTIFF, ESRI ASCII grid (``.asc``), VRT, ISIS3 cubes
+    (``.cub``), PDS labels (``.lbl``/``.img``) and every other GDAL raster format; the CRS is
+    kept as WKT (projected Earth CRSs such as UTM, lunar CRSs of the ``IAU_2015:301xx``
+    family, or none: the site frame). Nodata (the file's nodata value, NaN, inf) is a mask,
+    not an error: those cells get the height of the nearest valid cell (:func:`fill_nodata`),
+    so that meshes are complete, and :attr:`DEM.valid` marks the measured ones.
 
     Parameters
     ----------
     path : str or Path
-        DEM file: heights in metres on square cells in a projected (metric) CRS or the site
-        frame; a GeoTIFF's CRS is kept.
+        DEM file: heights in metres. Cells must be square, north-up and in metres (a
+        projected CRS or none) unless ``reproject``.
     fill : {None, "nearest"}
         ``None``: nodata cells are filled and marked invalid. ``"nearest"``: they are filled
         the same way and taken as terrain (``valid`` is ``None``: every cell).
@@ -282,63 +298,147 @@ def read_dem(path: str | Path, fill: str | None = None, what: str | None = None,
         How messages name the input (default ``"DEM <path>"``), e.g. ``"--dem dem.tif"``.
     nodata_fix : str, optional
         Ignored (nodata is no longer refused); kept until every caller drops it.
+    reproject : bool
+        Resample a grid that is not metric and square: a geographic (degree) or non-metre
+        CRS goes to a local transverse Mercator CRS centred on the grid, on the CRS's own
+        ellipsoid or sphere (Earth or Moon), with square cells of the smaller native cell
+        side in metres; rotated or non-square cells in a metric CRS go to square cells of
+        the smaller side in the same CRS. Bilinear; nodata and cells outside the source
+        footprint become invalid. :attr:`DEM.source_crs` then records the file's CRS
+        (:func:`to_dem_xy` maps its coordinates into the DEM's).
+    window : (xmin, xmax, ymin, ymax) float, optional
+        Read only the cells covering this rectangle, in the file's own CRS units (metres, or
+        degrees for a geographic file), plus a :data:`WINDOW_PAD_CELLS` pad, clipped to the
+        raster; large rasters are read by window without loading the rest.
 
     Returns
     -------
     dem : DEM
-        Site frame = the file's map coordinates (GeoTIFF) or stored origin (``.npz``).
+        Site frame = the file's map coordinates (or the local CRS when reprojected), or the
+        stored origin (``.npz``).
 
     Raises
     ------
     InputFileError
-        Missing, empty, corrupt or unreadable file, unsupported suffix, several bands, a
-        non-numeric band, a geographic (degree) or non-metre CRS, no georeferencing,
-        rotated or non-square cells, ``.npz`` members missing or of the wrong shape or type,
-        non-finite or absurd origin or cell size.
+        Missing, empty, corrupt or unreadable file, several bands, a non-numeric band, no
+        georeferencing; unless ``reproject``: a geographic or non-metre CRS, rotated or
+        non-square cells (the message names ``--reproject`` and gdalwarp); ``.npz`` members
+        missing or of the wrong shape or type; non-finite or absurd origin or cell size.
     DataError
         Every cell nodata, heights beyond +-1e8 m, a grid smaller than 2 x 2 or larger than
-        :data:`MAX_DEM_CELLS`.
+        :data:`MAX_DEM_CELLS`, a ``window`` that misses the raster.
     ConfigError
-        Unknown ``fill``.
+        Unknown ``fill``; a ``window`` that is not 4 finite numbers with min < max.
+
+    Examples
+    --------
+    >>> import tempfile, os
+    >>> dem = DEM(np.arange(12.0).reshape(3, 4), (500.5, 20.5), 1.0)
+    >>> path = write_dem(os.path.join(tempfile.mkdtemp(), "d.npz"), dem)
+    >>> read_dem(path, window=(501.0, 501.2, 21.0, 21.0)).heights_m.shape  # padded, clipped
+    (3, 4)
     """
     del nodata_fix
     path = Path(path)
     what = what or f"DEM {path}"
-    _read_dem_iv(path, fill, what)
-    if path.suffix.lower() in (".tif", ".tiff"):
-        heights, origin, cell, crs = _read_tif(path, what)
-        stored_valid = None
+    _read_dem_iv(path, fill, window, what)
+    if path.suffix.lower() == ".npz":
+        raster = _read_npz(path, what, window)
     else:
-        heights, origin, cell, crs, stored_valid = _read_npz(path, what)
-    origin = (finite_number(origin[0], f"{what}: origin x"),
-              finite_number(origin[1], f"{what}: origin y"))
-    cell = finite_number(cell, f"{what}: cell size")
-    if cell <= 0:
-        raise InputFileError(f"{what}: cell size must be > 0 m, got {cell:g}; check the file's "
-                             "georeferencing")
+        raster = _read_gdal(path, what, window)
+    raster, source_crs = _metric_square(raster, reproject, what)
+    heights, origin, cell = _site_grid(raster, what)
     _heights_iv(heights, what)
     valid = np.isfinite(heights)
-    if stored_valid is not None:
-        valid &= stored_valid
     if not valid.any():
         raise DataError(f"{what}: every cell is nodata (NaN/inf or the nodata value); check "
                         "the nodata value (e.g. gdal_edit.py -a_nodata) and the file")
     heights = fill_nodata(np.where(valid, heights, np.nan), "nearest")
-    return DEM(heights, origin, cell, crs, valid=None if fill == "nearest" else valid)
+    crs = None if raster.crs is None else raster.crs.to_wkt()
+    return DEM(heights, origin, cell, crs, valid=None if fill == "nearest" else valid,
+               source_crs=source_crs)
 
 
-def _read_dem_iv(path: Path, fill: str | None, what: str) -> None:
+def to_dem_xy(dem: DEM, xy: np.ndarray) -> np.ndarray:
+    """Points given in the DEM file's own CRS, in the DEM's site frame.
+
+    Identity unless :func:`read_dem` reprojected the file (``dem.source_crs`` set): then
+    e.g. station longitudes/latitudes in degrees become local metres.
+
+    Parameters
+    ----------
+    dem : DEM
+    xy : (n, 2) float
+        Points in the file's CRS units (metres, or degrees for a geographic file).
+
+    Returns
+    -------
+    xy_dem : (n, 2) float64
+        The points in the DEM's frame (``dem.crs``), metres.
+
+    Examples
+    --------
+    >>> to_dem_xy(DEM(np.zeros((2, 2)), (0.0, 0.0), 1.0), [[1.0, 2.0]]).tolist()
+    [[1.0, 2.0]]
+    """
+    xy = np.array(xy, dtype=np.float64, ndmin=2)
+    if xy.ndim != 2 or xy.shape[1] != 2:
+        raise DataError(f"xy must have shape (n, 2), got {xy.shape}")
+    if dem.source_crs is None or len(xy) == 0:
+        return xy
+    from rasterio.crs import CRS
+    from rasterio.warp import transform
+
+    xs, ys = transform(CRS.from_wkt(dem.source_crs), CRS.from_wkt(dem.crs), xy[:, 0], xy[:, 1])
+    return np.column_stack([xs, ys])
+
+
+#: Cells read beyond a ``window`` on every side (bilinear stencils and slopes at its edge).
+WINDOW_PAD_CELLS = 2
+#: CRS under which a grid without one is resampled (the site frame, metres).
+_SITE_FRAME_WKT = ('ENGCRS["site frame",EDATUM["site"],CS[Cartesian,2],'
+                   'AXIS["x",east,ORDER[1],LENGTHUNIT["metre",1]],'
+                   'AXIS["y",north,ORDER[2],LENGTHUNIT["metre",1]]]')
+#: Ellipsoid or sphere parameters of a PROJ dict, kept by the local CRS of a reprojection.
+_SHAPE_KEYS = ("datum", "ellps", "R", "a", "b", "rf", "f", "towgs84")
+#: How a refusal names the way out on reading (the CLI option, then the library call).
+_REPROJECT_FIX = "pass --reproject (read_dem(..., reproject=True)) to resample it"
+
+
+class _Raster(NamedTuple):
+    """A height grid as stored: rows and columns in the file's order.
+
+    Attributes
+    ----------
+    heights : (rows, cols) float64
+        Heights, NaN at nodata.
+    transform : affine.Affine
+        Cell corner ``(col, row)`` to the file's coordinates.
+    crs : rasterio.crs.CRS or None
+        The file's CRS; ``None``: the site frame, metres.
+    """
+
+    heights: np.ndarray
+    transform: Any
+    crs: Any
+
+
+def _read_dem_iv(path: Path, fill: str | None, window, what: str) -> None:
     if fill is not None and fill not in FILL_POLICIES:
         raise ConfigError(f"fill must be one of {', '.join(FILL_POLICIES)} or None, got {fill!r}")
+    if window is not None:
+        w = np.asarray(window, dtype=float) if np.ndim(window) == 1 else np.zeros(0)
+        if w.shape != (4,) or not np.isfinite(w).all() or w[0] > w[1] or w[2] > w[3]:
+            raise ConfigError(f"window must be 4 finite numbers (xmin, xmax, ymin, ymax) with "
+                              f"min <= max, got {window!r:.80}")
     if not path.exists():
         raise InputFileError(f"{what}: file does not exist; check the path")
     if path.is_dir():
-        raise InputFileError(f"{what}: is a folder; give a .tif, .tiff or .npz file")
-    suffix = path.suffix.lower()
-    if suffix not in (".tif", ".tiff", ".npz"):
-        raise InputFileError(f"{what}: has suffix {suffix!r}; use .tif, .tiff or .npz")
+        raise InputFileError(f"{what}: is a folder; give the raster file (for an ArcInfo "
+                             "binary grid, its hdr.adf) or an .npz")
     if path.stat().st_size == 0:
-        raise InputFileError(f"{what}: file is empty; give a GeoTIFF or .npz DEM")
+        raise InputFileError(f"{what}: file is empty; give a raster GDAL reads (GeoTIFF, .asc, "
+                             "VRT, ISIS3/PDS cube) or an .npz DEM")
 
 
 def _heights_iv(heights: np.ndarray, what: str) -> None:
@@ -357,37 +457,41 @@ def _heights_iv(heights: np.ndarray, what: str) -> None:
 def _check_cells(ny: int, nx: int, what: str) -> None:
     if ny * nx > MAX_DEM_CELLS:
         raise DataError(f"{what}: {ny} x {nx} cells is more than the {MAX_DEM_CELLS:.0e} this "
-                        "reads; crop or coarsen it (e.g. gdalwarp -te ... or -tr ...)")
+                        "reads; read a window of it, or crop or coarsen it (e.g. gdalwarp "
+                        "-te ... or -tr ...)")
 
 
-def _check_crs(crs, what: str) -> None:
-    """Refuse a geographic (degree) or non-metre projected CRS (a rasterio ``CRS``)."""
-    from rasterio.errors import CRSError
+def _window(transform, rows: int, cols: int, window: tuple[float, float, float, float],
+            what: str):
+    """The rasterio ``Window`` of the cells covering ``window`` (file CRS units), padded by
+    :data:`WINDOW_PAD_CELLS` and clipped to the ``rows`` x ``cols`` grid, and its transform."""
+    import math
 
-    if crs is None:
-        return
-    name = (crs.to_string() or "of the file")[:60]
-    if crs.is_geographic:
-        raise InputFileError(f"{what}: CRS {name} is geographic (degrees), but DEM cells and "
-                             "heights must be metres; reproject it to a projected CRS first, "
-                             "e.g. gdalwarp -t_srs EPSG:326NN in.tif out.tif (NN: your UTM "
-                             "zone)")
-    try:
-        unit, factor = crs.linear_units_factor
-    except CRSError:  # no linear unit to read (local or engineering CRS): taken as metres
-        return
-    if not np.isclose(factor, 1.0):
-        raise InputFileError(f"{what}: CRS {name} has units of {unit}, not metres; reproject it "
-                             "to a metric CRS first (gdalwarp -t_srs ...)")
+    from rasterio.transform import Affine
+    from rasterio.windows import Window
+
+    xmin, xmax, ymin, ymax = (float(v) for v in window)
+    inverse = ~transform
+    corners = [inverse @ (x, y) for x in (xmin, xmax) for y in (ymin, ymax)]  # (col, row)
+    c0, c1 = min(c for c, _ in corners), max(c for c, _ in corners)
+    r0, r1 = min(r for _, r in corners), max(r for _, r in corners)
+    if r0 > rows or c0 > cols or r1 < 0 or c1 < 0:
+        raise DataError(f"{what}: window [{xmin:g}, {xmax:g}] x [{ymin:g}, {ymax:g}] misses the "
+                        "DEM; give a window inside the DEM, in the file's CRS units")
+    pad = WINDOW_PAD_CELLS
+    r0, c0 = max(math.floor(r0) - pad, 0), max(math.floor(c0) - pad, 0)
+    r1, c1 = min(math.ceil(r1) + pad, rows), min(math.ceil(c1) + pad, cols)
+    return Window(c0, r0, c1 - c0, r1 - r0), transform @ Affine.translation(c0, r0)
 
 
-def _read_tif(path: Path, what: str
-              ) -> tuple[np.ndarray, tuple[float, float], float, str | None]:
+def _read_gdal(path: Path, what: str, window) -> _Raster:
+    """One band of a raster GDAL reads, nodata as NaN, over ``window`` (or all of it)."""
     import warnings
 
     import rasterio
     from rasterio.errors import NotGeoreferencedWarning, RasterioError
     from rasterio.transform import Affine
+    from rasterio.windows import Window
 
     try:
         with warnings.catch_warnings():
@@ -404,44 +508,23 @@ def _read_tif(path: Path, what: str
                 if kind not in "iuf":
                     raise InputFileError(f"{what}: band type {src.dtypes[0]} is not a real "
                                          "number; heights must be integers or floats")
-                _check_crs(src.crs, what)
                 t = src.transform
                 if src.crs is None and t == Affine.identity() and not src.gcps[0]:
                     raise InputFileError(f"{what}: has no georeferencing (no geotransform); "
                                          "set it (e.g. gdal_translate -a_ullr) or write the DEM "
                                          "with visibility.dem.write_dem")
-                _check_cells(src.height, src.width, what)
-                band = src.read(1, masked=True).astype(np.float64)
-                crs = src.crs.to_wkt() if src.crs is not None else None
+                win, t = ((Window(0, 0, src.width, src.height), t) if window is None
+                          else _window(t, src.height, src.width, window, what))
+                _check_cells(int(win.height), int(win.width), what)
+                band = src.read(1, window=win, masked=True).astype(np.float64)
+                return _Raster(np.ma.filled(band, np.nan), t, src.crs)
     except RasterioError as exc:
-        raise InputFileError(f"{what}: not a readable GeoTIFF ({_one_line(exc)}); check the "
-                             "file") from exc
+        raise InputFileError(f"{what}: not a raster GDAL can read ({_one_line(exc)}); give a "
+                             "GeoTIFF, ESRI ASCII grid, VRT, ISIS3/PDS cube or an .npz DEM"
+                             ) from exc
     except MemoryError:
-        raise DataError(f"{what}: too large to read into memory; crop or coarsen it") from None
-    if not all(np.isfinite(v) for v in tuple(t)[:6]):
-        raise InputFileError(f"{what}: geotransform {tuple(t)[:6]} is not finite; fix the "
-                             "file's georeferencing")
-    if t.b != 0 or t.d != 0:
-        raise InputFileError(f"{what}: cells must be north-up, got a rotated or sheared "
-                             f"transform {tuple(t)[:6]}; resample it first (e.g. gdalwarp)")
-    if not np.isclose(abs(t.a), abs(t.e), rtol=1e-9) or t.a == 0:
-        raise InputFileError(f"{what}: cells must be square, got {abs(t.a):g} x {abs(t.e):g}; "
-                             "resample to square cells first (e.g. gdalwarp -tr 1 1 in.tif "
-                             "out.tif)")
-    heights = np.ma.filled(band, np.nan)
-    cell = abs(t.a)
-    ny, nx = heights.shape
-    if t.a > 0:
-        x0 = t.c + 0.5 * t.a
-    else:  # first column is the right edge (max x): flip so columns run along +x
-        heights = heights[:, ::-1]
-        x0 = t.c + (nx - 0.5) * t.a
-    if t.e < 0:  # first row is the top (max y): flip so rows run along +y
-        heights = heights[::-1]
-        y0 = t.f + (ny - 0.5) * t.e
-    else:
-        y0 = t.f + 0.5 * t.e
-    return heights, (x0, y0), cell, crs
+        raise DataError(f"{what}: too large to read into memory; read a window of it, or crop "
+                        "or coarsen it") from None
 
 
 #: Exceptions numpy and zipfile raise on a corrupt ``.npz``.
@@ -450,9 +533,10 @@ _NPZ_ERRORS = (OSError, ValueError, EOFError, KeyError, TypeError, NotImplemente
 _NPZ_MEMBERS = ("heights_m", "origin_m", "cell_size_m")
 
 
-def _read_npz(path: Path, what: str
-              ) -> tuple[np.ndarray, tuple[float, float], float, str | None, np.ndarray | None]:
-    """Heights, origin, cell size, CRS (WKT or None) and the optional ``valid`` member."""
+def _read_npz(path: Path, what: str, window) -> _Raster:
+    """Our ``.npz`` as a raster (rows along +y), cells outside its ``valid`` member NaN."""
+    from rasterio.transform import Affine
+
     fix = "write it with visibility.dem.write_dem"
     try:
         z = np.load(path, allow_pickle=False)
@@ -487,26 +571,168 @@ def _read_npz(path: Path, what: str
         raise InputFileError(f"{what}: valid must be a bool array shaped like heights_m "
                              f"{heights.shape}, got shape {valid.shape} dtype {valid.dtype}; "
                              f"{fix}")
-    crs = None
-    if "crs" in arrays:
-        c = arrays["crs"]
-        if c.size != 1 or c.dtype.kind not in "US":
-            raise InputFileError(f"{what}: crs must be one string (WKT, or empty), got shape "
-                                 f"{c.shape} dtype {c.dtype}; {fix}")
-        crs = str(c.reshape(()).item().decode("utf-8", "replace") if c.dtype.kind == "S"
-                  else c.reshape(()).item()) or None
-    if crs is not None:
-        from rasterio.crs import CRS
-        from rasterio.errors import CRSError
+    x0 = finite_number(float(origin[0]), f"{what}: origin x")
+    y0 = finite_number(float(origin[1]), f"{what}: origin y")
+    c = finite_number(float(cell.reshape(())), f"{what}: cell size")
+    if c <= 0:
+        raise InputFileError(f"{what}: cell size must be > 0 m, got {c:g}; check the file's "
+                             "georeferencing")
+    heights = heights.astype(np.float64)
+    if valid is not None:
+        heights[~valid] = np.nan
+    transform = Affine(c, 0.0, x0 - 0.5 * c, 0.0, c, y0 - 0.5 * c)
+    if window is not None:
+        win, transform = _window(transform, *heights.shape, window, what)
+        heights = heights[win.toslices()]
+    return _Raster(heights, transform, _npz_crs(arrays.get("crs"), what, fix))
 
-        try:
-            parsed = CRS.from_user_input(crs)
-        except CRSError as exc:
-            raise InputFileError(f"{what}: crs {crs[:40]!r} is not a CRS (give WKT, an EPSG "
-                                 f"code or an empty string); {fix}") from exc
-        _check_crs(parsed, what)
-    return (heights.astype(np.float64), (float(origin[0]), float(origin[1])),
-            float(cell.reshape(())), crs, valid)
+
+def _npz_crs(c: np.ndarray | None, what: str, fix: str):
+    """The ``crs`` member (WKT, a code such as ``EPSG:32633``, or empty) as a rasterio CRS."""
+    if c is None:
+        return None
+    if c.size != 1 or c.dtype.kind not in "US":
+        raise InputFileError(f"{what}: crs must be one string (WKT, or empty), got shape "
+                             f"{c.shape} dtype {c.dtype}; {fix}")
+    text = str(c.reshape(()).item().decode("utf-8", "replace") if c.dtype.kind == "S"
+               else c.reshape(()).item())
+    if not text:
+        return None
+    from rasterio.crs import CRS
+    from rasterio.errors import CRSError
+
+    try:
+        return CRS.from_user_input(text)
+    except CRSError as exc:
+        raise InputFileError(f"{what}: crs {text[:40]!r} is not a CRS (give WKT, an EPSG "
+                             f"code or an empty string); {fix}") from exc
+
+
+def _crs_problem(crs) -> tuple[str, str] | None:
+    """Why a rasterio CRS is not metric (what, and the GDAL fix), or None (metric, or
+    ``None``: the site frame)."""
+    from rasterio.errors import CRSError
+
+    if crs is None:
+        return None
+    name = (crs.to_string() or "of the file")[:60]
+    if crs.is_geographic:
+        return (f"CRS {name} is geographic (degrees), but DEM cells and heights must be "
+                "metres", "reproject it first, e.g. gdalwarp -t_srs EPSG:326NN in.tif "
+                "out.tif (NN: your UTM zone)")
+    try:
+        unit, factor = crs.linear_units_factor
+    except CRSError:  # no linear unit to read (local or engineering CRS): taken as metres
+        return None
+    if not np.isclose(factor, 1.0):
+        return (f"CRS {name} has units of {unit}, not metres",
+                "reproject it to a metric CRS first (gdalwarp -t_srs ...)")
+    return None
+
+
+def _cell_problem(t) -> tuple[str, str] | None:
+    """Why a geotransform's cells are not north-up squares (what, and the GDAL fix), or None."""
+    if t.b != 0 or t.d != 0:
+        return (f"cells must be north-up, got a rotated or sheared transform {tuple(t)[:6]}",
+                "resample it first (e.g. gdalwarp)")
+    if not np.isclose(abs(t.a), abs(t.e), rtol=1e-9):
+        return (f"cells must be square, got {abs(t.a):g} x {abs(t.e):g}",
+                "resample to square cells first (e.g. gdalwarp -tr 1 1 in.tif out.tif)")
+    return None
+
+
+def _metric_square(raster: _Raster, reproject: bool, what: str
+                   ) -> tuple[_Raster, str | None]:
+    """The grid if metric, north-up and square; else refused, or resampled (``reproject``)
+    with the file's CRS as WKT when it changed (else None)."""
+    t = raster.transform
+    if not all(np.isfinite(v) for v in tuple(t)[:6]):
+        raise InputFileError(f"{what}: geotransform {tuple(t)[:6]} is not finite; fix the "
+                             "file's georeferencing")
+    if t.a * t.e - t.b * t.d == 0:
+        raise InputFileError(f"{what}: cell size must be > 0 m, got the degenerate transform "
+                             f"{tuple(t)[:6]}; check the file's georeferencing")
+    problem = _crs_problem(raster.crs) or _cell_problem(t)
+    if problem is None:
+        return raster, None
+    if not reproject:
+        raise InputFileError(f"{what}: {problem[0]}; {_REPROJECT_FIX} to a local metric grid "
+                             f"of square cells, or {problem[1]}")
+    return _reproject(raster, what)
+
+
+def _local_crs(raster: _Raster, what: str):
+    """Transverse Mercator (metres) centred on the grid, on the file CRS's ellipsoid/sphere."""
+    from rasterio.crs import CRS
+    from rasterio.warp import transform
+
+    d = raster.crs.to_dict()
+    shape = {k: d[k] for k in _SHAPE_KEYS if k in d}
+    if not shape:
+        raise InputFileError(f"{what}: CRS {raster.crs.to_string()[:60]} names no ellipsoid or "
+                             "sphere to reproject on; reproject it first (gdalwarp -t_srs ...)")
+    rows, cols = raster.heights.shape
+    cx, cy = raster.transform @ (cols / 2, rows / 2)
+    (lon,), (lat,) = transform(raster.crs, CRS.from_dict({"proj": "longlat", **shape}),
+                               [cx], [cy])
+    return CRS.from_dict({"proj": "tmerc", "lat_0": round(lat, 6), "lon_0": round(lon, 6),
+                          "k": 1, "x_0": 0, "y_0": 0, **shape, "units": "m"})
+
+
+def _reproject(raster: _Raster, what: str) -> tuple[_Raster, str | None]:
+    """Bilinear resampling onto square metric cells (see :func:`read_dem`, ``reproject``)."""
+    import math
+
+    from rasterio.crs import CRS
+    from rasterio.transform import Affine
+    from rasterio.warp import Resampling, reproject, transform, transform_bounds
+
+    src_crs = raster.crs if raster.crs is not None else CRS.from_wkt(_SITE_FRAME_WKT)
+    metric = _crs_problem(raster.crs) is None
+    dst_crs = src_crs if metric else _local_crs(raster, what)
+    t = raster.transform
+    rows, cols = raster.heights.shape
+    # the smaller side, in metres, of the cell at the grid's centre
+    steps = [t @ (cols / 2 + dc, rows / 2 + dr) for dc, dr in ((0, 0), (1, 0), (0, 1))]
+    xs, ys = transform(src_crs, dst_crs, [p[0] for p in steps], [p[1] for p in steps])
+    cell = min(math.hypot(xs[k] - xs[0], ys[k] - ys[0]) for k in (1, 2))
+    corners = [t @ (c, r) for c in (0, cols) for r in (0, rows)]
+    left, bottom, right, top = transform_bounds(
+        src_crs, dst_crs, min(p[0] for p in corners), min(p[1] for p in corners),
+        max(p[0] for p in corners), max(p[1] for p in corners), densify_pts=21)
+    left, top = math.floor(left / cell) * cell, math.ceil(top / cell) * cell
+    width, height = math.ceil((right - left) / cell), math.ceil((top - bottom) / cell)
+    _check_cells(height, width, f"{what} reprojected")
+    heights = np.full((height, width), np.nan)
+    dst_transform = Affine(cell, 0.0, left, 0.0, -cell, top)
+    reproject(raster.heights, heights, src_transform=t, src_crs=src_crs,
+              dst_transform=dst_transform, dst_crs=dst_crs, src_nodata=np.nan,
+              dst_nodata=np.nan, resampling=Resampling.bilinear)
+    if metric:
+        return _Raster(heights, dst_transform, raster.crs), None
+    return _Raster(heights, dst_transform, dst_crs), raster.crs.to_wkt()
+
+
+def _site_grid(raster: _Raster, what: str
+               ) -> tuple[np.ndarray, tuple[float, float], float]:
+    """Heights with rows along +y and columns along +x, origin (cell ``[0, 0]`` centre) and
+    cell size of a north-up square grid, metres."""
+    t = raster.transform
+    heights = raster.heights
+    cell = finite_number(abs(t.a), f"{what}: cell size")
+    ny, nx = heights.shape
+    if t.a > 0:
+        x0 = t.c + 0.5 * t.a
+    else:  # first column is the right edge (max x): flip so columns run along +x
+        heights = heights[:, ::-1]
+        x0 = t.c + (nx - 0.5) * t.a
+    if t.e < 0:  # first row is the top (max y): flip so rows run along +y
+        heights = heights[::-1]
+        y0 = t.f + (ny - 0.5) * t.e
+    else:
+        y0 = t.f + 0.5 * t.e
+    return (heights, (finite_number(x0, f"{what}: origin x"),
+                      finite_number(y0, f"{what}: origin y")), cell)
 
 
 def _one_line(exc: BaseException) -> str:

@@ -124,5 +124,5 @@ def test_npz_round_trip_and_bad_files(tmp_path):
     with pytest.raises(InputFileError, match="does not exist"):
         read_dem(tmp_path / "missing.tif")
     (tmp_path / "x.csv").write_text("1,2\n")
-    with pytest.raises(InputFileError, match="suffix"):
+    with pytest.raises(InputFileError, match="not a raster GDAL can read"):
         read_dem(tmp_path / "x.csv")
