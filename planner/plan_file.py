@@ -121,8 +121,8 @@ def plan_dem_path(provenance: dict) -> str | None:
 
 
 def plan_dem(provenance: dict) -> DEM | None:
-    """The terrain of a plan made on a ``--dem`` file, read as the plan read it; ``None`` for
-    a preset's terrain.
+    """The terrain of a plan made on a ``--dem`` file, read as the plan read it (reprojected
+    or by window when it was); ``None`` for a preset's terrain.
 
     Raises
     ------
@@ -132,7 +132,11 @@ def plan_dem(provenance: dict) -> DEM | None:
     path = plan_dem_path(provenance)
     if path is None:
         return None
-    return read_dem(path, what=f"DEM {path} (named by the plan)")
+    inputs = provenance["inputs"]
+    window = inputs.get("dem_window")
+    return read_dem(path, what=f"DEM {path} (named by the plan)",
+                    reproject=bool(inputs.get("reproject")),
+                    window=None if window is None else tuple(window))
 
 
 def write_plan(doc: dict, path: Path) -> None:
@@ -282,6 +286,15 @@ def _provenance_iv(prov: Any, what: str, full: bool) -> None:
         for key in ("site", "dem", "stations"):
             if inputs.get(key) is not None:
                 require_type(inputs[key], str, f"{what} inputs {key}")
+        if "reproject" in inputs:
+            require_type(inputs["reproject"], bool, f"{what} inputs reproject")
+        if inputs.get("dem_window") is not None:
+            window = require_type(inputs["dem_window"], list, f"{what} inputs dem_window")
+            if len(window) != 4:
+                raise InputFileError(f"{what} inputs dem_window: must be [xmin, xmax, ymin, "
+                                     f"ymax], got {len(window)} numbers; {_FIX}")
+            for v in window:
+                json_number(v, f"{what} inputs dem_window", MAX_ABS_COORDINATE_M)
         if "station_ids" in inputs:
             for sid in require_type(inputs["station_ids"], list, f"{what} inputs station_ids"):
                 require_type(sid, str, f"{what} inputs station_ids entry")

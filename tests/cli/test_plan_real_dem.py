@@ -13,7 +13,7 @@ from planner.sight import crosses_nodata
 from tests.cli.bad_input import Case, check_refused
 from tests.cli.invoke import run_cli
 from tests.planner.utm_dem import ORIGIN, utm_dem, utm_mask, write_stations
-from visibility.dem import DEM, read_dem, write_dem
+from visibility.dem import DEM, read_dem, to_dem_xy, write_dem
 
 
 @pytest.fixture(scope="module")
@@ -99,6 +99,35 @@ def test_verify_and_reduce_read_the_plan_from_another_folder(utm_plan, tmp_path,
     assert summary["site"] == "dem" and summary["n_markers"] == doc["n_markers"]
 
 
+def test_plan_a_dem_in_degrees_with_reproject(tmp_path, capsys, monkeypatch):
+    """A DEM and stations in longitude/latitude: ``--reproject`` plans in a local metric CRS;
+    the plan records it, and verify's reader reads the DEM the same way."""
+    from planner.plan_file import load_plan
+
+    valid = np.ones((120, 150), bool)
+    valid[:, :12] = False  # nodata along the west edge
+    x = np.arange(150) * 0.4
+    write_dem(tmp_path / "lonlat.tif", DEM(np.tile(0.1 * np.sin(x / 4.0), (120, 1)),
+                                           (14.0, 37.0), 5e-6, "EPSG:4326", valid=valid))
+    (tmp_path / "st.csv").write_text("id,x_m,y_m\nS1,14.00030,37.00025\n"
+                                     "S2,14.00055,37.00035\n")
+    monkeypatch.chdir(tmp_path)
+    code, out, err = run_cli(capsys, ["plan", "--dem", "lonlat.tif", "--reproject",
+                                      "--stations", "st.csv", "--json", "--out", "p"])
+    assert code == 0, err
+    doc = json.loads((tmp_path / "p" / "plan.json").read_text())
+    assert doc["site"]["name"] == "lonlat" and doc["provenance"]["inputs"]["reproject"] is True
+    plan = load_plan(tmp_path / "p" / "plan.json")
+    assert plan.dem.source_crs is not None
+    dem = read_dem(tmp_path / "lonlat.tif", reproject=True)
+    assert plan.dem.shape == dem.shape
+    xy = plan.marker_xyz_m[:, :2]
+    assert dem.valid_at(xy).all() and len(xy) >= 3
+    stations = np.array([s.position_m[:2] for s in plan.stations])
+    np.testing.assert_allclose(stations, to_dem_xy(dem, [[14.00030, 37.00025],
+                                                         [14.00055, 37.00035]]), atol=1e-6)
+
+
 def _write(name, dem):
     def setup(cwd, inputs):
         write_dem(cwd / name, dem)
@@ -115,12 +144,22 @@ def _all_nodata(cwd, inputs):
         dst.write(np.full((1, 6, 8), -9999.0))
 
 
+def _geographic(cwd, inputs):
+    write_dem(cwd / "bad.tif", DEM(np.zeros((20, 20)), (14.0, 37.0), 1e-4, "EPSG:4326"))
+
+
 PLAN = ["plan", "--dem", "bad.tif", "--stations", "{inputs}/st.csv", "--out", "out"]
 CASES = [
     Case("station-on-nodata", PLAN, "station S4 at (500067.00, 4100040.00) m stands on DEM "
          "nodata", setup=_write("bad.tif", DEM(utm_dem().heights_m, ORIGIN, 0.5, utm_dem().crs,
                                                valid=utm_mask() & (np.arange(161) < 120)))),
     Case("all-nodata", PLAN, "every cell is nodata", setup=_all_nodata),
+    # the stations' window misses the DEM: the station is named, not the window
+    Case("station-off-the-dem", ["plan", "--dem", "dem.tif", "--stations", "far.csv", "--out",
+                                 "out"], "station F1 at (400000.00, 4100040.00) m lies outside",
+         files={"far.csv": "id,x_m,y_m\nF1,400000,4100040\n"},
+         setup=_write("dem.tif", utm_dem())),
+    Case("geographic-without-reproject", PLAN, "--reproject", setup=_geographic),
 ]
 
 

@@ -145,3 +145,71 @@ def test_too_little_measured_terrain_is_a_one_line_error():
     with pytest.raises(DataError, match="nowhere wider") as exc:
         valid_area(dem, edge_margin_m(dem, 0.1))
     assert "\n" not in str(exc.value)
+
+
+def test_dem_read_only_as_far_as_the_stations_see(tmp_path):
+    """A 400 m DEM with two stations in one corner: load_inputs reads the stations' window
+    (their box grown by the sight radius and the margin), records it, and the default boundary
+    keeps the edge margin from the window's edge."""
+    from planner.planning import WINDOW_MARGIN_M, load_inputs, sight_window
+    from visibility.dem import write_dem
+
+    x = np.arange(401.0)
+    valid = np.ones((401, 401), bool)
+    valid[:, :5] = False  # nodata along the west edge: the DEM has a mask
+    write_dem(tmp_path / "big.tif", DEM(0.01 * np.add.outer(x, x), (1000.0, 2000.0), 1.0,
+                                        "EPSG:32633", valid=valid))
+    (tmp_path / "st.csv").write_text("id,x_m,y_m\nA,1040,2050\nB,1060,2040\n")
+    inputs = load_inputs(dem_path=tmp_path / "big.tif", stations_path=tmp_path / "st.csv",
+                         sight_radius_m=30.0)
+    window = sight_window([[1040, 2050], [1060, 2040]], 30.0)
+    assert window == (1040 - 30 - WINDOW_MARGIN_M, 1060 + 30 + WINDOW_MARGIN_M,
+                      2040 - 30 - WINDOW_MARGIN_M, 2050 + 30 + WINDOW_MARGIN_M)
+    assert inputs.sources["dem_window"] == list(window)
+    xmin, xmax, ymin, ymax = inputs.dem.extent()
+    pad = 2 + 1  # read_dem's pad of 2 cells, and the cell the window's edge falls in
+    assert window[0] - pad <= xmin <= window[0] and window[1] <= xmax <= window[1] + pad
+    assert window[2] - pad <= ymin <= window[2] and window[3] <= ymax <= window[3] + pad
+    assert inputs.dem.shape[0] * inputs.dem.shape[1] < 0.1 * 401 * 401
+    b = np.asarray(inputs.boundary_xy)
+    margin = edge_margin_m(inputs.dem, inputs.marker_radius_m)
+    assert b[:, 0].min() >= 1005 + margin - 0.5 and b[:, 0].max() <= xmax - margin
+    assert b[:, 1].min() >= ymin + margin and b[:, 1].max() <= ymax - margin
+    # the same inputs read whole: the window is the only difference
+    whole = load_inputs(dem_path=tmp_path / "big.tif", stations_path=tmp_path / "st.csv")
+    assert whole.dem.shape == (401, 401) and "dem_window" not in whole.sources
+    np.testing.assert_array_equal(inputs.station_xyz, whole.station_xyz)
+
+
+def test_reproject_maps_every_input_file_into_the_dem(tmp_path):
+    """A DEM in degrees (EPSG:4326) with stations, a boundary and an exclusion in degrees:
+    --reproject reads it in a local metric CRS and maps each file with to_dem_xy."""
+    import json
+
+    from markerplan.errors import InputFileError
+    from planner.planning import load_inputs
+    from visibility.dem import read_dem, to_dem_xy, write_dem
+
+    cell = 5e-6  # degrees: about 0.55 m north-south, 0.44 m east-west at 37 N
+    h = np.zeros((160, 200))
+    write_dem(tmp_path / "geo.tif", DEM(h, (14.0, 37.0), cell, "EPSG:4326"))
+    lonlat = np.array([[14.0002, 37.0003], [14.0007, 37.0004]])
+    (tmp_path / "st.csv").write_text("id,x_m,y_m\n" + "".join(
+        f"S{k},{lon:.7f},{lat:.7f}\n" for k, (lon, lat) in enumerate(lonlat)))
+    ring = [[14.0001, 37.0001], [14.0009, 37.0001], [14.0009, 37.0007], [14.0001, 37.0007],
+            [14.0001, 37.0001]]
+    (tmp_path / "b.geojson").write_text(json.dumps(
+        {"type": "Polygon", "coordinates": [ring]}))
+    with pytest.raises(InputFileError, match="--reproject"):
+        load_inputs(dem_path=tmp_path / "geo.tif", stations_path=tmp_path / "st.csv")
+    inputs = load_inputs(dem_path=tmp_path / "geo.tif", stations_path=tmp_path / "st.csv",
+                         boundary_path=tmp_path / "b.geojson", reproject=True,
+                         sight_radius_m=30.0)
+    dem = read_dem(tmp_path / "geo.tif", reproject=True)
+    np.testing.assert_allclose(inputs.station_xyz[:, :2], to_dem_xy(dem, lonlat), atol=1e-6)
+    # 0.0005 degrees of longitude apart at 37 N: about 44 m east, 11 m north (metres now)
+    d = np.diff(inputs.station_xyz[:, :2], axis=0)[0]
+    assert d[0] == pytest.approx(0.0005 * 111_320 * np.cos(np.radians(37)), rel=0.01)
+    assert d[1] == pytest.approx(0.0001 * 110_950, rel=0.01)
+    np.testing.assert_allclose(inputs.boundary_xy, to_dem_xy(dem, np.array(ring)), atol=1e-6)
+    assert inputs.sources["reproject"] is True and "dem_window" not in inputs.sources
