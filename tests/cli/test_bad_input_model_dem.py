@@ -218,12 +218,14 @@ PLAN_DEM = ["plan", "--dem", "bad.tif", "--stations", "{inputs}/stations.csv", "
 PLAN_NPZ = ["plan", "--dem", "bad.npz", "--stations", "{inputs}/stations.csv", "--out", "out"]
 
 DEM_CASES = [
-    Case("simulate-dem-geographic", SIM, "geographic", setup=_tif(crs="EPSG:4326")),
+    Case("simulate-dem-geographic", SIM, "geographic (degrees), but DEM cells and heights must "
+         "be metres; pass --reproject", setup=_tif(crs="EPSG:4326")),
     Case("plan-dem-geographic", PLAN_DEM, "gdalwarp", setup=_tif(crs="EPSG:4326")),
     Case("simulate-dem-us-feet", SIM, "not metres", setup=_tif(crs="EPSG:2229")),
     Case("simulate-dem-two-bands", SIM, "2 bands", setup=_tif(bands=2)),
     Case("plan-dem-three-bands", PLAN_DEM, "3 bands", setup=_tif(bands=3)),
-    Case("simulate-dem-non-square", SIM, "square", setup=_tif(cell=(1.0, 2.0))),
+    Case("simulate-dem-non-square", SIM, "cells must be square, got 1 x 2; pass --reproject",
+         setup=_tif(cell=(1.0, 2.0))),
     Case("plan-dem-rotated", PLAN_DEM, "north-up", setup=_tif(rotated=True)),
     Case("simulate-station-on-nodata", SIM, "station S1 at (0.00, 0.00) m stands on DEM nodata",
          setup=_NODATA_UNDER_S1),

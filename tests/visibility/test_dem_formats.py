@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from markerplan.errors import DataError, InputFileError
+from markerplan.errors import ConfigError, DataError, InputFileError
 from visibility.dem import DEM, WINDOW_PAD_CELLS, read_dem, to_dem_xy, write_dem
 
 UTM = "EPSG:32633"
@@ -55,7 +55,7 @@ def test_esri_ascii_grid_reads_as_the_geotiff(tmp_path):
 
     tif = write_dem(tmp_path / "d.tif", _dem())
     rasterio.shutil.copy(tif, tmp_path / "d.asc", driver="AAIGrid")
-    assert (tmp_path / "d.asc").read_text().startswith("ncols        8\nnrows        6\n")
+    assert (tmp_path / "d.asc").read_text().split()[:4] == ["ncols", "8", "nrows", "6"]
     _same(read_dem(tmp_path / "d.asc"), read_dem(tif))
 
 
@@ -259,6 +259,18 @@ def test_real_geographic_dem_reprojected(tmp_path):
     hi = np.array([h[a - 1:a + 2, b - 1:b + 2].max() for a, b in zip(r, c, strict=True)])
     assert np.all((got >= lo - 1e-6) & (got <= hi + 1e-6))
     assert np.median(np.abs(got - h[r, c])) < 5.0  # metres, on relief of 236..1076 m
+    # a window in the file's own units (degrees), read then reprojected around its centre
+    part = read_dem(path, reproject=True, window=(-84.30, -84.25, 36.55, 36.60))
+    local = CRS.from_wkt(part.crs).to_dict()
+    assert (local["lon_0"], local["lat_0"]) == pytest.approx((-84.275, 36.575), abs=2 * deg)
+    assert part.cell_size_m == pytest.approx(dem.cell_size_m, rel=1e-3)
+    assert part.shape[0] * part.shape[1] < 0.04 * dem.shape[0] * dem.shape[1]  # 64 x 64 read
+    inside = (lon > -84.30) & (lon < -84.25) & (lat > 36.55) & (lat < 36.60)
+    assert inside.sum() >= 2
+    xy = to_dem_xy(part, np.column_stack([lon[inside], lat[inside]]))
+    assert part.valid_at(xy).all()
+    assert np.all((part.height_at(xy) >= lo[inside] - 1e-6)
+                  & (part.height_at(xy) <= hi[inside] + 1e-6))
 
 
 def test_dem_source_crs_needs_crs():
@@ -292,6 +304,9 @@ def test_window_read_is_the_crop_of_the_full_read(tmp_path, suffix):
     assert corner.origin_m == full.origin_m and corner.shape == (1 + pad, 1 + pad)
     with pytest.raises(DataError, match="misses the DEM"):
         read_dem(path, window=(0.0, 10.0, 0.0, 10.0))
+    for bad in ((1.0, 0.0, 0.0, 1.0), (0.0, 1.0, 0.0), (0.0, np.nan, 0.0, 1.0), "abcd"):
+        with pytest.raises(ConfigError, match="window must be 4 finite numbers"):
+            read_dem(path, window=bad)
 
 
 def test_big_raster_read_by_window_stays_small(tmp_path):

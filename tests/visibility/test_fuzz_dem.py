@@ -18,9 +18,9 @@ FAST = settings(max_examples=80, deadline=None,
 ODD_FLOATS = st.sampled_from([0.0, 1.0, -2.5, 1e300, -1e300, np.nan, np.inf, -np.inf, 1e7])
 
 
-def _check(path, fill=None):
+def _check(path, fill=None, reproject=False):
     try:
-        dem = read_dem(path, fill=fill)
+        dem = read_dem(path, fill=fill, reproject=reproject)
     except MarkerPlanError as exc:
         assert "\n" not in str(exc), str(exc)
         return None
@@ -30,7 +30,8 @@ def _check(path, fill=None):
     assert np.isfinite(dem.cell_size_m) and dem.cell_size_m > 0
     assert all(np.isfinite(dem.origin_m))
     if dem.valid is not None:  # nodata is a mask: some cells, never all or none, are invalid
-        assert fill is None and dem.valid.shape == dem.shape and 0 < dem.valid.sum() < dem.size
+        assert fill is None and dem.valid.shape == dem.shape
+        assert 0 < dem.valid.sum() < dem.valid.size
     return dem
 
 
@@ -113,9 +114,10 @@ def test_damaged_dem_bytes_are_read_or_refused(tmp_path_factory, valid_bytes, su
        rotation=st.sampled_from([0.0, 0.2]), heights=st.lists(ODD_FLOATS, min_size=1,
                                                               max_size=3),
        dtype=st.sampled_from(["float64", "float32", "int16", "uint8", "complex64"]),
-       shape=st.sampled_from([(2, 2), (1, 4), (5, 6)]), fill=st.sampled_from([None, "nearest"]))
+       shape=st.sampled_from([(2, 2), (1, 4), (5, 6)]), fill=st.sampled_from([None, "nearest"]),
+       reproject=st.booleans())
 def test_geotiff_variants_are_read_or_refused(tmp_path_factory, crs, bands, cell, rotation,
-                                              heights, dtype, shape, fill):
+                                              heights, dtype, shape, fill, reproject):
     import rasterio
     from rasterio.transform import Affine
 
@@ -128,7 +130,12 @@ def test_geotiff_variants_are_read_or_refused(tmp_path_factory, crs, bands, cell
                        dtype=dtype, crs=crs, transform=t) as dst:
         for b in range(1, bands + 1):
             dst.write(h, b)
-    dem = _check(path, fill)
-    if dem is not None:
-        assert bands == 1 and rotation == 0.0 and abs(cell[0]) == abs(cell[1])
+    dem = _check(path, fill, reproject)
+    if dem is None:
+        return
+    assert bands == 1
+    if not reproject:  # refused unless metric, north-up and square
+        assert rotation == 0.0 and abs(cell[0]) == abs(cell[1])
         assert crs not in ("EPSG:4326", "EPSG:2229")
+    # the CRS changes (to a local metric one) only for a geographic or non-metre CRS
+    assert (dem.source_crs is not None) == (reproject and crs in ("EPSG:4326", "EPSG:2229"))
