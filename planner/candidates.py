@@ -32,8 +32,8 @@ class Candidates:
     centre_m : (n, 3) float
         Marker centre at each site (ground + radius), m.
     dropped : dict
-        Number of grid points dropped per reason (outside boundary, excluded, slope, crater,
-        near station).
+        Number of grid points dropped per reason (outside boundary, on nodata, near nodata,
+        excluded, slope, crater, near station; the nodata reasons only for a DEM with nodata).
     """
 
     ids: tuple[str, ...]
@@ -177,7 +177,10 @@ def candidate_sites(dem, config, boundary=None, exclusions=(), station_xy=None, 
     Parameters
     ----------
     dem : visibility.dem.DEM
-        Terrain, site frame.
+        Terrain, site frame. Where it has nodata (:attr:`~visibility.dem.DEM.valid`), a
+        site must stand on measured terrain, its slope stencil too (:func:`on_terrain`,
+        dropped as "on nodata"), and at least :func:`edge_margin_m` inside the measured area
+        (:func:`valid_area`, dropped as "near nodata").
     config : PlanConfig
         Uses ``grid_spacing_m``, ``max_slope_deg``, ``exclude_crater_interiors``,
         ``min_station_distance_m``.
@@ -230,6 +233,10 @@ def candidate_sites(dem, config, boundary=None, exclusions=(), station_xy=None, 
                         dem.extent()[3] - h)
     drop(~shapely.contains_xy(region.intersection(inner), xy[:, 0], xy[:, 1]),
          "outside boundary")
+    if dem.valid is not None:
+        drop(~on_terrain(dem, xy, h), "on nodata")
+        area = valid_area(dem, edge_margin_m(dem, marker_radius_m))
+        drop(~shapely.contains_xy(area, xy[:, 0], xy[:, 1]), "near nodata")
     if excl:
         union = shapely.union_all(excl)
         drop(shapely.intersects_xy(union, xy[:, 0], xy[:, 1]), "excluded zone")
@@ -267,3 +274,93 @@ def ground_slope_rad(dem, xy: np.ndarray, baseline_m: float = SLOPE_BASELINE_M) 
     gx = (dem.height_at(xy + e) - dem.height_at(xy - e)) / (2 * baseline_m)
     gy = (dem.height_at(xy + n) - dem.height_at(xy - n)) / (2 * baseline_m)
     return np.arctan(np.hypot(gx, gy))
+
+
+def on_terrain(dem, xy: np.ndarray, baseline_m: float = SLOPE_BASELINE_M) -> np.ndarray:
+    """Whether each point and the four points of its slope stencil (:func:`ground_slope_rad`)
+    lie on measured terrain (:meth:`visibility.dem.DEM.valid_at`).
+
+    Parameters
+    ----------
+    dem : visibility.dem.DEM
+    xy : (n, 2) float
+        Site-frame points, m.
+    baseline_m : float
+        The slope stencil's half-width, m.
+
+    Returns
+    -------
+    on_data : (n,) bool
+    """
+    xy = np.atleast_2d(np.asarray(xy, dtype=float))
+    ok = dem.valid_at(xy)
+    for d in ([baseline_m, 0.0], [-baseline_m, 0.0], [0.0, baseline_m], [0.0, -baseline_m]):
+        ok &= dem.valid_at(xy + np.array([d]))
+    return ok
+
+
+def edge_margin_m(dem, marker_radius_m: float) -> float:
+    """How far inside the measured terrain's outline a marker must stand, m: two cells, or
+    the slope stencil's half-width plus the marker radius when that is more (the sphere and
+    the ground it is judged on stay on measured terrain).
+
+    Examples
+    --------
+    >>> from visibility.dem import DEM
+    >>> edge_margin_m(DEM(np.zeros((3, 3)), (0.0, 0.0), 0.5), 0.1)
+    1.0
+    >>> edge_margin_m(DEM(np.zeros((3, 3)), (0.0, 0.0), 0.1), 0.1)
+    0.35
+    """
+    return max(2.0 * dem.cell_size_m, max(SLOPE_BASELINE_M, dem.cell_size_m) + marker_radius_m)
+
+
+def valid_area(dem, margin_m: float = 0.0):
+    """The DEM's measured terrain as polygons, shrunk by ``margin_m``.
+
+    The outline follows the edges of the valid cells' footprints (cell ``[j, i]`` covers
+    ``x0 + (i -+ 0.5) * cell``, ``y0 + (j -+ 0.5) * cell``), including the DEM's own edge;
+    nodata inside the area makes holes. It is shrunk by ``margin_m`` plus half a cell and then
+    simplified within half a cell, so every point of it lies at least ``margin_m`` inside the
+    footprints.
+
+    Parameters
+    ----------
+    dem : visibility.dem.DEM
+        Terrain, site frame.
+    margin_m : float
+        Distance kept from nodata and from the DEM's edge, m.
+
+    Returns
+    -------
+    area : shapely Polygon or MultiPolygon
+        Site frame, m.
+
+    Raises
+    ------
+    DataError
+        Nothing of the measured terrain is wider than twice ``margin_m``.
+
+    Examples
+    --------
+    >>> from visibility.dem import DEM
+    >>> valid = np.zeros((20, 20), bool); valid[2:18, 2:18] = True
+    >>> area = valid_area(DEM(np.zeros((20, 20)), (0.0, 0.0), 1.0, valid=valid), 1.0)
+    >>> [round(b, 6) for b in area.bounds]
+    [3.0, 3.0, 16.0, 16.0]
+    """
+    from rasterio import features
+    from rasterio.transform import Affine
+
+    c = dem.cell_size_m
+    x0, y0 = dem.origin_m
+    mask = dem.valid_mask()
+    transform = Affine(c, 0.0, x0 - 0.5 * c, 0.0, c, y0 - 0.5 * c)  # rows run along +y
+    cells = [shapely.geometry.shape(g) for g, _ in
+             features.shapes(mask.astype(np.uint8), mask=mask, transform=transform)]
+    area = shapely.union_all(cells).buffer(-(margin_m + 0.5 * c)).simplify(0.5 * c)
+    if area.is_empty:
+        raise DataError(f"the DEM's measured terrain is nowhere wider than "
+                        f"{2 * margin_m:.2f} m (twice the {margin_m:.2f} m kept from nodata and "
+                        "the DEM's edge); give a DEM with more measured terrain around the site")
+    return area

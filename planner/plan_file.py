@@ -115,8 +115,28 @@ def plan_layout(doc: dict) -> PlanLayout:
 
 
 def plan_dem_path(provenance: dict) -> str | None:
-    """The ``--dem`` file a plan's provenance names, or ``None`` for a preset's terrain."""
+    """The ``--dem`` file a plan's provenance names (an absolute path since plans record
+    their inputs so), or ``None`` for a preset's terrain."""
     return provenance.get("inputs", {}).get("dem")
+
+
+def plan_dem(provenance: dict) -> DEM | None:
+    """The terrain of a plan made on a ``--dem`` file, read as the plan read it (reprojected
+    or by window when it was); ``None`` for a preset's terrain.
+
+    Raises
+    ------
+    InputFileError, DataError
+        The DEM the plan names cannot be read (see :func:`visibility.dem.read_dem`).
+    """
+    path = plan_dem_path(provenance)
+    if path is None:
+        return None
+    inputs = provenance["inputs"]
+    window = inputs.get("dem_window")
+    return read_dem(path, what=f"DEM {path} (named by the plan)",
+                    reproject=bool(inputs.get("reproject")),
+                    window=None if window is None else tuple(window))
 
 
 def write_plan(doc: dict, path: Path) -> None:
@@ -134,11 +154,8 @@ def load_plan(path: str | Path) -> SurveyPlan:
     """
     doc = read_plan(path, "PLAN", full=True)
     site = doc["site"]
-    dem_path = plan_dem_path(doc["provenance"])
-    if dem_path is not None:
-        dem = read_dem(dem_path, what=f"DEM {dem_path} (named by the plan)",
-                       nodata_fix="fix the DEM the plan names, or plan again on a filled DEM")
-    else:
+    dem = plan_dem(doc["provenance"])
+    if dem is None:
         dem = load_site(site["name"], site.get("seed")).dem
     layout = plan_layout(doc)
     return SurveyPlan(
@@ -266,9 +283,18 @@ def _provenance_iv(prov: Any, what: str, full: bool) -> None:
         require_type(prov["config"], dict, f"{what} config")
     if "inputs" in prov:
         inputs = require_type(prov["inputs"], dict, f"{what} inputs")
-        for key in ("dem", "stations"):
+        for key in ("site", "dem", "stations"):
             if inputs.get(key) is not None:
                 require_type(inputs[key], str, f"{what} inputs {key}")
+        if "reproject" in inputs:
+            require_type(inputs["reproject"], bool, f"{what} inputs reproject")
+        if inputs.get("dem_window") is not None:
+            window = require_type(inputs["dem_window"], list, f"{what} inputs dem_window")
+            if len(window) != 4:
+                raise InputFileError(f"{what} inputs dem_window: must be [xmin, xmax, ymin, "
+                                     f"ymax], got {len(window)} numbers; {_FIX}")
+            for v in window:
+                json_number(v, f"{what} inputs dem_window", MAX_ABS_COORDINATE_M)
         if "station_ids" in inputs:
             for sid in require_type(inputs["station_ids"], list, f"{what} inputs station_ids"):
                 require_type(sid, str, f"{what} inputs station_ids entry")

@@ -14,8 +14,9 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
+import shapely
 
-from markerplan.errors import ConfigError, InputFileError
+from markerplan.errors import ConfigError, DataError, InputFileError
 from markerplan.reading import (
     MAX_ABS_COORDINATE_M,
     finite_number,
@@ -26,13 +27,19 @@ from markerplan.reading import (
     unique_ids,
 )
 from planner.baselines import Baseline, greedy_cover, greedy_network, regular_grid
-from planner.candidates import Candidates, candidate_sites, load_polygons
+from planner.candidates import (
+    Candidates,
+    candidate_sites,
+    edge_margin_m,
+    load_polygons,
+    valid_area,
+)
 from planner.config import MAX_MARKERS, MAX_STATIONS
 from planner.program import PlanResult, plan_sites
 from planner.sight import sight_problem
 from planner.station_checks import LayoutCheck, evaluate_layout
 from planner.usability import PlanProblem
-from visibility.dem import read_dem
+from visibility.dem import read_dem, to_dem_xy
 from visibility.sites import load_site, site_with_marker_radius
 
 
@@ -43,15 +50,17 @@ class PlanInputs:
     Attributes
     ----------
     site_name : str
+        The site preset's name, or the DEM file's stem (``mydem`` for ``mydem.tif``).
     site_seed : int or None
-        Terrain seed of the site preset.
+        Terrain seed of the site preset (None on a DEM file).
     dem : visibility.dem.DEM
     station_ids : list of str
     station_xyz : (s, 3) float
         LiDAR centres, m.
     station_heading_rad : (s,) float
     boundary_xy : (k, 2) float or None
-        Where markers may go (None: the whole DEM).
+        Where markers may go (None: the whole DEM; on a DEM with nodata and no
+        ``--boundary``, :func:`default_boundary`).
     exclusions : list of shapely Polygon
     craters : list
         Objects with ``centre_xy_m`` and ``diameter_m`` (for the map and crater exclusion).
@@ -63,7 +72,8 @@ class PlanInputs:
         Markers already in the field, fixed in the plan, m.
     marker_radius_m : float
     sources : dict
-        Where each input came from (for provenance).
+        Where each input came from (for provenance): the preset, and input files as absolute
+        paths.
     """
 
     site_name: str
@@ -140,7 +150,8 @@ def known_ids(wanted, available, option: str, what: str) -> tuple[str, ...]:
 def load_inputs(site: str = "default", site_seed: int | None = None, dem_path=None,
                 stations_path=None, boundary_path=None, exclude_paths=(),
                 existing: str | None = None, marker_radius_m: float | None = None,
-                station_ids=None) -> PlanInputs:
+                station_ids=None, reproject: bool = False,
+                sight_radius_m: float | None = None) -> PlanInputs:
     """Assemble the inputs of a plan from a site preset and optional files.
 
     Parameters
@@ -151,8 +162,11 @@ def load_inputs(site: str = "default", site_seed: int | None = None, dem_path=No
         Terrain seed of the preset (default 0).
     dem_path : path, optional
         GeoTIFF / npz DEM in the site frame (replaces the preset terrain; the preset's craters
-        and as-built layout are then dropped). Needs ``stations_path``: the preset's stations
-        belong to the preset's terrain.
+        and as-built layout are then dropped, the site is named after the file). Needs
+        ``stations_path``: the preset's stations belong to the preset's terrain. Stations and
+        existing markers must stand on its measured terrain; where it has nodata, markers may
+        go only inside :func:`default_boundary` (or ``boundary_path``, kept
+        :func:`~planner.candidates.edge_margin_m` off nodata).
     stations_path : path, optional
         Stations CSV (``id, x_m, y_m[, z_m][, heading_deg]``; ``z_m`` is the LiDAR centre, default
         ground + rig height) or GeoJSON Points with an ``id`` property.
@@ -168,6 +182,14 @@ def load_inputs(site: str = "default", site_seed: int | None = None, dem_path=No
         stand this far above it.
     station_ids : sequence of str, optional
         Only these of the stations (:func:`select_stations`); default all.
+    reproject : bool
+        Resample a DEM that is not metric and square (``read_dem(..., reproject=True)``); the
+        station, boundary, exclusion and existing-marker files are then in the DEM file's CRS
+        and mapped into the DEM's (:func:`visibility.dem.to_dem_xy`).
+    sight_radius_m : float, optional
+        Read only the part of the DEM within this distance of the stations
+        (:func:`sight_window`; e.g. ``config.max_range_m``, beyond which no pair counts);
+        default, and with ``reproject``, the whole DEM.
 
     Raises
     ------
@@ -175,7 +197,7 @@ def load_inputs(site: str = "default", site_seed: int | None = None, dem_path=No
         ``dem_path`` without ``stations_path``, or an unknown preset.
     InputFileError, DataError
         A malformed input file (see :func:`read_stations`, :func:`read_markers`,
-        :func:`planner.candidates.load_polygons`), or a point outside the DEM.
+        :func:`planner.candidates.load_polygons`), or a point outside the DEM or on nodata.
     """
     if dem_path is not None and stations_path is None:
         raise ConfigError(f"--dem {dem_path} needs --stations: the preset's stations belong to "
@@ -189,17 +211,26 @@ def load_inputs(site: str = "default", site_seed: int | None = None, dem_path=No
     craters = list(preset.craters)
     as_built_ids, as_built_xyz = list(preset.marker_ids), np.asarray(preset.marker_centres_m)
     boundary = np.asarray(preset.boundary_xy_m, float) if len(preset.boundary_xy_m) else None
+    site_name, site_seed = site, preset.seed
+    station_points = (None if stations_path is None
+                      else _read_points(stations_path, "--stations", MAX_STATIONS))
     if dem_path is not None:
-        dem = read_dem(dem_path, what=f"--dem {dem_path}",
-                       nodata_fix="fill them (e.g. gdal_fillnodata.py) or crop the DEM to its "
-                                  "valid cells")
-        sources["dem"] = str(dem_path)
-        craters, boundary = [], None
+        window = None
+        if sight_radius_m is not None and not reproject:
+            window = sight_window([[p["x_m"], p["y_m"]] for p in station_points], sight_radius_m)
+        dem, window = _read_site_dem(dem_path, reproject, window)
+        sources.update(dem=_absolute(dem_path), reproject=bool(reproject))
+        if window is not None:
+            sources["dem_window"] = list(window)
+        site_name, site_seed = Path(dem_path).stem, None
+        craters = []
+        boundary = None if boundary_path is not None else default_boundary(
+            dem, float(preset.marker_radius_m))
         as_built_ids, as_built_xyz = [], np.zeros((0, 3))
     lidar_h = float(preset.lidar_height_m)
-    if stations_path is not None:
-        ids, xyz, heading = read_stations(stations_path, dem, lidar_h)
-        sources["stations"] = str(stations_path)
+    if station_points is not None:
+        ids, xyz, heading = place_stations(station_points, dem, lidar_h)
+        sources["stations"] = _absolute(stations_path)
         as_built_ids, as_built_xyz = [], np.zeros((0, 3))
     else:
         ids = list(preset.station_ids)
@@ -208,13 +239,14 @@ def load_inputs(site: str = "default", site_seed: int | None = None, dem_path=No
                                dem.height_at(preset.station_xy_m) + lidar_h])
         heading = np.asarray(preset.station_heading_rad, float)
     if boundary_path is not None:
-        boundary = _boundary_iv(load_polygons(boundary_path, "--boundary"), boundary_path)
-        sources["boundary"] = str(boundary_path)
+        boundary = _boundary_iv(_polygons_on_dem(load_polygons(boundary_path, "--boundary"),
+                                                 dem), boundary_path)
+        sources["boundary"] = _absolute(boundary_path)
     exclusions = []
     for p in exclude_paths:
-        exclusions += load_polygons(p, "--exclude")
+        exclusions += _polygons_on_dem(load_polygons(p, "--exclude"), dem)
     if exclude_paths:
-        sources["exclude"] = [str(p) for p in exclude_paths]
+        sources["exclude"] = [_absolute(p) for p in exclude_paths]
     ex_ids, ex_xyz = [], np.zeros((0, 3))
     if existing == "as-built":
         if not as_built_ids:
@@ -224,8 +256,8 @@ def load_inputs(site: str = "default", site_seed: int | None = None, dem_path=No
     elif existing is not None:
         ex_ids, ex_xyz = read_markers(existing, dem, float(preset.marker_radius_m))
     if existing is not None:
-        sources["existing"] = existing
-    inputs = PlanInputs(site_name=site, site_seed=preset.seed, dem=dem, station_ids=ids,
+        sources["existing"] = existing if existing == "as-built" else _absolute(existing)
+    inputs = PlanInputs(site_name=site_name, site_seed=site_seed, dem=dem, station_ids=ids,
                         station_xyz=xyz, station_heading_rad=heading, boundary_xy=boundary,
                         exclusions=exclusions, craters=craters, as_built_ids=as_built_ids,
                         as_built_xyz=as_built_xyz, existing_ids=ex_ids, existing_xyz=ex_xyz,
@@ -234,6 +266,88 @@ def load_inputs(site: str = "default", site_seed: int | None = None, dem_path=No
     if station_ids is None:
         return inputs
     return inputs.with_stations(select_stations(inputs.station_ids, station_ids))
+
+
+#: Room kept beyond the stations' sight radius when a DEM is read by window, m: the edge
+#: margin markers keep from the window's edge (:func:`~planner.candidates.edge_margin_m`, two
+#: cells) for cells up to 2.5 m.
+WINDOW_MARGIN_M = 5.0
+
+
+def sight_window(station_xy, sight_radius_m: float) -> tuple[float, float, float, float]:
+    """The part of a DEM stations can see: their bounding box grown by ``sight_radius_m`` and
+    :data:`WINDOW_MARGIN_M`.
+
+    Parameters
+    ----------
+    station_xy : (s, 2) float
+        Stations in the DEM file's coordinates, m.
+    sight_radius_m : float
+        How far a station sees, m.
+
+    Returns
+    -------
+    window : (xmin, xmax, ymin, ymax) float
+        As :func:`visibility.dem.read_dem` takes it, m.
+
+    Examples
+    --------
+    >>> sight_window([[0.0, 0.0], [10.0, 4.0]], 30.0)
+    (-35.0, 45.0, -35.0, 39.0)
+    """
+    xy = np.asarray(station_xy, dtype=float).reshape(-1, 2)
+    r = sight_radius_m + WINDOW_MARGIN_M
+    return (float(xy[:, 0].min() - r), float(xy[:, 0].max() + r),
+            float(xy[:, 1].min() - r), float(xy[:, 1].max() + r))
+
+
+def _read_site_dem(path, reproject: bool, window) -> tuple[object, tuple | None]:
+    """``--dem`` read by ``window`` when it holds data, else whole; returns the DEM and the
+    window it was read by (``None``: whole).
+
+    A window that finds no data means the stations stand off the DEM's data (or the file is
+    refused whatever part is read, e.g. for its CRS); the whole file is then read so that the
+    one-line error names the real cause (the station, the CRS) rather than the window.
+    """
+    what = f"--dem {path}"
+    if window is not None:
+        try:
+            return read_dem(path, what=what, reproject=reproject, window=window), window
+        except DataError:
+            pass
+    return read_dem(path, what=what, reproject=reproject), None
+
+
+def _polygons_on_dem(polygons: list, dem) -> list:
+    """Polygons read in the DEM file's CRS, in the DEM's (:func:`visibility.dem.to_dem_xy`,
+    corner by corner)."""
+    if dem.source_crs is None:
+        return polygons
+    return [shapely.transform(p, lambda xy: to_dem_xy(dem, xy)) for p in polygons]
+
+
+def _absolute(path) -> str:
+    """``path`` made absolute (symbolic links resolved), as provenance records an input file,
+    so that ``verify`` and ``reduce`` find it from any folder."""
+    return str(Path(path).resolve())
+
+
+def default_boundary(dem, marker_radius_m: float) -> np.ndarray | None:
+    """Where markers may go on a DEM when no ``--boundary`` is given: the outline of its
+    largest piece of measured terrain, :func:`~planner.candidates.edge_margin_m` inside it
+    (:func:`~planner.candidates.valid_area`); ``None`` (the whole DEM) when it has no nodata.
+
+    Returns
+    -------
+    corners : (k, 2) float or None
+        Site frame, m. Holes in that piece and other pieces of measured terrain are not part
+        of it; :func:`~planner.candidates.candidate_sites` keeps markers off nodata anyway.
+    """
+    if dem.valid is None:
+        return None
+    area = valid_area(dem, edge_margin_m(dem, marker_radius_m))
+    largest = max(getattr(area, "geoms", [area]), key=lambda g: g.area)
+    return np.asarray(largest.exterior.coords, float)
 
 
 def _boundary_iv(polygons: list, path) -> np.ndarray:
@@ -357,18 +471,25 @@ def read_stations(path, dem, lidar_height_m: float) -> tuple[list[str], np.ndarr
         CSV ``id, x_m, y_m[, z_m][, heading_deg]`` or GeoJSON Points (see :func:`_read_points`);
         at most :data:`planner.config.MAX_STATIONS` stations.
     dem : visibility.dem.DEM
-        Terrain; every station must lie on it.
+        Terrain; every station must stand on its measured terrain.
     lidar_height_m : float
         LiDAR centre above the ground where ``z_m`` is not given, m.
 
     Raises
     ------
     InputFileError, DataError
-        Unreadable or malformed file (see :func:`_read_points`), or a station outside the DEM.
+        Unreadable or malformed file (see :func:`_read_points`), or a station outside the DEM
+        or on nodata.
     """
-    pts = _read_points(path, "--stations", MAX_STATIONS)
-    ids, xyz = _points_on_dem(pts, dem, lidar_height_m, "station")
-    heading = np.radians([p["heading_deg"] or 0.0 for p in pts])
+    return place_stations(_read_points(path, "--stations", MAX_STATIONS), dem, lidar_height_m)
+
+
+def place_stations(points: list[dict], dem, lidar_height_m: float
+                   ) -> tuple[list[str], np.ndarray, np.ndarray]:
+    """Stations read by :func:`_read_points` -> ids, LiDAR centres (s, 3) m, headings (s,) rad
+    on ``dem`` (see :func:`read_stations`)."""
+    ids, xyz = _points_on_dem(points, dem, lidar_height_m, "station")
+    heading = np.radians([p["heading_deg"] or 0.0 for p in points])
     return ids, xyz, heading
 
 
@@ -381,7 +502,7 @@ def read_markers(path, dem, marker_radius_m: float, option: str = "--existing"
     path : str or Path
         See :func:`_read_points`; at most :data:`planner.config.MAX_MARKERS` markers.
     dem : visibility.dem.DEM
-        Terrain; every marker must lie on it.
+        Terrain; every marker must stand on its measured terrain.
     marker_radius_m : float
         Default ``z``: ground + this radius, m.
     option : str
@@ -390,7 +511,8 @@ def read_markers(path, dem, marker_radius_m: float, option: str = "--existing"
     Raises
     ------
     InputFileError, DataError
-        Unreadable or malformed file (see :func:`_read_points`), or a marker outside the DEM.
+        Unreadable or malformed file (see :func:`_read_points`), or a marker outside the DEM
+        or on nodata.
     """
     return _points_on_dem(_read_points(path, option, MAX_MARKERS), dem, marker_radius_m,
                           "marker")
@@ -398,10 +520,12 @@ def read_markers(path, dem, marker_radius_m: float, option: str = "--existing"
 
 def _points_on_dem(points: list[dict], dem, height_m: float, label: str
                    ) -> tuple[list[str], np.ndarray]:
-    """Ids and (k, 3) positions of :func:`_read_points` rows that must lie on the DEM, m; a
-    missing ``z_m`` is the ground plus ``height_m``."""
+    """Ids and (k, 3) positions of :func:`_read_points` rows that must stand on the DEM's
+    measured terrain (:meth:`~visibility.dem.DEM.valid_at`), m; they are given in the DEM
+    file's CRS (:func:`visibility.dem.to_dem_xy`); a missing ``z_m`` is the ground plus
+    ``height_m``."""
     ids = [p["id"] for p in points]
-    xy = np.array([[p["x_m"], p["y_m"]] for p in points], float)
+    xy = to_dem_xy(dem, np.array([[p["x_m"], p["y_m"]] for p in points], float))
     _check_inside(dem, xy, ids, label)
     ground = dem.height_at(xy)
     z = np.array([g + height_m if p["z_m"] is None else p["z_m"]

@@ -12,6 +12,9 @@ option                      meaning (and the value the command receives)
 ``--site-seed N``           seed of the preset's synthetic terrain
 ``--seed N``                seed of the random noise (simulation) or resampling of the command
 ``--dem FILE``              DEM instead of the preset's terrain (``Path``)
+``--reproject``             resample a ``--dem`` in degrees (or on non-square cells) to a local
+                            metric CRS; point and polygon files are then in the DEM file's CRS
+                            (``bool``; :func:`visibility.dem.read_dem`, ``to_dem_xy``)
 ``--stations FILE``         stations CSV/GeoJSON (``Path``)
 ``--station-ids S1,S3``     which stations to work on (``tuple[str, ...]``)
 ``--marker-radius M``       marker (sphere) radius, metres (``float``)
@@ -241,6 +244,12 @@ lidar_height_option = click.option(
 dem_option = click.option(
     "--dem", "dem_path", type=FILE,
     help="DEM (.tif/.tiff/.npz, site-frame metres) instead of the preset's terrain.")
+
+reproject_option = click.option(
+    "--reproject", is_flag=True,
+    help="Resample a --dem in a geographic CRS (degrees) or on non-square cells to a local "
+         "metric CRS; --stations, --boundary, --exclude and --existing files are then in the "
+         "DEM file's CRS.")
 
 stations_option = click.option(
     "--stations", "stations_path", type=FILE,

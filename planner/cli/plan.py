@@ -24,6 +24,7 @@ from planner.cli._common import (
     overwrite_option,
     reference_station_option,
     report_timings,
+    reproject_option,
     site_option,
     site_seed_option,
     station_ids_option,
@@ -37,6 +38,7 @@ from planner.cli._common import (
 @site_option()
 @site_seed_option
 @dem_option
+@reproject_option
 @stations_option
 @station_ids_option
 @boundary_option
@@ -62,10 +64,10 @@ from planner.cli._common import (
 @out_option(default="markerplan-out")
 @overwrite_option
 @json_option
-def command(site_name, site_seed, dem_path, stations_path, station_ids, boundary_path,
-            exclude_paths, marker_radius_m, error_model, config_path, visibility_path, redundant,
-            existing, budget, network, reference_station, time_limit_s, stand_map_cell_m, out,
-            overwrite, as_json):
+def command(site_name, site_seed, dem_path, reproject, stations_path, station_ids,
+            boundary_path, exclude_paths, marker_radius_m, error_model, config_path,
+            visibility_path, redundant, existing, budget, network, reference_station,
+            time_limit_s, stand_map_cell_m, out, overwrite, as_json):
     """Plan the fewest marker sites so that every station meets the accuracy requirement.
 
     Writes under --out: plan.json, markers.csv, report.md, map.png; markers.geojson (WGS84
@@ -85,6 +87,7 @@ def command(site_name, site_seed, dem_path, stations_path, station_ids, boundary
       markerplan plan --network --reference-station S4 --out plan-network-s4/
       markerplan plan --dem site.tif --stations stations.csv --exclude paths.geojson --out p/
       markerplan plan --dem site.tif --stations stations.csv --stand-map-cell 2 --out p/
+      markerplan plan --dem lonlat.tif --reproject --stations lonlat.csv --out p/
     """
     from markerplan.output_folder import output_folder
     from planner.gis_output import write_stand_map
@@ -99,7 +102,8 @@ def command(site_name, site_seed, dem_path, stations_path, station_ids, boundary
         outcome, config = _plan(site_name, site_seed, dem_path, stations_path, station_ids,
                                 boundary_path, exclude_paths, marker_radius_m, error_model,
                                 config_path, visibility_path, redundant, existing, budget,
-                                time_limit_s, as_json, network, reference_station)
+                                time_limit_s, as_json, network, reference_station,
+                                reproject)
         doc = write_plan_files(outcome, stage)
         draw_plan_map(outcome, stage / "map.png")
         stand_s = {}
@@ -140,8 +144,10 @@ def solver_status_text(solver: dict) -> str:
 
 def _plan(site_name, site_seed, dem_path, stations_path, station_ids, boundary_path,
           exclude_paths, marker_radius_m, error_model, config_path, visibility_path, redundant,
-          existing, budget, time_limit_s, as_json, network=None, reference_station=None):
-    """Read the inputs and make the plan; return ``(outcome, config)``."""
+          existing, budget, time_limit_s, as_json, network=None, reference_station=None,
+          reproject=False):
+    """Read the inputs and make the plan; return ``(outcome, config)``. A ``--dem`` is read
+    only as far as the stations see (``config.max_range_m``)."""
     from markerplan.errors import ConfigError
     from planner.config import PlanConfig, load_config
     from planner.planning import load_inputs, make_plan
@@ -153,7 +159,8 @@ def _plan(site_name, site_seed, dem_path, stations_path, station_ids, boundary_p
     inputs = load_inputs(site_name, site_seed, dem_path=dem_path, stations_path=stations_path,
                          boundary_path=boundary_path, exclude_paths=exclude_paths,
                          existing=existing, marker_radius_m=marker_radius_m,
-                         station_ids=station_ids)
+                         station_ids=station_ids, reproject=reproject,
+                         sight_radius_m=config.max_range_m)
     if inputs.existing_ids:
         config = config.replace(existing=tuple(inputs.existing_ids))
     problem = None

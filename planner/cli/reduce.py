@@ -24,6 +24,7 @@ from planner.cli._common import (
     overwrite_option,
     reference_station_option,
     report_timings,
+    reproject_option,
     seed_option,
     site_option,
     site_seed_option,
@@ -39,6 +40,7 @@ from planner.cli._common import (
 @site_option(default=None)
 @site_seed_option
 @dem_option
+@reproject_option
 @stations_option
 @station_ids_option
 @boundary_option
@@ -67,7 +69,7 @@ from planner.cli._common import (
 @out_option(default="markerplan-reduce")
 @overwrite_option
 @json_option
-def command(layout_spec, site_name, site_seed, dem_path, stations_path, station_ids,
+def command(layout_spec, site_name, site_seed, dem_path, reproject, stations_path, station_ids,
             boundary_path, exclude_paths, marker_radius_m, error_model, config_path, free,
             keep_ids, drop_ids, k_min, network, reference_station, time_limit_s, verify, seed,
             verify_k, offsets, out, overwrite, as_json):
@@ -104,7 +106,7 @@ def command(layout_spec, site_name, site_seed, dem_path, stations_path, station_
                                config_path, *exclude_paths,
                                None if layout_spec == "as-built" else layout_spec)
     sources = {"site_name": site_name, "site_seed": site_seed, "dem_path": dem_path,
-               "stations_path": stations_path, "station_ids": station_ids,
+               "reproject": reproject, "stations_path": stations_path, "station_ids": station_ids,
                "boundary_path": boundary_path, "exclude_paths": exclude_paths,
                "marker_radius_m": marker_radius_m}
     with output_folder(out, overwrite, "reduce", inputs=inputs_given) as stage:

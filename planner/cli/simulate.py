@@ -22,6 +22,7 @@ from planner.cli._common import (
     out_option,
     overwrite_option,
     range_noise_option,
+    reproject_option,
     rpm_option,
     seed_option,
     sensor_profile_option,
@@ -36,6 +37,7 @@ from planner.cli._common import (
 @site_option()
 @site_seed_option
 @dem_option
+@reproject_option
 @click.option("--dem-fill", type=click.Choice(["nearest"]),
               help="Take NaN/nodata DEM cells as terrain, filled from the nearest valid "
                    "cell (default: they are nodata, where no station or marker may stand).")
@@ -61,7 +63,7 @@ from planner.cli._common import (
 @out_option(required=True)
 @overwrite_option
 @json_option
-def command(site_name: str, site_seed: int | None, dem_path: Path | None,
+def command(site_name: str, site_seed: int | None, dem_path: Path | None, reproject: bool,
             dem_fill: str | None, stations_path: Path | None, station_ids: tuple[str, ...] | None,
             marker_radius_m: float | None, frames: int, rpm: int, seed: int,
             lidar_height_m: float, offsets, profile, range_noise_mm: float | None,
@@ -97,7 +99,7 @@ def command(site_name: str, site_seed: int | None, dem_path: Path | None,
     with output_folder(out, overwrite, "simulate",
                        inputs=given_paths(dem_path, stations_path)) as stage:
         site = _site(site_name, site_seed, dem_path, dem_fill, stations_path, marker_radius_m,
-                     lidar_height_m)
+                     lidar_height_m, reproject)
         ids = select_stations(site.station_ids, station_ids)
         with tqdm(total=len(ids) * frames, unit="frame", file=sys.stderr, disable=None,
                   desc="simulate") as bar:
@@ -118,8 +120,9 @@ def _metres(mm: float | None) -> float | None:
 
 
 def _site(site_name, site_seed, dem_path, dem_fill, stations_path, marker_radius_m,
-          lidar_height_m):
-    """The site to scan: the preset, with the DEM, stations and marker radius given."""
+          lidar_height_m, reproject=False):
+    """The site to scan: the preset, with the DEM (resampled with ``reproject``; the stations
+    are then in its file's CRS), stations and marker radius given."""
     import numpy as np
 
     from planner.planning import read_stations
@@ -133,7 +136,8 @@ def _site(site_name, site_seed, dem_path, dem_fill, stations_path, marker_radius
 
     site = load_site(site_name, seed=site_seed)
     dem = site.dem if dem_path is None else read_dem(dem_path, fill=dem_fill,
-                                                     what=f"--dem {dem_path}")
+                                                     what=f"--dem {dem_path}",
+                                                     reproject=reproject)
     if stations_path is not None:  # before site_with_dem, which checks the stations it keeps
         ids, xyz, heading = read_stations(stations_path, dem, lidar_height_m)
         if np.any(np.abs(xyz[:, 2] - dem.height_at(xyz[:, :2]) - lidar_height_m) > 1e-3):

@@ -127,7 +127,7 @@ def read_layout(spec: str, inputs) -> Layout:
 def resolve_inputs(spec: str, site_name: str | None = None, site_seed: int | None = None,
                    dem_path=None, stations_path=None, station_ids=None, boundary_path=None,
                    exclude_paths=(), marker_radius_m: float | None = None,
-                   config=None) -> tuple[object, Layout, object]:
+                   config=None, reproject: bool = False) -> tuple[object, Layout, object]:
     """Site inputs, layout and plan configuration of a reduction study.
 
     A ``plan.json`` supplies its own site, terrain seed, DEM and stations files, stations,
@@ -148,6 +148,9 @@ def resolve_inputs(spec: str, site_name: str | None = None, site_seed: int | Non
         Only these stations (:func:`planner.planning.select_stations`).
     config : PlanConfig, optional
         Default: the plan's configuration, else ``PlanConfig()``.
+    reproject : bool
+        As for :func:`~planner.planning.load_inputs` (default: as the plan's DEM was read).
+        The DEM is read as far as the stations see (``config.max_range_m``).
 
     Returns
     -------
@@ -158,9 +161,11 @@ def resolve_inputs(spec: str, site_name: str | None = None, site_seed: int | Non
     plan = _read_plan(Path(spec)) if _is_plan(spec) else None
     if plan is not None:
         recorded = plan.get("provenance", {}).get("inputs", {})
-        site_name = site_name or plan.get("site", {}).get("name")
+        # the preset that supplied the defaults (a plan on a DEM is named after the DEM file)
+        site_name = site_name or recorded.get("site") or plan.get("site", {}).get("name")
         site_seed = plan.get("site", {}).get("seed") if site_seed is None else site_seed
-        dem_path = dem_path or recorded.get("dem")
+        if dem_path is None:
+            dem_path, reproject = recorded.get("dem"), reproject or recorded.get("reproject")
         stations_path = stations_path or recorded.get("stations")
         station_ids = station_ids or recorded.get("station_ids")
         if marker_radius_m is None:
@@ -178,7 +183,8 @@ def resolve_inputs(spec: str, site_name: str | None = None, site_seed: int | Non
     inputs = load_inputs(site_name or "default", site_seed, dem_path=dem_path,
                          stations_path=stations_path, boundary_path=boundary_path,
                          exclude_paths=exclude_paths, marker_radius_m=marker_radius_m,
-                         station_ids=station_ids)
+                         station_ids=station_ids, reproject=bool(reproject),
+                         sight_radius_m=config.max_range_m)
     if plan is None:
         return inputs, read_layout(spec, inputs), config
     layout = _plan_layout(plan, spec)
