@@ -90,6 +90,31 @@ def test_process_runs_on_the_imported_scan(capture, capsys, tmp_path):
     assert all(",false," in row for row in rows[1:])
 
 
+def test_real_capture_to_las_and_ply(capture, capsys, tmp_path):
+    """The real capture, imported, processed and written as LAS 1.4 and PLY (station frame:
+    a real scan has no pose in a site); read back with laspy and plyfile, every point of the
+    scan is there with its sensor-frame range."""
+    import laspy
+    import plyfile
+
+    _import(capsys, "--out", "scans")
+    scan = read_scan(tmp_path / "scans" / "my.scan.npz")
+    code, _, err = run_cli(capsys, ["process", "scans", "--no-calibrate", "--cloud", "las,ply",
+                                    "--out", "tables"])
+    assert code == 0, err
+    assert not list((tmp_path / "tables").glob("*.site.*"))
+    las = laspy.read(tmp_path / "tables" / "my.station.las")
+    ply = plyfile.PlyData.read(tmp_path / "tables" / "my.station.ply")["vertex"]
+    assert las.header.version.major == 1 and las.header.version.minor == 4
+    assert len(las.points) == ply.count == scan.n_points
+    for xyz in (np.column_stack([las.x, las.y, las.z]),
+                np.column_stack([ply["x"], ply["y"], ply["z"]])):
+        # one frame at angle 0 and no offsets: the station frame's origin is the sensor's, so
+        # each point keeps its measured range, in order (to the LAS scale and float32 ranges)
+        np.testing.assert_allclose(np.linalg.norm(xyz, axis=1), scan.range_m, atol=2e-4)
+    assert set(np.unique(las.classification)) <= {1, 2}  # an indoor capture: no marker
+
+
 def test_self_calibration_refused_on_a_single_angle(capture, capsys, tmp_path):
     """One frame at one turntable angle cannot calibrate the mounting: a one-line error
     naming --no-calibrate, not meaningless offsets."""

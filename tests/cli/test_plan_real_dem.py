@@ -74,6 +74,35 @@ def test_no_used_sight_line_crosses_nodata(utm_plan):
     assert crosses_nodata(dem, np.array(every)[:, :2], np.array(every)[:, 2:]).any()
 
 
+def test_gis_layers_read_back_in_the_dems_crs_with_markers_on_data(utm_plan):
+    """The issue's real-DEM flow: plan.gpkg and the stand-map GeoTIFFs, read back with
+    pyogrio and rasterio, keep the DEM's CRS; every marker of the GeoPackage stands on
+    measured terrain, and the stand map is nodata wherever the DEM is."""
+    import rasterio
+    from pyogrio.raw import read
+    from rasterio.crs import CRS
+
+    cwd, doc = utm_plan
+    dem = read_dem(cwd / "dem.tif")
+    utm = CRS.from_epsg(32633)
+    meta, _, wkb, fields = read(cwd / "plan" / "plan.gpkg", layer="markers")
+    assert CRS.from_user_input(meta["crs"]) == utm
+    xy = shapely.get_coordinates(shapely.from_wkb(wkb))
+    ids = list(fields[list(meta["fields"]).index("id")])
+    assert sorted(ids) == sorted(m["id"] for m in doc["markers"])
+    assert dem.valid_at(xy).all()
+    for name in ("usable_markers.tif", "station_error.tif"):
+        with rasterio.open(cwd / "plan" / name) as src:
+            assert src.crs == utm
+            band = src.read(1)
+            rows, cols = np.indices(band.shape)
+            cx, cy = rasterio.transform.xy(src.transform, rows.ravel(), cols.ravel())
+        on_data = dem.valid_at(np.column_stack([cx, cy])).reshape(band.shape)
+        assert np.isnan(band[~on_data]).all() and (~on_data).any()
+        if name == "usable_markers.tif":
+            assert np.isfinite(band[on_data]).all() and band[on_data].max() >= 3
+
+
 def test_site_named_after_the_dem_with_absolute_paths(utm_plan):
     cwd, doc = utm_plan
     assert doc["site"]["name"] == "dem" and doc["site"]["seed"] is None
