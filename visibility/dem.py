@@ -281,7 +281,7 @@ def fill_nodata(heights: np.ndarray, policy: str) -> np.ndarray:
 
 
 def read_dem(path: str | Path, fill: str | None = None, what: str | None = None,
-             nodata_fix: str | None = None, *, reproject: bool = False,
+             *, reproject: bool = False,
              window: tuple[float, float, float, float] | None = None) -> DEM:
     """Read a DEM from any one-band raster GDAL reads, or from our ``.npz``.
 
@@ -302,8 +302,6 @@ def read_dem(path: str | Path, fill: str | None = None, what: str | None = None,
         the same way and taken as terrain (``valid`` is ``None``: every cell).
     what : str, optional
         How messages name the input (default ``"DEM <path>"``), e.g. ``"--dem dem.tif"``.
-    nodata_fix : str, optional
-        Ignored (nodata is no longer refused); kept until every caller drops it.
     reproject : bool
         Resample a grid that is not metric and square: a geographic (degree) or non-metre
         CRS goes to a local transverse Mercator CRS centred on the grid, on the CRS's own
@@ -348,7 +346,6 @@ def read_dem(path: str | Path, fill: str | None = None, what: str | None = None,
     >>> part.origin_m, part.shape
     ((500.5, 20.5), (4, 4))
     """
-    del nodata_fix
     path = Path(path)
     what = what or f"DEM {path}"
     _read_dem_iv(path, fill, window, what)

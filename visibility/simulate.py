@@ -311,11 +311,11 @@ def _simulate_iv(dem: DEM, position_m: np.ndarray, rig: RigConfig,
 
 
 def _station_inside_iv(dem: DEM, xy: np.ndarray, label: str) -> None:
-    if not dem.contains(np.asarray(xy, dtype=float)[None, :2])[0]:
+    if not dem.valid_at(np.asarray(xy, dtype=float)[None, :2])[0]:
         xmin, xmax, ymin, ymax = dem.extent()
         raise DataError(f"{label} at ({xy[0]:.2f}, {xy[1]:.2f}) m lies outside the DEM "
-                        f"[{xmin:.1f}, {xmax:.1f}] x [{ymin:.1f}, {ymax:.1f}] m; move the "
-                        "station inside or use a larger DEM")
+                        f"[{xmin:.1f}, {xmax:.1f}] x [{ymin:.1f}, {ymax:.1f}] m or on its "
+                        "nodata; move the station onto measured terrain or use a larger DEM")
 
 
 def _frame(setup: _Setup, frame: int, rotation: np.ndarray, origin: np.ndarray) -> dict:

@@ -212,8 +212,8 @@ def _plan_layout(data: dict, path) -> Layout:
 
 def _inside_site_iv(layout: Layout, inputs) -> None:
     xy = layout.xyz[:, :2]
-    inside = inputs.dem.contains(xy)
-    where = "the DEM"
+    inside = inputs.dem.valid_at(xy)
+    where = "the DEM's measured terrain"
     if inputs.boundary_xy is not None:
         poly = shapely.Polygon(np.asarray(inputs.boundary_xy, float))
         inside &= shapely.intersects_xy(poly, xy[:, 0], xy[:, 1])
