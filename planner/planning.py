@@ -535,7 +535,8 @@ def _points_on_dem(points: list[dict], dem, height_m: float, label: str
 
 @dataclass
 class PlanOutcome:
-    """A finished planning run (inputs, intermediate products, the plan and the baselines)."""
+    """A finished planning run (inputs, intermediate products, the plan and the baselines;
+    ``scene`` is the terrain's ray scene, ``None`` for a plan from a visibility table)."""
 
     inputs: PlanInputs
     config: object
@@ -547,6 +548,7 @@ class PlanOutcome:
     baselines: list[Baseline]
     as_built: LayoutCheck | None
     timings_s: dict
+    scene: object | None = None
 
     @property
     def selected_ids(self) -> list[str]:
@@ -619,7 +621,7 @@ def make_plan(inputs: PlanInputs, config, error_model, model_name: str = "defaul
                                    config.replace(existing=(), forbidden=()))
     return PlanOutcome(inputs=inputs, config=config, model_name=model_name, problem=problem,
                        candidates=cand, visibility=vis, result=result, baselines=baselines,
-                       as_built=as_built, timings_s=timings)
+                       as_built=as_built, timings_s=timings, scene=scene)
 
 
 def plan_bounds(inputs: PlanInputs, problem: PlanProblem) -> tuple[float, float, float, float]:
