@@ -44,7 +44,7 @@ def write_survey_dem(path: Path, size_m: float, cell_m: float, seed: int = 7) ->
     angle = np.arctan2(gy, gx)
     radius = 0.42 * size_m * (1 + 0.12 * np.sin(3 * angle) + 0.06 * np.cos(7 * angle))
     valid = np.hypot(gx, gy) <= radius
-    for cx, cy, r in ((-150.0, 80.0, 25.0), (120.0, -40.0, 15.0), (15.0, 60.0, 8.0)):
+    for cx, cy, r in ((-150.0, 80.0, 25.0), (120.0, -40.0, 15.0), (10.0, 32.0, 6.0)):
         valid &= np.hypot(gx - cx, gy - cy) > r  # holes: shadows of a photogrammetry survey
     heights[~valid] = np.nan
     x0, y0 = 500_000.0, 4_100_000.0

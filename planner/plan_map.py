@@ -12,6 +12,8 @@ import numpy as np
 
 #: Above this many stations (or markers) the map leaves out their text labels.
 MAX_LABELS = 30
+#: Colour covering the DEM's nodata cells (no measured terrain).
+NODATA_COLOUR = "#e8d9c5"
 
 
 def draw_plan_map(outcome, path: Path, dpi: int = 150) -> Path:
@@ -21,9 +23,9 @@ def draw_plan_map(outcome, path: Path, dpi: int = 150) -> Path:
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    from matplotlib.colors import LightSource
+    from matplotlib.colors import LightSource, ListedColormap
     from matplotlib.lines import Line2D
-    from matplotlib.patches import Circle, Polygon
+    from matplotlib.patches import Circle, Patch, Polygon
     from mpl_toolkits.axes_grid1.anchored_artists import AnchoredSizeBar
 
     inp, prob, res, cfg = outcome.inputs, outcome.problem, outcome.result, outcome.config
@@ -44,6 +46,11 @@ def draw_plan_map(outcome, path: Path, dpi: int = 150) -> Path:
     extent = (gx[ci][0], gx[ci][-1], gy[cj][0], gy[cj][-1])
     ax.imshow(shade, cmap="gray", origin="lower", extent=extent, vmin=0, vmax=1,
               interpolation="bilinear")
+    # nodata: its filled heights are no terrain, so cover them
+    nodata = ~dem.valid_mask()[np.ix_(cj, ci)][::step, ::step]
+    if nodata.any():
+        ax.imshow(np.ma.masked_where(~nodata, nodata), cmap=ListedColormap([NODATA_COLOUR]),
+                  origin="lower", extent=extent, interpolation="nearest", zorder=1)
     for c in inp.craters:
         ax.add_patch(Circle(c.centre_xy_m, 0.5 * c.diameter_m, fill=False, ec="#8c6d31",
                             lw=1.0, ls="--", alpha=0.9))
@@ -108,6 +115,8 @@ def draw_plan_map(outcome, path: Path, dpi: int = 150) -> Path:
         handles.append(Line2D([], [], color="#8c6d31", ls="--", label="crater rim"))
     if inp.boundary_xy is not None:
         handles.append(Line2D([], [], color="#1f77b4", ls=":", label="site boundary"))
+    if nodata.any():
+        handles.append(Patch(fc=NODATA_COLOUR, ec="none", label="DEM nodata"))
     fig.legend(handles=handles, loc="outside lower center", ncols=min(len(handles), 4),
                fontsize=8, frameon=False)
     sol = res.solution
