@@ -243,7 +243,9 @@ lidar_height_option = click.option(
 
 dem_option = click.option(
     "--dem", "dem_path", type=FILE,
-    help="DEM (.tif/.tiff/.npz, site-frame metres) instead of the preset's terrain.")
+    help="DEM instead of the preset's terrain: any one-band raster GDAL reads (GeoTIFF, .asc, "
+         ".vrt, ISIS3/PDS cubes) or .npz, in a metric CRS (UTM, lunar) or none; nodata is a "
+         "mask.")
 
 reproject_option = click.option(
     "--reproject", is_flag=True,
