@@ -185,15 +185,33 @@ class DEM:
             raise DataError(f"point ({bad[0]:.3f}, {bad[1]:.3f}) m lies outside the DEM "
                             f"[{xmin:.2f}, {xmax:.2f}] x [{ymin:.2f}, {ymax:.2f}] m; move it "
                             "inside or use a larger DEM")
-        ny, nx = self.shape
-        fx = (xy[:, 0] - self.origin_m[0]) / self.cell_size_m
-        fy = (xy[:, 1] - self.origin_m[1]) / self.cell_size_m
-        i = np.clip(np.floor(fx).astype(np.int64), 0, nx - 2)
-        j = np.clip(np.floor(fy).astype(np.int64), 0, ny - 2)
-        u, v = fx - i, fy - j
+        i, j, u, v = self._stencil(xy)
         h = self.heights_m
         return ((1 - u) * (1 - v) * h[j, i] + u * (1 - v) * h[j, i + 1]
                 + (1 - u) * v * h[j + 1, i] + u * v * h[j + 1, i + 1])
+
+    def _stencil(self, xy: np.ndarray
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """The bilinear stencil of each point: lower-left cell ``(i, j)`` (column, row; the
+        stencil is cells ``i, i + 1`` by ``j, j + 1``, clipped onto the grid) and the point's
+        fractions ``(u, v)`` across it (in [0, 1] for points on the grid).
+
+        Parameters
+        ----------
+        xy : (n, 2) float
+            Site-frame points, metres (NaN allowed: its stencil is a clipped placeholder).
+
+        Returns
+        -------
+        i, j : (n,) int64
+        u, v : (n,) float64
+        """
+        ny, nx = self.shape
+        fx = (xy[:, 0] - self.origin_m[0]) / self.cell_size_m
+        fy = (xy[:, 1] - self.origin_m[1]) / self.cell_size_m
+        i = np.clip(np.floor(np.nan_to_num(fx)).astype(np.int64), 0, nx - 2)
+        j = np.clip(np.floor(np.nan_to_num(fy)).astype(np.int64), 0, ny - 2)
+        return i, j, fx - i, fy - j
 
     def valid_mask(self) -> np.ndarray:
         """(ny, nx) bool: which cells hold measured terrain (all of them when
@@ -226,11 +244,7 @@ class DEM:
         inside = self.contains(xy)
         if self.valid is None:
             return inside
-        ny, nx = self.shape
-        fx = (xy[:, 0] - self.origin_m[0]) / self.cell_size_m
-        fy = (xy[:, 1] - self.origin_m[1]) / self.cell_size_m
-        i = np.clip(np.floor(np.nan_to_num(fx)).astype(np.int64), 0, nx - 2)
-        j = np.clip(np.floor(np.nan_to_num(fy)).astype(np.int64), 0, ny - 2)
+        i, j, _, _ = self._stencil(xy)
         v = self.valid
         return inside & v[j, i] & v[j, i + 1] & v[j + 1, i] & v[j + 1, i + 1]
 
