@@ -122,6 +122,49 @@ class DEM:
         return ((xy[:, 0] >= xmin) & (xy[:, 0] <= xmax)
                 & (xy[:, 1] >= ymin) & (xy[:, 1] <= ymax))
 
+    def crop(self, xmin: float, xmax: float, ymin: float, ymax: float) -> DEM:
+        """The sub-grid whose triangles cover the rectangle, clipped to the grid (a tile).
+
+        Cells are kept whole and on the same grid (no resampling), so a tile's mesh is made of
+        the same triangles as the whole DEM's mesh over the rectangle.
+
+        Parameters
+        ----------
+        xmin, xmax, ymin, ymax : float
+            Rectangle to cover, site frame, metres.
+
+        Returns
+        -------
+        tile : DEM
+            Same cell size, CRS and source CRS; heights and valid mask cut out.
+
+        Raises
+        ------
+        DataError
+            The rectangle misses the grid, or covers only nodata.
+
+        Examples
+        --------
+        >>> dem = DEM(np.arange(100.0).reshape(10, 10), (0.0, 0.0), 1.0)
+        >>> t = dem.crop(2.5, 4.0, 0.0, 1.2)
+        >>> t.origin_m, t.shape
+        ((2.0, 0.0), (3, 3))
+        """
+        x0, y0 = self.origin_m
+        ny, nx = self.shape
+        c = self.cell_size_m
+        i0 = max(int(np.floor((xmin - x0) / c)), 0)
+        i1 = min(int(np.ceil((xmax - x0) / c)), nx - 1)
+        j0 = max(int(np.floor((ymin - y0) / c)), 0)
+        j1 = min(int(np.ceil((ymax - y0) / c)), ny - 1)
+        if i1 - i0 < 1 or j1 - j0 < 1:
+            raise DataError(f"the rectangle x {xmin:g}..{xmax:g}, y {ymin:g}..{ymax:g} m misses "
+                            "the DEM; keep stations and markers on the DEM")
+        rows, cols = slice(j0, j1 + 1), slice(i0, i1 + 1)
+        return DEM(self.heights_m[rows, cols], (x0 + i0 * c, y0 + j0 * c), c, crs=self.crs,
+                   valid=None if self.valid is None else self.valid[rows, cols],
+                   source_crs=self.source_crs)
+
     def require_inside(self, xy: np.ndarray, ids, label: str, fix: str) -> None:
         """Raise unless every point lies on the grid (:meth:`contains`) and on measured
         terrain (:meth:`valid_at`): stations and markers stand on data, never on nodata.

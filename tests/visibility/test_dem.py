@@ -126,3 +126,26 @@ def test_npz_round_trip_and_bad_files(tmp_path):
     (tmp_path / "x.csv").write_text("1,2\n")
     with pytest.raises(InputFileError, match="not a raster GDAL can read"):
         read_dem(tmp_path / "x.csv")
+
+
+def test_crop_keeps_the_grid_and_covers_the_rectangle():
+    rng = np.random.default_rng(3)
+    valid = np.ones((40, 50), bool)
+    valid[:5] = False
+    dem = DEM(rng.normal(size=(40, 50)), (100.0, -20.0), 0.25, crs=None, valid=valid)
+    tile = dem.crop(103.1, 106.9, -18.6, -15.05)
+    x, y = tile.grid_xy()
+    assert x[0] <= 103.1 and x[-1] >= 106.9 and y[0] <= -18.6 and y[-1] >= -15.05
+    assert x[1] > 103.1 and x[-2] < 106.9  # no more than one cell of margin
+    i0 = round((x[0] - 100.0) / 0.25)
+    j0 = round((y[0] + 20.0) / 0.25)
+    ny, nx = tile.shape
+    np.testing.assert_array_equal(tile.heights_m, dem.heights_m[j0:j0 + ny, i0:i0 + nx])
+    np.testing.assert_array_equal(tile.valid_mask(), valid[j0:j0 + ny, i0:i0 + nx])
+    assert not dem.crop(101.0, 103.0, -20.0, -18.0).valid_mask().all()  # nodata rows kept
+    pts = np.column_stack([rng.uniform(103.1, 106.9, 50), rng.uniform(-18.6, -15.05, 50)])
+    np.testing.assert_array_equal(tile.height_at(pts), dem.height_at(pts))
+    edge = dem.crop(-1e3, 1e3, -1e3, 1e3)  # clipped to the grid
+    assert edge.shape == dem.shape
+    with pytest.raises(DataError, match="misses the DEM"):
+        dem.crop(0.0, 1.0, 0.0, 1.0)
