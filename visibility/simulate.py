@@ -56,13 +56,15 @@ Per-channel offsets (``SensorConfig.laser_range_bias_m``, ``laser_angle_bias_rad
     directions; the scan reports the nominal ones.
 
 Rays that provably cannot hit anything (steeper than the conservative
-:class:`visibility.scene.HorizonBound` in their azimuth bin, built around the lowest and widest
-perturbed LiDAR centre) are skipped without changing the result; near-silhouette beams are
-never skipped. Randomness: frame ``f`` draws its phase, noise and dropout from
-``numpy.random.default_rng([seed, f])`` and its turntable errors from ``default_rng([seed, f,
-1])`` (always five draws, so switching one term off leaves the others), so output is
-independent of threading and of which frames are simulated, and the same seed gives
-byte-identical files.
+:class:`visibility.horizon.HorizonBound` in their azimuth bin, built around the lowest and
+widest perturbed LiDAR centre; decided per frame by :class:`visibility.horizon.PatternBound`)
+are skipped without changing the result; near-silhouette beams are never skipped. A frame's
+noise and dropout are drawn for the rays cast, in pattern order, so the culling decisions are
+part of the output's definition (they are kept exactly). Randomness: frame ``f`` draws its
+phase, noise and dropout from ``numpy.random.default_rng([seed, f])`` and its turntable errors
+from ``default_rng([seed, f, 1])`` (always five draws, so switching one term off leaves the
+others), so output is independent of threading and of which frames are simulated, and the same
+seed gives byte-identical files.
 """
 
 from __future__ import annotations
