@@ -17,13 +17,14 @@ miss) by
       (the same decisions, from the pattern's columns), then cast the rest ((a2), (b) and (c)
       build the cast rays' directions alike, as the simulator does now, so b/c is the
       decisions' cost alone);
+  (o) the ceiling of any culling: frame by frame, cast only the rays known (from (a)) to hit;
   (d) Open3D's ``RaycastingScene.cast_rays`` on all rays at once (a pre-built float32 (n, 6)
       tensor; its own threads on all cores), when ``open3d`` is installed
       (``.venv/bin/pip install open3d``; its Linux wheel also needs the system's
       ``libusb-1.0-0``); it is no dependency of markerplan,
 
-and the ratios from the same run. (a), (a2), (b) and (c) must give identical distances; (d)
-the same hits.
+and the ratios from the same run. (a), (a2), (o), (b) and (c) must give identical distances;
+(d) the same hits.
 
 Usage: ``python -u benchmarks/station_rays.py [--frames 800] [--repeat 3]``
 """
@@ -47,16 +48,16 @@ _FRAMES_PER_TASK = 8
 _MAX_RANGE_M = 100.0
 
 
-def _per_frame(cast_frame, rotations: np.ndarray, n: int, threads: int) -> np.ndarray:
-    """(F, n) distances: ``cast_frame(rotation)`` for every frame, frames over ``threads``."""
-    out = np.empty((len(rotations), n))
+def _per_frame(cast_frame, n_frames: int, n: int, threads: int) -> np.ndarray:
+    """(F, n) distances: ``cast_frame(f)`` for every frame ``f``, frames over ``threads``."""
+    out = np.empty((n_frames, n))
 
     def work(a: int) -> None:
-        for f in range(a, min(a + _FRAMES_PER_TASK, len(rotations))):
-            out[f] = cast_frame(rotations[f])
+        for f in range(a, min(a + _FRAMES_PER_TASK, n_frames)):
+            out[f] = cast_frame(f)
 
     with ThreadPoolExecutor(threads) as pool:
-        list(pool.map(work, range(0, len(rotations), _FRAMES_PER_TASK)))
+        list(pool.map(work, range(0, n_frames, _FRAMES_PER_TASK)))
     return out
 
 
@@ -104,7 +105,7 @@ def main() -> None:
                                MountingOffsets())
     origin = np.array([0.0, 0.0, float(dem.height_at(np.zeros((1, 2)))[0]) + 1.0])
     bound = HorizonBound(dem, origin, reach_m=_MAX_RANGE_M)
-    blocks = PatternBound(bound, pattern)
+    beams = PatternBound(bound, pattern)
     n, n_rays = len(pattern), args.frames * len(pattern)
     everything = np.ones(n, dtype=bool)
     directions = np.concatenate([pattern @ r.T for r in rotations])  # as (b) and (c) build them
@@ -112,17 +113,26 @@ def main() -> None:
     scene.intersect(origin[None], np.array([[0.0, 0.0, -1.0]]))  # Embree builds its BVH lazily
     o3d_scene = _open3d_scene(scene.mesh)
     cores = os.cpu_count() or 1
+    hit = np.isfinite(scene.intersect_unit(origins, directions, _MAX_RANGE_M).distance_m)
+    hit = hit.reshape(-1, n)
+    rot = rotations
+
+    def old_rule(r: np.ndarray) -> np.ndarray:  # the simulator's line until 2026-12-02
+        return bound.may_hit_z(pattern @ r[2], lambda rows: pattern[rows] @ r.T)
+
     runs = {
         "a": lambda: scene.intersect_unit(origins, directions, _MAX_RANGE_M,
                                           threads=cores).distance_m.reshape(-1, n),
-        "a2": lambda: _per_frame(lambda r: _cast_subset(scene, origin, pattern, r, everything),
-                                 rotations, n, cores),
-        # the simulator's line until 2026-12-02
-        "b": lambda: _per_frame(lambda r: _cast_subset(scene, origin, pattern, r, bound.may_hit_z(
-            pattern @ r[2], lambda rows: pattern[rows] @ r.T)), rotations, n, cores),
-        "c": lambda: _per_frame(lambda r: _cast_subset(scene, origin, pattern, r,
-                                                       blocks.may_hit(r)),
-                                rotations, n, cores),
+        "a2": lambda: _per_frame(lambda f: _cast_subset(scene, origin, pattern, rot[f], everything),
+                                 args.frames, n, cores),
+        "o": lambda: _per_frame(lambda f: _cast_subset(scene, origin, pattern, rot[f], hit[f]),
+                                args.frames, n, cores),
+        "b": lambda: _per_frame(lambda f: _cast_subset(scene, origin, pattern, rot[f],
+                                                       old_rule(rot[f])),
+                                args.frames, n, cores),
+        "c": lambda: _per_frame(lambda f: _cast_subset(scene, origin, pattern, rot[f],
+                                                       beams.may_hit(rot[f])),
+                                args.frames, n, cores),
     }
     if o3d_scene is not None:
         import open3d as o3d
@@ -133,7 +143,7 @@ def main() -> None:
         rays = o3d.core.Tensor(rays)
         o3d_scene.cast_rays(rays[:10])
         runs["d"] = lambda: o3d_scene.cast_rays(rays, nthreads=0)["t_hit"].numpy()
-    n_cast = sum(int(blocks.may_hit(r).sum()) for r in rotations)
+    n_cast = sum(int(beams.may_hit(r).sum()) for r in rotations)
     print(f"DEM {dem.shape[1]} x {dem.shape[0]} cells, {scene.n_triangles:,} triangles; "
           f"{args.frames} frames x {n:,} rays = {n_rays:,} rays; {n_cast:,} cast after "
           f"culling; {cores} cores", flush=True)
@@ -147,9 +157,8 @@ def main() -> None:
             best[k] = min(best[k], time.perf_counter() - t0)
             cpu[k] = min(cpu[k], time.process_time() - c0)
         print(f"run {rep + 1}: " + "  ".join(f"{k} {best[k]:.2f} s" for k in runs), flush=True)
-    hit = np.isfinite(result["a"])
-    same = all(np.array_equal(result["a"], result[k]) for k in ("a2", "b", "c"))
-    print(f"{int(hit.sum()):,} rays hit; a, a2, b and c give identical distances: {same}")
+    same = all(np.array_equal(result["a"], result[k]) for k in ("a2", "o", "b", "c"))
+    print(f"{int(hit.sum()):,} rays hit; a, a2, o, b and c give identical distances: {same}")
     if "d" in result:
         t = result["d"].reshape(-1, n)
         agree = np.mean(np.isfinite(t) == hit)
@@ -158,6 +167,7 @@ def main() -> None:
               f"{err:.1e} m")
     names = {"a": "cast every ray (RayScene, all at once)",
              "a2": "cast every ray, frame by frame",
+             "o": "cast only the rays that hit (ceiling)",
              "b": "per-ray bound, then cast (until 2026-12-02)",
              "c": "pattern bound, then cast (now)",
              "d": "Open3D RaycastingScene.cast_rays"}
@@ -165,6 +175,7 @@ def main() -> None:
         print(f"({k:2s}) {names[k]:44s}: {best[k]:6.2f} s  {n_rays / best[k] / 1e6:6.2f} M rays/s  "
               f"(CPU {cpu[k]:.2f} s, all threads)")
     ratios = [f"c vs {k}: {best[k] / best['c']:.2f}x" for k in ("a", "a2", "b")]
+    ratios.append(f"o vs a: {best['a'] / best['o']:.2f}x")
     if "d" in best:
         ratios += [f"a vs d: {best['d'] / best['a']:.2f}x", f"c vs d: {best['d'] / best['c']:.2f}x"]
     print("speed-ups (time of the other / time of the first): " + ", ".join(ratios)
