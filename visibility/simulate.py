@@ -56,13 +56,15 @@ Per-channel offsets (``SensorConfig.laser_range_bias_m``, ``laser_angle_bias_rad
     directions; the scan reports the nominal ones.
 
 Rays that provably cannot hit anything (steeper than the conservative
-:class:`visibility.scene.HorizonBound` in their azimuth bin, built around the lowest and widest
-perturbed LiDAR centre) are skipped without changing the result; near-silhouette beams are
-never skipped. Randomness: frame ``f`` draws its phase, noise and dropout from
-``numpy.random.default_rng([seed, f])`` and its turntable errors from ``default_rng([seed, f,
-1])`` (always five draws, so switching one term off leaves the others), so output is
-independent of threading and of which frames are simulated, and the same seed gives
-byte-identical files.
+:class:`visibility.horizon.HorizonBound` in their azimuth bin, built around the lowest and
+widest perturbed LiDAR centre; decided per frame by :class:`visibility.horizon.PatternBound`)
+are skipped without changing the result; near-silhouette beams are never skipped. A frame's
+noise and dropout are drawn for the rays cast, in pattern order, so the culling decisions are
+part of the output's definition (they are kept exactly). Randomness: frame ``f`` draws its
+phase, noise and dropout from ``numpy.random.default_rng([seed, f])`` and its turntable errors
+from ``default_rng([seed, f, 1])`` (always five draws, so switching one term off leaves the
+others), so output is independent of threading and of which frames are simulated, and the same
+seed gives byte-identical files.
 """
 
 from __future__ import annotations
@@ -83,7 +85,8 @@ from markerplan.provenance import provenance
 from pipeline.rig import frame_poses, rot_x, rot_y, rot_z, station_to_site_matrix
 from pipeline.scan_format import POINT_FIELDS, StationScan, write_scan, write_truth
 from visibility.dem import DEM
-from visibility.scene import HorizonBound, RayScene
+from visibility.horizon import HorizonBound, PatternBound
+from visibility.scene import RayScene
 from visibility.sensor import (
     BEAM_DIVERGENCE_RAD,
     VLP16_ELEVATION_RAD,
@@ -114,7 +117,8 @@ class _Setup:
     """What every frame of one scan shares."""
 
     scene: RayScene
-    horizon: HorizonBound
+    horizon: PatternBound
+    """The horizon bound applied to ``d_true``."""
     sensor: SensorConfig
     seed: int
     laser: np.ndarray
@@ -190,9 +194,10 @@ def simulate_scan(scene: RayScene, position_m: np.ndarray, heading_rad: float,
     channel = laser.astype(np.int64)
     channel_elevation = VLP16_ELEVATION_RAD + elevation_bias
     azimuth = az0 + azimuth_bias[channel]
-    setup = _Setup(scene, horizon, sensor, seed, laser, az0, sensor_directions(laser, az0),
-                   channel_elevation, azimuth,
-                   beam_directions(channel_elevation[channel], azimuth), range_bias[channel],
+    d_true = beam_directions(channel_elevation[channel], azimuth)
+    setup = _Setup(scene, PatternBound(horizon, d_true), sensor, seed, laser, az0,
+                   sensor_directions(laser, az0), channel_elevation, azimuth, d_true,
+                   range_bias[channel],
                    footprint_offsets_rad(sensor.footprint_samples) if sensor.beam_divergence
                    else np.zeros((0, 2)))
 
@@ -330,7 +335,7 @@ def _frame(setup: _Setup, frame: int, rotation: np.ndarray, origin: np.ndarray) 
     d_true = setup.d_true
     spin = rot_z(-phase)
     rot = rotation @ spin
-    may_hit = setup.horizon.may_hit_z(d_true @ rot[2], lambda idx: d_true[idx] @ rot.T)
+    may_hit = setup.horizon.may_hit(rot)
     incidence = sensor.incidence_noise_m > 0
     is_near = np.zeros(len(d_true), dtype=bool)
     if len(setup.footprint):
@@ -339,7 +344,8 @@ def _frame(setup: _Setup, frame: int, rotation: np.ndarray, origin: np.ndarray) 
     is_central = ~is_near[cast]
     central, near = cast[is_central], cast[~is_central]
     hits = scene.intersect_unit(np.broadcast_to(origin, (len(central), 3)),
-                                d_true[central] @ rot.T, max_range_m=sensor.max_range_m,
+                                np.take(d_true, central, axis=0) @ rot.T,
+                                max_range_m=sensor.max_range_m,
                                 threads=1, incidence=incidence)
     true_range = np.empty(len(cast))
     sphere = np.empty(len(cast), dtype=np.int64)

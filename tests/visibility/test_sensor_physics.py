@@ -12,7 +12,7 @@ from pipeline.sensor_noise import RangeNoise
 from tests.cli.invoke import run_cli
 from tests.visibility.test_simulate import _flat, _frames_facing, _station_points
 from visibility.dem import DEM
-from visibility.scene import HorizonBound
+from visibility.horizon import PatternBound
 from visibility.sensor import RigConfig, SensorConfig, TurntableErrors
 from visibility.simulate import simulate_markers, turntable_errors
 
@@ -207,8 +207,8 @@ def test_wobble_tilts_each_frame_and_culling_stays_exact(monkeypatch):
     centres = [[3.0, 1.0, 0.1], [-4.0, 2.0, 0.3], [0.0, -6.0, 0.1]]
     culled, _ = simulate_markers(_flat(), [0, 0, 1.0], 0.0, centres, sensor, rig, seed=6,
                                  frames=range(0, 800, 25))
-    monkeypatch.setattr(HorizonBound, "may_hit_z",
-                        lambda self, dz, rows: np.ones(len(dz), dtype=bool))
+    monkeypatch.setattr(PatternBound, "may_hit",
+                        lambda self, rotation: np.ones(len(self.pattern), dtype=bool))
     full, _ = simulate_markers(_flat(), [0, 0, 1.0], 0.0, centres, sensor, rig, seed=6,
                                frames=range(0, 800, 25))
     assert culled.metadata["n_rays_cast"] < full.metadata["n_rays_cast"]
