@@ -7,6 +7,7 @@ from pathlib import Path
 import pytest
 
 from markerplan.errors import ConfigError, DataError
+from pipeline.marker_table import read_marker_table
 from planner import distributed
 from planner.distributed import Executor, TaskError, executor
 from tests.cli.invoke import run_cli
@@ -114,3 +115,16 @@ def test_cluster_files_equal_single_process_files(tmp_path, capsys, network):
     names = ["verify.json", "verify.md"] + (["markers.csv"] if network else [])
     for name in names:
         assert (tmp_path / "one" / name).read_bytes() == (tmp_path / "two" / name).read_bytes()
+
+
+def test_range_study_replicates_on_a_cluster_equal_in_process(tmp_path, capsys):
+    quick = ["range-study", "--frames", "40", "--replicates", "3", "--max-distance", "4"]
+    code_one, _, err = run_cli(capsys, quick + ["--scheduler", "none",
+                                                "--out", str(tmp_path / "one")])
+    assert code_one == 0, err
+    code_two, _, err = run_cli(capsys, quick + ["--workers", "2", "--out", str(tmp_path / "two")])
+    assert code_two == 0, err
+    for name in ("markers.csv", "summary.csv", "summary.json"):
+        assert (tmp_path / "one" / name).read_bytes() == (tmp_path / "two" / name).read_bytes()
+    rows = read_marker_table(tmp_path / "two" / "markers.csv")
+    assert sorted({r["replicate"] for r in rows}) == ["0", "1", "2"]  # none dropped
