@@ -14,8 +14,9 @@ In one run:
    hits both alike), and checks both give the same station checks;
 3. prints the wall times, the ratio of the fastest a to the fastest b, the per-task costs
    (simulation, processing, planning visibility), and a table of the projected time of a
-   ``--km-stations`` station site on N workers: N = 1 is the baseline's per-station cost, N = 2 the measured cluster, larger N
-   on paper: overhead + ceil(S / N) x (cluster seconds per task per worker).
+   ``--km-stations`` station site on N workers: N = 1 is the baseline's per-station cost,
+   N = 2 the measured cluster, larger N on paper: start-up + ceil(S / N) x (cluster seconds
+   per task per worker).
 
 The machine is shared (other work may run), so the figures that matter are the ratios.
 
