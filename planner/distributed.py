@@ -213,7 +213,7 @@ def executor(scheduler: str | None = LOCAL, workers: int | None = None,
     if scheduler == LOCAL:
         n = workers or os.cpu_count() or 1
         with LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
-                          dashboard_address=None, silence_logs=logging.ERROR) as cluster, \
+                          dashboard_address=":0", silence_logs=logging.ERROR) as cluster, \
                 Client(cluster) as client:
             yield Executor(client, progress, retries)
         return

@@ -36,7 +36,7 @@ def cluster():
     from distributed import Client, LocalCluster
 
     with LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
-                      dashboard_address=None, silence_logs=40) as lc, Client(lc) as client:
+                      dashboard_address=":0", silence_logs=40) as lc, Client(lc) as client:
         yield Executor(client, progress=False)
 
 
@@ -103,10 +103,11 @@ def test_cli_reports_a_failing_station_without_traceback(tmp_path, capsys, monke
 @pytest.mark.slow
 @pytest.mark.parametrize("network", [False, True])
 def test_cluster_files_equal_single_process_files(tmp_path, capsys, network):
+    """One station in known-control mode, two (the fewest) in network mode: ~20 s a station."""
     plan = tmp_path / "plan"
     assert run_cli(capsys, ["plan", "--out", str(plan)])[0] == 0
-    common = ["verify", str(plan / "plan.json"), "--station-ids", "S1,S2", "--json"]
-    common += ["--network"] if network else []
+    common = ["verify", str(plan / "plan.json"), "--json"]
+    common += ["--network", "--station-ids", "S1,S2"] if network else ["--station-ids", "S1"]
     code_one, out_one, _ = run_cli(capsys, common + ["--scheduler", "none",
                                                      "--out", str(tmp_path / "one")])
     code_two, out_two, _ = run_cli(capsys, common + ["--workers", "2",
@@ -117,6 +118,7 @@ def test_cluster_files_equal_single_process_files(tmp_path, capsys, network):
         assert (tmp_path / "one" / name).read_bytes() == (tmp_path / "two" / name).read_bytes()
 
 
+@pytest.mark.slow
 def test_range_study_replicates_on_a_cluster_equal_in_process(tmp_path, capsys):
     quick = ["range-study", "--frames", "40", "--replicates", "3", "--max-distance", "4"]
     code_one, _, err = run_cli(capsys, quick + ["--scheduler", "none",
