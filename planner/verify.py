@@ -4,8 +4,9 @@ registration error with the plan's prediction.
 
 Per station:
 
-1. ``visibility.simulate.simulate_markers`` — a full turntable scan of the site's terrain with
-   only the planned markers, at the planned station pose, with the sensor and turntable errors
+1. ``visibility.simulate.simulate_markers`` — a full turntable scan of the station's terrain
+   tile (the station ± the sensor's maximum range) with only the planned markers, at the
+   planned station pose, with the sensor and turntable errors
    of a sensor profile (:mod:`visibility.sensor_profile`, ``calibrated`` by default);
 2. ``pipeline.process.process_station`` — the published chain; detections are matched to the
    planned markers projected into the station frame with the *planned* (nominal) pose;
@@ -17,16 +18,20 @@ Per station:
    (:func:`planner.accuracy.registration_error`).
 
 The plan passes only if every station's achieved error is within the requirement.
+
+Each station is one task (:func:`station_task`: simulate, then process, returning only the small
+result), mapped by :mod:`planner.distributed` in process or over a dask cluster, with the same
+results either way.
 """
 
 from __future__ import annotations
 
-import sys
-from collections.abc import Iterator
+import contextlib
+import functools
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
-from tqdm import tqdm
 
 from markerplan.provenance import provenance
 from pipeline.evaluation import Reference
@@ -34,8 +39,10 @@ from pipeline.process import process_station
 from pipeline.rig import MountingOffsets, station_to_site_matrix
 from pipeline.scan_format import StationScan
 from pipeline.stages import build_config
-from planner import accuracy
+from planner import accuracy, distributed
+from planner.distributed import Executor
 from planner.plan_file import PlannedStation, SurveyPlan
+from visibility.dem import DEM
 from visibility.sensor_profile import SensorProfile, default_profile
 from visibility.simulate import simulate_markers
 
@@ -64,7 +71,8 @@ class StationCheck:
 def verify_plan(plan: SurveyPlan, error_model, seed: int = 0, progress: bool = True,
                 offsets: MountingOffsets | None = None,
                 station_ids: list[str] | None = None,
-                profile: SensorProfile | None = None) -> list[StationCheck]:
+                profile: SensorProfile | None = None,
+                executor: Executor | None = None) -> list[StationCheck]:
     """Simulate, process and register every station of a plan (see module docstring).
 
     Parameters
@@ -77,7 +85,7 @@ def verify_plan(plan: SurveyPlan, error_model, seed: int = 0, progress: bool = T
     seed : int
         Simulation seed (the plan's station ``k`` uses ``seed + k``, whichever are verified).
     progress : bool
-        Progress bar on stderr.
+        Progress bar on stderr (when no ``executor`` is given).
     offsets : pipeline.rig.MountingOffsets, optional
         True mounting offsets of the simulated rig (default: none). The pipeline self-calibrates
         them from each station's scan, as it would in the field.
@@ -86,78 +94,195 @@ def verify_plan(plan: SurveyPlan, error_model, seed: int = 0, progress: bool = T
     profile : SensorProfile, optional
         Sensor and turntable errors of the simulated rig (default: the shipped
         ``calibrated`` profile), at 600 rpm.
+    executor : planner.distributed.Executor, optional
+        Where the stations run (default: one after another in this process); the checks are
+        the same either way.
 
     Returns
     -------
     checks : list of StationCheck
+        In the plan's station order.
     """
-    ids = list(plan.marker_ids)
-    centres = plan.marker_xyz_m
-    cfg = build_config({"fit": {"radius_m": plan.marker_radius_m}})
-    checks = []
-    for st, scan, truth in simulated_stations(plan, seed, progress, offsets, station_ids,
-                                              profile):
-        rot = station_to_site_matrix(st.heading_rad)
-        nominal = (centres - st.position_m) @ rot  # planned markers in the planned station frame
-        ref = Reference(tuple(ids), nominal, st.id, "plan (nominal pose)")
-        result = process_station(scan, cfg, ref, seed=seed)
-        rows = [r for r in result.rows if r.accepted and r.marker_id]
-        marker_err = {r.marker_id: r.error_m for r in rows}
-        n_planned = len(st.marker_ids)
-        if len(rows) < MIN_MATCHED:
-            checks.append(StationCheck(st.id, st.predicted_error_m, None, n_planned, len(rows),
-                                       False, f"only {len(rows)} planned marker(s) detected and "
-                                       f"accepted (needs {MIN_MATCHED})", marker_err))
-            continue
-        p = np.array([r.centre_m for r in rows])
-        site_xyz = centres[[ids.index(r.marker_id) for r in rows]]
-        sigma = np.asarray(error_model.predict(np.array([r.distance_m for r in rows]),
-                                               np.radians([r.elevation_deg for r in rows]))
-                           .sigma_m, float)
-        sigma = np.maximum(sigma, 1e-4)
-        t, psi = accuracy.fit_pose(p, site_xyz, sigma, heading0_rad=st.heading_rad)
-        true_pose = truth["station_pose"]
-        achieved = accuracy.registration_error(t, psi, true_pose["position_m"],
-                                               true_pose["heading_rad"], plan.working_radius_m)
-        ok = achieved <= plan.requirement_m
-        missing = sorted(set(st.marker_ids) - {r.marker_id for r in rows})
-        reason = ("ok" if ok else
-                  f"achieved {achieved:.3f} m > requirement {plan.requirement_m:g} m")
-        if missing:
-            reason += f" (planned markers not detected: {', '.join(missing)})"
-        checks.append(StationCheck(st.id, st.predicted_error_m, achieved, n_planned, len(rows),
-                                   ok, reason, marker_err))
-    return checks
+    check = functools.partial(check_station, tuple(plan.marker_ids), plan.marker_xyz_m,
+                              build_config({"fit": {"radius_m": plan.marker_radius_m}}),
+                              error_model, plan.requirement_m, plan.working_radius_m, seed)
+    return map_stations(plan, check, seed, progress, offsets, station_ids, profile, executor)
 
 
-def simulated_stations(plan: SurveyPlan, seed: int = 0, progress: bool = True,
-                       offsets: MountingOffsets | None = None,
-                       station_ids: list[str] | None = None,
-                       profile: SensorProfile | None = None
-                       ) -> Iterator[tuple[PlannedStation, StationScan, dict]]:
-    """Simulate the chosen stations of a plan at their planned poses, one at a time (step 1 of
-    the module docstring; parameters as :func:`verify_plan`).
+def check_station(ids: tuple[str, ...], centres: np.ndarray, cfg: dict, error_model,
+                  requirement_m: float, working_radius_m: float, seed: int,
+                  st: PlannedStation, scan: StationScan, truth: dict) -> StationCheck:
+    """Steps 2-4 of the module docstring for one simulated station.
 
-    Yields
-    ------
-    station : PlannedStation
+    Parameters
+    ----------
+    ids : tuple of str
+        The plan's marker ids.
+    centres : (m, 3) float
+        Their centres, site frame, metres.
+    cfg : dict
+        Pipeline configuration (:func:`pipeline.stages.build_config`).
+    error_model : ErrorModel
+    requirement_m, working_radius_m : float
+        The plan's requirement and working radius, metres.
+    seed : int
+        The pipeline's seed.
+    st : PlannedStation
     scan : StationScan
-        The full turntable scan with only the planned markers.
     truth : dict
         The simulator's truth (:func:`visibility.simulate.simulate_markers`).
+
+    Returns
+    -------
+    check : StationCheck
     """
-    ids = list(plan.marker_ids)
+    ids = list(ids)
+    rot = station_to_site_matrix(st.heading_rad)
+    nominal = (centres - st.position_m) @ rot  # planned markers in the planned station frame
+    ref = Reference(tuple(ids), nominal, st.id, "plan (nominal pose)")
+    result = process_station(scan, cfg, ref, seed=seed)
+    rows = [r for r in result.rows if r.accepted and r.marker_id]
+    marker_err = {r.marker_id: r.error_m for r in rows}
+    n_planned = len(st.marker_ids)
+    if len(rows) < MIN_MATCHED:
+        return StationCheck(st.id, st.predicted_error_m, None, n_planned, len(rows), False,
+                            f"only {len(rows)} planned marker(s) detected and accepted (needs "
+                            f"{MIN_MATCHED})", marker_err)
+    p = np.array([r.centre_m for r in rows])
+    site_xyz = centres[[ids.index(r.marker_id) for r in rows]]
+    sigma = np.asarray(error_model.predict(np.array([r.distance_m for r in rows]),
+                                           np.radians([r.elevation_deg for r in rows]))
+                       .sigma_m, float)
+    sigma = np.maximum(sigma, 1e-4)
+    t, psi = accuracy.fit_pose(p, site_xyz, sigma, heading0_rad=st.heading_rad)
+    true_pose = truth["station_pose"]
+    achieved = accuracy.registration_error(t, psi, true_pose["position_m"],
+                                           true_pose["heading_rad"], working_radius_m)
+    ok = achieved <= requirement_m
+    missing = sorted(set(st.marker_ids) - {r.marker_id for r in rows})
+    reason = "ok" if ok else f"achieved {achieved:.3f} m > requirement {requirement_m:g} m"
+    if missing:
+        reason += f" (planned markers not detected: {', '.join(missing)})"
+    return StationCheck(st.id, st.predicted_error_m, achieved, n_planned, len(rows), ok, reason,
+                        marker_err)
+
+
+@dataclass(frozen=True)
+class StationJob:
+    """One station's task: what :func:`station_task` needs besides the DEM (small, picklable).
+
+    Attributes
+    ----------
+    station : PlannedStation
+    seed : int
+        The simulation's seed (``seed + k`` for the plan's station ``k``).
+    marker_ids : tuple of str
+    marker_xyz_m : (m, 3) float
+        Planned marker centres, site frame, metres.
+    marker_radius_m : float
+    profile : SensorProfile
+    offsets : MountingOffsets
+        True mounting offsets of the simulated rig.
+    process : callable
+        ``process(station, scan, truth)`` -> the task's small result (a module-level function
+        or a ``functools.partial`` of one).
+    threads : int or None
+        Ray-casting threads (None: all cores).
+    """
+
+    station: PlannedStation
+    seed: int
+    marker_ids: tuple[str, ...]
+    marker_xyz_m: np.ndarray
+    marker_radius_m: float
+    profile: SensorProfile
+    offsets: MountingOffsets
+    process: Callable
+    threads: int | None = None
+
+
+def station_tile(dem: DEM, position_m: np.ndarray, reach_m: float) -> DEM:
+    """The DEM tile a station's scan can reach: its position ± ``reach_m`` (the sensor's
+    maximum range), on the DEM's own grid (:meth:`visibility.dem.DEM.crop`).
+
+    Parameters
+    ----------
+    dem : DEM
+    position_m : (3,) float
+        Station (LiDAR centre), site frame, metres.
+    reach_m : float
+        Half-width of the tile, metres.
+
+    Returns
+    -------
+    tile : DEM
+    """
+    x, y = float(position_m[0]), float(position_m[1])
+    return dem.crop(x - reach_m, x + reach_m, y - reach_m, y + reach_m)
+
+
+def station_task(dem: DEM, job: StationJob):
+    """Simulate one planned station on its DEM tile with the planned markers, then hand the
+    scan to ``job.process`` and return what it returns (never the scan itself).
+
+    The Embree scene is built here, on the worker, from the tile (it is never pickled); the
+    same function runs in process and on a cluster, so the results are the same.
+
+    Parameters
+    ----------
+    dem : DEM
+        The plan's whole terrain (sent to each worker once).
+    job : StationJob
+
+    Returns
+    -------
+    result : object
+        ``job.process(station, scan, truth)``.
+    """
+    st, profile = job.station, job.profile
+    sensor = profile.sensor_config()
+    rig = profile.rig_config(offsets=job.offsets)
+    tile = station_tile(dem, st.position_m, sensor.max_range_m)
+    scan, truth = simulate_markers(tile, st.position_m, st.heading_rad, job.marker_xyz_m,
+                                   sensor, rig, seed=job.seed,
+                                   marker_radius_m=job.marker_radius_m,
+                                   marker_ids=list(job.marker_ids), station_id=st.id,
+                                   threads=job.threads, sensor_profile=profile.name)
+    return job.process(st, scan, truth)
+
+
+def map_stations(plan: SurveyPlan, process: Callable, seed: int = 0, progress: bool = True,
+                 offsets: MountingOffsets | None = None, station_ids: list[str] | None = None,
+                 profile: SensorProfile | None = None, executor: Executor | None = None) -> list:
+    """Simulate the chosen stations of a plan at their planned poses (step 1 of the module
+    docstring) and ``process`` each, as one :func:`station_task` per station.
+
+    Parameters
+    ----------
+    plan : SurveyPlan
+    process : callable
+        ``process(station, scan, truth)`` -> a station's result; picklable.
+    seed, progress, offsets, station_ids, profile, executor
+        As :func:`verify_plan`.
+
+    Returns
+    -------
+    results : list
+        ``process``'s results in the plan's station order.
+    """
     profile = profile or default_profile()
-    rig = profile.rig_config(offsets=offsets or MountingOffsets())
+    offsets = offsets or MountingOffsets()
     chosen = [(k, st) for k, st in enumerate(plan.stations)
               if station_ids is None or st.id in station_ids]
-    for k, st in tqdm(chosen, desc="verify", unit="station", file=sys.stderr,
-                      disable=None if progress else True):
-        scan, truth = simulate_markers(plan.dem, st.position_m, st.heading_rad, plan.marker_xyz_m,
-                                       profile.sensor_config(), rig, seed=seed + k,
-                                       marker_radius_m=plan.marker_radius_m, marker_ids=ids,
-                                       station_id=st.id, sensor_profile=profile.name)
-        yield st, scan, truth
+    with contextlib.ExitStack() as stack:
+        if executor is None:
+            executor = stack.enter_context(distributed.executor(distributed.IN_PROCESS,
+                                                                progress=progress))
+        jobs = [StationJob(st, seed + k, tuple(plan.marker_ids), plan.marker_xyz_m,
+                           plan.marker_radius_m, profile, offsets, process, executor.threads)
+                for k, st in chosen]
+        return executor.map(station_task, jobs, shared=plan.dem,
+                            labels=[f"station {st.id}" for _, st in chosen], desc="verify")
 
 
 def verify_record(plan: SurveyPlan, checks: list[StationCheck], seed: int, model_name: str,

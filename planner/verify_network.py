@@ -5,7 +5,7 @@ marker errors with the predicted ones.
 The closed loop of issue 12 (``markerplan verify --network``), in two steps:
 
 1. :func:`scan_plan` — every chosen station is simulated at its planned pose with only the
-   planned markers (:func:`planner.verify.simulated_stations`: the sensor profile and the
+   planned markers (:func:`planner.verify.map_stations`: the sensor profile and the
    mis-mounted rig of known-control ``verify``) and processed by the published chain
    (:func:`pipeline.process.process_station`) *without* a reference, so the marker table's
    ``marker_id`` column stays empty. The truth of every station (its pose and the markers' true
@@ -41,6 +41,7 @@ adjustment (:func:`tied_network`); the others are still adjusted and compared.
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -52,6 +53,7 @@ from markerplan.provenance import provenance
 from pipeline.marker_table import MarkerRow
 from pipeline.rig import MountingOffsets
 from planner import accuracy
+from planner.distributed import Executor
 from planner.plan_file import SurveyPlan
 from planner.verify import VERIFY_SCHEMA, VERIFY_SCHEMA_VERSION
 from visibility.sensor_profile import SensorProfile
@@ -212,7 +214,7 @@ def reference_station(named: str | None, plan_stations, chosen) -> str:
 
 def scan_plan(plan: SurveyPlan, seed: int = 0, progress: bool = True,
               offsets: MountingOffsets | None = None, station_ids: list[str] | None = None,
-              profile: SensorProfile | None = None
+              profile: SensorProfile | None = None, executor: Executor | None = None
               ) -> tuple[list[MarkerRow], dict[str, TrueStation]]:
     """Simulate and process the chosen stations of a plan (step 1 of the module docstring).
 
@@ -226,18 +228,24 @@ def scan_plan(plan: SurveyPlan, seed: int = 0, progress: bool = True,
     truth : dict of str to TrueStation
         Per station id.
     """
-    from pipeline.process import process_station
     from pipeline.stages import build_config
-    from planner.verify import simulated_stations
+    from planner.verify import map_stations
 
     cfg = build_config({"fit": {"radius_m": plan.marker_radius_m}})
-    rows: list[MarkerRow] = []
-    truth: dict[str, TrueStation] = {}
-    for st, scan, true in simulated_stations(plan, seed, progress, offsets, station_ids,
-                                             profile):
-        rows += process_station(scan, cfg, None, seed=seed).rows
-        truth[st.id] = TrueStation.from_truth(true)
-    return rows, truth
+    done = map_stations(plan, functools.partial(station_rows, cfg, seed), seed, progress,
+                        offsets, station_ids, profile, executor)
+    rows = [r for station, _ in done for r in station]
+    return rows, {true.station_id: true for _, true in done}
+
+
+def station_rows(cfg: dict, seed: int, st, scan, truth: dict
+                 ) -> tuple[list[MarkerRow], TrueStation]:
+    """One simulated station's marker-table rows (no reference: identification comes later)
+    and its truth; ``cfg`` and ``seed`` are the pipeline's (a :func:`planner.verify.station_task`
+    ``process``)."""
+    from pipeline.process import process_station
+
+    return process_station(scan, cfg, None, seed=seed).rows, TrueStation.from_truth(truth)
 
 
 def adjust_and_compare(tables: list[Path], plan_path: Path, error_model,

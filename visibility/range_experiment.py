@@ -11,6 +11,7 @@ writes the files of ``markerplan range-study``.
 
 from __future__ import annotations
 
+import functools
 import json
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, replace
@@ -59,7 +60,8 @@ def run_range_study(max_distance_m: float = 50.0, frames: int = 800, replicates:
                     marker_radius_m: float = 0.1,
                     progress: Callable[[int], object] | None = None, *, rpm: int = 600,
                     range_noise_m: float | None = None, lidar_height_m: float = 1.0,
-                    slope_deg: float = 0.0) -> RangeStudy:
+                    slope_deg: float = 0.0,
+                    map_tasks: Callable[[Callable, list], list] | None = None) -> RangeStudy:
     """Simulate and measure the range experiment, on level ground or on a slope.
 
     Parameters
@@ -89,6 +91,10 @@ def run_range_study(max_distance_m: float = 50.0, frames: int = 800, replicates:
         Ground slope, degrees, in (-45, 45): the ground is a plane through the station's foot
         rising towards the station frame's +x; markers rest on it (see
         :func:`pipeline.range_study.marker_layout`). 0 is the published level ground.
+    map_tasks : callable, optional
+        ``map_tasks(fn, items) -> [fn(item) ...]`` running the replicates (one task each, e.g.
+        a :class:`planner.distributed.Executor`, which has its own progress); default a loop
+        here that calls ``progress``.
 
     Returns
     -------
@@ -104,18 +110,17 @@ def run_range_study(max_distance_m: float = 50.0, frames: int = 800, replicates:
     dem = ground_dem(float(distances.max()), slope_rad)
     station = [0.0, 0.0, lidar_height_m]
     research_radius_m = RADIUS_SCALED[("research", "radius_m")] * marker_radius_m
-    rows = []
-    for rep in range(replicates):
-        unit = replace(sensor, unit_seed=seed + rep)  # each replicate another sensor unit
-        scan, _ = simulate_markers(dem, station, 0.0, centres + station, unit, rig,
-                                   seed=seed + rep, marker_radius_m=marker_radius_m,
-                                   marker_ids=ids, station_id="RANGE")
-        rows += measure_markers(scan, centres, ids, radius_m=marker_radius_m,
-                                research_radius_m=research_radius_m, replicate=rep,
-                                seed=seed + rep, noise=sensor.expected_scatter())
-        del scan
-        if progress is not None:
-            progress(1)
+    task = functools.partial(replicate_rows, dem, station, centres, ids, sensor, rig, seed,
+                             marker_radius_m, research_radius_m)
+    if map_tasks is None:
+        def map_tasks(fn, items):
+            out = []
+            for item in items:
+                out.append(fn(item))
+                if progress is not None:
+                    progress(1)
+            return out
+    rows = [row for reps in map_tasks(task, list(range(replicates))) for row in reps]
     config = {"distances_m": distances.tolist(), "frames": frames, "replicates": replicates,
               "seed": seed, "sensor_profile": profile.name, "sensor": asdict(sensor),
               "turntable": asdict(profile.turntable),
@@ -124,6 +129,43 @@ def run_range_study(max_distance_m: float = 50.0, frames: int = 800, replicates:
               "marker_radius_m": marker_radius_m}
     distance_of = dict(zip(ids, distances.tolist(), strict=True))
     return RangeStudy(distance_of, rows, summarise(rows, distance_of), config)
+
+
+def replicate_rows(dem: DEM, station: list[float], centres: np.ndarray, ids: list[str], sensor,
+                   rig, seed: int, marker_radius_m: float, research_radius_m: float,
+                   rep: int) -> list[MarkerRow]:
+    """One replicate of the range experiment (a task of :func:`run_range_study`): simulate a
+    scan with sensor unit and noise seed ``seed + rep`` and measure every marker in it.
+
+    Parameters
+    ----------
+    dem : DEM
+        The ground (:func:`ground_dem`).
+    station : (3,) float
+        LiDAR centre, site frame, m.
+    centres : (m, 3) float
+        Marker centres relative to the station (as :func:`marker_layout` gives them), m.
+    ids : list of str
+    sensor : SensorConfig
+    rig : RigConfig
+    seed : int
+        Seed of the first replicate.
+    marker_radius_m, research_radius_m : float
+        Marker radius and the re-search radius, m.
+    rep : int
+        Replicate index.
+
+    Returns
+    -------
+    rows : list of MarkerRow
+    """
+    unit = replace(sensor, unit_seed=seed + rep)  # each replicate another sensor unit
+    scan, _ = simulate_markers(dem, station, 0.0, centres + station, unit, rig, seed=seed + rep,
+                               marker_radius_m=marker_radius_m, marker_ids=ids,
+                               station_id="RANGE")
+    return measure_markers(scan, centres, ids, radius_m=marker_radius_m,
+                           research_radius_m=research_radius_m, replicate=rep, seed=seed + rep,
+                           noise=sensor.expected_scatter())
 
 
 def ground_dem(max_distance_m: float, slope_rad: float = 0.0) -> DEM:

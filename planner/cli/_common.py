@@ -33,6 +33,10 @@ option                      meaning (and the value the command receives)
                             the reference station (:mod:`planner.network_accuracy`)
 ``--reference-station ID``  the datum station of network mode (default the first station);
                             refused outside network mode (:func:`network_settings`)
+``--scheduler ADDRESS``     where the per-station tasks run: ``local`` (a LocalCluster sized to
+                            the machine), ``none`` (in process) or a dask scheduler address
+                            (``str``; :func:`planner.distributed.executor`)
+``--workers N``             worker processes of the ``local`` cluster (default: one per core)
 ==========================  =====================================================================
 
 Helpers: :func:`emit_summary` (JSON or human summary), :func:`report_timings` (step timings on
@@ -298,6 +302,19 @@ boundary_option = click.option(
 exclude_option = click.option(
     "--exclude", "exclude_paths", type=FILE, multiple=True,
     help="GeoJSON polygon(s) where no marker may go (repeatable).")
+
+def scheduler_options(f):
+    """``--scheduler ADDRESS`` and ``--workers N``: where a command's independent tasks run
+    (:func:`planner.distributed.executor`); the command receives ``scheduler`` and ``workers``."""
+    f = click.option(
+        "--workers", type=click.IntRange(min=1), default=None, metavar="N",
+        help="Worker processes of the local cluster (default: one per core).")(f)
+    return click.option(
+        "--scheduler", default="local", show_default=True, metavar="ADDRESS",
+        help="Where the tasks run: local (a dask LocalCluster on this machine), none (in this "
+             "process), or a running dask scheduler such as tcp://host:8786 (see "
+             "docs/distributed.md); the files are the same.")(f)
+
 
 network_option = click.option(
     "--network", is_flag=True, default=None,

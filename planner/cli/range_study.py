@@ -17,6 +17,7 @@ from planner.cli._common import (
     overwrite_option,
     range_noise_option,
     rpm_option,
+    scheduler_options,
     seed_option,
     sensor_profile_option,
 )
@@ -45,9 +46,11 @@ SLOPE_DEG = FiniteRange(-30.0, 30.0)
 @click.option("--slope-deg", type=SLOPE_DEG, default=0.0, show_default=True,
               help="Ground slope, degrees: a plane through the station's foot rising towards "
                    "the station frame's +x (negative: falling); markers rest on it.")
+@scheduler_options
 @json_option
 def command(out, overwrite, frames, replicates, seed, profile, rpm, range_noise_mm,
-            marker_radius_m, max_distance_m, lidar_height_m, slope_deg, as_json) -> None:
+            marker_radius_m, max_distance_m, lidar_height_m, slope_deg, scheduler, workers,
+            as_json) -> None:
     """Simulate the published range experiment and fit every marker with both estimators.
 
     Markers every 1 m from 1-15 m, every 2 m from 15-25 m, every 5 m from 25-50 m around one
@@ -57,25 +60,26 @@ def command(out, overwrite, frames, replicates, seed, profile, rpm, range_noise_
     turntable's errors come from --sensor-profile (--range-noise-mm overrides its range
     noise). Writes markers.csv (marker table, all replicates), summary.csv (per estimator and
     distance: median density, median and 95th-percentile centre error), range_study.png and
-    summary.json (its provenance records the profile, sensor, turntable and terrain).
+    summary.json (its provenance records the profile, sensor, turntable and terrain). Each
+    replicate is a task run where --scheduler says (the files are the same).
 
     \b
     Example:
       markerplan range-study --out range/ --replicates 3
       markerplan range-study --out quick/ --frames 100 --replicates 1
       markerplan range-study --out slope/ --lidar-height 0.8 --slope-deg 15
+      markerplan range-study --out range/ --scheduler tcp://10.0.0.5:8786
     """
-    from tqdm import tqdm
-
     from markerplan.output_folder import output_folder
+    from planner.distributed import executor
     from visibility.range_experiment import run_range_study, write_range_study
 
-    with output_folder(out, overwrite, "range-study") as stage:
-        with tqdm(total=replicates, desc="replicates", file=sys.stderr, disable=None) as bar:
-            study = run_range_study(
-                max_distance_m, frames, replicates, seed, profile, marker_radius_m,
-                progress=bar.update, rpm=rpm, lidar_height_m=lidar_height_m, slope_deg=slope_deg,
-                range_noise_m=None if range_noise_mm is None else range_noise_mm / 1e3)
+    with executor(scheduler, workers, not as_json or sys.stderr.isatty()) as ex, \
+            output_folder(out, overwrite, "range-study") as stage:
+        study = run_range_study(
+            max_distance_m, frames, replicates, seed, profile, marker_radius_m, rpm=rpm,
+            lidar_height_m=lidar_height_m, slope_deg=slope_deg, map_tasks=ex,
+            range_noise_m=None if range_noise_mm is None else range_noise_mm / 1e3)
         result = write_range_study(study, stage)
         summary_rows = study.summary
         distances = study.distance_of.values()

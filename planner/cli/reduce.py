@@ -25,6 +25,7 @@ from planner.cli._common import (
     reference_station_option,
     report_timings,
     reproject_option,
+    scheduler_options,
     seed_option,
     site_option,
     site_seed_option,
@@ -66,13 +67,14 @@ from planner.cli._common import (
               help="Counts to verify, comma-separated (default: the full layout and the "
                    "fewest meeting the requirement).")
 @mounting_offset_options
+@scheduler_options
 @out_option(default="markerplan-reduce")
 @overwrite_option
 @json_option
 def command(layout_spec, site_name, site_seed, dem_path, reproject, stations_path, station_ids,
             boundary_path, exclude_paths, marker_radius_m, error_model, config_path, free,
             keep_ids, drop_ids, k_min, network, reference_station, time_limit_s, verify, seed,
-            verify_k, offsets, out, overwrite, as_json):
+            verify_k, offsets, scheduler, workers, out, overwrite, as_json):
     """Trade-off between the number of markers and the worst station's predicted error.
 
     INPUT is a plan.json from `markerplan plan`, a markers CSV (id,x_m,y_m[,z_m], site frame)
@@ -90,7 +92,8 @@ def command(layout_spec, site_name, site_seed, dem_path, reproject, stations_pat
       markerplan reduce as-built --network --reference-station S4 --out reduce-s4/
 
     --seed and the mounting-offset options set the noise and the mis-mounted rig that --verify
-    simulates (the pipeline self-calibrates it).
+    simulates (the pipeline self-calibrates it); its stations run as tasks where --scheduler
+    says, as in `markerplan verify`.
 
     With --network, or for a plan made by `plan --network` (always studied in network mode,
     the mode its errors are for), every station's and every kept marker's error is the
@@ -113,7 +116,7 @@ def command(layout_spec, site_name, site_seed, dem_path, reproject, stations_pat
         study, doc, config = _study(
             layout_spec, sources, error_model, config_path, free, keep_ids, drop_ids, k_min,
             time_limit_s, verify, seed, verify_k, offsets, network, reference_station,
-            progress=not as_json or sys.stderr.isatty())
+            progress=not as_json or sys.stderr.isatty(), where=(scheduler, workers))
         write_reduce_files(doc, stage)
         plot_tradeoff(doc, stage / "tradeoff.png")
     timings = reduce_timings(study)
@@ -132,11 +135,12 @@ def command(layout_spec, site_name, site_seed, dem_path, reproject, stations_pat
 
 
 def _study(layout_spec, sources, error_model, config_path, free, keep_ids, drop_ids, k_min,
-           time_limit_s, verify, seed, verify_k, offsets, network, reference_station, progress):
+           time_limit_s, verify, seed, verify_k, offsets, network, reference_station, progress,
+           where):
     """Read the inputs, run the study (and ``--verify``); return ``(study, doc, config)``.
 
     ``sources`` holds the site options as :func:`planner.reduction.study.resolve_inputs`
-    takes them."""
+    takes them; ``where`` is ``(scheduler, workers)`` of ``--verify``'s station tasks."""
     from markerplan.errors import ConfigError
     from pipeline.rig import MountingOffsets
     from planner.config import load_config
@@ -167,11 +171,13 @@ def _study(layout_spec, sources, error_model, config_path, free, keep_ids, drop_
     if verify:
         import time
 
+        from planner.distributed import executor
         from planner.reduction.verify import verify_points
 
         t = time.perf_counter()
-        verified = verify_points(study, inputs, ks, model, seed=seed, progress=progress,
-                                 offsets=offsets)
+        with executor(*where, progress) as ex:
+            verified = verify_points(study, inputs, ks, model, seed=seed, offsets=offsets,
+                                     executor=ex)
         study.timings_s["verify"] = time.perf_counter() - t
     options = {"input": layout_spec, "free": free, "k_min": k_min,
                "verify": verify, "verify_seed": seed if verify else None,

@@ -18,6 +18,7 @@ from planner.cli._common import (
     overwrite_option,
     reference_station_option,
     require_network,
+    scheduler_options,
     seed_option,
     sensor_profile_option,
     station_ids_option,
@@ -47,12 +48,13 @@ def _adjust_options(*names: str):
 @network_option
 @reference_station_option
 @_adjust_options("odometry_sigma_m", "odometry_heading_sigma_deg")
+@scheduler_options
 @out_option(required=True)
 @overwrite_option
 @json_option
 def command(plan_path, error_model, seed, station_ids, offsets, profile, network,
-            reference_station, odometry_sigma_m, odometry_heading_sigma_deg, out, overwrite,
-            as_json):
+            reference_station, odometry_sigma_m, odometry_heading_sigma_deg, scheduler, workers,
+            out, overwrite, as_json):
     """Check a plan by simulation: scan each station with the planned markers, process the
     scans, register each station to its detected markers, and compare achieved with predicted
     error. Exit code 1 when any station's achieved error exceeds the requirement. The plan's
@@ -73,6 +75,10 @@ def command(plan_path, error_model, seed, station_ids, offsets, profile, network
     left out of the adjustment. --reference-station names the datum: a network plan's
     predictions are relative to its own datum, so for such a plan it may only repeat it.
 
+    Each station is a task (simulated on its terrain tile, then processed) run on a dask
+    cluster: --scheduler local (the default) starts one on this machine, --scheduler ADDRESS
+    uses a running one, --scheduler none runs in this process; the files are the same.
+
     \b
     Example:
       markerplan plan --out plan/
@@ -80,11 +86,13 @@ def command(plan_path, error_model, seed, station_ids, offsets, profile, network
       markerplan verify plan/plan.json --vertical-axis-error-deg 0.3 --lframe-tilt-deg 0.3 \\
           --axis-offset-mm 15,0 --out verify-offsets/
       markerplan verify plan/plan.json --network --out verify-network/
+      markerplan verify plan/plan.json --scheduler tcp://10.0.0.5:8786 --out verify/
     """
     import json
 
     from markerplan.errors import InfeasiblePlanError
     from markerplan.output_folder import output_folder
+    from planner.distributed import executor
     from planner.plan_file import load_plan
     from planner.planning import select_stations
     from planner.verify import verify_markdown, verify_plan, verify_record
@@ -100,12 +108,14 @@ def command(plan_path, error_model, seed, station_ids, offsets, profile, network
 
         settings = NetworkVerifySettings(odometry_sigma_m, odometry_heading_sigma_deg)
         _verify_network(plan_path, plan, ids, inputs, error_model, seed, offsets, profile,
-                        settings, out, overwrite, as_json, reference_station)
+                        settings, out, overwrite, as_json, reference_station,
+                        (scheduler, workers))
         return
-    with output_folder(out, overwrite, "verify", inputs=inputs) as stage:
-        checks = verify_plan(plan, error_model.model, seed=seed,
-                             progress=not as_json or sys.stderr.isatty(), offsets=offsets,
-                             station_ids=ids, profile=profile)
+    progress = not as_json or sys.stderr.isatty()
+    with executor(scheduler, workers, progress) as ex, \
+            output_folder(out, overwrite, "verify", inputs=inputs) as stage:
+        checks = verify_plan(plan, error_model.model, seed=seed, offsets=offsets,
+                             station_ids=ids, profile=profile, executor=ex)
         rec = verify_record(plan, checks, seed, error_model.name, offsets, profile)
         (stage / "verify.json").write_text(json.dumps(rec, indent=2) + "\n")
         (stage / "verify.md").write_text(verify_markdown(rec))
@@ -123,15 +133,17 @@ def command(plan_path, error_model, seed, station_ids, offsets, profile, network
 
 
 def _verify_network(plan_path, plan, ids, inputs, error_model, seed, offsets, profile, settings,
-                    out, overwrite, as_json, datum=None):
+                    out, overwrite, as_json, datum, where):
     """``verify --network``: scan, write the marker table, adjust and compare
     (:mod:`planner.verify_network`); exit code 1 when a station fails. ``datum``: the
-    ``--reference-station`` given (a network plan's own datum only)."""
+    ``--reference-station`` given (a network plan's own datum only); ``where``: ``(scheduler,
+    workers)`` of the station tasks."""
     import json
 
     from markerplan.errors import ConfigError, InfeasiblePlanError
     from markerplan.output_folder import output_folder
     from pipeline.marker_table import write_marker_table
+    from planner.distributed import executor
     from planner.plan_file import read_plan
     from planner.verify_network import (
         adjust_and_compare,
@@ -157,9 +169,11 @@ def _verify_network(plan_path, plan, ids, inputs, error_model, seed, offsets, pr
                           f"ids are {', '.join(station_list[:20])}")
     reference_station(datum or named, station_list, ids)
     profile = profile or default_profile()
-    with output_folder(out, overwrite, "verify", inputs=inputs) as stage:
-        rows, truth = scan_plan(plan, seed, progress=not as_json or sys.stderr.isatty(),
-                                offsets=offsets, station_ids=ids, profile=profile)
+    progress = not as_json or sys.stderr.isatty()
+    with executor(*where, progress) as ex, \
+            output_folder(out, overwrite, "verify", inputs=inputs) as stage:
+        rows, truth = scan_plan(plan, seed, offsets=offsets, station_ids=ids, profile=profile,
+                                executor=ex)
         table = write_marker_table(stage / "markers.csv", rows)
         check = adjust_and_compare(
             [table], plan_path, error_model.model, truth,

@@ -57,7 +57,7 @@ def point_plan(study, inputs, k: int) -> SurveyPlan:
 
 
 def verify_points(study, inputs, ks, error_model, seed: int = 0, progress: bool = True,
-                  offsets=None) -> dict:
+                  offsets=None, executor=None) -> dict:
     """Verify the curve at the counts ``ks`` (default :func:`default_counts`).
 
     Parameters
@@ -74,6 +74,8 @@ def verify_points(study, inputs, ks, error_model, seed: int = 0, progress: bool 
     offsets : pipeline.rig.MountingOffsets, optional
         True mounting offsets of the simulated rig (default: none); see
         :func:`planner.verify.verify_plan`.
+    executor : planner.distributed.Executor, optional
+        Where each point's stations run (default: in this process).
 
     Returns
     -------
@@ -87,7 +89,8 @@ def verify_points(study, inputs, ks, error_model, seed: int = 0, progress: bool 
     points = []
     for k in ks:
         plan = point_plan(study, inputs, k)
-        checks = verify_plan(plan, error_model, seed=seed, progress=progress, offsets=offsets)
+        checks = verify_plan(plan, error_model, seed=seed, progress=progress, offsets=offsets,
+                             executor=executor)
         achieved = [c.achieved_error_m for c in checks]
         finite = [a for a in achieved if a is not None]
         points.append({

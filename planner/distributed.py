@@ -1,0 +1,227 @@
+"""Distributed execution: map independent tasks (one per station, replicate, ...) over
+dask.distributed, or over a plain loop in this process.
+
+This is the only module that knows about a cluster. The task functions it runs are ordinary
+functions of picklable arguments (:func:`planner.verify.station_task`, ...); they return small
+results and never learn where they run, so a cluster and the in-process loop give the same
+results, and byte-identical files.
+
+Three ways to run, chosen by ``--scheduler`` (:func:`executor`):
+
+``local`` (the default)
+    A ``distributed.LocalCluster`` sized to the machine: one worker process per core, one
+    thread each (or ``--workers N``), started for the command and closed after it.
+``none``
+    No cluster: the same task functions in a loop in this process (the single-process baseline).
+``tcp://HOST:8786``
+    The scheduler of a running cluster (``dask scheduler`` + ``dask worker``, dask-ssh,
+    dask-jobqueue, Kubernetes; see ``docs/distributed.md``).
+
+Large inputs shared by every task (the DEM) are sent to each worker once
+(``Client.scatter(..., broadcast=True)``); each task returns its small result. Progress is a
+tqdm bar on stderr advanced as futures complete. A task that raises is retried
+(:data:`RETRIES` times); one that still fails stops the run with :class:`TaskError` naming the
+task (its station id) and the error — no result is ever dropped.
+
+An :class:`Executor` is also a ``map_groups(fn, items) -> list`` callable (results in input
+order), so code that maps groups of work (e.g. tiled planning-time visibility) can take one.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import sys
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import contextmanager
+from typing import Any
+
+from tqdm import tqdm
+
+from markerplan.errors import ConfigError, MarkerPlanError
+
+#: How many times a failed task is run again before the run stops with :class:`TaskError`.
+RETRIES = 2
+
+#: ``--scheduler`` values that are not addresses.
+LOCAL, IN_PROCESS = "local", "none"
+
+#: Seconds to wait for a scheduler at an address before giving up.
+CONNECT_TIMEOUT_S = 10
+
+
+class TaskError(MarkerPlanError, RuntimeError):
+    """A task still failed after its retries; the message names the task and the error."""
+
+
+class Executor:
+    """Runs ``fn`` over items, in a cluster (``client`` given) or in this process.
+
+    Parameters
+    ----------
+    client : distributed.Client or None
+        None: run the tasks in a loop in this process.
+    progress : bool
+        Progress bar on stderr.
+    retries : int
+        Extra runs of a failed task before :class:`TaskError`.
+    """
+
+    def __init__(self, client=None, progress: bool = True, retries: int = RETRIES):
+        self.client = client
+        self.progress = progress
+        self.retries = retries
+
+    @property
+    def workers(self) -> int:
+        """Worker processes (1 in process)."""
+        if self.client is None:
+            return 1
+        return len(self.client.scheduler_info(n_workers=-1)["workers"])
+
+    @property
+    def threads(self) -> int | None:
+        """Threads a task may use for ray casting: 1 in a cluster (a worker per core), None
+        (all cores) in process."""
+        return None if self.client is None else 1
+
+    def __call__(self, fn: Callable, items: Sequence) -> list:
+        """``map_groups`` form: ``fn(item)`` for every item, results in input order."""
+        return self.map(fn, items)
+
+    def map(self, fn: Callable, items: Sequence, *, shared: Any = None,
+            labels: Sequence[str] | None = None, desc: str = "tasks") -> list:
+        """Run ``fn(item)`` (or ``fn(shared, item)`` when ``shared`` is given) for every item.
+
+        Parameters
+        ----------
+        fn : callable
+            A module-level function (it is pickled by reference to run on a worker).
+        items : sequence
+            Picklable task arguments, one per task.
+        shared : object, optional
+            A large input every task needs (a DEM): sent once to every worker.
+        labels : sequence of str, optional
+            Task names for progress and errors (default ``task 0``, ``task 1``, ...).
+        desc : str
+            Progress-bar label.
+
+        Returns
+        -------
+        results : list
+            ``fn``'s results in the order of ``items``.
+
+        Raises
+        ------
+        TaskError
+            A task failed ``1 + retries`` times.
+        """
+        items = list(items)
+        labels = list(labels) if labels is not None else [f"task {i}" for i in range(len(items))]
+        bar = tqdm(total=len(items), desc=desc, unit="task", file=sys.stderr,
+                   disable=None if self.progress else True)
+        with bar:
+            if self.client is None:
+                return [self._run_here(fn, shared, item, label, bar)
+                        for item, label in zip(items, labels, strict=True)]
+            return self._run_cluster(fn, shared, items, labels, bar)
+
+    def _run_here(self, fn, shared, item, label, bar):
+        """One task in this process, with the cluster's retry rule."""
+        args = (item,) if shared is None else (shared, item)
+        for attempt in range(self.retries + 1):
+            try:
+                result = fn(*args)
+            except Exception as exc:  # noqa: BLE001 - reported below, never dropped
+                if attempt == self.retries:
+                    raise _failed(label, exc, self.retries) from exc
+                continue
+            bar.update()
+            return result
+
+    def _run_cluster(self, fn, shared, items, labels, bar):
+        """All tasks on the cluster; results gathered in input order."""
+        from distributed import as_completed
+
+        client = self.client
+        extra = () if shared is None else (client.scatter(shared, broadcast=True, hash=True),)
+        futures = [client.submit(fn, *extra, item, retries=self.retries, pure=False)
+                   for item in items]
+        index = {f.key: i for i, f in enumerate(futures)}
+        results: list = [None] * len(items)
+        try:
+            for fut in as_completed(futures):
+                i = index[fut.key]
+                if fut.status == "error":
+                    exc = fut.exception()
+                    raise _failed(labels[i], exc, self.retries) from exc
+                results[i] = fut.result()
+                bar.update()
+        finally:
+            client.cancel(futures)
+        return results
+
+
+def _failed(label: str, exc: BaseException, retries: int) -> TaskError:
+    """The one-line report of a task that failed every try."""
+    what = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+    return TaskError(f"{label} failed after {retries + 1} tries: {type(exc).__name__}: {what}")
+
+
+@contextmanager
+def executor(scheduler: str | None = LOCAL, workers: int | None = None,
+             progress: bool = True, retries: int = RETRIES) -> Iterator[Executor]:
+    """The executor ``--scheduler`` names, open for the ``with`` block.
+
+    Parameters
+    ----------
+    scheduler : str or None
+        ``local`` (or None): a LocalCluster of ``workers`` processes (default: one per core);
+        ``none``: in this process; else a scheduler address such as ``tcp://host:8786``.
+    workers : int, optional
+        Worker processes of the LocalCluster (refused with ``none`` or an address).
+    progress : bool
+        Progress bar on stderr.
+    retries : int
+        Extra runs of a failed task.
+
+    Yields
+    ------
+    executor : Executor
+
+    Raises
+    ------
+    ConfigError
+        ``workers`` with a scheduler that is not ``local``, or no scheduler answers at the
+        address.
+
+    Examples
+    --------
+    >>> with executor("none", progress=False) as ex:
+    ...     ex.map(abs, [-1, 2, -3])
+    [1, 2, 3]
+    """
+    scheduler = LOCAL if scheduler is None else scheduler
+    if workers is not None and scheduler != LOCAL:
+        raise ConfigError(f"--workers {workers} sizes the local cluster only; drop it with "
+                          f"--scheduler {scheduler} (the running cluster has its own workers)")
+    if scheduler == IN_PROCESS:
+        yield Executor(None, progress, retries)
+        return
+    from distributed import Client, LocalCluster
+
+    if scheduler == LOCAL:
+        n = workers or os.cpu_count() or 1
+        with LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
+                          dashboard_address=":0", silence_logs=logging.ERROR) as cluster, \
+                Client(cluster) as client:
+            yield Executor(client, progress, retries)
+        return
+    try:
+        client = Client(scheduler, timeout=CONNECT_TIMEOUT_S)
+    except (OSError, TimeoutError, ValueError) as exc:
+        raise ConfigError(f"--scheduler {scheduler}: no dask scheduler answers there "
+                          f"({type(exc).__name__}); start one with `dask scheduler` and "
+                          "`dask worker ADDRESS`, or use --scheduler local") from None
+    with client:
+        yield Executor(client, progress, retries)

@@ -1,0 +1,132 @@
+"""Distributed execution (planner.distributed): a LocalCluster of two worker processes gives
+the in-process results, retries a failing task, and reports one that keeps failing."""
+
+import os
+from pathlib import Path
+
+import pytest
+
+from markerplan.errors import ConfigError, DataError
+from pipeline.marker_table import read_marker_table
+from planner import distributed
+from planner.distributed import Executor, TaskError, executor
+from tests.cli.invoke import run_cli
+
+
+def _scaled(shared, x):
+    """A task with a shared input: ``shared * x`` and the worker's pid."""
+    return shared * x, os.getpid()
+
+
+def _fails_once(flag: str):
+    """Raises the first time (``flag`` is created then), succeeds afterwards, in any process."""
+    if not Path(flag).exists():
+        Path(flag).write_text("tried")
+        raise RuntimeError("transient failure")
+    return "ok"
+
+
+def _always_fails(x):
+    raise DataError(f"the tile of {x} misses the DEM\nsecond line")
+
+
+@pytest.fixture(scope="module")
+def cluster():
+    """A LocalCluster of two worker processes, one thread each (as ``--workers 2``)."""
+    from distributed import Client, LocalCluster
+
+    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                      dashboard_address=":0", silence_logs=40) as lc, Client(lc) as client:
+        yield Executor(client, progress=False)
+
+
+def test_cluster_maps_in_input_order_on_both_workers(cluster):
+    items = list(range(12))
+    with executor("none", progress=False) as here:
+        expected = here.map(_scaled, items, shared=3)
+    got = cluster.map(_scaled, items, shared=3)
+    assert [v for v, _ in got] == [v for v, _ in expected] == [3 * x for x in items]
+    assert cluster.workers == 2 and cluster.threads == 1 and here.threads is None
+    assert len({pid for _, pid in got} - {os.getpid()}) >= 1  # ran outside this process
+
+
+def test_map_groups_form(cluster):
+    assert cluster(abs, [-2, 1, -7]) == [2, 1, 7]
+
+
+@pytest.mark.parametrize("where", ["cluster", "none"])
+def test_a_task_that_fails_once_is_retried(cluster, tmp_path, where):
+    flags = [str(tmp_path / f"flag{i}") for i in range(3)]
+    ex = cluster if where == "cluster" else Executor(None, progress=False)
+    assert ex.map(_fails_once, flags) == ["ok"] * 3
+    assert all(Path(f).exists() for f in flags)
+
+
+@pytest.mark.parametrize("where", ["cluster", "none"])
+def test_a_task_that_keeps_failing_is_reported_by_name(cluster, where):
+    ex = cluster if where == "cluster" else Executor(None, progress=False)
+    with pytest.raises(TaskError) as info:
+        ex.map(_always_fails, ["a", "b"], labels=["station S1", "station S2"])
+    msg = str(info.value)
+    assert msg.startswith("station S") and "failed after 3 tries" in msg
+    assert "DataError: the tile of" in msg and "\n" not in msg
+
+
+def test_unreachable_scheduler_is_one_line(monkeypatch):
+    monkeypatch.setattr(distributed, "CONNECT_TIMEOUT_S", 1)
+    with pytest.raises(ConfigError, match=r"--scheduler tcp://127.0.0.1:9.*dask scheduler"):
+        with executor("tcp://127.0.0.1:9", progress=False):
+            pass
+    with pytest.raises(ConfigError, match="--workers 2 sizes the local cluster only"):
+        with executor("none", workers=2):
+            pass
+
+
+def test_cli_reports_a_failing_station_without_traceback(tmp_path, capsys, monkeypatch):
+    import planner.verify
+
+    def broken(*args, **kwargs):
+        raise DataError("simulated failure")
+
+    monkeypatch.setattr(planner.verify, "simulate_markers", broken)
+    plan = tmp_path / "plan"
+    code, _, err = run_cli(capsys, ["plan", "--out", str(plan)])
+    assert code == 0, err
+    code, _, err = run_cli(capsys, ["verify", str(plan / "plan.json"), "--station-ids", "S2",
+                                    "--scheduler", "none", "--out", str(tmp_path / "v")])
+    assert code == 1 and "Traceback" not in err
+    assert err.strip().splitlines()[-1] == ("error: station S2 failed after 3 tries: DataError: "
+                                            "simulated failure")
+    assert not (tmp_path / "v").exists()
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("network", [False, True])
+def test_cluster_files_equal_single_process_files(tmp_path, capsys, network):
+    """One station in known-control mode, two (the fewest) in network mode: ~20 s a station."""
+    plan = tmp_path / "plan"
+    assert run_cli(capsys, ["plan", "--out", str(plan)])[0] == 0
+    common = ["verify", str(plan / "plan.json"), "--json"]
+    common += ["--network", "--station-ids", "S1,S2"] if network else ["--station-ids", "S1"]
+    code_one, out_one, _ = run_cli(capsys, common + ["--scheduler", "none",
+                                                     "--out", str(tmp_path / "one")])
+    code_two, out_two, _ = run_cli(capsys, common + ["--workers", "2",
+                                                     "--out", str(tmp_path / "two")])
+    assert code_one == code_two and out_one.replace("one", "two") == out_two
+    names = ["verify.json", "verify.md"] + (["markers.csv"] if network else [])
+    for name in names:
+        assert (tmp_path / "one" / name).read_bytes() == (tmp_path / "two" / name).read_bytes()
+
+
+@pytest.mark.slow
+def test_range_study_replicates_on_a_cluster_equal_in_process(tmp_path, capsys):
+    quick = ["range-study", "--frames", "40", "--replicates", "3", "--max-distance", "4"]
+    code_one, _, err = run_cli(capsys, quick + ["--scheduler", "none",
+                                                "--out", str(tmp_path / "one")])
+    assert code_one == 0, err
+    code_two, _, err = run_cli(capsys, quick + ["--workers", "2", "--out", str(tmp_path / "two")])
+    assert code_two == 0, err
+    for name in ("markers.csv", "summary.csv", "summary.json"):
+        assert (tmp_path / "one" / name).read_bytes() == (tmp_path / "two" / name).read_bytes()
+    rows = read_marker_table(tmp_path / "two" / "markers.csv")
+    assert sorted({r["replicate"] for r in rows}) == ["0", "1", "2"]  # none dropped
