@@ -67,7 +67,7 @@ def test_aggregation_keeps_the_optimum(seed):
 
 @pytest.mark.parametrize("seed", range(4))
 def test_plan_matches_brute_force_on_clustered_sites(seed):
-    p = _clustered(seed, n_clusters=5, per_cluster=3)
+    p = _clustered(seed, n_clusters=4, per_cluster=2)
     for requirement in (5.0, 0.03):
         cfg = LOOSE.replace(requirement_m=requirement)
         best = brute_force_optimum(p, cfg)
@@ -119,7 +119,10 @@ def test_a_stopped_run_reports_its_bound_and_gap(monkeypatch):
            "solver": {**solver_record(60.0, 0.0), "status": sol.status,
                       "objective": sol.objective, "dual_bound": sol.dual_bound, "gap": sol.gap,
                       "iterations": 1, "accuracy_cuts": 0, "proven_optimal": False},
-           "baselines": {}}
+           "baselines": {}, "markers": [], "frame": "site frame",
+           "visibility": {"n_pairs": 0, "n_usable": 0}, "candidates": {"n_sites": 5},
+           "provenance": {"error_model": "m", "markerplan_version": "0",
+                          "config_sha256": "0" * 64}}
     text = report_markdown(doc)
     assert "status **time_limit** — not proven optimal" in text
     assert "dual bound 4.0, gap 0.2" in text
