@@ -67,13 +67,19 @@ def test_aggregation_keeps_the_optimum(seed):
 
 @pytest.mark.parametrize("seed", range(4))
 def test_plan_matches_brute_force_on_clustered_sites(seed):
-    p = _clustered(seed, n_clusters=4, per_cluster=2)
-    for requirement in (5.0, 0.03):
-        cfg = LOOSE.replace(requirement_m=requirement)
-        best = brute_force_optimum(p, cfg)
-        if best is None:
-            continue
-        r = plan_sites(p, cfg)
+    # two stations, five pairs of near-identical sites around them
+    rng = np.random.default_rng(seed)
+    bearings = np.radians(np.sort(rng.uniform(0, 360, 5)))
+    centres = np.array([4.0, 0.0]) + 6.0 * np.column_stack([np.cos(bearings),
+                                                            np.sin(bearings)])
+    sites = np.repeat(centres, 2, axis=0) + rng.uniform(-0.05, 0.05, (10, 2))
+    p = make_problem([[2.0, 0.0], [6.0, 0.0]], sites, max_range_m=14.0)
+    cfg = LOOSE.replace(min_sectors=2, min_markers=3)
+    assert aggregate_columns(_directions_only(build_model(p, cfg)))[1].size < 10
+    for requirement in (5.0, 0.02):
+        best = brute_force_optimum(p, cfg.replace(requirement_m=requirement))
+        assert best is not None
+        r = plan_sites(p, cfg.replace(requirement_m=requirement))
         assert r.status == "optimal" and r.check.all_ok
         assert int(r.selected.sum()) == best
 
