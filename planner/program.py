@@ -4,10 +4,13 @@ Build, solve and check are separate steps:
 
 - :func:`build_model` turns a :class:`~planner.usability.PlanProblem` into a :class:`Model`
   (plain data: ``c``, sparse ``A``, row and variable bounds, index maps);
-- :func:`solve` runs ``scipy.optimize.milp`` (HiGHS) once -> :class:`Solution`;
+- :func:`solve` runs HiGHS once (:func:`planner.highs_model.run_highs`, optionally on the
+  model with identical site columns merged, :func:`aggregate_columns`) -> :class:`Solution`;
 - :func:`plan_sites` is the accuracy-cut loop: solve, check every station's predicted accuracy
   exactly (:class:`planner.station_checks.StationInfo`), add valid cuts for stations that fail
-  and re-solve until all pass.
+  and re-solve until all pass. In known-control mode the first solve is the directions-only
+  relaxation, aggregated (:func:`_combinatorial_first`); the full model is built only when its
+  layout fails a station.
 
 Models are immutable: :meth:`Model.with_rows` returns a new model, so what-if studies re-use one
 model with changed bounds (``dataclasses.replace``) or added rows. Every row carries a
@@ -160,7 +163,7 @@ class Model:
 
 @dataclass(frozen=True)
 class Solution:
-    """One ``milp`` solve.
+    """One HiGHS solve (:func:`solve`).
 
     Attributes
     ----------
