@@ -119,10 +119,15 @@ def plain_model(problem, config) -> dict:
                           shape=(ny, nx + ny))
     directions = sp.csr_array((np.ones(ny), (occupied // config.n_sectors, nx + np.arange(ny))),
                               shape=(ns, nx + ny))
-    a = sp.csc_array(sp.vstack([count, sector, directions]))
+    # rows station by station (count, its sectors, directions), as a model is usually written
+    row_station = np.r_[np.arange(ns), occupied // config.n_sectors, np.arange(ns)]
+    row_part = np.r_[np.zeros(ns), 1 + occupied % config.n_sectors,
+                     np.full(ns, 1 + config.n_sectors)]
+    order = np.lexsort((row_part, row_station))
+    a = sp.csc_array(sp.vstack([count, sector, directions]).tocsr()[order])
     lo = np.r_[np.full(ns, config.min_markers), np.full(ny, -np.inf),
-               np.full(ns, config.min_sectors)]
-    hi = np.r_[np.full(ns, np.inf), np.zeros(ny), np.full(ns, np.inf)]
+               np.full(ns, config.min_sectors)][order]
+    hi = np.r_[np.full(ns, np.inf), np.zeros(ny), np.full(ns, np.inf)][order]
     h = highspy.Highs()
     h.setOptionValue("output_flag", False)
     h.setOptionValue("threads", 2)
