@@ -4,10 +4,13 @@ Build, solve and check are separate steps:
 
 - :func:`build_model` turns a :class:`~planner.usability.PlanProblem` into a :class:`Model`
   (plain data: ``c``, sparse ``A``, row and variable bounds, index maps);
-- :func:`solve` runs ``scipy.optimize.milp`` (HiGHS) once -> :class:`Solution`;
+- :func:`solve` runs HiGHS once (:func:`planner.highs_model.run_highs`, optionally on the
+  model with identical site columns merged, :func:`aggregate_columns`) -> :class:`Solution`;
 - :func:`plan_sites` is the accuracy-cut loop: solve, check every station's predicted accuracy
   exactly (:class:`planner.station_checks.StationInfo`), add valid cuts for stations that fail
-  and re-solve until all pass.
+  and re-solve until all pass. In known-control mode the first solve is the directions-only
+  relaxation, aggregated (:func:`_combinatorial_first`); the full model is built only when its
+  layout fails a station.
 
 Models are immutable: :meth:`Model.with_rows` returns a new model, so what-if studies re-use one
 model with changed bounds (``dataclasses.replace``) or added rows. Every row carries a
@@ -53,10 +56,10 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 import scipy.sparse as sp
-from scipy.optimize import Bounds, LinearConstraint, milp
 
 from markerplan.errors import ConfigError, InfeasiblePlanError, PlanTimeLimitError
 from planner import accuracy
+from planner.highs_model import run_highs
 from planner.network_accuracy import NetworkModel, network_model
 from planner.station_checks import (
     LayoutCheck,
@@ -160,7 +163,7 @@ class Model:
 
 @dataclass(frozen=True)
 class Solution:
-    """One ``milp`` solve.
+    """One HiGHS solve (:func:`solve`).
 
     Attributes
     ----------
@@ -202,7 +205,8 @@ class PlanResult:
     solve_time_s : float
         Total time in the solver over all iterations.
     model : Model
-        The final model including every cut.
+        The final model including every cut (known control, when the first solve passed:
+        the directions-only relaxation it solved, see :func:`plan_sites`).
     history : list of dict
         Per solve: iteration, status, objective, dual bound, solve time, rows.
     greedy : planner.baselines.Baseline or None
@@ -396,8 +400,9 @@ def info_weights(problem: PlanProblem, pairs: np.ndarray, config
     return w_t, w_h
 
 
-def solve(model: Model, time_limit_s: float = 60.0, gap: float = 0.0) -> Solution:
-    """Solve ``model`` once with HiGHS through ``scipy.optimize.milp``.
+def solve(model: Model, time_limit_s: float = 60.0, gap: float = 0.0, aggregate: bool = False,
+          priority: np.ndarray | None = None) -> Solution:
+    """Solve ``model`` once with HiGHS (:func:`planner.highs_model.run_highs`).
 
     Parameters
     ----------
@@ -406,44 +411,118 @@ def solve(model: Model, time_limit_s: float = 60.0, gap: float = 0.0) -> Solutio
         Wall-clock limit, s.
     gap : float
         Target relative MIP gap (0: prove optimality).
+    aggregate : bool
+        Merge ``x`` columns that are identical (same entries in every row, cost and bounds)
+        into one integer variable counting how many of them hold a marker
+        (:func:`aggregate_columns`; exact: the optimum and every objective value are kept).
+    priority : (nx,) float, optional
+        With ``aggregate``: which members of a merged group get its markers (highest first,
+        then by variable order); default variable order.
 
     Returns
     -------
     solution : Solution
-        A time-limited answer has status ``"time_limit"``, never ``"optimal"``.
+        A time-limited answer has status ``"time_limit"``, never ``"optimal"``. When the
+        objective can only take integer values the dual bound is HiGHS' bound rounded up
+        (a bound on an integer is one on its ceiling) and HiGHS stops once the incumbent is
+        within less than 1 of its bound.
     """
     if not time_limit_s > 0:
         raise ConfigError(f"`time_limit_s` must be > 0, got {time_limit_s!r}")
     if not gap >= 0:
         raise ConfigError(f"`gap` must be >= 0, got {gap!r}")
     t0 = time.perf_counter()
-    constraints = [LinearConstraint(model.A, model.row_lb, model.row_ub)] if model.A.shape[0] \
-        else []
-    res = milp(model.c, integrality=model.integrality, bounds=Bounds(model.lb, model.ub),
-               constraints=constraints,
-               options={"time_limit": float(time_limit_s), "mip_rel_gap": float(gap),
-                        "disp": False})
-    elapsed = time.perf_counter() - t0
-    x = None if res.x is None else np.round(res.x)
-    if res.status == 0:
-        status = "optimal" if gap == 0 else "gap_reached"
-    elif res.status == 1:
-        status = "time_limit" if x is not None else "no_solution"
-    elif res.status == 2:
-        status = "infeasible"
-    else:
-        status = "error" if x is None else "time_limit"
+    nx = model.var_site.size
+    group = first = cols = None
+    c, a, lb, ub = model.c, model.A, model.lb, model.ub
+    if aggregate:
+        group, first = aggregate_columns(model)
+        size = np.bincount(group).astype(float)
+        aux = np.arange(nx, model.n_vars)
+        cols = np.r_[first, aux]
+        a = sp.csc_array(model.A)[:, cols]
+        c = model.c[cols]
+        lb = np.r_[size * model.lb[first], model.lb[aux]]
+        ub = np.r_[size * model.ub[first], model.ub[aux]]
+    integrality = model.integrality if cols is None else model.integrality[cols]
+    integral = bool(np.all(integrality == 1) and np.all(np.abs(c - np.round(c)) < 1e-12))
+    out = run_highs(c, a, model.row_lb, model.row_ub, lb, ub, integrality,
+                    max(time_limit_s - (time.perf_counter() - t0), 1e-3), gap,
+                    integral_objective=integral)
+    x = None if out.x is None else np.round(out.x)
+    if x is not None and aggregate:
+        x = _disaggregate(x, group, first.size, nx, priority)
     selected = None
     if x is not None:
         selected = np.zeros(model.site_var.shape[0], dtype=bool)
-        selected[model.var_site[x[: model.var_site.size] > 0.5]] = True
-    dual = getattr(res, "mip_dual_bound", None)
-    mgap = getattr(res, "mip_gap", None)
-    return Solution(status=status, selected=selected,
-                    objective=float(res.fun) if res.fun is not None else float("nan"),
-                    dual_bound=float(dual) if dual is not None else float("nan"),
-                    gap=float(mgap) if mgap is not None else float("nan"),
-                    solve_time_s=elapsed, message=str(res.message), x=x)
+        selected[model.var_site[x[:nx] > 0.5]] = True
+    status = out.status
+    if status == "optimal" and gap > 0:
+        status = "gap_reached"
+    elif status in ("time_limit", "error") and x is None:
+        status = "no_solution" if status == "time_limit" else "error"
+    elif status == "error":
+        status = "time_limit"
+    dual = out.dual_bound
+    if not np.any(integrality):  # a linear program: solved means bound = objective
+        dual = out.objective if status == "optimal" else float("nan")
+    elif integral and np.isfinite(dual):
+        dual = float(math.ceil(dual - 1e-6))
+    obj = out.objective
+    mgap = max(obj - dual, 0.0) / max(abs(obj), 1e-9) if np.isfinite(obj) and np.isfinite(dual) \
+        else float("nan")
+    return Solution(status=status, selected=selected, objective=obj, dual_bound=dual, gap=mgap,
+                    solve_time_s=time.perf_counter() - t0, message=out.message, x=x)
+
+
+def aggregate_columns(model: Model) -> tuple[np.ndarray, np.ndarray]:
+    """Group the ``x`` columns of ``model`` that are identical: the same entries in every row,
+    the same cost and the same bounds.
+
+    Merging such a group of ``k`` binaries into one integer ``0 <= n <= k`` (``k lb`` to
+    ``k ub``) is exact: ``A x`` and ``c x`` depend on the group only through ``n``, so every
+    solution maps to one with the same rows and objective and back (any ``n`` of the ``k``
+    columns set to 1). The optimum, the bound and feasibility are unchanged.
+
+    Returns
+    -------
+    group : (nx,) int
+        Group of each ``x`` variable, numbered by first member.
+    first : (g,) int
+        First (lowest) variable of each group.
+    """
+    nx = model.var_site.size
+    cols = sp.csc_array(model.A)[:, :nx]
+    cols.sum_duplicates()
+    # two fixed random projections identify columns; equality is then checked exactly
+    proj = np.random.default_rng(0).standard_normal((2, cols.shape[0]))
+    key = np.column_stack([cols.T @ proj[0], cols.T @ proj[1], model.c[:nx], model.lb[:nx],
+                           model.ub[:nx]])
+    _, first, group = np.unique(key, axis=0, return_index=True, return_inverse=True)
+    group = group.ravel()
+    diff = cols - cols[:, first[group]]
+    diff.eliminate_zeros()
+    odd = np.unique(diff.tocoo().col) if diff.nnz else np.zeros(0, np.int64)
+    odd = odd[first[group[odd]] != odd]
+    group[odd] = first.size + np.arange(odd.size)  # a hash collision: kept on their own
+    # number groups by first member
+    _, first, group = np.unique(group, return_index=True, return_inverse=True)
+    order = np.argsort(first, kind="stable")
+    rank = np.empty_like(order)
+    rank[order] = np.arange(order.size)
+    return rank[group.ravel()], first[order]
+
+
+def _disaggregate(x: np.ndarray, group: np.ndarray, n_groups: int, nx: int,
+                  priority: np.ndarray | None) -> np.ndarray:
+    """Solution of the full model from one of the aggregated model: each group's count goes to
+    its members by ``priority`` (highest first), then by variable order."""
+    prio = np.zeros(nx) if priority is None else -np.asarray(priority, float)
+    order = np.lexsort((np.arange(nx), prio, group))  # by group, then priority
+    starts = np.searchsorted(group[order], np.arange(n_groups))
+    rank = np.empty(nx, np.int64)
+    rank[order] = np.arange(nx) - starts[group[order]]
+    return np.r_[(rank < x[group]).astype(float), x[n_groups:]]
 
 
 def accuracy_cuts(problem: PlanProblem, model: Model, selected: np.ndarray, config,
@@ -843,6 +922,16 @@ def plan_sites(problem: PlanProblem, config, model: Model | None = None) -> Plan
     infos = station_infos(problem, config)
     if config.network:
         return _plan_network(problem, config, model, infos)
+    t0 = time.perf_counter()
+    first = None
+    if model is None:
+        base = build_model(problem, config)
+        first, rows = _combinatorial_first(problem, config, base, infos)
+        if rows is None:
+            return first
+        model = with_tightening_rows(problem, base, config)
+        if rows[0] is not None:
+            model = model.with_rows(rows[0], rows[1], np.full(len(rows[1]), np.inf), rows[2])
     failing = diagnose(problem, config, infos)
     if failing:
         raise InfeasiblePlanError(
@@ -851,8 +940,6 @@ def plan_sites(problem: PlanProblem, config, model: Model | None = None) -> Plan
             "sectors) at station(s): "
             + "; ".join(f"{k}: {v}" for k, v in failing.items())
             + "; relax the configuration or add candidate sites")
-    if model is None:
-        model = with_tightening_rows(problem, build_model(problem, config), config)
 
     def cuts(selected):
         return accuracy_cuts(problem, model, selected, config, infos, outer_approximation=True)
@@ -860,7 +947,60 @@ def plan_sites(problem: PlanProblem, config, model: Model | None = None) -> Plan
     def check(selected):
         return evaluate_layout(problem, selected, config, infos)
 
-    return _cut_loop(problem, config, model, cuts, check)
+    result = _cut_loop(problem, config, model, cuts, check, t0=t0)
+    if first is None:
+        return result
+    return replace(result, iterations=result.iterations + first.iterations,
+                   n_cuts=result.n_cuts + first.n_cuts,
+                   solve_time_s=result.solve_time_s + first.solve_time_s,
+                   history=first.history + result.history)
+
+
+def _combinatorial_first(problem: PlanProblem, config, base: Model, infos: list[StationInfo]
+                         ) -> tuple[PlanResult | None, tuple | None]:
+    """Known control: solve the directions rows alone first, aggregated; done if that passes.
+
+    ``base`` without its information rows keeps only rows in which many candidate sites have
+    identical columns (same stations, same sectors), so :func:`solve` merges them
+    (:func:`aggregate_columns`, exact) and HiGHS gets a model a fraction of the size. It is a
+    relaxation of the full program (every row left out — information, tightening, accuracy
+    cuts — holds for every passing layout), so its optimum bounds the full one from below: a
+    layout that is optimal here and passes every station's exact check is optimal for the
+    plan. Markers of a merged group go to its members with the most information
+    (``sum 3 / sigma^2`` over their usable pairs).
+
+    Returns
+    -------
+    result : PlanResult or None
+        The plan when the layout passes (then ``rows`` is None), else the first solve's
+        record (iterations, cuts, solver time, history) for the loop that follows.
+    rows : tuple or None
+        ``(rows, lower, kinds)`` of :func:`accuracy_cuts` for the failing layout (``rows``
+        None when there was no layout), to add to the full model.
+    """
+    keep = np.array([k.family != "info" for k in base.row_kind], dtype=bool)
+    relaxed = replace(base, A=sp.csr_array(base.A[keep]), row_lb=base.row_lb[keep],
+                      row_ub=base.row_ub[keep],
+                      row_kind=tuple(k for k, q in zip(base.row_kind, keep, strict=True) if q))
+    usable = np.flatnonzero(problem.pair_usable)
+    info = np.bincount(problem.pair_site[usable], 3.0 / problem.pair_sigma_m[usable] ** 2,
+                       minlength=problem.n_sites)
+    sol = solve(relaxed, config.time_limit_s, config.mip_gap, aggregate=True,
+                priority=info[base.var_site])
+    history = [{"iteration": 1, "status": sol.status, "objective": sol.objective,
+                "dual_bound": sol.dual_bound, "solve_time_s": sol.solve_time_s,
+                "n_rows": int(relaxed.A.shape[0])}]
+    rows = (None, [], [])
+    if sol.selected is not None:
+        rows = accuracy_cuts(problem, base, sol.selected, config, infos,
+                             outer_approximation=True)
+    result = PlanResult(selected=sol.selected, check=None, solution=sol, iterations=1,
+                        n_cuts=0 if rows[0] is None else rows[0].shape[0],
+                        solve_time_s=sol.solve_time_s, model=relaxed, history=history)
+    if sol.selected is not None and rows[0] is None:
+        return replace(result, check=evaluate_layout(problem, sol.selected, config, infos)), None
+    return result, rows
+
 
 def _plan_network(problem: PlanProblem, config, model: Model | None,
                   infos: list[StationInfo]) -> PlanResult:

@@ -11,7 +11,8 @@ DEM's CRS when it has one):
   local site frame);
 - ``site``: name, seed, CRS name (None: local site frame), marker radius, boundary;
 - ``requirement``: requirement_m, sectors, markers, working radius, redundant;
-- ``solver``: name, status, objective, dual bound, gap, iterations, cuts, time limit;
+- ``solver``: name, HiGHS version, threads, time limit, target gap, status, objective, dual
+  bound, gap, iterations, cuts;
 - ``markers``: id, x_m, y_m, z_m, existing, stations that use it;
 - ``stations``: id, position, heading, predicted error, markers used, occupied sectors,
   (redundant mode) worst error after losing one marker, meets_requirement;
@@ -33,6 +34,7 @@ import numpy as np
 
 from markerplan.provenance import provenance
 from planner.gis_output import crs_name, geojson_crs_members, geojson_positions, write_plan_gpkg
+from planner.highs_model import solver_record
 from planner.plan_file import SCHEMA, SCHEMA_VERSION, write_plan
 from planner.usability import sector_index
 
@@ -103,11 +105,10 @@ def plan_record(outcome) -> dict:
             "saved_by_plan": len(inp.as_built_ids) - n_plan,
             "station_error_m": [_num(v) for v in ab.error_m],
             "station_sectors": [int(v) for v in ab.sectors]}
-    solver = {"name": "HiGHS via scipy.optimize.milp", "status": sol.status,
+    solver = {**solver_record(cfg.time_limit_s, cfg.mip_gap), "status": sol.status,
               "objective": _num(sol.objective), "dual_bound": _num(sol.dual_bound),
               "gap": _num(sol.gap),
               "iterations": res.iterations, "accuracy_cuts": res.n_cuts,
-              "time_limit_s": cfg.time_limit_s, "target_gap": cfg.mip_gap,
               "proven_optimal": sol.status == "optimal"}
     vis = outcome.visibility
     network = _network_record(outcome, stations, markers) if cfg.network else None
@@ -252,12 +253,14 @@ def report_markdown(doc: dict) -> str:
              f"sectors" + (", surviving the loss of any one marker" if req["redundant"] else "")
              + ".", "",
              "## Solver", "",
-             f"- HiGHS (scipy.optimize.milp) status **{sol['status']}**"
+             f"- {sol['name']}" + (f" {sol['version']}" if "version" in sol else "")
+             + f" status **{sol['status']}**"
              + (" (proven optimal)" if sol["proven_optimal"] else
                 " — not proven optimal"),
              f"- objective {sol['objective']}, dual bound {sol['dual_bound']}, gap {sol['gap']}",
              f"- {sol['iterations']} solve(s), {sol['accuracy_cuts']} accuracy cut(s), "
-             f"solver time limit {sol['time_limit_s']:g} s", "",
+             f"solver time limit {sol['time_limit_s']:g} s, target gap {sol['target_gap']:g}"
+             + (f", {sol['threads']} thread(s)" if "threads" in sol else ""), "",
              "## Compared with", "", "| layout | markers | meets requirement | plan saves |",
              "|---|---:|---|---:|"]
     for name, b in doc["baselines"].items():

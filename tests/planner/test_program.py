@@ -1,10 +1,12 @@
 
+import itertools
+
 import numpy as np
 import pytest
 
 from markerplan.errors import ConfigError, InfeasiblePlanError
 from planner.config import PlanConfig
-from planner.program import RowKind, build_model, plan_sites, solve
+from planner.program import RowKind, build_model, plan_sites, solve, with_tightening_rows
 from planner.station_checks import evaluate_layout
 from tests.planner.instances import brute_force_optimum, make_problem, ring
 
@@ -38,8 +40,14 @@ def test_accuracy_binding_instances_match_brute_force(seed):
     cfg = PlanConfig(requirement_m=0.04, working_radius_m=10, max_range_m=25)
     r = plan_sites(p, cfg)
     loose = plan_sites(p, cfg.replace(requirement_m=5.0))
-    # accuracy binds: the layout that only meets counts and directions fails it
-    assert not evaluate_layout(p, loose.selected, cfg).all_ok
+    # accuracy binds: some layout as small as the directions-only optimum meets counts and
+    # directions but fails it (which one the solver picks among ties is its own choice)
+    k = int(loose.selected.sum())
+    layouts = [np.isin(np.arange(p.n_sites), c)
+               for c in itertools.combinations(range(p.n_sites), k)]
+    directions_ok = [s for s in layouts
+                     if evaluate_layout(p, s, cfg.replace(requirement_m=5.0)).all_ok]
+    assert any(not evaluate_layout(p, s, cfg).all_ok for s in directions_ok)
     assert r.selected.sum() == brute_force_optimum(p, cfg)
     assert r.check.all_ok and np.all(r.check.error_m <= 0.04)
 
@@ -55,9 +63,12 @@ def _grid_instance(seed=4, spacing=3.0):
 def test_accuracy_cuts_are_needed_and_the_plan_is_minimal():
     p = _grid_instance()
     cfg = PlanConfig(requirement_m=0.03, working_radius_m=10, max_range_m=20)
-    r = plan_sites(p, cfg)
+    # the full model from the start (no directions-only first solve): the cut loop itself
+    full = with_tightening_rows(p, build_model(p, cfg), cfg)
+    r = plan_sites(p, cfg, model=full)
     assert r.check.all_ok
     assert r.n_cuts > 0  # directions and information cuts alone were not enough
+    assert plan_sites(p, cfg).selected.sum() == r.selected.sum()
     for j in np.flatnonzero(r.selected):
         fewer = r.selected.copy()
         fewer[j] = False
