@@ -144,7 +144,10 @@ class Executor:
         from distributed import as_completed
 
         client = self.client
-        extra = () if shared is None else (client.scatter(shared, broadcast=True, hash=True),)
+        # hash=False: a second map over the same data (reduce --verify's counts) would otherwise
+        # reuse the first scatter's key, which the scheduler forgets once the first map's
+        # futures are released ("lost dependencies")
+        extra = () if shared is None else (client.scatter(shared, broadcast=True, hash=False),)
         futures = [client.submit(fn, *extra, item, retries=self.retries, pure=False)
                    for item in items]
         index = {f.key: i for i, f in enumerate(futures)}

@@ -50,6 +50,19 @@ def test_cluster_maps_in_input_order_on_both_workers(cluster):
     assert len({pid for _, pid in got} - {os.getpid()}) >= 1  # ran outside this process
 
 
+def test_two_maps_over_the_same_shared_input(cluster):
+    """reduce --verify maps twice over one DEM: the second map must not lose the shared data
+    when the first map's futures are released (a hashed scatter reuses the key)."""
+    import gc
+
+    shared = list(range(1000))
+    first = cluster.map(_scaled, [1, 2], shared=shared)
+    gc.collect()
+    second = cluster.map(_scaled, [3, 4], shared=shared)
+    assert [v for v, _ in first] == [shared, shared * 2]
+    assert [v for v, _ in second] == [shared * 3, shared * 4]
+
+
 def test_map_groups_form(cluster):
     assert cluster(abs, [-2, 1, -7]) == [2, 1, 7]
 
