@@ -189,7 +189,10 @@ def estimate_rotation_offsets(scan: StationScan, offsets: MountingOffsets | None
     for _ in range(cfg.iterations):
         off = _with_angles(offsets, p)
         pa, pb = _positions(scan, a, off), _positions(scan, b, off)
-        dist, nn = cKDTree(pb).query(pa, k=cfg.neighbours, workers=-1)
+        # unbalanced, uncompacted: a third of the build time of the default tree, same
+        # neighbours
+        tree = cKDTree(pb, balanced_tree=False, compact_nodes=False)
+        dist, nn = tree.query(pa, k=cfg.neighbours, workers=-1)
         normal, ok = _local_planes(pb[nn], dist)
         r0 = _plane_residuals(pa, pb, nn, normal)
         ok &= _inliers(r0, ok)
@@ -197,12 +200,15 @@ def estimate_rotation_offsets(scan: StationScan, offsets: MountingOffsets | None
             raise DataError(f"scan {scan.station_id}: only {int(ok.sum())} direct/reverse plane "
                             "pairs; the scene is too sparse for self-calibration")
         jac = np.empty((int(ok.sum()), 2))
+        # the shifted reverse face is needed only at the neighbours of the pairs kept
+        used, local = np.unique(nn[ok].ravel(), return_inverse=True)
+        local = local.reshape(-1, nn.shape[1])
         for k in range(2):
             pk = p.copy()
             pk[k] += h
             offk = _with_angles(offsets, pk)
-            rk = _plane_residuals(_positions(scan, a[ok], offk), _positions(scan, b, offk),
-                                  nn[ok], normal[ok])
+            rk = _plane_residuals(_positions(scan, a[ok], offk), _positions(scan, b[used], offk),
+                                  local, normal[ok])
             jac[:, k] = (rk - r0[ok]) / h
         step, *_ = np.linalg.lstsq(jac, -r0[ok], rcond=None)
         p = p + step

@@ -127,6 +127,59 @@ class RangeIndex:
         return np.sort(idx[d2 <= radius_m ** 2])
 
 
+#: Margin added to the search radius by :func:`within_range_bands`, metres: far above the
+#: round-off of a computed range (~1e-13 m at 1 km), so no point of a sphere is missed.
+RANGE_BAND_MARGIN_M = 1e-6
+
+
+def within_range_bands(range_m: np.ndarray, centres_m: np.ndarray, radius_m: float,
+                       bin_m: float = 0.05) -> np.ndarray:
+    """Indices of the points that may lie within ``radius_m`` of any of ``centres_m``.
+
+    A point within ``radius_m`` of a centre has a range within ``radius_m`` of the centre's
+    range (triangle inequality), so only the range bins that such bands touch are kept: a
+    superset of every :meth:`RangeIndex.within` answer, found in a few passes over the ranges.
+    Building the :class:`RangeIndex` of these points only (and mapping its indices back) gives
+    the same re-search points as indexing the whole cloud, at a fraction of the cost.
+
+    Parameters
+    ----------
+    range_m : (N,) float
+        Range of each point from the station origin, metres (``|xyz|``).
+    centres_m : (K, 3) float
+        Search centres, station frame, metres.
+    radius_m : float
+        Search radius, metres.
+    bin_m : float
+        Width of the range bins, metres.
+
+    Returns
+    -------
+    indices : (n,) int
+        Ascending point indices.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> within_range_bands(np.array([1.0, 5.0, 5.2, 9.0]), np.array([[5.0, 0, 0]]), 0.3).tolist()
+    [1, 2]
+    """
+    centres = np.asarray(centres_m, dtype=float).reshape(-1, 3)
+    if centres.shape[0] == 0:
+        return np.zeros(0, dtype=np.int64)
+    reach = float(radius_m) + RANGE_BAND_MARGIN_M
+    centre_range = np.linalg.norm(centres, axis=1)
+    top = int(np.floor((centre_range.max() + reach) / bin_m)) + 1
+    lo = np.clip(np.floor((centre_range - reach) / bin_m).astype(np.int64), 0, top)
+    hi = np.clip(np.floor((centre_range + reach) / bin_m).astype(np.int64), 0, top)
+    cover = np.zeros(top + 2, dtype=np.int64)
+    np.add.at(cover, lo, 1)
+    np.add.at(cover, hi + 1, -1)
+    wanted = np.cumsum(cover)[:top + 1] > 0
+    bins = np.minimum(range_m / bin_m, top + 1).astype(np.int64)
+    return np.flatnonzero(np.append(wanted, False)[bins])
+
+
 def research(index: RangeIndex, centroids_m: np.ndarray, radius_m: float = 0.3
              ) -> list[np.ndarray]:
     """Re-extract all points within ``radius_m`` of each centroid (ground included).

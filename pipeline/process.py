@@ -6,7 +6,9 @@ research, fit, quality, evaluate). The synthesis (:mod:`.synthesis`) runs after 
 calibration; once the axis offset has been estimated from the accepted spheres, only the
 candidates' neighbourhoods are synthesised again and re-fitted. Detection (ground, cluster,
 gate) runs on a range-thinned copy of the cloud (:func:`detection_subset`); re-search and
-fitting use every point; :func:`pipeline.evaluation.evaluate_rows` evaluates the rows.
+fitting use every point (indexed only within the candidates' range bands,
+:func:`pipeline.gate.within_range_bands`); :func:`pipeline.evaluation.evaluate_rows` evaluates
+the rows.
 
 When the range noise is known (recorded in the scan, or given), the gate and re-search are
 widened for it (:func:`pipeline.stages.noise_widened`) and the fit and quality gate take their
@@ -25,7 +27,7 @@ from markerplan.errors import DataError
 from pipeline.calibration import estimate_axis_offset, estimate_rotation_offsets
 from pipeline.clustering import euclidean_clusters
 from pipeline.evaluation import Reference, evaluate_rows
-from pipeline.gate import RangeIndex, research, two_box_gate
+from pipeline.gate import RangeIndex, research, two_box_gate, within_range_bands
 from pipeline.ground import remove_ground
 from pipeline.marker_table import MarkerRow, line_of_sight
 from pipeline.quality import MarkerMetrics, marker_metrics, quality_gate
@@ -94,8 +96,12 @@ def detection_subset(range_m: np.ndarray, full_density_range_m: float = 4.0,
     subset : (n,) int
         Ascending point indices.
     """
-    stride = np.clip((full_density_range_m / np.maximum(range_m, 1e-3)) ** 2, 1, max_stride)
-    return np.flatnonzero(np.arange(range_m.size) % stride.astype(np.int64) == 0)
+    stride = np.maximum(range_m, 1e-3)  # (full / range)^2 clipped, in place
+    np.divide(full_density_range_m, stride, out=stride)
+    np.square(stride, out=stride)
+    np.clip(stride, 1, max_stride, out=stride)
+    small = np.int32 if range_m.size < np.iinfo(np.int32).max else np.int64
+    return np.flatnonzero(np.arange(range_m.size, dtype=small) % stride.astype(small) == 0)
 
 
 def detect_candidates(cloud: StationCloud, cfg: ProcessConfig) -> list[np.ndarray]:
@@ -259,9 +265,14 @@ def _detect_and_measure(scan: StationScan, offsets: MountingOffsets, cfg: Proces
     clusters = detect_candidates(cloud, cfg)
     timer.lap("ground+cluster+gate")
     starts = np.array([cap_start(cloud.xyz_m[m], cfg.fit.radius_m) for m in clusters])
-    index = RangeIndex(cloud.xyz_m, cloud.range_m)
+    starts = starts.reshape(-1, 3)
+    near = within_range_bands(cloud.range_m, starts, cfg.research.radius_m)
+    xyz = cloud.xyz_m[near]
+    index = RangeIndex(xyz, cloud.range_m[near])
     timer.lap("index")
-    cands = measure_candidates(cloud.xyz_m, index, starts.reshape(-1, 3), cfg, noise)
+    cands = measure_candidates(xyz, index, starts, cfg, noise)
+    for c in cands:
+        c.members = near[c.members]
     timer.lap("research+fit+quality")
     return cands
 

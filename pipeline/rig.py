@@ -146,16 +146,19 @@ def sensor_to_station(xyz_sensor_m: np.ndarray, frame_index: np.ndarray,
                       turntable_angle_rad: np.ndarray, offsets: MountingOffsets) -> np.ndarray:
     """Merge sensor-frame points of many frames into the station frame.
 
-    One matrix product per run of equal frame indices (no per-point rotation temporary), so it
-    scales to the ~10 million points of an 800-frame station.
+    Long runs of equal frame indices (the ~10 million points of an 800-frame station) take one
+    matrix product per run, in place. Short runs (subsamples of a few points per frame) would
+    spend their time in that loop, so there the frames' shared mounting rotation ``S``
+    (:func:`frame_poses`: ``R_f = Rz(theta_f) S``, ``t_f = Rz(theta_f) d``) is applied to all
+    points in one product and the turntable angle enters as each point's ``cos`` and ``sin``,
+    in blocks of :data:`_BLOCK_POINTS` points.
 
     Parameters
     ----------
     xyz_sensor_m : (N, 3) float
         Points in the sensor frame, metres.
     frame_index : (N,) int
-        Frame of each point, indexing ``turntable_angle_rad`` (runs of equal values are
-        transformed together; sorted is fastest).
+        Frame of each point, indexing ``turntable_angle_rad`` (any order).
     turntable_angle_rad : (F,) float
         Turntable angle per frame, radians.
     offsets : MountingOffsets
@@ -166,18 +169,37 @@ def sensor_to_station(xyz_sensor_m: np.ndarray, frame_index: np.ndarray,
     xyz_station_m : (N, 3) float64
         Points in the station frame, metres.
     """
-    rotation, translation = frame_poses(turntable_angle_rad, offsets)
     fi = np.asarray(frame_index)
-    out = np.empty((fi.size, 3))
-    if fi.size == 0:
-        return out
-    starts = np.flatnonzero(np.r_[True, fi[1:] != fi[:-1]])
-    ends = np.r_[starts[1:], fi.size]
     p = np.asarray(xyz_sensor_m)
-    for a, b in zip(starts, ends, strict=True):
-        f = fi[a]
-        out[a:b] = p[a:b] @ rotation[f].T + translation[f]
+    out = np.empty((fi.size, 3))
+    starts = np.flatnonzero(np.r_[True, fi[1:] != fi[:-1]])
+    if fi.size >= _RUN_POINTS * starts.size:
+        rotation, translation = frame_poses(turntable_angle_rad, offsets)
+        for a, b, f in zip(starts, np.r_[starts[1:], fi.size], fi[starts], strict=True):
+            run = out[a:b]  # written in place: no temporaries per run
+            np.matmul(p[a:b], rotation[f].T, out=run)
+            run += translation[f]
+        return out
+    mounting = sensor_to_turntable_rotation(offsets)
+    theta = np.asarray(turntable_angle_rad, dtype=float).reshape(-1)
+    cos_f, sin_f = np.cos(theta), np.sin(theta)
+    dx, dy = (float(v) for v in offsets.axis_offset_m)
+    for a in range(0, fi.size, _BLOCK_POINTS):
+        b = min(a + _BLOCK_POINTS, fi.size)
+        turntable = mounting @ p[a:b].T  # (3, m) rows: p_T = S p_S + d, then Rz(theta) p_T
+        x, y = turntable[0] + dx, turntable[1] + dy
+        c, s = cos_f[fi[a:b]], sin_f[fi[a:b]]
+        np.subtract(c * x, s * y, out=out[a:b, 0])
+        np.add(s * x, c * y, out=out[a:b, 1])
+        out[a:b, 2] = turntable[2]
     return out
+
+
+#: Points per block of :func:`sensor_to_station`'s short-run path (temporaries of a few MB).
+_BLOCK_POINTS = 1 << 18
+#: Mean run length (points per run of equal frame indices) from which :func:`sensor_to_station`
+#: loops over the runs (measured: a product per run costs about as much as 100 points' gathers).
+_RUN_POINTS = 128
 
 
 def station_to_site_matrix(heading_rad: float, roll_rad: float = 0.0,

@@ -43,6 +43,7 @@ least squares, biased small by range noise: 87 mm at ``s = 15 mm``, 62 mm at ``s
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -641,24 +642,91 @@ def _los_solve(rng, beam, centre, radius, noise, free_radius=False, max_iter=50,
                ) -> tuple[np.ndarray, float, np.ndarray]:
     """Gauss-Newton of :func:`fit_line_of_sight`, sensor at the origin.
 
+    The problem of :func:`_los_system` with its invariants hoisted out of the iterations (the
+    range part of each point's variance), ``J^T W J`` and ``J^T W r`` from one product
+    (``V^T diag(w / h^2) [V, h r]`` with ``V = t beam - c``), and for a fixed radius the 3 x 3
+    normal equations inverted and stepped in closed form on Python floats (a singular matrix
+    ends the iterations, as :func:`numpy.linalg.inv`'s error did): the iterates of the plain
+    Gauss-Newton up to round-off.
+
     Returns the centre (3,), the radius and the covariance ((3, 3) or (4, 4) with the radius)
     of the estimate under the noise model.
     """
-    x = np.append(np.asarray(centre, dtype=float), radius)
+    x = [*np.asarray(centre, dtype=float).tolist(), float(radius)]
     k = 4 if free_radius else 3
     cov = np.full((k, k), np.nan)
+    var0 = noise.total_sigma_m(rng) ** 2  # variance at normal incidence, (n,)
+    inc2 = noise.incidence_noise_m ** 2
+    v = np.empty((rng.size, k + 1))  # [rows of the Jacobian times h, h * residual]
     for _ in range(max_iter):
-        jac, w, res = _los_system(rng, beam, x, noise, free_radius)
+        c = np.array(x[:3])
+        r2 = x[3] * x[3]
+        along = beam @ c
+        h2 = along * along
+        h2 += r2 - (x[0] * x[0] + x[1] * x[1] + x[2] * x[2])
+        np.maximum(h2, r2 * _MIN_COS_INCIDENCE ** 2, out=h2)
+        h = np.sqrt(h2)
+        t = along - h
+        var = var0 + inc2 * np.maximum(r2 - h2, 0.0) / h2 if inc2 else var0
+        np.multiply(t[:, None], beam, out=v[:, :3])
+        v[:, :3] -= c
+        if free_radius:
+            v[:, 3] = x[3]
+        np.multiply(rng - t, h, out=v[:, k])
+        m = (v[:, :k] * (1.0 / (var * h2))[:, None]).T @ v  # [J^T W J, J^T W r]
         try:
-            cov = np.linalg.inv(jac.T @ (w[:, None] * jac))
+            if free_radius:
+                cov = np.linalg.inv(m[:, :k])
+                step = (-cov @ m[:, k]).tolist()
+            else:
+                rows = m.tolist()
+                inv = _inv3(rows)
+                g = [row[3] for row in rows]
+                step = [-(a * g[0] + b * g[1] + e * g[2]) for a, b, e in inv]
+                cov = inv
         except np.linalg.LinAlgError:
             break
-        step = -cov @ (jac.T @ (w * res))
-        step *= min(1.0, 0.5 * x[3] / max(float(np.linalg.norm(step)), 1e-300))  # damped
-        x[:k] += step
-        if np.linalg.norm(step) < tol_m:
+        length = math.sqrt(sum(s * s for s in step))
+        damp = min(1.0, 0.5 * x[3] / max(length, 1e-300))
+        for i, s in enumerate(step):
+            x[i] += s * damp
+        if (length if damp == 1.0 else length * damp) < tol_m:
             break
-    return x[:3], float(abs(x[3])), cov
+    return np.array(x[:3]), float(abs(x[3])), np.array(cov, dtype=float)
+
+
+def _inv3(a: list) -> tuple:
+    """Inverse of a 3 x 3 matrix by cofactors, on Python floats (no LAPACK call's overhead).
+
+    Parameters
+    ----------
+    a : list of 3 sequences of >= 3 floats
+        Rows of the matrix (entries past the third of a row are ignored).
+
+    Returns
+    -------
+    inverse : tuple of 3 tuples of 3 floats
+        Rows of the inverse.
+
+    Raises
+    ------
+    numpy.linalg.LinAlgError
+        If the determinant is exactly zero.
+
+    Examples
+    --------
+    >>> a = np.array([[4.0, 1, 0], [1, 3, 1], [0, 1, 2]])
+    >>> bool(np.allclose(np.array(_inv3(a.tolist())) @ a, np.eye(3)))
+    True
+    """
+    (a00, a01, a02, *_), (a10, a11, a12, *_), (a20, a21, a22, *_) = a
+    c00, c01, c02 = a11 * a22 - a12 * a21, a12 * a20 - a10 * a22, a10 * a21 - a11 * a20
+    det = a00 * c00 + a01 * c01 + a02 * c02
+    if det == 0.0:
+        raise np.linalg.LinAlgError("singular matrix")
+    return ((c00 / det, (a02 * a21 - a01 * a22) / det, (a01 * a12 - a02 * a11) / det),
+            (c01 / det, (a00 * a22 - a02 * a20) / det, (a02 * a10 - a00 * a12) / det),
+            (c02 / det, (a01 * a20 - a00 * a21) / det, (a00 * a11 - a01 * a10) / det))
 
 
 def hemisphere_model(radius_m: float, spacing_m: float | None = None) -> np.ndarray:
