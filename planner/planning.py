@@ -536,7 +536,7 @@ def _points_on_dem(points: list[dict], dem, height_m: float, label: str
 @dataclass
 class PlanOutcome:
     """A finished planning run (inputs, intermediate products, the plan and the baselines;
-    ``scene`` is the terrain's ray scene, ``None`` for a plan from a visibility table)."""
+    ``candidates`` and ``visibility`` are ``None`` for a plan from a visibility table)."""
 
     inputs: PlanInputs
     config: object
@@ -548,7 +548,6 @@ class PlanOutcome:
     baselines: list[Baseline]
     as_built: LayoutCheck | None
     timings_s: dict
-    scene: object | None = None
 
     @property
     def selected_ids(self) -> list[str]:
@@ -556,11 +555,12 @@ class PlanOutcome:
 
 
 def build_problem(inputs: PlanInputs, config, error_model, progress: bool = True
-                  ) -> tuple[PlanProblem, Candidates, object, object, dict]:
+                  ) -> tuple[PlanProblem, Candidates, object, dict, dict]:
     """Candidates + visibility matrix + usability (:func:`planner.sight.sight_problem`) -> the
     program's input.
 
-    Returns ``(problem, candidates, visibility, scene, timings_s)``; existing markers are
+    Returns ``(problem, candidates, visibility, tiles, timings_s)`` (``tiles`` as
+    :attr:`planner.sight.Sight.tiles`); existing markers are
     appended to the candidate sites (ids as given) and fixed.
     """
     timings = {}
@@ -578,7 +578,7 @@ def build_problem(inputs: PlanInputs, config, error_model, progress: bool = True
     sight = sight_problem(inputs, site_ids, site_xyz, config, error_model,
                           site_existing=existing, progress=progress)
     timings.update(sight.timings_s)
-    return sight.problem, cand, sight.visibility, sight.scene, timings
+    return sight.problem, cand, sight.visibility, sight.tiles, timings
 
 
 def make_plan(inputs: PlanInputs, config, error_model, model_name: str = "default",
@@ -599,9 +599,9 @@ def make_plan(inputs: PlanInputs, config, error_model, model_name: str = "defaul
         Progress bars on stderr.
     """
     timings: dict = {}
-    cand = vis = scene = None
+    cand = vis = None
     if problem is None:
-        problem, cand, vis, scene, timings = build_problem(inputs, config, error_model, progress)
+        problem, cand, vis, _, timings = build_problem(inputs, config, error_model, progress)
     t = time.perf_counter()
     result = plan_sites(problem, config)
     timings["program"] = time.perf_counter() - t
@@ -614,14 +614,14 @@ def make_plan(inputs: PlanInputs, config, error_model, model_name: str = "defaul
         baselines.append(regular_grid(problem, config, (x0, y0, x1, y1)))
     timings["baselines"] = time.perf_counter() - t
     as_built = None
-    if scene is not None and len(inputs.as_built_ids):
+    if vis is not None and len(inputs.as_built_ids):
         pab = sight_problem(inputs, inputs.as_built_ids, inputs.as_built_xyz, config,
-                            error_model, scene=scene, progress=False).problem
+                            error_model, progress=False).problem
         as_built = evaluate_layout(pab, np.ones(len(inputs.as_built_ids), bool),
                                    config.replace(existing=(), forbidden=()))
     return PlanOutcome(inputs=inputs, config=config, model_name=model_name, problem=problem,
                        candidates=cand, visibility=vis, result=result, baselines=baselines,
-                       as_built=as_built, timings_s=timings, scene=scene)
+                       as_built=as_built, timings_s=timings)
 
 
 def plan_bounds(inputs: PlanInputs, problem: PlanProblem) -> tuple[float, float, float, float]:

@@ -149,7 +149,7 @@ def stand_map(outcome, error_model, cell_m: float | None = None, progress: bool 
     grid_inputs = replace(inp, station_ids=[f"G{i}" for i in stand], station_xyz=sxyz,
                           station_heading_rad=np.zeros(stand.size))
     problem = sight_problem(grid_inputs, [prob.site_ids[j] for j in sel], prob.site_xyz[sel],
-                            cfg, error_model, scene=outcome.scene, progress=progress).problem
+                            cfg, error_model, progress=progress).problem
     count, sectors = direction_status(problem, np.ones(sel.size, bool), cfg.n_sectors)
     err = _known_control_errors(problem, cfg)
     err[(count < cfg.min_markers) | (sectors < cfg.min_sectors) | ~np.isfinite(err)] = np.nan
