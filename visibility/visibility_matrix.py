@@ -326,7 +326,7 @@ def tile_rectangle(dem, station_xy_m: np.ndarray, reach_m: float
 
 def group_visibility(group: VisibilityGroup) -> GroupVisibility:
     """Ray-cast one group of stations against its sites through its own tile (pure: the
-    scene is built here and dropped on return).
+    scene is built here, only when some site is in reach, and dropped on return).
 
     Parameters
     ----------
@@ -338,6 +338,11 @@ def group_visibility(group: VisibilityGroup) -> GroupVisibility:
     """
     from visibility.scene import RayScene
 
+    if not len(group.site_index):  # nothing in reach: no scene to build
+        empty = visibility_matrix(None, group.station_position_m, np.zeros((0, 3)),
+                                  group.marker_radius_m, group.max_range_m,
+                                  group.rays_per_marker, group.sampling, progress=False)
+        return GroupVisibility(vis=empty, scene_s=0.0, n_triangles=0)
     t = time.perf_counter()
     scene = RayScene(group.tile)
     scene_s = time.perf_counter() - t
