@@ -171,7 +171,7 @@ def km_traverse() -> np.ndarray:
     return np.array([p for leg in ends for p in leg])
 
 
-def _along(path: np.ndarray, step_m: float) -> tuple[np.ndarray, np.ndarray]:
+def points_along(path: np.ndarray, step_m: float) -> tuple[np.ndarray, np.ndarray]:
     """Points every ``step_m`` along a polyline (its start included) and the path's heading
     there: ((p, 2) m, (p,) rad)."""
     seg = np.diff(path, axis=0)
@@ -185,7 +185,7 @@ def _along(path: np.ndarray, step_m: float) -> tuple[np.ndarray, np.ndarray]:
 
 def _km_site(seed: int) -> Site:
     path = km_traverse()
-    stations, headings = _along(path, KM_STATION_STEP_M)
+    stations, headings = points_along(path, KM_STATION_STEP_M)
     stations = stations + np.random.default_rng([seed, 1]).uniform(-2.0, 2.0, stations.shape)
     x0, x1 = KM_LEG_X_M
     mx = np.arange(x0, x1 + 1e-9, 60.0)
