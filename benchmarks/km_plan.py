@@ -6,7 +6,8 @@ status, bound/gap, wall time per stage and peak RSS (each in its own process); a
 baseline, the peak RSS a mesh of the whole site would need, extrapolated from a scene built on
 one tile in the same run (a whole-site scene is not built). Finally one JSON object.
 
-    .venv/bin/python -u benchmarks/km_plan.py [--grid-spacing 4] [--time-limit 120] [--keep DIR]
+    .venv/bin/python -u benchmarks/km_plan.py [--grid-spacing 4] [--time-limit 120]
+        [--network-requirement 0.5] [--keep DIR]
 """
 
 from __future__ import annotations
@@ -36,6 +37,7 @@ def _child(cmd: list[str], log: Path) -> tuple[int, float, float]:
 
 _SITE_PROBE = """
 import json, resource, time
+import numpy as np
 t = time.perf_counter()
 from visibility.sites import load_site
 site = load_site("km")
@@ -43,6 +45,8 @@ print(json.dumps({"s": time.perf_counter() - t, "shape": list(site.dem.shape),
                   "cell_m": site.dem.cell_size_m, "extent_m": list(site.dem.extent()),
                   "stations": len(site.station_ids), "markers": len(site.marker_ids),
                   "craters": len(site.craters), "rocks": len(site.rock_radii_m),
+                  "centre_station": site.station_ids[int(np.argmin(np.hypot(
+                      *site.station_xy_m.T)))],
                   "peak_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}))
 """
 
@@ -74,6 +78,9 @@ def main() -> None:
     ap.add_argument("--grid-spacing", type=float, default=4.0,
                     help="Candidate grid spacing, m (the 1 m default gives ~1 M grid points).")
     ap.add_argument("--time-limit", type=float, default=120.0, help="Solver time limit, s.")
+    ap.add_argument("--network-requirement", type=float, default=0.5,
+                    help="requirement_m of the network plan, m (relative to the station nearest "
+                         "the centre; 0.1 m is out of reach ~200 m from the reference).")
     ap.add_argument("--keep", type=Path, help="Write the configuration and plans here.")
     args = ap.parse_args()
 
@@ -94,11 +101,16 @@ def main() -> None:
 
     config = root / "km.toml"
     config.write_text(f"grid_spacing_m = {args.grid_spacing}\n")
+    network = root / "km-network.toml"
+    network.write_text(f"grid_spacing_m = {args.grid_spacing}\n"
+                       f"requirement_m = {args.network_requirement}\n")
     cli = str(Path(sys.executable).with_name("markerplan"))
     figures = {"site": site, "whole_mesh_mb": whole_mb, "probe_mesh": mesh}
-    for name, extra in (("plan", []), ("plan_network", ["--network"])):
+    runs = (("plan", config, []), ("plan_network", network, [
+        "--network", "--reference-station", site["centre_station"]]))
+    for name, cfg, extra in runs:
         out = root / name
-        cmd = [cli, "plan", "--site", "km", "--config", str(config), "--time-limit",
+        cmd = [cli, "plan", "--site", "km", "--config", str(cfg), "--time-limit",
                str(args.time_limit), "--json", "--out", str(out), "--overwrite", *extra]
         code, wall, peak = _child(cmd, root / f"{name}.log")
         if code:

@@ -296,18 +296,20 @@ class GroupVisibility:
     n_triangles: int
 
 
-def tile_rectangle(dem, station_xy_m: np.ndarray, reach_m: float
+def tile_rectangle(dem, xy_m: np.ndarray, margin_m: float
                    ) -> tuple[float, float, float, float]:
-    """The rectangle a group's tile must cover, snapped so the tile starts on an even row and
-    column of ``dem`` (its triangles' diagonals then match the whole mesh's checkerboard).
+    """The rectangle a group's tile must cover: the points' bounding box plus a margin,
+    snapped so the tile starts on an even row and column of ``dem`` (its triangles'
+    diagonals then match the whole mesh's checkerboard, :func:`visibility.mesh.dem_to_mesh`).
 
     Parameters
     ----------
     dem : visibility.dem.DEM
-    station_xy_m : (g, 2) float
-        The group's stations, site frame, m.
-    reach_m : float
-        How far from a station a ray can go (range + marker radius + one cell), m.
+    xy_m : (p, 2) float
+        The group's stations and the sites they see, site frame, m: every ray runs between
+        a station and a point on a marker.
+    margin_m : float
+        Marker radius plus one cell, m.
 
     Returns
     -------
@@ -316,8 +318,8 @@ def tile_rectangle(dem, station_xy_m: np.ndarray, reach_m: float
     """
     c = dem.cell_size_m
     x0, y0 = dem.origin_m
-    lo = station_xy_m.min(axis=0) - reach_m
-    hi = station_xy_m.max(axis=0) + reach_m
+    lo = xy_m.min(axis=0) - margin_m
+    hi = xy_m.max(axis=0) + margin_m
     # half a cell past an even index, so crop's floor lands on that even index
     i0 = 2 * np.floor((lo[0] - x0) / c / 2)
     j0 = 2 * np.floor((lo[1] - y0) / c / 2)
@@ -383,9 +385,10 @@ def tiled_visibility(dem, station_position_m, site_centre_m, marker_radius_m: fl
     each block cast through a tile of the DEM that reaches as far as its rays
     (:func:`group_visibility`).
 
-    A ray from a station to a site within ``max_range_m`` stays within ``max_range_m +
-    marker_radius_m`` of the station horizontally, so the tile (that plus one cell, on the
-    whole DEM's triangles) holds every triangle the ray could hit. The tile's mesh is recentred
+    A ray runs from a station to a point on a marker within ``max_range_m``, so the bounding
+    box of the group's stations and the sites they see, widened by the marker radius and one
+    cell (:func:`tile_rectangle`, on the whole DEM's triangles), holds every triangle a ray
+    could hit: at most ``block_m + 2 max_range_m`` across. The tile's mesh is recentred
     on the tile, so Embree's float32 coordinates differ from the whole mesh's by rounding: a
     ray grazing an edge can rarely flip (see ``benchmarks/km_plan.py``).
 
@@ -396,8 +399,9 @@ def tiled_visibility(dem, station_position_m, site_centre_m, marker_radius_m: fl
     station_position_m, site_centre_m, marker_radius_m, max_range_m, rays_per_marker, sampling
         As :func:`visibility_matrix`.
     block_m : float, optional
-        Side of a station block, m (default ``2 * max_range_m``): a tile is about
-        ``block_m + 2 max_range_m`` across.
+        Side of a station block, m (default ``4 * max_range_m``: a dense grid of stations
+        then builds 2.25 times the DEM's triangles in all, each tile at most 9 ``max_range_m``
+        squared).
     map_groups : callable
         ``map_groups(group_visibility, groups)`` -> iterable of answers in the groups' order;
         default the built-in ``map`` (one group at a time in this process). The groups are
@@ -418,16 +422,18 @@ def tiled_visibility(dem, station_position_m, site_centre_m, marker_radius_m: fl
     sampling = sampling or AngularSampling()
     from tqdm import tqdm
 
-    groups = station_groups(st[:, :2], block_m or 2.0 * max_range_m) if len(st) else []
+    groups = station_groups(st[:, :2], block_m or 4.0 * max_range_m) if len(st) else []
     tree = cKDTree(si[:, :2]) if len(si) else None
-    reach = max_range_m + marker_radius_m + dem.cell_size_m
+    margin = marker_radius_m + dem.cell_size_m
 
     def tasks():
         for g in groups:
             near = [] if tree is None else tree.query_ball_point(st[g, :2], r=max_range_m)
             sites = np.unique(np.concatenate([np.asarray(n, np.int64) for n in near])) \
                 if len(near) else np.zeros(0, np.int64)
-            yield VisibilityGroup(dem.crop(*tile_rectangle(dem, st[g, :2], reach)), g, st[g],
+            seeing = [k for k, n in zip(g, near, strict=True) if len(n)] or list(g)
+            xy = np.vstack([st[seeing, :2], si[sites, :2]])
+            yield VisibilityGroup(dem.crop(*tile_rectangle(dem, xy, margin)), g, st[g],
                                   sites, si[sites], marker_radius_m, max_range_m,
                                   rays_per_marker, sampling)
 
