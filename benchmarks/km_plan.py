@@ -51,7 +51,7 @@ print(json.dumps({"s": time.perf_counter() - t, "shape": list(site.dem.shape),
 """
 
 _MESH_PROBE = """
-import json, resource, sys
+import json, resource, sys, time
 import numpy as np
 from visibility.dem import DEM
 from visibility.scene import RayScene
@@ -60,10 +60,12 @@ n = int(sys.argv[1])
 dem = DEM(fractal_surface((n, n), 0.25, 0.85, 0.02, 30.0, np.random.default_rng(0)),
           (0.0, 0.0), 0.25)
 before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+t = time.perf_counter()
 scene = RayScene(dem)
-scene.intersect(np.array([[50.0, 50.0, 5.0]]), np.array([[0.0, 0.0, -1.0]]))
+scene.intersect(np.array([[50.0, 50.0, 5.0]]), np.array([[0.0, 0.0, -1.0]]))  # builds the BVH
+s = time.perf_counter() - t
 after = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
-print(json.dumps({"triangles": scene.n_triangles, "mb": after - before}))
+print(json.dumps({"triangles": scene.n_triangles, "mb": after - before, "s": s}))
 """
 
 
@@ -95,9 +97,11 @@ def main() -> None:
     whole_triangles = 2 * (site["shape"][0] - 1) * (site["shape"][1] - 1)
     mesh = _probe(_MESH_PROBE, str(PROBE_CELLS))
     whole_mb = mesh["mb"] / mesh["triangles"] * whole_triangles
+    whole_s = mesh["s"] / mesh["triangles"] * whole_triangles
     print(f"baseline: a scene of {mesh['triangles']:,} triangles adds {mesh['mb']:.0f} MB peak "
-          f"RSS; the whole site ({whole_triangles:,} triangles, {cells:,} cells) would add "
-          f"~{whole_mb:,.0f} MB (extrapolated, not built)")
+          f"RSS and builds in {mesh['s']:.2f} s; the whole site ({whole_triangles:,} triangles, "
+          f"{cells:,} cells) would add ~{whole_mb:,.0f} MB and take ~{whole_s:.0f} s "
+          "(extrapolated, not built)")
 
     config = root / "km.toml"
     config.write_text(f"grid_spacing_m = {args.grid_spacing}\n")
@@ -105,7 +109,8 @@ def main() -> None:
     network.write_text(f"grid_spacing_m = {args.grid_spacing}\n"
                        f"requirement_m = {args.network_requirement}\n")
     cli = str(Path(sys.executable).with_name("markerplan"))
-    figures = {"site": site, "whole_mesh_mb": whole_mb, "probe_mesh": mesh}
+    figures = {"site": site, "whole_mesh_mb": whole_mb, "whole_mesh_s": whole_s,
+               "probe_mesh": mesh}
     runs = (("plan", config, []), ("plan_network", network, [
         "--network", "--reference-station", site["centre_station"]]))
     for name, cfg, extra in runs:
@@ -123,9 +128,11 @@ def main() -> None:
         print(f"{name}: {doc['n_markers']} markers, status {solver.get('status')}, bound "
               f"{solver.get('dual_bound')}, gap {solver.get('gap')}; {wall:.0f} s wall "
               f"({stages}); peak RSS {peak:.0f} MB = {peak / whole_mb:.2f} x the whole-site "
-              "mesh alone")
+              f"mesh alone; tile scenes {summary['timings_s']['scene'] / whole_s:.2f} x its "
+              "build time")
         figures[name] = {"n_markers": doc["n_markers"], "solver": solver, "wall_s": wall,
                          "peak_rss_mb": peak, "peak_vs_whole_mesh": peak / whole_mb,
+                         "scene_vs_whole_mesh": summary["timings_s"]["scene"] / whole_s,
                          "timings_s": summary["timings_s"],
                          "candidates": doc.get("candidates")}
     print(json.dumps(figures))
