@@ -437,10 +437,9 @@ def tiled_visibility(dem, station_position_m, site_centre_m, marker_radius_m: fl
                                   sites, si[sites], marker_radius_m, max_range_m,
                                   rays_per_marker, sampling)
 
-    answers = []
-    for ans in tqdm(map_groups(group_visibility, tasks()), total=len(groups), desc="visibility",
-                    unit="group", file=sys.stderr, disable=None if progress else True):
-        answers.append(ans)
+    answers = list(tqdm(map_groups(group_visibility, tasks()), total=len(groups),
+                        desc="visibility", unit="group", file=sys.stderr,
+                        disable=None if progress else True))
     parts = [a.vis for a in answers]
     station = np.concatenate([p.station for p in parts] + [np.zeros(0, np.int64)])
     site = np.concatenate([p.site for p in parts] + [np.zeros(0, np.int64)])
