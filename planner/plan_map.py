@@ -36,9 +36,12 @@ def draw_plan_map(outcome, path: Path, dpi: int = 150) -> Path:
     gx, gy = dem.grid_xy()
     ci = (gx >= xmin - 1) & (gx <= xmax + 1)
     cj = (gy >= ymin - 1) & (gy <= ymax + 1)
-    h = dem.heights_m[np.ix_(cj, ci)]
-    step = max(1, int(np.ceil(max(h.shape) / 1200)))
-    h = h[::step, ::step]
+    # the view is a contiguous block of cells: stride it as a view, never copy the whole DEM
+    cols = slice(int(np.argmax(ci)), int(np.flatnonzero(ci)[-1]) + 1)
+    rows = slice(int(np.argmax(cj)), int(np.flatnonzero(cj)[-1]) + 1)
+    step = max(1, int(np.ceil(max(rows.stop - rows.start, cols.stop - cols.start) / 1200)))
+    view = (slice(rows.start, rows.stop, step), slice(cols.start, cols.stop, step))
+    h = dem.heights_m[view]
     ls = LightSource(azdeg=315, altdeg=35)
     # LightSource expects row 0 at the top (north); our rows run along +y, so flip and back
     shade = ls.hillshade(h[::-1], vert_exag=3.0, dx=dem.cell_size_m * step,
@@ -47,7 +50,7 @@ def draw_plan_map(outcome, path: Path, dpi: int = 150) -> Path:
     ax.imshow(shade, cmap="gray", origin="lower", extent=extent, vmin=0, vmax=1,
               interpolation="bilinear")
     # nodata: its filled heights are no terrain, so cover them
-    nodata = ~dem.valid_mask()[np.ix_(cj, ci)][::step, ::step]
+    nodata = ~dem.valid_mask()[view]
     if nodata.any():
         ax.imshow(np.ma.masked_where(~nodata, nodata), cmap=ListedColormap([NODATA_COLOUR]),
                   origin="lower", extent=extent, interpolation="nearest", zorder=1)

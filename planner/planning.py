@@ -536,7 +536,7 @@ def _points_on_dem(points: list[dict], dem, height_m: float, label: str
 @dataclass
 class PlanOutcome:
     """A finished planning run (inputs, intermediate products, the plan and the baselines;
-    ``scene`` is the terrain's ray scene, ``None`` for a plan from a visibility table)."""
+    ``candidates`` and ``visibility`` are ``None`` for a plan from a visibility table)."""
 
     inputs: PlanInputs
     config: object
@@ -548,19 +548,19 @@ class PlanOutcome:
     baselines: list[Baseline]
     as_built: LayoutCheck | None
     timings_s: dict
-    scene: object | None = None
 
     @property
     def selected_ids(self) -> list[str]:
         return [self.problem.site_ids[j] for j in np.flatnonzero(self.result.selected)]
 
 
-def build_problem(inputs: PlanInputs, config, error_model, progress: bool = True
-                  ) -> tuple[PlanProblem, Candidates, object, object, dict]:
-    """Candidates + visibility matrix + usability (:func:`planner.sight.sight_problem`) -> the
-    program's input.
+def build_problem(inputs: PlanInputs, config, error_model, progress: bool = True,
+                  map_groups=map) -> tuple[PlanProblem, Candidates, object, dict, dict]:
+    """Candidates + visibility matrix + usability (:func:`planner.sight.sight_problem`, its
+    station groups mapped over by ``map_groups``) -> the program's input.
 
-    Returns ``(problem, candidates, visibility, scene, timings_s)``; existing markers are
+    Returns ``(problem, candidates, visibility, tiles, timings_s)`` (``tiles`` as
+    :attr:`planner.sight.Sight.tiles`); existing markers are
     appended to the candidate sites (ids as given) and fixed.
     """
     timings = {}
@@ -576,13 +576,14 @@ def build_problem(inputs: PlanInputs, config, error_model, progress: bool = True
     site_xyz = np.vstack([cand.centre_m, inputs.existing_xyz])
     existing = np.r_[np.zeros(len(cand), bool), np.ones(len(inputs.existing_ids), bool)]
     sight = sight_problem(inputs, site_ids, site_xyz, config, error_model,
-                          site_existing=existing, progress=progress)
+                          site_existing=existing, progress=progress, map_groups=map_groups)
     timings.update(sight.timings_s)
-    return sight.problem, cand, sight.visibility, sight.scene, timings
+    return sight.problem, cand, sight.visibility, sight.tiles, timings
 
 
 def make_plan(inputs: PlanInputs, config, error_model, model_name: str = "default",
-              problem: PlanProblem | None = None, progress: bool = True) -> PlanOutcome:
+              problem: PlanProblem | None = None, progress: bool = True,
+              map_groups=map) -> PlanOutcome:
     """Run the whole plan: candidates, visibility, integer program, baselines, as-built check.
 
     Parameters
@@ -597,11 +598,15 @@ def make_plan(inputs: PlanInputs, config, error_model, model_name: str = "defaul
         Plan from this (e.g. a ``--visibility`` table) instead of ray casting.
     progress : bool
         Progress bars on stderr.
+    map_groups : callable
+        How the ray casting's station groups are mapped over (built-in ``map``: one at a time
+        here), see :func:`planner.sight.sight_problem`.
     """
     timings: dict = {}
-    cand = vis = scene = None
+    cand = vis = None
     if problem is None:
-        problem, cand, vis, scene, timings = build_problem(inputs, config, error_model, progress)
+        problem, cand, vis, _, timings = build_problem(inputs, config, error_model, progress,
+                                                       map_groups)
     t = time.perf_counter()
     result = plan_sites(problem, config)
     timings["program"] = time.perf_counter() - t
@@ -614,14 +619,14 @@ def make_plan(inputs: PlanInputs, config, error_model, model_name: str = "defaul
         baselines.append(regular_grid(problem, config, (x0, y0, x1, y1)))
     timings["baselines"] = time.perf_counter() - t
     as_built = None
-    if scene is not None and len(inputs.as_built_ids):
+    if vis is not None and len(inputs.as_built_ids):
         pab = sight_problem(inputs, inputs.as_built_ids, inputs.as_built_xyz, config,
-                            error_model, scene=scene, progress=False).problem
+                            error_model, progress=False, map_groups=map_groups).problem
         as_built = evaluate_layout(pab, np.ones(len(inputs.as_built_ids), bool),
                                    config.replace(existing=(), forbidden=()))
     return PlanOutcome(inputs=inputs, config=config, model_name=model_name, problem=problem,
                        candidates=cand, visibility=vis, result=result, baselines=baselines,
-                       as_built=as_built, timings_s=timings, scene=scene)
+                       as_built=as_built, timings_s=timings)
 
 
 def plan_bounds(inputs: PlanInputs, problem: PlanProblem) -> tuple[float, float, float, float]:

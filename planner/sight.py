@@ -1,9 +1,10 @@
-"""What each station sees, written once: ray scene -> visibility matrix -> usable pairs.
+"""What each station sees, written once: tiled ray scenes -> visibility matrix -> usable pairs.
 
-The one way plans, their as-built check and reduction studies get a
-:class:`~planner.usability.PlanProblem` from terrain: a terrain-only
-:class:`visibility.scene.RayScene`, the station x site
-:func:`visibility.visibility_matrix.visibility_matrix` with the default rig's angular sampling
+The one way plans, their as-built check, stand maps and reduction studies get a
+:class:`~planner.usability.PlanProblem` from terrain: the station x site
+:func:`visibility.visibility_matrix.tiled_visibility` (stations in blocks, each cast through a
+terrain-only :class:`visibility.scene.RayScene` of the DEM tile within its reach, so no step
+holds a mesh of the whole site) with the default rig's angular sampling
 (:mod:`visibility.sensor`), and the usability verdict of
 :func:`planner.usability.problem_from_visibility`.
 
@@ -14,15 +15,13 @@ since unknown terrain could hide the marker.
 
 from __future__ import annotations
 
-import time
 from dataclasses import dataclass, replace
 
 import numpy as np
 
 from planner.usability import OCCLUDED, PlanProblem, problem_from_visibility
-from visibility.scene import RayScene
 from visibility.sensor import RigConfig, SensorConfig
-from visibility.visibility_matrix import AngularSampling, VisibilityMatrix, visibility_matrix
+from visibility.visibility_matrix import AngularSampling, VisibilityMatrix, tiled_visibility
 
 
 @dataclass(frozen=True)
@@ -33,16 +32,16 @@ class Sight:
     ----------
     problem : PlanProblem
     visibility : VisibilityMatrix
-    scene : RayScene
-        Re-usable for other sites on the same terrain.
     timings_s : dict
-        ``"scene"`` (when the scene was built here) and ``"visibility"``, s.
+        ``"scene"`` (tile scenes built, summed) and ``"visibility"`` (ray casting, summed), s.
+    tiles : dict
+        ``"groups"`` (station blocks, one tile each) and ``"max_tile_triangles"``.
     """
 
     problem: PlanProblem
     visibility: VisibilityMatrix
-    scene: RayScene
     timings_s: dict
+    tiles: dict
 
 
 def angular_sampling() -> AngularSampling:
@@ -52,8 +51,8 @@ def angular_sampling() -> AngularSampling:
 
 
 def sight_problem(inputs, site_ids, site_xyz: np.ndarray, config, error_model,
-                  site_existing: np.ndarray | None = None, scene: RayScene | None = None,
-                  progress: bool = True) -> Sight:
+                  site_existing: np.ndarray | None = None, progress: bool = True,
+                  map_groups=map) -> Sight:
     """Ray-cast the stations against some sites and judge every pair.
 
     Parameters
@@ -69,10 +68,11 @@ def sight_problem(inputs, site_ids, site_xyz: np.ndarray, config, error_model,
     error_model : ErrorModel
     site_existing : (n,) bool, optional
         Markers already in the field (fixed and free in the plan).
-    scene : RayScene, optional
-        The terrain scene of ``inputs.dem`` when already built.
     progress : bool
         Progress bar on stderr.
+    map_groups : callable
+        How the station groups are mapped over (built-in ``map`` by default; a distributed
+        map for a cluster), see :func:`~visibility.visibility_matrix.tiled_visibility`.
 
     Returns
     -------
@@ -80,21 +80,18 @@ def sight_problem(inputs, site_ids, site_xyz: np.ndarray, config, error_model,
         Usable pairs whose sight line crosses nodata (:func:`crosses_nodata`) are judged
         occluded.
     """
-    timings = {}
-    if scene is None:
-        t = time.perf_counter()
-        scene = RayScene(inputs.dem)
-        timings["scene"] = time.perf_counter() - t
-    vis = visibility_matrix(scene, inputs.station_xyz, site_xyz, inputs.marker_radius_m,
-                            config.max_range_m, config.rays_per_marker, angular_sampling(),
-                            progress=progress)
-    timings["visibility"] = vis.elapsed_s
+    vis, stats = tiled_visibility(inputs.dem, inputs.station_xyz, site_xyz,
+                                  inputs.marker_radius_m, config.max_range_m,
+                                  config.rays_per_marker, angular_sampling(),
+                                  map_groups=map_groups, progress=progress)
+    timings = {"scene": stats["scene_s"], "visibility": vis.elapsed_s}
     problem = problem_from_visibility(vis, error_model, config, inputs.station_ids,
                                       inputs.station_xyz, site_ids, site_xyz,
                                       site_existing=site_existing)
     if inputs.dem.valid is not None:
         problem = _unknown_terrain_occludes(problem, inputs.dem)
-    return Sight(problem=problem, visibility=vis, scene=scene, timings_s=timings)
+    return Sight(problem=problem, visibility=vis, timings_s=timings,
+                 tiles={k: stats[k] for k in ("groups", "max_tile_triangles")})
 
 
 def _unknown_terrain_occludes(problem: PlanProblem, dem) -> PlanProblem:

@@ -117,8 +117,8 @@ def stand_grid(dem, k: int) -> tuple[np.ndarray, tuple]:
     return np.stack([gx, gy], axis=-1), (size, 0.0, left, 0.0, -size, top)
 
 
-def stand_map(outcome, error_model, cell_m: float | None = None, progress: bool = False
-              ) -> StandMap:
+def stand_map(outcome, error_model, cell_m: float | None = None, progress: bool = False,
+              map_groups=map) -> StandMap:
     """The stand map of a plan: usable markers and predicted error at every grid cell.
 
     Parameters
@@ -132,6 +132,9 @@ def stand_map(outcome, error_model, cell_m: float | None = None, progress: bool 
         Cell size, m (see :func:`cells_per_stand_cell`).
     progress : bool
         Progress bar of the ray casting on stderr.
+    map_groups : callable
+        How the ray casting's station groups (blocks of grid cells, each with its own DEM
+        tile) are mapped over, see :func:`planner.sight.sight_problem`.
 
     Returns
     -------
@@ -149,7 +152,8 @@ def stand_map(outcome, error_model, cell_m: float | None = None, progress: bool 
     grid_inputs = replace(inp, station_ids=[f"G{i}" for i in stand], station_xyz=sxyz,
                           station_heading_rad=np.zeros(stand.size))
     problem = sight_problem(grid_inputs, [prob.site_ids[j] for j in sel], prob.site_xyz[sel],
-                            cfg, error_model, scene=outcome.scene, progress=progress).problem
+                            cfg, error_model, progress=progress,
+                            map_groups=map_groups).problem
     count, sectors = direction_status(problem, np.ones(sel.size, bool), cfg.n_sectors)
     err = _known_control_errors(problem, cfg)
     err[(count < cfg.min_markers) | (sectors < cfg.min_sectors) | ~np.isfinite(err)] = np.nan

@@ -13,6 +13,13 @@
 ``large``
     About 300 m x 300 m for scale: DEM 340 m x 340 m at 0.5 m cells, craters 2-30 m, boulders
     0.5-2 m, 100 stations on a jittered 30 m grid, 121 markers on the offset 30 m grid.
+``km``
+    A kilometre-scale crater field: DEM 1 km x 1 km at 0.25 m cells (4001 x 4001 cells,
+    32 M triangles: too big for one ray scene, so plans tile it, :mod:`planner.sight`). Random
+    craters 1-40 m from the equilibrium SFD (``b = 2``) at 5 % of the mare density, rocks
+    0.3-1.5 m (Golombek & Rapp, k = 1 %). About 300 stations every 20 m along a serpentine
+    rover traverse (six 900 m east-west legs 160 m apart, jittered 2 m), markers every 60 m
+    along the legs, 10 m to the side.
 
 The layouts are fixed; only the terrain randomness depends on ``seed`` (default 0), and random
 craters and rocks keep out of stations and markers.
@@ -150,6 +157,56 @@ def _large_site(seed: int) -> Site:
                                         [-150.0, 150.0]]))
 
 
+#: Serpentine traverse of the ``km`` preset: leg ends (x, m), leg rows (y, m), station step (m).
+KM_LEG_X_M = (-450.0, 450.0)
+KM_LEG_Y_M = tuple(-400.0 + 160.0 * k for k in range(6))
+KM_STATION_STEP_M = 20.0
+
+
+def km_traverse() -> np.ndarray:
+    """(p, 2) vertices of the ``km`` preset's serpentine traverse, site frame, m."""
+    x0, x1 = KM_LEG_X_M
+    ends = [((x0, y), (x1, y)) if k % 2 == 0 else ((x1, y), (x0, y))
+            for k, y in enumerate(KM_LEG_Y_M)]
+    return np.array([p for leg in ends for p in leg])
+
+
+def points_along(path: np.ndarray, step_m: float) -> tuple[np.ndarray, np.ndarray]:
+    """Points every ``step_m`` along a polyline (its start included) and the path's heading
+    there: ((p, 2) m, (p,) rad)."""
+    seg = np.diff(path, axis=0)
+    length = np.hypot(seg[:, 0], seg[:, 1])
+    start = np.r_[0.0, np.cumsum(length)]
+    s = np.arange(0.0, start[-1] + 1e-9, step_m)
+    k = np.clip(np.searchsorted(start, s, side="right") - 1, 0, len(seg) - 1)
+    xy = path[k] + ((s - start[k]) / length[k])[:, None] * seg[k]
+    return xy, np.arctan2(seg[k, 1], seg[k, 0])
+
+
+def _km_site(seed: int) -> Site:
+    path = km_traverse()
+    stations, headings = points_along(path, KM_STATION_STEP_M)
+    stations = stations + np.random.default_rng([seed, 1]).uniform(-2.0, 2.0, stations.shape)
+    x0, x1 = KM_LEG_X_M
+    mx = np.arange(x0, x1 + 1e-9, 60.0)
+    markers_xy = np.vstack([np.column_stack([mx, np.full(mx.size, y + 10.0)])
+                            for y in KM_LEG_Y_M])
+    keep = tuple((float(x), float(y), 3.0) for x, y in stations) + tuple(
+        (float(x), float(y), 2.0) for x, y in markers_xy)
+    spec = TerrainSpec(
+        extent_m=(-500.0, 500.0, -500.0, 500.0), cell_size_m=0.25,
+        hurst=0.85, roughness_1m_m=0.02, rolloff_m=30.0,
+        slope_deg=1.0, slope_azimuth_deg=60.0,
+        crater_density=0.004, crater_sfd_exponent=2.0, crater_diameter_range_m=(1.0, 40.0),
+        fresh_fraction=0.2,
+        rock_abundance=0.01, rock_diameter_range_m=(0.3, 1.5),
+        keepout_xyr_m=keep,
+    )
+    return _assemble("km", spec, seed, stations, headings, markers_xy,
+                     boundary=np.array([[-480.0, -480.0], [480.0, -480.0], [480.0, 480.0],
+                                        [-480.0, 480.0]]))
+
+
 def _assemble(name: str, spec: TerrainSpec, seed: int, stations: np.ndarray,
               headings: np.ndarray, markers_xy: np.ndarray, boundary: np.ndarray) -> Site:
     terrain = generate_terrain(spec, np.random.default_rng([seed, zlib.crc32(name.encode())]))
@@ -205,7 +262,7 @@ def _seated(centres_m: np.ndarray, dem: DEM, radius_m: float) -> np.ndarray:
     return np.column_stack([xy, dem.height_at(xy) + radius_m])
 
 
-PRESETS = {"default": _default_site, "large": _large_site}
+PRESETS = {"default": _default_site, "large": _large_site, "km": _km_site}
 
 
 def load_site(name: str, seed: int | None = None) -> Site:
@@ -213,7 +270,7 @@ def load_site(name: str, seed: int | None = None) -> Site:
 
     Parameters
     ----------
-    name : {"default", "large"}
+    name : {"default", "large", "km"}
     seed : int, optional
         Terrain seed (default 0).
 

@@ -31,7 +31,7 @@ from __future__ import annotations
 
 import sys
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -242,3 +242,219 @@ def _visible_fraction(scene, origin: np.ndarray, centre: np.ndarray, radius: flo
     hit_d = np.asarray(hits.distance_m, dtype=float).reshape(-1, k)
     visible = ~(hit_d < length - HIT_TOLERANCE_M)  # a miss is inf (or nan): visible
     return visible.mean(axis=1)
+
+
+@dataclass(frozen=True)
+class VisibilityGroup:
+    """One group's share of a tiled visibility matrix: everything a worker needs.
+
+    Attributes
+    ----------
+    tile : visibility.dem.DEM
+        The terrain within reach of the group's stations (:func:`tile_rectangle`).
+    station_index : (g,) int
+        The group's stations, as indices into the whole station list.
+    station_position_m : (g, 3) float
+        Their LiDAR centres, site frame, m.
+    site_index : (k,) int
+        The sites within range of some station of the group, indices into the whole site list.
+    site_centre_m : (k, 3) float
+        Their marker centres, site frame, m.
+    marker_radius_m, max_range_m : float
+        m.
+    rays_per_marker : int
+    sampling : AngularSampling
+    """
+
+    tile: object
+    station_index: np.ndarray
+    station_position_m: np.ndarray
+    site_index: np.ndarray
+    site_centre_m: np.ndarray
+    marker_radius_m: float
+    max_range_m: float
+    rays_per_marker: int
+    sampling: AngularSampling
+
+
+@dataclass(frozen=True)
+class GroupVisibility:
+    """:func:`group_visibility`'s answer: one group's pairs, whole-list indices.
+
+    Attributes
+    ----------
+    vis : VisibilityMatrix
+        Station and site indices refer to the whole station and site lists.
+    scene_s : float
+        Time spent building the tile's scene, s.
+    n_triangles : int
+        Terrain triangles in the tile's scene.
+    """
+
+    vis: VisibilityMatrix
+    scene_s: float
+    n_triangles: int
+
+
+def tile_rectangle(dem, xy_m: np.ndarray, margin_m: float
+                   ) -> tuple[float, float, float, float]:
+    """The rectangle a group's tile must cover: the points' bounding box plus a margin,
+    snapped so the tile starts on an even row and column of ``dem`` (its triangles'
+    diagonals then match the whole mesh's checkerboard, :func:`visibility.mesh.dem_to_mesh`).
+
+    Parameters
+    ----------
+    dem : visibility.dem.DEM
+    xy_m : (p, 2) float
+        The group's stations and the sites they see, site frame, m: every ray runs between
+        a station and a point on a marker.
+    margin_m : float
+        Marker radius plus one cell, m.
+
+    Returns
+    -------
+    xmin, xmax, ymin, ymax : float
+        Site frame, m (for :meth:`~visibility.dem.DEM.crop`).
+    """
+    c = dem.cell_size_m
+    x0, y0 = dem.origin_m
+    lo = xy_m.min(axis=0) - margin_m
+    hi = xy_m.max(axis=0) + margin_m
+    # half a cell past an even index, so crop's floor lands on that even index
+    i0 = 2 * np.floor((lo[0] - x0) / c / 2)
+    j0 = 2 * np.floor((lo[1] - y0) / c / 2)
+    return x0 + (i0 + 0.5) * c, float(hi[0]), y0 + (j0 + 0.5) * c, float(hi[1])
+
+
+def group_visibility(group: VisibilityGroup) -> GroupVisibility:
+    """Ray-cast one group of stations against its sites through its own tile (pure: the
+    scene is built here, only when some site is in reach, and dropped on return).
+
+    Parameters
+    ----------
+    group : VisibilityGroup
+
+    Returns
+    -------
+    answer : GroupVisibility
+    """
+    from visibility.scene import RayScene
+
+    if not len(group.site_index):  # nothing in reach: no scene to build
+        empty = visibility_matrix(None, group.station_position_m, np.zeros((0, 3)),
+                                  group.marker_radius_m, group.max_range_m,
+                                  group.rays_per_marker, group.sampling, progress=False)
+        return GroupVisibility(vis=empty, scene_s=0.0, n_triangles=0)
+    t = time.perf_counter()
+    scene = RayScene(group.tile)
+    scene_s = time.perf_counter() - t
+    vis = visibility_matrix(scene, group.station_position_m, group.site_centre_m,
+                            group.marker_radius_m, group.max_range_m, group.rays_per_marker,
+                            group.sampling, progress=False)
+    vis = replace(vis, station=group.station_index[vis.station], site=group.site_index[vis.site])
+    return GroupVisibility(vis=vis, scene_s=scene_s, n_triangles=scene.n_triangles)
+
+
+def station_groups(station_xy_m: np.ndarray, block_m: float) -> list[np.ndarray]:
+    """Stations grouped by square blocks of side ``block_m`` (m), blocks in row-major order.
+
+    Returns
+    -------
+    groups : list of (g,) int
+        Station indices of each non-empty block, ascending.
+
+    Examples
+    --------
+    >>> [g.tolist() for g in station_groups(np.array([[0.0, 0], [25, 0], [1, 1]]), 20.0)]
+    [[0, 2], [1]]
+    """
+    xy = np.asarray(station_xy_m, dtype=float)
+    block = np.floor((xy - xy.min(axis=0)) / block_m).astype(np.int64)
+    key = block[:, 1] * (block[:, 0].max() + 1) + block[:, 0]
+    order = np.argsort(key, kind="stable")
+    cuts = np.flatnonzero(np.diff(key[order])) + 1
+    return np.split(order, cuts)
+
+
+def tiled_visibility(dem, station_position_m, site_centre_m, marker_radius_m: float = 0.10,
+                     max_range_m: float = 30.0, rays_per_marker: int = 24,
+                     sampling: AngularSampling | None = None, block_m: float | None = None,
+                     map_groups=map, progress: bool = True
+                     ) -> tuple[VisibilityMatrix, dict]:
+    """:func:`visibility_matrix` without a mesh of the whole DEM: stations in square blocks,
+    each block cast through a tile of the DEM that reaches as far as its rays
+    (:func:`group_visibility`).
+
+    A ray runs from a station to a point on a marker within ``max_range_m``, so the bounding
+    box of the group's stations and the sites they see, widened by the marker radius and one
+    cell (:func:`tile_rectangle`, on the whole DEM's triangles), holds every triangle a ray
+    could hit: at most ``block_m + 2 max_range_m`` across. The tile's mesh is recentred
+    on the tile, so Embree's float32 coordinates differ from the whole mesh's by rounding: a
+    ray grazing an edge can rarely flip (see ``benchmarks/km_plan.py``).
+
+    Parameters
+    ----------
+    dem : visibility.dem.DEM
+        Terrain, site frame.
+    station_position_m, site_centre_m, marker_radius_m, max_range_m, rays_per_marker, sampling
+        As :func:`visibility_matrix`.
+    block_m : float, optional
+        Side of a station block, m (default ``4 * max_range_m``: a dense grid of stations
+        then builds 2.25 times the DEM's triangles in all, each tile at most 9 ``max_range_m``
+        squared).
+    map_groups : callable
+        ``map_groups(group_visibility, groups)`` -> iterable of answers in the groups' order;
+        default the built-in ``map`` (one group at a time in this process). The groups are
+        made lazily, so at most the tiles the map holds at once are in memory.
+    progress : bool
+        Progress bar (groups) on stderr.
+
+    Returns
+    -------
+    vis : VisibilityMatrix
+        The same pairs in the same order as :func:`visibility_matrix`; ``elapsed_s`` is the
+        ray-casting time summed over groups.
+    stats : dict
+        ``"groups"``, ``"scene_s"`` (summed scene builds, s) and ``"max_tile_triangles"``.
+    """
+    st, si = _vm_iv(station_position_m, site_centre_m, marker_radius_m, max_range_m,
+                    rays_per_marker)
+    sampling = sampling or AngularSampling()
+    from tqdm import tqdm
+
+    groups = station_groups(st[:, :2], block_m or 4.0 * max_range_m) if len(st) else []
+    tree = cKDTree(si[:, :2]) if len(si) else None
+    margin = marker_radius_m + dem.cell_size_m
+
+    def tasks():
+        for g in groups:
+            near = [] if tree is None else tree.query_ball_point(st[g, :2], r=max_range_m)
+            sites = np.unique(np.concatenate([np.asarray(n, np.int64) for n in near])) \
+                if len(near) else np.zeros(0, np.int64)
+            seeing = [k for k, n in zip(g, near, strict=True) if len(n)] or list(g)
+            xy = np.vstack([st[seeing, :2], si[sites, :2]])
+            yield VisibilityGroup(dem.crop(*tile_rectangle(dem, xy, margin)), g, st[g],
+                                  sites, si[sites], marker_radius_m, max_range_m,
+                                  rays_per_marker, sampling)
+
+    answers = list(tqdm(map_groups(group_visibility, tasks()), total=len(groups),
+                        desc="visibility", unit="group", file=sys.stderr,
+                        disable=None if progress else True))
+    parts = [a.vis for a in answers]
+    station = np.concatenate([p.station for p in parts] + [np.zeros(0, np.int64)])
+    site = np.concatenate([p.site for p in parts] + [np.zeros(0, np.int64)])
+    order = np.lexsort((site, station))
+
+    def joined(name):
+        return np.concatenate([getattr(p, name) for p in parts] + [np.zeros(0)])[order]
+
+    vis = VisibilityMatrix(station=station[order], site=site[order],
+                           distance_m=joined("distance_m"), elevation_rad=joined("elevation_rad"),
+                           bearing_rad=joined("bearing_rad"),
+                           visible_fraction=joined("visible_fraction"),
+                           expected_points=joined("expected_points"),
+                           n_rays=sum(p.n_rays for p in parts),
+                           elapsed_s=sum(p.elapsed_s for p in parts))
+    stats = {"groups": len(groups), "scene_s": sum(a.scene_s for a in answers),
+             "max_tile_triangles": max((a.n_triangles for a in answers), default=0)}
+    return vis, stats

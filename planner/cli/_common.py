@@ -8,7 +8,7 @@ option                      meaning (and the value the command receives)
 ``--out DIR``               the folder all output files go to (``Path``)
 ``--overwrite``             replace ``--out`` if markerplan wrote it
 ``--json``                  one JSON summary object on stdout
-``--site NAME``             site preset (``default``, ``large``)
+``--site NAME``             site preset (``default``, ``large``, ``km``)
 ``--site-seed N``           seed of the preset's synthetic terrain
 ``--seed N``                seed of the random noise (simulation) or resampling of the command
 ``--dem FILE``              DEM instead of the preset's terrain (``Path``)
@@ -212,8 +212,10 @@ def site_option(default: str | None = "default"):
     settings = {"default": default, "show_default": True} if default else {}
     return click.option(
         "--site", "site_name", **settings,
-        help="Site preset: default (40 m crater field, 7 stations) or large (300 m, 100 "
-             "stations)." + ("" if default else " Default: the plan's site, else default."))
+        help="Site preset: default (40 m crater field, 7 stations), large (300 m, 100 "
+             "stations) or km (1 km at 0.25 m cells, 311 stations on a traverse; plan it with "
+             "grid_spacing_m >= 2 in --config)."
+             + ("" if default else " Default: the plan's site, else default."))
 
 
 site_seed_option = click.option(

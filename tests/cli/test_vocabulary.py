@@ -73,3 +73,15 @@ def test_seeds_and_stations_mean_one_thing():
 def test_every_writing_command_writes_under_out():
     writers = {c for c, _ in OPTIONS["--out"]}
     assert writers == set(COMMANDS) - {"fit-sphere"}
+
+
+def test_site_help_names_every_preset():
+    from planner.cli import _common
+    from visibility.sites import PRESETS
+
+    assert set(PRESETS) == {"default", "large", "km"}
+    table = next(line for line in _common.__doc__.splitlines() if line.startswith("``--site "))
+    for name, param in OPTIONS["--site"]:
+        for preset in PRESETS:
+            assert f"{preset} (" in param.help, (name, preset)
+            assert f"``{preset}``" in table

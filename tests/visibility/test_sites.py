@@ -8,7 +8,7 @@ import pytest
 from markerplan.errors import ConfigError, DataError
 from visibility.dem import DEM
 from visibility.scene import RayScene
-from visibility.sites import load_site, site_with_dem
+from visibility.sites import KM_STATION_STEP_M, km_traverse, load_site, points_along, site_with_dem
 
 
 @pytest.fixture(scope="module")
@@ -68,8 +68,34 @@ def test_large_preset_is_big_and_fast():
     assert site.dem.contains(site.marker_centres_m[:, :2]).all()
 
 
+def test_km_traverse_gives_a_few_hundred_stations_along_the_legs():
+    xy, heading = points_along(km_traverse(), KM_STATION_STEP_M)
+    path = km_traverse()
+    length = np.sum(np.hypot(*np.diff(path, axis=0).T))
+    assert length == pytest.approx(6 * 900 + 5 * 160)
+    assert len(xy) == int(length // KM_STATION_STEP_M) + 1 == 311
+    step = np.hypot(*np.diff(xy, axis=0).T)
+    assert np.all(step <= KM_STATION_STEP_M + 1e-9) and np.median(step) == pytest.approx(20.0)
+    assert np.all(np.abs(xy) <= 450.0)
+    np.testing.assert_allclose(np.abs(np.cos(heading[:40])), 1.0)  # first leg: east-west
+
+
+@pytest.mark.slow
+def test_km_preset_extent_cells_stations_and_crater_sfd():
+    site = load_site("km")
+    assert site.dem.shape == (4001, 4001) and site.dem.cell_size_m == 0.25
+    assert site.dem.extent() == (-500.0, 500.0, -500.0, 500.0)
+    assert len(site.station_ids) == 311 and len(site.marker_ids) == 96
+    assert site.dem.contains(site.station_xy_m).all()
+    d = np.array([c.diameter_m for c in site.craters])
+    assert d.min() >= 1.0 and 20.0 < d.max() <= 40.0
+    # cumulative SFD N(>D) ~ D^-2: ten times the diameter, a hundred times fewer craters
+    assert 50 < np.sum(d >= 1.0) / np.sum(d >= 10.0) < 200
+    assert len(site.rock_radii_m) > 100 and site.rock_radii_m.max() <= 0.75
+
+
 def test_unknown_preset_lists_valid_names():
-    with pytest.raises(ConfigError, match="default, large"):
+    with pytest.raises(ConfigError, match="default, large, km"):
         load_site("moon")
 
 

@@ -1,0 +1,142 @@
+"""The ``km`` site preset planned with tiled terrain: ``markerplan plan`` and ``plan --network``
+on a 1 km x 1 km crater field at 0.25 m cells (4001 x 4001) with ~300 stations.
+
+Prints, one line each: the preset's build time and peak RSS; for each plan the markers, solver
+status, bound/gap, wall time per stage and peak RSS (each in its own process); and, as the
+baseline, the peak RSS a mesh of the whole site would need, extrapolated from a scene built on
+one tile in the same run (a whole-site scene is not built). Finally one JSON object.
+
+    .venv/bin/python -u benchmarks/km_plan.py [--grid-spacing 4] [--time-limit 120]
+        [--network-requirement 2.5] [--keep DIR]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+#: Side of the tile the whole-site mesh is extrapolated from, DEM cells.
+PROBE_CELLS = 801
+
+
+def _child(cmd: list[str], log: Path) -> tuple[int, float, float]:
+    """Run ``cmd`` (stdout to ``log``, stderr to ``log`` + ``.err``); return (exit code,
+    wall s, peak RSS MB of that process alone)."""
+    t = time.perf_counter()
+    with open(log, "w") as out, open(f"{log}.err", "w") as err:
+        proc = subprocess.Popen(cmd, stdout=out, stderr=err)
+        _, status, usage = os.wait4(proc.pid, 0)
+    return os.waitstatus_to_exitcode(status), time.perf_counter() - t, usage.ru_maxrss / 1024
+
+
+_SITE_PROBE = """
+import json, resource, time
+import numpy as np
+t = time.perf_counter()
+from visibility.sites import load_site
+site = load_site("km")
+print(json.dumps({"s": time.perf_counter() - t, "shape": list(site.dem.shape),
+                  "cell_m": site.dem.cell_size_m, "extent_m": list(site.dem.extent()),
+                  "stations": len(site.station_ids), "markers": len(site.marker_ids),
+                  "craters": len(site.craters), "rocks": len(site.rock_radii_m),
+                  "centre_station": site.station_ids[int(np.argmin(np.hypot(
+                      *site.station_xy_m.T)))],
+                  "peak_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}))
+"""
+
+_MESH_PROBE = """
+import json, resource, sys, time
+import numpy as np
+from visibility.dem import DEM
+from visibility.scene import RayScene
+from visibility.terrain import fractal_surface
+n = int(sys.argv[1])
+dem = DEM(fractal_surface((n, n), 0.25, 0.85, 0.02, 30.0, np.random.default_rng(0)),
+          (0.0, 0.0), 0.25)
+before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+t = time.perf_counter()
+scene = RayScene(dem)
+scene.intersect(np.array([[50.0, 50.0, 5.0]]), np.array([[0.0, 0.0, -1.0]]))  # builds the BVH
+s = time.perf_counter() - t
+after = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+print(json.dumps({"triangles": scene.n_triangles, "mb": after - before, "s": s}))
+"""
+
+
+def _probe(code: str, *args: str) -> dict:
+    out = subprocess.run([sys.executable, "-c", code, *args], capture_output=True, text=True,
+                         check=True)
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--grid-spacing", type=float, default=4.0,
+                    help="Candidate grid spacing, m (the 1 m default gives ~1 M grid points).")
+    ap.add_argument("--time-limit", type=float, default=120.0, help="Solver time limit, s.")
+    ap.add_argument("--network-requirement", type=float, default=2.5,
+                    help="requirement_m of the network plan, m (relative to the station nearest "
+                         "the centre; with every site the farthest stations reach only 1.9 m).")
+    ap.add_argument("--keep", type=Path, help="Write the configuration and plans here.")
+    args = ap.parse_args()
+
+    root = args.keep or Path(tempfile.mkdtemp(prefix="markerplan-km-"))
+    root.mkdir(parents=True, exist_ok=True)
+    site = _probe(_SITE_PROBE)
+    print(f"km preset: DEM {site['shape'][1]} x {site['shape'][0]} cells of {site['cell_m']} m "
+          f"over {site['extent_m']}, {site['stations']} stations, {site['markers']} markers, "
+          f"{site['craters']} craters, {site['rocks']} rocks; built in {site['s']:.1f} s, "
+          f"peak RSS {site['peak_mb']:.0f} MB")
+    cells = site["shape"][0] * site["shape"][1]
+    whole_triangles = 2 * (site["shape"][0] - 1) * (site["shape"][1] - 1)
+    mesh = _probe(_MESH_PROBE, str(PROBE_CELLS))
+    whole_mb = mesh["mb"] / mesh["triangles"] * whole_triangles
+    whole_s = mesh["s"] / mesh["triangles"] * whole_triangles
+    print(f"baseline: a scene of {mesh['triangles']:,} triangles adds {mesh['mb']:.0f} MB peak "
+          f"RSS and builds in {mesh['s']:.2f} s; the whole site ({whole_triangles:,} triangles, "
+          f"{cells:,} cells) would add ~{whole_mb:,.0f} MB and take ~{whole_s:.0f} s "
+          "(extrapolated, not built)")
+
+    config = root / "km.toml"
+    config.write_text(f"grid_spacing_m = {args.grid_spacing}\n")
+    network = root / "km-network.toml"
+    network.write_text(f"grid_spacing_m = {args.grid_spacing}\n"
+                       f"requirement_m = {args.network_requirement}\n")
+    cli = str(Path(sys.executable).with_name("markerplan"))
+    figures = {"site": site, "whole_mesh_mb": whole_mb, "whole_mesh_s": whole_s,
+               "probe_mesh": mesh}
+    runs = (("plan", config, []), ("plan_network", network, [
+        "--network", "--reference-station", site["centre_station"]]))
+    for name, cfg, extra in runs:
+        out = root / name
+        cmd = [cli, "plan", "--site", "km", "--config", str(cfg), "--time-limit",
+               str(args.time_limit), "--json", "--out", str(out), "--overwrite", *extra]
+        code, wall, peak = _child(cmd, root / f"{name}.log")
+        if code:
+            tail = Path(f"{root / name}.log.err").read_text().strip().splitlines()[-1:]
+            sys.exit(f"{name} failed ({code}): {tail}")
+        summary = json.loads((root / f"{name}.log").read_text().strip().splitlines()[-1])
+        doc = json.loads((out / "plan.json").read_text())
+        solver = doc["solver"]
+        cast_s = summary["timings_s"]["scene"] + summary["timings_s"]["visibility"]
+        stages = ", ".join(f"{k} {v:.1f} s" for k, v in summary["timings_s"].items())
+        print(f"{name}: {doc['n_markers']} markers, status {solver.get('status')}, bound "
+              f"{solver.get('dual_bound')}, gap {solver.get('gap')}; {wall:.0f} s wall "
+              f"({stages}); peak RSS {peak:.0f} MB = {peak / whole_mb:.2f} x the whole-site "
+              f"mesh alone; tile scenes + ray casting {cast_s / whole_s:.2f} x its build time")
+        figures[name] = {"n_markers": doc["n_markers"], "solver": solver, "wall_s": wall,
+                         "peak_rss_mb": peak, "peak_vs_whole_mesh": peak / whole_mb,
+                         "cast_vs_whole_mesh_build": cast_s / whole_s,
+                         "timings_s": summary["timings_s"],
+                         "candidates": doc.get("candidates")}
+    print(json.dumps(figures))
+
+
+if __name__ == "__main__":
+    main()
