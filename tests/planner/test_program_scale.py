@@ -1,4 +1,4 @@
-"""The integer program at scale: exact column aggregation, HiGHS limits and honest statuses."""
+"""The integer program at scale: identical columns regrouped, HiGHS limits, honest statuses."""
 
 import itertools
 from dataclasses import replace
@@ -43,26 +43,32 @@ def test_identical_sites_form_one_group():
 
 
 @pytest.mark.parametrize("seed", range(6))
-def test_aggregation_keeps_the_optimum(seed):
+def test_regrouping_keeps_the_optimum(seed):
     p = _clustered(seed)
     model = _directions_only(build_model(p, LOOSE))
     group, _ = aggregate_columns(model)
     assert group.max() + 1 < model.var_site.size  # something was merged
     plain = solve(model)
-    merged = solve(model, aggregate=True)
+    # the last member of each group preferred: markers must move
+    merged = solve(model, priority=np.arange(model.var_site.size))
     if plain.status == "infeasible":
         assert merged.status == "infeasible"
         return
     assert plain.status == merged.status == "optimal"
     assert merged.objective == pytest.approx(plain.objective)
     assert merged.dual_bound == pytest.approx(plain.objective)
-    # the disaggregated layout is feasible for the unaggregated model, at that objective
+    # the regrouped layout is feasible for the unaggregated model, at that objective
     x = merged.x
     ax = model.A @ x
     assert np.all(ax >= model.row_lb - 1e-9) and np.all(ax <= model.row_ub + 1e-9)
     assert model.c @ x == pytest.approx(plain.objective)
     assert np.array_equal(np.flatnonzero(merged.selected),
                           np.sort(model.var_site[x[:model.var_site.size] > 0.5]))
+    # in every group the markers sit on its last (most preferred) members
+    sel = x[:model.var_site.size] > 0.5
+    for g in range(group.max() + 1):
+        members = np.flatnonzero(group == g)
+        assert sel[members[members.size - sel[members].sum():]].all()
 
 
 @pytest.mark.parametrize("seed", range(4))
@@ -84,12 +90,12 @@ def test_plan_matches_brute_force_on_clustered_sites(seed):
         assert int(r.selected.sum()) == best
 
 
-def test_aggregated_counts_never_exceed_a_group():
+def test_regrouped_counts_never_exceed_a_group():
     # a station needing 3 markers where only one cluster of 3 copies is usable: all 3 go
     p = make_problem([[0, 0]], [[5, 5], [5, 5], [5, 5], [-5, 5], [-5, -5], [5, -5]],
                      max_range_m=10.0)
     cfg = LOOSE.replace(min_sectors=1, n_sectors=1, min_markers=5)
-    sol = solve(_directions_only(build_model(p, cfg)), aggregate=True)
+    sol = solve(_directions_only(build_model(p, cfg)), priority=np.zeros(6))
     assert sol.status == "optimal" and int(sol.selected.sum()) == 5
     assert sol.selected[:3].all()
 
