@@ -48,8 +48,6 @@ class StationInfo:
         Error-model 1-sigma 3D centre error of each, m.
     info : (u, 4, 4) float
         Pose information each site contributes (:func:`planner.accuracy.pair_information`).
-    position : dict of int -> int
-        Row in ``sites`` of a candidate-site index.
     radius : float
         Working radius, m.
     incl : float
@@ -64,14 +62,19 @@ class StationInfo:
         self.info = (accuracy.pair_information(problem.station_xyz[s],
                                                problem.site_xyz[self.sites], self.sigma_m)
                      if idx.size else np.zeros((0, 4, 4)))
-        self.position = {int(j): k for k, j in enumerate(self.sites)}
         self.radius = config.working_radius_m
         self.incl = config.inclinometer_sigma_rad
 
+    def rows(self, sites) -> np.ndarray:
+        """Rows in ``sites`` of the usable ones among some candidate-site indices (int)."""
+        sites = np.atleast_1d(np.asarray(sites, np.int64))
+        k = np.minimum(np.searchsorted(self.sites, sites), max(self.sites.size - 1, 0))
+        return k[self.sites[k] == sites] if self.sites.size else k[:0]
+
     def error(self, sites) -> float:
         """Predicted error using the usable ones among ``sites`` (candidate-site indices), m."""
-        k = [self.position[int(j)] for j in np.atleast_1d(sites) if int(j) in self.position]
-        if not k:
+        k = self.rows(sites)
+        if not k.size:
             return float("inf")
         j = self.info[k].sum(axis=0)
         return float(accuracy.errors_from_information(j[None], self.radius, self.incl)[0])
@@ -82,12 +85,12 @@ class StationInfo:
         (:func:`planner.accuracy.linearisation`), as ``(sites, coefficients, rhs)`` with the cut
         ``sum coef * x >= rhs``; only cuts with a positive right-hand side. ``exclude`` gets no
         coefficient (the cut then holds for the others alone)."""
-        k = [self.position[int(j)] for j in np.atleast_1d(sites) if int(j) in self.position]
-        if not k:
+        k = self.rows(sites)
+        if not k.size:
             return []
         keep = np.ones(self.sites.size, bool)
-        if exclude is not None and int(exclude) in self.position:
-            keep[self.position[int(exclude)]] = False
+        if exclude is not None:
+            keep[self.rows(exclude)] = False
         out = []
         for v, rhs in accuracy.linearisation(scale * self.info[k].sum(axis=0), self.radius,
                                              self.incl, requirement_m, rim):
@@ -106,12 +109,11 @@ class StationInfo:
         Returns candidate-site indices of the grown (still failing) set.
         """
         in_set = np.zeros(self.sites.size, bool)
-        in_set[[self.position[int(j)] for j in np.atleast_1d(failing)
-                if int(j) in self.position]] = True
+        in_set[self.rows(failing)] = True
         order = np.argsort(1.0 / self.sigma_m**2, kind="stable")
         skip = in_set.copy()
-        if exclude is not None and int(exclude) in self.position:
-            skip[self.position[int(exclude)]] = True
+        if exclude is not None:
+            skip[self.rows(exclude)] = True
         order = order[~skip[order]]
         total = self.info[in_set].sum(axis=0)
         cum = np.concatenate([np.zeros((1, 4, 4)), np.cumsum(self.info[order], axis=0)])
