@@ -13,6 +13,7 @@ and the reduction studies all ask of a station.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -47,7 +48,8 @@ class StationInfo:
     sigma_m : (u,) float
         Error-model 1-sigma 3D centre error of each, m.
     info : (u, 4, 4) float
-        Pose information each site contributes (:func:`planner.accuracy.pair_information`).
+        Pose information each site contributes (:func:`planner.accuracy.pair_information`),
+        computed on first use (checking a layout needs only its markers' information).
     radius : float
         Working radius, m.
     incl : float
@@ -59,11 +61,21 @@ class StationInfo:
         self.pairs = idx
         self.sites = problem.pair_site[idx]
         self.sigma_m = problem.pair_sigma_m[idx]
-        self.info = (accuracy.pair_information(problem.station_xyz[s],
-                                               problem.site_xyz[self.sites], self.sigma_m)
-                     if idx.size else np.zeros((0, 4, 4)))
+        self.station_xyz = problem.station_xyz[s]
+        self.site_xyz = problem.site_xyz[self.sites]
         self.radius = config.working_radius_m
         self.incl = config.inclinometer_sigma_rad
+
+    @cached_property
+    def info(self) -> np.ndarray:
+        return self._information(np.arange(self.sites.size))
+
+    def _information(self, k: np.ndarray) -> np.ndarray:
+        """(len(k), 4, 4) float: information of the sites in rows ``k`` (per site the same
+        numbers as ``info[k]``)."""
+        if not k.size:
+            return np.zeros((0, 4, 4))
+        return accuracy.pair_information(self.station_xyz, self.site_xyz[k], self.sigma_m[k])
 
     def rows(self, sites) -> np.ndarray:
         """Rows in ``sites`` of the usable ones among some candidate-site indices (int)."""
@@ -76,7 +88,7 @@ class StationInfo:
         k = self.rows(sites)
         if not k.size:
             return float("inf")
-        j = self.info[k].sum(axis=0)
+        j = self._information(k).sum(axis=0)
         return float(accuracy.errors_from_information(j[None], self.radius, self.incl)[0])
 
     def oa_cuts(self, sites, requirement_m: float, exclude: int | None = None,
