@@ -983,15 +983,18 @@ def _combinatorial_first(problem: PlanProblem, config, base: Model, infos: list[
     history = [{"iteration": 1, "status": sol.status, "objective": sol.objective,
                 "dual_bound": sol.dual_bound, "solve_time_s": sol.solve_time_s,
                 "n_rows": int(relaxed.A.shape[0])}]
-    rows = (None, [], [])
+    rows, check = (None, [], []), None
     if sol.selected is not None:
-        rows = accuracy_cuts(problem, base, sol.selected, config, infos,
-                             outer_approximation=True)
-    result = PlanResult(selected=sol.selected, check=None, solution=sol, iterations=1,
+        # the exact check first: a layout it passes needs no cuts
+        check = evaluate_layout(problem, sol.selected, config, infos)
+        if not check.all_ok:
+            rows = accuracy_cuts(problem, base, sol.selected, config, infos,
+                                 outer_approximation=True)
+    result = PlanResult(selected=sol.selected, check=check, solution=sol, iterations=1,
                         n_cuts=0 if rows[0] is None else rows[0].shape[0],
                         solve_time_s=sol.solve_time_s, model=relaxed, history=history)
     if sol.selected is not None and rows[0] is None:
-        return replace(result, check=evaluate_layout(problem, sol.selected, config, infos)), None
+        return result, None
     return result, rows
 
 
