@@ -230,7 +230,7 @@ class PlanResult:
         return self.solution.status
 
 
-def build_model(problem: PlanProblem, config) -> Model:
+def build_model(problem: PlanProblem, config, information: bool = True) -> Model:
     """Build the integer program for a problem and a :class:`~planner.config.PlanConfig`.
 
     Parameters
@@ -239,6 +239,9 @@ def build_model(problem: PlanProblem, config) -> Model:
     config : PlanConfig
         Uses ``min_markers``, ``n_sectors``, ``min_sectors``, ``requirement_m``, ``redundant``,
         ``budget``, ``existing``, ``forbidden``.
+    information : bool
+        Include the ``info`` rows; without them the model is the directions-only relaxation
+        (same variables: rows of one fit the other).
 
     Returns
     -------
@@ -273,7 +276,7 @@ def build_model(problem: PlanProblem, config) -> Model:
         idx = problem.usable_pairs(s)
         cols = site_var[problem.pair_site[idx]]
         add_row(cols, np.ones(cols.size), min_count, np.inf, RowKind("count", s))
-        if s != reference:
+        if s != reference and information:
             w_t, _ = info_weights(problem, idx, config)
             add_row(cols, w_t, 1.0, np.inf, RowKind("info", s))
         sec = sector_index(problem.pair_bearing_rad[idx], config.n_sectors)
@@ -920,11 +923,10 @@ def plan_sites(problem: PlanProblem, config, model: Model | None = None) -> Plan
     t0 = time.perf_counter()
     first = None
     if model is None:
-        base = build_model(problem, config)
-        first, rows = _combinatorial_first(problem, config, base, infos)
+        first, rows = _combinatorial_first(problem, config, infos)
         if rows is None:
             return first
-        model = with_tightening_rows(problem, base, config)
+        model = with_tightening_rows(problem, build_model(problem, config), config)
         if rows[0] is not None:
             model = model.with_rows(rows[0], rows[1], np.full(len(rows[1]), np.inf), rows[2])
     failing = diagnose(problem, config, infos)
@@ -951,14 +953,14 @@ def plan_sites(problem: PlanProblem, config, model: Model | None = None) -> Plan
                    history=first.history + result.history)
 
 
-def _combinatorial_first(problem: PlanProblem, config, base: Model, infos: list[StationInfo]
+def _combinatorial_first(problem: PlanProblem, config, infos: list[StationInfo]
                          ) -> tuple[PlanResult | None, tuple | None]:
     """Known control: solve the directions rows alone first; done if that passes.
 
-    ``base`` without its information rows is the plain cover-plus-sector model. It is a
-    relaxation of the full program (every row left out — information, tightening, accuracy
-    cuts — holds for every passing layout), so its optimum bounds the full one from below: a
-    layout that is optimal here and passes every station's exact check is optimal for the
+    :func:`build_model` without its information rows is the plain cover-plus-sector model. It
+    is a relaxation of the full program (every row left out — information, tightening,
+    accuracy cuts — holds for every passing layout), so its optimum bounds the full one from
+    below: a layout that is optimal here and passes every station's exact check is optimal for the
     plan. In it many candidate sites have identical columns (same stations, same sectors):
     the markers of such a group go to its members with the most information
     (``sum 3 / sigma^2`` over their usable pairs).
@@ -972,14 +974,11 @@ def _combinatorial_first(problem: PlanProblem, config, base: Model, infos: list[
         ``(rows, lower, kinds)`` of :func:`accuracy_cuts` for the failing layout (``rows``
         None when there was no layout), to add to the full model.
     """
-    keep = np.array([k.family != "info" for k in base.row_kind], dtype=bool)
-    relaxed = replace(base, A=sp.csr_array(base.A[keep]), row_lb=base.row_lb[keep],
-                      row_ub=base.row_ub[keep],
-                      row_kind=tuple(k for k, q in zip(base.row_kind, keep, strict=True) if q))
+    relaxed = build_model(problem, config, information=False)
     usable = np.flatnonzero(problem.pair_usable)
     info = np.bincount(problem.pair_site[usable], 3.0 / problem.pair_sigma_m[usable] ** 2,
                        minlength=problem.n_sites)
-    sol = solve(relaxed, config.time_limit_s, config.mip_gap, priority=info[base.var_site])
+    sol = solve(relaxed, config.time_limit_s, config.mip_gap, priority=info[relaxed.var_site])
     history = [{"iteration": 1, "status": sol.status, "objective": sol.objective,
                 "dual_bound": sol.dual_bound, "solve_time_s": sol.solve_time_s,
                 "n_rows": int(relaxed.A.shape[0])}]
@@ -988,7 +987,7 @@ def _combinatorial_first(problem: PlanProblem, config, base: Model, infos: list[
         # the exact check first: a layout it passes needs no cuts
         check = evaluate_layout(problem, sol.selected, config, infos)
         if not check.all_ok:
-            rows = accuracy_cuts(problem, base, sol.selected, config, infos,
+            rows = accuracy_cuts(problem, relaxed, sol.selected, config, infos,
                                  outer_approximation=True)
     result = PlanResult(selected=sol.selected, check=check, solution=sol, iterations=1,
                         n_cuts=0 if rows[0] is None else rows[0].shape[0],
