@@ -151,3 +151,33 @@ def test_run_highs_small_program_against_enumeration():
                if np.all(a @ np.array(v) >= 1))
     assert out.status == "optimal" and out.objective == pytest.approx(best) == 3.0
     assert solver_record(60.0, 0.0)["threads"] == 2
+
+
+def test_directions_only_model_is_the_full_model_without_information_rows():
+    p = _clustered(1)
+    full = build_model(p, LOOSE)
+    relaxed = build_model(p, LOOSE, information=False)
+    keep = np.array([k.family != "info" for k in full.row_kind])
+    assert keep.sum() < keep.size  # the full model has information rows
+    assert relaxed.n_vars == full.n_vars
+    assert np.array_equal(relaxed.var_site, full.var_site)
+    assert relaxed.row_kind == tuple(k for k, q in zip(full.row_kind, keep, strict=True) if q)
+    assert (abs(relaxed.A - full.A[keep]) > 0).nnz == 0
+    assert np.array_equal(relaxed.row_lb, full.row_lb[keep])
+
+
+def test_station_error_from_its_markers_matches_the_cached_information():
+    from planner import accuracy
+    from planner.station_checks import StationInfo
+
+    p = _clustered(2)
+    for s in range(p.n_stations):
+        info = StationInfo(p, s, LOOSE)
+        if info.sites.size < 2:
+            continue
+        picked = info.sites[::2]
+        j = info.info[::2].sum(axis=0)  # all sites' information, computed on first use
+        expected = accuracy.errors_from_information(j[None], info.radius, info.incl)[0]
+        assert info.error(picked) == expected  # bit for bit
+        assert info.error(np.r_[picked, -1]) == expected  # not a usable site: ignored
+        assert np.array_equal(info.rows(np.r_[info.sites[1], 10**6]), [1])
