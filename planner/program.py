@@ -4,12 +4,13 @@ Build, solve and check are separate steps:
 
 - :func:`build_model` turns a :class:`~planner.usability.PlanProblem` into a :class:`Model`
   (plain data: ``c``, sparse ``A``, row and variable bounds, index maps);
-- :func:`solve` runs HiGHS once (:func:`planner.highs_model.run_highs`, optionally on the
-  model with identical site columns merged, :func:`aggregate_columns`) -> :class:`Solution`;
+- :func:`solve` runs HiGHS once (:func:`planner.highs_model.run_highs`; optionally the
+  markers of identical site columns then move to the preferred sites,
+  :func:`aggregate_columns`) -> :class:`Solution`;
 - :func:`plan_sites` is the accuracy-cut loop: solve, check every station's predicted accuracy
   exactly (:class:`planner.station_checks.StationInfo`), add valid cuts for stations that fail
   and re-solve until all pass. In known-control mode the first solve is the directions-only
-  relaxation, aggregated (:func:`_combinatorial_first`); the full model is built only when its
+  relaxation (:func:`_combinatorial_first`); the full model is built only when its
   layout fails a station.
 
 Models are immutable: :meth:`Model.with_rows` returns a new model, so what-if studies re-use one
@@ -229,7 +230,7 @@ class PlanResult:
         return self.solution.status
 
 
-def build_model(problem: PlanProblem, config) -> Model:
+def build_model(problem: PlanProblem, config, information: bool = True) -> Model:
     """Build the integer program for a problem and a :class:`~planner.config.PlanConfig`.
 
     Parameters
@@ -238,6 +239,9 @@ def build_model(problem: PlanProblem, config) -> Model:
     config : PlanConfig
         Uses ``min_markers``, ``n_sectors``, ``min_sectors``, ``requirement_m``, ``redundant``,
         ``budget``, ``existing``, ``forbidden``.
+    information : bool
+        Include the ``info`` rows; without them the model is the directions-only relaxation
+        (same variables: rows of one fit the other).
 
     Returns
     -------
@@ -272,7 +276,7 @@ def build_model(problem: PlanProblem, config) -> Model:
         idx = problem.usable_pairs(s)
         cols = site_var[problem.pair_site[idx]]
         add_row(cols, np.ones(cols.size), min_count, np.inf, RowKind("count", s))
-        if s != reference:
+        if s != reference and information:
             w_t, _ = info_weights(problem, idx, config)
             add_row(cols, w_t, 1.0, np.inf, RowKind("info", s))
         sec = sector_index(problem.pair_bearing_rad[idx], config.n_sectors)
@@ -400,7 +404,7 @@ def info_weights(problem: PlanProblem, pairs: np.ndarray, config
     return w_t, w_h
 
 
-def solve(model: Model, time_limit_s: float = 60.0, gap: float = 0.0, aggregate: bool = False,
+def solve(model: Model, time_limit_s: float = 60.0, gap: float = 0.0,
           priority: np.ndarray | None = None) -> Solution:
     """Solve ``model`` once with HiGHS (:func:`planner.highs_model.run_highs`).
 
@@ -411,13 +415,12 @@ def solve(model: Model, time_limit_s: float = 60.0, gap: float = 0.0, aggregate:
         Wall-clock limit, s.
     gap : float
         Target relative MIP gap (0: prove optimality).
-    aggregate : bool
-        Merge ``x`` columns that are identical (same entries in every row, cost and bounds)
-        into one integer variable counting how many of them hold a marker
-        (:func:`aggregate_columns`; exact: the optimum and every objective value are kept).
     priority : (nx,) float, optional
-        With ``aggregate``: which members of a merged group get its markers (highest first,
-        then by variable order); default variable order.
+        Move the markers of every group of identical ``x`` columns (same entries in every row,
+        cost and bounds, :func:`aggregate_columns`) to its members of highest priority (then
+        by variable order). Exact: ``A x`` and ``c x`` are unchanged. HiGHS gets the model
+        as it is (merging the group into one integer column made its solve slower, see
+        ``benchmarks/program_scale.py``).
 
     Returns
     -------
@@ -433,25 +436,16 @@ def solve(model: Model, time_limit_s: float = 60.0, gap: float = 0.0, aggregate:
         raise ConfigError(f"`gap` must be >= 0, got {gap!r}")
     t0 = time.perf_counter()
     nx = model.var_site.size
-    group = first = cols = None
-    c, a, lb, ub = model.c, model.A, model.lb, model.ub
-    if aggregate:
-        group, first = aggregate_columns(model)
-        size = np.bincount(group).astype(float)
-        aux = np.arange(nx, model.n_vars)
-        cols = np.r_[first, aux]
-        a = sp.csc_array(model.A)[:, cols]
-        c = model.c[cols]
-        lb = np.r_[size * model.lb[first], model.lb[aux]]
-        ub = np.r_[size * model.ub[first], model.ub[aux]]
-    integrality = model.integrality if cols is None else model.integrality[cols]
+    integrality, c = model.integrality, model.c
     integral = bool(np.all(integrality == 1) and np.all(np.abs(c - np.round(c)) < 1e-12))
-    out = run_highs(c, a, model.row_lb, model.row_ub, lb, ub, integrality,
+    out = run_highs(c, model.A, model.row_lb, model.row_ub, model.lb, model.ub, integrality,
                     max(time_limit_s - (time.perf_counter() - t0), 1e-3), gap,
                     integral_objective=integral)
     x = None if out.x is None else np.round(out.x)
-    if x is not None and aggregate:
-        x = _disaggregate(x, group, first.size, nx, priority)
+    if x is not None and priority is not None:
+        group, first = aggregate_columns(model)
+        count = np.r_[np.bincount(group, x[:nx], minlength=first.size), x[nx:]]
+        x = _disaggregate(count, group, first.size, nx, priority)
     selected = None
     if x is not None:
         selected = np.zeros(model.site_var.shape[0], dtype=bool)
@@ -479,10 +473,9 @@ def aggregate_columns(model: Model) -> tuple[np.ndarray, np.ndarray]:
     """Group the ``x`` columns of ``model`` that are identical: the same entries in every row,
     the same cost and the same bounds.
 
-    Merging such a group of ``k`` binaries into one integer ``0 <= n <= k`` (``k lb`` to
-    ``k ub``) is exact: ``A x`` and ``c x`` depend on the group only through ``n``, so every
-    solution maps to one with the same rows and objective and back (any ``n`` of the ``k``
-    columns set to 1). The optimum, the bound and feasibility are unchanged.
+    ``A x`` and ``c x`` depend on such a group of ``k`` binaries only through how many of them
+    are 1, so moving the ones within a group keeps every row and the objective
+    (:func:`solve` with ``priority``).
 
     Returns
     -------
@@ -496,10 +489,14 @@ def aggregate_columns(model: Model) -> tuple[np.ndarray, np.ndarray]:
     cols.sum_duplicates()
     # two fixed random projections identify columns; equality is then checked exactly
     proj = np.random.default_rng(0).standard_normal((2, cols.shape[0]))
-    key = np.column_stack([cols.T @ proj[0], cols.T @ proj[1], model.c[:nx], model.lb[:nx],
-                           model.ub[:nx]])
-    _, first, group = np.unique(key, axis=0, return_index=True, return_inverse=True)
-    group = group.ravel()
+    key = np.vstack([cols.T @ proj[0], cols.T @ proj[1], model.c[:nx], model.lb[:nx],
+                     model.ub[:nx]])
+    order = np.lexsort(key[::-1])  # stable: members of a group in variable order
+    new_group = np.r_[np.ones(min(nx, 1), bool),
+                      np.any(np.diff(key[:, order], axis=1) != 0, axis=0)]
+    first = order[new_group]
+    group = np.empty(nx, np.int64)
+    group[order] = np.cumsum(new_group) - 1
     diff = cols - cols[:, first[group]]
     diff.eliminate_zeros()
     odd = np.unique(diff.tocoo().col) if diff.nnz else np.zeros(0, np.int64)
@@ -514,10 +511,11 @@ def aggregate_columns(model: Model) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _disaggregate(x: np.ndarray, group: np.ndarray, n_groups: int, nx: int,
-                  priority: np.ndarray | None) -> np.ndarray:
-    """Solution of the full model from one of the aggregated model: each group's count goes to
-    its members by ``priority`` (highest first), then by variable order."""
-    prio = np.zeros(nx) if priority is None else -np.asarray(priority, float)
+                  priority: np.ndarray) -> np.ndarray:
+    """Solution of the model from its markers per group (``x``: ``n_groups`` counts, then the
+    other variables): each group's count goes to its members by ``priority`` (highest first),
+    then by variable order."""
+    prio = -np.asarray(priority, float)
     order = np.lexsort((np.arange(nx), prio, group))  # by group, then priority
     starts = np.searchsorted(group[order], np.arange(n_groups))
     rank = np.empty(nx, np.int64)
@@ -925,11 +923,10 @@ def plan_sites(problem: PlanProblem, config, model: Model | None = None) -> Plan
     t0 = time.perf_counter()
     first = None
     if model is None:
-        base = build_model(problem, config)
-        first, rows = _combinatorial_first(problem, config, base, infos)
+        first, rows = _combinatorial_first(problem, config, infos)
         if rows is None:
             return first
-        model = with_tightening_rows(problem, base, config)
+        model = with_tightening_rows(problem, build_model(problem, config), config)
         if rows[0] is not None:
             model = model.with_rows(rows[0], rows[1], np.full(len(rows[1]), np.inf), rows[2])
     failing = diagnose(problem, config, infos)
@@ -956,17 +953,16 @@ def plan_sites(problem: PlanProblem, config, model: Model | None = None) -> Plan
                    history=first.history + result.history)
 
 
-def _combinatorial_first(problem: PlanProblem, config, base: Model, infos: list[StationInfo]
+def _combinatorial_first(problem: PlanProblem, config, infos: list[StationInfo]
                          ) -> tuple[PlanResult | None, tuple | None]:
-    """Known control: solve the directions rows alone first, aggregated; done if that passes.
+    """Known control: solve the directions rows alone first; done if that passes.
 
-    ``base`` without its information rows keeps only rows in which many candidate sites have
-    identical columns (same stations, same sectors), so :func:`solve` merges them
-    (:func:`aggregate_columns`, exact) and HiGHS gets a model a fraction of the size. It is a
-    relaxation of the full program (every row left out — information, tightening, accuracy
-    cuts — holds for every passing layout), so its optimum bounds the full one from below: a
-    layout that is optimal here and passes every station's exact check is optimal for the
-    plan. Markers of a merged group go to its members with the most information
+    :func:`build_model` without its information rows is the plain cover-plus-sector model. It
+    is a relaxation of the full program (every row left out — information, tightening,
+    accuracy cuts — holds for every passing layout), so its optimum bounds the full one from
+    below: a layout that is optimal here and passes every station's exact check is optimal for the
+    plan. In it many candidate sites have identical columns (same stations, same sectors):
+    the markers of such a group go to its members with the most information
     (``sum 3 / sigma^2`` over their usable pairs).
 
     Returns
@@ -978,27 +974,26 @@ def _combinatorial_first(problem: PlanProblem, config, base: Model, infos: list[
         ``(rows, lower, kinds)`` of :func:`accuracy_cuts` for the failing layout (``rows``
         None when there was no layout), to add to the full model.
     """
-    keep = np.array([k.family != "info" for k in base.row_kind], dtype=bool)
-    relaxed = replace(base, A=sp.csr_array(base.A[keep]), row_lb=base.row_lb[keep],
-                      row_ub=base.row_ub[keep],
-                      row_kind=tuple(k for k, q in zip(base.row_kind, keep, strict=True) if q))
+    relaxed = build_model(problem, config, information=False)
     usable = np.flatnonzero(problem.pair_usable)
     info = np.bincount(problem.pair_site[usable], 3.0 / problem.pair_sigma_m[usable] ** 2,
                        minlength=problem.n_sites)
-    sol = solve(relaxed, config.time_limit_s, config.mip_gap, aggregate=True,
-                priority=info[base.var_site])
+    sol = solve(relaxed, config.time_limit_s, config.mip_gap, priority=info[relaxed.var_site])
     history = [{"iteration": 1, "status": sol.status, "objective": sol.objective,
                 "dual_bound": sol.dual_bound, "solve_time_s": sol.solve_time_s,
                 "n_rows": int(relaxed.A.shape[0])}]
-    rows = (None, [], [])
+    rows, check = (None, [], []), None
     if sol.selected is not None:
-        rows = accuracy_cuts(problem, base, sol.selected, config, infos,
-                             outer_approximation=True)
-    result = PlanResult(selected=sol.selected, check=None, solution=sol, iterations=1,
+        # the exact check first: a layout it passes needs no cuts
+        check = evaluate_layout(problem, sol.selected, config, infos)
+        if not check.all_ok:
+            rows = accuracy_cuts(problem, relaxed, sol.selected, config, infos,
+                                 outer_approximation=True)
+    result = PlanResult(selected=sol.selected, check=check, solution=sol, iterations=1,
                         n_cuts=0 if rows[0] is None else rows[0].shape[0],
                         solve_time_s=sol.solve_time_s, model=relaxed, history=history)
     if sol.selected is not None and rows[0] is None:
-        return replace(result, check=evaluate_layout(problem, sol.selected, config, infos)), None
+        return result, None
     return result, rows
 
 

@@ -13,6 +13,7 @@ and the reduction studies all ask of a station.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -47,9 +48,8 @@ class StationInfo:
     sigma_m : (u,) float
         Error-model 1-sigma 3D centre error of each, m.
     info : (u, 4, 4) float
-        Pose information each site contributes (:func:`planner.accuracy.pair_information`).
-    position : dict of int -> int
-        Row in ``sites`` of a candidate-site index.
+        Pose information each site contributes (:func:`planner.accuracy.pair_information`),
+        computed on first use (checking a layout needs only its markers' information).
     radius : float
         Working radius, m.
     incl : float
@@ -61,19 +61,34 @@ class StationInfo:
         self.pairs = idx
         self.sites = problem.pair_site[idx]
         self.sigma_m = problem.pair_sigma_m[idx]
-        self.info = (accuracy.pair_information(problem.station_xyz[s],
-                                               problem.site_xyz[self.sites], self.sigma_m)
-                     if idx.size else np.zeros((0, 4, 4)))
-        self.position = {int(j): k for k, j in enumerate(self.sites)}
+        self.station_xyz = problem.station_xyz[s]
+        self.site_xyz = problem.site_xyz[self.sites]
         self.radius = config.working_radius_m
         self.incl = config.inclinometer_sigma_rad
 
+    @cached_property
+    def info(self) -> np.ndarray:
+        return self._information(np.arange(self.sites.size))
+
+    def _information(self, k: np.ndarray) -> np.ndarray:
+        """(len(k), 4, 4) float: information of the sites in rows ``k`` (per site the same
+        numbers as ``info[k]``)."""
+        if not k.size:
+            return np.zeros((0, 4, 4))
+        return accuracy.pair_information(self.station_xyz, self.site_xyz[k], self.sigma_m[k])
+
+    def rows(self, sites) -> np.ndarray:
+        """Rows in ``sites`` of the usable ones among some candidate-site indices (int)."""
+        sites = np.atleast_1d(np.asarray(sites, np.int64))
+        k = np.minimum(np.searchsorted(self.sites, sites), max(self.sites.size - 1, 0))
+        return k[self.sites[k] == sites] if self.sites.size else k[:0]
+
     def error(self, sites) -> float:
         """Predicted error using the usable ones among ``sites`` (candidate-site indices), m."""
-        k = [self.position[int(j)] for j in np.atleast_1d(sites) if int(j) in self.position]
-        if not k:
+        k = self.rows(sites)
+        if not k.size:
             return float("inf")
-        j = self.info[k].sum(axis=0)
+        j = self._information(k).sum(axis=0)
         return float(accuracy.errors_from_information(j[None], self.radius, self.incl)[0])
 
     def oa_cuts(self, sites, requirement_m: float, exclude: int | None = None,
@@ -82,12 +97,12 @@ class StationInfo:
         (:func:`planner.accuracy.linearisation`), as ``(sites, coefficients, rhs)`` with the cut
         ``sum coef * x >= rhs``; only cuts with a positive right-hand side. ``exclude`` gets no
         coefficient (the cut then holds for the others alone)."""
-        k = [self.position[int(j)] for j in np.atleast_1d(sites) if int(j) in self.position]
-        if not k:
+        k = self.rows(sites)
+        if not k.size:
             return []
         keep = np.ones(self.sites.size, bool)
-        if exclude is not None and int(exclude) in self.position:
-            keep[self.position[int(exclude)]] = False
+        if exclude is not None:
+            keep[self.rows(exclude)] = False
         out = []
         for v, rhs in accuracy.linearisation(scale * self.info[k].sum(axis=0), self.radius,
                                              self.incl, requirement_m, rim):
@@ -106,12 +121,11 @@ class StationInfo:
         Returns candidate-site indices of the grown (still failing) set.
         """
         in_set = np.zeros(self.sites.size, bool)
-        in_set[[self.position[int(j)] for j in np.atleast_1d(failing)
-                if int(j) in self.position]] = True
+        in_set[self.rows(failing)] = True
         order = np.argsort(1.0 / self.sigma_m**2, kind="stable")
         skip = in_set.copy()
-        if exclude is not None and int(exclude) in self.position:
-            skip[self.position[int(exclude)]] = True
+        if exclude is not None:
+            skip[self.rows(exclude)] = True
         order = order[~skip[order]]
         total = self.info[in_set].sum(axis=0)
         cum = np.concatenate([np.zeros((1, 4, 4)), np.cumsum(self.info[order], axis=0)])

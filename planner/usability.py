@@ -10,6 +10,7 @@ matrix with an error model; :func:`direction_status` counts a layout's markers a
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
+from functools import cached_property
 
 import numpy as np
 
@@ -77,8 +78,16 @@ class PlanProblem:
 
     def usable_pairs(self, station: int) -> np.ndarray:
         """Indices of the usable pairs of station ``station`` (ordered by site index)."""
-        idx = np.flatnonzero((self.pair_station == station) & self.pair_usable)
-        return idx[np.argsort(self.pair_site[idx], kind="stable")]
+        idx, start = self._usable_by_station
+        return idx[start[station]:start[station + 1]].copy()
+
+    @cached_property
+    def _usable_by_station(self) -> tuple[np.ndarray, np.ndarray]:
+        """Usable pairs sorted by station, then site (sorted once: planners ask per station),
+        and where each station's run starts ((s + 1,) int)."""
+        idx = np.flatnonzero(self.pair_usable)
+        idx = idx[np.lexsort((self.pair_site[idx], self.pair_station[idx]))]
+        return idx, np.searchsorted(self.pair_station[idx], np.arange(self.n_stations + 1))
 
     def selected_pairs(self, station: int, selected: np.ndarray) -> np.ndarray:
         """Indices of the usable pairs of ``station`` whose site is ``selected`` ((n_sites,)
@@ -102,12 +111,14 @@ class PlanProblem:
             An id that names no candidate site.
         """
         ids = list(ids)
+        mask = np.zeros(self.n_sites, dtype=bool)
+        if not ids:
+            return mask
         pos = {sid: i for i, sid in enumerate(self.site_ids)}
         unknown = [i for i in ids if i not in pos]
         if unknown:
             raise ConfigError(f"`{name}` names unknown site id(s) {', '.join(unknown[:5])}; "
                               "use ids from the candidate sites or the marker layout")
-        mask = np.zeros(self.n_sites, dtype=bool)
         mask[[pos[i] for i in ids]] = True
         return mask
 

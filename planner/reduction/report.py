@@ -39,9 +39,9 @@ from planner.reduction.curve import check_worst, failure_reason
 SCHEMA = "markerplan-reduce"
 SCHEMA_VERSION = 1
 FRAME_NOTE = "site frame: local metres (x, y horizontal, z up)"
-SOLVER = "HiGHS via scipy.optimize.milp (bisection on the worst-station error)"
+SOLVER = "HiGHS via highspy (bisection on the worst-station error)"
 #: Network mode: each query is the planner's network program (:func:`planner.program.plan_sites`).
-NETWORK_SOLVER = ("HiGHS via scipy.optimize.milp (network mode: descent on the worst station or "
+NETWORK_SOLVER = ("HiGHS via highspy (network mode: descent on the worst station or "
                   "kept-marker error, each query the planner's network program)")
 
 

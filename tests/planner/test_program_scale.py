@@ -1,4 +1,4 @@
-"""The integer program at scale: exact column aggregation, HiGHS limits and honest statuses."""
+"""The integer program at scale: identical columns regrouped, HiGHS limits, honest statuses."""
 
 import itertools
 from dataclasses import replace
@@ -43,26 +43,32 @@ def test_identical_sites_form_one_group():
 
 
 @pytest.mark.parametrize("seed", range(6))
-def test_aggregation_keeps_the_optimum(seed):
+def test_regrouping_keeps_the_optimum(seed):
     p = _clustered(seed)
     model = _directions_only(build_model(p, LOOSE))
     group, _ = aggregate_columns(model)
     assert group.max() + 1 < model.var_site.size  # something was merged
     plain = solve(model)
-    merged = solve(model, aggregate=True)
+    # the last member of each group preferred: markers must move
+    merged = solve(model, priority=np.arange(model.var_site.size))
     if plain.status == "infeasible":
         assert merged.status == "infeasible"
         return
     assert plain.status == merged.status == "optimal"
     assert merged.objective == pytest.approx(plain.objective)
     assert merged.dual_bound == pytest.approx(plain.objective)
-    # the disaggregated layout is feasible for the unaggregated model, at that objective
+    # the regrouped layout is feasible for the unaggregated model, at that objective
     x = merged.x
     ax = model.A @ x
     assert np.all(ax >= model.row_lb - 1e-9) and np.all(ax <= model.row_ub + 1e-9)
     assert model.c @ x == pytest.approx(plain.objective)
     assert np.array_equal(np.flatnonzero(merged.selected),
                           np.sort(model.var_site[x[:model.var_site.size] > 0.5]))
+    # in every group the markers sit on its last (most preferred) members
+    sel = x[:model.var_site.size] > 0.5
+    for g in range(group.max() + 1):
+        members = np.flatnonzero(group == g)
+        assert sel[members[members.size - sel[members].sum():]].all()
 
 
 @pytest.mark.parametrize("seed", range(4))
@@ -84,12 +90,12 @@ def test_plan_matches_brute_force_on_clustered_sites(seed):
         assert int(r.selected.sum()) == best
 
 
-def test_aggregated_counts_never_exceed_a_group():
+def test_regrouped_counts_never_exceed_a_group():
     # a station needing 3 markers where only one cluster of 3 copies is usable: all 3 go
     p = make_problem([[0, 0]], [[5, 5], [5, 5], [5, 5], [-5, 5], [-5, -5], [5, -5]],
                      max_range_m=10.0)
     cfg = LOOSE.replace(min_sectors=1, n_sectors=1, min_markers=5)
-    sol = solve(_directions_only(build_model(p, cfg)), aggregate=True)
+    sol = solve(_directions_only(build_model(p, cfg)), priority=np.zeros(6))
     assert sol.status == "optimal" and int(sol.selected.sum()) == 5
     assert sol.selected[:3].all()
 
@@ -145,3 +151,33 @@ def test_run_highs_small_program_against_enumeration():
                if np.all(a @ np.array(v) >= 1))
     assert out.status == "optimal" and out.objective == pytest.approx(best) == 3.0
     assert solver_record(60.0, 0.0)["threads"] == 2
+
+
+def test_directions_only_model_is_the_full_model_without_information_rows():
+    p = _clustered(1)
+    full = build_model(p, LOOSE)
+    relaxed = build_model(p, LOOSE, information=False)
+    keep = np.array([k.family != "info" for k in full.row_kind])
+    assert keep.sum() < keep.size  # the full model has information rows
+    assert relaxed.n_vars == full.n_vars
+    assert np.array_equal(relaxed.var_site, full.var_site)
+    assert relaxed.row_kind == tuple(k for k, q in zip(full.row_kind, keep, strict=True) if q)
+    assert (abs(relaxed.A - full.A[keep]) > 0).nnz == 0
+    assert np.array_equal(relaxed.row_lb, full.row_lb[keep])
+
+
+def test_station_error_from_its_markers_matches_the_cached_information():
+    from planner import accuracy
+    from planner.station_checks import StationInfo
+
+    p = _clustered(2)
+    for s in range(p.n_stations):
+        info = StationInfo(p, s, LOOSE)
+        if info.sites.size < 2:
+            continue
+        picked = info.sites[::2]
+        j = info.info[::2].sum(axis=0)  # all sites' information, computed on first use
+        expected = accuracy.errors_from_information(j[None], info.radius, info.incl)[0]
+        assert info.error(picked) == expected  # bit for bit
+        assert info.error(np.r_[picked, -1]) == expected  # not a usable site: ignored
+        assert np.array_equal(info.rows(np.r_[info.sites[1], 10**6]), [1])
