@@ -10,7 +10,8 @@ Three ways to run, chosen by ``--scheduler`` (:func:`executor`):
 
 ``local`` (the default)
     A ``distributed.LocalCluster`` sized to the machine: one worker process per core, one
-    thread each (or ``--workers N``), started for the command and closed after it.
+    thread each (or ``--workers N``), started for the command at its first map of more than
+    one task (a single task runs in this process, with no cluster to start) and closed after it.
 ``none``
     No cluster: the same task functions in a loop in this process (the single-process baseline).
 ``tcp://HOST:8786``
@@ -33,7 +34,7 @@ import logging
 import os
 import sys
 from collections.abc import Callable, Iterator, Sequence
-from contextlib import contextmanager
+from contextlib import ExitStack, contextmanager
 from typing import Any
 
 from tqdm import tqdm
@@ -60,17 +61,22 @@ class Executor:
     Parameters
     ----------
     client : distributed.Client or None
-        None: run the tasks in a loop in this process.
+        None: run the tasks in a loop in this process (unless ``start`` is given).
     progress : bool
         Progress bar on stderr.
     retries : int
         Extra runs of a failed task before :class:`TaskError`.
+    start : callable, optional
+        ``start() -> Client``: connects a cluster the first time a map has more than one task
+        (the local cluster, started only when it can help).
     """
 
-    def __init__(self, client=None, progress: bool = True, retries: int = RETRIES):
+    def __init__(self, client=None, progress: bool = True, retries: int = RETRIES,
+                 start: Callable | None = None):
         self.client = client
         self.progress = progress
         self.retries = retries
+        self._start = start
 
     @property
     def workers(self) -> int:
@@ -79,11 +85,14 @@ class Executor:
             return 1
         return len(self.client.scheduler_info(n_workers=-1)["workers"])
 
-    @property
-    def threads(self) -> int | None:
-        """Threads a task may use for ray casting: 1 in a cluster (a worker per core), None
-        (all cores) in process."""
-        return None if self.client is None else 1
+    def threads(self, n_tasks: int) -> int | None:
+        """Threads each of ``n_tasks`` tasks may use for ray casting: 1 in a cluster (a worker
+        per core), None (all cores) in process."""
+        return None if self._in_process(n_tasks) else 1
+
+    def _in_process(self, n_tasks: int) -> bool:
+        """Whether a map of ``n_tasks`` tasks runs in this process."""
+        return self.client is None and (self._start is None or n_tasks <= 1)
 
     def __call__(self, fn: Callable, items: Sequence) -> list:
         """``map_groups`` form: ``fn(item)`` for every item, results in input order."""
@@ -121,9 +130,11 @@ class Executor:
         bar = tqdm(total=len(items), desc=desc, unit="task", file=sys.stderr,
                    disable=None if self.progress else True)
         with bar:
-            if self.client is None:
+            if self._in_process(len(items)):
                 return [self._run_here(fn, shared, item, label, bar)
                         for item, label in zip(items, labels, strict=True)]
+            if self.client is None:
+                self.client = self._start()
             return self._run_cluster(fn, shared, items, labels, bar)
 
     def _run_here(self, fn, shared, item, label, bar):
@@ -215,10 +226,14 @@ def executor(scheduler: str | None = LOCAL, workers: int | None = None,
 
     if scheduler == LOCAL:
         n = workers or os.cpu_count() or 1
-        with LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
-                          dashboard_address=":0", silence_logs=logging.ERROR) as cluster, \
-                Client(cluster) as client:
-            yield Executor(client, progress, retries)
+        with ExitStack() as stack:
+            def start():
+                cluster = stack.enter_context(LocalCluster(
+                    n_workers=n, threads_per_worker=1, processes=True, dashboard_address=":0",
+                    silence_logs=logging.ERROR))
+                return stack.enter_context(Client(cluster))
+
+            yield Executor(None, progress, retries, start=start)
         return
     try:
         client = Client(scheduler, timeout=CONNECT_TIMEOUT_S)

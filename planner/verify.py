@@ -279,7 +279,8 @@ def map_stations(plan: SurveyPlan, process: Callable, seed: int = 0, progress: b
             executor = stack.enter_context(distributed.executor(distributed.IN_PROCESS,
                                                                 progress=progress))
         jobs = [StationJob(st, seed + k, tuple(plan.marker_ids), plan.marker_xyz_m,
-                           plan.marker_radius_m, profile, offsets, process, executor.threads)
+                           plan.marker_radius_m, profile, offsets, process,
+                           executor.threads(len(chosen)))
                 for k, st in chosen]
         return executor.map(station_task, jobs, shared=plan.dem,
                             labels=[f"station {st.id}" for _, st in chosen], desc="verify")

@@ -46,7 +46,7 @@ def test_cluster_maps_in_input_order_on_both_workers(cluster):
         expected = here.map(_scaled, items, shared=3)
     got = cluster.map(_scaled, items, shared=3)
     assert [v for v, _ in got] == [v for v, _ in expected] == [3 * x for x in items]
-    assert cluster.workers == 2 and cluster.threads == 1 and here.threads is None
+    assert cluster.workers == 2 and cluster.threads(12) == 1 and here.threads(12) is None
     assert len({pid for _, pid in got} - {os.getpid()}) >= 1  # ran outside this process
 
 
@@ -143,3 +143,14 @@ def test_range_study_replicates_on_a_cluster_equal_in_process(tmp_path, capsys):
         assert (tmp_path / "one" / name).read_bytes() == (tmp_path / "two" / name).read_bytes()
     rows = read_marker_table(tmp_path / "two" / "markers.csv")
     assert sorted({r["replicate"] for r in rows}) == ["0", "1", "2"]  # none dropped
+
+
+def test_local_cluster_starts_only_for_more_than_one_task():
+    """``--scheduler local``: one task runs here (no cluster to start), two start the cluster."""
+    with executor("local", workers=2, progress=False) as ex:
+        assert ex.threads(1) is None and ex.threads(2) == 1
+        assert ex.map(_scaled, [5], shared=2)[0] == (10, os.getpid())
+        assert ex.client is None
+        got = ex.map(_scaled, [1, 2], shared=2)
+        assert [v for v, _ in got] == [2, 4] and ex.workers == 2
+    assert ex.client.status == "closed"
