@@ -96,7 +96,7 @@ class Executor:
 
     def __call__(self, fn: Callable, items: Sequence) -> list:
         """``map_groups`` form: ``fn(item)`` for every item, results in input order."""
-        return self.map(fn, items)
+        return self.map(fn, items, desc=getattr(fn, "__name__", "tasks"))
 
     def map(self, fn: Callable, items: Sequence, *, shared: Any = None,
             labels: Sequence[str] | None = None, desc: str = "tasks") -> list:

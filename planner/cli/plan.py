@@ -25,6 +25,7 @@ from planner.cli._common import (
     reference_station_option,
     report_timings,
     reproject_option,
+    scheduler_options,
     site_option,
     site_seed_option,
     station_ids_option,
@@ -61,13 +62,14 @@ from planner.cli._common import (
 @click.option("--stand-map-cell", "stand_map_cell_m", type=click.FloatRange(min=0, min_open=True),
               help="Cell size (m, rounded to whole DEM cells) of usable_markers.tif and "
                    "station_error.tif. Default: the finest with at most 40,000 cells.")
+@scheduler_options
 @out_option(default="markerplan-out")
 @overwrite_option
 @json_option
 def command(site_name, site_seed, dem_path, reproject, stations_path, station_ids,
             boundary_path, exclude_paths, marker_radius_m, error_model, config_path,
             visibility_path, redundant, existing, budget, network, reference_station,
-            time_limit_s, stand_map_cell_m, out, overwrite, as_json):
+            time_limit_s, stand_map_cell_m, scheduler, workers, out, overwrite, as_json):
     """Plan the fewest marker sites so that every station meets the accuracy requirement.
 
     Writes under --out: plan.json, markers.csv, report.md, map.png; markers.geojson (WGS84
@@ -77,6 +79,11 @@ def command(site_name, site_seed, dem_path, reproject, stations_path, station_id
     station_error.tif (its predicted error, m; not with --visibility). With --network also
     stations.csv: each station's error relative to the reference station and the stations it
     is tied to. With no arguments: the default site, into ./markerplan-out/.
+
+    Ray casting runs as one task per block of stations, each on its own DEM tile:
+    --scheduler local (the default) starts a dask cluster on this machine when there is
+    more than one block, --scheduler ADDRESS uses a running one, --scheduler none runs in
+    this process; the files are the same.
 
     \b
     Examples:
@@ -88,8 +95,10 @@ def command(site_name, site_seed, dem_path, reproject, stations_path, station_id
       markerplan plan --dem site.tif --stations stations.csv --exclude paths.geojson --out p/
       markerplan plan --dem site.tif --stations stations.csv --stand-map-cell 2 --out p/
       markerplan plan --dem lonlat.tif --reproject --stations lonlat.csv --out p/
+      markerplan plan --site km --scheduler tcp://10.0.0.5:8786 --out plan-km/
     """
     from markerplan.output_folder import output_folder
+    from planner.distributed import executor
     from planner.gis_output import write_stand_map
     from planner.plan_map import draw_plan_map
     from planner.report import plan_timings, summary, write_plan_files
@@ -98,18 +107,20 @@ def command(site_name, site_seed, dem_path, reproject, stations_path, station_id
     inputs_given = given_paths(dem_path, stations_path, boundary_path, error_model.path,
                                config_path, visibility_path, *exclude_paths,
                                None if existing == "as-built" else existing)
-    with output_folder(out, overwrite, "plan", inputs=inputs_given) as stage:
+    progress = not as_json or sys.stderr.isatty()
+    with output_folder(out, overwrite, "plan", inputs=inputs_given) as stage, \
+            executor(scheduler, workers, progress) as tasks:
         outcome, config = _plan(site_name, site_seed, dem_path, stations_path, station_ids,
                                 boundary_path, exclude_paths, marker_radius_m, error_model,
                                 config_path, visibility_path, redundant, existing, budget,
                                 time_limit_s, as_json, network, reference_station,
-                                reproject)
+                                reproject, map_groups=tasks)
         doc = write_plan_files(outcome, stage)
         draw_plan_map(outcome, stage / "map.png")
         stand_s = {}
         if visibility_path is None:
             stand = stand_map(outcome, error_model.model, stand_map_cell_m,
-                              progress=not as_json or sys.stderr.isatty())
+                              progress=progress, map_groups=tasks)
             write_stand_map(stand, stage)
             stand_s = {"stand_map": round(stand.elapsed_s, 3)}
     timings = {**plan_timings(outcome), **stand_s}
@@ -145,9 +156,10 @@ def solver_status_text(solver: dict) -> str:
 def _plan(site_name, site_seed, dem_path, stations_path, station_ids, boundary_path,
           exclude_paths, marker_radius_m, error_model, config_path, visibility_path, redundant,
           existing, budget, time_limit_s, as_json, network=None, reference_station=None,
-          reproject=False):
+          reproject=False, map_groups=map):
     """Read the inputs and make the plan; return ``(outcome, config)``. A ``--dem`` is read
-    only as far as the stations see (``config.max_range_m``)."""
+    only as far as the stations see (``config.max_range_m``); ``map_groups`` maps the ray
+    casting's station blocks (:func:`visibility.visibility_matrix.tiled_visibility`)."""
     from markerplan.errors import ConfigError
     from planner.config import PlanConfig, load_config
     from planner.planning import load_inputs, make_plan
@@ -175,5 +187,5 @@ def _plan(site_name, site_seed, dem_path, stations_path, station_ids, boundary_p
     else:
         model, model_name = error_model.model, error_model.name
     outcome = make_plan(inputs, config, model, model_name, problem=problem,
-                        progress=not as_json or sys.stderr.isatty())
+                        progress=not as_json or sys.stderr.isatty(), map_groups=map_groups)
     return outcome, config

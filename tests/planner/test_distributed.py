@@ -154,3 +154,28 @@ def test_local_cluster_starts_only_for_more_than_one_task():
         got = ex.map(_scaled, [1, 2], shared=2)
         assert [v for v, _ in got] == [2, 4] and ex.workers == 2
     assert ex.client.status == "closed"
+
+
+def test_tiled_visibility_on_the_cluster_equals_in_process(cluster):
+    """Planning-time ray casting (one task per station block, each on its DEM tile) gives the
+    in-process answer exactly on two worker processes."""
+    import numpy as np
+
+    from visibility.terrain import TerrainSpec, generate_terrain
+    from visibility.visibility_matrix import tiled_visibility
+
+    spec = TerrainSpec(extent_m=(-12.0, 12.0, -12.0, 12.0), cell_size_m=0.2, crater_density=0.02,
+                       crater_diameter_range_m=(0.5, 3.0))
+    dem = generate_terrain(spec, np.random.default_rng(2)).dem
+    rng = np.random.default_rng(3)
+    sxy = rng.uniform(-10.0, 10.0, (6, 2))
+    st = np.column_stack([sxy, dem.height_at(sxy) + 1.0])
+    g = np.arange(-11.0, 11.1, 2.0)
+    xy = np.stack(np.meshgrid(g, g), -1).reshape(-1, 2)
+    si = np.column_stack([xy, dem.height_at(xy) + 0.1])
+    here, _ = tiled_visibility(dem, st, si, 0.1, 6.0, 12, block_m=6.0, progress=False)
+    there, stats = tiled_visibility(dem, st, si, 0.1, 6.0, 12, block_m=6.0, progress=False,
+                                    map_groups=cluster)
+    assert stats["groups"] >= 3
+    for name in ("station", "site", "visible_fraction", "expected_points", "distance_m"):
+        np.testing.assert_array_equal(getattr(there, name), getattr(here, name), err_msg=name)
