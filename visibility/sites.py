@@ -109,8 +109,7 @@ def _default_layout() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 def _default_site(seed: int) -> Site:
     stations, headings, markers_xy = _default_layout()
-    keep = tuple((float(x), float(y), 1.5) for x, y in stations) + tuple(
-        (float(x), float(y), 1.0) for x, y in markers_xy)
+    keep = _keepout(stations, 1.5, markers_xy, 1.0)
     spec = TerrainSpec(
         extent_m=(-30.0, 30.0, -30.0, 30.0), cell_size_m=0.1,
         hurst=0.85, roughness_1m_m=0.02, rolloff_m=10.0,
@@ -128,8 +127,7 @@ def _default_site(seed: int) -> Site:
         keepout_xyr_m=keep,
     )
     return _assemble("default", spec, seed, stations, headings, markers_xy,
-                     boundary=np.array([[-20.0, -20.0], [20.0, -20.0], [20.0, 20.0],
-                                        [-20.0, 20.0]]))
+                     boundary=_square(20.0))
 
 
 def _large_site(seed: int) -> Site:
@@ -141,8 +139,7 @@ def _large_site(seed: int) -> Site:
     m = np.arange(-150.0, 151.0, 30.0)
     mx, my = np.meshgrid(m, m)
     markers_xy = np.column_stack([mx.ravel(), my.ravel()])
-    keep = tuple((float(x), float(y), 3.0) for x, y in stations) + tuple(
-        (float(x), float(y), 2.0) for x, y in markers_xy)
+    keep = _keepout(stations, 3.0, markers_xy, 2.0)
     spec = TerrainSpec(
         extent_m=(-170.0, 170.0, -170.0, 170.0), cell_size_m=0.5,
         hurst=0.85, roughness_1m_m=0.02, rolloff_m=30.0,
@@ -153,8 +150,7 @@ def _large_site(seed: int) -> Site:
         keepout_xyr_m=keep,
     )
     return _assemble("large", spec, seed, stations, headings, markers_xy,
-                     boundary=np.array([[-150.0, -150.0], [150.0, -150.0], [150.0, 150.0],
-                                        [-150.0, 150.0]]))
+                     boundary=_square(150.0))
 
 
 #: Serpentine traverse of the ``km`` preset: leg ends (x, m), leg rows (y, m), station step (m).
@@ -191,8 +187,7 @@ def _km_site(seed: int) -> Site:
     mx = np.arange(x0, x1 + 1e-9, 60.0)
     markers_xy = np.vstack([np.column_stack([mx, np.full(mx.size, y + 10.0)])
                             for y in KM_LEG_Y_M])
-    keep = tuple((float(x), float(y), 3.0) for x, y in stations) + tuple(
-        (float(x), float(y), 2.0) for x, y in markers_xy)
+    keep = _keepout(stations, 3.0, markers_xy, 2.0)
     spec = TerrainSpec(
         extent_m=(-500.0, 500.0, -500.0, 500.0), cell_size_m=0.25,
         hurst=0.85, roughness_1m_m=0.02, rolloff_m=30.0,
@@ -203,8 +198,21 @@ def _km_site(seed: int) -> Site:
         keepout_xyr_m=keep,
     )
     return _assemble("km", spec, seed, stations, headings, markers_xy,
-                     boundary=np.array([[-480.0, -480.0], [480.0, -480.0], [480.0, 480.0],
-                                        [-480.0, 480.0]]))
+                     boundary=_square(480.0))
+
+
+def _keepout(stations: np.ndarray, station_radius_m: float, markers_xy: np.ndarray,
+             marker_radius_m: float) -> tuple:
+    """Keep-out discs ``(x, y, r)`` (m) around the stations and the marker layout: no crater or
+    rock is placed there (:attr:`visibility.terrain.TerrainSpec.keepout_xyr_m`)."""
+    return tuple((float(x), float(y), station_radius_m) for x, y in stations) + tuple(
+        (float(x), float(y), marker_radius_m) for x, y in markers_xy)
+
+
+def _square(half_m: float) -> np.ndarray:
+    """(4, 2) corners of the square boundary ``[-half_m, half_m]²``, site frame, m."""
+    return np.array([[-half_m, -half_m], [half_m, -half_m], [half_m, half_m],
+                     [-half_m, half_m]])
 
 
 def _assemble(name: str, spec: TerrainSpec, seed: int, stations: np.ndarray,
