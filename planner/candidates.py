@@ -11,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 import shapely
+from scipy.spatial import cKDTree
 from shapely.geometry import Polygon
 
 from markerplan.errors import ConfigError, DataError, InputFileError
@@ -18,8 +19,11 @@ from markerplan.reading import finite_number, json_kind, load_json
 
 #: Baseline for the slope under a marker, m (a 0.20 m sphere's footprint, not DEM micro-relief).
 SLOPE_BASELINE_M = 0.25
-#: Most candidate grid points one plan may ray cast (the large preset at 0.5 m has ~460 000).
+#: Most candidate sites one plan may ray cast (the large preset at 0.5 m has ~460 000 grid
+#: points), counted after the boundary, nodata and range drops.
 MAX_GRID_POINTS = 500_000
+#: Most grid points laid out before any drop (16 bytes each: the ``km`` preset at 0.5 m).
+MAX_RAW_GRID_POINTS = 8 * MAX_GRID_POINTS
 
 
 @dataclass(frozen=True)
@@ -33,7 +37,8 @@ class Candidates:
         Marker centre at each site (ground + radius), m.
     dropped : dict
         Number of grid points dropped per reason (outside boundary, on nodata, near nodata,
-        excluded, slope, crater, near station; the nodata reasons only for a DEM with nodata).
+        excluded, near station, out of range, crater, slope; the nodata reasons only for a DEM
+        with nodata, the station reasons only with stations).
     """
 
     ids: tuple[str, ...]
@@ -183,13 +188,15 @@ def candidate_sites(dem, config, boundary=None, exclusions=(), station_xy=None, 
         (:func:`valid_area`, dropped as "near nodata").
     config : PlanConfig
         Uses ``grid_spacing_m``, ``max_slope_deg``, ``exclude_crater_interiors``,
-        ``min_station_distance_m``.
+        ``min_station_distance_m``, ``max_range_m``.
     boundary : Polygon or (k, 2) float, optional
         Site boundary; default the DEM's rectangle.
     exclusions : sequence of Polygon or (k, 2) float
         Areas where no marker may go (work zones, rover paths).
     station_xy : (s, 2) or (s, 3) float, optional
-        Stations; sites closer than ``min_station_distance_m`` are dropped.
+        Stations; sites closer than ``min_station_distance_m`` to one are dropped ("near
+        station"), and so are sites farther than ``max_range_m`` plus the marker radius
+        (horizontally) from every one ("out of range": no station can use them).
     craters : sequence
         Objects with ``centre_xy_m`` and ``diameter_m``; their interiors (within the rim crest)
         are dropped when ``config.exclude_crater_interiors``.
@@ -203,7 +210,9 @@ def candidate_sites(dem, config, boundary=None, exclusions=(), station_xy=None, 
     Raises
     ------
     ConfigError
-        When ``grid_spacing_m`` would give more than :data:`MAX_GRID_POINTS` grid points.
+        When ``grid_spacing_m`` would lay out more than :data:`MAX_RAW_GRID_POINTS` grid points,
+        or leave more than :data:`MAX_GRID_POINTS` sites after the boundary, nodata, exclusion
+        and station drops.
     DataError
         When no site survives, with the count dropped for each reason.
     """
@@ -211,11 +220,9 @@ def candidate_sites(dem, config, boundary=None, exclusions=(), station_xy=None, 
     s = config.grid_spacing_m
     x0, y0, x1, y1 = region.bounds
     n_grid = np.ceil((x1 - x0) / s) * np.ceil((y1 - y0) / s)
-    if n_grid > MAX_GRID_POINTS:
-        raise ConfigError(f"`grid_spacing_m` {s:g} m gives {n_grid:.3g} candidate grid points on "
-                          f"this {x1 - x0:.0f} x {y1 - y0:.0f} m site, more than the "
-                          f"{MAX_GRID_POINTS} accepted; raise grid_spacing_m or shrink the "
-                          "boundary")
+    if n_grid > MAX_RAW_GRID_POINTS:
+        raise ConfigError(_too_many(s, n_grid, "candidate grid points", MAX_RAW_GRID_POINTS,
+                                    x1 - x0, y1 - y0))
     gx = np.arange(x0 + s / 2, x1, s)
     gy = np.arange(y0 + s / 2, y1, s)
     xx, yy = np.meshgrid(gx, gy)
@@ -241,8 +248,13 @@ def candidate_sites(dem, config, boundary=None, exclusions=(), station_xy=None, 
         union = shapely.union_all(excl)
         drop(shapely.intersects_xy(union, xy[:, 0], xy[:, 1]), "excluded zone")
     if len(st) and len(xy):
-        d = np.min(np.linalg.norm(xy[:, None, :] - st[None, :, :], axis=2), axis=1)
+        d = cKDTree(st).query(xy)[0]
+        far = d > config.max_range_m + marker_radius_m
         drop(d < config.min_station_distance_m, "near station")
+        drop(far[d >= config.min_station_distance_m], "out of range")
+    if len(xy) > MAX_GRID_POINTS:
+        raise ConfigError(_too_many(s, len(xy), "candidate sites in range of a station",
+                                    MAX_GRID_POINTS, x1 - x0, y1 - y0))
     if config.exclude_crater_interiors and len(craters) and len(xy):
         inside = np.zeros(len(xy), bool)
         for c in craters:
@@ -258,6 +270,14 @@ def candidate_sites(dem, config, boundary=None, exclusions=(), station_xy=None, 
     z = dem.height_at(xy) + marker_radius_m
     ids = tuple(f"C{k:05d}" for k in range(len(xy)))
     return Candidates(ids=ids, centre_m=np.column_stack([xy, z]), dropped=dropped)
+
+
+def _too_many(spacing_m: float, n: float, what: str, limit: int, width_m: float,
+              height_m: float) -> str:
+    """The one-line message for a candidate grid larger than ``limit``."""
+    return (f"`grid_spacing_m` {spacing_m:g} m gives {n:.3g} {what} on this {width_m:.0f} x "
+            f"{height_m:.0f} m site, more than the {limit} accepted; raise grid_spacing_m or "
+            "shrink the boundary")
 
 
 def ground_slope_rad(dem, xy: np.ndarray, baseline_m: float = SLOPE_BASELINE_M) -> np.ndarray:

@@ -4,7 +4,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from markerplan.errors import DataError, InputFileError
+from markerplan.errors import ConfigError, DataError, InputFileError
 from planner.candidates import candidate_sites, ground_slope_rad, load_polygons
 from planner.config import PlanConfig
 from visibility.dem import DEM
@@ -34,7 +34,8 @@ def test_grid_boundary_exclusion_slope_stations_and_craters():
     assert np.all(np.hypot(xy[:, 0], xy[:, 1] + 5.0) >= 1.0)
     assert np.allclose(c.centre_m[:, 2], dem.height_at(xy) + 0.1)
     assert set(c.dropped) == {"outside boundary", "excluded zone", "near station",
-                              "crater interior", "too steep"}
+                              "out of range", "crater interior", "too steep"}
+    assert c.dropped["out of range"] == 0  # 30 m range: the 16 m square is all in it
     assert len(set(c.ids)) == len(c)
     # grid spacing: neighbours 1 m apart
     assert np.isclose(np.min(np.diff(np.unique(xy[:, 0]))), 1.0)
@@ -76,3 +77,63 @@ def test_geojson_polygons_and_malformed_ones(tmp_path):
     bad.write_text("{not json")
     with pytest.raises(InputFileError, match="not valid JSON"):
         load_polygons(bad)
+
+
+def test_sites_out_of_range_of_every_station_are_dropped():
+    # flat 20 m x 20 m, one station at (-5, 0): range 6 m + 0.1 m radius
+    dem = DEM(np.zeros((201, 201)), (-10.0, -10.0), 0.1)
+    cfg = PlanConfig(grid_spacing_m=1.0, max_range_m=6.0, min_station_distance_m=1.0)
+    near = candidate_sites(dem, cfg, station_xy=[[-5.0, 0.0, 1.5]])
+    wide = candidate_sites(dem, cfg.replace(max_range_m=100.0), station_xy=[[-5.0, 0.0]])
+    d_wide = np.hypot(wide.centre_m[:, 0] + 5.0, wide.centre_m[:, 1])
+    keep = d_wide <= 6.1
+    np.testing.assert_array_equal(near.centre_m, wide.centre_m[keep])
+    assert near.dropped["out of range"] == int((~keep).sum()) > 0
+    assert wide.dropped["out of range"] == 0
+    assert near.dropped["near station"] == wide.dropped["near station"] == 4
+    assert list(near.dropped) == ["outside boundary", "near station", "out of range",
+                                  "too steep"]
+
+
+def test_grid_limit_counts_the_sites_in_range(monkeypatch):
+    import planner.candidates as candidates
+
+    dem = DEM(np.zeros((201, 201)), (-10.0, -10.0), 0.1)
+    cfg = PlanConfig(grid_spacing_m=0.5, max_range_m=2.0, min_station_distance_m=0.5)
+    monkeypatch.setattr(candidates, "MAX_GRID_POINTS", 100)
+    kept = candidate_sites(dem, cfg, station_xy=[[0.0, 0.0]])  # 1600 grid points, ~50 in range
+    assert len(kept) < 100
+    with pytest.raises(ConfigError, match="candidate sites in range of a station.*more than "
+                                          "the 100 accepted"):
+        candidate_sites(dem, cfg.replace(max_range_m=10.0), station_xy=[[0.0, 0.0]])
+    monkeypatch.setattr(candidates, "MAX_RAW_GRID_POINTS", 1000)
+    with pytest.raises(ConfigError, match="1.6e\\+03 candidate grid points"):
+        candidate_sites(dem, cfg, station_xy=[[0.0, 0.0]])
+
+
+def test_dropping_out_of_range_sites_leaves_the_plan_unchanged(monkeypatch):
+    """The default site planned with a 12 m range: the same markers (by position) whether or not
+    the sites out of every station's range were ray cast."""
+    import planner.planning as planning
+    from error_model import default_model
+
+    inputs = planning.load_inputs("default")
+    cfg = PlanConfig(max_range_m=12.0)
+    model = default_model()
+    dropped = planning.make_plan(inputs, cfg, model, progress=False)
+    kept_all = planning.candidate_sites
+
+    def no_range_drop(dem, config, **kw):
+        return kept_all(dem, config.replace(max_range_m=100.0), **kw)
+
+    monkeypatch.setattr(planning, "candidate_sites", no_range_drop)
+    full = planning.make_plan(inputs, cfg, model, progress=False)
+    assert dropped.candidates.dropped["out of range"] > 0
+    assert len(full.candidates) > len(dropped.candidates)
+
+    def chosen(outcome):
+        xyz = outcome.problem.site_xyz[outcome.result.selected]
+        return xyz[np.lexsort(xyz.T)]
+
+    assert dropped.result.status == full.result.status
+    np.testing.assert_array_equal(chosen(dropped), chosen(full))
