@@ -6,8 +6,8 @@ status, bound/gap, wall time per stage and peak RSS (each in its own process); a
 baseline, the peak RSS a mesh of the whole site would need, extrapolated from a scene built on
 one tile in the same run (a whole-site scene is not built). Finally one JSON object.
 
-    .venv/bin/python -u benchmarks/km_plan.py [--grid-spacing 4] [--time-limit 120]
-        [--network-requirement 2.5] [--keep DIR]
+    .venv/bin/python -u benchmarks/km_plan.py [--grid-spacing 4] [--network-grid-spacing G]
+        [--time-limit 120] [--network-requirement 2.5] [--keep DIR]
 """
 
 from __future__ import annotations
@@ -79,6 +79,9 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--grid-spacing", type=float, default=4.0,
                     help="Candidate grid spacing, m (the 1 m default gives ~1 M grid points).")
+    ap.add_argument("--network-grid-spacing", type=float,
+                    help="Candidate grid spacing of the network plan, m (default --grid-spacing; "
+                         "network mode takes at most 20,000 sites seen by two stations).")
     ap.add_argument("--time-limit", type=float, default=120.0, help="Solver time limit, s.")
     ap.add_argument("--network-requirement", type=float, default=2.5,
                     help="requirement_m of the network plan, m (relative to the station nearest "
@@ -106,7 +109,7 @@ def main() -> None:
     config = root / "km.toml"
     config.write_text(f"grid_spacing_m = {args.grid_spacing}\n")
     network = root / "km-network.toml"
-    network.write_text(f"grid_spacing_m = {args.grid_spacing}\n"
+    network.write_text(f"grid_spacing_m = {args.network_grid_spacing or args.grid_spacing}\n"
                        f"requirement_m = {args.network_requirement}\n")
     cli = str(Path(sys.executable).with_name("markerplan"))
     figures = {"site": site, "whole_mesh_mb": whole_mb, "whole_mesh_s": whole_s,
@@ -126,7 +129,10 @@ def main() -> None:
         solver = doc["solver"]
         cast_s = summary["timings_s"]["scene"] + summary["timings_s"]["visibility"]
         stages = ", ".join(f"{k} {v:.1f} s" for k, v in summary["timings_s"].items())
-        print(f"{name}: {doc['n_markers']} markers, status {solver.get('status')}, bound "
+        req = (f" (requirement {args.network_requirement:g} m relative to "
+               f"{site['centre_station']}: 0.1 m is out of reach ~200 m from it)"
+               if extra else "")
+        print(f"{name}{req}: {doc['n_markers']} markers, status {solver.get('status')}, bound "
               f"{solver.get('dual_bound')}, gap {solver.get('gap')}; {wall:.0f} s wall "
               f"({stages}); peak RSS {peak:.0f} MB = {peak / whole_mb:.2f} x the whole-site "
               f"mesh alone; tile scenes + ray casting {cast_s / whole_s:.2f} x its build time")
