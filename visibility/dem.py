@@ -125,8 +125,10 @@ class DEM:
     def crop(self, xmin: float, xmax: float, ymin: float, ymax: float) -> DEM:
         """The sub-grid whose triangles cover the rectangle, clipped to the grid (a tile).
 
-        Cells are kept whole and on the same grid (no resampling), so a tile's mesh is made of
-        the same triangles as the whole DEM's mesh over the rectangle.
+        Cells are kept whole and on the same grid (no resampling), and the tile starts on an even
+        row and column, so its mesh is made of the same triangles as the whole DEM's mesh over
+        the rectangle (the diagonals' checkerboard of :func:`visibility.mesh.dem_to_mesh` runs
+        from cell ``[0, 0]``).
 
         Parameters
         ----------
@@ -136,7 +138,8 @@ class DEM:
         Returns
         -------
         tile : DEM
-            Same cell size, CRS and source CRS; heights and valid mask cut out.
+            Same cell size, CRS and source CRS; heights and valid mask cut out; at most two cells
+            beyond the rectangle on its low sides and one on its high sides.
 
         Raises
         ------
@@ -154,8 +157,10 @@ class DEM:
         ny, nx = self.shape
         c = self.cell_size_m
         i0 = max(int(np.floor((xmin - x0) / c)), 0)
+        i0 -= i0 % 2
         i1 = min(int(np.ceil((xmax - x0) / c)), nx - 1)
         j0 = max(int(np.floor((ymin - y0) / c)), 0)
+        j0 -= j0 % 2
         j1 = min(int(np.ceil((ymax - y0) / c)), ny - 1)
         if i1 - i0 < 1 or j1 - j0 < 1:
             raise DataError(f"the rectangle x {xmin:g}..{xmax:g}, y {ymin:g}..{ymax:g} m misses "

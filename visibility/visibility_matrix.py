@@ -296,15 +296,13 @@ class GroupVisibility:
     n_triangles: int
 
 
-def tile_rectangle(dem, xy_m: np.ndarray, margin_m: float
-                   ) -> tuple[float, float, float, float]:
-    """The rectangle a group's tile must cover: the points' bounding box plus a margin,
-    snapped so the tile starts on an even row and column of ``dem`` (its triangles'
-    diagonals then match the whole mesh's checkerboard, :func:`visibility.mesh.dem_to_mesh`).
+def tile_rectangle(xy_m: np.ndarray, margin_m: float) -> tuple[float, float, float, float]:
+    """The rectangle a group's tile must cover: the points' bounding box plus a margin
+    (:meth:`~visibility.dem.DEM.crop` starts the tile on an even row and column, so its
+    triangles match the whole mesh's).
 
     Parameters
     ----------
-    dem : visibility.dem.DEM
     xy_m : (p, 2) float
         The group's stations and the sites they see, site frame, m: every ray runs between
         a station and a point on a marker.
@@ -316,14 +314,9 @@ def tile_rectangle(dem, xy_m: np.ndarray, margin_m: float
     xmin, xmax, ymin, ymax : float
         Site frame, m (for :meth:`~visibility.dem.DEM.crop`).
     """
-    c = dem.cell_size_m
-    x0, y0 = dem.origin_m
     lo = xy_m.min(axis=0) - margin_m
     hi = xy_m.max(axis=0) + margin_m
-    # half a cell past an even index, so crop's floor lands on that even index
-    i0 = 2 * np.floor((lo[0] - x0) / c / 2)
-    j0 = 2 * np.floor((lo[1] - y0) / c / 2)
-    return x0 + (i0 + 0.5) * c, float(hi[0]), y0 + (j0 + 0.5) * c, float(hi[1])
+    return float(lo[0]), float(hi[0]), float(lo[1]), float(hi[1])
 
 
 def group_visibility(group: VisibilityGroup) -> GroupVisibility:
@@ -433,7 +426,7 @@ def tiled_visibility(dem, station_position_m, site_centre_m, marker_radius_m: fl
                 if len(near) else np.zeros(0, np.int64)
             seeing = [k for k, n in zip(g, near, strict=True) if len(n)] or list(g)
             xy = np.vstack([st[seeing, :2], si[sites, :2]])
-            yield VisibilityGroup(dem.crop(*tile_rectangle(dem, xy, margin)), g, st[g],
+            yield VisibilityGroup(dem.crop(*tile_rectangle(xy, margin)), g, st[g],
                                   sites, si[sites], marker_radius_m, max_range_m,
                                   rays_per_marker, sampling)
 

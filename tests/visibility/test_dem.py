@@ -136,9 +136,10 @@ def test_crop_keeps_the_grid_and_covers_the_rectangle():
     tile = dem.crop(103.1, 106.9, -18.6, -15.05)
     x, y = tile.grid_xy()
     assert x[0] <= 103.1 and x[-1] >= 106.9 and y[0] <= -18.6 and y[-1] >= -15.05
-    assert x[1] > 103.1 and x[-2] < 106.9  # no more than one cell of margin
+    assert x[2] > 103.1 and x[-2] < 106.9  # at most two cells of margin below, one above
     i0 = round((x[0] - 100.0) / 0.25)
     j0 = round((y[0] + 20.0) / 0.25)
+    assert i0 % 2 == 0 and j0 % 2 == 0  # the whole mesh's diagonals (checkerboard from [0, 0])
     ny, nx = tile.shape
     np.testing.assert_array_equal(tile.heights_m, dem.heights_m[j0:j0 + ny, i0:i0 + nx])
     np.testing.assert_array_equal(tile.valid_mask(), valid[j0:j0 + ny, i0:i0 + nx])

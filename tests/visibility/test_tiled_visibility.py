@@ -81,7 +81,7 @@ def test_station_groups_and_even_tiles():
     assert [g.tolist() for g in station_groups(xy, 20.0)] == [[0, 2], [1], [3]]
     dem = DEM(np.zeros((101, 101)), (-5.0, -5.0), 0.1)
     for x in (-1.23, 0.0, 0.05, 0.17):
-        tile = dem.crop(*tile_rectangle(dem, np.array([[x, x + 0.31], [x + 0.5, x]]), 1.0))
+        tile = dem.crop(*tile_rectangle(np.array([[x, x + 0.31], [x + 0.5, x]]), 1.0))
         i0 = round((tile.origin_m[0] + 5.0) / 0.1)
         j0 = round((tile.origin_m[1] + 5.0) / 0.1)
         assert i0 % 2 == 0 and j0 % 2 == 0
