@@ -67,7 +67,7 @@ def run_site(site: str, args, grid_spacing_m: float) -> dict:
     inputs = load_inputs(site)
     config = PlanConfig(grid_spacing_m=grid_spacing_m, time_limit_s=args.time_limit,
                         requirement_m=args.requirement, reference_station=args.reference)
-    problem, cand, _, _, _ = build_problem(inputs, config, default_model(), progress=False)
+    problem, cand, _, _ = build_problem(inputs, config, default_model(), progress=False)
     t_build = time.perf_counter() - t0
     doc, _ = ns.run_studies(problem, config, plan_bounds(inputs, problem),
                             _floats(args.requirements), _sigmas(args.heading_priors),

@@ -34,7 +34,7 @@ def main() -> None:
     t_site = time.perf_counter() - t
     config = PlanConfig(grid_spacing_m=args.grid_spacing, time_limit_s=args.time_limit,
                         rays_per_marker=args.rays_per_marker)
-    problem, cand, vis, _, timings = build_problem(inputs, config, default_model())
+    problem, cand, vis, timings = build_problem(inputs, config, default_model())
     print(f"site {args.site}: {len(inputs.station_ids)} stations, {len(cand)} candidate sites "
           f"(grid {args.grid_spacing:g} m), site build {t_site:.1f} s")
     print(f"visibility matrix: {len(vis)} pairs, {vis.n_rays} rays in {vis.elapsed_s:.2f} s "

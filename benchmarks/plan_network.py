@@ -35,7 +35,7 @@ def _run(site: str, grid_spacing: float, time_limit: float, greedy_batch: int,
     inputs = load_inputs(site)
     config = PlanConfig(grid_spacing_m=grid_spacing, time_limit_s=time_limit,
                         requirement_m=requirement_m)
-    problem, cand, _, _, _ = build_problem(inputs, config, default_model(), progress=False)
+    problem, cand, _, _ = build_problem(inputs, config, default_model(), progress=False)
     out = {"site": site, "n_stations": problem.n_stations, "n_candidates": len(cand),
            "requirement_m": requirement_m}
     print(f"site {site}: {problem.n_stations} stations, {len(cand)} candidate sites "

@@ -45,7 +45,7 @@ from planner.planning import build_problem, load_inputs, plan_bounds
 # %%
 inputs = load_inputs("default")
 config = PlanConfig(grid_spacing_m=2.0, time_limit_s=20.0)
-problem, cand, _, _, _ = build_problem(inputs, config, default_model(), progress=False)
+problem, cand, _, _ = build_problem(inputs, config, default_model(), progress=False)
 net = network_model(problem, config.replace(network=True))
 print(f"{problem.n_stations} stations, {problem.n_sites} candidate sites, "
       f"{int(net.tying.sum())} of them seen by two or more stations (only those tie the network); "

@@ -555,13 +555,12 @@ class PlanOutcome:
 
 
 def build_problem(inputs: PlanInputs, config, error_model, progress: bool = True,
-                  map_groups=map) -> tuple[PlanProblem, Candidates, object, dict, dict]:
+                  map_groups=map) -> tuple[PlanProblem, Candidates, object, dict]:
     """Candidates + visibility matrix + usability (:func:`planner.sight.sight_problem`, its
     station groups mapped over by ``map_groups``) -> the program's input.
 
-    Returns ``(problem, candidates, visibility, tiles, timings_s)`` (``tiles`` as
-    :attr:`planner.sight.Sight.tiles`); existing markers are
-    appended to the candidate sites (ids as given) and fixed.
+    Returns ``(problem, candidates, visibility, timings_s)``; existing markers are appended to
+    the candidate sites (ids as given) and fixed.
     """
     timings = {}
     t = time.perf_counter()
@@ -578,7 +577,7 @@ def build_problem(inputs: PlanInputs, config, error_model, progress: bool = True
     sight = sight_problem(inputs, site_ids, site_xyz, config, error_model,
                           site_existing=existing, progress=progress, map_groups=map_groups)
     timings.update(sight.timings_s)
-    return sight.problem, cand, sight.visibility, sight.tiles, timings
+    return sight.problem, cand, sight.visibility, timings
 
 
 def make_plan(inputs: PlanInputs, config, error_model, model_name: str = "default",
@@ -605,8 +604,8 @@ def make_plan(inputs: PlanInputs, config, error_model, model_name: str = "defaul
     timings: dict = {}
     cand = vis = None
     if problem is None:
-        problem, cand, vis, _, timings = build_problem(inputs, config, error_model, progress,
-                                                       map_groups)
+        problem, cand, vis, timings = build_problem(inputs, config, error_model, progress,
+                                                    map_groups)
     t = time.perf_counter()
     result = plan_sites(problem, config)
     timings["program"] = time.perf_counter() - t

@@ -34,14 +34,11 @@ class Sight:
     visibility : VisibilityMatrix
     timings_s : dict
         ``"scene"`` (tile scenes built, summed) and ``"visibility"`` (ray casting, summed), s.
-    tiles : dict
-        ``"groups"`` (station blocks, one tile each) and ``"max_tile_triangles"``.
     """
 
     problem: PlanProblem
     visibility: VisibilityMatrix
     timings_s: dict
-    tiles: dict
 
 
 def angular_sampling() -> AngularSampling:
@@ -90,8 +87,7 @@ def sight_problem(inputs, site_ids, site_xyz: np.ndarray, config, error_model,
                                       site_existing=site_existing)
     if inputs.dem.valid is not None:
         problem = _unknown_terrain_occludes(problem, inputs.dem)
-    return Sight(problem=problem, visibility=vis, timings_s=timings,
-                 tiles={k: stats[k] for k in ("groups", "max_tile_triangles")})
+    return Sight(problem=problem, visibility=vis, timings_s=timings)
 
 
 def _unknown_terrain_occludes(problem: PlanProblem, dem) -> PlanProblem:

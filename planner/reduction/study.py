@@ -248,7 +248,7 @@ def layout_problem(inputs, layout: Layout, config, error_model, free: bool = Fal
     """
     if free:
         with_layout = replace(inputs, existing_ids=list(layout.ids), existing_xyz=layout.xyz)
-        problem, _, _, _, timings = build_problem(with_layout, config, error_model, progress)
+        problem, _, _, timings = build_problem(with_layout, config, error_model, progress)
         problem = replace(problem, site_existing=np.zeros(problem.n_sites, bool),
                           site_cost=np.ones(problem.n_sites))
         mask = problem.site_mask(layout.ids, "layout")
