@@ -263,8 +263,7 @@ def build_model(problem: PlanProblem, config, information: bool = True) -> Model
     nx, ns, redundant = var_site.size, problem.n_stations, bool(config.redundant)
 
     # usable pairs by station, then site; their column, and their (station, sector) key
-    pairs = np.flatnonzero(usable)
-    pairs = pairs[np.lexsort((problem.pair_site[pairs], problem.pair_station[pairs]))]
+    pairs = np.concatenate([problem.usable_pairs(s) for s in range(ns)] or [np.zeros(0, int)])
     station = problem.pair_station[pairs]
     col = site_var[problem.pair_site[pairs]]
     key = station * config.n_sectors + sector_index(problem.pair_bearing_rad[pairs],
