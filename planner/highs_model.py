@@ -1,9 +1,10 @@
 """One mixed-integer program handed to HiGHS directly (highspy), and what came back.
 
 :func:`run_highs` passes the arrays of a program ``min c x  s.t.  row_lb <= A x <= row_ub,
-lb <= x <= ub`` to HiGHS in one column-wise call (no ``scipy.optimize.milp`` wrapping and
-copying), with a thread count, a time limit and a relative gap; :func:`solver_record` gives
-the name, version and limits a plan records.
+lb <= x <= ub`` to HiGHS in one row-wise call (the CSR arrays as they are: no
+``scipy.optimize.milp`` wrapping, no transposing copy in Python), with a thread count, a time
+limit and a relative gap; :func:`solver_record` gives the name, version and limits a plan
+records.
 """
 
 from __future__ import annotations
@@ -98,8 +99,10 @@ def run_highs(c: np.ndarray, a: sp.sparray, row_lb: np.ndarray, row_ub: np.ndarr
     outcome : HighsOutcome
     """
     t0 = time.perf_counter()
-    a = sp.csc_array(a)
-    a.sort_indices()
+    a = sp.csr_array(a)
+    if not a.has_canonical_format:  # HiGHS wants each row's columns sorted and distinct
+        a = a.copy()
+        a.sum_duplicates()
     h = _core._Highs()
     h.setOptionValue("output_flag", False)
     h.setOptionValue("threads", THREADS)
@@ -108,7 +111,7 @@ def run_highs(c: np.ndarray, a: sp.sparray, row_lb: np.ndarray, row_ub: np.ndarr
     if integral_objective:
         h.setOptionValue("mip_abs_gap", INTEGRAL_ABS_GAP)
     n_col, n_row = c.shape[0], a.shape[0]
-    h.passModel(n_col, n_row, int(a.nnz), int(_core.MatrixFormat.kColwise),
+    h.passModel(n_col, n_row, int(a.nnz), int(_core.MatrixFormat.kRowwise),
                 int(_core.ObjSense.kMinimize), 0.0, np.ascontiguousarray(c, float),
                 np.ascontiguousarray(lb, float), np.ascontiguousarray(ub, float),
                 np.ascontiguousarray(row_lb, float), np.ascontiguousarray(row_ub, float),

@@ -233,6 +233,11 @@ class PlanResult:
 def build_model(problem: PlanProblem, config, information: bool = True) -> Model:
     """Build the integer program for a problem and a :class:`~planner.config.PlanConfig`.
 
+    Built from whole arrays (no loop over stations): rows are laid out station by station
+    (count, info, then per occupied sector its sector rows, directions, then in redundant
+    mode the directions-loss rows), then the budget row; the ``y`` (and ``z``) variables
+    follow the ``x`` variables in the same station and sector order.
+
     Parameters
     ----------
     problem : PlanProblem
@@ -255,70 +260,90 @@ def build_model(problem: PlanProblem, config, information: bool = True) -> Model
     var_site = np.flatnonzero(in_model)
     site_var = np.full(problem.n_sites, -1, dtype=np.int64)
     site_var[var_site] = np.arange(var_site.size)
-    nx = var_site.size
+    nx, ns, redundant = var_site.size, problem.n_stations, bool(config.redundant)
 
-    rows_i, rows_j, rows_v = [], [], []
-    row_lb, row_ub, kinds = [], [], []
-    n_vars = nx
+    # usable pairs by station, then site; their column, and their (station, sector) key
+    pairs = np.concatenate([problem.usable_pairs(s) for s in range(ns)] or [np.zeros(0, int)])
+    station = problem.pair_station[pairs]
+    col = site_var[problem.pair_site[pairs]]
+    key = station * config.n_sectors + sector_index(problem.pair_bearing_rad[pairs],
+                                                    config.n_sectors)
+    occupied, sector_of = np.unique(key, return_inverse=True)  # (p,) sector of each pair
+    occ_station = occupied // config.n_sectors
+    n_occ = np.bincount(occ_station, minlength=ns)
+    rank = np.arange(occupied.size) - np.searchsorted(occ_station, occ_station)
+    y = nx + (2 if redundant else 1) * np.arange(occupied.size)  # z = y + 1 when redundant
+    n_vars = nx + (2 if redundant else 1) * occupied.size
 
-    def add_row(cols, vals, lo, hi, kind):
-        r = len(row_lb)
-        rows_i.append(np.full(len(cols), r, dtype=np.int64))
-        rows_j.append(np.asarray(cols, dtype=np.int64))
-        rows_v.append(np.asarray(vals, dtype=float))
-        row_lb.append(lo)
-        row_ub.append(hi)
-        kinds.append(kind)
-
-    min_count = config.min_markers + (1 if config.redundant else 0)
+    # rows of each station: count, [info], per sector 1 (redundant: 3), directions,
+    # [redundant: one directions-loss per sector]
     reference = _reference_index(problem, config)
-    for s in range(problem.n_stations):
-        idx = problem.usable_pairs(s)
-        cols = site_var[problem.pair_site[idx]]
-        add_row(cols, np.ones(cols.size), min_count, np.inf, RowKind("count", s))
-        if s != reference and information:
-            w_t, _ = info_weights(problem, idx, config)
-            add_row(cols, w_t, 1.0, np.inf, RowKind("info", s))
-        sec = sector_index(problem.pair_bearing_rad[idx], config.n_sectors)
-        present = np.unique(sec)
-        y = {}
-        z = {}
-        for k in present:
-            y[k] = n_vars
-            n_vars += 1
-            in_k = cols[sec == k]
-            add_row(np.r_[y[k], in_k], np.r_[1.0, -np.ones(in_k.size)], -np.inf, 0.0,
-                    RowKind("sector", s))
-            if config.redundant:
-                z[k] = n_vars
-                n_vars += 1
-                add_row(np.r_[z[k], in_k], np.r_[2.0, -np.ones(in_k.size)], -np.inf, 0.0,
-                        RowKind("sector2", s))
-                add_row([z[k], y[k]], [1.0, -1.0], -np.inf, 0.0, RowKind("sector21", s))
-        ycols = [y[k] for k in present]
-        add_row(ycols, np.ones(len(ycols)), config.min_sectors, np.inf, RowKind("directions", s))
-        if config.redundant:
-            for k in present:
-                vals = [1.0 if kk != k else 0.0 for kk in present]
-                add_row(ycols + [z[k]], vals + [1.0], config.min_sectors, np.inf,
-                        RowKind("directions-loss", s))
-    if config.budget is not None:
-        add_row(np.arange(nx), np.ones(nx), -np.inf, float(config.budget),
-                RowKind("budget"))
+    has_info = np.full(ns, information)
+    if information and reference >= 0:
+        has_info[reference] = False
+    per_sector = 3 if redundant else 1
+    size = 2 + has_info + n_occ * (per_sector + (1 if redundant else 0))
+    start = np.r_[0, np.cumsum(size)]
+    count_row = start[:-1]
+    sector_row = (start[occ_station] + 1 + has_info[occ_station]) + per_sector * rank
+    directions_row = count_row + 1 + has_info + per_sector * n_occ
+    n_rows = int(start[-1]) + (config.budget is not None)
 
-    a = sp.csr_array((np.concatenate(rows_v) if rows_v else np.zeros(0),
-                      (np.concatenate(rows_i) if rows_i else np.zeros(0, np.int64),
-                       np.concatenate(rows_j) if rows_j else np.zeros(0, np.int64))),
-                     shape=(len(row_lb), n_vars))
+    ones_p, ones_o = np.ones(pairs.size), np.ones(occupied.size)
+    parts = [(count_row[station], col, ones_p),                            # count
+             (sector_row, y, ones_o),                                      # y - sum x <= 0
+             (sector_row[sector_of], col, -ones_p),
+             (directions_row[occ_station], y, ones_o)]                     # sum y >= min
+    if information:
+        w_t, _ = info_weights(problem, pairs, config)
+        keep = has_info[station]
+        parts.append((count_row[station[keep]] + 1, col[keep], w_t[keep]))  # info
+    if redundant:
+        z = y + 1
+        loss_row = directions_row[occ_station] + 1 + rank
+        # the directions-loss row of sector o holds y of its station's other occupied sectors
+        reps = n_occ[occ_station]
+        o = np.repeat(np.arange(occupied.size), reps)
+        other = (np.arange(occupied.size) - rank)[o] + np.arange(o.size) \
+            - np.repeat(np.cumsum(reps) - reps, reps)
+        mask = other != o
+        parts += [(sector_row + 1, z, 2 * ones_o),                         # 2 z - sum x <= 0
+                  (sector_row[sector_of] + 1, col, -ones_p),
+                  (sector_row + 2, z, ones_o), (sector_row + 2, y, -ones_o),  # z - y <= 0
+                  (loss_row[o[mask]], y[other[mask]], np.ones(int(mask.sum()))),
+                  (loss_row, z, ones_o)]
+    if config.budget is not None:
+        parts.append((np.full(nx, n_rows - 1), np.arange(nx), np.ones(nx)))
+    i, j, v = (np.concatenate([np.asarray(p[k]) for p in parts]) for k in range(3))
+    a = sp.csr_array((v, (i, j)), shape=(n_rows, n_vars))
+
+    # bounds and kinds, row by row
+    min_count = config.min_markers + (1 if redundant else 0)
+    row_lb, row_ub = np.full(n_rows, -np.inf), np.zeros(n_rows)
+    family = np.empty(n_rows, dtype=object)
+    row_station = np.r_[np.repeat(np.arange(ns), size), np.full(n_rows - start[-1], -1)]
+    family[count_row], row_lb[count_row], row_ub[count_row] = "count", min_count, np.inf
+    info_row = count_row[has_info] + 1
+    family[info_row], row_lb[info_row], row_ub[info_row] = "info", 1.0, np.inf
+    family[sector_row] = "sector"
+    family[directions_row] = "directions"
+    row_lb[directions_row], row_ub[directions_row] = config.min_sectors, np.inf
+    if redundant:
+        family[sector_row + 1], family[sector_row + 2] = "sector2", "sector21"
+        family[loss_row], row_lb[loss_row], row_ub[loss_row] = \
+            "directions-loss", config.min_sectors, np.inf
+    if config.budget is not None:
+        family[-1], row_ub[-1] = "budget", float(config.budget)
     c = np.zeros(n_vars)
     c[:nx] = problem.site_cost[var_site]
     lb = np.zeros(n_vars)
     ub = np.ones(n_vars)
     lb[:nx][existing[var_site]] = 1.0
     ub[:nx][forbidden[var_site]] = 0.0
-    return Model(c=c, A=a, row_lb=np.asarray(row_lb, float), row_ub=np.asarray(row_ub, float),
-                 lb=lb, ub=ub, integrality=np.ones(n_vars, dtype=np.int64), var_site=var_site,
-                 site_var=site_var, row_kind=tuple(kinds))
+    return Model(c=c, A=a, row_lb=row_lb, row_ub=row_ub, lb=lb, ub=ub,
+                 integrality=np.ones(n_vars, dtype=np.int64), var_site=var_site,
+                 site_var=site_var,
+                 row_kind=tuple(map(RowKind, family.tolist(), row_station.tolist())))
 
 
 def _reference_index(problem: PlanProblem, config) -> int:

@@ -6,8 +6,16 @@ import pytest
 
 from markerplan.errors import ConfigError, InfeasiblePlanError
 from planner.config import PlanConfig
-from planner.program import RowKind, build_model, plan_sites, solve, with_tightening_rows
+from planner.program import (
+    RowKind,
+    build_model,
+    info_weights,
+    plan_sites,
+    solve,
+    with_tightening_rows,
+)
 from planner.station_checks import evaluate_layout
+from planner.usability import sector_index
 from tests.planner.instances import brute_force_optimum, make_problem, ring
 
 LOOSE = PlanConfig(requirement_m=0.10, working_radius_m=10.0, max_range_m=30.0)
@@ -131,3 +139,45 @@ def test_models_and_inputs_are_never_mutated():
         assert np.array_equal(getattr(p, k), v)
     sol = solve(model, 10.0)
     assert sol.status == "optimal" and sol.gap == pytest.approx(0.0)
+
+
+@pytest.mark.parametrize("redundant", [False, True])
+def test_model_rows_spell_the_formulation(redundant):
+    # two stations sharing sites, one seeing none; read every row back against the
+    # formulation written out station by station
+    rng = np.random.default_rng(2)
+    p = make_problem([[0, 0], [6, 2], [300, 0]], rng.uniform(-8, 12, (14, 2)), max_range_m=12)
+    cfg = LOOSE.replace(redundant=redundant, budget=9, n_sectors=4, min_sectors=2)
+    m = build_model(p, cfg)
+    a = m.A.toarray()
+    nx, kinds = m.var_site.size, [(k.family, k.station) for k in m.row_kind]
+    expected, r, var = [], 0, nx
+    for s in range(p.n_stations):
+        idx = p.usable_pairs(s)
+        cols = m.site_var[p.pair_site[idx]]
+        sec = sector_index(p.pair_bearing_rad[idx], cfg.n_sectors)
+        expected += [("count", s, {c: 1.0 for c in cols}, 3 + redundant, np.inf),
+                     ("info", s, dict(zip(cols, info_weights(p, idx, cfg)[0], strict=True)),
+                      1.0, np.inf)]
+        ys = {}
+        for k in np.unique(sec):
+            ys[k] = var
+            expected.append(("sector", s, {var: 1.0} | {c: -1.0 for c in cols[sec == k]},
+                             -np.inf, 0.0))
+            if redundant:
+                expected += [("sector2", s, {var + 1: 2.0} | {c: -1.0 for c in cols[sec == k]},
+                              -np.inf, 0.0),
+                             ("sector21", s, {var + 1: 1.0, var: -1.0}, -np.inf, 0.0)]
+            var += 1 + redundant
+        expected.append(("directions", s, {y: 1.0 for y in ys.values()}, 2, np.inf))
+        if redundant:
+            expected += [("directions-loss", s, {y: 1.0 for kk, y in ys.items() if kk != k}
+                          | {ys[k] + 1: 1.0}, 2, np.inf) for k in ys]
+    expected.append(("budget", -1, dict.fromkeys(range(nx), 1.0), -np.inf, 9.0))
+    assert m.n_vars == var and len(kinds) == len(expected) == a.shape[0]
+    for r, (family, s, entries, lo, hi) in enumerate(expected):
+        assert kinds[r] == (family, s)
+        assert (m.row_lb[r], m.row_ub[r]) == (lo, hi)
+        row = np.zeros(m.n_vars)
+        row[list(entries)] = list(entries.values())
+        np.testing.assert_array_equal(a[r], row, err_msg=f"row {r} ({family}, station {s})")

@@ -5,6 +5,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+import scipy.sparse as sp
 
 from planner import program
 from planner.config import PlanConfig
@@ -151,6 +152,19 @@ def test_run_highs_small_program_against_enumeration():
                if np.all(a @ np.array(v) >= 1))
     assert out.status == "optimal" and out.objective == pytest.approx(best) == 3.0
     assert solver_record(60.0, 0.0)["threads"] == 2
+
+
+def test_run_highs_sums_repeated_entries_and_leaves_the_matrix_alone():
+    # one row x0 + x1 >= 1 with x0's coefficient given as 0.5 twice, after x1's: unsorted,
+    # repeated entries mean their sum, so x0 alone (cost 1) is enough, not x1 (cost 3)
+    a = sp.csr_array((np.array([1.0, 0.5, 0.5]), np.array([1, 0, 0]), np.array([0, 3])),
+                     shape=(1, 2))
+    data = a.data.copy()
+    out = run_highs(np.array([1.0, 3.0]), a, np.ones(1), np.full(1, np.inf), np.zeros(2),
+                    np.ones(2), np.ones(2, np.int64), 10.0, 0.0, integral_objective=True)
+    assert out.status == "optimal" and out.objective == 1.0
+    np.testing.assert_array_equal(out.x, [1.0, 0.0])
+    assert not a.has_canonical_format and np.array_equal(a.data, data)
 
 
 def test_directions_only_model_is_the_full_model_without_information_rows():
