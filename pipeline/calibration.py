@@ -187,11 +187,19 @@ def estimate_rotation_offsets(scan: StationScan, offsets: MountingOffsets | None
     cov = np.full((2, 2), np.nan)
     n_pairs, rms = 0, float("nan")
     neighbours = NearestNeighbours(cfg.neighbours)
+    # the samples' sensor-frame points and frames, gathered once
+    xyz_a, frame_a = scan.xyz_sensor_m[a], scan.frame_index[a]
+    xyz_b, frame_b = scan.xyz_sensor_m[b], scan.frame_index[b]
+
+    def station(xyz: np.ndarray, frame: np.ndarray, off: MountingOffsets) -> np.ndarray:
+        return sensor_to_station(xyz, frame, scan.turntable_angle_rad, off)
+
     for _ in range(cfg.iterations):
         off = _with_angles(offsets, p)
-        pa, pb = _positions(scan, a, off), _positions(scan, b, off)
+        pa, pb = station(xyz_a, frame_a, off), station(xyz_b, frame_b, off)
         dist, nn = neighbours.query(pa, pb)
-        centroid, normal, ok = _local_planes(pb[nn], dist)
+        # np.take: the rows pb[nn] holds, in half the time of fancy indexing
+        centroid, normal, ok = _local_planes(np.take(pb, nn, axis=0), dist)
         r0 = _plane_residuals(pa, centroid, normal)
         ok &= _inliers(r0, ok)
         if ok.sum() < 50:
@@ -205,8 +213,9 @@ def estimate_rotation_offsets(scan: StationScan, offsets: MountingOffsets | None
             pk = p.copy()
             pk[k] += h
             offk = _with_angles(offsets, pk)
-            rk = _plane_residuals(_positions(scan, a[ok], offk),
-                                  _positions(scan, b[used], offk)[local].mean(axis=1),
+            rk = _plane_residuals(station(xyz_a[ok], frame_a[ok], offk),
+                                  np.take(station(xyz_b[used], frame_b[used], offk), local,
+                                          axis=0).mean(axis=1),
                                   normal[ok])
             jac[:, k] = (rk - r0[ok]) / h
         step, *_ = np.linalg.lstsq(jac, -r0[ok], rcond=None)
@@ -293,7 +302,7 @@ class NearestNeighbours:
     def _from_candidates(self, pa: np.ndarray, pb: np.ndarray, drift: float
                          ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The ``k`` nearest candidates of each query point, and where that is unproven."""
-        dist = _distances(pa[:, None, :], pb[self.candidates])
+        dist = _distances(pa[:, None, :], np.take(pb, self.candidates, axis=0))
         order = np.argsort(dist, axis=1, kind="stable")[:, :self.k]
         dist = np.take_along_axis(dist, order, axis=1)
         moved = np.sqrt(_squared_norms(pa - self.pa0))
