@@ -294,7 +294,7 @@ class NearestNeighbours:
         self.tree = cKDTree(pb, balanced_tree=False, compact_nodes=False)
         self.builds += 1
         self.pb0, self.pa0 = pb, pa
-        size = min(self.k + self.spare, pb.shape[0])
+        size = max(self.k, min(self.k + self.spare, pb.shape[0]))
         dist, self.candidates = self.tree.query(pa, k=size, workers=-1)
         self.reach = dist[:, -1]
         return dist[:, :self.k], self.candidates[:, :self.k].copy()

@@ -124,3 +124,18 @@ def test_nearest_neighbours_reuse_gives_fresh_tree_answers(monkeypatch, step_m, 
         pa = pa + gen.normal(0, step_m, pa.shape)
     assert nn.builds == builds
     assert bool(calls) == ball_searches
+
+
+def test_nearest_neighbours_with_fewer_reference_points_than_candidates():
+    """With fewer reference points than k + spare every point is a candidate; the answers
+    still equal a fresh tree's."""
+    gen = np.random.default_rng(4)
+    pb, pa = gen.normal(size=(12, 3)), gen.normal(size=(30, 3))
+    nn = NearestNeighbours(10)
+    for _ in range(3):
+        dist, idx = nn.query(pa, pb)
+        want_d, want_i = cKDTree(pb).query(pa, k=10)
+        np.testing.assert_array_equal(idx, want_i)
+        np.testing.assert_array_equal(dist, want_d)
+        pb = pb + gen.normal(0, 1e-4, pb.shape)
+        pa = pa + gen.normal(0, 1e-4, pa.shape)
