@@ -270,9 +270,10 @@ class NearestNeighbours:
         Parameters
         ----------
         pa : (m, 3) float
-            Query points, metres (the same points, moved, at every call).
+            Query points, metres (the same points, moved, at every call; a new array each
+            time: the last ones are kept, not copied).
         pb : (n, 3) float
-            Reference points, metres (the same points, moved, at every call).
+            Reference points, metres (likewise).
 
         Returns
         -------
