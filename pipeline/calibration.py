@@ -186,15 +186,21 @@ def estimate_rotation_offsets(scan: StationScan, offsets: MountingOffsets | None
     h = 1e-5
     cov = np.full((2, 2), np.nan)
     n_pairs, rms = 0, float("nan")
+    neighbours = NearestNeighbours(cfg.neighbours)
+    # the samples' sensor-frame points and frames, gathered once
+    xyz_a, frame_a = scan.xyz_sensor_m[a], scan.frame_index[a]
+    xyz_b, frame_b = scan.xyz_sensor_m[b], scan.frame_index[b]
+
+    def station(xyz: np.ndarray, frame: np.ndarray, off: MountingOffsets) -> np.ndarray:
+        return sensor_to_station(xyz, frame, scan.turntable_angle_rad, off)
+
     for _ in range(cfg.iterations):
         off = _with_angles(offsets, p)
-        pa, pb = _positions(scan, a, off), _positions(scan, b, off)
-        # unbalanced, uncompacted: a third of the build time of the default tree, same
-        # neighbours
-        tree = cKDTree(pb, balanced_tree=False, compact_nodes=False)
-        dist, nn = tree.query(pa, k=cfg.neighbours, workers=-1)
-        normal, ok = _local_planes(pb[nn], dist)
-        r0 = _plane_residuals(pa, pb, nn, normal)
+        pa, pb = station(xyz_a, frame_a, off), station(xyz_b, frame_b, off)
+        dist, nn = neighbours.query(pa, pb)
+        # np.take: the rows pb[nn] holds, in half the time of fancy indexing
+        centroid, normal, ok = _local_planes(np.take(pb, nn, axis=0), dist)
+        r0 = _plane_residuals(pa, centroid, normal)
         ok &= _inliers(r0, ok)
         if ok.sum() < 50:
             raise DataError(f"scan {scan.station_id}: only {int(ok.sum())} direct/reverse plane "
@@ -207,8 +213,10 @@ def estimate_rotation_offsets(scan: StationScan, offsets: MountingOffsets | None
             pk = p.copy()
             pk[k] += h
             offk = _with_angles(offsets, pk)
-            rk = _plane_residuals(_positions(scan, a[ok], offk), _positions(scan, b[used], offk),
-                                  local, normal[ok])
+            rk = _plane_residuals(station(xyz_a[ok], frame_a[ok], offk),
+                                  np.take(station(xyz_b[used], frame_b[used], offk), local,
+                                          axis=0).mean(axis=1),
+                                  normal[ok])
             jac[:, k] = (rk - r0[ok]) / h
         step, *_ = np.linalg.lstsq(jac, -r0[ok], rcond=None)
         p = p + step
@@ -221,21 +229,147 @@ def estimate_rotation_offsets(scan: StationScan, offsets: MountingOffsets | None
     return _with_angles(offsets, p), cov, n_pairs, rms
 
 
-def _local_planes(neigh: np.ndarray, dist: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Normals of the planes through each neighbourhood (m, k, 3) and a usability mask."""
-    centred = neigh - neigh.mean(axis=1, keepdims=True)
+class NearestNeighbours:
+    """The ``k`` nearest of moving points ``pb`` to moving queries ``pa``, reusing one tree.
+
+    Every :meth:`query` returns what a fresh ``cKDTree(pb).query(pa, k)`` returns (the same
+    neighbours in the same order, the same distances to the bit; only exact ties could be
+    ordered differently), but the ICP's points move little between its later iterations, so
+    the tree is built only when the answer cannot be proved from the last search. That search
+    found ``k + spare`` candidates of each query point as it was then (``pa0``) among the
+    reference points as they were when the tree was built (``pb0``), the farthest at
+    ``reach``. Since then every point of ``pb`` has moved by at most ``drift`` and a query
+    point by ``moved``, so (triangle inequality) no point outside its candidates is nearer
+    than ``reach - moved - drift``: where the ``k``-th nearest candidate, at the new
+    positions, is nearer than that, the candidates hold the answer. For the few query points
+    where that fails, every point of the tree within that ``k``-th distance plus ``drift`` is
+    a candidate (a ball search); if many fail (:attr:`REBUILD_FRACTION`), the tree is built
+    again at the new positions.
+
+    Parameters
+    ----------
+    k : int
+        Neighbours per query point.
+    spare : int
+        Extra candidates kept per query point.
+    """
+
+    #: Fraction of failing query points above which the tree is built again.
+    REBUILD_FRACTION = 0.01
+    #: Safety margin of the bounds against round-off of the distances, metres.
+    MARGIN_M = 1e-9
+
+    def __init__(self, k: int, spare: int = 6) -> None:
+        self.k, self.spare = k, spare
+        self.tree: cKDTree | None = None
+        self.builds = 0
+
+    def query(self, pa: np.ndarray, pb: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Distances and indices of the ``k`` nearest points of ``pb`` to each of ``pa``.
+
+        Parameters
+        ----------
+        pa : (m, 3) float
+            Query points, metres (the same points, moved, at every call; a new array each
+            time: the last ones are kept, not copied).
+        pb : (n, 3) float
+            Reference points, metres (likewise).
+
+        Returns
+        -------
+        dist : (m, k) float
+            Distances, ascending, metres.
+        nn : (m, k) int
+            Indices into ``pb``.
+        """
+        if self.tree is not None:
+            drift = float(np.sqrt(np.max(_squared_norms(pb - self.pb0))))
+            dist, nn, bad = self._from_candidates(pa, pb, drift)
+            rows = np.flatnonzero(bad)
+            if rows.size <= self.REBUILD_FRACTION * bad.size:
+                for i in rows:
+                    dist[i], nn[i] = self._ball(pa[i], pb, dist[i, -1] + drift)
+                return dist, nn
+        # unbalanced, uncompacted: a third of the build time of the default tree, same
+        # neighbours
+        self.tree = cKDTree(pb, balanced_tree=False, compact_nodes=False)
+        self.builds += 1
+        self.pb0, self.pa0 = pb, pa
+        size = max(self.k, min(self.k + self.spare, pb.shape[0]))
+        dist, self.candidates = self.tree.query(pa, k=size, workers=-1)
+        self.reach = dist[:, -1]
+        return dist[:, :self.k], self.candidates[:, :self.k].copy()
+
+    def _from_candidates(self, pa: np.ndarray, pb: np.ndarray, drift: float
+                         ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The ``k`` nearest candidates of each query point, and where that is unproven."""
+        dist = _distances(pa[:, None, :], np.take(pb, self.candidates, axis=0))
+        order = np.argsort(dist, axis=1, kind="stable")[:, :self.k]
+        dist = np.take_along_axis(dist, order, axis=1)
+        moved = np.sqrt(_squared_norms(pa - self.pa0))
+        bad = ~(dist[:, -1] < self.reach - moved - drift - self.MARGIN_M)
+        return dist, np.take_along_axis(self.candidates, order, axis=1), bad
+
+    def _ball(self, q: np.ndarray, pb: np.ndarray, radius_m: float
+              ) -> tuple[np.ndarray, np.ndarray]:
+        """The ``k`` nearest points of ``pb`` to ``q`` (3,) among those whose tree position
+        is within ``radius_m`` of ``q``."""
+        cand = np.asarray(self.tree.query_ball_point(q, radius_m + self.MARGIN_M), dtype=np.intp)
+        dist = _distances(q, pb[cand])
+        order = np.argsort(dist, kind="stable")[:self.k]
+        return dist[order], cand[order]
+
+
+def _distances(q: np.ndarray, p: np.ndarray) -> np.ndarray:
+    """Euclidean distances ``|p - q|`` over the last axis (length 3, broadcast), metres.
+
+    Summed in cKDTree's order (x, then y, then z), so they are its distances to the bit.
+    """
+    d = p - q
+    d *= d
+    return np.sqrt(d[..., 0] + d[..., 1] + d[..., 2])
+
+
+def _squared_norms(v: np.ndarray) -> np.ndarray:
+    """Squared Euclidean norm (n,) of each row of ``v`` (n, 3)."""
+    return np.einsum("ij,ij->i", v, v)
+
+
+def _local_planes(neigh: np.ndarray, dist: np.ndarray
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Planes through neighbourhoods of points.
+
+    Parameters
+    ----------
+    neigh : (m, k, 3) float
+        The ``k`` neighbours of each of ``m`` points, metres.
+    dist : (m, k) float
+        Their distances from the point, ascending, metres.
+
+    Returns
+    -------
+    centroid : (m, 3) float
+        Mean of each neighbourhood, metres.
+    normal : (m, 3) float
+        Unit normal of its least-squares plane.
+    usable : (m,) bool
+        Planar (smallest eigenvalue below 5 % of the middle one) and compact (farthest
+        neighbour within 0.3 m or twice the spread).
+    """
+    centroid = neigh.mean(axis=1)
+    centred = neigh - centroid[:, None, :]
     cov = np.einsum("mki,mkj->mij", centred, centred)
     w, v = np.linalg.eigh(cov)
     normal = v[:, :, 0]
     spread = np.sqrt(np.maximum(w[:, 2], 0) / neigh.shape[1])
     planar = w[:, 0] < 0.05 * w[:, 1]
     near = dist[:, -1] < np.maximum(0.3, 2 * spread)
-    return normal, planar & near & np.isfinite(dist[:, -1])
+    return centroid, normal, planar & near & np.isfinite(dist[:, -1])
 
 
-def _plane_residuals(pa: np.ndarray, pb: np.ndarray, nn: np.ndarray, normal: np.ndarray
-                     ) -> np.ndarray:
-    centroid = pb[nn].mean(axis=1)
+def _plane_residuals(pa: np.ndarray, centroid: np.ndarray, normal: np.ndarray) -> np.ndarray:
+    """Signed distances (m,) of points ``pa`` (m, 3) from planes through ``centroid`` (m, 3)
+    with unit ``normal`` (m, 3), metres."""
     return np.einsum("mi,mi->m", pa - centroid, normal)
 
 

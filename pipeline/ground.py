@@ -41,10 +41,11 @@ def local_ground_height(xyz_m: np.ndarray, cell_m: float = 0.5) -> np.ndarray:
     n = xyz_m.shape[0]
     if n == 0:
         return np.zeros(0)
-    ij = np.floor(xyz_m[:, :2] / cell_m).astype(np.int64)
-    ij -= ij.min(axis=0)
-    ny = int(ij[:, 1].max()) + 1
-    flat = ij[:, 0] * ny + ij[:, 1]
+    # per column: contiguous temporaries, and a column's min is far faster than min(axis=0)
+    ix, iy = (np.floor(xyz_m[:, k] / cell_m).astype(np.int64) for k in (0, 1))
+    ix -= ix.min()
+    iy -= iy.min()
+    flat = ix * (int(iy.max()) + 1) + iy
     grid = np.full(int(flat.max()) + 1, np.inf)
     np.minimum.at(grid, flat, xyz_m[:, 2])
     return grid[flat]

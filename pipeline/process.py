@@ -96,12 +96,20 @@ def detection_subset(range_m: np.ndarray, full_density_range_m: float = 4.0,
     subset : (n,) int
         Ascending point indices.
     """
-    stride = np.maximum(range_m, 1e-3)  # (full / range)^2 clipped, in place
-    np.divide(full_density_range_m, stride, out=stride)
-    np.square(stride, out=stride)
-    np.clip(stride, 1, max_stride, out=stride)
     small = np.int32 if range_m.size < np.iinfo(np.int32).max else np.int64
-    return np.flatnonzero(np.arange(range_m.size, dtype=small) % stride.astype(small) == 0)
+    kept = []
+    for a in range(0, range_m.size, _SUBSET_BLOCK):  # blocks: temporaries stay in cache
+        stride = np.maximum(range_m[a:a + _SUBSET_BLOCK], 1e-3)  # (full / range)^2 clipped
+        np.divide(full_density_range_m, stride, out=stride)
+        np.square(stride, out=stride)
+        np.clip(stride, 1, max_stride, out=stride)
+        index = np.arange(a, a + stride.size, dtype=small)
+        kept.append(index[index % stride.astype(small) == 0])
+    return np.concatenate(kept, dtype=np.intp) if kept else np.zeros(0, dtype=np.intp)
+
+
+#: Points per block of :func:`detection_subset` (temporaries of about 1 MB).
+_SUBSET_BLOCK = 1 << 16
 
 
 def detect_candidates(cloud: StationCloud, cfg: ProcessConfig) -> list[np.ndarray]:
@@ -115,7 +123,7 @@ def detect_candidates(cloud: StationCloud, cfg: ProcessConfig) -> list[np.ndarra
     g = cfg.ground
     sub = detection_subset(cloud.range_m)
     rng = cloud.range_m[sub]
-    pts = cloud.xyz_m[sub]
+    pts = np.take(cloud.xyz_m, sub, axis=0)  # same rows as xyz_m[sub], in half the time
     band = (rng >= g.min_range_m) & (rng <= g.max_range_m)
     keep = np.flatnonzero(remove_ground(pts, g.cell_m, g.min_height_m) & band)
     above = pts[keep]

@@ -1,9 +1,11 @@
 import numpy as np
 import pytest
+from scipy.spatial import cKDTree
 
 from markerplan.errors import ConfigError, DataError
 from pipeline.calibration import (
     CalibrationConfig,
+    NearestNeighbours,
     direct_face,
     estimate_axis_offset,
     estimate_rotation_offsets,
@@ -94,3 +96,46 @@ def test_config_and_data_errors(scan):
     with pytest.raises(DataError, match="calibration range band"):
         estimate_rotation_offsets(scan, config=CalibrationConfig(min_range_m=50,
                                                                  max_range_m=60))
+
+
+@pytest.mark.parametrize(("step_m", "builds", "ball_searches"),
+                         [(1e-4, 1, False), (1e-3, 1, True), (0.2, 4, False)])
+def test_nearest_neighbours_reuse_gives_fresh_tree_answers(monkeypatch, step_m, builds,
+                                                           ball_searches):
+    """Moving both point sets by tiny steps (the tree is reused), small ones (reused, with
+    ball searches where the candidates cannot prove the answer) and large ones (rebuilt),
+    every query equals a fresh cKDTree query: same neighbours, same order, bit-identical
+    distances."""
+    calls = []
+    ball = NearestNeighbours._ball
+    monkeypatch.setattr(NearestNeighbours, "_ball",
+                        lambda self, *a: calls.append(1) or ball(self, *a))
+    gen = np.random.default_rng(3)
+    pb = gen.uniform(-5, 5, (20000, 3))
+    pb[:, 2] *= 0.05  # a thin slab, like the ground the reverse face sees
+    pa = pb[gen.choice(pb.shape[0], 2000, replace=False)] + gen.normal(0, 0.02, (2000, 3))
+    nn = NearestNeighbours(10)
+    for _ in range(4):
+        dist, idx = nn.query(pa, pb)
+        want_d, want_i = cKDTree(pb).query(pa, k=10)
+        np.testing.assert_array_equal(idx, want_i)
+        np.testing.assert_array_equal(dist, want_d)
+        pb = pb + gen.normal(0, step_m, pb.shape)
+        pa = pa + gen.normal(0, step_m, pa.shape)
+    assert nn.builds == builds
+    assert bool(calls) == ball_searches
+
+
+def test_nearest_neighbours_with_fewer_reference_points_than_candidates():
+    """With fewer reference points than k + spare every point is a candidate; the answers
+    still equal a fresh tree's."""
+    gen = np.random.default_rng(4)
+    pb, pa = gen.normal(size=(12, 3)), gen.normal(size=(30, 3))
+    nn = NearestNeighbours(10)
+    for _ in range(3):
+        dist, idx = nn.query(pa, pb)
+        want_d, want_i = cKDTree(pb).query(pa, k=10)
+        np.testing.assert_array_equal(idx, want_i)
+        np.testing.assert_array_equal(dist, want_d)
+        pb = pb + gen.normal(0, 1e-4, pb.shape)
+        pa = pa + gen.normal(0, 1e-4, pa.shape)

@@ -22,6 +22,18 @@ def test_marker_on_sloped_ground_keeps_upper_part():
     np.testing.assert_allclose(local_ground_height(ground, 0.5), ground[:, 2], atol=0.011)
 
 
+def test_ground_height_is_the_lowest_point_of_each_cell():
+    """Against a plain per-cell minimum, on cells with negative indices and cell edges."""
+    rng = np.random.default_rng(1)
+    pts = rng.uniform(-3, 2, (3000, 3))
+    pts[:50, :2] = rng.integers(-6, 4, (50, 2)) * 0.5  # on cell edges
+    cells = [tuple(c) for c in np.floor(pts[:, :2] / 0.5)]
+    lowest = {}
+    for c, z in zip(cells, pts[:, 2], strict=True):
+        lowest[c] = min(lowest.get(c, np.inf), z)
+    np.testing.assert_array_equal(local_ground_height(pts, 0.5), [lowest[c] for c in cells])
+
+
 @pytest.mark.parametrize("kwargs", [{"cell_m": 0}, {"min_height_m": -1}])
 def test_bad_parameters(kwargs):
     with pytest.raises(ConfigError):
