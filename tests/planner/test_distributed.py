@@ -63,8 +63,41 @@ def test_two_maps_over_the_same_shared_input(cluster):
     assert [v for v, _ in second] == [shared * 3, shared * 4]
 
 
-def test_map_groups_form(cluster):
-    assert cluster(abs, [-2, 1, -7]) == [2, 1, 7]
+def _sleeps(seconds):
+    """Sleeps ``seconds`` and returns them (tasks that complete out of order)."""
+    import time
+
+    time.sleep(seconds)
+    return seconds
+
+
+@pytest.mark.parametrize("where", ["cluster", "none"])
+def test_map_groups_form_is_lazy_in_order_and_has_no_bar(cluster, monkeypatch, where):
+    """``ex(fn, items)``: an iterator (no list, no bar of its own) of the results in input
+    order, though on the cluster the later, shorter tasks finish first."""
+    bars = []
+    monkeypatch.setattr(distributed, "tqdm", lambda *a, **k: bars.append(k))
+    ex = cluster if where == "cluster" else Executor(None, progress=True)
+    seconds = [0.6, 0.3, 0.0, 0.0]
+    results = ex(_sleeps, iter(seconds))
+    assert not isinstance(results, list) and next(results) == 0.6
+    assert list(results) == seconds[1:] and bars == []
+    assert list(ex(abs, [])) == []
+
+
+def test_map_groups_form_reads_items_one_at_a_time_in_process():
+    """In this process, as the built-in ``map``: an item is read only when its result is
+    asked for (tiled visibility makes a DEM tile per item)."""
+    read = []
+
+    def items():
+        for x in (-2, 1, -7):
+            read.append(x)
+            yield x
+
+    results = Executor(None, progress=False)(abs, items())
+    assert read == [] and next(results) == 2 and read == [-2]
+    assert list(results) == [1, 7] and read == [-2, 1, -7]
 
 
 @pytest.mark.parametrize("where", ["cluster", "none"])
@@ -83,6 +116,9 @@ def test_a_task_that_keeps_failing_is_reported_by_name(cluster, where):
     msg = str(info.value)
     assert msg.startswith("station S") and "failed after 3 tries" in msg
     assert "DataError: the tile of" in msg and "\n" not in msg
+    with pytest.raises(TaskError, match=r"^task [01] failed after 3 tries: DataError: the "
+                                        r"tile of [ab] misses the DEM$"):
+        list(ex(_always_fails, ["a", "b"]))
 
 
 def test_unreachable_scheduler_is_one_line(monkeypatch):
