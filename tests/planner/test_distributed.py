@@ -1,7 +1,12 @@
-"""Distributed execution (planner.distributed): a LocalCluster of two worker processes gives
-the in-process results, retries a failing task, and reports one that keeps failing."""
+"""Distributed execution (planner.distributed): a LocalCluster of two worker processes, and a
+scheduler and two workers started by hand as docs/distributed.md says, give the in-process
+results; a failing task is retried, and one that keeps failing is reported."""
 
 import os
+import signal
+import socket
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -215,3 +220,71 @@ def test_tiled_visibility_on_the_cluster_equals_in_process(cluster):
     assert stats["groups"] >= 3
     for name in ("station", "site", "visible_fraction", "expected_points", "distance_m"):
         np.testing.assert_array_equal(getattr(there, name), getattr(here, name), err_msg=name)
+
+
+def _free_port() -> int:
+    """A TCP port on 127.0.0.1 that nothing listens on now."""
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def _stop(procs: list[subprocess.Popen]) -> None:
+    """Stop processes started in their own sessions: SIGTERM (dask closes its worker
+    processes), then SIGKILL to the whole process group of one that lingers."""
+    for p in procs:
+        p.terminate()
+    for p in procs:
+        try:
+            p.wait(timeout=20)
+        except subprocess.TimeoutExpired:
+            os.killpg(p.pid, signal.SIGKILL)
+            p.wait()
+
+
+@pytest.fixture
+def cluster_by_hand(tmp_path):
+    """``dask scheduler`` and two ``dask worker`` processes (this venv's executables, one
+    thread each) on a free port, as docs/distributed.md starts them by hand; yields the
+    scheduler's address and stops all three afterwards, even when the test fails."""
+    from distributed import Client
+
+    dask = Path(sys.executable).with_name("dask")
+    address = f"tcp://127.0.0.1:{_free_port()}"
+    env = {**os.environ, "OPENBLAS_NUM_THREADS": "1"}
+    logs = tmp_path / "dask-logs"
+    logs.mkdir()
+    commands = [[dask, "scheduler", "--host", "127.0.0.1", "--port", address.rsplit(":", 1)[1],
+                 "--no-dashboard"]]
+    commands += [[dask, "worker", address, "--nthreads", "1", "--no-dashboard", "--name",
+                  f"w{i}", "--local-directory", str(logs / f"w{i}")] for i in range(2)]
+    procs = []
+    try:
+        for i, command in enumerate(commands):
+            with open(logs / f"{i}.log", "wb") as log:
+                procs.append(subprocess.Popen(command, stdout=log, stderr=subprocess.STDOUT,
+                                              env=env, start_new_session=True))
+        with Client(address, timeout=30) as client:
+            client.wait_for_workers(2, timeout=30)
+            yield address, client
+    finally:
+        _stop(procs)
+
+
+@pytest.mark.slow
+def test_range_study_on_a_scheduler_and_workers_started_by_hand(tmp_path, capsys,
+                                                                cluster_by_hand):
+    """``--scheduler tcp://...`` of a real (not Local) cluster: the same files as in process,
+    and the replicates ran on its workers."""
+    address, client = cluster_by_hand
+    quick = ["range-study", "--frames", "20", "--replicates", "2", "--max-distance", "3"]
+    code, _, err = run_cli(capsys, quick + ["--scheduler", "none",
+                                            "--out", str(tmp_path / "one")])
+    assert code == 0, err
+    code, _, err = run_cli(capsys, quick + ["--scheduler", address,
+                                            "--out", str(tmp_path / "tcp")])
+    assert code == 0, err
+    for name in ("markers.csv", "summary.csv", "summary.json"):
+        assert (tmp_path / "one" / name).read_bytes() == (tmp_path / "tcp" / name).read_bytes()
+    ran = client.run(lambda dask_worker: dask_worker.state.executed_count)
+    assert len(ran) == 2 and sum(ran.values()) == 2  # one task per replicate, none here
