@@ -288,3 +288,42 @@ def test_range_study_on_a_scheduler_and_workers_started_by_hand(tmp_path, capsys
         assert (tmp_path / "one" / name).read_bytes() == (tmp_path / "tcp" / name).read_bytes()
     ran = client.run(lambda dask_worker: dask_worker.state.executed_count)
     assert len(ran) == 2 and sum(ran.values()) == 2  # one task per replicate, none here
+
+
+def _station_id(st, scan, truth):
+    """A station's ``process`` that returns its id (the scan is a stub here)."""
+    return st.id
+
+
+def _refuses(st, scan, truth):
+    raise DataError(f"no markers seen from {st.id}")
+
+
+def test_several_plans_are_one_map_under_one_bar(monkeypatch):
+    """reduce --verify's counts: every station of every plan is a task of one map (one bar of
+    all the tasks), the results come back per plan, and a failure names station and plan."""
+    from dataclasses import replace
+
+    import numpy as np
+
+    import planner.verify
+    from planner.plan_file import PlannedStation, SurveyPlan
+    from planner.verify import map_plan_stations
+    from visibility.terrain import TerrainSpec, generate_terrain
+
+    monkeypatch.setattr(planner.verify, "simulate_markers", lambda *a, **k: (None, {}))
+    bars, tqdm = [], distributed.tqdm
+    monkeypatch.setattr(distributed, "tqdm", lambda *a, **k: bars.append(k["total"]) or
+                        tqdm(*a, **k))
+    spec = TerrainSpec(extent_m=(-5.0, 5.0, -5.0, 5.0), cell_size_m=0.5)
+    dem = generate_terrain(spec, np.random.default_rng(0)).dem
+    stations = tuple(PlannedStation(f"S{i}", np.array([i, 0.0, 1.0]), 0.0, None, ())
+                     for i in range(3))
+    plan = SurveyPlan(dem, stations, (), np.zeros((0, 3)), 0.1, 0.1, 10.0)
+    fewer = replace(plan, stations=stations[:2])
+    got = map_plan_stations([plan, fewer], [_station_id, _station_id], progress=False)
+    assert got == [["S0", "S1", "S2"], ["S0", "S1"]] and bars == [5]
+    with pytest.raises(TaskError, match=r"^station S0 \(k=2\) failed after 3 tries: DataError: "
+                                        r"no markers seen from S0$"):
+        map_plan_stations([plan, fewer], [_station_id, _refuses], names=["k=3", "k=2"],
+                          progress=False)
