@@ -66,7 +66,7 @@ class Executor:
     client : distributed.Client or None
         None: run the tasks in a loop in this process (unless ``start`` is given).
     progress : bool
-        Progress bar on stderr.
+        :meth:`map`'s progress bar on stderr (the ``map_groups`` form has none).
     retries : int
         Extra runs of a failed task before :class:`TaskError`.
     start : callable, optional
