@@ -189,30 +189,47 @@ def write_station_clouds(folder: str | Path, cloud: ClassifiedCloud, formats: tu
         The files written, sorted.
     """
     check_formats(formats)
-    writers = {"las": write_las, "ply": write_ply}
+    encoders = {"las": _write_las, "ply": _write_ply}
     names = []
     for frame in FRAMES[:2 if pose is not None else 1]:
+        site = frame == "site"
+        xyz, meta = _in_frame(cloud, pose if site else None)  # once for every format
         for fmt in sorted(set(formats)):
             name = f"{cloud.station_id}.{frame}.{fmt}"
-            writers[fmt](Path(folder) / name, cloud, pose if frame == "site" else None,
-                         crs_wkt if frame == "site" else None)
+            encoders[fmt](Path(folder) / name, cloud, xyz, meta, crs_wkt if site else None)
             names.append(name)
     return sorted(names)
 
 
-def _frame_metadata(cloud: ClassifiedCloud, pose: StationPose | None) -> dict[str, Any]:
-    """What the file holds: station, frame, classes, the accepted markers' centres, the pose."""
+def _in_frame(cloud: ClassifiedCloud, pose: StationPose | None
+              ) -> tuple[np.ndarray, dict[str, Any]]:
+    """The cloud's points in the frame a file is written in, and what the file holds.
+
+    Parameters
+    ----------
+    cloud : ClassifiedCloud
+    pose : StationPose or None
+        The site frame; None: the station frame.
+
+    Returns
+    -------
+    xyz_m : (N, 3) float
+        The points in that frame, metres.
+    meta : dict
+        Station, frame, classes, the accepted markers' centres (in that frame), the pose.
+    """
     meta: dict[str, Any] = {
         "station_id": cloud.station_id, "frame": "station" if pose is None else "site",
         "classes": {str(UNCLASSIFIED_CLASS): "unclassified", str(GROUND_CLASS): "ground",
                     str(MARKER_CLASS): "marker (sphere-fit inliers of an accepted marker)"},
         "markers": cloud.markers}
-    if pose is not None:
-        centres = pose.to_site(np.array([m["centre_m"] for m in cloud.markers]).reshape(-1, 3))
-        meta["markers"] = [{**m, "centre_m": c.tolist()}
-                           for m, c in zip(cloud.markers, centres, strict=True)]
-        meta["station_pose"] = pose.to_dict()
-    return meta
+    if pose is None:
+        return cloud.xyz_m, meta
+    centres = pose.to_site(np.array([m["centre_m"] for m in cloud.markers]).reshape(-1, 3))
+    meta["markers"] = [{**m, "centre_m": c.tolist()}
+                       for m, c in zip(cloud.markers, centres, strict=True)]
+    meta["station_pose"] = pose.to_dict()
+    return pose.to_site(cloud.xyz_m), meta
 
 
 def write_las(path: str | Path, cloud: ClassifiedCloud, pose: StationPose | None = None,
@@ -220,7 +237,7 @@ def write_las(path: str | Path, cloud: ClassifiedCloud, pose: StationPose | None
     """Write a LAS 1.4 file, point format 6, 0.1 mm scale, in the station or site frame.
 
     The header's offsets are the points' mid-point rounded to :data:`LAS_OFFSET_STEP_M`; a
-    ``markerplan`` VLR (record 1) holds :func:`_frame_metadata` as JSON; ``crs_wkt`` goes into
+    ``markerplan`` VLR (record 1) holds :func:`_in_frame`'s metadata as JSON; ``crs_wkt`` goes into
     the OGC WKT VLR (global-encoding WKT bit set, as point format 6 requires). Extra bytes:
     ``frame_index``, ``laser_id``, ``marker_index``.
 
@@ -238,13 +255,18 @@ def write_las(path: str | Path, cloud: ClassifiedCloud, pose: StationPose | None
     DataError
         The cloud spans more than the LAS integers hold at 0.1 mm (about 214 km).
     """
+    return _write_las(path, cloud, *_in_frame(cloud, pose), crs_wkt)
+
+
+def _write_las(path: str | Path, cloud: ClassifiedCloud, xyz: np.ndarray, meta: dict[str, Any],
+               crs_wkt: str | None) -> Path:
+    """:func:`write_las` of the cloud's points already in the file's frame (:func:`_in_frame`
+    gives ``xyz``, (N, 3) metres, and ``meta``)."""
     import laspy
 
-    xyz = cloud.xyz_m if pose is None else pose.to_site(cloud.xyz_m)
     header = laspy.LasHeader(version="1.4", point_format=6)
     header.creation_date = LAS_CREATION_DATE
     header.generating_software = "markerplan process"
-    meta = _frame_metadata(cloud, pose)
     header.system_identifier = f"{cloud.station_id} {meta['frame']} frame"[:32]
     mid = (xyz.min(axis=0) + xyz.max(axis=0)) / 2 if len(xyz) else np.zeros(3)
     offsets = np.round(mid / LAS_OFFSET_STEP_M) * LAS_OFFSET_STEP_M + 0.0  # no -0.0
@@ -289,8 +311,13 @@ def write_ply(path: str | Path, cloud: ClassifiedCloud, pose: StationPose | None
     crs_wkt : str, optional
         CRS of the site frame, WKT.
     """
-    xyz = cloud.xyz_m if pose is None else pose.to_site(cloud.xyz_m)
-    meta = _frame_metadata(cloud, pose)
+    return _write_ply(path, cloud, *_in_frame(cloud, pose), crs_wkt)
+
+
+def _write_ply(path: str | Path, cloud: ClassifiedCloud, xyz: np.ndarray, meta: dict[str, Any],
+               crs_wkt: str | None) -> Path:
+    """:func:`write_ply` of the cloud's points already in the file's frame (:func:`_in_frame`
+    gives ``xyz``, (N, 3) metres, and ``meta``)."""
     fields = [("x", "<f8", "double"), ("y", "<f8", "double"), ("z", "<f8", "double"),
               ("classification", "u1", "uchar"),
               *((name, np.dtype(dtype).newbyteorder("<").str, ply)

@@ -19,21 +19,24 @@ Three ways to run, chosen by ``--scheduler`` (:func:`executor`):
     dask-jobqueue, Kubernetes; see ``docs/distributed.md``).
 
 Large inputs shared by every task (the DEM) are sent to each worker once
-(``Client.scatter(..., broadcast=True)``); each task returns its small result. Progress is a
-tqdm bar on stderr advanced as futures complete. A task that raises is retried
-(:data:`RETRIES` times); one that still fails stops the run with :class:`TaskError` naming the
-task (its station id) and the error — no result is ever dropped.
+(``Client.scatter(..., broadcast=True)``); each task returns its small result. A task that
+raises is retried (:data:`RETRIES` times); one that still fails stops the run with
+:class:`TaskError` naming the task (its station id) and the error — no result is ever dropped.
 
-An :class:`Executor` is also a ``map_groups(fn, items) -> list`` callable (results in input
-order), so code that maps groups of work (e.g. tiled planning-time visibility) can take one.
+Two forms: :meth:`Executor.map` returns the list of results and shows a tqdm bar on stderr
+advanced as tasks complete; an :class:`Executor` called as ``map_groups(fn, items)`` returns a
+lazy iterator of the results in input order with no bar of its own, like the built-in ``map``,
+so code that maps groups of work (tiled planning-time visibility, the range study's
+replicates) takes either and advances its own progress as results arrive.
 """
 
 from __future__ import annotations
 
+import itertools
 import logging
 import os
 import sys
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from contextlib import ExitStack, contextmanager
 from typing import Any
 
@@ -63,7 +66,7 @@ class Executor:
     client : distributed.Client or None
         None: run the tasks in a loop in this process (unless ``start`` is given).
     progress : bool
-        Progress bar on stderr.
+        :meth:`map`'s progress bar on stderr (the ``map_groups`` form has none).
     retries : int
         Extra runs of a failed task before :class:`TaskError`.
     start : callable, optional
@@ -94,13 +97,32 @@ class Executor:
         """Whether a map of ``n_tasks`` tasks runs in this process."""
         return self.client is None and (self._start is None or n_tasks <= 1)
 
-    def __call__(self, fn: Callable, items: Sequence) -> list:
-        """``map_groups`` form: ``fn(item)`` for every item, results in input order."""
-        return self.map(fn, items, desc=getattr(fn, "__name__", "tasks"))
+    def __call__(self, fn: Callable, items: Iterable) -> Iterator:
+        """``map_groups`` form: ``fn(item)`` for every item, lazily, in input order.
+
+        No progress bar: the caller advances its own as results arrive. In this process the
+        items are read one at a time (as the built-in ``map`` reads them); on a cluster all are
+        submitted at the first ``next``. Retries and :class:`TaskError` as :meth:`map`.
+
+        Parameters
+        ----------
+        fn : callable
+            A module-level function of one item.
+        items : iterable
+            Picklable task arguments, one per task.
+
+        Returns
+        -------
+        results : iterator
+            ``fn``'s results in the order of ``items``, each as soon as it and every earlier
+            one are done.
+        """
+        return _in_order(self._completed(fn, None, items, None))
 
     def map(self, fn: Callable, items: Sequence, *, shared: Any = None,
             labels: Sequence[str] | None = None, desc: str = "tasks") -> list:
-        """Run ``fn(item)`` (or ``fn(shared, item)`` when ``shared`` is given) for every item.
+        """Run ``fn(item)`` (or ``fn(shared, item)`` when ``shared`` is given) for every item,
+        with a progress bar (tasks completed) on stderr.
 
         Parameters
         ----------
@@ -111,7 +133,7 @@ class Executor:
         shared : object, optional
             A large input every task needs (a DEM): sent once to every worker.
         labels : sequence of str, optional
-            Task names for progress and errors (default ``task 0``, ``task 1``, ...).
+            Task names for errors (default ``task 0``, ``task 1``, ...).
         desc : str
             Progress-bar label.
 
@@ -126,32 +148,42 @@ class Executor:
             A task failed ``1 + retries`` times.
         """
         items = list(items)
-        labels = list(labels) if labels is not None else [f"task {i}" for i in range(len(items))]
-        bar = tqdm(total=len(items), desc=desc, unit="task", file=sys.stderr,
-                   disable=None if self.progress else True)
-        with bar:
-            if self._in_process(len(items)):
-                return [self._run_here(fn, shared, item, label, bar)
-                        for item, label in zip(items, labels, strict=True)]
-            if self.client is None:
-                self.client = self._start()
-            return self._run_cluster(fn, shared, items, labels, bar)
+        results: list = [None] * len(items)
+        with tqdm(total=len(items), desc=desc, unit="task", file=sys.stderr,
+                  disable=None if self.progress else True) as bar:
+            for i, result in self._completed(fn, shared, items, labels):
+                results[i] = result
+                bar.update()
+        return results
 
-    def _run_here(self, fn, shared, item, label, bar):
+    def _completed(self, fn, shared, items: Iterable, labels) -> Iterator[tuple[int, Any]]:
+        """``(index, result)`` of every task as it completes (in input order in this
+        process); ``labels`` None names task ``i`` ``task i``."""
+        items = iter(items)
+        if self.client is None and self._start is not None:
+            head = list(itertools.islice(items, 2))  # enough to tell one task from several
+            items = itertools.chain(head, items)
+            if not self._in_process(len(head)):
+                self.client = self._start()
+        label = (lambda i: f"task {i}") if labels is None else labels.__getitem__
+        if self.client is None:
+            for i, item in enumerate(items):
+                yield i, self._run_here(fn, shared, item, label(i))
+        else:
+            yield from self._run_cluster(fn, shared, list(items), label)
+
+    def _run_here(self, fn, shared, item, label):
         """One task in this process, with the cluster's retry rule."""
         args = (item,) if shared is None else (shared, item)
         for attempt in range(self.retries + 1):
             try:
-                result = fn(*args)
+                return fn(*args)
             except Exception as exc:  # noqa: BLE001 - reported below, never dropped
                 if attempt == self.retries:
                     raise _failed(label, exc, self.retries) from exc
-                continue
-            bar.update()
-            return result
 
-    def _run_cluster(self, fn, shared, items, labels, bar):
-        """All tasks on the cluster; results gathered in input order."""
+    def _run_cluster(self, fn, shared, items, label):
+        """All tasks on the cluster: ``(index, result)`` as each completes."""
         from distributed import as_completed
 
         client = self.client
@@ -162,18 +194,27 @@ class Executor:
         futures = [client.submit(fn, *extra, item, retries=self.retries, pure=False)
                    for item in items]
         index = {f.key: i for i, f in enumerate(futures)}
-        results: list = [None] * len(items)
         try:
             for fut in as_completed(futures):
                 i = index[fut.key]
                 if fut.status == "error":
                     exc = fut.exception()
-                    raise _failed(labels[i], exc, self.retries) from exc
-                results[i] = fut.result()
-                bar.update()
+                    raise _failed(label(i), exc, self.retries) from exc
+                yield i, fut.result()
         finally:
             client.cancel(futures)
-        return results
+
+
+def _in_order(completed: Iterator[tuple[int, Any]]) -> Iterator:
+    """The results of ``(index, result)`` pairs in index order, each as soon as every earlier
+    one has come (later ones wait in a buffer)."""
+    waiting: dict[int, Any] = {}
+    following = 0
+    for i, result in completed:
+        waiting[i] = result
+        while following in waiting:
+            yield waiting.pop(following)
+            following += 1
 
 
 def _failed(label: str, exc: BaseException, retries: int) -> TaskError:

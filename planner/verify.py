@@ -28,7 +28,8 @@ from __future__ import annotations
 
 import contextlib
 import functools
-from collections.abc import Callable
+import itertools
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -103,10 +104,38 @@ def verify_plan(plan: SurveyPlan, error_model, seed: int = 0, progress: bool = T
     checks : list of StationCheck
         In the plan's station order.
     """
-    check = functools.partial(check_station, tuple(plan.marker_ids), plan.marker_xyz_m,
-                              build_config({"fit": {"radius_m": plan.marker_radius_m}}),
-                              error_model, plan.requirement_m, plan.working_radius_m, seed)
-    return map_stations(plan, check, seed, progress, offsets, station_ids, profile, executor)
+    return verify_plans([plan], error_model, seed, progress, offsets, station_ids, profile,
+                        executor)[0]
+
+
+def verify_plans(plans: Sequence[SurveyPlan], error_model, seed: int = 0,
+                 progress: bool = True, offsets: MountingOffsets | None = None,
+                 station_ids: list[str] | None = None, profile: SensorProfile | None = None,
+                 executor: Executor | None = None, names: Sequence[str] | None = None
+                 ) -> list[list[StationCheck]]:
+    """:func:`verify_plan` of several plans on one terrain (``reduce --verify``'s counts) as
+    one map: every station of every plan is a task, all under one progress bar.
+
+    Parameters
+    ----------
+    plans : sequence of SurveyPlan
+        Sharing one DEM (the same object).
+    error_model, seed, progress, offsets, station_ids, profile, executor
+        As :func:`verify_plan`.
+    names : sequence of str, optional
+        A name per plan for the task errors (e.g. ``k=11``).
+
+    Returns
+    -------
+    checks : list of list of StationCheck
+        Per plan, in the plan's station order.
+    """
+    checks = [functools.partial(check_station, tuple(plan.marker_ids), plan.marker_xyz_m,
+                                build_config({"fit": {"radius_m": plan.marker_radius_m}}),
+                                error_model, plan.requirement_m, plan.working_radius_m, seed)
+              for plan in plans]
+    return map_plan_stations(plans, checks, seed, progress, offsets, station_ids, profile,
+                             executor, names)
 
 
 def check_station(ids: tuple[str, ...], centres: np.ndarray, cfg: dict, error_model,
@@ -270,20 +299,56 @@ def map_stations(plan: SurveyPlan, process: Callable, seed: int = 0, progress: b
     results : list
         ``process``'s results in the plan's station order.
     """
+    return map_plan_stations([plan], [process], seed, progress, offsets, station_ids, profile,
+                             executor)[0]
+
+
+def map_plan_stations(plans: Sequence[SurveyPlan], processes: Sequence[Callable],
+                      seed: int = 0, progress: bool = True,
+                      offsets: MountingOffsets | None = None,
+                      station_ids: list[str] | None = None,
+                      profile: SensorProfile | None = None, executor: Executor | None = None,
+                      names: Sequence[str] | None = None) -> list[list]:
+    """:func:`map_stations` of several plans on one terrain as one map (one progress bar).
+
+    Parameters
+    ----------
+    plans : sequence of SurveyPlan
+        Sharing one DEM (the same object: it is sent to each worker once).
+    processes : sequence of callable
+        ``process`` of each plan, as :func:`map_stations` takes it.
+    seed, progress, offsets, station_ids, profile, executor
+        As :func:`verify_plan`.
+    names : sequence of str, optional
+        A name per plan for the task errors (``station S2 (k=11)``); default none.
+
+    Returns
+    -------
+    results : list of list
+        Per plan, its ``process``'s results in the plan's station order.
+    """
+    if any(plan.dem is not plans[0].dem for plan in plans):
+        raise ValueError("map_plan_stations: the plans must share one DEM object")
     profile = profile or default_profile()
     offsets = offsets or MountingOffsets()
-    chosen = [(k, st) for k, st in enumerate(plan.stations)
-              if station_ids is None or st.id in station_ids]
+    chosen = [[(k, st) for k, st in enumerate(plan.stations)
+               if station_ids is None or st.id in station_ids] for plan in plans]
+    n_tasks = sum(len(c) for c in chosen)
+    suffix = [f" ({name})" for name in names] if names is not None else [""] * len(plans)
     with contextlib.ExitStack() as stack:
         if executor is None:
             executor = stack.enter_context(distributed.executor(distributed.IN_PROCESS,
                                                                 progress=progress))
         jobs = [StationJob(st, seed + k, tuple(plan.marker_ids), plan.marker_xyz_m,
                            plan.marker_radius_m, profile, offsets, process,
-                           executor.threads(len(chosen)))
-                for k, st in chosen]
-        return executor.map(station_task, jobs, shared=plan.dem,
-                            labels=[f"station {st.id}" for _, st in chosen], desc="verify")
+                           executor.threads(n_tasks))
+                for plan, process, stations in zip(plans, processes, chosen, strict=True)
+                for k, st in stations]
+        labels = [f"station {st.id}{end}" for stations, end in zip(chosen, suffix, strict=True)
+                  for _, st in stations]
+        results = iter(executor.map(station_task, jobs, shared=plans[0].dem, labels=labels,
+                                    desc="verify"))
+    return [list(itertools.islice(results, len(stations))) for stations in chosen]
 
 
 def verify_record(plan: SurveyPlan, checks: list[StationCheck], seed: int, model_name: str,

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import functools
 import json
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
@@ -61,7 +61,8 @@ def run_range_study(max_distance_m: float = 50.0, frames: int = 800, replicates:
                     progress: Callable[[int], object] | None = None, *, rpm: int = 600,
                     range_noise_m: float | None = None, lidar_height_m: float = 1.0,
                     slope_deg: float = 0.0,
-                    map_tasks: Callable[[Callable, list], list] | None = None) -> RangeStudy:
+                    map_tasks: Callable[[Callable, Iterable], Iterable] | None = None
+                    ) -> RangeStudy:
     """Simulate and measure the range experiment, on level ground or on a slope.
 
     Parameters
@@ -80,7 +81,7 @@ def run_range_study(max_distance_m: float = 50.0, frames: int = 800, replicates:
     marker_radius_m : float
         Marker radius, m.
     progress : callable, optional
-        Called with 1 after each replicate.
+        Called with 1 as each replicate's result arrives (e.g. a tqdm bar's ``update``).
     rpm : int
         VLP-16 spin rate.
     range_noise_m : float, optional
@@ -92,9 +93,9 @@ def run_range_study(max_distance_m: float = 50.0, frames: int = 800, replicates:
         rising towards the station frame's +x; markers rest on it (see
         :func:`pipeline.range_study.marker_layout`). 0 is the published level ground.
     map_tasks : callable, optional
-        ``map_tasks(fn, items) -> [fn(item) ...]`` running the replicates (one task each, e.g.
-        a :class:`planner.distributed.Executor`, which has its own progress); default a loop
-        here that calls ``progress``.
+        ``map_tasks(fn, items)`` -> iterable of ``fn(item)`` in the items' order, running the
+        replicates (one task each, e.g. a :class:`planner.distributed.Executor`); default the
+        built-in ``map`` (one after another in this process).
 
     Returns
     -------
@@ -112,15 +113,11 @@ def run_range_study(max_distance_m: float = 50.0, frames: int = 800, replicates:
     research_radius_m = RADIUS_SCALED[("research", "radius_m")] * marker_radius_m
     task = functools.partial(replicate_rows, dem, station, centres, ids, sensor, rig, seed,
                              marker_radius_m, research_radius_m)
-    if map_tasks is None:
-        def map_tasks(fn, items):
-            out = []
-            for item in items:
-                out.append(fn(item))
-                if progress is not None:
-                    progress(1)
-            return out
-    rows = [row for reps in map_tasks(task, list(range(replicates))) for row in reps]
+    rows = []
+    for reps in (map_tasks or map)(task, range(replicates)):
+        rows += reps
+        if progress is not None:
+            progress(1)
     config = {"distances_m": distances.tolist(), "frames": frames, "replicates": replicates,
               "seed": seed, "sensor_profile": profile.name, "sensor": asdict(sensor),
               "turntable": asdict(profile.turntable),

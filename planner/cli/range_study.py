@@ -70,15 +70,20 @@ def command(out, overwrite, frames, replicates, seed, profile, rpm, range_noise_
       markerplan range-study --out slope/ --lidar-height 0.8 --slope-deg 15
       markerplan range-study --out range/ --scheduler tcp://10.0.0.5:8786
     """
+    from tqdm import tqdm
+
     from markerplan.output_folder import output_folder
     from planner.distributed import executor
     from visibility.range_experiment import run_range_study, write_range_study
 
-    with executor(scheduler, workers, not as_json or sys.stderr.isatty()) as ex, \
-            output_folder(out, overwrite, "range-study") as stage:
+    progress = not as_json or sys.stderr.isatty()
+    with executor(scheduler, workers, progress) as ex, \
+            output_folder(out, overwrite, "range-study") as stage, \
+            tqdm(total=replicates, desc="replicates", unit="replicate", file=sys.stderr,
+                 disable=None if progress else True) as bar:
         study = run_range_study(
-            max_distance_m, frames, replicates, seed, profile, marker_radius_m, rpm=rpm,
-            lidar_height_m=lidar_height_m, slope_deg=slope_deg, map_tasks=ex,
+            max_distance_m, frames, replicates, seed, profile, marker_radius_m, bar.update,
+            rpm=rpm, lidar_height_m=lidar_height_m, slope_deg=slope_deg, map_tasks=ex,
             range_noise_m=None if range_noise_mm is None else range_noise_mm / 1e3)
         result = write_range_study(study, stage)
         summary_rows = study.summary

@@ -93,7 +93,7 @@ def command(layout_spec, site_name, site_seed, dem_path, reproject, stations_pat
 
     --seed and the mounting-offset options set the noise and the mis-mounted rig that --verify
     simulates (the pipeline self-calibrates it); its stations run as tasks where --scheduler
-    says, as in `markerplan verify`.
+    says, as in `markerplan verify` (--scheduler and --workers are for --verify only).
 
     With --network, or for a plan made by `plan --network` (always studied in network mode,
     the mode its errors are for), every station's and every kept marker's error is the
@@ -105,6 +105,7 @@ def command(layout_spec, site_name, site_seed, dem_path, reproject, stations_pat
     from planner.reduction.plot import plot_tradeoff
     from planner.reduction.report import reduce_timings, summary, write_reduce_files
 
+    _where_needs_verify(verify)
     inputs_given = given_paths(dem_path, stations_path, boundary_path, error_model.path,
                                config_path, *exclude_paths,
                                None if layout_spec == "as-built" else layout_spec)
@@ -184,6 +185,22 @@ def _study(layout_spec, sources, error_model, config_path, free, keep_ids, drop_
                "verify_mounting_offsets": offsets.to_dict() if verify else None,
                "verify_k": None if ks is None else list(ks)}
     return study, reduce_record(study, layout, inputs, model_name, options, verified), config
+
+
+def _where_needs_verify(verify: bool) -> None:
+    """Refuse ``--scheduler``/``--workers`` given on the command line without ``--verify``:
+    only --verify's station tasks run on a cluster (:class:`ConfigError`)."""
+    from click.core import ParameterSource
+
+    from markerplan.errors import ConfigError
+
+    ctx = click.get_current_context()
+    given = [f"--{name}" for name in ("scheduler", "workers")
+             if ctx.get_parameter_source(name) is not ParameterSource.DEFAULT]
+    if given and not verify:
+        raise ConfigError(f"{' and '.join(given)} set where --verify's station tasks run, and "
+                          f"nothing else in reduce runs there; add --verify or drop "
+                          f"{'them' if len(given) > 1 else 'it'}")
 
 
 def _verify_counts(text: str | None, verify: bool, n: int) -> tuple[int, ...] | None:

@@ -1,6 +1,7 @@
 """``markerplan reduce --verify``: simulate and process the stations at chosen points of the
-trade-off curve, with :func:`planner.verify.verify_plan` (simulator + pipeline + 4-DoF WLS
-registration), and set the achieved registration errors beside the predicted ones."""
+trade-off curve, with :func:`planner.verify.verify_plans` (simulator + pipeline + 4-DoF WLS
+registration; every count's stations as one map), and set the achieved registration errors
+beside the predicted ones."""
 
 from __future__ import annotations
 
@@ -8,7 +9,7 @@ import numpy as np
 
 from markerplan.errors import ConfigError
 from planner.plan_file import PlannedStation, SurveyPlan
-from planner.verify import verify_plan
+from planner.verify import verify_plans
 
 
 def default_counts(study) -> tuple[int, ...]:
@@ -75,7 +76,8 @@ def verify_points(study, inputs, ks, error_model, seed: int = 0, progress: bool 
         True mounting offsets of the simulated rig (default: none); see
         :func:`planner.verify.verify_plan`.
     executor : planner.distributed.Executor, optional
-        Where each point's stations run (default: in this process).
+        Where the stations run, every point's together under one progress bar (default: in
+        this process).
 
     Returns
     -------
@@ -86,11 +88,11 @@ def verify_points(study, inputs, ks, error_model, seed: int = 0, progress: bool 
         the point's ``achieved_worst_error_m`` is None too.
     """
     ks = default_counts(study) if ks is None else _counts_iv(study, ks)
+    plans = [point_plan(study, inputs, k) for k in ks]
+    all_checks = verify_plans(plans, error_model, seed=seed, progress=progress, offsets=offsets,
+                              executor=executor, names=[f"k={k}" for k in ks])
     points = []
-    for k in ks:
-        plan = point_plan(study, inputs, k)
-        checks = verify_plan(plan, error_model, seed=seed, progress=progress, offsets=offsets,
-                             executor=executor)
+    for k, plan, checks in zip(ks, plans, all_checks, strict=True):
         achieved = [c.achieved_error_m for c in checks]
         finite = [a for a in achieved if a is not None]
         points.append({

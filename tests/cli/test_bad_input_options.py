@@ -117,6 +117,16 @@ CASES = [
          "`reference_station` 'S9' is not a station of this plan"),
     Case("reduce-network-verify", ["reduce", "as-built", "--network", "--verify", "--out",
                                    "out"], "markerplan verify PLAN --network"),
+    # --scheduler/--workers place --verify's station tasks: refused without --verify
+    Case("reduce-scheduler-without-verify", ["reduce", "as-built", "--scheduler", "none",
+                                             "--out", "out"],
+         "--scheduler set where --verify's station tasks run, and nothing else in reduce runs "
+         "there; add --verify or drop it"),
+    Case("reduce-scheduler-and-workers-without-verify", ["reduce", "as-built", "--scheduler",
+                                                         "local", "--workers", "2", "--out",
+                                                         "out"],
+         "--scheduler and --workers set where --verify's station tasks run, and nothing else "
+         "in reduce runs there; add --verify or drop them"),
     usage("fit-error-model-estimator-unknown", ["fit-error-model", "{inputs}/markers.csv",
                                                 "--estimator", "magic", "--out", "out"],
           "--estimator"),

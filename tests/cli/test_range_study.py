@@ -56,3 +56,21 @@ def test_bad_options(tmp_path, capsys):
     code, _, err = run_cli(capsys, ["range-study", "--out", str(tmp_path / "o"), "--replicates",
                                     "0"])
     assert code == 2 and "--replicates" in err and not (tmp_path / "o").exists()
+
+
+def test_progress_advances_as_each_replicate_arrives():
+    """The caller's progress moves with the results of ``map_tasks`` (an Executor's lazy,
+    in-order iterator has no bar of its own), not once they are all back."""
+    from visibility.range_experiment import run_range_study
+
+    log = []
+
+    def map_tasks(fn, items):
+        for item in items:
+            log.append(f"replicate {item}")
+            yield fn(item)
+
+    study = run_range_study(2.0, 4, 2, progress=lambda n: log.append(f"progress {n}"),
+                            map_tasks=map_tasks)
+    assert log == ["replicate 0", "progress 1", "replicate 1", "progress 1"]
+    assert sorted({r.replicate for r in study.rows}) == [0, 1]

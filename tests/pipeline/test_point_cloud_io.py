@@ -146,6 +146,24 @@ def test_files_are_named_per_frame_and_byte_identical_across_runs(station, tmp_p
     assert write_station_clouds(tmp_path / "a", cloud, ("las",)) == ["S1.station.las"]
 
 
+def test_site_frame_is_computed_once_for_every_format(station, tmp_path, monkeypatch):
+    """write_station_clouds transforms the cloud to the site frame once (not once per format)
+    and writes the bytes write_las and write_ply write on their own."""
+    _, _, cloud = station
+    for fmt, write in (("las", write_las), ("ply", write_ply)):
+        for frame, pose, crs in (("station", None, None), ("site", POSE, UTM_33N)):
+            write(tmp_path / f"S1.{frame}.{fmt}", cloud, pose, crs)
+    sizes = []
+    to_site = StationPose.to_site
+    monkeypatch.setattr(StationPose, "to_site",
+                        lambda self, xyz: sizes.append(len(xyz)) or to_site(self, xyz))
+    (tmp_path / "both").mkdir()
+    names = write_station_clouds(tmp_path / "both", cloud, ("ply", "las"), POSE, UTM_33N)
+    assert sorted(sizes) == sorted([len(cloud.markers), len(cloud.xyz_m)])  # centres, points
+    for name in names:
+        assert (tmp_path / "both" / name).read_bytes() == (tmp_path / name).read_bytes(), name
+
+
 def test_bad_requests_are_refused(station, tmp_path):
     _, _, cloud = station
     with pytest.raises(ConfigError, match="unknown point-cloud format.*xyz.*las, ply"):

@@ -1,7 +1,12 @@
-"""Distributed execution (planner.distributed): a LocalCluster of two worker processes gives
-the in-process results, retries a failing task, and reports one that keeps failing."""
+"""Distributed execution (planner.distributed): a LocalCluster of two worker processes, and a
+scheduler and two workers started by hand as docs/distributed.md says, give the in-process
+results; a failing task is retried, and one that keeps failing is reported."""
 
 import os
+import signal
+import socket
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -63,8 +68,41 @@ def test_two_maps_over_the_same_shared_input(cluster):
     assert [v for v, _ in second] == [shared * 3, shared * 4]
 
 
-def test_map_groups_form(cluster):
-    assert cluster(abs, [-2, 1, -7]) == [2, 1, 7]
+def _sleeps(seconds):
+    """Sleeps ``seconds`` and returns them (tasks that complete out of order)."""
+    import time
+
+    time.sleep(seconds)
+    return seconds
+
+
+@pytest.mark.parametrize("where", ["cluster", "none"])
+def test_map_groups_form_is_lazy_in_order_and_has_no_bar(cluster, monkeypatch, where):
+    """``ex(fn, items)``: an iterator (no list, no bar of its own) of the results in input
+    order, though on the cluster the later, shorter tasks finish first."""
+    bars = []
+    monkeypatch.setattr(distributed, "tqdm", lambda *a, **k: bars.append(k))
+    ex = cluster if where == "cluster" else Executor(None, progress=True)
+    seconds = [0.6, 0.3, 0.0, 0.0]
+    results = ex(_sleeps, iter(seconds))
+    assert not isinstance(results, list) and next(results) == 0.6
+    assert list(results) == seconds[1:] and bars == []
+    assert list(ex(abs, [])) == []
+
+
+def test_map_groups_form_reads_items_one_at_a_time_in_process():
+    """In this process, as the built-in ``map``: an item is read only when its result is
+    asked for (tiled visibility makes a DEM tile per item)."""
+    read = []
+
+    def items():
+        for x in (-2, 1, -7):
+            read.append(x)
+            yield x
+
+    results = Executor(None, progress=False)(abs, items())
+    assert read == [] and next(results) == 2 and read == [-2]
+    assert list(results) == [1, 7] and read == [-2, 1, -7]
 
 
 @pytest.mark.parametrize("where", ["cluster", "none"])
@@ -83,6 +121,9 @@ def test_a_task_that_keeps_failing_is_reported_by_name(cluster, where):
     msg = str(info.value)
     assert msg.startswith("station S") and "failed after 3 tries" in msg
     assert "DataError: the tile of" in msg and "\n" not in msg
+    with pytest.raises(TaskError, match=r"^task [01] failed after 3 tries: DataError: the "
+                                        r"tile of [ab] misses the DEM$"):
+        list(ex(_always_fails, ["a", "b"]))
 
 
 def test_unreachable_scheduler_is_one_line(monkeypatch):
@@ -179,3 +220,110 @@ def test_tiled_visibility_on_the_cluster_equals_in_process(cluster):
     assert stats["groups"] >= 3
     for name in ("station", "site", "visible_fraction", "expected_points", "distance_m"):
         np.testing.assert_array_equal(getattr(there, name), getattr(here, name), err_msg=name)
+
+
+def _free_port() -> int:
+    """A TCP port on 127.0.0.1 that nothing listens on now."""
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def _stop(procs: list[subprocess.Popen]) -> None:
+    """Stop processes started in their own sessions: SIGTERM (dask closes its worker
+    processes), then SIGKILL to the whole process group of one that lingers."""
+    for p in procs:
+        p.terminate()
+    for p in procs:
+        try:
+            p.wait(timeout=20)
+        except subprocess.TimeoutExpired:
+            os.killpg(p.pid, signal.SIGKILL)
+            p.wait()
+
+
+@pytest.fixture
+def cluster_by_hand(tmp_path):
+    """``dask scheduler`` and two ``dask worker`` processes (this venv's executables, one
+    thread each) on a free port, as docs/distributed.md starts them by hand; yields the
+    scheduler's address and stops all three afterwards, even when the test fails."""
+    from distributed import Client
+
+    dask = Path(sys.executable).with_name("dask")
+    address = f"tcp://127.0.0.1:{_free_port()}"
+    env = {**os.environ, "OPENBLAS_NUM_THREADS": "1"}
+    logs = tmp_path / "dask-logs"
+    logs.mkdir()
+    commands = [[dask, "scheduler", "--host", "127.0.0.1", "--port", address.rsplit(":", 1)[1],
+                 "--no-dashboard"]]
+    commands += [[dask, "worker", address, "--nthreads", "1", "--no-dashboard", "--name",
+                  f"w{i}", "--local-directory", str(logs / f"w{i}")] for i in range(2)]
+    procs = []
+    try:
+        for i, command in enumerate(commands):
+            with open(logs / f"{i}.log", "wb") as log:
+                procs.append(subprocess.Popen(command, stdout=log, stderr=subprocess.STDOUT,
+                                              env=env, start_new_session=True))
+        with Client(address, timeout=30) as client:
+            client.wait_for_workers(2, timeout=30)
+            yield address, client
+    finally:
+        _stop(procs)
+
+
+@pytest.mark.slow
+def test_range_study_on_a_scheduler_and_workers_started_by_hand(tmp_path, capsys,
+                                                                cluster_by_hand):
+    """``--scheduler tcp://...`` of a real (not Local) cluster: the same files as in process,
+    and the replicates ran on its workers."""
+    address, client = cluster_by_hand
+    quick = ["range-study", "--frames", "20", "--replicates", "2", "--max-distance", "3"]
+    code, _, err = run_cli(capsys, quick + ["--scheduler", "none",
+                                            "--out", str(tmp_path / "one")])
+    assert code == 0, err
+    code, _, err = run_cli(capsys, quick + ["--scheduler", address,
+                                            "--out", str(tmp_path / "tcp")])
+    assert code == 0, err
+    for name in ("markers.csv", "summary.csv", "summary.json"):
+        assert (tmp_path / "one" / name).read_bytes() == (tmp_path / "tcp" / name).read_bytes()
+    ran = client.run(lambda dask_worker: dask_worker.state.executed_count)
+    assert len(ran) == 2 and sum(ran.values()) == 2  # one task per replicate, none here
+
+
+def _station_id(st, scan, truth):
+    """A station's ``process`` that returns its id (the scan is a stub here)."""
+    return st.id
+
+
+def _refuses(st, scan, truth):
+    raise DataError(f"no markers seen from {st.id}")
+
+
+def test_several_plans_are_one_map_under_one_bar(monkeypatch):
+    """reduce --verify's counts: every station of every plan is a task of one map (one bar of
+    all the tasks), the results come back per plan, and a failure names station and plan."""
+    from dataclasses import replace
+
+    import numpy as np
+
+    import planner.verify
+    from planner.plan_file import PlannedStation, SurveyPlan
+    from planner.verify import map_plan_stations
+    from visibility.terrain import TerrainSpec, generate_terrain
+
+    monkeypatch.setattr(planner.verify, "simulate_markers", lambda *a, **k: (None, {}))
+    bars, tqdm = [], distributed.tqdm
+    monkeypatch.setattr(distributed, "tqdm", lambda *a, **k: bars.append(k["total"]) or
+                        tqdm(*a, **k))
+    spec = TerrainSpec(extent_m=(-5.0, 5.0, -5.0, 5.0), cell_size_m=0.5)
+    dem = generate_terrain(spec, np.random.default_rng(0)).dem
+    stations = tuple(PlannedStation(f"S{i}", np.array([i, 0.0, 1.0]), 0.0, None, ())
+                     for i in range(3))
+    plan = SurveyPlan(dem, stations, (), np.zeros((0, 3)), 0.1, 0.1, 10.0)
+    fewer = replace(plan, stations=stations[:2])
+    got = map_plan_stations([plan, fewer], [_station_id, _station_id], progress=False)
+    assert got == [["S0", "S1", "S2"], ["S0", "S1"]] and bars == [5]
+    with pytest.raises(TaskError, match=r"^station S0 \(k=2\) failed after 3 tries: DataError: "
+                                        r"no markers seen from S0$"):
+        map_plan_stations([plan, fewer], [_station_id, _refuses], names=["k=3", "k=2"],
+                          progress=False)
