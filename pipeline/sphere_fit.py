@@ -11,7 +11,9 @@ position of the scanner in that same frame, and return a :class:`SphereFit`.
     cone of half-angle 60 deg about the centre->scanner line (apex at the centre) that also lie
     within the cylinder of radius ``R sin 60 deg`` about the scanner->centre line; (3) fit with
     the radius fixed, drop points whose residual exceeds 3 standard deviations, fit again;
-    repeat (2)-(3) from the new centre until the centre moves less than ``tol_m``.
+    repeat (2)-(3) from the new centre until the centre moves less than ``tol_m`` (or
+    ``max_iter`` times: a loop that does not converge cycles through a few point sets, and is
+    stopped where ``max_iter`` would leave it once the cycle has been seen twice).
 
     *With the sensor's range noise given* (``noise``, a :class:`~pipeline.sensor_noise.RangeNoise`)
     the same procedure runs on line-of-sight residuals instead (:func:`fit_line_of_sight`):
@@ -85,7 +87,8 @@ class SphereFit:
     method : str
         ``"fixed-radius"`` or ``"hemisphere-icp"``.
     iterations : int
-        Outer iterations run.
+        Outer iterations run (a fit whose iterations cycle stops early and reports those the
+        loop would have run, ``max_iter``; see ``_astm_e3125``).
     converged : bool
         Whether the centre moved less than the tolerance before the iteration cap.
     """
@@ -391,12 +394,21 @@ def _residuals(p: np.ndarray, centre: np.ndarray, radius: float) -> np.ndarray:
 
 
 def _astm_e3125(p, radius, sensor, centre, tol_m, max_iter, noise=None) -> SphereFit:
-    """The ASTM E3125 loop; with ``noise`` on line-of-sight residuals (module docstring)."""
+    """The ASTM E3125 loop; with ``noise`` on line-of-sight residuals (module docstring).
+
+    A loop that does not converge falls into a cycle: the points selected and kept repeat with
+    a short period (2 to 12 iterations on the simulated stations) while the centre alternates
+    between as many positions, up to millimetres apart. Once the last ``q`` iterations' point
+    sets have repeated the ``q`` before them, the loop stops and reports the iteration of the
+    cycle that iteration ``max_iter`` would reach (:func:`_cycle_period`): the same sets and,
+    up to the Gauss-Newton stopping tolerance, the same centre, at a fraction of the cost.
+    """
     select, solve = (_geometric_steps(p, radius, sensor) if noise is None
                      else _line_of_sight_steps(p, radius, sensor, noise))
     used = np.ones(p.shape[0], dtype=bool)
     converged = False
     it = 0
+    states, history = [], []  # point sets selected and kept; (centre, used) after each iteration
     for it in range(1, max_iter + 1):  # noqa: B007 - `it` is reported
         sel = select(centre)
         if sel.sum() < _MIN_POINTS:
@@ -412,9 +424,30 @@ def _astm_e3125(p, radius, sensor, centre, tol_m, max_iter, noise=None) -> Spher
         if moved < tol_m:
             converged = True
             break
+        states.append((np.packbits(sel).tobytes(), np.packbits(keep).tobytes()))
+        history.append((centre, used))
+        period = _cycle_period(states)
+        if period and it < max_iter:  # skip whole cycles: where iteration max_iter would be
+            centre, used = history[-1 - (period - (max_iter - it) % period) % period]
+            it = max_iter
+            break
     res = _residuals(p[used], centre, radius)
     return SphereFit(centre, radius, float(np.sqrt(np.mean(res ** 2))), p.shape[0],
                      int(used.sum()), used, "fixed-radius", it, converged)
+
+
+def _cycle_period(states: list) -> int:
+    """Smallest ``q`` such that the last ``q`` states equal the ``q`` before them (0: none).
+
+    Examples
+    --------
+    >>> _cycle_period(list("abcbc")), _cycle_period(list("abcb")), _cycle_period(list("aa"))
+    (2, 0, 1)
+    """
+    for q in range(1, len(states) // 2 + 1):
+        if states[-1] == states[-1 - q] and states[-q:] == states[-2 * q:-q]:
+            return q
+    return 0
 
 
 def _geometric_steps(p, radius, sensor):

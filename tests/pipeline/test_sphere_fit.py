@@ -3,7 +3,9 @@ import pytest
 from scipy.optimize import least_squares
 
 from markerplan.errors import ConfigError, DataError
+from pipeline import sphere_fit
 from pipeline.pointsets import read_points
+from pipeline.sensor_noise import RangeNoise
 from pipeline.sphere_fit import METHODS, fit_free_radius, fit_sphere, hemisphere_model
 
 
@@ -123,3 +125,21 @@ def test_nist_scans_match_astm_e3125_reference(real_data):
         _, r, rms = fit_free_radius(pts[fit.used], fit.centre_m, 0.05)
         assert abs(r - 0.05) < 2e-3, f.name
         assert fit.rms_m < 5e-4, f.name
+
+
+@pytest.mark.parametrize("noise", [None, RangeNoise(0.045, range_resolution_m=0.0)])
+def test_a_cycling_fit_stops_where_the_full_loop_would(monkeypatch, noise):
+    """Noisy caps whose ASTM loop cycles (6 of these 8 do): stopping once the point sets
+    repeat gives the sets, iterations and (to the Gauss-Newton tolerance) the centre that
+    running all 100 iterations gives."""
+    caps = [noisy_cap([5.0, 1.0, -0.9], 0.1, (0, 0, 0), 300, 0.045, np.random.default_rng(s))
+            for s in range(8)]
+    short = [fit_sphere(p, 0.1, centre0_m=[5.05, 1.0, -0.9], noise=noise) for p in caps]
+    monkeypatch.setattr(sphere_fit, "_cycle_period", lambda states: 0)
+    full = [fit_sphere(p, 0.1, centre0_m=[5.05, 1.0, -0.9], noise=noise) for p in caps]
+    assert sum(f.iterations == 100 for f in full) == 6  # the cycles were met
+    for a, b in zip(short, full, strict=True):
+        assert (a.iterations, a.converged, a.n_used) == (b.iterations, b.converged, b.n_used)
+        np.testing.assert_array_equal(a.used, b.used)
+        np.testing.assert_allclose(a.centre_m, b.centre_m, rtol=0, atol=1e-10)
+        assert a.rms_m == pytest.approx(b.rms_m, rel=0, abs=1e-10)
