@@ -1092,11 +1092,14 @@ def _root_relaxation(problem: PlanProblem, model: Model, config, net: NetworkMod
     prior = np.diag(net.prior)
     e_all = net.station_errors_from(net.covariance(prior + sites_all))
     cuts = []  # (station, coefficients (n,), rhs)
-    for k in np.flatnonzero(np.isfinite(e_all)):
-        if k == net.reference:
-            continue
-        cov_t = net.covariance(prior + (e_all[k] / req) ** 2 * sites_all)
-        cuts += net.station_tangents(cov_t, [int(k)], req)
+    tied = np.flatnonzero(np.isfinite(e_all) & (np.arange(problem.n_stations) != net.reference))
+    try:  # every station determined: one decomposition for all the scaled informations
+        scaled = net.scaled_covariances(sites_all, (e_all[tied] / req) ** 2, tied)
+    except np.linalg.LinAlgError:
+        scaled = ((int(k), net.covariance(prior + (e_all[k] / req) ** 2 * sites_all))
+                  for k in tied)
+    for k, cov_t in scaled:
+        cuts += net.station_tangents(cov_t, [k], req)
     lp = replace(model, integrality=np.zeros_like(model.integrality))
     bound, history = -np.inf, []
     added = 0

@@ -207,3 +207,25 @@ def test_growing_covariance_matches_a_fresh_inverse_at_every_step(refresh):
     assert seen_undetermined and (seen_woodbury or refresh == 1)
     with pytest.raises(ConfigError, match="refresh"):
         GrowingCovariance(net, net.information(selected), refresh=0)
+
+
+def test_scaled_covariances_match_each_fresh_inverse():
+    net = NetworkModel(_line(4, seed=5, n_sites=30), 10.0, INCL)
+    sites = net.site_information(net.tying)
+    stations, scales = np.array([1, 2, 3]), np.array([0.3, 1.0, 4.0])
+    got = list(net.scaled_covariances(sites, scales, stations))
+    assert [k for k, _ in got] == [1, 2, 3]
+    for (k, cov), t in zip(got, scales, strict=True):
+        fresh = net.covariance(np.diag(net.prior) + t * sites)
+        rows = 6 * k + np.arange(6)
+        tol = 1e-8 * np.abs(fresh.full).max()
+        np.testing.assert_allclose(cov.full[rows], fresh.full[rows], atol=tol)
+        np.testing.assert_allclose(cov.full[:, rows], fresh.full[:, rows], atol=tol)
+        assert not np.any(np.delete(np.delete(cov.full, rows, 0), rows, 1))
+        req = 0.5 * net.station_errors_from(fresh)[k]
+        (_, coef, rhs), = net.station_tangents(cov, [k], req)
+        (_, coef0, rhs0), = net.station_tangents(fresh, [k], req)
+        np.testing.assert_allclose(coef, coef0, rtol=1e-6, atol=1e-9 * coef0.max())
+        assert rhs == pytest.approx(rhs0, rel=1e-6)
+    with pytest.raises(np.linalg.LinAlgError):  # a station with no shared site: singular
+        list(net.scaled_covariances(np.zeros_like(sites), scales, stations))
