@@ -200,7 +200,9 @@ def greedy_network(problem: PlanProblem, config, net=None, max_steps: int = 5000
     every station passes, until every station and marker meets the requirement; in redundant
     mode then also of the station that fails worst after losing one marker. ``batch > 1``
     adds, per step, the best site of each of the ``batch`` worst failing stations (for large
-    networks: fewer exact evaluations).
+    networks: fewer exact evaluations). The information and covariance grow with each added
+    site (:class:`planner.network_accuracy.GrowingCovariance`: a low-rank update per site, not
+    a fresh inverse), which picks the same sites as recomputing them at every step.
 
     Raises
     ------
