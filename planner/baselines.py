@@ -18,7 +18,7 @@ from scipy.spatial import cKDTree
 
 from markerplan.errors import InfeasiblePlanError
 from planner import accuracy
-from planner.station_checks import evaluate_layout, station_infos
+from planner.station_checks import StationInfo, evaluate_layout, station_infos
 from planner.usability import PlanProblem, direction_status, sector_index
 
 #: Grid phases tried at each spacing (fraction of the spacing from the bounds' lower corner).
@@ -48,6 +48,22 @@ class Baseline:
         return int(self.selected.sum())
 
 
+class _RememberingInfo(StationInfo):
+    """A :class:`~planner.station_checks.StationInfo` that remembers the error of each set of
+    its sites it was asked about: the greedy cover checks every station after each added
+    site, and only the stations that can use that site see a new set."""
+
+    def __init__(self, problem: PlanProblem, s: int, config) -> None:
+        super().__init__(problem, s, config)
+        self._errors: dict[bytes, float] = {}
+
+    def error(self, sites) -> float:
+        key = np.asarray(sites, np.int64).tobytes()
+        if key not in self._errors:
+            self._errors[key] = super().error(sites)
+        return self._errors[key]
+
+
 def greedy_cover(problem: PlanProblem, config) -> Baseline:
     """Greedy cover: add one site at a time until every station meets the requirement.
 
@@ -61,7 +77,7 @@ def greedy_cover(problem: PlanProblem, config) -> Baseline:
     InfeasiblePlanError
         When no remaining site improves a station that still fails.
     """
-    infos = station_infos(problem, config)
+    infos = [_RememberingInfo(problem, s, config) for s in range(problem.n_stations)]
     forbidden = problem.site_mask(config.forbidden, "forbidden")
     selected = problem.site_existing | problem.site_mask(config.existing, "existing")
     min_count = config.min_markers + (1 if config.redundant else 0)

@@ -75,3 +75,20 @@ def test_network_greedy_picks_what_the_full_recompute_picked(requirement, redund
     g = greedy_network(p, cfg, batch=batch)
     assert np.flatnonzero(g.selected).tolist() == expected
     assert evaluate_layout(p, g.selected, cfg).all_ok
+
+
+@pytest.mark.parametrize(("redundant", "expected"), [
+    (False, [6, 8, 16, 32, 58, 93, 101, 119]),
+    (True, [3, 6, 8, 35, 42, 52, 73, 75, 77, 93, 96, 103, 109, 119]),
+])
+def test_greedy_cover_picks_what_it_picked_checking_every_station_afresh(redundant, expected):
+    # expected: the greedy cover before it remembered each station's error per site set
+    rng = np.random.default_rng(3)
+    stations = np.column_stack([np.arange(6) * 12.0, rng.uniform(-3, 3, 6)])
+    sites = np.column_stack([rng.uniform(-10, 70, 120), rng.uniform(-14, 14, 120)])
+    p = make_problem(stations, sites, max_range_m=18)
+    cfg = PlanConfig(min_markers=3, min_sectors=2, max_range_m=18, working_radius_m=8,
+                     requirement_m=0.03, redundant=redundant)
+    g = greedy_cover(p, cfg)
+    assert np.flatnonzero(g.selected).tolist() == expected
+    assert evaluate_layout(p, g.selected, cfg).all_ok
