@@ -609,6 +609,10 @@ MAX_NETWORK_TYING_SITES = 20_000
 #: stops when its bound rose less than this (relative) over 5 solves; its rows in the integer
 #: program give up at most this fraction of their right-hand side.
 _ROOT_TIME_FRACTION = 0.5
+#: ... and at least this fraction of the whole time limit, even when the greedy incumbent took
+#: the rest (a time-limited plan then still reports a proven bound; the run may exceed the
+#: time limit by up to this fraction).
+_ROOT_MIN_TIME_FRACTION = 0.1
 _ROOT_MAX_ROUNDS = 100
 _ROOT_STALL = 2e-3
 _ROOT_SPARSE_SLACK = 0.05
@@ -1039,7 +1043,8 @@ def _plan_network(problem: PlanProblem, config, model: Model | None,
                            shape=(1, model.n_vars))
         model = model.with_rows(row, [-np.inf], [float(upper_bound)],
                                 [RowKind("upper-bound")])
-        budget_s = _ROOT_TIME_FRACTION * (config.time_limit_s - (time.perf_counter() - t0))
+        budget_s = max(_ROOT_TIME_FRACTION * (config.time_limit_s - (time.perf_counter() - t0)),
+                       _ROOT_MIN_TIME_FRACTION * config.time_limit_s)
         model, root_bound = _root_relaxation(problem, model, config, net, upper_bound, budget_s)
 
     def cuts(selected):
