@@ -1,20 +1,21 @@
 """Network greedy step cost: the incremental covariance against the full recompute, same run.
 
     OPENBLAS_NUM_THREADS=1 .venv/bin/python -u benchmarks/network_greedy.py [--site km]
-        [--grid-spacing 4] [--requirement 2.5] [--steps 10]
+        [--grid-spacing 4] [--requirement 2.5] [--steps 10] [--greedy-steps 5000]
 
 Builds the site's network problem (``km``: datum at the station nearest the centre), runs
-``greedy_network`` once (markers, wall time), then replays ``--steps`` additions of its
-selected sites twice per phase and times each step both ways:
+``greedy_network`` once (at most ``--greedy-steps`` steps: markers, wall time), then adds
+``--steps`` sites one at a time, twice per phase, and times each step both ways:
 
 - old: ``net.information(selected)`` and ``net.covariance`` of it (and, while some station
   is undetermined, of the regularised ``J + 0.05 J_all`` too), as the greedy did per step;
 - new: :meth:`planner.network_accuracy.GrowingCovariance.add` on the layout (and on the
   regularised information while undetermined).
 
-Phase "undetermined" starts from the greedy's directions-only cover (stations not yet tied);
-phase "determined" from the greedy's final layout without its last ``--steps`` tying sites
-(site order). Prints one line per phase and a final JSON object.
+Phase "undetermined" starts from the greedy's directions-only cover (stations not yet tied)
+and adds tying sites spread over the site list; phase "determined" starts from every tying
+site but the last ``--steps`` and adds those. Prints one line per phase and a final JSON
+object.
 """
 
 from __future__ import annotations
@@ -62,9 +63,12 @@ def main() -> None:
     ap.add_argument("--grid-spacing", type=float, default=4.0, help="Candidate grid, m.")
     ap.add_argument("--requirement", type=float, default=2.5, help="requirement_m, m.")
     ap.add_argument("--steps", type=int, default=10, help="Steps timed per phase.")
+    ap.add_argument("--greedy-steps", type=int, default=5000,
+                    help="max_steps of the greedy run (its wall time is printed).")
     args = ap.parse_args()
 
     from error_model import default_model
+    from markerplan.errors import InfeasiblePlanError
     from planner.baselines import greedy_cover, greedy_network
     from planner.config import PlanConfig
     from planner.network_accuracy import network_model
@@ -83,19 +87,24 @@ def main() -> None:
     print(f"site {args.site}: {problem.n_stations} stations, {net.n_params} pose parameters, "
           f"{int(net.tying.sum())} tying sites; built in {time.perf_counter() - t:.0f} s")
     t = time.perf_counter()
-    g = greedy_network(problem, config, net)
+    try:
+        g = greedy_network(problem, config, net, max_steps=args.greedy_steps)
+        greedy = f"{g.n_markers} markers"
+    except InfeasiblePlanError as exc:  # e.g. stations still untied after --greedy-steps
+        greedy = f"no passing layout after at most {args.greedy_steps} steps ({str(exc)[:60]}...)"
     greedy_s = time.perf_counter() - t
-    print(f"greedy_network: {g.n_markers} markers in {greedy_s:.1f} s")
+    print(f"greedy_network: {greedy} in {greedy_s:.1f} s")
     start = greedy_cover(problem, config.replace(network=False, requirement_m=1e9)).selected
-    added = np.flatnonzero(g.selected & ~start & net.tying)
     j_all = net.information(net.tying)
-    out = {"site": args.site, "n_params": net.n_params, "greedy_markers": g.n_markers,
-           "greedy_s": greedy_s}
-    last = added[-args.steps:]
-    end = g.selected.copy()
+    out = {"site": args.site, "n_params": net.n_params, "greedy": greedy, "greedy_s": greedy_s}
+    # the same sites both ways: every k-th tying site outside the cover, then every tying site
+    # but the last --steps of them (a determined layout)
+    spare = np.flatnonzero(net.tying & ~start)
+    first = spare[::max(spare.size // args.steps, 1)][:args.steps]
+    last = np.flatnonzero(net.tying)[-args.steps:]
+    end = net.tying.copy()
     end[last] = False
-    for phase, begin, sites in (("undetermined", start, added[:args.steps]),
-                                ("determined", end, last)):
+    for phase, begin, sites in (("undetermined", start, first), ("determined", end, last)):
         r = _replay(net, begin, sites, j_all)
         out[phase] = r
         print(f"{phase} phase ({r['undetermined_at_start']} stations undetermined at the "
