@@ -18,7 +18,7 @@ from scipy.spatial import cKDTree
 
 from markerplan.errors import InfeasiblePlanError
 from planner import accuracy
-from planner.station_checks import evaluate_layout, station_infos
+from planner.station_checks import StationInfo, evaluate_layout, station_infos
 from planner.usability import PlanProblem, direction_status, sector_index
 
 #: Grid phases tried at each spacing (fraction of the spacing from the bounds' lower corner).
@@ -48,6 +48,22 @@ class Baseline:
         return int(self.selected.sum())
 
 
+class _RememberingInfo(StationInfo):
+    """A :class:`~planner.station_checks.StationInfo` that remembers the error of each set of
+    its sites it was asked about: the greedy cover checks every station after each added
+    site, and only the stations that can use that site see a new set."""
+
+    def __init__(self, problem: PlanProblem, s: int, config) -> None:
+        super().__init__(problem, s, config)
+        self._errors: dict[bytes, float] = {}
+
+    def error(self, sites) -> float:
+        key = np.asarray(sites, np.int64).tobytes()
+        if key not in self._errors:
+            self._errors[key] = super().error(sites)
+        return self._errors[key]
+
+
 def greedy_cover(problem: PlanProblem, config) -> Baseline:
     """Greedy cover: add one site at a time until every station meets the requirement.
 
@@ -61,7 +77,7 @@ def greedy_cover(problem: PlanProblem, config) -> Baseline:
     InfeasiblePlanError
         When no remaining site improves a station that still fails.
     """
-    infos = station_infos(problem, config)
+    infos = [_RememberingInfo(problem, s, config) for s in range(problem.n_stations)]
     forbidden = problem.site_mask(config.forbidden, "forbidden")
     selected = problem.site_existing | problem.site_mask(config.existing, "existing")
     min_count = config.min_markers + (1 if config.redundant else 0)
@@ -200,25 +216,32 @@ def greedy_network(problem: PlanProblem, config, net=None, max_steps: int = 5000
     every station passes, until every station and marker meets the requirement; in redundant
     mode then also of the station that fails worst after losing one marker. ``batch > 1``
     adds, per step, the best site of each of the ``batch`` worst failing stations (for large
-    networks: fewer exact evaluations).
+    networks: fewer exact evaluations). The information and covariance grow with each added
+    site (:class:`planner.network_accuracy.GrowingCovariance`: a low-rank update per site, not
+    a fresh inverse), which picks the same sites as recomputing them at every step.
 
     Raises
     ------
     InfeasiblePlanError
         When no remaining site improves the worst station or marker.
     """
-    from planner.network_accuracy import network_model
+    from planner.network_accuracy import GrowingCovariance, network_model
 
     net = net or network_model(problem, config)
     req = config.requirement_m
     forbidden = problem.site_mask(config.forbidden, "forbidden")
     selected = greedy_cover(problem, config.replace(network=False, requirement_m=1e9)).selected
     open_site = ~forbidden & net.tying
-    j_all = None
+    layout = GrowingCovariance(net, net.information(selected))
+    j_all = regularised = None
     for _ in range(max_steps):
-        j = net.information(selected)
-        cov = net.covariance(j)
-        err = net.station_errors_from(cov)
+        j, determined = layout.j, layout.determined
+        if determined.all() or batch > np.sum(~determined):
+            cov = layout.cov
+            err = net.station_errors_from(cov)
+        else:  # the stations to improve are the first undetermined ones: no covariance needed
+            cov = None
+            err = np.where(determined, 0.0, np.inf)
         markers = np.flatnonzero(selected)
         # markers are judged once every station passes (until then the stations lead)
         merr = net.marker_errors(cov, markers) if np.all(err <= req) else np.zeros(0)
@@ -244,10 +267,12 @@ def greedy_network(problem: PlanProblem, config, net=None, max_steps: int = 5000
         elif np.any(err > req):
             worst = np.argsort(-np.nan_to_num(err, posinf=1e300), kind="stable")
             worst = worst[:min(batch, int(np.sum(err > req)))]
-            if not cov.determined.all():
+            if not determined.all():
                 if j_all is None:
                     j_all = net.information(open_site)
-                cov = net.covariance(j + 0.05 * j_all)
+                # linearised at J + 0.05 J_all, which grows with the layout as J does
+                regularised = regularised or GrowingCovariance(net, j + 0.05 * j_all)
+                cov = regularised.cov
             gains = [net.worst_direction_gain(cov, int(k)) for k in worst]
         else:
             m = markers[int(np.argmax(merr))]
@@ -258,10 +283,17 @@ def greedy_network(problem: PlanProblem, config, net=None, max_steps: int = 5000
         for gain in gains:
             gain = np.where(open_site & ~selected, gain, 0.0)
             if gain.max() > 0:
-                selected[int(np.argmax(gain))] = True
+                site = int(np.argmax(gain))
+                selected[site] = True
+                layout.add(site)
+                if regularised is not None:
+                    regularised.add(site)
                 added = True
+        if layout.determined.all():
+            regularised = None  # adding sites never undoes a determined network
         if not added:
             break
+    err = net.station_errors_from(layout.cov)
     failing = [problem.station_ids[s] for s in np.flatnonzero(err > req)]
     raise InfeasiblePlanError(f"greedy (network) cannot satisfy station(s) "
                               f"{', '.join(failing) or 'markers'}: no remaining site helps")

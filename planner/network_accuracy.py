@@ -281,6 +281,37 @@ class NetworkModel:
         full[np.ix_(self.free, self.free)] = 0.5 * (c + c.T)
         return NetworkCovariance(full=full, determined=determined)
 
+    def site_factor(self, site: int) -> tuple[np.ndarray, np.ndarray]:
+        """A low-rank factor of one site's information ``J^(j)``.
+
+        ``J^(j) = B^T (D kron I_3) B`` with ``B`` the block diagonal of the ``m`` stations'
+        ``H_s`` and ``D = diag(w) - w w^T / W_j`` (positive semi-definite, rank ``m - 1``);
+        ``D = L L^T`` from its eigen-decomposition gives ``U = B^T (L kron I_3)``.
+
+        Parameters
+        ----------
+        site : int
+            Candidate site ``j``.
+
+        Returns
+        -------
+        index : (6 m,) int
+            The pose parameters (of all ``6 s``, fixed ones included) of the stations that use
+            the site.
+        factor : (6 m, r) float
+            ``U`` with ``J^(j) = U U^T`` on ``index`` (``r = 3 (m - 1)``; 0 columns when
+            ``m < 2``). Rows of fixed parameters are to be ignored.
+        """
+        lo, hi = self.site_start[site], self.site_start[site + 1]
+        w = self.weight[lo:hi]
+        index = (6 * self.pair_station[lo:hi][:, None] + np.arange(6)).ravel()
+        if hi - lo < 2:
+            return index, np.zeros((index.size, 0))
+        lam, vec = np.linalg.eigh(np.diag(w) - np.outer(w, w) / w.sum())
+        root = vec[:, 1:] * np.sqrt(np.maximum(lam[1:], 0.0))  # (m, m - 1); lam[0] = 0
+        u = np.einsum("aib,ak->abki", self.design[lo:hi], root)  # (m, 6, m - 1, 3)
+        return index, u.reshape(index.size, -1)
+
     def station_errors_from(self, cov: NetworkCovariance) -> np.ndarray:
         """(s,) 95 % station errors of a covariance, m (``inf`` where undetermined)."""
         err = pose_errors_from_covariance(cov.station(np.arange(self.problem.n_stations)),
@@ -423,6 +454,50 @@ class NetworkModel:
         gs, owners = self._station_gradients(cov, stations, rim)
         return self._tangents(cov, gs, owners, requirement_m**2 / CHI2_3_95, np.zeros(len(gs)))
 
+    def scaled_covariances(self, sites_information: np.ndarray, scales, stations):
+        """Station blocks of the covariances of ``J(t) = J_prior + t S`` for many ``t``.
+
+        One generalised eigen-decomposition ``S V = (J_prior + S) V diag(mu)`` with ``V^T
+        (J_prior + S) V = I`` gives ``J(t)^-1 = V diag(1 / (1 - mu + t mu)) V^T`` for every
+        ``t > 0``: ``O(P^3)`` once and ``O(P^2)`` per station instead of ``O(P^3)`` each.
+
+        Parameters
+        ----------
+        sites_information : (P, P) float
+            ``S``, e.g. :meth:`site_information` of every open site; ``J_prior + S`` must be
+            positive definite (every station determined).
+        scales : (k,) float
+            ``t`` per station, > 0.
+        stations : (k,) int
+
+        Returns
+        -------
+        covariances : iterator of (station, NetworkCovariance)
+            Per station, in order, a covariance whose ``full`` holds the rows and columns of
+            ``station``'s pose parameters only (zero elsewhere): all that
+            :meth:`station_tangents` and :meth:`station_errors_from` of that station read.
+
+        Raises
+        ------
+        numpy.linalg.LinAlgError
+            ``J_prior + S`` is not positive definite.
+        """
+        mu, vec = scipy.linalg.eigh(sites_information, sites_information + np.diag(self.prior))
+        return self._scaled_station_rows(mu, vec, scales, stations)
+
+    def _scaled_station_rows(self, mu, vec, scales, stations):
+        s = self.problem.n_stations
+        position = np.full(6 * s, -1)
+        position[self.free] = np.arange(self.free.size)
+        for k, t in zip(stations, scales, strict=True):
+            params = 6 * int(k) + np.arange(6)
+            own = params[position[params] >= 0]
+            rows = (vec[position[own]] / (1.0 - mu + t * mu)) @ vec.T  # (q, P)
+            full = np.zeros((6 * s, 6 * s))
+            full[np.ix_(own, self.free)] = rows
+            full[np.ix_(self.free, own)] = rows.T
+            yield int(k), NetworkCovariance(full=full, determined=np.ones(s, bool))
+
     def worst_direction_gain(self, cov: NetworkCovariance, k: int) -> np.ndarray:
         """(n,) ``v^T J^(j) v`` at station ``k``'s worst rim point and direction: the first-order
         reduction of its worst variance that adding each site brings (``v = C g``)."""
@@ -556,6 +631,130 @@ class NetworkModel:
                                f"working-radius rim ({at_station[k]:.3f} m at the station "
                                f"itself) with every usable site, above {requirement_m:g} m")
         return out
+
+
+class GrowingCovariance:
+    """The information and covariance of a layout that grows one site at a time.
+
+    Adding site ``j`` adds ``J^(j) = U U^T`` (:meth:`NetworkModel.site_factor`, rank
+    ``r <= 3 (m - 1)`` for a site ``m`` stations use) to the information. While every station
+    is determined the covariance follows by the Woodbury identity ``C' = C - C U (I + U^T C
+    U)^-1 U^T C`` in ``O(P^2 r)`` instead of a fresh ``O(P^3)`` inverse; it is recomputed by
+    :meth:`NetworkModel.covariance` every ``refresh`` updates (round-off does not accumulate).
+    While some station is undetermined, the null space of the information is tracked instead
+    (adding ``U U^T`` leaves the null vectors ``n`` with ``U^T n = 0``), and the covariance is
+    only computed when asked for. Equal to :meth:`NetworkModel.covariance` of the grown
+    information up to round-off.
+
+    Parameters
+    ----------
+    net : NetworkModel
+    j : (P, P) float
+        Information of the starting layout (copied), e.g. ``net.information(selected)``.
+    refresh : int
+        Updates between recomputations (>= 1).
+
+    Attributes
+    ----------
+    j : (P, P) float
+        The current information.
+    """
+
+    #: ``|U^T n|`` below this fraction of ``|U|`` leaves ``n`` in the null space.
+    NULL_TOLERANCE = 1e-8
+
+    def __init__(self, net: NetworkModel, j: np.ndarray, refresh: int = 50) -> None:
+        if refresh < 1:
+            raise ConfigError(f"`refresh` must be >= 1, got {refresh!r}")
+        self.net = net
+        self.j = np.array(j, dtype=float)
+        self.refresh = int(refresh)
+        self._position = np.full(6 * net.problem.n_stations, -1)
+        self._position[net.free] = np.arange(net.free.size)
+        self._recompute()
+        self._null = np.zeros((net.free.size, 0))
+        if not self._cov.determined.all():
+            self._null = self._null_space()
+
+    def _recompute(self) -> None:
+        self._cov = self.net.covariance(self.j)
+        self._updates = 0
+
+    def _null_space(self) -> np.ndarray:
+        """(P, d) orthonormal basis of the null space of ``j``, each vector within one
+        connected block of ``j``, by :meth:`NetworkModel.covariance`'s criterion (eigenvalues
+        of the diagonally scaled ``j`` below ``1e-10`` of the largest)."""
+        _, block = connected_components(csr_array(self.j != 0), directed=False)
+        scale = np.sqrt(np.maximum(np.diag(self.j), 1e-300))
+        parts = []
+        for b in np.unique(block):
+            idx = np.flatnonzero(block == b)
+            lam, vec = np.linalg.eigh(self.j[np.ix_(idx, idx)] / scale[idx, None]
+                                      / scale[None, idx])
+            parts.append((idx, lam, vec))
+        top = max(max(lam[-1] for _, lam, _ in parts), 1e-300)
+        null = np.zeros((self.j.shape[0], 0))
+        for idx, lam, vec in parts:
+            v = vec[:, lam <= 1e-10 * top] / scale[idx, None]
+            if v.shape[1]:
+                part = np.zeros((self.j.shape[0], v.shape[1]))
+                part[idx] = np.linalg.qr(v)[0]  # orthonormal in the unscaled parameters
+                null = np.column_stack([null, part])
+        return null
+
+    @property
+    def determined(self) -> np.ndarray:
+        """(s,) bool: stations whose pose the layout determines (no null vector moves them)."""
+        if not self._null.shape[1]:
+            return self._cov.determined
+        bad = np.zeros(6 * self.net.problem.n_stations)
+        bad[self.net.free] = np.linalg.norm(self._null, axis=1)
+        return bad.reshape(-1, 6).max(axis=1) < 1e-6
+
+    @property
+    def cov(self) -> NetworkCovariance:
+        """The covariance of ``j`` (updated in place by :meth:`add`: do not keep it across)."""
+        if self._cov is None:
+            self._recompute()
+        return self._cov
+
+    def add(self, site: int) -> None:
+        """Add candidate site ``site`` to the layout."""
+        index, u = self.net.site_factor(site)
+        if u.shape[1] == 0:
+            return  # a site one station uses adds no information
+        pos = self._position[index]
+        free = pos >= 0
+        uf = u[free]
+        self.j[np.ix_(pos[free], pos[free])] += uf @ uf.T
+        if self._null.shape[1]:
+            self._shrink_null(pos[free], uf)
+        if self._cov is None or not self._cov.determined.all() \
+                or self._updates + 1 >= self.refresh:
+            # stale until asked for while undetermined; recomputed once determined
+            self._cov = None
+            if not self._null.shape[1]:
+                self._recompute()
+            return
+        full = self._cov.full
+        cu = full[:, index] @ u  # (6 s, r); rows and columns of fixed parameters are zero
+        inner = np.eye(u.shape[1]) + u.T @ cu[index]
+        z = scipy.linalg.solve_triangular(np.linalg.cholesky(inner), cu.T, lower=True)
+        full -= z.T @ z
+        self._updates += 1
+
+    def _shrink_null(self, pos: np.ndarray, uf: np.ndarray) -> None:
+        """Keep the null vectors the added ``U U^T`` (rows ``pos``) leaves null."""
+        touched = np.flatnonzero(np.any(self._null[pos] != 0, axis=0))
+        if not touched.size:
+            return
+        m = uf.T @ self._null[np.ix_(pos, touched)]  # (r, t)
+        _, sig, vt = np.linalg.svd(m)
+        tol = self.NULL_TOLERANCE * np.linalg.norm(uf, 2)
+        rank = int(np.sum(sig > tol))
+        kept = self._null[:, touched] @ vt[rank:].T
+        rest = np.delete(self._null, touched, axis=1)
+        self._null = np.column_stack([rest, kept])
 
 
 def network_model(problem: PlanProblem, config) -> NetworkModel:

@@ -634,6 +634,10 @@ MAX_NETWORK_TYING_SITES = 20_000
 #: stops when its bound rose less than this (relative) over 5 solves; its rows in the integer
 #: program give up at most this fraction of their right-hand side.
 _ROOT_TIME_FRACTION = 0.5
+#: ... and at least this fraction of the whole time limit, even when the greedy incumbent took
+#: the rest (a time-limited plan then still reports a proven bound; the run may exceed the
+#: time limit by up to this fraction).
+_ROOT_MIN_TIME_FRACTION = 0.1
 _ROOT_MAX_ROUNDS = 100
 _ROOT_STALL = 2e-3
 _ROOT_SPARSE_SLACK = 0.05
@@ -1064,7 +1068,8 @@ def _plan_network(problem: PlanProblem, config, model: Model | None,
                            shape=(1, model.n_vars))
         model = model.with_rows(row, [-np.inf], [float(upper_bound)],
                                 [RowKind("upper-bound")])
-        budget_s = _ROOT_TIME_FRACTION * (config.time_limit_s - (time.perf_counter() - t0))
+        budget_s = max(_ROOT_TIME_FRACTION * (config.time_limit_s - (time.perf_counter() - t0)),
+                       _ROOT_MIN_TIME_FRACTION * config.time_limit_s)
         model, root_bound = _root_relaxation(problem, model, config, net, upper_bound, budget_s)
 
     def cuts(selected):
@@ -1117,11 +1122,14 @@ def _root_relaxation(problem: PlanProblem, model: Model, config, net: NetworkMod
     prior = np.diag(net.prior)
     e_all = net.station_errors_from(net.covariance(prior + sites_all))
     cuts = []  # (station, coefficients (n,), rhs)
-    for k in np.flatnonzero(np.isfinite(e_all)):
-        if k == net.reference:
-            continue
-        cov_t = net.covariance(prior + (e_all[k] / req) ** 2 * sites_all)
-        cuts += net.station_tangents(cov_t, [int(k)], req)
+    tied = np.flatnonzero(np.isfinite(e_all) & (np.arange(problem.n_stations) != net.reference))
+    try:  # every station determined: one decomposition for all the scaled informations
+        scaled = net.scaled_covariances(sites_all, (e_all[tied] / req) ** 2, tied)
+    except np.linalg.LinAlgError:
+        scaled = ((int(k), net.covariance(prior + (e_all[k] / req) ** 2 * sites_all))
+                  for k in tied)
+    for k, cov_t in scaled:
+        cuts += net.station_tangents(cov_t, [k], req)
     lp = replace(model, integrality=np.zeros_like(model.integrality))
     bound, history = -np.inf, []
     added = 0

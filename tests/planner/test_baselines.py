@@ -1,6 +1,7 @@
 import numpy as np
+import pytest
 
-from planner.baselines import greedy_cover, regular_grid
+from planner.baselines import greedy_cover, greedy_network, regular_grid
 from planner.config import PlanConfig
 from planner.network_accuracy import network_model
 from planner.program import plan_sites
@@ -51,3 +52,43 @@ def test_regular_grid_in_network_mode_judges_the_network():
     # the next wider spacing fails the network at every phase tried
     assert not regular_grid(p, net_cfg, bounds, spacings_m=np.array([grid.spacing_m + 1.0]),
                             net=net).meets_requirement
+
+
+@pytest.mark.parametrize(("requirement", "redundant", "batch", "expected"), [
+    (0.3, False, 1, [5, 6, 8, 10, 16, 20, 27, 32, 93, 101, 119]),
+    (0.3, True, 1, [3, 6, 8, 17, 31, 35, 42, 47, 52, 54, 64, 77, 103, 109, 119]),
+    (0.15, False, 1, [5, 6, 8, 10, 16, 17, 20, 27, 28, 32, 41, 43, 44, 47, 58, 59, 68, 72, 86,
+                      93, 95, 101, 105, 112, 119]),
+    (0.3, False, 3, [6, 8, 16, 20, 27, 32, 44, 86, 93, 101, 119]),
+])
+def test_network_greedy_picks_what_the_full_recompute_picked(requirement, redundant, batch,
+                                                             expected):
+    # expected: the selections of the greedy that rebuilt the information and inverted it
+    # afresh at every step (before the incremental covariance); six stations in a row, so the
+    # greedy starts with untied stations and ends on marker accuracy
+    rng = np.random.default_rng(3)
+    stations = np.column_stack([np.arange(6) * 12.0, rng.uniform(-3, 3, 6)])
+    sites = np.column_stack([rng.uniform(-10, 70, 120), rng.uniform(-14, 14, 120)])
+    p = make_problem(stations, sites, max_range_m=18)
+    cfg = PlanConfig(network=True, min_markers=3, min_sectors=2, max_range_m=18,
+                     working_radius_m=8, requirement_m=requirement, redundant=redundant)
+    g = greedy_network(p, cfg, batch=batch)
+    assert np.flatnonzero(g.selected).tolist() == expected
+    assert evaluate_layout(p, g.selected, cfg).all_ok
+
+
+@pytest.mark.parametrize(("redundant", "expected"), [
+    (False, [6, 8, 16, 32, 58, 93, 101, 119]),
+    (True, [3, 6, 8, 35, 42, 52, 73, 75, 77, 93, 96, 103, 109, 119]),
+])
+def test_greedy_cover_picks_what_it_picked_checking_every_station_afresh(redundant, expected):
+    # expected: the greedy cover before it remembered each station's error per site set
+    rng = np.random.default_rng(3)
+    stations = np.column_stack([np.arange(6) * 12.0, rng.uniform(-3, 3, 6)])
+    sites = np.column_stack([rng.uniform(-10, 70, 120), rng.uniform(-14, 14, 120)])
+    p = make_problem(stations, sites, max_range_m=18)
+    cfg = PlanConfig(min_markers=3, min_sectors=2, max_range_m=18, working_radius_m=8,
+                     requirement_m=0.03, redundant=redundant)
+    g = greedy_cover(p, cfg)
+    assert np.flatnonzero(g.selected).tolist() == expected
+    assert evaluate_layout(p, g.selected, cfg).all_ok

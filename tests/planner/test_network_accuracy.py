@@ -9,6 +9,7 @@ from markerplan.errors import ConfigError
 from planner import accuracy
 from planner.config import PlanConfig
 from planner.network_accuracy import (
+    GrowingCovariance,
     NetworkModel,
     network_model,
     pose_errors_from_covariance,
@@ -165,3 +166,66 @@ def test_tangent_cuts_never_remove_a_passing_layout():
     for owner, coef, rhs in cuts:
         applies = np.ones(len(x), bool) if owner is None else x[:, owner] > 0
         assert np.all(x[applies] @ coef >= rhs * (1 - 1e-9))
+
+
+def test_site_factor_reproduces_each_sites_information():
+    net = NetworkModel(_line(4, seed=3, n_sites=20), 10.0, INCL)
+    pos = np.full(6 * 4, -1)
+    pos[net.free] = np.arange(net.n_params)
+    for j in range(net.problem.n_sites):
+        one = np.zeros(net.problem.n_sites)
+        one[j] = 1.0
+        index, u = net.site_factor(j)
+        assert u.shape == (6 * net.n_stations_seeing[j], 3 * max(net.n_stations_seeing[j] - 1, 0))
+        got = np.zeros((net.n_params, net.n_params))
+        keep = pos[index] >= 0
+        got[np.ix_(pos[index][keep], pos[index][keep])] = u[keep] @ u[keep].T
+        np.testing.assert_allclose(got, net.site_information(one), atol=1e-9 * (1 + np.abs(
+            got).max()))
+
+
+@pytest.mark.parametrize("refresh", [1, 3, 1000])
+def test_growing_covariance_matches_a_fresh_inverse_at_every_step(refresh):
+    # four stations tied one site at a time, from nothing: undetermined stations first (the
+    # tracked null space must flag the same stations), then Woodbury updates
+    net = NetworkModel(_line(4, seed=5, n_sites=30), 10.0, INCL)
+    selected = np.zeros(net.problem.n_sites, bool)
+    grow = GrowingCovariance(net, net.information(selected), refresh=refresh)
+    seen_undetermined = seen_woodbury = False
+    for j in np.flatnonzero(net.tying):
+        selected[j] = True
+        grow.add(int(j))
+        fresh = net.covariance(net.information(selected))
+        np.testing.assert_allclose(grow.j, net.information(selected), rtol=1e-12, atol=1e-6)
+        np.testing.assert_array_equal(grow.determined, fresh.determined)
+        if fresh.determined.all():
+            seen_woodbury |= grow._updates > 0
+            np.testing.assert_allclose(grow.cov.full, fresh.full, rtol=1e-7,
+                                       atol=1e-9 * np.abs(fresh.full).max())
+        else:
+            seen_undetermined = True
+    assert seen_undetermined and (seen_woodbury or refresh == 1)
+    with pytest.raises(ConfigError, match="refresh"):
+        GrowingCovariance(net, net.information(selected), refresh=0)
+
+
+def test_scaled_covariances_match_each_fresh_inverse():
+    net = NetworkModel(_line(4, seed=5, n_sites=30), 10.0, INCL)
+    sites = net.site_information(net.tying)
+    stations, scales = np.array([1, 2, 3]), np.array([0.3, 1.0, 4.0])
+    got = list(net.scaled_covariances(sites, scales, stations))
+    assert [k for k, _ in got] == [1, 2, 3]
+    for (k, cov), t in zip(got, scales, strict=True):
+        fresh = net.covariance(np.diag(net.prior) + t * sites)
+        rows = 6 * k + np.arange(6)
+        tol = 1e-8 * np.abs(fresh.full).max()
+        np.testing.assert_allclose(cov.full[rows], fresh.full[rows], atol=tol)
+        np.testing.assert_allclose(cov.full[:, rows], fresh.full[:, rows], atol=tol)
+        assert not np.any(np.delete(np.delete(cov.full, rows, 0), rows, 1))
+        req = 0.5 * net.station_errors_from(fresh)[k]
+        (_, coef, rhs), = net.station_tangents(cov, [k], req)
+        (_, coef0, rhs0), = net.station_tangents(fresh, [k], req)
+        np.testing.assert_allclose(coef, coef0, rtol=1e-6, atol=1e-9 * coef0.max())
+        assert rhs == pytest.approx(rhs0, rel=1e-6)
+    with pytest.raises(np.linalg.LinAlgError):  # a station with no shared site: singular
+        list(net.scaled_covariances(np.zeros_like(sites), scales, stations))
