@@ -79,9 +79,14 @@ def _worker(scan_path: Path) -> None:
                       "offsets": res.calibration["offsets"]}, default=float))
 
 
-def _run(tree: Path, scan_path: Path) -> dict:
+def run_worker(script: str, tree: Path, arguments: list[str]) -> dict:
+    """Run ``script --worker ...`` with ``tree`` first on ``PYTHONPATH``, one BLAS thread.
+
+    Returns the JSON object the worker printed on its last line; exits when the worker imported
+    ``pipeline`` from anywhere but ``tree``.
+    """
     env = dict(os.environ, PYTHONPATH=str(tree), OPENBLAS_NUM_THREADS="1")
-    out = subprocess.run([sys.executable, __file__, "--worker", str(scan_path)], env=env,
+    out = subprocess.run([sys.executable, script, "--worker", *arguments], env=env,
                          capture_output=True, text=True, check=True)
     result = json.loads(out.stdout.strip().splitlines()[-1])
     if Path(result["code"]).resolve() != tree.resolve():
@@ -111,7 +116,7 @@ def main() -> None:
     print(f"load average before: {os.getloadavg()[0]:.2f}", flush=True)
     for k in range(args.repeats):
         for name, tree in sides.items():
-            runs[name].append(_run(tree, args.scan))
+            runs[name].append(run_worker(__file__, tree, [str(args.scan)]))
             print(f"  repeat {k + 1} {name:4s} {runs[name][-1]['total_s']:6.2f} s wall, "
                   f"{runs[name][-1]['cpu_s']:6.2f} s CPU (load {os.getloadavg()[0]:.2f})",
                   flush=True)

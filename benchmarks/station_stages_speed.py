@@ -28,12 +28,12 @@ import argparse
 import hashlib
 import json
 import os
-import subprocess
 import sys
 import time
 from pathlib import Path
 
 import numpy as np
+from process_speed import run_worker
 
 HERE = Path(__file__).resolve().parents[1]
 STAGES = ("calibrate_angles", "synthesis", "ground+cluster+gate")
@@ -76,17 +76,6 @@ def _worker(scan_path: Path, inner: int) -> None:
                       "clusters": [m.tolist() for m in clusters]}))
 
 
-def _run(tree: Path, scan_path: Path, inner: int) -> dict:
-    env = dict(os.environ, PYTHONPATH=str(tree), OPENBLAS_NUM_THREADS="1")
-    out = subprocess.run([sys.executable, __file__, "--worker", str(scan_path),
-                          "--inner", str(inner)], env=env, capture_output=True, text=True,
-                         check=True)
-    result = json.loads(out.stdout.strip().splitlines()[-1])
-    if Path(result["code"]).resolve() != tree.resolve():
-        sys.exit(f"the worker imported pipeline from {result['code']}, not {tree}")
-    return result
-
-
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--base", type=Path, help="checkout of the baseline revision")
@@ -108,7 +97,8 @@ def main() -> None:
     print(f"load average before: {os.getloadavg()[0]:.2f}", flush=True)
     for k in range(args.repeats):
         for name, tree in sides.items():
-            runs[name].append(_run(tree, args.scan, args.inner))
+            runs[name].append(run_worker(__file__, tree, [str(args.scan), "--inner",
+                                                          str(args.inner)]))
             print(f"  repeat {k + 1} {name}: done (load {os.getloadavg()[0]:.2f})", flush=True)
     print(f"CPU time per stage, s: min / median of {args.repeats} x {args.inner} runs "
           f"(base {args.base}, new {HERE})")

@@ -98,6 +98,14 @@ def test_config_and_data_errors(scan):
                                                                  max_range_m=60))
 
 
+def _assert_fresh_tree_answer(nn, pa, pb):
+    """``nn``'s 10 nearest neighbours of ``pa`` in ``pb`` equal a fresh tree's, bit for bit."""
+    dist, idx = nn.query(pa, pb)
+    want_d, want_i = cKDTree(pb).query(pa, k=10)
+    np.testing.assert_array_equal(idx, want_i)
+    np.testing.assert_array_equal(dist, want_d)
+
+
 @pytest.mark.parametrize(("step_m", "builds", "ball_searches"),
                          [(1e-4, 1, False), (1e-3, 1, True), (0.2, 4, False)])
 def test_nearest_neighbours_reuse_gives_fresh_tree_answers(monkeypatch, step_m, builds,
@@ -116,10 +124,7 @@ def test_nearest_neighbours_reuse_gives_fresh_tree_answers(monkeypatch, step_m, 
     pa = pb[gen.choice(pb.shape[0], 2000, replace=False)] + gen.normal(0, 0.02, (2000, 3))
     nn = NearestNeighbours(10)
     for _ in range(4):
-        dist, idx = nn.query(pa, pb)
-        want_d, want_i = cKDTree(pb).query(pa, k=10)
-        np.testing.assert_array_equal(idx, want_i)
-        np.testing.assert_array_equal(dist, want_d)
+        _assert_fresh_tree_answer(nn, pa, pb)
         pb = pb + gen.normal(0, step_m, pb.shape)
         pa = pa + gen.normal(0, step_m, pa.shape)
     assert nn.builds == builds
@@ -133,9 +138,6 @@ def test_nearest_neighbours_with_fewer_reference_points_than_candidates():
     pb, pa = gen.normal(size=(12, 3)), gen.normal(size=(30, 3))
     nn = NearestNeighbours(10)
     for _ in range(3):
-        dist, idx = nn.query(pa, pb)
-        want_d, want_i = cKDTree(pb).query(pa, k=10)
-        np.testing.assert_array_equal(idx, want_i)
-        np.testing.assert_array_equal(dist, want_d)
+        _assert_fresh_tree_answer(nn, pa, pb)
         pb = pb + gen.normal(0, 1e-4, pb.shape)
         pa = pa + gen.normal(0, 1e-4, pa.shape)
