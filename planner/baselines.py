@@ -250,6 +250,7 @@ def greedy_network(problem: PlanProblem, config, net=None, max_steps: int = 5000
                     layout.add(site)
                     added = True
             if not added:
+                why = "no remaining site removes a free movement"
                 break
             continue
         cov = layout.cov
@@ -294,18 +295,22 @@ def greedy_network(problem: PlanProblem, config, net=None, max_steps: int = 5000
                 layout.add(site)
                 added = True
         if not added:
+            why = "no remaining site helps"
             break
+    else:
+        why = f"stopped after {max_steps} steps"
     determined = layout.determined
     if not determined.all():
         untied = [problem.station_ids[s] for s in np.flatnonzero(~determined)]
         raise GreedyStuckError(
             f"greedy (network) got stuck with {len(untied)} station(s) not tied to the "
-            f"reference ({_listed(untied)}) after {int(selected.sum())} markers: no remaining "
-            f"site removes a free movement", selected)
+            f"reference ({_listed(untied)}) after {int(selected.sum())} markers: {why}",
+            selected)
     err = net.station_errors_from(layout.cov)
     failing = [problem.station_ids[s] for s in np.flatnonzero(err > req)]
     raise GreedyStuckError(f"greedy (network) cannot satisfy station(s) "
-                           f"{_listed(failing) or 'markers'}: no remaining site helps", selected)
+                           f"{_listed(failing) or 'markers'} after {int(selected.sum())} "
+                           f"markers: {why}", selected)
 
 
 def _listed(ids: list[str], shown: int = 10) -> str:

@@ -1,7 +1,7 @@
 import numpy as np
 import pytest
 
-from planner.baselines import greedy_cover, greedy_network, regular_grid
+from planner.baselines import GreedyStuckError, greedy_cover, greedy_network, regular_grid
 from planner.config import PlanConfig
 from planner.network_accuracy import network_model
 from planner.program import plan_sites
@@ -94,3 +94,47 @@ def test_greedy_cover_picks_what_it_picked_checking_every_station_afresh(redunda
     g = greedy_cover(p, cfg)
     assert np.flatnonzero(g.selected).tolist() == expected
     assert evaluate_layout(p, g.selected, cfg).all_ok
+
+
+def _row_of_stations(extra_stations=(), extra_sites=()):
+    """The six stations in a row of the tests above, plus optional stations and sites."""
+    rng = np.random.default_rng(3)
+    stations = np.column_stack([np.arange(6) * 12.0, rng.uniform(-3, 3, 6)])
+    sites = np.column_stack([rng.uniform(-10, 70, 120), rng.uniform(-14, 14, 120)])
+    stations = np.vstack([stations, np.reshape(extra_stations, (-1, 2))])
+    sites = np.vstack([sites, np.reshape(extra_sites, (-1, 2))])
+    return make_problem(stations, sites, max_range_m=18)
+
+
+def test_network_greedy_that_runs_out_of_steps_says_which_stations_are_untied():
+    # after the direction cover S4-S6 turn freely in heading; no step is allowed to tie them
+    p = _row_of_stations()
+    cfg = PlanConfig(network=True, min_markers=3, min_sectors=2, max_range_m=18,
+                     working_radius_m=8, requirement_m=0.3)
+    with pytest.raises(GreedyStuckError, match=r"^greedy \(network\) got stuck with 3 station\(s\)"
+                       r" not tied to the reference \(S4, S5, S6\) after 7 markers: stopped "
+                       r"after 0 steps$") as err:
+        greedy_network(p, cfg, max_steps=0)
+    assert err.value.selected.sum() == 7
+    # one step ties them (site 0); S5 and S6 then still fail the requirement
+    with pytest.raises(GreedyStuckError, match=r"^greedy \(network\) cannot satisfy station\(s\) "
+                       r"S5, S6 after 8 markers: stopped after 1 steps$") as err:
+        greedy_network(p, cfg, max_steps=1)
+    assert err.value.selected[0] and err.value.selected.sum() == 8
+
+
+def test_network_greedy_stops_at_once_when_no_site_can_tie_a_station():
+    # S7 stands 200 m away with its own markers: nothing it sees is seen by another station,
+    # so the greedy ties S4-S6 and then stops (not after max_steps) naming S7 alone
+    far = np.array([[200.0, 0.0]])
+    ring = 200.0 + 6 * np.column_stack([np.cos(np.arange(8) * np.pi / 4),
+                                        np.sin(np.arange(8) * np.pi / 4)])
+    ring[:, 1] -= 200.0
+    p = _row_of_stations(far, ring)
+    cfg = PlanConfig(network=True, min_markers=3, min_sectors=2, max_range_m=18,
+                     working_radius_m=8, requirement_m=0.3)
+    with pytest.raises(GreedyStuckError, match=r"got stuck with 1 station\(s\) not tied to the "
+                       r"reference \(S7\) after \d+ markers: no remaining site removes a free "
+                       r"movement$") as err:
+        greedy_network(p, cfg)
+    assert err.value.selected[0]  # S4-S6 were tied first, by site 0 as without S7
