@@ -5,8 +5,9 @@
 - :func:`regular_grid`: markers on a square grid, each grid point moved to the nearest
   candidate site; the widest spacing whose layout meets the requirement at every station
   (in network mode: every station and marker, relative to the reference station).
-- :func:`greedy_network`: network mode — the greedy cover's directions, then the site that
-  most reduces the worst station's (or marker's) variance, until all pass.
+- :func:`greedy_network`: network mode — the greedy cover's directions, then the sites that
+  tie every station to the reference, then the site that most reduces the worst station's
+  (or marker's) variance, until all pass.
 """
 
 from __future__ import annotations
