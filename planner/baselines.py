@@ -5,8 +5,9 @@
 - :func:`regular_grid`: markers on a square grid, each grid point moved to the nearest
   candidate site; the widest spacing whose layout meets the requirement at every station
   (in network mode: every station and marker, relative to the reference station).
-- :func:`greedy_network`: network mode — the greedy cover's directions, then the site that
-  most reduces the worst station's (or marker's) variance, until all pass.
+- :func:`greedy_network`: network mode — the greedy cover's directions, then the sites that
+  tie every station to the reference, then the site that most reduces the worst station's
+  (or marker's) variance, until all pass.
 """
 
 from __future__ import annotations
@@ -209,21 +210,25 @@ def greedy_network(problem: PlanProblem, config, net=None, max_steps: int = 5000
     """Greedy baseline in network mode.
 
     Starts from the greedy cover of the direction and count rules alone (:func:`greedy_cover`
-    with no accuracy requirement), then repeatedly adds the site with the largest first-order
-    reduction ``v^T J^(j) v`` of the worst variance of the worst station relative to the
-    datum (:meth:`planner.network_accuracy.NetworkModel.worst_direction_gain`; a station not
-    yet tied is linearised at a regularised information), or of the worst selected marker once
-    every station passes, until every station and marker meets the requirement; in redundant
-    mode then also of the station that fails worst after losing one marker. ``batch > 1``
-    adds, per step, the best site of each of the ``batch`` worst failing stations (for large
-    networks: fewer exact evaluations). The information and covariance grow with each added
-    site (:class:`planner.network_accuracy.GrowingCovariance`: a low-rank update per site, not
-    a fresh inverse), which picks the same sites as recomputing them at every step.
+    with no accuracy requirement). While some station is not tied to the reference (its pose
+    moves freely: a null direction of the information), each step first adds the site that
+    removes the most free movements, among the sites the first untied station uses (else any
+    untied station; :func:`_tying_site`). Once every station is tied it repeatedly adds the
+    site with the largest first-order reduction ``v^T J^(j) v`` of the worst variance of the
+    worst station relative to the datum
+    (:meth:`planner.network_accuracy.NetworkModel.worst_direction_gain`), or of the worst
+    selected marker once every station passes, until every station and marker meets the
+    requirement; in redundant mode then also of the station that fails worst after losing one
+    marker. ``batch > 1`` adds, per step, a site for each of the ``batch`` first untied (then
+    worst failing) stations (for large networks: fewer exact evaluations). The information and
+    covariance grow with each added site (:class:`planner.network_accuracy.GrowingCovariance`:
+    a low-rank update per site, not a fresh inverse).
 
     Raises
     ------
-    InfeasiblePlanError
-        When no remaining site improves the worst station or marker.
+    GreedyStuckError
+        When no remaining site ties an untied station, or improves the worst station or
+        marker, or after ``max_steps`` steps; the message says how many stations are untied.
     """
     from planner.network_accuracy import GrowingCovariance, network_model
 
@@ -233,15 +238,24 @@ def greedy_network(problem: PlanProblem, config, net=None, max_steps: int = 5000
     selected = greedy_cover(problem, config.replace(network=False, requirement_m=1e9)).selected
     open_site = ~forbidden & net.tying
     layout = GrowingCovariance(net, net.information(selected))
-    j_all = regularised = None
+    j_all = None
     for _ in range(max_steps):
         j, determined = layout.j, layout.determined
-        if determined.all() or batch > np.sum(~determined):
-            cov = layout.cov
-            err = net.station_errors_from(cov)
-        else:  # the stations to improve are the first undetermined ones: no covariance needed
-            cov = None
-            err = np.where(determined, 0.0, np.inf)
+        if not determined.all():  # tie first: remove free movements, worst stations first
+            added = False
+            for k in np.flatnonzero(~determined)[:batch]:
+                site = _tying_site(net, layout, open_site & ~selected, int(k))
+                if site is not None:
+                    selected = selected.copy()
+                    selected[site] = True
+                    layout.add(site)
+                    added = True
+            if not added:
+                why = "no remaining site removes a free movement"
+                break
+            continue
+        cov = layout.cov
+        err = net.station_errors_from(cov)
         markers = np.flatnonzero(selected)
         # markers are judged once every station passes (until then the stations lead)
         merr = net.marker_errors(cov, markers) if np.all(err <= req) else np.zeros(0)
@@ -267,12 +281,6 @@ def greedy_network(problem: PlanProblem, config, net=None, max_steps: int = 5000
         elif np.any(err > req):
             worst = np.argsort(-np.nan_to_num(err, posinf=1e300), kind="stable")
             worst = worst[:min(batch, int(np.sum(err > req)))]
-            if not determined.all():
-                if j_all is None:
-                    j_all = net.information(open_site)
-                # linearised at J + 0.05 J_all, which grows with the layout as J does
-                regularised = regularised or GrowingCovariance(net, j + 0.05 * j_all)
-                cov = regularised.cov
             gains = [net.worst_direction_gain(cov, int(k)) for k in worst]
         else:
             m = markers[int(np.argmax(merr))]
@@ -286,14 +294,61 @@ def greedy_network(problem: PlanProblem, config, net=None, max_steps: int = 5000
                 site = int(np.argmax(gain))
                 selected[site] = True
                 layout.add(site)
-                if regularised is not None:
-                    regularised.add(site)
                 added = True
-        if layout.determined.all():
-            regularised = None  # adding sites never undoes a determined network
         if not added:
+            why = "no remaining site helps"
             break
+    else:
+        why = f"stopped after {max_steps} steps"
+    determined = layout.determined
+    if not determined.all():
+        untied = [problem.station_ids[s] for s in np.flatnonzero(~determined)]
+        raise GreedyStuckError(
+            f"greedy (network) got stuck with {len(untied)} station(s) not tied to the "
+            f"reference ({_listed(untied)}) after {int(selected.sum())} markers: {why}",
+            selected)
     err = net.station_errors_from(layout.cov)
     failing = [problem.station_ids[s] for s in np.flatnonzero(err > req)]
-    raise InfeasiblePlanError(f"greedy (network) cannot satisfy station(s) "
-                              f"{', '.join(failing) or 'markers'}: no remaining site helps")
+    raise GreedyStuckError(f"greedy (network) cannot satisfy station(s) "
+                           f"{_listed(failing) or 'markers'} after {int(selected.sum())} "
+                           f"markers: {why}", selected)
+
+
+def _listed(ids: list[str], shown: int = 10) -> str:
+    """The first ``shown`` ids, comma-separated, with a count of the rest."""
+    more = f" and {len(ids) - shown} more" if len(ids) > shown else ""
+    return ", ".join(ids[:shown]) + more
+
+
+def _tying_site(net, layout, available: np.ndarray, k: int) -> int | None:
+    """The site that removes the most free movements of the layout (null directions of its
+    information), first among the sites station ``k`` uses, else among the sites any
+    undetermined station uses; ties go to the lowest index. None when no available site
+    removes one.
+
+    Parameters
+    ----------
+    net : planner.network_accuracy.NetworkModel
+    layout : planner.network_accuracy.GrowingCovariance
+    available : (n,) bool
+        Sites that may be added.
+    k : int
+        An undetermined station.
+    """
+    users = [np.array([k]), np.flatnonzero(~layout.determined)]
+    for stations in users:
+        sites = np.unique(net.pair_site[np.isin(net.pair_station, stations)])
+        sites = sites[available[sites]]
+        removed = np.array([layout.null_reduction(int(j)) for j in sites], dtype=np.int64)
+        if removed.size and removed.max() > 0:
+            return int(sites[int(np.argmax(removed))])
+    return None
+
+
+class GreedyStuckError(InfeasiblePlanError):
+    """:func:`greedy_network` found no site that helps; ``selected`` (n,) bool is where it
+    stopped (a layout that does not meet the requirement)."""
+
+    def __init__(self, message: str, selected: np.ndarray) -> None:
+        super().__init__(message)
+        self.selected = selected

@@ -743,15 +743,32 @@ class GrowingCovariance:
         full -= z.T @ z
         self._updates += 1
 
-    def _shrink_null(self, pos: np.ndarray, uf: np.ndarray) -> None:
-        """Keep the null vectors the added ``U U^T`` (rows ``pos``) leaves null."""
+    def null_reduction(self, site: int) -> int:
+        """How many free movements (null directions of ``j``) adding ``site`` would remove."""
+        index, u = self.net.site_factor(site)
+        if not (u.shape[1] and self._null.shape[1]):
+            return 0
+        pos = self._position[index]
+        free = pos >= 0
+        return self._null_split(pos[free], u[free])[1]
+
+    def _null_split(self, pos: np.ndarray, uf: np.ndarray) -> tuple[np.ndarray, int, np.ndarray]:
+        """The null vectors an added ``U U^T`` (rows ``pos``) touches (column indices), how
+        many of their directions it removes, and the right singular vectors of ``U^T N``
+        (rows past that count span what stays null)."""
         touched = np.flatnonzero(np.any(self._null[pos] != 0, axis=0))
         if not touched.size:
-            return
+            return touched, 0, np.zeros((0, 0))
         m = uf.T @ self._null[np.ix_(pos, touched)]  # (r, t)
         _, sig, vt = np.linalg.svd(m)
         tol = self.NULL_TOLERANCE * np.linalg.norm(uf, 2)
-        rank = int(np.sum(sig > tol))
+        return touched, int(np.sum(sig > tol)), vt
+
+    def _shrink_null(self, pos: np.ndarray, uf: np.ndarray) -> None:
+        """Keep the null vectors the added ``U U^T`` (rows ``pos``) leaves null."""
+        touched, rank, vt = self._null_split(pos, uf)
+        if not touched.size:
+            return
         kept = self._null[:, touched] @ vt[rank:].T
         rest = np.delete(self._null, touched, axis=1)
         self._null = np.column_stack([rest, kept])

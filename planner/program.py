@@ -1054,12 +1054,15 @@ def _plan_network(problem: PlanProblem, config, model: Model | None,
     if int(net.tying.sum()) > _SPARSE_ABOVE_SITES and not config.redundant \
             and np.all(problem.site_cost[~existing] == 1):
         # every layout at least as good as the greedy one has at most its number of sites
-        from planner.baselines import greedy_network
+        from planner.baselines import Baseline, GreedyStuckError, greedy_network
 
-        greedy = greedy_network(problem, config.replace(
-            forbidden=config.forbidden + tuple(problem.site_ids[j]
-                                               for j in np.flatnonzero(hopeless & ~forbidden))),
-            net)
+        try:
+            greedy = greedy_network(problem, config.replace(
+                forbidden=config.forbidden + tuple(
+                    problem.site_ids[j] for j in np.flatnonzero(hopeless & ~forbidden))), net)
+        except GreedyStuckError as exc:  # no starting layout: the search goes on without one
+            greedy = Baseline("greedy", exc.selected, False)
+    if greedy is not None and greedy.meets_requirement:
         in_model = model.site_var >= 0
         greedy_selected = greedy.selected
         upper_bound = int((greedy.selected & in_model).sum())

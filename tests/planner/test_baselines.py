@@ -1,7 +1,7 @@
 import numpy as np
 import pytest
 
-from planner.baselines import greedy_cover, greedy_network, regular_grid
+from planner.baselines import GreedyStuckError, greedy_cover, greedy_network, regular_grid
 from planner.config import PlanConfig
 from planner.network_accuracy import network_model
 from planner.program import plan_sites
@@ -55,17 +55,19 @@ def test_regular_grid_in_network_mode_judges_the_network():
 
 
 @pytest.mark.parametrize(("requirement", "redundant", "batch", "expected"), [
-    (0.3, False, 1, [5, 6, 8, 10, 16, 20, 27, 32, 93, 101, 119]),
+    (0.3, False, 1, [0, 6, 8, 10, 16, 27, 32, 93, 101, 112, 119]),
     (0.3, True, 1, [3, 6, 8, 17, 31, 35, 42, 47, 52, 54, 64, 77, 103, 109, 119]),
-    (0.15, False, 1, [5, 6, 8, 10, 16, 17, 20, 27, 28, 32, 41, 43, 44, 47, 58, 59, 68, 72, 86,
+    (0.15, False, 1, [0, 6, 8, 10, 16, 17, 20, 27, 28, 32, 41, 43, 44, 47, 58, 59, 63, 68, 86,
                       93, 95, 101, 105, 112, 119]),
-    (0.3, False, 3, [6, 8, 16, 20, 27, 32, 44, 86, 93, 101, 119]),
+    (0.3, False, 3, [0, 6, 8, 16, 27, 32, 86, 93, 101, 112, 119]),
 ])
 def test_network_greedy_picks_what_the_full_recompute_picked(requirement, redundant, batch,
                                                              expected):
     # expected: the selections of the greedy that rebuilt the information and inverted it
-    # afresh at every step (before the incremental covariance); six stations in a row, so the
-    # greedy starts with untied stations and ends on marker accuracy
+    # afresh at every step (before the incremental covariance), with the tie-first rule: six
+    # stations in a row, S4-S6 free in heading after the direction cover; sites 0 (seen by
+    # S2-S4) and 5 (S3-S5, the old first-order choice) each remove that one free movement, so
+    # the lowest index is tied first; the same marker counts as before the rule
     rng = np.random.default_rng(3)
     stations = np.column_stack([np.arange(6) * 12.0, rng.uniform(-3, 3, 6)])
     sites = np.column_stack([rng.uniform(-10, 70, 120), rng.uniform(-14, 14, 120)])
@@ -92,3 +94,47 @@ def test_greedy_cover_picks_what_it_picked_checking_every_station_afresh(redunda
     g = greedy_cover(p, cfg)
     assert np.flatnonzero(g.selected).tolist() == expected
     assert evaluate_layout(p, g.selected, cfg).all_ok
+
+
+def _row_of_stations(extra_stations=(), extra_sites=()):
+    """The six stations in a row of the tests above, plus optional stations and sites."""
+    rng = np.random.default_rng(3)
+    stations = np.column_stack([np.arange(6) * 12.0, rng.uniform(-3, 3, 6)])
+    sites = np.column_stack([rng.uniform(-10, 70, 120), rng.uniform(-14, 14, 120)])
+    stations = np.vstack([stations, np.reshape(extra_stations, (-1, 2))])
+    sites = np.vstack([sites, np.reshape(extra_sites, (-1, 2))])
+    return make_problem(stations, sites, max_range_m=18)
+
+
+def test_network_greedy_that_runs_out_of_steps_says_which_stations_are_untied():
+    # after the direction cover S4-S6 turn freely in heading; no step is allowed to tie them
+    p = _row_of_stations()
+    cfg = PlanConfig(network=True, min_markers=3, min_sectors=2, max_range_m=18,
+                     working_radius_m=8, requirement_m=0.3)
+    with pytest.raises(GreedyStuckError, match=r"^greedy \(network\) got stuck with 3 station\(s\)"
+                       r" not tied to the reference \(S4, S5, S6\) after 7 markers: stopped "
+                       r"after 0 steps$") as err:
+        greedy_network(p, cfg, max_steps=0)
+    assert err.value.selected.sum() == 7
+    # one step ties them (site 0); S5 and S6 then still fail the requirement
+    with pytest.raises(GreedyStuckError, match=r"^greedy \(network\) cannot satisfy station\(s\) "
+                       r"S5, S6 after 8 markers: stopped after 1 steps$") as err:
+        greedy_network(p, cfg, max_steps=1)
+    assert err.value.selected[0] and err.value.selected.sum() == 8
+
+
+def test_network_greedy_stops_at_once_when_no_site_can_tie_a_station():
+    # S7 stands 200 m away with its own markers: nothing it sees is seen by another station,
+    # so the greedy ties S4-S6 and then stops (not after max_steps) naming S7 alone
+    far = np.array([[200.0, 0.0]])
+    ring = 200.0 + 6 * np.column_stack([np.cos(np.arange(8) * np.pi / 4),
+                                        np.sin(np.arange(8) * np.pi / 4)])
+    ring[:, 1] -= 200.0
+    p = _row_of_stations(far, ring)
+    cfg = PlanConfig(network=True, min_markers=3, min_sectors=2, max_range_m=18,
+                     working_radius_m=8, requirement_m=0.3)
+    with pytest.raises(GreedyStuckError, match=r"got stuck with 1 station\(s\) not tied to the "
+                       r"reference \(S7\) after \d+ markers: no remaining site removes a free "
+                       r"movement$") as err:
+        greedy_network(p, cfg)
+    assert err.value.selected[0]  # S4-S6 were tied first, by site 0 as without S7

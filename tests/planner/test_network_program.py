@@ -189,3 +189,32 @@ def test_a_greedy_that_takes_the_whole_time_limit_still_leaves_a_root_bound(monk
     assert r.solution.dual_bound <= brute_force_optimum(p, cfg) + 1e-6
     obj = r.selected.sum()
     assert r.solution.gap == pytest.approx(max(obj - r.solution.dual_bound, 0) / obj)
+
+
+def test_a_stuck_greedy_leaves_the_large_problem_path_without_a_starting_layout(monkeypatch):
+    """When the greedy incumbent gets stuck, the plan goes on without it (no upper bound, no
+    root relaxation) and still finds the optimum; the greedy is reported as not meeting the
+    requirement, and planning does not run it again."""
+    import planner.baselines as baselines
+    import planner.planning as planning
+    import planner.program as program
+
+    monkeypatch.setattr(program, "_SPARSE_ABOVE_SITES", 0)
+    p = _instance(2)
+    base = PlanConfig(network=True, min_markers=3, min_sectors=2, max_range_m=16,
+                      working_radius_m=10, time_limit_s=60)
+    net = network_model(p, base)
+    cfg = base.replace(requirement_m=float(1.15 * net.station_errors(np.ones(p.n_sites,
+                                                                           bool)).max()))
+    greedy = baselines.greedy_network
+    monkeypatch.setattr(baselines, "greedy_network",
+                        lambda *a, **k: greedy(*a, **{**k, "max_steps": 0}))
+    r = plan_sites(p, cfg)
+    assert r.greedy is not None and not r.greedy.meets_requirement
+    assert r.check.all_ok and r.status == "optimal"
+    assert r.selected.sum() == brute_force_optimum(p, cfg)
+    assert not any(k.family in ("oa-root", "upper-bound") for k in r.model.row_kind)
+    # the baseline planning reports when it runs the greedy itself (small problems)
+    monkeypatch.setattr(planning, "greedy_network", baselines.greedy_network)
+    b = planning._greedy_network_baseline(p, cfg)
+    assert not b.meets_requirement and b.n_markers == r.greedy.n_markers
