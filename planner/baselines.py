@@ -352,3 +352,12 @@ class GreedyStuckError(InfeasiblePlanError):
     def __init__(self, message: str, selected: np.ndarray) -> None:
         super().__init__(message)
         self.selected = selected
+
+
+def network_baseline(problem: PlanProblem, config, net=None) -> Baseline:
+    """:func:`greedy_network`, or the layout where it got stuck (marked as not meeting the
+    requirement): a plan stands on its own when the greedy cannot finish."""
+    try:
+        return greedy_network(problem, config, net)
+    except GreedyStuckError as exc:
+        return Baseline("greedy", exc.selected, False)

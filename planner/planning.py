@@ -26,7 +26,7 @@ from markerplan.reading import (
     require_type,
     unique_ids,
 )
-from planner.baselines import Baseline, GreedyStuckError, greedy_cover, greedy_network, regular_grid
+from planner.baselines import Baseline, greedy_cover, network_baseline, regular_grid
 from planner.candidates import (
     Candidates,
     candidate_sites,
@@ -611,7 +611,7 @@ def make_plan(inputs: PlanInputs, config, error_model, model_name: str = "defaul
     timings["program"] = time.perf_counter() - t
     t = time.perf_counter()
     if config.network:
-        baselines = [result.greedy or _greedy_network_baseline(problem, config)]
+        baselines = [result.greedy or network_baseline(problem, config)]
     else:
         baselines = [greedy_cover(problem, config)]
         x0, y0, x1, y1 = plan_bounds(inputs, problem)
@@ -626,15 +626,6 @@ def make_plan(inputs: PlanInputs, config, error_model, model_name: str = "defaul
     return PlanOutcome(inputs=inputs, config=config, model_name=model_name, problem=problem,
                        candidates=cand, visibility=vis, result=result, baselines=baselines,
                        as_built=as_built, timings_s=timings)
-
-
-def _greedy_network_baseline(problem: PlanProblem, config) -> Baseline:
-    """:func:`~planner.baselines.greedy_network`, or where it stopped (not meeting the
-    requirement) when it got stuck: the plan stands on its own."""
-    try:
-        return greedy_network(problem, config)
-    except GreedyStuckError as exc:
-        return Baseline("greedy", exc.selected, False)
 
 
 def plan_bounds(inputs: PlanInputs, problem: PlanProblem) -> tuple[float, float, float, float]:

@@ -1054,14 +1054,12 @@ def _plan_network(problem: PlanProblem, config, model: Model | None,
     if int(net.tying.sum()) > _SPARSE_ABOVE_SITES and not config.redundant \
             and np.all(problem.site_cost[~existing] == 1):
         # every layout at least as good as the greedy one has at most its number of sites
-        from planner.baselines import Baseline, GreedyStuckError, greedy_network
+        from planner.baselines import network_baseline
 
-        try:
-            greedy = greedy_network(problem, config.replace(
-                forbidden=config.forbidden + tuple(
-                    problem.site_ids[j] for j in np.flatnonzero(hopeless & ~forbidden))), net)
-        except GreedyStuckError as exc:  # no starting layout: the search goes on without one
-            greedy = Baseline("greedy", exc.selected, False)
+        # a stuck greedy gives no starting layout: the search goes on without one
+        greedy = network_baseline(problem, config.replace(
+            forbidden=config.forbidden + tuple(
+                problem.site_ids[j] for j in np.flatnonzero(hopeless & ~forbidden))), net)
     if greedy is not None and greedy.meets_requirement:
         in_model = model.site_var >= 0
         greedy_selected = greedy.selected

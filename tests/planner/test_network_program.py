@@ -160,6 +160,18 @@ def test_large_problem_path_bound_never_exceeds_the_brute_force_optimum(seed, mo
     assert any(k.family == "oa-root" for k in r.model.row_kind)
 
 
+def _reachable_network_case(time_limit_s: float):
+    """The two-group instance in network mode, with a requirement 15 % above what every site
+    together reaches (so it can be met)."""
+    p = _instance(2)
+    base = PlanConfig(network=True, min_markers=3, min_sectors=2, max_range_m=16,
+                      working_radius_m=10, time_limit_s=time_limit_s)
+    net = network_model(p, base)
+    cfg = base.replace(requirement_m=float(1.15 * net.station_errors(np.ones(p.n_sites,
+                                                                           bool)).max()))
+    return p, cfg
+
+
 def test_a_greedy_that_takes_the_whole_time_limit_still_leaves_a_root_bound(monkeypatch):
     """When the greedy incumbent uses up the time limit, the root relaxation still gets its
     minimum share: the answer is the greedy layout, time-limited, with a finite proven bound
@@ -170,12 +182,7 @@ def test_a_greedy_that_takes_the_whole_time_limit_still_leaves_a_root_bound(monk
     import planner.program as program
 
     monkeypatch.setattr(program, "_SPARSE_ABOVE_SITES", 0)
-    p = _instance(2)
-    base = PlanConfig(network=True, min_markers=3, min_sectors=2, max_range_m=16,
-                      working_radius_m=10, time_limit_s=5)
-    net = network_model(p, base)
-    cfg = base.replace(requirement_m=float(1.15 * net.station_errors(np.ones(p.n_sites,
-                                                                           bool)).max()))
+    p, cfg = _reachable_network_case(5)
     greedy = baselines.greedy_network
 
     def slow_greedy(*args, **kwargs):
@@ -194,18 +201,12 @@ def test_a_greedy_that_takes_the_whole_time_limit_still_leaves_a_root_bound(monk
 def test_a_stuck_greedy_leaves_the_large_problem_path_without_a_starting_layout(monkeypatch):
     """When the greedy incumbent gets stuck, the plan goes on without it (no upper bound, no
     root relaxation) and still finds the optimum; the greedy is reported as not meeting the
-    requirement, and planning does not run it again."""
+    requirement, as it is when planning runs the greedy itself (small problems)."""
     import planner.baselines as baselines
-    import planner.planning as planning
     import planner.program as program
 
     monkeypatch.setattr(program, "_SPARSE_ABOVE_SITES", 0)
-    p = _instance(2)
-    base = PlanConfig(network=True, min_markers=3, min_sectors=2, max_range_m=16,
-                      working_radius_m=10, time_limit_s=60)
-    net = network_model(p, base)
-    cfg = base.replace(requirement_m=float(1.15 * net.station_errors(np.ones(p.n_sites,
-                                                                           bool)).max()))
+    p, cfg = _reachable_network_case(60)
     greedy = baselines.greedy_network
     monkeypatch.setattr(baselines, "greedy_network",
                         lambda *a, **k: greedy(*a, **{**k, "max_steps": 0}))
@@ -214,7 +215,5 @@ def test_a_stuck_greedy_leaves_the_large_problem_path_without_a_starting_layout(
     assert r.check.all_ok and r.status == "optimal"
     assert r.selected.sum() == brute_force_optimum(p, cfg)
     assert not any(k.family in ("oa-root", "upper-bound") for k in r.model.row_kind)
-    # the baseline planning reports when it runs the greedy itself (small problems)
-    monkeypatch.setattr(planning, "greedy_network", baselines.greedy_network)
-    b = planning._greedy_network_baseline(p, cfg)
+    b = baselines.network_baseline(p, cfg)
     assert not b.meets_requirement and b.n_markers == r.greedy.n_markers
