@@ -178,6 +178,9 @@ class NetworkModel:
             prior[:, 3] = 1.0 / heading_prior_sigma_rad**2
         self.heading_prior = heading_prior_sigma_rad is not None
         self.free = np.flatnonzero(~fixed.ravel())
+        #: (6 s,) int: each pose parameter's index among the free ones (-1: fixed)
+        self.free_position = np.full(6 * s, -1)
+        self.free_position[self.free] = np.arange(self.free.size)
         self.prior = prior.ravel()[self.free]
         idx = np.flatnonzero(problem.pair_usable)
         idx = idx[np.lexsort((problem.pair_station[idx], problem.pair_site[idx]))]
@@ -274,12 +277,17 @@ class NetworkModel:
             null = lam <= 1e-10 * max(lam[-1], 1e-300)
             inv = np.where(null, 0.0, 1.0 / np.where(null, 1.0, lam))
             c = (vec * inv) @ vec.T / scale[:, None] / scale[None, :]
-            bad = np.zeros(n6)
-            bad[self.free] = np.linalg.norm(vec[:, null], axis=1)
-            determined = bad.reshape(s, 6).max(axis=1) < 1e-6
+            determined = self.determined_by(vec[:, null])
         full = np.zeros((n6, n6))
         full[np.ix_(self.free, self.free)] = 0.5 * (c + c.T)
         return NetworkCovariance(full=full, determined=determined)
+
+    def determined_by(self, null: np.ndarray) -> np.ndarray:
+        """(s,) bool: the stations no null vector of the information moves (each pose
+        parameter's row of ``null``, (P, d), has norm below ``1e-6``)."""
+        moved = np.zeros(6 * self.problem.n_stations)
+        moved[self.free] = np.linalg.norm(null, axis=1)
+        return moved.reshape(-1, 6).max(axis=1) < 1e-6
 
     def site_factor(self, site: int) -> tuple[np.ndarray, np.ndarray]:
         """A low-rank factor of one site's information ``J^(j)``.
@@ -487,8 +495,7 @@ class NetworkModel:
 
     def _scaled_station_rows(self, mu, vec, scales, stations):
         s = self.problem.n_stations
-        position = np.full(6 * s, -1)
-        position[self.free] = np.arange(self.free.size)
+        position = self.free_position
         for k, t in zip(stations, scales, strict=True):
             params = 6 * int(k) + np.arange(6)
             own = params[position[params] >= 0]
@@ -669,8 +676,6 @@ class GrowingCovariance:
         self.net = net
         self.j = np.array(j, dtype=float)
         self.refresh = int(refresh)
-        self._position = np.full(6 * net.problem.n_stations, -1)
-        self._position[net.free] = np.arange(net.free.size)
         self._recompute()
         self._null = np.zeros((net.free.size, 0))
         if not self._cov.determined.all():
@@ -707,9 +712,7 @@ class GrowingCovariance:
         """(s,) bool: stations whose pose the layout determines (no null vector moves them)."""
         if not self._null.shape[1]:
             return self._cov.determined
-        bad = np.zeros(6 * self.net.problem.n_stations)
-        bad[self.net.free] = np.linalg.norm(self._null, axis=1)
-        return bad.reshape(-1, 6).max(axis=1) < 1e-6
+        return self.net.determined_by(self._null)
 
     @property
     def cov(self) -> NetworkCovariance:
@@ -723,7 +726,7 @@ class GrowingCovariance:
         index, u = self.net.site_factor(site)
         if u.shape[1] == 0:
             return  # a site one station uses adds no information
-        pos = self._position[index]
+        pos = self.net.free_position[index]
         free = pos >= 0
         uf = u[free]
         self.j[np.ix_(pos[free], pos[free])] += uf @ uf.T
@@ -748,7 +751,7 @@ class GrowingCovariance:
         index, u = self.net.site_factor(site)
         if not (u.shape[1] and self._null.shape[1]):
             return 0
-        pos = self._position[index]
+        pos = self.net.free_position[index]
         free = pos >= 0
         return self._null_split(pos[free], u[free])[1]
 
