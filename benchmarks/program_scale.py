@@ -168,6 +168,18 @@ def _outside(runs: list) -> float:
     return statistics.median(r["time_s"] - r["solver_s"] for r in runs)
 
 
+def _alternate(repeats: int, contenders: list) -> dict:
+    """Run each ``(key, label, run)`` of ``contenders`` in turn, ``repeats`` rounds, printing
+    each run's line; returns ``{key: [run's result, ...]}``."""
+    runs = {key: [] for key, _, _ in contenders}
+    for rep in range(repeats):
+        print(f"repeat {rep + 1}", flush=True)
+        for key, label, run in contenders:
+            runs[key].append(run())
+            print(_line(label, runs[key][-1]), flush=True)
+    return runs
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--site", default="large")
@@ -191,15 +203,12 @@ def main() -> None:
     print(f"site {args.site} at {args.grid_spacing:g} m: {problem.n_stations} stations, "
           f"{problem.n_sites:,} candidate sites, {int(problem.pair_usable.sum()):,} usable "
           f"pairs; HiGHS {highs_version()}; baseline {args.baseline_rev}", flush=True)
-    runs = {"a": [], "b": [], "c": []}
-    for rep in range(args.repeats):
-        print(f"repeat {rep + 1}", flush=True)
-        runs["a"].append(run_baseline(base, args.site, args.grid_spacing, False, args.time_limit))
-        print(_line("(a) plan_sites at baseline", runs["a"][-1]), flush=True)
-        runs["b"].append(plain_model(problem, config))
-        print(_line("(b) plain cover+sector in highspy", runs["b"][-1]), flush=True)
-        runs["c"].append(run_plan(args.site, args.grid_spacing, False, args.time_limit))
-        print(_line("(c) plan_sites now", runs["c"][-1]), flush=True)
+    runs = _alternate(args.repeats, [
+        ("a", "(a) plan_sites at baseline",
+         lambda: run_baseline(base, args.site, args.grid_spacing, False, args.time_limit)),
+        ("b", "(b) plain cover+sector in highspy", lambda: plain_model(problem, config)),
+        ("c", "(c) plan_sites now",
+         lambda: run_plan(args.site, args.grid_spacing, False, args.time_limit))])
     med = {k: _median(v) for k, v in runs.items()}
     print(f"median: (a) {med['a']:.2f} s, (b) {med['b']:.2f} s, (c) {med['c']:.2f} s; "
           f"(c)/(b) {med['c'] / med['b']:.2f}, (c)/(a) {med['c'] / med['a']:.2f}", flush=True)
@@ -211,14 +220,12 @@ def main() -> None:
     print(f"network mode, site {args.network_site} at {args.network_grid:g} m: "
           f"{net_problem.n_stations} stations, {net_problem.n_sites:,} candidate sites",
           flush=True)
-    net = {"a": [], "c": []}
-    for rep in range(args.repeats):
-        print(f"repeat {rep + 1}", flush=True)
-        net["a"].append(run_baseline(base, args.network_site, args.network_grid, True,
-                                          args.time_limit))
-        print(_line("(a) plan_sites --network at baseline", net["a"][-1]), flush=True)
-        net["c"].append(run_plan(args.network_site, args.network_grid, True, args.time_limit))
-        print(_line("(c) plan_sites --network now", net["c"][-1]), flush=True)
+    net = _alternate(args.repeats, [
+        ("a", "(a) plan_sites --network at baseline",
+         lambda: run_baseline(base, args.network_site, args.network_grid, True,
+                              args.time_limit)),
+        ("c", "(c) plan_sites --network now",
+         lambda: run_plan(args.network_site, args.network_grid, True, args.time_limit))])
     net_med = {k: _median(v) for k, v in net.items()}
     print(f"network median: (a) {net_med['a']:.2f} s, (c) {net_med['c']:.2f} s; "
           f"(c)/(a) {net_med['c'] / net_med['a']:.2f}", flush=True)
