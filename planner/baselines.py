@@ -37,12 +37,16 @@ class Baseline:
     meets_requirement : bool
     spacing_m : float or None
         Grid spacing (regular grid only), m.
+    note : str or None
+        Why the layout falls short, when its method said so (the stuck network greedy's
+        :class:`GreedyStuckError` message).
     """
 
     name: str
     selected: np.ndarray
     meets_requirement: bool
     spacing_m: float | None = None
+    note: str | None = None
 
     @property
     def n_markers(self) -> int:
@@ -356,8 +360,9 @@ class GreedyStuckError(InfeasiblePlanError):
 
 def network_baseline(problem: PlanProblem, config, net=None) -> Baseline:
     """:func:`greedy_network`, or the layout where it got stuck (marked as not meeting the
-    requirement): a plan stands on its own when the greedy cannot finish."""
+    requirement, with the error's message as its ``note``): a plan stands on its own when the
+    greedy cannot finish."""
     try:
         return greedy_network(problem, config, net)
     except GreedyStuckError as exc:
-        return Baseline("greedy", exc.selected, False)
+        return Baseline("greedy", exc.selected, False, note=str(exc))

@@ -16,7 +16,8 @@ DEM's CRS when it has one):
 - ``markers``: id, x_m, y_m, z_m, existing, stations that use it;
 - ``stations``: id, position, heading, predicted error, markers used, occupied sectors,
   (redundant mode) worst error after losing one marker, meets_requirement;
-- ``baselines``: greedy, regular grid, as-built — markers, meets_requirement, saved;
+- ``baselines``: greedy, regular grid, as-built — markers, meets_requirement, saved, and
+  ``note`` (why it falls short: a stuck network greedy's message) when there is one;
 - ``candidates`` and ``visibility``: counts.
 
 No file holds a timing, so the same inputs give byte-identical files; :func:`plan_timings`
@@ -98,6 +99,8 @@ def plan_record(outcome) -> dict:
                           "marker_ids": [prob.site_ids[j] for j in np.flatnonzero(b.selected)]}
         if b.spacing_m is not None:
             baselines[key]["spacing_m"] = b.spacing_m
+        if b.note is not None:
+            baselines[key]["note"] = b.note
     if outcome.as_built is not None:
         ab = outcome.as_built
         baselines["as_built"] = {
@@ -270,6 +273,10 @@ def report_markdown(doc: dict) -> str:
         saved = b.get("saved_by_plan")
         lines.append(f"| {label} | {b['n_markers']} | {'yes' if b['meets_requirement'] else 'no'}"
                      f" | {saved if saved is not None else '—'} |")
+    notes = [f"- {name.replace('_', ' ')}: {b['note']}" for name, b in doc["baselines"].items()
+             if "note" in b]
+    if notes:
+        lines += ["", *notes]
     if "network" in doc:
         net = doc["network"]
         lines += ["", "## Network", "",
@@ -315,7 +322,8 @@ def summary(doc: dict, out: Path) -> dict:
             "worst_station_error_m": max((s["predicted_error_m"] or math.inf)
                                          for s in doc["stations"]),
             "baselines": {k: {"n_markers": v["n_markers"],
-                              "meets_requirement": v["meets_requirement"]}
+                              "meets_requirement": v["meets_requirement"],
+                              **({"note": v["note"]} if "note" in v else {})}
                           for k, v in doc["baselines"].items()},
             "markers": [m["id"] for m in doc["markers"]],
             **({"mode": "network",

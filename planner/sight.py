@@ -49,7 +49,7 @@ def angular_sampling() -> AngularSampling:
 
 def sight_problem(inputs, site_ids, site_xyz: np.ndarray, config, error_model,
                   site_existing: np.ndarray | None = None, progress: bool = True,
-                  map_groups=map) -> Sight:
+                  map_groups=map, desc: str = "visibility") -> Sight:
     """Ray-cast the stations against some sites and judge every pair.
 
     Parameters
@@ -70,6 +70,9 @@ def sight_problem(inputs, site_ids, site_xyz: np.ndarray, config, error_model,
     map_groups : callable
         How the station groups are mapped over (built-in ``map`` by default; a distributed
         map for a cluster), see :func:`~visibility.visibility_matrix.tiled_visibility`.
+    desc : str
+        The progress bar's label (the stand map's is ``"stand map"``: each bar of a run has
+        its own).
 
     Returns
     -------
@@ -80,7 +83,7 @@ def sight_problem(inputs, site_ids, site_xyz: np.ndarray, config, error_model,
     vis, stats = tiled_visibility(inputs.dem, inputs.station_xyz, site_xyz,
                                   inputs.marker_radius_m, config.max_range_m,
                                   config.rays_per_marker, angular_sampling(),
-                                  map_groups=map_groups, progress=progress)
+                                  map_groups=map_groups, progress=progress, desc=desc)
     timings = {"scene": stats["scene_s"], "visibility": vis.elapsed_s}
     problem = problem_from_visibility(vis, error_model, config, inputs.station_ids,
                                       inputs.station_xyz, site_ids, site_xyz,

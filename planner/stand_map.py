@@ -131,7 +131,7 @@ def stand_map(outcome, error_model, cell_m: float | None = None, progress: bool 
     cell_m : float, optional
         Cell size, m (see :func:`cells_per_stand_cell`).
     progress : bool
-        Progress bar of the ray casting on stderr.
+        Progress bar of the ray casting on stderr, labelled ``stand map``.
     map_groups : callable
         How the ray casting's station groups (blocks of grid cells, each with its own DEM
         tile) are mapped over, see :func:`planner.sight.sight_problem`.
@@ -152,8 +152,8 @@ def stand_map(outcome, error_model, cell_m: float | None = None, progress: bool 
     grid_inputs = replace(inp, station_ids=[f"G{i}" for i in stand], station_xyz=sxyz,
                           station_heading_rad=np.zeros(stand.size))
     problem = sight_problem(grid_inputs, [prob.site_ids[j] for j in sel], prob.site_xyz[sel],
-                            cfg, error_model, progress=progress,
-                            map_groups=map_groups).problem
+                            cfg, error_model, progress=progress, map_groups=map_groups,
+                            desc="stand map").problem
     count, sectors = direction_status(problem, np.ones(sel.size, bool), cfg.n_sectors)
     err = _known_control_errors(problem, cfg)
     err[(count < cfg.min_markers) | (sectors < cfg.min_sectors) | ~np.isfinite(err)] = np.nan

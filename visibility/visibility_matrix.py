@@ -372,7 +372,7 @@ def station_groups(station_xy_m: np.ndarray, block_m: float) -> list[np.ndarray]
 def tiled_visibility(dem, station_position_m, site_centre_m, marker_radius_m: float = 0.10,
                      max_range_m: float = 30.0, rays_per_marker: int = 24,
                      sampling: AngularSampling | None = None, block_m: float | None = None,
-                     map_groups=map, progress: bool = True
+                     map_groups=map, progress: bool = True, desc: str = "visibility"
                      ) -> tuple[VisibilityMatrix, dict]:
     """:func:`visibility_matrix` without a mesh of the whole DEM: stations in square blocks,
     each block cast through a tile of the DEM that reaches as far as its rays
@@ -401,6 +401,8 @@ def tiled_visibility(dem, station_position_m, site_centre_m, marker_radius_m: fl
         made lazily, so at most the tiles the map holds at once are in memory.
     progress : bool
         Progress bar (groups) on stderr.
+    desc : str
+        Its label (what the rays are cast for: each bar of a run has its own).
 
     Returns
     -------
@@ -431,7 +433,7 @@ def tiled_visibility(dem, station_position_m, site_centre_m, marker_radius_m: fl
                                   rays_per_marker, sampling)
 
     answers = list(tqdm(map_groups(group_visibility, tasks()), total=len(groups),
-                        desc="visibility", unit="group", file=sys.stderr,
+                        desc=desc, unit="group", file=sys.stderr,
                         disable=None if progress else True))
     parts = [a.vis for a in answers]
     station = np.concatenate([p.station for p in parts] + [np.zeros(0, np.int64)])

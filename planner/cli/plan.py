@@ -123,6 +123,10 @@ def command(site_name, site_seed, dem_path, reproject, stations_path, station_id
                               progress=progress, map_groups=tasks)
             write_stand_map(stand, stage)
             stand_s = {"stand_map": round(stand.elapsed_s, 3)}
+    for name, b in doc["baselines"].items():
+        if "note" in b:
+            click.echo(f"warning: {name.replace('_', ' ')} baseline falls short: {b['note']}",
+                       err=True)
     timings = {**plan_timings(outcome), **stand_s}
     report_timings(timings)
     info = {**summary(doc, out), "timings_s": timings}

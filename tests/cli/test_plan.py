@@ -158,3 +158,53 @@ def test_station_ids_select_and_travel_to_reduce(tmp_path, capsys):
     code, _, err = run_cli(capsys, ["plan", "--station-ids", "S9", "--out", str(tmp_path / "q")])
     assert code == 1 and "--station-ids: unknown station id(s) S9; valid ids are S1" in err
     assert not (tmp_path / "q").exists()
+
+
+#: A fast plan of the default site: two stations, a coarse stand map, no cluster.
+_SMALL_PLAN = ["plan", "--station-ids", "S1,S2", "--stand-map-cell", "4", "--scheduler", "none"]
+
+
+def test_each_progress_bar_of_a_plan_has_its_own_label(tmp_path, capsys, monkeypatch):
+    """The planning visibility and the stand map cast rays under bars of their own names
+    (shown on a terminal; bars made with ``disable=True`` never show)."""
+    import tqdm
+
+    labels, real = [], tqdm.tqdm
+
+    def recording(*args, **kwargs):
+        if kwargs.get("disable") is not True:
+            labels.append(kwargs.get("desc"))
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(tqdm, "tqdm", recording)
+    code, _, err = run_cli(capsys, [*_SMALL_PLAN, "--out", str(tmp_path / "p")])
+    assert code == 0, err
+    assert labels == ["visibility", "stand map"]
+
+
+def test_a_stuck_network_greedy_is_a_warning_and_a_note(tmp_path, capsys, monkeypatch):
+    """plan --network with a greedy baseline that gets stuck: its message is one warning line on
+    stderr and the greedy's note in plan.json, the --json summary and report.md; the plan
+    itself still meets the requirement."""
+    import re
+
+    import planner.baselines as baselines
+
+    greedy = baselines.greedy_network
+    monkeypatch.setattr(baselines, "greedy_network",
+                        lambda *a, **k: greedy(*a, **{**k, "max_steps": 0}))
+    out = tmp_path / "p"
+    code, stdout, err = run_cli(capsys, [*_SMALL_PLAN, "--network", "--json", "--out",
+                                         str(out)])
+    assert code == 0, err
+    doc = json.loads((out / "plan.json").read_text())
+    assert doc["meets_requirement"]
+    b = doc["baselines"]["greedy"]
+    assert not b["meets_requirement"] and b["saved_by_plan"] is None
+    found = re.fullmatch(r"greedy \(network\) (got stuck|cannot satisfy) .* after (\d+) "
+                         r"markers: stopped after 0 steps", b["note"])
+    assert found and int(found[2]) == b["n_markers"]
+    assert [line for line in err.splitlines() if line.startswith("warning:")] == \
+        [f"warning: greedy baseline falls short: {b['note']}"]
+    assert json.loads(stdout)["baselines"]["greedy"]["note"] == b["note"]
+    assert f"\n- greedy: {b['note']}\n" in (out / "report.md").read_text()

@@ -1,7 +1,13 @@
 import numpy as np
 import pytest
 
-from planner.baselines import GreedyStuckError, greedy_cover, greedy_network, regular_grid
+from planner.baselines import (
+    GreedyStuckError,
+    greedy_cover,
+    greedy_network,
+    network_baseline,
+    regular_grid,
+)
 from planner.config import PlanConfig
 from planner.network_accuracy import network_model
 from planner.program import plan_sites
@@ -138,3 +144,22 @@ def test_network_greedy_stops_at_once_when_no_site_can_tie_a_station():
                        r"movement$") as err:
         greedy_network(p, cfg)
     assert err.value.selected[0]  # S4-S6 were tied first, by site 0 as without S7
+
+
+def test_network_baseline_keeps_why_the_greedy_got_stuck():
+    """The stuck greedy's layout is reported with its error's message as the note; a greedy
+    that finishes has none."""
+    cfg = PlanConfig(network=True, min_markers=3, min_sectors=2, max_range_m=18,
+                     working_radius_m=8, requirement_m=0.3)
+    ring = 200.0 + 6 * np.column_stack([np.cos(np.arange(8) * np.pi / 4),
+                                        np.sin(np.arange(8) * np.pi / 4)])
+    ring[:, 1] -= 200.0
+    p = _row_of_stations(np.array([[200.0, 0.0]]), ring)  # S7 cannot be tied (test above)
+    with pytest.raises(GreedyStuckError) as err:
+        greedy_network(p, cfg)
+    b = network_baseline(p, cfg)
+    assert b.name == "greedy" and not b.meets_requirement
+    assert b.note == str(err.value) and "(S7)" in b.note
+    np.testing.assert_array_equal(b.selected, err.value.selected)
+    done = network_baseline(_row_of_stations(), cfg)
+    assert done.meets_requirement and done.note is None
