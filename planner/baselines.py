@@ -12,6 +12,7 @@
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass
 
 import numpy as np
@@ -210,7 +211,7 @@ def _grid_passes(problem: PlanProblem, selected: np.ndarray, config, infos, net)
 
 
 def greedy_network(problem: PlanProblem, config, net=None, max_steps: int = 5000,
-                   batch: int = 1) -> Baseline:
+                   batch: int = 1, deadline: float | None = None) -> Baseline:
     """Greedy baseline in network mode.
 
     Starts from the greedy cover of the direction and count rules alone (:func:`greedy_cover`
@@ -228,11 +229,16 @@ def greedy_network(problem: PlanProblem, config, net=None, max_steps: int = 5000
     covariance grow with each added site (:class:`planner.network_accuracy.GrowingCovariance`:
     a low-rank update per site, not a fresh inverse).
 
+    ``deadline``: a :func:`time.perf_counter` value after which no further step starts (the
+    greedy's share of a plan's time limit; the directions-only cover it starts from is not
+    interrupted).
+
     Raises
     ------
     GreedyStuckError
         When no remaining site ties an untied station, or improves the worst station or
-        marker, or after ``max_steps`` steps; the message says how many stations are untied.
+        marker, after ``max_steps`` steps, or at ``deadline``; the message says how many
+        stations are untied, or which fail.
     """
     from planner.network_accuracy import GrowingCovariance, network_model
 
@@ -244,6 +250,9 @@ def greedy_network(problem: PlanProblem, config, net=None, max_steps: int = 5000
     layout = GrowingCovariance(net, net.information(selected))
     j_all = None
     for _ in range(max_steps):
+        if deadline is not None and time.perf_counter() > deadline:
+            why = "its share of the time limit ran out"
+            break
         j, determined = layout.j, layout.determined
         if not determined.all():  # tie first: remove free movements, worst stations first
             added = False
@@ -313,9 +322,9 @@ def greedy_network(problem: PlanProblem, config, net=None, max_steps: int = 5000
             selected)
     err = net.station_errors_from(layout.cov)
     failing = [problem.station_ids[s] for s in np.flatnonzero(err > req)]
-    raise GreedyStuckError(f"greedy (network) cannot satisfy station(s) "
-                           f"{_listed(failing) or 'markers'} after {int(selected.sum())} "
-                           f"markers: {why}", selected)
+    what = f"station(s) {_listed(failing)}" if failing else "every selected marker"
+    raise GreedyStuckError(f"greedy (network) cannot satisfy {what} after "
+                           f"{int(selected.sum())} markers: {why}", selected)
 
 
 def _listed(ids: list[str], shown: int = 10) -> str:
@@ -358,11 +367,12 @@ class GreedyStuckError(InfeasiblePlanError):
         self.selected = selected
 
 
-def network_baseline(problem: PlanProblem, config, net=None) -> Baseline:
-    """:func:`greedy_network`, or the layout where it got stuck (marked as not meeting the
-    requirement, with the error's message as its ``note``): a plan stands on its own when the
-    greedy cannot finish."""
+def network_baseline(problem: PlanProblem, config, net=None,
+                     deadline: float | None = None) -> Baseline:
+    """:func:`greedy_network` (no step after ``deadline``, a :func:`time.perf_counter` value),
+    or the layout where it got stuck (marked as not meeting the requirement, with the error's
+    message as its ``note``): a plan stands on its own when the greedy cannot finish."""
     try:
-        return greedy_network(problem, config, net)
+        return greedy_network(problem, config, net, deadline=deadline)
     except GreedyStuckError as exc:
         return Baseline("greedy", exc.selected, False, note=str(exc))

@@ -629,6 +629,10 @@ _SPARSE_ABOVE_SITES = 8000
 #: has about 86,000) the tangent rows touch tens of thousands of sites and HiGHS did not return
 #: at its time limit in our runs; ``large`` at a 3 m grid (about 10,000) returns at the limit.
 MAX_NETWORK_TYING_SITES = 20_000
+#: Network mode, large problems: the greedy incumbent (:func:`~planner.baselines.greedy_network`)
+#: starts no step after this fraction of the time limit (it stops without a layout; the search
+#: goes on without an incumbent).
+_GREEDY_TIME_FRACTION = 0.5
 #: Network mode, large problems: the root relaxation (:func:`_root_relaxation`) spends at most
 #: this fraction of the time left after the greedy incumbent, at most this many LP solves, and
 #: stops when its bound rose less than this (relative) over 5 solves; its rows in the integer
@@ -1059,7 +1063,8 @@ def _plan_network(problem: PlanProblem, config, model: Model | None,
         # a stuck greedy gives no starting layout: the search goes on without one
         greedy = network_baseline(problem, config.replace(
             forbidden=config.forbidden + tuple(
-                problem.site_ids[j] for j in np.flatnonzero(hopeless & ~forbidden))), net)
+                problem.site_ids[j] for j in np.flatnonzero(hopeless & ~forbidden))), net,
+            deadline=t0 + _GREEDY_TIME_FRACTION * config.time_limit_s)
     if greedy is not None and greedy.meets_requirement:
         in_model = model.site_var >= 0
         greedy_selected = greedy.selected

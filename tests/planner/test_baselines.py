@@ -1,3 +1,5 @@
+import time
+
 import numpy as np
 import pytest
 
@@ -112,6 +114,15 @@ def _row_of_stations(extra_stations=(), extra_sites=()):
     return make_problem(stations, sites, max_range_m=18)
 
 
+def _row_with_an_untiable_station():
+    """The row plus S7, 200 m away with its own ring of sites: nothing it sees is seen by
+    another station, so no site ties it to the reference."""
+    ring = 200.0 + 6 * np.column_stack([np.cos(np.arange(8) * np.pi / 4),
+                                        np.sin(np.arange(8) * np.pi / 4)])
+    ring[:, 1] -= 200.0
+    return _row_of_stations(np.array([[200.0, 0.0]]), ring)
+
+
 def test_network_greedy_that_runs_out_of_steps_says_which_stations_are_untied():
     # after the direction cover S4-S6 turn freely in heading; no step is allowed to tie them
     p = _row_of_stations()
@@ -129,14 +140,20 @@ def test_network_greedy_that_runs_out_of_steps_says_which_stations_are_untied():
     assert err.value.selected[0] and err.value.selected.sum() == 8
 
 
+def test_network_greedy_starts_no_step_after_its_deadline():
+    p = _row_of_stations()
+    cfg = PlanConfig(network=True, min_markers=3, min_sectors=2, max_range_m=18,
+                     working_radius_m=8, requirement_m=0.3)
+    with pytest.raises(GreedyStuckError, match=r"^greedy \(network\) got stuck with 3 station\(s\)"
+                       r" not tied .* after 7 markers: its share of the time limit ran out$"):
+        greedy_network(p, cfg, deadline=time.perf_counter())
+    later = greedy_network(p, cfg, deadline=time.perf_counter() + 3600)
+    np.testing.assert_array_equal(later.selected, greedy_network(p, cfg).selected)
+
+
 def test_network_greedy_stops_at_once_when_no_site_can_tie_a_station():
-    # S7 stands 200 m away with its own markers: nothing it sees is seen by another station,
-    # so the greedy ties S4-S6 and then stops (not after max_steps) naming S7 alone
-    far = np.array([[200.0, 0.0]])
-    ring = 200.0 + 6 * np.column_stack([np.cos(np.arange(8) * np.pi / 4),
-                                        np.sin(np.arange(8) * np.pi / 4)])
-    ring[:, 1] -= 200.0
-    p = _row_of_stations(far, ring)
+    # the greedy ties S4-S6 and then stops (not after max_steps) naming S7 alone
+    p = _row_with_an_untiable_station()
     cfg = PlanConfig(network=True, min_markers=3, min_sectors=2, max_range_m=18,
                      working_radius_m=8, requirement_m=0.3)
     with pytest.raises(GreedyStuckError, match=r"got stuck with 1 station\(s\) not tied to the "
@@ -151,10 +168,7 @@ def test_network_baseline_keeps_why_the_greedy_got_stuck():
     that finishes has none."""
     cfg = PlanConfig(network=True, min_markers=3, min_sectors=2, max_range_m=18,
                      working_radius_m=8, requirement_m=0.3)
-    ring = 200.0 + 6 * np.column_stack([np.cos(np.arange(8) * np.pi / 4),
-                                        np.sin(np.arange(8) * np.pi / 4)])
-    ring[:, 1] -= 200.0
-    p = _row_of_stations(np.array([[200.0, 0.0]]), ring)  # S7 cannot be tied (test above)
+    p = _row_with_an_untiable_station()
     with pytest.raises(GreedyStuckError) as err:
         greedy_network(p, cfg)
     b = network_baseline(p, cfg)

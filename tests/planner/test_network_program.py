@@ -185,9 +185,9 @@ def test_a_greedy_that_takes_the_whole_time_limit_still_leaves_a_root_bound(monk
     p, cfg = _reachable_network_case(5)
     greedy = baselines.greedy_network
 
-    def slow_greedy(*args, **kwargs):
+    def slow_greedy(*args, **kwargs):  # e.g. a directions-only cover that takes it all
         time.sleep(cfg.time_limit_s)
-        return greedy(*args, **kwargs)
+        return greedy(*args, **{**kwargs, "deadline": None})
 
     monkeypatch.setattr(baselines, "greedy_network", slow_greedy)
     r = plan_sites(p, cfg)
@@ -217,3 +217,17 @@ def test_a_stuck_greedy_leaves_the_large_problem_path_without_a_starting_layout(
     assert not any(k.family in ("oa-root", "upper-bound") for k in r.model.row_kind)
     b = baselines.network_baseline(p, cfg)
     assert not b.meets_requirement and b.n_markers == r.greedy.n_markers
+
+
+def test_the_greedy_incumbent_starts_no_step_after_its_share_of_the_time_limit(monkeypatch):
+    """With no time share the greedy stops where its directions-only cover left it, says why,
+    and the plan goes on without it to the optimum."""
+    import planner.program as program
+
+    monkeypatch.setattr(program, "_SPARSE_ABOVE_SITES", 0)
+    monkeypatch.setattr(program, "_GREEDY_TIME_FRACTION", 0.0)
+    p, cfg = _reachable_network_case(60)
+    r = plan_sites(p, cfg)
+    assert not r.greedy.meets_requirement
+    assert r.greedy.note.endswith(": its share of the time limit ran out")
+    assert r.check.all_ok and r.selected.sum() == brute_force_optimum(p, cfg)
