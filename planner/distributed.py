@@ -107,14 +107,17 @@ class Executor:
         return None if self._in_process(n_tasks) else 1
 
     def window_size(self) -> int:
-        """The most tasks a cluster map holds now (submitted, not yet handed back).
+        """The most tasks a map holds now (submitted, not yet handed back): 1 in process.
 
-        ``window`` when given, else twice the cluster's threads (at least 2): one task running
-        on each thread and one waiting behind it, so a thread that finishes starts its next
-        task without waiting for this process to read and send the next item, while only two
-        tasks' arguments per thread are held. Read from the scheduler at every freed slot, so
-        a cluster that grows during a map (dask-jobqueue workers arriving) is put to work.
+        On a cluster ``window`` when given, else twice the cluster's threads (at least 2): one
+        task running on each thread and one waiting behind it, so a thread that finishes starts
+        its next task without waiting for this process to read and send the next item, while
+        only two tasks' arguments per thread are held. Read from the scheduler at every freed
+        slot, so a cluster that grows during a map (dask-jobqueue workers arriving) is put to
+        work.
         """
+        if self.client is None:
+            return 1
         if self.window is not None:
             return self.window
         return max(2, 2 * self.client.scheduler_info(n_workers=0)["total_threads"])

@@ -92,7 +92,7 @@ def test_map_groups_form_is_lazy_in_order_and_has_no_bar(cluster, monkeypatch, w
 
 def test_map_groups_form_reads_items_one_at_a_time_in_process():
     """In this process, as the built-in ``map``: an item is read only when its result is
-    asked for (tiled visibility makes a DEM tile per item)."""
+    asked for (tiled visibility makes a DEM tile per item); a cluster's window plays no part."""
     read = []
 
     def items():
@@ -100,8 +100,9 @@ def test_map_groups_form_reads_items_one_at_a_time_in_process():
             read.append(x)
             yield x
 
-    results = Executor(None, progress=False)(abs, items())
-    assert read == [] and next(results) == 2 and read == [-2]
+    ex = Executor(None, progress=False, window=3)
+    results = ex(abs, items())
+    assert ex.window_size() == 1 and read == [] and next(results) == 2 and read == [-2]
     assert list(results) == [1, 7] and read == [-2, 1, -7]
 
 
