@@ -23,6 +23,11 @@ Large inputs shared by every task (the DEM) are sent to each worker once
 raises is retried (:data:`RETRIES` times); one that still fails stops the run with
 :class:`TaskError` naming the task (its station id) and the error — no result is ever dropped.
 
+Memory stays bounded however many tasks a map has: on a cluster at most a *window* of tasks
+(default twice the cluster's threads, :meth:`Executor.window_size`) is submitted and not yet
+handed back, and the items are read from their iterable only as slots free, so this process
+and the scheduler hold at most a window of task arguments (DEM tiles) and results at once.
+
 Two forms: :meth:`Executor.map` returns the list of results and shows a tqdm bar on stderr
 advanced as tasks complete; an :class:`Executor` called as ``map_groups(fn, items)`` returns a
 lazy iterator of the results in input order with no bar of its own, like the built-in ``map``,
@@ -72,13 +77,21 @@ class Executor:
     start : callable, optional
         ``start() -> Client``: connects a cluster the first time a map has more than one task
         (the local cluster, started only when it can help).
+    window : int, optional
+        On a cluster, the most tasks submitted and not yet handed back at any time (a
+        positive int); default twice the cluster's threads, at least 2
+        (:meth:`window_size`). Unused in this process, which holds one task at a time.
     """
 
     def __init__(self, client=None, progress: bool = True, retries: int = RETRIES,
-                 start: Callable | None = None):
+                 start: Callable | None = None, window: int | None = None):
+        if window is not None and window < 1:
+            raise ValueError(f"Executor: `window` must be a positive number of tasks, "
+                             f"got {window}")
         self.client = client
         self.progress = progress
         self.retries = retries
+        self.window = window
         self._start = start
 
     @property
@@ -93,6 +106,22 @@ class Executor:
         per core), None (all cores) in process."""
         return None if self._in_process(n_tasks) else 1
 
+    def window_size(self) -> int:
+        """The most tasks a map holds now (submitted, not yet handed back): 1 in process.
+
+        On a cluster ``window`` when given, else twice the cluster's threads (at least 2): one
+        task running on each thread and one waiting behind it, so a thread that finishes starts
+        its next task without waiting for this process to read and send the next item, while
+        only two tasks' arguments per thread are held. Read from the scheduler at every freed
+        slot, so a cluster that grows during a map (dask-jobqueue workers arriving) is put to
+        work.
+        """
+        if self.client is None:
+            return 1
+        if self.window is not None:
+            return self.window
+        return max(2, 2 * self.client.scheduler_info(n_workers=0)["total_threads"])
+
     def _in_process(self, n_tasks: int) -> bool:
         """Whether a map of ``n_tasks`` tasks runs in this process."""
         return self.client is None and (self._start is None or n_tasks <= 1)
@@ -101,8 +130,12 @@ class Executor:
         """``map_groups`` form: ``fn(item)`` for every item, lazily, in input order.
 
         No progress bar: the caller advances its own as results arrive. In this process the
-        items are read one at a time (as the built-in ``map`` reads them); on a cluster all are
-        submitted at the first ``next``. Retries and :class:`TaskError` as :meth:`map`.
+        items are read one at a time (as the built-in ``map`` reads them); on a cluster an item
+        is read and submitted only while fewer than :meth:`window_size` tasks are submitted and
+        not yet yielded. A task's result waits until every earlier one is yielded, and counts
+        against the window meanwhile: a slow task holds back the tasks after it (the cluster
+        idles once a window's worth has finished behind it) instead of letting later results
+        pile up in memory. Retries and :class:`TaskError` as :meth:`map`.
 
         Parameters
         ----------
@@ -117,12 +150,15 @@ class Executor:
             ``fn``'s results in the order of ``items``, each as soon as it and every earlier
             one are done.
         """
-        return _in_order(self._completed(fn, None, items, None))
+        return (result for _, result in self._completed(fn, None, items, None, ordered=True))
 
     def map(self, fn: Callable, items: Sequence, *, shared: Any = None,
             labels: Sequence[str] | None = None, desc: str = "tasks") -> list:
         """Run ``fn(item)`` (or ``fn(shared, item)`` when ``shared`` is given) for every item,
         with a progress bar (tasks completed) on stderr.
+
+        On a cluster at most :meth:`window_size` tasks run or wait at a time; each completed
+        one frees its slot for the next item, whatever the order.
 
         Parameters
         ----------
@@ -151,14 +187,15 @@ class Executor:
         results: list = [None] * len(items)
         with tqdm(total=len(items), desc=desc, unit="task", file=sys.stderr,
                   disable=None if self.progress else True) as bar:
-            for i, result in self._completed(fn, shared, items, labels):
+            for i, result in self._completed(fn, shared, items, labels, ordered=False):
                 results[i] = result
                 bar.update()
         return results
 
-    def _completed(self, fn, shared, items: Iterable, labels) -> Iterator[tuple[int, Any]]:
-        """``(index, result)`` of every task as it completes (in input order in this
-        process); ``labels`` None names task ``i`` ``task i``."""
+    def _completed(self, fn, shared, items: Iterable, labels,
+                   ordered: bool) -> Iterator[tuple[int, Any]]:
+        """``(index, result)`` of every task, in input order when ``ordered`` (always in this
+        process), else as each completes; ``labels`` None names task ``i`` ``task i``."""
         items = iter(items)
         if self.client is None and self._start is not None:
             head = list(itertools.islice(items, 2))  # enough to tell one task from several
@@ -170,7 +207,7 @@ class Executor:
             for i, item in enumerate(items):
                 yield i, self._run_here(fn, shared, item, label(i))
         else:
-            yield from self._run_cluster(fn, shared, list(items), label)
+            yield from self._run_cluster(fn, shared, items, label, ordered)
 
     def _run_here(self, fn, shared, item, label):
         """One task in this process, with the cluster's retry rule."""
@@ -182,8 +219,10 @@ class Executor:
                 if attempt == self.retries:
                     raise _failed(label, exc, self.retries) from exc
 
-    def _run_cluster(self, fn, shared, items, label):
-        """All tasks on the cluster: ``(index, result)`` as each completes."""
+    def _run_cluster(self, fn, shared, items, label, ordered):
+        """The tasks on the cluster, a window at a time: ``(index, result)`` as each completes,
+        or in index order when ``ordered``; the next item is read and submitted after a
+        result is yielded, never while :meth:`window_size` tasks are held."""
         from distributed import as_completed
 
         client = self.client
@@ -191,30 +230,34 @@ class Executor:
         # reuse the first scatter's key, which the scheduler forgets once the first map's
         # futures are released ("lost dependencies")
         extra = () if shared is None else (client.scatter(shared, broadcast=True, hash=False),)
-        futures = [client.submit(fn, *extra, item, retries=self.retries, pure=False)
-                   for item in items]
-        index = {f.key: i for i, f in enumerate(futures)}
+        todo = enumerate(items)
+        held: dict[int, Any] = {}  # index -> future: submitted, not yet yielded
+        index: dict[str, int] = {}  # future key -> index, until it completes
+        finished: set[int] = set()  # completed, waiting for an earlier one (ordered)
+        completing = as_completed()
+
+        def fill():
+            for i, item in itertools.islice(todo, max(0, self.window_size() - len(held))):
+                held[i] = client.submit(fn, *extra, item, retries=self.retries, pure=False)
+                index[held[i].key] = i
+                completing.add(held[i])
+
         try:
-            for fut in as_completed(futures):
-                i = index[fut.key]
+            fill()
+            for fut in completing:
+                i = index.pop(fut.key)
                 if fut.status == "error":
                     exc = fut.exception()
                     raise _failed(label(i), exc, self.retries) from exc
-                yield i, fut.result()
+                finished.add(i)
+                first = min(held) if ordered else i  # the next index that may be yielded
+                for j in list(itertools.takewhile(finished.__contains__,
+                                                  itertools.count(first))):
+                    finished.remove(j)
+                    yield j, held.pop(j).result()
+                    fill()
         finally:
-            client.cancel(futures)
-
-
-def _in_order(completed: Iterator[tuple[int, Any]]) -> Iterator:
-    """The results of ``(index, result)`` pairs in index order, each as soon as every earlier
-    one has come (later ones wait in a buffer)."""
-    waiting: dict[int, Any] = {}
-    following = 0
-    for i, result in completed:
-        waiting[i] = result
-        while following in waiting:
-            yield waiting.pop(following)
-            following += 1
+            client.cancel(list(held.values()))
 
 
 def _failed(label: str, exc: BaseException, retries: int) -> TaskError:

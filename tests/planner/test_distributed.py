@@ -92,7 +92,7 @@ def test_map_groups_form_is_lazy_in_order_and_has_no_bar(cluster, monkeypatch, w
 
 def test_map_groups_form_reads_items_one_at_a_time_in_process():
     """In this process, as the built-in ``map``: an item is read only when its result is
-    asked for (tiled visibility makes a DEM tile per item)."""
+    asked for (tiled visibility makes a DEM tile per item); a cluster's window plays no part."""
     read = []
 
     def items():
@@ -100,9 +100,105 @@ def test_map_groups_form_reads_items_one_at_a_time_in_process():
             read.append(x)
             yield x
 
-    results = Executor(None, progress=False)(abs, items())
-    assert read == [] and next(results) == 2 and read == [-2]
+    ex = Executor(None, progress=False, window=3)
+    results = ex(abs, items())
+    assert ex.window_size() == 1 and read == [] and next(results) == 2 and read == [-2]
     assert list(results) == [1, 7] and read == [-2, 1, -7]
+
+
+def _reads(seconds, got, held):
+    """The items ``seconds`` one at a time; before each, appends to ``held`` the items read and
+    not yet in ``got`` (the consumer's results), this one included."""
+    for k, s in enumerate(seconds):
+        held.append(k + 1 - len(got))
+        yield s
+
+
+def test_cluster_map_groups_reads_items_only_as_its_window_frees(cluster):
+    """A km site's DEM tiles are made as they are read: at most ``window`` are read and not
+    yet handed back, though the first task is slow and the others finish long before it (they
+    wait for it, in order, and the cluster idles)."""
+    seconds = [0.5] + [0.0] * 29
+    got, held = [], []
+    for result in Executor(cluster.client, progress=False, window=3)(
+            _sleeps, _reads(seconds, got, held)):
+        got.append(result)
+    assert got == seconds and len(held) == 30
+    assert max(held) == 3 and held[:4] == [1, 2, 3, 3]  # the 4th read waited for the slow 1st
+    with pytest.raises(ValueError, match=r"`window` must be a positive number of tasks, got 0"):
+        Executor(cluster.client, window=0)
+
+
+def test_cluster_map_holds_twice_the_threads_and_advances_its_bar_per_task(cluster,
+                                                                           monkeypatch):
+    """``map``'s default window is twice the cluster's threads (2 workers x 1 thread): a
+    task is submitted only when fewer are running or waiting, one finished frees its slot."""
+    done = []
+
+    class Bar:
+        def __init__(self, *args, **kwargs):
+            pass
+
+        def __enter__(self):
+            return self
+
+        def __exit__(self, *exc):
+            return False
+
+        def update(self):
+            done.append(1)
+
+    monkeypatch.setattr(distributed, "tqdm", Bar)
+    held, submit = [], cluster.client.submit
+    monkeypatch.setattr(cluster.client, "submit",
+                        lambda *a, **k: held.append(len(held) + 1 - len(done)) or submit(*a, **k))
+    seconds = [0.3, 0.0, 0.1, 0.0] * 5
+    assert cluster.window_size() == 4
+    assert cluster.map(_sleeps, seconds) == seconds
+    assert len(held) == len(done) == 20 and max(held) == 4
+
+
+def _fails_at_seven(x):
+    if x == 7:
+        raise DataError("seven is missing")
+    return x
+
+
+def test_a_failing_task_past_the_first_window_is_reported_after_its_retries(cluster):
+    """Task 7 is submitted only after 5 is handed back (window 2): the results before it
+    arrive in order, then its failure after three tries, and the map stops."""
+    ex, got = Executor(cluster.client, progress=False, window=2), []
+    with pytest.raises(TaskError, match=r"^task 7 failed after 3 tries: DataError: seven is "
+                                        r"missing$"):
+        for result in ex(_fails_at_seven, range(12)):
+            got.append(result)
+    assert got in (list(range(6)), list(range(7)))
+
+
+def test_the_default_window_grows_with_the_cluster():
+    """Workers that join during a map (dask-jobqueue's jobs starting) widen the default window
+    at the next freed slot: 2 tasks held on one thread, 4 once a second worker has joined."""
+    import itertools
+
+    from distributed import Client, LocalCluster
+
+    with LocalCluster(n_workers=1, threads_per_worker=1, processes=False,
+                      dashboard_address=":0", silence_logs=40) as lc, Client(lc) as client:
+        got, held = [], []
+        reads = _reads([0.0] * 16, got, held)
+
+        def items():
+            yield from itertools.islice(reads, 4)
+            lc.scale(2)
+            client.wait_for_workers(2, timeout=30)
+            yield from reads
+
+        ex = Executor(client, progress=False)
+        assert ex.window_size() == 2
+        for result in ex(_sleeps, items()):
+            got.append(result)
+        assert got == [0.0] * 16 and max(held[:4]) == 2 and max(held) == 4
+        assert ex.window_size() == 4
 
 
 @pytest.mark.parametrize("where", ["cluster", "none"])
