@@ -2,6 +2,7 @@
 
     OPENBLAS_NUM_THREADS=1 .venv/bin/python -u benchmarks/network_greedy.py [--site km]
         [--grid-spacing 4] [--requirement 2.5] [--steps 10] [--greedy-steps 5000]
+        [--base DIR [--repeats 3]]
 
 Builds the site's network problem (``km``: datum at the station nearest the centre), runs
 ``greedy_network`` once (at most ``--greedy-steps`` steps: markers, wall time), then adds
@@ -16,15 +17,27 @@ Phase "undetermined" starts from the greedy's directions-only cover (stations no
 and adds tying sites spread over the site list; phase "determined" starts from every tying
 site but the last ``--steps`` and adds those. Prints one line per phase and a final JSON
 object.
+
+With ``--base DIR`` (a checkout of another revision) it instead times the whole
+``greedy_network`` of the built problem (pickled once) with that checkout's code and with this
+tree's, in alternating subprocesses (``--repeats`` each, one BLAS thread), and prints each
+side's times, the ratio of the medians and whether both selected the same sites. A huge
+``--requirement`` (e.g. 1e6) times the tie-first phase alone.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import pickle
+import statistics
+import sys
+import tempfile
 import time
+from pathlib import Path
 
 import numpy as np
+from process_speed import run_worker
 
 
 def _replay(net, start: np.ndarray, sites: np.ndarray, j_all: np.ndarray) -> dict:
@@ -57,6 +70,49 @@ def _replay(net, start: np.ndarray, sites: np.ndarray, j_all: np.ndarray) -> dic
             "ratio_old_over_new": float(np.sum(old) / np.sum(new))}
 
 
+def _worker(problem_file: Path) -> None:
+    """Time ``greedy_network`` on the pickled (problem, config); print a JSON line."""
+    import planner
+    from markerplan.errors import InfeasiblePlanError
+    from planner.baselines import greedy_network
+
+    with open(problem_file, "rb") as f:
+        problem, config = pickle.load(f)
+    t = time.perf_counter()
+    try:
+        selected = greedy_network(problem, config).selected
+    except InfeasiblePlanError as exc:  # stuck: where it stopped
+        selected = exc.selected
+    print(json.dumps({"code": str(Path(planner.__file__).parents[1]),
+                      "s": time.perf_counter() - t,
+                      "sites": np.flatnonzero(selected).tolist()}))
+
+
+def _against(base: Path, problem, config, repeats: int) -> dict:
+    """Alternate ``greedy_network`` runs of ``base`` and this tree; print and return figures."""
+    here = Path(__file__).resolve().parents[1]
+    with tempfile.TemporaryDirectory() as tmp:
+        problem_file = Path(tmp) / "problem.pkl"
+        with open(problem_file, "wb") as f:
+            pickle.dump((problem, config), f)
+        runs = {"base": [], "new": []}
+        for _ in range(repeats):
+            for name, tree in (("base", base), ("new", here)):
+                runs[name].append(run_worker(__file__, tree, [str(problem_file)]))
+    times = {name: [r["s"] for r in rs] for name, rs in runs.items()}
+    out = {name: {"median_s": statistics.median(t), "s": t} for name, t in times.items()}
+    out["ratio_base_over_new"] = out["base"]["median_s"] / out["new"]["median_s"]
+    sites = {name: {tuple(r["sites"]) for r in rs} for name, rs in runs.items()}
+    out["same_sites"] = len(sites["base"] | sites["new"]) == 1
+    out["n_sites"] = len(runs["new"][0]["sites"])
+    for name in ("base", "new"):
+        print(f"{name}: median {out[name]['median_s']:.1f} s "
+              f"({', '.join(f'{t:.1f}' for t in times[name])})")
+    print(f"ratio base/new {out['ratio_base_over_new']:.2f}; {out['n_sites']} sites, same sites "
+          f"on both sides and every repeat: {out['same_sites']}")
+    return out
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--site", default="km")
@@ -65,7 +121,13 @@ def main() -> None:
     ap.add_argument("--steps", type=int, default=10, help="Steps timed per phase.")
     ap.add_argument("--greedy-steps", type=int, default=5000,
                     help="max_steps of the greedy run (its wall time is printed).")
+    ap.add_argument("--base", type=Path, help="time the whole greedy against this checkout")
+    ap.add_argument("--repeats", type=int, default=3, help="Runs per side with --base.")
+    ap.add_argument("--worker", type=Path, help=argparse.SUPPRESS)
     args = ap.parse_args()
+    if args.worker:
+        _worker(args.worker)
+        return
 
     from error_model import default_model
     from markerplan.errors import InfeasiblePlanError
@@ -86,6 +148,11 @@ def main() -> None:
     net = network_model(problem, config)
     print(f"site {args.site}: {problem.n_stations} stations, {net.n_params} pose parameters, "
           f"{int(net.tying.sum())} tying sites; built in {time.perf_counter() - t:.0f} s")
+    if args.base:
+        if not (args.base / "planner" / "baselines.py").is_file():
+            sys.exit(f"--base {args.base} is not a markerplan checkout")
+        print(json.dumps(_against(args.base, problem, config, args.repeats)))
+        return
     t = time.perf_counter()
     try:
         g = greedy_network(problem, config, net, max_steps=args.greedy_steps)

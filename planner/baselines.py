@@ -352,7 +352,7 @@ def _tying_site(net, layout, available: np.ndarray, k: int) -> int | None:
     for stations in users:
         sites = np.unique(net.pair_site[np.isin(net.pair_station, stations)])
         sites = sites[available[sites]]
-        removed = np.array([layout.null_reduction(int(j)) for j in sites], dtype=np.int64)
+        removed = layout.null_reductions(sites)
         if removed.size and removed.max() > 0:
             return int(sites[int(np.argmax(removed))])
     return None

@@ -310,15 +310,45 @@ class NetworkModel:
             ``U`` with ``J^(j) = U U^T`` on ``index`` (``r = 3 (m - 1)``; 0 columns when
             ``m < 2``). Rows of fixed parameters are to be ignored.
         """
-        lo, hi = self.site_start[site], self.site_start[site + 1]
-        w = self.weight[lo:hi]
-        index = (6 * self.pair_station[lo:hi][:, None] + np.arange(6)).ravel()
-        if hi - lo < 2:
+        m = int(self.n_stations_seeing[site])
+        if m < 2:
+            lo = self.site_start[site]
+            index = (6 * self.pair_station[lo:lo + m][:, None] + np.arange(6)).ravel()
             return index, np.zeros((index.size, 0))
-        lam, vec = np.linalg.eigh(np.diag(w) - np.outer(w, w) / w.sum())
-        root = vec[:, 1:] * np.sqrt(np.maximum(lam[1:], 0.0))  # (m, m - 1); lam[0] = 0
-        u = np.einsum("aib,ak->abki", self.design[lo:hi], root)  # (m, 6, m - 1, 3)
-        return index, u.reshape(index.size, -1)
+        _, index, u = next(self.site_factors(np.array([site])))
+        return index[0], u[0]
+
+    def site_factors(self, sites: np.ndarray):
+        """:meth:`site_factor` of many sites at once, grouped by how many stations use them.
+
+        Parameters
+        ----------
+        sites : (k,) int
+            Candidate sites; those fewer than two stations use are skipped (no factor).
+
+        Yields
+        ------
+        group : (g,) int
+            The sites of ``sites`` that ``m >= 2`` stations use (one ``m`` per group, rising).
+        index : (g, 6 m) int
+            Each site's pose parameters, as :meth:`site_factor`.
+        factor : (g, 6 m, 3 (m - 1)) float
+            Each site's ``U``, as :meth:`site_factor`.
+        """
+        sites = np.asarray(sites, dtype=np.int64)
+        seen = self.n_stations_seeing[sites]
+        for m in np.unique(seen[seen >= 2]):
+            group = sites[seen == m]
+            pairs = self.site_start[group][:, None] + np.arange(m)  # (g, m)
+            w = self.weight[pairs]
+            d = w[:, :, None] * np.eye(m) - w[:, :, None] * w[:, None, :] \
+                / w.sum(axis=1)[:, None, None]
+            lam, vec = np.linalg.eigh(d)
+            root = vec[:, :, 1:] * np.sqrt(np.maximum(lam[:, None, 1:], 0.0))  # lam[:, 0] = 0
+            u = np.einsum("gaib,gak->gabki", self.design[pairs], root)  # (g, m, 6, m - 1, 3)
+            index = (6 * self.pair_station[pairs][:, :, None] + np.arange(6)).reshape(
+                group.size, -1)
+            yield group, index, u.reshape(group.size, 6 * m, -1)
 
     def station_errors_from(self, cov: NetworkCovariance) -> np.ndarray:
         """(s,) 95 % station errors of a covariance, m (``inf`` where undetermined)."""
@@ -746,14 +776,27 @@ class GrowingCovariance:
         full -= z.T @ z
         self._updates += 1
 
-    def null_reduction(self, site: int) -> int:
-        """How many free movements (null directions of ``j``) adding ``site`` would remove."""
-        index, u = self.net.site_factor(site)
-        if not (u.shape[1] and self._null.shape[1]):
-            return 0
-        pos = self.net.free_position[index]
-        free = pos >= 0
-        return self._null_split(pos[free], u[free])[1]
+    def null_reductions(self, sites: np.ndarray) -> np.ndarray:
+        """(k,) int: how many free movements (null directions of ``j``) adding each of
+        ``sites`` ((k,) int, distinct) alone would remove: the rank of ``U^T N`` (``N`` the
+        null basis), counting singular values above ``NULL_TOLERANCE`` times ``|U|``, as
+        :meth:`add` does."""
+        sites = np.asarray(sites, dtype=np.int64)
+        removed = np.zeros(sites.size, dtype=np.int64)
+        if not self._null.shape[1]:
+            return removed
+        n_free = self._null.shape[0]
+        null = np.vstack([self._null, np.zeros((1, self._null.shape[1]))])  # row n_free: 0
+        where = {int(j): i for i, j in enumerate(sites)}
+        for group, index, u in self.net.site_factors(sites):
+            pos = self.net.free_position[index]  # (g, 6 m)
+            fixed = pos < 0
+            u = np.where(fixed[:, :, None], 0.0, u)
+            m = np.einsum("gpr,gpd->grd", u, null[np.where(fixed, n_free, pos)])
+            sig = np.linalg.svd(m, compute_uv=False)
+            tol = self.NULL_TOLERANCE * np.linalg.norm(u, 2, axis=(1, 2))
+            removed[[where[int(j)] for j in group]] = np.sum(sig > tol[:, None], axis=1)
+        return removed
 
     def _null_split(self, pos: np.ndarray, uf: np.ndarray) -> tuple[np.ndarray, int, np.ndarray]:
         """The null vectors an added ``U U^T`` (rows ``pos``) touches (column indices), how

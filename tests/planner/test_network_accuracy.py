@@ -209,6 +209,36 @@ def test_growing_covariance_matches_a_fresh_inverse_at_every_step(refresh):
         GrowingCovariance(net, net.information(selected), refresh=0)
 
 
+def _null_dimension(j):
+    """Null dimension of an information matrix, by the eigenvalues of its diagonally scaled
+    form (the criterion of ``NetworkModel.covariance``)."""
+    scale = np.sqrt(np.maximum(np.diag(j), 1e-300))
+    lam = np.linalg.eigvalsh(j / scale[:, None] / scale[None, :])
+    return int(np.sum(lam <= 1e-10 * lam[-1]))
+
+
+def test_null_reductions_count_the_free_movements_each_site_removes():
+    # five stations, two tying sites added: some stations still turn or slide freely; for
+    # every site, the count equals the drop of the null dimension of a fresh information
+    net = NetworkModel(_line(5, seed=7, n_sites=40), 10.0, INCL)
+    selected = np.zeros(net.problem.n_sites, bool)
+    selected[np.flatnonzero(net.tying)[:2]] = True
+    grow = GrowingCovariance(net, net.information(selected))
+    before = _null_dimension(net.information(selected))
+    assert before > 0
+    sites = np.arange(net.problem.n_sites)
+    removed = grow.null_reductions(sites[::-1])[::-1]  # any order
+    expected = []
+    for j in sites:
+        one = selected.copy()
+        one[j] = True
+        expected.append(before - _null_dimension(net.information(one)))
+    np.testing.assert_array_equal(removed, expected)
+    assert len(set(expected)) > 1  # some sites remove movements, others none
+    determined = GrowingCovariance(net, net.information(net.tying))
+    assert not determined.null_reductions(sites).any()
+
+
 def test_scaled_covariances_match_each_fresh_inverse():
     net = NetworkModel(_line(4, seed=5, n_sites=30), 10.0, INCL)
     sites = net.site_information(net.tying)
