@@ -812,37 +812,52 @@ def network_cuts(problem: PlanProblem, model: Model, selected: np.ndarray, confi
     grow = failing[np.argmax(err[failing])] if failing.size and \
         net.tie_a.size <= _GROW_MAX_TIES and np.isfinite(err[failing]).any() else -1
     linked = net.connected_to_reference(selected)
-    done_components = set()
-    for k in failing:
-        chosen = selected & tying
-        if k == grow:
-            first = [c for kk, c, _ in tangents if kk == k]
-            chosen = _grow_network(net, chosen, int(k), req, tying & ~selected, j_sel,
-                                   first[0] if first else None)
-        rest = np.flatnonzero(tying & ~chosen)
-        if dense_ok or rest.size <= _MAX_TERMS:
-            add(model.site_row(rest), 1.0, RowKind("cut", int(k)))
-        if not linked[k]:
-            comp = _component(net, selected, int(k))
-            if comp in done_components:
-                continue
-            done_components.add(comp)
-            inside = np.zeros(problem.n_stations, bool)
-            inside[list(comp)] = True
-            a = np.bincount(net.pair_site, inside[net.pair_station], minlength=problem.n_sites)
-            b = net.n_stations_seeing - a
-            bridge = np.flatnonzero(tying & (a > 0) & (b > 0))
-            if dense_ok or bridge.size <= 4 * _MAX_TERMS:
-                add(model.site_row(bridge), 1.0, RowKind("connect", int(k)))
+
+    def station_rows(stations: np.ndarray, dense: bool) -> None:
+        """The "cut" and "connect" rows of failing ``stations`` (the short ones unless
+        ``dense``)."""
+        done_components = set()
+        for k in stations:
+            chosen = selected & tying
+            if k == grow:
+                first = [c for kk, c, _ in tangents if kk == k]
+                chosen = _grow_network(net, chosen, int(k), req, tying & ~selected, j_sel,
+                                       first[0] if first else None)
+            rest = np.flatnonzero(tying & ~chosen)
+            if dense or rest.size <= _MAX_TERMS:
+                add(model.site_row(rest), 1.0, RowKind("cut", int(k)))
+            if not linked[k]:
+                comp = _component(net, selected, int(k))
+                if comp in done_components:
+                    continue
+                done_components.add(comp)
+                inside = np.zeros(problem.n_stations, bool)
+                inside[list(comp)] = True
+                a = np.bincount(net.pair_site, inside[net.pair_station],
+                                minlength=problem.n_sites)
+                b = net.n_stations_seeing - a
+                bridge = np.flatnonzero(tying & (a > 0) & (b > 0))
+                if dense or bridge.size <= 4 * _MAX_TERMS:
+                    add(model.site_row(bridge), 1.0, RowKind("connect", int(k)))
+
+    def marker_rows(markers: np.ndarray, dense: bool) -> None:
+        """The "cut-marker" rows of failing ``markers`` (left out when long unless ``dense``)."""
+        rest = np.flatnonzero(tying & ~selected)
+        for m in markers if dense or rest.size <= _MAX_TERMS else ():
+            add(model.implied_row(m, rest), 0.0, RowKind("cut-marker"))
+
+    station_rows(failing, dense_ok)
+    worst_m = bad_markers[np.argsort(-merr[merr > req], kind="stable")]
     if bad_markers.size:
-        worst_m = bad_markers[np.argsort(-merr[merr > req], kind="stable")]
         for m, coef, rhs in net.marker_tangents(cov, worst_m[:n_oa], req):
             cut = _sparse_tangent(np.where(in_model, coef, 0.0), rhs, upper_bound, _MAX_TERMS)
             add(model.implied_row(m, cut[0], cut[1]), 0.0, RowKind("oa-marker"))
-        rest = np.flatnonzero(tying & ~selected)
-        for m in bad_markers if dense_ok or rest.size <= _MAX_TERMS else ():
-            add(model.implied_row(m, rest), 0.0, RowKind("cut-marker"))
-    if not rows:  # pragma: no cover - a failing station always yields a tangent
+    marker_rows(bad_markers, dense_ok)
+    if not rows:  # no tangent is violated and every short row was left out: the worst
+        # stations' and markers' long rows (valid; merely many terms)
+        station_rows(worst_first[:n_oa], True)
+        marker_rows(worst_m[:n_oa], True)
+    if not rows:  # pragma: no cover - a failing station or marker always yields a no-good cut
         raise InfeasiblePlanError("network mode: the layout fails but no cut was found")
     return sp.csr_array(sp.vstack(rows)), lower, kinds
 

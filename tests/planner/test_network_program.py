@@ -231,3 +231,20 @@ def test_the_greedy_incumbent_starts_no_step_after_its_share_of_the_time_limit(m
     assert not r.greedy.meets_requirement
     assert r.greedy.note.endswith(": its share of the time limit ran out")
     assert r.check.all_ok and r.selected.sum() == brute_force_optimum(p, cfg)
+
+
+def test_when_no_tangent_applies_and_rows_are_long_the_long_no_good_rows_are_cut(monkeypatch):
+    """On large problems long combinatorial rows are left out; when no tangent applies either,
+    the worst stations' long rows are cut instead of failing with 'no cut was found', and the
+    plan still passes."""
+    import planner.program as program
+    from planner.network_accuracy import NetworkModel
+
+    monkeypatch.setattr(program, "_SPARSE_ABOVE_SITES", 0)
+    monkeypatch.setattr(program, "_MAX_TERMS", 1)
+    monkeypatch.setattr(NetworkModel, "station_tangents", lambda *a, **k: [])
+    monkeypatch.setattr(NetworkModel, "marker_tangents", lambda *a, **k: [])
+    p, cfg = _reachable_network_case(60)
+    r = plan_sites(p, cfg)
+    assert r.check.all_ok
+    assert any(k.family in ("cut", "connect", "cut-marker") for k in r.model.row_kind)
