@@ -2,7 +2,7 @@
 
     OPENBLAS_NUM_THREADS=1 .venv/bin/python -u benchmarks/network_greedy.py [--site km]
         [--grid-spacing 4] [--requirement 2.5] [--steps 10] [--greedy-steps 5000]
-        [--base DIR [--repeats 3]]
+        [--base DIR [--repeats 3]] [--curve [--fractions 1,0.1] [--heading-prior DEG]]
 
 Builds the site's network problem (``km``: datum at the station nearest the centre), runs
 ``greedy_network`` once (at most ``--greedy-steps`` steps: markers, wall time), then adds
@@ -23,6 +23,10 @@ With ``--base DIR`` (a checkout of another revision) it instead times the whole
 tree's, in alternating subprocesses (``--repeats`` each, one BLAS thread), and prints each
 side's times, the ratio of the medians and whether both selected the same sites. A huge
 ``--requirement`` (e.g. 1e6) times the tie-first phase alone.
+
+With ``--curve`` it prints, instead, the worst, 90th-percentile and median station error
+relative to the datum for the greedy's directions-only cover plus a random share of the tying
+sites (each share of ``--fractions``; seed 0): how many markers a network requirement takes.
 """
 
 from __future__ import annotations
@@ -113,6 +117,29 @@ def _against(base: Path, problem, config, repeats: int) -> dict:
     return out
 
 
+def _curve(problem, config, net, fractions: list[float]) -> list[dict]:
+    """Station errors of the directions-only cover plus random shares of the tying sites."""
+    from planner.baselines import greedy_cover
+
+    cover = greedy_cover(problem, config.replace(network=False, requirement_m=1e9)).selected
+    tying = np.flatnonzero(net.tying)
+    rng = np.random.default_rng(0)
+    rows = []
+    for f in fractions:
+        x = cover.copy()
+        x[rng.choice(tying, int(f * tying.size), replace=False)] = True
+        err = net.station_errors_from(net.covariance(net.information(x)))
+        tied = err[np.isfinite(err)]
+        rows.append({"fraction": f, "sites": int(x.sum()), "untied": int(err.size - tied.size),
+                     "worst_m": float(tied.max()), "p90_m": float(np.percentile(tied, 90)),
+                     "median_m": float(np.median(tied))})
+        print(f"cover + {f:.0%} of the tying sites: {rows[-1]['sites']} sites, "
+              f"{rows[-1]['untied']} stations untied; station error worst "
+              f"{rows[-1]['worst_m']:.2f} m, 90th percentile {rows[-1]['p90_m']:.2f} m, median "
+              f"{rows[-1]['median_m']:.2f} m", flush=True)
+    return rows
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--site", default="km")
@@ -123,6 +150,12 @@ def main() -> None:
                     help="max_steps of the greedy run (its wall time is printed).")
     ap.add_argument("--base", type=Path, help="time the whole greedy against this checkout")
     ap.add_argument("--repeats", type=int, default=3, help="Runs per side with --base.")
+    ap.add_argument("--curve", action="store_true",
+                    help="print station errors against the share of tying sites instead")
+    ap.add_argument("--fractions", default="1,0.6,0.3,0.1,0.05,0.02",
+                    help="shares of the tying sites for --curve (comma-separated)")
+    ap.add_argument("--heading-prior", type=float,
+                    help="heading_prior_sigma_deg of the network (default none)")
     ap.add_argument("--worker", type=Path, help=argparse.SUPPRESS)
     args = ap.parse_args()
     if args.worker:
@@ -142,12 +175,17 @@ def main() -> None:
         # as benchmarks/km_plan.py: the station nearest the site's centre (the origin)
         ref = inputs.station_ids[int(np.argmin(np.hypot(*inputs.station_xyz[:, :2].T)))]
     config = PlanConfig(grid_spacing_m=args.grid_spacing, requirement_m=args.requirement,
-                        network=True, reference_station=ref)
+                        network=True, reference_station=ref,
+                        heading_prior_sigma_deg=args.heading_prior)
     t = time.perf_counter()
     problem, _, _, _ = build_problem(inputs, config, default_model(), progress=False)
     net = network_model(problem, config)
     print(f"site {args.site}: {problem.n_stations} stations, {net.n_params} pose parameters, "
           f"{int(net.tying.sum())} tying sites; built in {time.perf_counter() - t:.0f} s")
+    if args.curve:
+        rows = _curve(problem, config, net, [float(f) for f in args.fractions.split(",")])
+        print(json.dumps(rows))
+        return
     if args.base:
         if not (args.base / "planner" / "baselines.py").is_file():
             sys.exit(f"--base {args.base} is not a markerplan checkout")
