@@ -61,6 +61,8 @@ from planner.accuracy import CHI2_3_95, lambda_max_sym3
 from planner.usability import PlanProblem
 
 _CHUNK = 100_000
+#: Candidate sites whose low-rank factors are held at once (`GrowingCovariance.null_reductions`).
+_SITES_CHUNK = 512
 
 
 def pose_errors_from_covariance(cov, working_radius_m: float) -> np.ndarray:
@@ -788,14 +790,15 @@ class GrowingCovariance:
         n_free = self._null.shape[0]
         null = np.vstack([self._null, np.zeros((1, self._null.shape[1]))])  # row n_free: 0
         where = {int(j): i for i, j in enumerate(sites)}
-        for group, index, u in self.net.site_factors(sites):
-            pos = self.net.free_position[index]  # (g, 6 m)
-            fixed = pos < 0
-            u = np.where(fixed[:, :, None], 0.0, u)
-            m = np.einsum("gpr,gpd->grd", u, null[np.where(fixed, n_free, pos)])
-            sig = np.linalg.svd(m, compute_uv=False)
-            tol = self.NULL_TOLERANCE * np.linalg.norm(u, 2, axis=(1, 2))
-            removed[[where[int(j)] for j in group]] = np.sum(sig > tol[:, None], axis=1)
+        for lo in range(0, sites.size, _SITES_CHUNK):  # bounded memory: factors of a chunk
+            for group, index, u in self.net.site_factors(sites[lo:lo + _SITES_CHUNK]):
+                pos = self.net.free_position[index]  # (g, 6 m)
+                fixed = pos < 0
+                u = np.where(fixed[:, :, None], 0.0, u)
+                m = np.einsum("gpr,gpd->grd", u, null[np.where(fixed, n_free, pos)])
+                sig = np.linalg.svd(m, compute_uv=False)
+                tol = self.NULL_TOLERANCE * np.linalg.norm(u, 2, axis=(1, 2))
+                removed[[where[int(j)] for j in group]] = np.sum(sig > tol[:, None], axis=1)
         return removed
 
     def _null_split(self, pos: np.ndarray, uf: np.ndarray) -> tuple[np.ndarray, int, np.ndarray]:
