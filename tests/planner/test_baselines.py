@@ -76,12 +76,8 @@ def test_network_greedy_picks_what_the_full_recompute_picked(requirement, redund
     # stations in a row, S4-S6 free in heading after the direction cover; sites 0 (seen by
     # S2-S4) and 5 (S3-S5, the old first-order choice) each remove that one free movement, so
     # the lowest index is tied first; the same marker counts as before the rule
-    rng = np.random.default_rng(3)
-    stations = np.column_stack([np.arange(6) * 12.0, rng.uniform(-3, 3, 6)])
-    sites = np.column_stack([rng.uniform(-10, 70, 120), rng.uniform(-14, 14, 120)])
-    p = make_problem(stations, sites, max_range_m=18)
-    cfg = PlanConfig(network=True, min_markers=3, min_sectors=2, max_range_m=18,
-                     working_radius_m=8, requirement_m=requirement, redundant=redundant)
+    p = _row_of_stations()
+    cfg = _ROW_CONFIG.replace(requirement_m=requirement, redundant=redundant)
     g = greedy_network(p, cfg, batch=batch)
     assert np.flatnonzero(g.selected).tolist() == expected
     assert evaluate_layout(p, g.selected, cfg).all_ok
@@ -102,6 +98,11 @@ def test_greedy_cover_picks_what_it_picked_checking_every_station_afresh(redunda
     g = greedy_cover(p, cfg)
     assert np.flatnonzero(g.selected).tolist() == expected
     assert evaluate_layout(p, g.selected, cfg).all_ok
+
+
+#: Network rules of the row of stations below (requirement 0.3 m).
+_ROW_CONFIG = PlanConfig(network=True, min_markers=3, min_sectors=2, max_range_m=18,
+                         working_radius_m=8, requirement_m=0.3)
 
 
 def _row_of_stations(extra_stations=(), extra_sites=()):
@@ -126,8 +127,7 @@ def _row_with_an_untiable_station():
 def test_network_greedy_that_runs_out_of_steps_says_which_stations_are_untied():
     # after the direction cover S4-S6 turn freely in heading; no step is allowed to tie them
     p = _row_of_stations()
-    cfg = PlanConfig(network=True, min_markers=3, min_sectors=2, max_range_m=18,
-                     working_radius_m=8, requirement_m=0.3)
+    cfg = _ROW_CONFIG
     with pytest.raises(GreedyStuckError, match=r"^greedy \(network\) got stuck with 3 station\(s\)"
                        r" not tied to the reference \(S4, S5, S6\) after 7 markers: stopped "
                        r"after 0 steps$") as err:
@@ -142,8 +142,7 @@ def test_network_greedy_that_runs_out_of_steps_says_which_stations_are_untied():
 
 def test_network_greedy_starts_no_step_after_its_deadline():
     p = _row_of_stations()
-    cfg = PlanConfig(network=True, min_markers=3, min_sectors=2, max_range_m=18,
-                     working_radius_m=8, requirement_m=0.3)
+    cfg = _ROW_CONFIG
     with pytest.raises(GreedyStuckError, match=r"^greedy \(network\) got stuck with 3 station\(s\)"
                        r" not tied .* after 7 markers: its share of the time limit ran out$"):
         greedy_network(p, cfg, deadline=time.perf_counter())
@@ -154,8 +153,7 @@ def test_network_greedy_starts_no_step_after_its_deadline():
 def test_network_greedy_stops_at_once_when_no_site_can_tie_a_station():
     # the greedy ties S4-S6 and then stops (not after max_steps) naming S7 alone
     p = _row_with_an_untiable_station()
-    cfg = PlanConfig(network=True, min_markers=3, min_sectors=2, max_range_m=18,
-                     working_radius_m=8, requirement_m=0.3)
+    cfg = _ROW_CONFIG
     with pytest.raises(GreedyStuckError, match=r"got stuck with 1 station\(s\) not tied to the "
                        r"reference \(S7\) after \d+ markers: no remaining site removes a free "
                        r"movement$") as err:
@@ -166,8 +164,7 @@ def test_network_greedy_stops_at_once_when_no_site_can_tie_a_station():
 def test_network_baseline_keeps_why_the_greedy_got_stuck():
     """The stuck greedy's layout is reported with its error's message as the note; a greedy
     that finishes has none."""
-    cfg = PlanConfig(network=True, min_markers=3, min_sectors=2, max_range_m=18,
-                     working_radius_m=8, requirement_m=0.3)
+    cfg = _ROW_CONFIG
     p = _row_with_an_untiable_station()
     with pytest.raises(GreedyStuckError) as err:
         greedy_network(p, cfg)
