@@ -12,6 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from markerplan.errors import ConfigError
+from pipeline.kernels import in_wanted_bins
 
 
 def two_box_gate(xyz_m: np.ndarray, labels: np.ndarray, max_box_m: float = 0.30,
@@ -175,9 +176,8 @@ def within_range_bands(range_m: np.ndarray, centres_m: np.ndarray, radius_m: flo
     cover = np.zeros(top + 2, dtype=np.int64)
     np.add.at(cover, lo, 1)
     np.add.at(cover, hi + 1, -1)
-    wanted = np.cumsum(cover)[:top + 1] > 0
-    bins = np.minimum(range_m / bin_m, top + 1).astype(np.int64)
-    return np.flatnonzero(np.append(wanted, False)[bins])
+    wanted = np.append(np.cumsum(cover)[:top + 1] > 0, False)
+    return in_wanted_bins(np.ascontiguousarray(range_m, dtype=float), float(bin_m), wanted)
 
 
 def research(index: RangeIndex, centroids_m: np.ndarray, radius_m: float = 0.3

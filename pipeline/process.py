@@ -29,6 +29,7 @@ from pipeline.clustering import euclidean_clusters
 from pipeline.evaluation import Reference, evaluate_rows
 from pipeline.gate import RangeIndex, research, two_box_gate, within_range_bands
 from pipeline.ground import remove_ground
+from pipeline.kernels import range_thinned
 from pipeline.marker_table import MarkerRow, line_of_sight
 from pipeline.quality import MarkerMetrics, marker_metrics, quality_gate
 from pipeline.rig import MountingOffsets, sensor_to_station
@@ -84,7 +85,8 @@ def detection_subset(range_m: np.ndarray, full_density_range_m: float = 4.0,
     3 m. Inside ``full_density_range_m`` every ``(full_density_range_m / range)^2``-th point is
     kept (at most every ``max_stride``-th), so near-field density is capped at that of
     ``full_density_range_m``. Detection only needs a candidate's centroid: the re-search and
-    the centre fit use the full cloud.
+    the centre fit use the full cloud. One compiled pass (:func:`pipeline.kernels.range_thinned`),
+    the arithmetic in the ranges' float type.
 
     Parameters
     ----------
@@ -96,20 +98,11 @@ def detection_subset(range_m: np.ndarray, full_density_range_m: float = 4.0,
     subset : (n,) int
         Ascending point indices.
     """
-    small = np.int32 if range_m.size < np.iinfo(np.int32).max else np.int64
-    kept = []
-    for a in range(0, range_m.size, _SUBSET_BLOCK):  # blocks: temporaries stay in cache
-        stride = np.maximum(range_m[a:a + _SUBSET_BLOCK], 1e-3)  # (full / range)^2 clipped
-        np.divide(full_density_range_m, stride, out=stride)
-        np.square(stride, out=stride)
-        np.clip(stride, 1, max_stride, out=stride)
-        index = np.arange(a, a + stride.size, dtype=small)
-        kept.append(index[index % stride.astype(small) == 0])
-    return np.concatenate(kept, dtype=np.intp) if kept else np.zeros(0, dtype=np.intp)
-
-
-#: Points per block of :func:`detection_subset` (temporaries of about 1 MB).
-_SUBSET_BLOCK = 1 << 16
+    range_m = np.asarray(range_m)
+    if range_m.dtype not in (np.float32, np.float64):
+        range_m = range_m.astype(np.float64)
+    limits = np.array([full_density_range_m, max_stride, 1e-3, 1.0], dtype=range_m.dtype)
+    return range_thinned(np.ascontiguousarray(range_m), limits)
 
 
 def detect_candidates(cloud: StationCloud, cfg: ProcessConfig) -> list[np.ndarray]:

@@ -41,6 +41,9 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
+from markerplan.errors import DataError
+from pipeline.kernels import transform_frames
+
 #: VLP-16 laser elevation angles in channel (firing) order, degrees (VLP-16 user manual).
 VLP16_ELEVATION_DEG = (-15.0, 1.0, -13.0, 3.0, -11.0, 5.0, -9.0, 7.0,
                        -7.0, 9.0, -5.0, 11.0, -3.0, 13.0, -1.0, 15.0)
@@ -146,12 +149,10 @@ def sensor_to_station(xyz_sensor_m: np.ndarray, frame_index: np.ndarray,
                       turntable_angle_rad: np.ndarray, offsets: MountingOffsets) -> np.ndarray:
     """Merge sensor-frame points of many frames into the station frame.
 
-    Long runs of equal frame indices (the ~10 million points of an 800-frame station) take one
-    matrix product per run, in place. Short runs (subsamples of a few points per frame) would
-    spend their time in that loop, so there the frames' shared mounting rotation ``S``
-    (:func:`frame_poses`: ``R_f = Rz(theta_f) S``, ``t_f = Rz(theta_f) d``) is applied to all
-    points in one product and the turntable angle enters as each point's ``cos`` and ``sin``,
-    in blocks of :data:`_BLOCK_POINTS` points.
+    Each point is rotated and shifted by its frame's pose (:func:`frame_poses`) in one compiled
+    pass (:func:`pipeline.kernels.transform_frames`): no temporaries over the ~10 million
+    points of an 800-frame station, and no per-frame overhead for subsamples of a few points
+    per frame.
 
     Parameters
     ----------
@@ -168,38 +169,39 @@ def sensor_to_station(xyz_sensor_m: np.ndarray, frame_index: np.ndarray,
     -------
     xyz_station_m : (N, 3) float64
         Points in the station frame, metres.
+
+    Raises
+    ------
+    DataError
+        If a frame index has no turntable angle.
     """
-    fi = np.asarray(frame_index)
+    return _to_station(xyz_sensor_m, frame_index, turntable_angle_rad, offsets, False)[0]
+
+
+def sensor_to_station_with_range(xyz_sensor_m: np.ndarray, frame_index: np.ndarray,
+                                 turntable_angle_rad: np.ndarray, offsets: MountingOffsets
+                                 ) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`sensor_to_station`, and each point's distance from the station origin (N,),
+    metres, from the same pass."""
+    return _to_station(xyz_sensor_m, frame_index, turntable_angle_rad, offsets, True)
+
+
+def _to_station(xyz_sensor_m, frame_index, turntable_angle_rad, offsets, with_range: bool
+                ) -> tuple[np.ndarray, np.ndarray]:
     p = np.asarray(xyz_sensor_m)
+    if p.dtype not in (np.float32, np.float64):
+        p = p.astype(np.float64)
+    fi = np.asarray(frame_index)
+    rotation, translation = frame_poses(turntable_angle_rad, offsets)
+    if fi.size and not 0 <= int(fi.min()) <= int(fi.max()) < rotation.shape[0]:
+        raise DataError(f"frame indices run from {int(fi.min())} to {int(fi.max())} but there "
+                        f"are {rotation.shape[0]} turntable angles: give one angle per frame")
     out = np.empty((fi.size, 3))
-    starts = np.flatnonzero(np.r_[True, fi[1:] != fi[:-1]])
-    if fi.size >= _RUN_POINTS * starts.size:
-        rotation, translation = frame_poses(turntable_angle_rad, offsets)
-        for a, b, f in zip(starts, np.r_[starts[1:], fi.size], fi[starts], strict=True):
-            run = out[a:b]  # written in place: no temporaries per run
-            np.matmul(p[a:b], rotation[f].T, out=run)
-            run += translation[f]
-        return out
-    mounting = sensor_to_turntable_rotation(offsets)
-    theta = np.asarray(turntable_angle_rad, dtype=float).reshape(-1)
-    cos_f, sin_f = np.cos(theta), np.sin(theta)
-    dx, dy = (float(v) for v in offsets.axis_offset_m)
-    for a in range(0, fi.size, _BLOCK_POINTS):
-        b = min(a + _BLOCK_POINTS, fi.size)
-        turntable = mounting @ p[a:b].T  # (3, m) rows: p_T = S p_S + d, then Rz(theta) p_T
-        x, y = turntable[0] + dx, turntable[1] + dy
-        c, s = cos_f[fi[a:b]], sin_f[fi[a:b]]
-        np.subtract(c * x, s * y, out=out[a:b, 0])
-        np.add(s * x, c * y, out=out[a:b, 1])
-        out[a:b, 2] = turntable[2]
-    return out
-
-
-#: Points per block of :func:`sensor_to_station`'s short-run path (temporaries of a few MB).
-_BLOCK_POINTS = 1 << 18
-#: Mean run length (points per run of equal frame indices) from which :func:`sensor_to_station`
-#: loops over the runs (measured: a product per run costs about as much as 100 points' gathers).
-_RUN_POINTS = 128
+    range_m = np.empty(fi.size if with_range else 0)
+    transform_frames(np.ascontiguousarray(p), np.ascontiguousarray(fi),
+                     np.ascontiguousarray(rotation), np.ascontiguousarray(translation), out,
+                     range_m)
+    return out, range_m
 
 
 def station_to_site_matrix(heading_rad: float, roll_rad: float = 0.0,

@@ -45,7 +45,6 @@ least squares, biased small by range noise: 87 mm at ``s = 15 mm``, 62 mm at ``s
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -54,6 +53,7 @@ from scipy.spatial import cKDTree
 from markerplan.constants import GOLDEN_ANGLE_RAD
 from markerplan.errors import ConfigError, DataError
 from markerplan.reading import MAX_ABS_COORDINATE_M
+from pipeline.kernels import gauss_newton_fixed_radius, los_gauss_newton_fixed
 from pipeline.sensor_noise import MAX_TAN_INCIDENCE, RangeNoise
 
 METHODS = ("fixed-radius", "hemisphere-icp")
@@ -264,7 +264,8 @@ def lsq_fixed_radius(points_m: np.ndarray, radius_m: float, centre0_m: np.ndarra
                      max_iter: int = 50, tol_m: float = 1e-10) -> np.ndarray:
     """Geometric least-squares sphere centre with the radius fixed (Gauss-Newton).
 
-    Minimises ``sum (|p_i - c| - R)^2`` over ``c`` from ``centre0_m``.
+    Minimises ``sum (|p_i - c| - R)^2`` over ``c`` from ``centre0_m``, compiled
+    (:func:`pipeline.kernels.gauss_newton_fixed_radius`): it runs hundreds of times per station.
 
     Parameters
     ----------
@@ -277,20 +278,9 @@ def lsq_fixed_radius(points_m: np.ndarray, radius_m: float, centre0_m: np.ndarra
     -------
     centre_m : (3,) float
     """
-    c = np.asarray(centre0_m, dtype=float).copy()
-    for _ in range(max_iter):
-        d = points_m - c
-        n = np.linalg.norm(d, axis=1)
-        u = d / np.maximum(n, 1e-12)[:, None]
-        r = n - radius_m
-        try:
-            step = np.linalg.solve(u.T @ u, u.T @ r)
-        except np.linalg.LinAlgError:
-            break
-        c = c + step
-        if np.linalg.norm(step) < tol_m:
-            break
-    return c
+    return gauss_newton_fixed_radius(np.ascontiguousarray(points_m), float(radius_m),
+                                     np.array(centre0_m, dtype=float).reshape(3),
+                                     int(max_iter), float(tol_m))
 
 
 def fit_free_radius(points_m: np.ndarray, centre0_m: np.ndarray, radius0_m: float,
@@ -675,91 +665,52 @@ def _los_solve(rng, beam, centre, radius, noise, free_radius=False, max_iter=50,
                ) -> tuple[np.ndarray, float, np.ndarray]:
     """Gauss-Newton of :func:`fit_line_of_sight`, sensor at the origin.
 
-    The problem of :func:`_los_system` with its invariants hoisted out of the iterations (the
-    range part of each point's variance), ``J^T W J`` and ``J^T W r`` from one product
-    (``V^T diag(w / h^2) [V, h r]`` with ``V = t beam - c``), and for a fixed radius the 3 x 3
-    normal equations inverted and stepped in closed form on Python floats (a singular matrix
-    ends the iterations, as :func:`numpy.linalg.inv`'s error did): the iterates of the plain
-    Gauss-Newton up to round-off.
+    A fixed radius runs the compiled loop :func:`pipeline.kernels.los_gauss_newton_fixed` (the
+    hundreds of small fits of a station's markers). A free radius runs the problem of
+    :func:`_los_system` in numpy with its invariants hoisted out of the iterations (the range
+    part of each point's variance) and ``J^T W J`` and ``J^T W r`` from one product
+    (``V^T diag(w / h^2) [V, h r]`` with ``V = [t beam - c, R]``); a singular matrix ends the
+    iterations. Each step is capped at half the radius.
 
     Returns the centre (3,), the radius and the covariance ((3, 3) or (4, 4) with the radius)
     of the estimate under the noise model.
     """
-    x = [*np.asarray(centre, dtype=float).tolist(), float(radius)]
-    k = 4 if free_radius else 3
-    cov = np.full((k, k), np.nan)
     var0 = noise.total_sigma_m(rng) ** 2  # variance at normal incidence, (n,)
     inc2 = noise.incidence_noise_m ** 2
-    v = np.empty((rng.size, k + 1))  # [rows of the Jacobian times h, h * residual]
+    if not free_radius:
+        c, cov = los_gauss_newton_fixed(
+            np.ascontiguousarray(rng, dtype=float), np.ascontiguousarray(beam, dtype=float),
+            np.array(centre, dtype=float), float(radius), np.ascontiguousarray(var0, dtype=float),
+            float(inc2), float(_MIN_COS_INCIDENCE), int(max_iter), float(tol_m))
+        return c, float(radius), cov
+    x = np.array([*np.asarray(centre, dtype=float), radius], dtype=float)
+    cov = np.full((4, 4), np.nan)
+    v = np.empty((rng.size, 5))  # [rows of the Jacobian times h, h * residual]
     for _ in range(max_iter):
-        c = np.array(x[:3])
-        r2 = x[3] * x[3]
+        c, r2 = x[:3], x[3] * x[3]
         along = beam @ c
         h2 = along * along
-        h2 += r2 - (x[0] * x[0] + x[1] * x[1] + x[2] * x[2])
+        h2 += r2 - float(c @ c)
         np.maximum(h2, r2 * _MIN_COS_INCIDENCE ** 2, out=h2)
         h = np.sqrt(h2)
         t = along - h
         var = var0 + inc2 * np.maximum(r2 - h2, 0.0) / h2 if inc2 else var0
         np.multiply(t[:, None], beam, out=v[:, :3])
         v[:, :3] -= c
-        if free_radius:
-            v[:, 3] = x[3]
-        np.multiply(rng - t, h, out=v[:, k])
-        m = (v[:, :k] * (1.0 / (var * h2))[:, None]).T @ v  # [J^T W J, J^T W r]
+        v[:, 3] = x[3]
+        np.multiply(rng - t, h, out=v[:, 4])
+        m = (v[:, :4] * (1.0 / (var * h2))[:, None]).T @ v  # [J^T W J, J^T W r]
         try:
-            if free_radius:
-                cov = np.linalg.inv(m[:, :k])
-                step = (-cov @ m[:, k]).tolist()
-            else:
-                rows = m.tolist()
-                inv = _inv3(rows)
-                g = [row[3] for row in rows]
-                step = [-(a * g[0] + b * g[1] + e * g[2]) for a, b, e in inv]
-                cov = inv
+            cov = np.linalg.inv(m[:, :4])
         except np.linalg.LinAlgError:
             break
-        length = math.sqrt(sum(s * s for s in step))
+        step = -cov @ m[:, 4]
+        length = float(np.sqrt(step @ step))
         damp = min(1.0, 0.5 * x[3] / max(length, 1e-300))
-        for i, s in enumerate(step):
-            x[i] += s * damp
+        x += step * damp
         if (length if damp == 1.0 else length * damp) < tol_m:
             break
-    return np.array(x[:3]), float(abs(x[3])), np.array(cov, dtype=float)
-
-
-def _inv3(a: list) -> tuple:
-    """Inverse of a 3 x 3 matrix by cofactors, on Python floats (no LAPACK call's overhead).
-
-    Parameters
-    ----------
-    a : list of 3 sequences of >= 3 floats
-        Rows of the matrix (entries past the third of a row are ignored).
-
-    Returns
-    -------
-    inverse : tuple of 3 tuples of 3 floats
-        Rows of the inverse.
-
-    Raises
-    ------
-    numpy.linalg.LinAlgError
-        If the determinant is exactly zero.
-
-    Examples
-    --------
-    >>> a = np.array([[4.0, 1, 0], [1, 3, 1], [0, 1, 2]])
-    >>> bool(np.allclose(np.array(_inv3(a.tolist())) @ a, np.eye(3)))
-    True
-    """
-    (a00, a01, a02, *_), (a10, a11, a12, *_), (a20, a21, a22, *_) = a
-    c00, c01, c02 = a11 * a22 - a12 * a21, a12 * a20 - a10 * a22, a10 * a21 - a11 * a20
-    det = a00 * c00 + a01 * c01 + a02 * c02
-    if det == 0.0:
-        raise np.linalg.LinAlgError("singular matrix")
-    return ((c00 / det, (a02 * a21 - a01 * a22) / det, (a01 * a12 - a02 * a11) / det),
-            (c01 / det, (a00 * a22 - a02 * a20) / det, (a02 * a10 - a00 * a12) / det),
-            (c02 / det, (a01 * a20 - a00 * a21) / det, (a00 * a11 - a01 * a10) / det))
+    return x[:3].copy(), float(abs(x[3])), cov
 
 
 def hemisphere_model(radius_m: float, spacing_m: float | None = None) -> np.ndarray:

@@ -6,7 +6,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from pipeline.rig import MountingOffsets, sensor_to_station
+from pipeline.rig import MountingOffsets, sensor_to_station_with_range
 from pipeline.scan_format import StationScan
 
 
@@ -47,8 +47,7 @@ def synthesize(scan: StationScan, offsets: MountingOffsets | None = None) -> Sta
     StationCloud
     """
     offsets = MountingOffsets() if offsets is None else offsets
-    xyz = sensor_to_station(scan.xyz_sensor_m, scan.frame_index, scan.turntable_angle_rad,
-                            offsets)
-    return StationCloud(xyz, scan.frame_index, np.sqrt(np.einsum("ij,ij->i", xyz, xyz)),
-                        offsets)
+    xyz, range_m = sensor_to_station_with_range(scan.xyz_sensor_m, scan.frame_index,
+                                                scan.turntable_angle_rad, offsets)
+    return StationCloud(xyz, scan.frame_index, range_m, offsets)
 

@@ -2,7 +2,6 @@ import numpy as np
 import pytest
 
 from markerplan.errors import ConfigError
-from pipeline import process
 from pipeline.evaluation import Reference
 from pipeline.process import detection_subset, process_station
 from pipeline.rig import MountingOffsets
@@ -34,14 +33,14 @@ def test_detection_subset_caps_near_density():
     assert (sub >= 1000).sum() == 1000
 
 
-@pytest.mark.parametrize("block", [1, 7, 1 << 16])
-def test_detection_subset_is_the_same_in_any_blocks(monkeypatch, block):
-    """Blocks of any size, including ones that split the cloud unevenly, keep exactly the
-    indices the whole-array formula ``i % clip((4 / r)^2, 1, 64) == 0`` keeps."""
+def test_detection_subset_keeps_the_whole_array_formula():
+    """Exactly the indices the whole-array formula ``i % clip((4 / r)^2, 1, 64) == 0`` keeps,
+    from float64 and integer ranges."""
     r = np.random.default_rng(2).uniform(0, 6, 5003)
     want = np.flatnonzero(np.arange(r.size) % np.clip((4.0 / np.maximum(r, 1e-3)) ** 2, 1, 64)
                           .astype(np.int64) == 0)
-    monkeypatch.setattr(process, "_SUBSET_BLOCK", block)
+    np.testing.assert_array_equal(detection_subset(np.round(r).astype(int)),
+                                  detection_subset(np.round(r)))
     got = detection_subset(r)
     assert got.dtype == np.intp
     np.testing.assert_array_equal(got, want)

@@ -10,7 +10,7 @@ import math
 import numpy as np
 import pytest
 
-from pipeline import rig
+from markerplan.errors import DataError
 from pipeline.gate import RangeIndex, within_range_bands
 from pipeline.process import detection_subset
 from pipeline.rig import MountingOffsets, frame_poses, sensor_to_station
@@ -52,25 +52,25 @@ def test_detection_subset_matches_the_formula():
         np.testing.assert_array_equal(detection_subset(rd), want)
 
 
-@pytest.mark.parametrize("run_points", [1, 10 ** 9])
-def test_sensor_to_station_matches_per_frame_products(monkeypatch, run_points):
-    """The per-frame ``p @ R.T + t`` (up to round-off) on either path (a product per run, or
-    the mounting rotation for all points and the turntable angle per point), with unsorted runs
-    of frames and more points than one block."""
+def test_sensor_to_station_matches_per_frame_products():
+    """The per-frame ``p @ R.T + t`` (up to round-off), with unsorted runs of frames, from
+    float32 and float64 points; a frame without a turntable angle is an error, not a read
+    past the poses."""
     gen = np.random.default_rng(7)
     angles = np.linspace(0, 2 * np.pi, 9)[:-1]
     fi = np.repeat(gen.permutation(8), gen.integers(1, 50, 8))
     fi = np.r_[fi, fi[:5]].astype(np.uint32)
-    monkeypatch.setattr(rig, "_BLOCK_POINTS", 64)
-    monkeypatch.setattr(rig, "_RUN_POINTS", run_points)
     p = gen.uniform(-20, 20, (fi.size, 3)).astype(np.float32)
     off = MountingOffsets(0.004, -0.003, (0.015, -0.002))
     rot, trans = frame_poses(angles, off)
     want = np.array([p[k] @ rot[f].T + trans[f] for k, f in enumerate(fi)])
-    got = sensor_to_station(p, fi, angles, off)
-    assert got.dtype == np.float64
-    np.testing.assert_allclose(got, want, rtol=0, atol=1e-12)
+    for points in (p, p.astype(np.float64)):
+        got = sensor_to_station(points, fi, angles, off)
+        assert got.dtype == np.float64
+        np.testing.assert_allclose(got, want, rtol=0, atol=1e-12)
     assert sensor_to_station(p[:0], fi[:0], angles, off).shape == (0, 3)
+    with pytest.raises(DataError, match="8 turntable angles"):
+        sensor_to_station(p, np.r_[fi[:-1], 8].astype(np.uint32), angles, off)
 
 
 #: Revision 6391827 (before the speed-ups) on default-site station 0, every 16th of 800 frames,
