@@ -16,7 +16,8 @@ mounting offsets against the true ones (vertical-axis error and L-frame tilt in 
 offset as the length of the (dx, dy) difference in mm) and the CPU time of the worker. Then,
 over all stations and per side: matched markers, mean / largest / 95th percentile of the
 accepted errors; the largest change of a marker's error between base and new (markers accepted
-and matched on both sides, paired by station and ``marker_id``); the markers one side finds
+and matched on both sides, paired by station and ``marker_id``) and how many differ at all
+(none when base and new are the same code); the markers one side finds
 and the other does not; and the CPU ratio base / new (median of the per-station ratios, and the
 ratio of the sums). A study that prints: it asserts nothing about the figures.
 
@@ -116,17 +117,19 @@ def report(summaries: dict[str, dict[str, dict]]) -> None:
         stats = (f"mean {err.mean():.3f}, max {err.max():.3f}, 95th percentile "
                  f"{np.percentile(err, 95):.3f} mm" if err.size else "no accepted markers")
         print(f"  {name:4s} matched {matched}/{in_view} in view; accepted errors: {stats}")
-    change, worst = 0.0, None
+    change, worst, n_paired, n_differ = 0.0, "", 0, 0
     only: dict[str, list[str]] = {"base": [], "new": []}
     for sid, s in summaries.items():
         b, n = s["base"]["errors_m"], s["new"]["errors_m"]
         for marker in sorted(b.keys() & n.keys()):
-            if worst is None or abs(n[marker] - b[marker]) > abs(change):
-                change, worst = n[marker] - b[marker], f"{sid}/{marker}"
+            n_paired += 1
+            n_differ += n[marker] != b[marker]
+            if abs(n[marker] - b[marker]) > abs(change):
+                change, worst = n[marker] - b[marker], f" ({sid}/{marker})"
         only["base"] += [f"{sid}/{m}" for m in sorted(b.keys() - n.keys())]
         only["new"] += [f"{sid}/{m}" for m in sorted(n.keys() - b.keys())]
-    print(f"  largest change of a marker's error, new - base: {1e3 * change:+.6f} mm"
-          + (f" ({worst})" if worst else ""))
+    print(f"  largest change of a marker's error, new - base: {1e3 * change:+.6f} mm{worst}; "
+          f"{n_differ} of {n_paired} markers found by both sides differ at all")
     for name, markers in only.items():
         print(f"  accepted and matched by {name} only: {', '.join(markers) or 'none'}")
     cpu = np.array([[s[name]["cpu_s"] for name in ("base", "new")] for s in summaries.values()])
