@@ -41,8 +41,18 @@ CENTRE_TOLERANCE_M = 1e-9
 OFFSET_TOLERANCE = 1e-9
 
 
-def _simulate(scan_path: Path, frames: int) -> None:
-    """Simulate station 0 of the default site and write ``scan_path`` and its truth beside."""
+def simulate(scan_path: Path, frames: int, station: int = 0) -> None:
+    """Simulate one station of the default site and write ``scan_path`` and its truth beside.
+
+    Parameters
+    ----------
+    scan_path : Path
+        ``<name>.scan.npz`` to write; the truth goes to :func:`truth_path` of it.
+    frames : int
+        Frames per turntable turn.
+    station : int
+        Index into the default site's ``station_ids``.
+    """
     from pipeline.rig import MountingOffsets
     from pipeline.scan_format import write_scan, write_truth
     from visibility.sensor import RigConfig
@@ -51,13 +61,14 @@ def _simulate(scan_path: Path, frames: int) -> None:
 
     rig = RigConfig(frames_per_turn=frames,
                     offsets=MountingOffsets(np.radians(0.3), np.radians(0.3), (0.015, 0.0)))
-    scan, truth = simulate_station(load_site("default"), 0, rig=rig, seed=0)
+    scan, truth = simulate_station(load_site("default"), station, rig=rig, seed=0)
     scan_path.parent.mkdir(parents=True, exist_ok=True)
     write_scan(scan_path, scan)
-    write_truth(_truth_path(scan_path), truth)
+    write_truth(truth_path(scan_path), truth)
 
 
-def _truth_path(scan_path: Path) -> Path:
+def truth_path(scan_path: Path) -> Path:
+    """The simulation truth file beside ``scan_path`` (``.scan.npz`` -> ``.truth.json``)."""
     return scan_path.with_name(scan_path.name.replace(".scan.npz", ".truth.json"))
 
 
@@ -65,16 +76,18 @@ def _worker(scan_path: Path) -> None:
     """Process the scan with whichever ``pipeline`` is importable; print one JSON line."""
     import pipeline
     from pipeline.evaluation import read_reference
+    from pipeline.marker_table import MarkerRow
     from pipeline.process import process_station
     from pipeline.scan_format import read_scan
 
     scan = read_scan(scan_path)
-    ref = read_reference(_truth_path(scan_path))
+    ref = read_reference(truth_path(scan_path))
     t0, c0 = time.perf_counter(), time.process_time()
     res = process_station(scan, None, ref)
     total, cpu = time.perf_counter() - t0, time.process_time() - c0
     print(json.dumps({"code": str(Path(pipeline.__file__).parents[1]), "total_s": total,
                       "cpu_s": cpu, "stages_s": res.timings_s,
+                      "columns": [f.name for f in fields(MarkerRow)],
                       "rows": [astuple(r) for r in res.rows],
                       "offsets": res.calibration["offsets"]}, default=float))
 
@@ -110,7 +123,7 @@ def main() -> None:
                  "(git worktree add /tmp/base-6391827 6391827)")
     if not args.scan.is_file():
         print(f"simulating the station into {args.scan} ...", flush=True)
-        _simulate(args.scan, args.frames)
+        simulate(args.scan, args.frames)
     sides = {"base": args.base, "new": HERE}
     runs: dict[str, list[dict]] = {name: [] for name in sides}
     print(f"load average before: {os.getloadavg()[0]:.2f}", flush=True)
