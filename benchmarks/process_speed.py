@@ -4,15 +4,18 @@ The station is simulated once (mounting offsets 0.3 deg, 0.3 deg, 15 mm, as in
 ``benchmarks/process.py``) and cached (``--scan``; reused when it exists). Each repeat then runs
 :func:`pipeline.process.process_station` on it in a fresh subprocess, once with the baseline's
 code on ``PYTHONPATH`` and once with this tree's, alternating, so both see the same machine
-load. Printed: the median and every time of each side (wall clock, and CPU time of all the
-process's threads, which other processes' load inflates less), the ratios, the median per-stage
-(wall) times, and how far the two marker tables and calibrations differ: the largest
-difference of the marker centres (metres, accepted and rejected apart), of every other float
-column and of the estimated offsets (radians for the angles, metres for the axis offset),
-whether every other column (ids, counts, estimator, verdicts and reasons) is identical, and
-whether the offsets and the accepted markers' centres are within :data:`OFFSET_TOLERANCE`
-and :data:`CENTRE_TOLERANCE_M` (round-off of exact rewrites; rejected candidates'
-ill-conditioned fits are only printed).
+load. Each subprocess processes the station twice: the first run is the first station of a fresh
+process (it pays one-time start-ups, such as loading compiled kernels), the second is what every
+further station of a process (``verify``, ``range-study``) costs. Printed, for both: the median
+and every time of each side (wall clock, and CPU time of all the process's threads, which other
+processes' load inflates less), the ratios, the median per-stage (wall) times of the first run;
+whether the two runs of a side gave the same table; and how far the two marker tables and
+calibrations differ: the largest difference of the marker centres (metres, accepted and rejected
+apart), of every other float column and of the estimated offsets (radians for the angles, metres
+for the axis offset), whether every other column (ids, counts, estimator, verdicts and reasons)
+is identical, and whether the offsets and the accepted markers' centres are within
+:data:`OFFSET_TOLERANCE` and :data:`CENTRE_TOLERANCE_M` (round-off of exact rewrites; rejected
+candidates' ill-conditioned fits are only printed).
 
 Make the baseline with ``git worktree add /tmp/base-6391827 6391827``.
 
@@ -85,8 +88,12 @@ def _worker(scan_path: Path) -> None:
     t0, c0 = time.perf_counter(), time.process_time()
     res = process_station(scan, None, ref)
     total, cpu = time.perf_counter() - t0, time.process_time() - c0
+    t0, c0 = time.perf_counter(), time.process_time()
+    again = process_station(scan, None, ref)
+    again_total, again_cpu = time.perf_counter() - t0, time.process_time() - c0
     print(json.dumps({"code": str(Path(pipeline.__file__).parents[1]), "total_s": total,
-                      "cpu_s": cpu, "stages_s": res.timings_s,
+                      "cpu_s": cpu, "again_total_s": again_total, "again_cpu_s": again_cpu,
+                      "again_same": repr(again.rows) == repr(res.rows), "stages_s": res.timings_s,
                       "columns": [f.name for f in fields(MarkerRow)],
                       "rows": [astuple(r) for r in res.rows],
                       "offsets": res.calibration["offsets"]}, default=float))
@@ -130,16 +137,21 @@ def main() -> None:
     for k in range(args.repeats):
         for name, tree in sides.items():
             runs[name].append(run_worker(__file__, tree, [str(args.scan)]))
-            print(f"  repeat {k + 1} {name:4s} {runs[name][-1]['total_s']:6.2f} s wall, "
-                  f"{runs[name][-1]['cpu_s']:6.2f} s CPU (load {os.getloadavg()[0]:.2f})",
-                  flush=True)
-    for key, what in (("total_s", "wall"), ("cpu_s", "CPU (all threads)")):
+            r = runs[name][-1]
+            print(f"  repeat {k + 1} {name:4s} first {r['total_s']:6.2f} s wall, "
+                  f"{r['cpu_s']:6.2f} s CPU; again {r['again_total_s']:6.2f} s wall, "
+                  f"{r['again_cpu_s']:6.2f} s CPU (load {os.getloadavg()[0]:.2f})", flush=True)
+    for key, what in (("total_s", "wall"), ("cpu_s", "CPU (all threads)"),
+                      ("again_total_s", "again, wall"), ("again_cpu_s", "again, CPU")):
         med = {name: float(np.median([r[key] for r in rs])) for name, rs in runs.items()}
         for name, rs in runs.items():
             times = ", ".join(f"{r[key]:.2f}" for r in rs)
             print(f"{name} {what} ({sides[name]}): median {med[name]:.2f} s  [{times}]")
         print(f"ratio base / new, {what}: {med['base'] / med['new']:.2f}")
-    print("median per-stage times, s (base / new):")
+    for name, rs in runs.items():
+        print(f"{name}: the second run gave the first's marker table every time: "
+              f"{all(r['again_same'] for r in rs)}")
+    print("median per-stage times of the first run, s (base / new):")
     stages = dict.fromkeys([s for rs in runs.values() for s in rs[0]["stages_s"]])
     for stage in stages:
         b, n = (np.median([r["stages_s"].get(stage, 0.0) for r in runs[name]])
