@@ -1,14 +1,17 @@
 """Compiled inner loops of the station chain (numba, compiled on first use and cached on disk).
 
-Two loops dominate the processing of a station once its numpy forms are exhausted: the
-turntable synthesis, one 3 x 3 rotation and a shift per point of ~11 million
-(:func:`transform_frames`), and the ~900 small Gauss-Newton solves of the line-of-sight sphere
-fits, each a few dozen iterations over tens to thousands of beams
-(:func:`los_gauss_newton_fixed`). In numpy each pass over the points makes temporaries and each
-small solve pays per-call overheads far above its arithmetic; compiled, each is one pass with
-no temporaries. The formulas are those of the numpy forms they replace
-(:func:`pipeline.rig.sensor_to_station`, :func:`pipeline.sphere_fit._los_solve`); sums are taken
-in point order, so results agree with those forms to round-off.
+Once their numpy forms were exhausted, two kinds of loop dominated the processing of a station:
+passes over its ~11 million points, each making temporaries (the turntable synthesis,
+:func:`transform_frames`; the detection's thinning, :func:`range_thinned`; its ground grid,
+:func:`lowest_in_cells`; the re-search's range bands, :func:`in_wanted_bins`), and the ~900
+small Gauss-Newton sphere fits whose per-call overheads far exceed their arithmetic
+(:func:`los_gauss_newton_fixed`, :func:`gauss_newton_fixed_radius`). Compiled, each is one
+pass with no temporaries. The formulas are those of the numpy forms they replace; sums are
+taken in point order, so results agree with those forms to round-off (the thinning, the grid
+and the bands exactly).
+
+The kernels are compiled once per installation (a few seconds; cached beside this file, or in
+``NUMBA_CACHE_DIR``) and loaded once per process (under a second).
 """
 
 from __future__ import annotations
@@ -22,16 +25,16 @@ from numba import njit
 @njit(cache=True, nogil=True)
 def transform_frames(xyz_sensor_m: np.ndarray, frame_index: np.ndarray, rotation: np.ndarray,
                      translation: np.ndarray, out: np.ndarray, range_out: np.ndarray
-                     ) -> None:  # pragma: no cover
+                     ) -> None:
     """``out[i] = rotation[f] @ xyz_sensor_m[i] + translation[f]`` with ``f = frame_index[i]``,
     and optionally ``range_out[i] = |out[i]|``.
 
     Parameters
     ----------
-    xyz_sensor_m : (N, 3) float64
+    xyz_sensor_m : (N, 3) float32 or float64
         Points in the sensor frame, metres.
     frame_index : (N,) int
-        Frame of each point, indexing ``rotation`` (any order).
+        Frame of each point, indexing ``rotation`` (any order; the caller checks the range).
     rotation : (F, 3, 3) float64
         Sensor -> station rotation of each frame.
     translation : (F, 3) float64
@@ -58,7 +61,7 @@ def transform_frames(xyz_sensor_m: np.ndarray, frame_index: np.ndarray, rotation
 def los_gauss_newton_fixed(range_m: np.ndarray, beam: np.ndarray, centre_m: np.ndarray,
                            radius_m: float, var0_m2: np.ndarray, incidence_var_m2: float,
                            min_cos_incidence: float, max_iter: int, tol_m: float
-                           ) -> tuple[np.ndarray, np.ndarray]:  # pragma: no cover
+                           ) -> tuple[np.ndarray, np.ndarray]:
     """Fixed-radius line-of-sight sphere fit by damped Gauss-Newton, sensor at the origin.
 
     Minimises ``sum (rho_i - t_i(c))^2 / var_i``: ``t_i`` is the range at which beam ``i`` meets
@@ -137,7 +140,7 @@ def los_gauss_newton_fixed(range_m: np.ndarray, beam: np.ndarray, centre_m: np.n
 
 
 @njit(cache=True, nogil=True)
-def inverse3(m: np.ndarray) -> tuple[np.ndarray, bool]:  # pragma: no cover
+def inverse3(m: np.ndarray) -> tuple[np.ndarray, bool]:
     """Inverse of the leading 3 x 3 block of ``m`` by cofactors.
 
     Parameters
@@ -171,7 +174,7 @@ def inverse3(m: np.ndarray) -> tuple[np.ndarray, bool]:  # pragma: no cover
 
 @njit(cache=True, nogil=True)
 def gauss_newton_fixed_radius(points_m: np.ndarray, radius_m: float, centre_m: np.ndarray,
-                              max_iter: int, tol_m: float) -> np.ndarray:  # pragma: no cover
+                              max_iter: int, tol_m: float) -> np.ndarray:
     """Geometric least-squares sphere centre with the radius fixed, by Gauss-Newton.
 
     Minimises ``sum (|p_i - c| - R)^2``; each step solves ``U^T U s = U^T r`` (``U``: unit
@@ -228,7 +231,7 @@ def gauss_newton_fixed_radius(points_m: np.ndarray, radius_m: float, centre_m: n
 
 
 @njit(cache=True, nogil=True)
-def range_thinned(range_m: np.ndarray, limits: np.ndarray) -> np.ndarray:  # pragma: no cover
+def range_thinned(range_m: np.ndarray, limits: np.ndarray) -> np.ndarray:
     """Indices ``i`` (ascending) with ``i % int(clip((full / max(r_i, floor))^2, 1, max_stride))
     == 0``, the arithmetic in the ranges' float type.
 
@@ -257,51 +260,60 @@ def range_thinned(range_m: np.ndarray, limits: np.ndarray) -> np.ndarray:  # pra
 
 
 @njit(cache=True, nogil=True)
-def lowest_in_cells(xyz_m: np.ndarray, cell_m: float) -> np.ndarray:  # pragma: no cover
+def lowest_in_cells(xyz_m: np.ndarray, cell_m: float) -> np.ndarray:
     """Lowest z of the points in each point's horizontal grid cell.
 
     Parameters
     ----------
     xyz_m : (N, 3) float
-        Points, z up, metres (N >= 1).
+        Points, z up, metres.
     cell_m : float
         Cell size, metres; cell ``(floor(x / cell_m), floor(y / cell_m))``.
 
     Returns
     -------
     ground_z_m : (N,) float64
-        Lowest z in each point's cell, metres.
+        Lowest z in each point's cell, metres; NaN for a point whose x or y is not finite.
     """
     n = xyz_m.shape[0]
-    ix0 = ix1 = int(math.floor(xyz_m[0, 0] / cell_m))
-    iy0 = iy1 = int(math.floor(xyz_m[0, 1] / cell_m))
+    out = np.full(n, np.nan)
+    flat = np.full(n, -1, dtype=np.int64)
+    ix0 = iy0 = ix1 = iy1 = 0
+    seen = False
     for i in range(n):
-        ix, iy = int(math.floor(xyz_m[i, 0] / cell_m)), int(math.floor(xyz_m[i, 1] / cell_m))
-        ix0, ix1, iy0, iy1 = min(ix0, ix), max(ix1, ix), min(iy0, iy), max(iy1, iy)
+        x, y = xyz_m[i, 0] / cell_m, xyz_m[i, 1] / cell_m
+        if not (math.isfinite(x) and math.isfinite(y)):
+            continue
+        ix, iy = int(math.floor(x)), int(math.floor(y))
+        if seen:
+            ix0, ix1, iy0, iy1 = min(ix0, ix), max(ix1, ix), min(iy0, iy), max(iy1, iy)
+        else:
+            ix0, ix1, iy0, iy1, seen = ix, ix, iy, iy, True
+    if not seen:
+        return out
     ny = iy1 - iy0 + 1
     grid = np.full((ix1 - ix0 + 1) * ny, np.inf)
-    flat = np.empty(n, dtype=np.int64)
     for i in range(n):
-        cell = ((int(math.floor(xyz_m[i, 0] / cell_m)) - ix0) * ny
-                + int(math.floor(xyz_m[i, 1] / cell_m)) - iy0)
-        flat[i] = cell
-        grid[cell] = min(grid[cell], xyz_m[i, 2])
-    out = np.empty(n)
+        x, y = xyz_m[i, 0] / cell_m, xyz_m[i, 1] / cell_m
+        if math.isfinite(x) and math.isfinite(y):
+            flat[i] = (int(math.floor(x)) - ix0) * ny + int(math.floor(y)) - iy0
+            grid[flat[i]] = min(grid[flat[i]], xyz_m[i, 2])
     for i in range(n):
-        out[i] = grid[flat[i]]
+        if flat[i] >= 0:
+            out[i] = grid[flat[i]]
     return out
 
 
 @njit(cache=True, nogil=True)
 def in_wanted_bins(range_m: np.ndarray, bin_m: float, wanted: np.ndarray
-                   ) -> np.ndarray:  # pragma: no cover
+                   ) -> np.ndarray:
     """Indices (ascending) of the points whose range bin ``min(int(r / bin_m), len - 1)`` is
     ``wanted``.
 
     Parameters
     ----------
     range_m : (N,) float
-        Ranges, metres (non-negative).
+        Ranges, metres.
     bin_m : float
         Bin width, metres.
     wanted : (B,) bool
@@ -310,12 +322,13 @@ def in_wanted_bins(range_m: np.ndarray, bin_m: float, wanted: np.ndarray
     Returns
     -------
     indices : (n,) int64
+        Never a point whose range is negative or NaN.
     """
     out = np.empty(range_m.shape[0], dtype=np.int64)
     last = wanted.shape[0] - 1
     n = 0
     for i in range(range_m.shape[0]):
-        if wanted[int(min(range_m[i] / bin_m, last))]:
+        if range_m[i] >= 0.0 and wanted[int(min(range_m[i] / bin_m, last))]:
             out[n] = i
             n += 1
     return out[:n].copy()

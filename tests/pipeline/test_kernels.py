@@ -112,3 +112,16 @@ def test_lowest_in_cells_is_the_grid_minimum():
     lowest = np.full(inverse.max() + 1, np.inf)
     np.minimum.at(lowest, inverse, xyz[:, 2])
     np.testing.assert_array_equal(got, lowest[inverse])
+
+
+def test_points_without_a_position_get_no_ground_and_no_range_band():
+    """A NaN x, y or range is left out (ground NaN, so never "above ground"; never in a band)
+    instead of indexing the grid or the bins with an undefined integer."""
+    from pipeline.gate import within_range_bands
+
+    xyz = np.array([[0.1, 0.1, -1.0], [np.nan, 0.2, -3.0], [0.2, np.inf, -2.0], [0.3, 0.3, -0.5]])
+    got = local_ground_height(xyz, 0.5)
+    np.testing.assert_array_equal(got, [-1.0, np.nan, np.nan, -1.0])
+    assert np.isnan(local_ground_height(xyz[1:3], 0.5)).all()
+    rng = np.array([5.0, np.nan, 5.1, -1.0, 9.0])
+    np.testing.assert_array_equal(within_range_bands(rng, np.array([[5.0, 0, 0]]), 0.3), [0, 2])
