@@ -42,7 +42,6 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from markerplan.errors import DataError
-from pipeline.kernels import transform_frames
 
 #: VLP-16 laser elevation angles in channel (firing) order, degrees (VLP-16 user manual).
 VLP16_ELEVATION_DEG = (-15.0, 1.0, -13.0, 3.0, -11.0, 5.0, -9.0, 7.0,
@@ -188,6 +187,10 @@ def sensor_to_station_with_range(xyz_sensor_m: np.ndarray, frame_index: np.ndarr
 
 def _to_station(xyz_sensor_m, frame_index, turntable_angle_rad, offsets, with_range: bool
                 ) -> tuple[np.ndarray, np.ndarray]:
+    # imported here: planning imports this module for the poses, and numba costs 0.4 s and
+    # 90 MB to import
+    from pipeline.kernels import transform_frames
+
     p = np.asarray(xyz_sensor_m)
     if p.dtype not in (np.float32, np.float64):
         p = p.astype(np.float64)

@@ -53,7 +53,6 @@ from scipy.spatial import cKDTree
 from markerplan.constants import GOLDEN_ANGLE_RAD
 from markerplan.errors import ConfigError, DataError
 from markerplan.reading import MAX_ABS_COORDINATE_M
-from pipeline.kernels import gauss_newton_fixed_radius, los_gauss_newton_fixed
 from pipeline.sensor_noise import MAX_TAN_INCIDENCE, RangeNoise
 
 METHODS = ("fixed-radius", "hemisphere-icp")
@@ -278,7 +277,10 @@ def lsq_fixed_radius(points_m: np.ndarray, radius_m: float, centre0_m: np.ndarra
     -------
     centre_m : (3,) float
     """
-    return gauss_newton_fixed_radius(np.ascontiguousarray(points_m), float(radius_m),
+    # imported here: planning imports this module, and numba costs 0.4 s and 90 MB to import
+    from pipeline.kernels import gauss_newton_fixed_radius
+
+    return gauss_newton_fixed_radius(np.ascontiguousarray(points_m, dtype=float), float(radius_m),
                                      np.array(centre0_m, dtype=float).reshape(3),
                                      int(max_iter), float(tol_m))
 
@@ -678,6 +680,8 @@ def _los_solve(rng, beam, centre, radius, noise, free_radius=False, max_iter=50,
     var0 = noise.total_sigma_m(rng) ** 2  # variance at normal incidence, (n,)
     inc2 = noise.incidence_noise_m ** 2
     if not free_radius:
+        from pipeline.kernels import los_gauss_newton_fixed  # as in lsq_fixed_radius
+
         c, cov = los_gauss_newton_fixed(
             np.ascontiguousarray(rng, dtype=float), np.ascontiguousarray(beam, dtype=float),
             np.array(centre, dtype=float), float(radius), np.ascontiguousarray(var0, dtype=float),

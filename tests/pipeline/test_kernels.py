@@ -125,3 +125,15 @@ def test_points_without_a_position_get_no_ground_and_no_range_band():
     assert np.isnan(local_ground_height(xyz[1:3], 0.5)).all()
     rng = np.array([5.0, np.nan, 5.1, -1.0, 9.0])
     np.testing.assert_array_equal(within_range_bands(rng, np.array([[5.0, 0, 0]]), 0.3), [0, 2])
+
+
+def test_planning_does_not_load_numba():
+    """numba costs 0.4 s and 90 MB to import: `plan` (which imports the rig and the sphere fit
+    for their constants and poses) must not pay for it."""
+    import subprocess
+    import sys
+
+    code = ("import sys, planner.cli.plan, planner.cli.verify, planner.cli.simulate; "
+            "print('numba' in sys.modules)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "False"
