@@ -1,7 +1,7 @@
 """Network adjustment speed: 100 stations, about 1,000 marker observations (issue 12: < 1 s).
 
 Prints the median wall time of
-  (a) :func:`pipeline.network_adjustment.adjust` as shipped: Gauss-Newton on the sparse normal
+  (a) :func:`pipeline.network.adjustment.adjust` as shipped: Gauss-Newton on the sparse normal
       equations (SuperLU), full covariance, w-tests, data snooping on (clean data, so only the
       false alarms alpha0 allows are removed), MDBs and their effects;
   (b) the baseline "dense normal equations": the same adjustment with every Gauss-Newton step
@@ -63,8 +63,8 @@ def main() -> None:
 
     import numpy as np
 
-    from pipeline.network_adjustment import adjust
-    from pipeline.network_simulation import simulated_network
+    from pipeline.network.adjustment import adjust
+    from pipeline.network.simulation import simulated_network
 
     obs, truth = simulated_network(n_stations=args.stations,
                                    markers_per_station=args.markers_per_station, seed=args.seed)

@@ -5,9 +5,9 @@ In one run:
 1. plans the ``large`` preset (``markerplan plan --site large``) and reads the planning
    visibility time from its timings line (per station: visibility seconds / stations);
 2. verifies the first ``--stations`` stations of that plan with the same seed, as
-   ``markerplan verify`` does (:func:`planner.verify.map_stations` with
-   :func:`planner.verify.check_station`, each station's processing timed inside its task):
-   (a) ``--scheduler none``, the single-process baseline (Embree on all cores),
+   ``markerplan verify`` does (:func:`planner.verify.known_control.map_stations` with
+   :func:`planner.verify.known_control.check_station`, each station's processing timed inside its
+   task): (a) ``--scheduler none``, the single-process baseline (Embree on all cores),
    (b) a LocalCluster of ``--workers`` worker processes (one thread each), its start-up and
    the DEM's broadcast included;
    alternating (a, b, a, b, ... ``--repeat`` times each, so that other work on a shared machine
@@ -41,8 +41,8 @@ from pathlib import Path
 from error_model.default import default_model
 from pipeline.stages import build_config
 from planner.distributed import IN_PROCESS, LOCAL, executor
-from planner.plan_file import load_plan
-from planner.verify import check_station, map_stations
+from planner.outputs.plan_file import load_plan
+from planner.verify.known_control import check_station, map_stations
 
 
 def timed(process, *args):

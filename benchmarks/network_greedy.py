@@ -10,7 +10,7 @@ Builds the site's network problem (``km``: datum at the station nearest the cent
 
 - old: ``net.information(selected)`` and ``net.covariance`` of it (and, while some station
   is undetermined, of the regularised ``J + 0.05 J_all`` too), as the greedy did per step;
-- new: :meth:`planner.network_accuracy.GrowingCovariance.add` on the layout (and on the
+- new: :meth:`planner.accuracy.network.GrowingCovariance.add` on the layout (and on the
   regularised information while undetermined).
 
 Phase "undetermined" starts from the greedy's directions-only cover (stations not yet tied)
@@ -46,7 +46,7 @@ from process_speed import run_worker
 
 def _replay(net, start: np.ndarray, sites: np.ndarray, j_all: np.ndarray) -> dict:
     """Seconds per step of the old and the new update over ``sites`` added to ``start``."""
-    from planner.network_accuracy import GrowingCovariance
+    from planner.accuracy.network import GrowingCovariance
 
     selected = start.copy()
     old = []
@@ -78,7 +78,7 @@ def _worker(problem_file: Path) -> None:
     """Time ``greedy_network`` on the pickled (problem, config); print a JSON line."""
     import planner
     from markerplan.errors import InfeasiblePlanError
-    from planner.baselines import greedy_network
+    from planner.program.baselines import greedy_network
 
     with open(problem_file, "rb") as f:
         problem, config = pickle.load(f)
@@ -119,7 +119,7 @@ def _against(base: Path, problem, config, repeats: int) -> dict:
 
 def _curve(problem, config, net, fractions: list[float]) -> list[dict]:
     """Station errors of the directions-only cover plus random shares of the tying sites."""
-    from planner.baselines import greedy_cover
+    from planner.program.baselines import greedy_cover
 
     cover = greedy_cover(problem, config.replace(network=False, requirement_m=1e9)).selected
     tying = np.flatnonzero(net.tying)
@@ -164,10 +164,11 @@ def main() -> None:
 
     from error_model import default_model
     from markerplan.errors import InfeasiblePlanError
-    from planner.baselines import greedy_cover, greedy_network
+    from planner.accuracy.network import network_model
     from planner.config import PlanConfig
-    from planner.network_accuracy import network_model
-    from planner.planning import build_problem, load_inputs
+    from planner.problem.inputs import load_inputs
+    from planner.program.baselines import greedy_cover, greedy_network
+    from planner.run import build_problem
 
     inputs = load_inputs(args.site)
     ref = None

@@ -16,7 +16,7 @@ regular-grid baselines, per site.
 default=1,large=3``). Prints the tables of every site (errors in cm, 95 %, relative to the
 reference station), then one JSON object; ``--out DIR`` also writes
 ``<site>_error_vs_distance.png`` and ``<site>_tradeoff.png``. The study code is
-:mod:`planner.network_studies` (shared with ``notebooks/06_network_mode.py``).
+:mod:`planner.studies.network` (shared with ``notebooks/06_network_mode.py``).
 """
 
 from __future__ import annotations
@@ -50,7 +50,7 @@ def _per_site(text: str, sites: list[str]) -> dict[str, float]:
 
 def _log(letter: str, doc: dict) -> None:
     """Progress on stderr: each study's table as soon as it is done."""
-    from planner import network_studies as ns
+    from planner.studies import network as ns
 
     lines = ns.report_lines(doc, letter, header=False)
     print(f"[{doc['site']}, {time.strftime('%H:%M:%S')}]" + "\n".join(lines), file=sys.stderr,
@@ -59,9 +59,10 @@ def _log(letter: str, doc: dict) -> None:
 
 def run_site(site: str, args, grid_spacing_m: float) -> dict:
     from error_model import default_model
-    from planner import network_studies as ns
     from planner.config import PlanConfig
-    from planner.planning import build_problem, load_inputs, plan_bounds
+    from planner.problem.inputs import load_inputs
+    from planner.run import build_problem, plan_bounds
+    from planner.studies import network as ns
 
     t0 = time.perf_counter()
     inputs = load_inputs(site)

@@ -24,10 +24,11 @@ def main() -> None:
     args = ap.parse_args()
 
     from error_model import default_model
-    from planner.baselines import greedy_cover
     from planner.config import PlanConfig
-    from planner.planning import build_problem, load_inputs
+    from planner.problem.inputs import load_inputs
     from planner.program import plan_sites
+    from planner.program.baselines import greedy_cover
+    from planner.run import build_problem
 
     t = time.perf_counter()
     inputs = load_inputs(args.site)

@@ -26,11 +26,12 @@ def _run(site: str, grid_spacing: float, time_limit: float, greedy_batch: int,
          requirement_m: float) -> dict:
     from error_model import default_model
     from markerplan.errors import InfeasiblePlanError
-    from planner.baselines import greedy_network
+    from planner.accuracy.network import network_model
     from planner.config import PlanConfig
-    from planner.network_accuracy import network_model
-    from planner.planning import build_problem, load_inputs
+    from planner.problem.inputs import load_inputs
     from planner.program import plan_sites
+    from planner.program.baselines import greedy_network
+    from planner.run import build_problem
 
     inputs = load_inputs(site)
     config = PlanConfig(grid_spacing_m=grid_spacing, time_limit_s=time_limit,

@@ -38,15 +38,16 @@ def cache_path(site: str, seed: int | None, grid_spacing: float) -> Path:
 
 
 def cached_problem(site: str, seed: int | None, grid_spacing: float):
-    """The :class:`~planner.usability.PlanProblem` of a site preset (default config, the
+    """The :class:`~planner.problem.usability.PlanProblem` of a site preset (default config, the
     given grid), from the /tmp cache or built (and cached)."""
-    from planner.usability import PlanProblem
+    from planner.problem.usability import PlanProblem
 
     path = cache_path(site, seed, grid_spacing)
     if not path.exists():
         from error_model import default_model
         from planner.config import PlanConfig
-        from planner.planning import build_problem, load_inputs
+        from planner.problem.inputs import load_inputs
+        from planner.run import build_problem
 
         t = time.perf_counter()
         inputs = load_inputs(site, seed)
@@ -107,7 +108,7 @@ def plain_model(problem, config) -> dict:
     import highspy
     import scipy.sparse as sp
 
-    from planner.usability import sector_index
+    from planner.problem.usability import sector_index
 
     t = time.perf_counter()
     use = np.flatnonzero(problem.pair_usable)
@@ -192,7 +193,7 @@ def main() -> None:
     args = ap.parse_args()
 
     from planner.config import PlanConfig
-    from planner.highs_model import highs_version
+    from planner.program.highs import highs_version
 
     base = Path("/tmp/base-prog")
     if not base.exists():

@@ -24,11 +24,12 @@ import numpy as np
 from nbsetup import OUT, plt, save
 
 from error_model import default_model
+from planner.accuracy.checks import evaluate_layout
 from planner.config import PlanConfig
-from planner.plan_map import draw_plan_map
-from planner.planning import load_inputs, make_plan
-from planner.station_checks import evaluate_layout
-from planner.usability import REASONS
+from planner.outputs.plan_map import draw_plan_map
+from planner.problem.inputs import load_inputs
+from planner.problem.usability import REASONS
+from planner.run import make_plan
 
 # %% [markdown]
 # ## Inputs and configuration

@@ -24,7 +24,7 @@ from nbsetup import OUT, plt, save
 
 from error_model import default_model
 from planner.config import PlanConfig
-from planner.planning import load_inputs
+from planner.problem.inputs import load_inputs
 from planner.reduction.plot import plot_tradeoff
 from planner.reduction.report import reduce_record
 from planner.reduction.study import layout_problem, read_layout, run_study

@@ -23,7 +23,7 @@
 # the requirement. This notebook tells the story on the `default` site (7 stations: a centre and
 # a hexagon of radius 12 m), on a coarse 2 m candidate grid so it stays quick; the figures of the
 # 1 m grid are in `docs/planner.md` ("Network mode studies",
-# `benchmarks/network_studies.py`). The study functions are `planner.network_studies`.
+# `benchmarks/network_studies.py`). The study functions are `planner.studies.network`.
 #
 # Figures go to `$MARKERPLAN_NB_OUT` (default: a fresh temporary folder).
 
@@ -32,10 +32,11 @@ import numpy as np
 from nbsetup import OUT, plt, save
 
 from error_model import default_model
-from planner import network_studies as ns
+from planner.accuracy.network import network_model
 from planner.config import PlanConfig
-from planner.network_accuracy import network_model
-from planner.planning import build_problem, load_inputs, plan_bounds
+from planner.problem.inputs import load_inputs
+from planner.run import build_problem, plan_bounds
+from planner.studies import network as ns
 
 # %% [markdown]
 # ## The site and the problem

@@ -84,7 +84,7 @@ class PlanConfig:
         Ids of candidate sites that must not be used.
     network : bool
         Network mode: markers are unknowns estimated with every station's pose, tied to the
-        reference station (:mod:`planner.network_accuracy`); default known control.
+        reference station (:mod:`planner.accuracy.network`); default known control.
     reference_station : str or None
         Network mode: id of the datum station (x, y, z, heading fixed); ``None``: the first.
     heading_prior_sigma_deg : float or None

@@ -2,9 +2,9 @@
 dask.distributed, or over a plain loop in this process.
 
 This is the only module that knows about a cluster. The task functions it runs are ordinary
-functions of picklable arguments (:func:`planner.verify.station_task`, ...); they return small
-results and never learn where they run, so a cluster and the in-process loop give the same
-results, and byte-identical files.
+functions of picklable arguments (:func:`planner.verify.known_control.station_task`, ...);
+they return small results and never learn where they run, so a cluster and the in-process loop
+give the same results, and byte-identical files.
 
 Three ways to run, chosen by ``--scheduler`` (:func:`executor`):
 

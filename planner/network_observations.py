@@ -18,7 +18,7 @@ Three steps, each a function, so ``markerplan adjust`` only strings them togethe
      simulated scans is the simulator's truth, so ``plan`` and ``geometry`` are the ones that
      test identification (:func:`identify_from_table`);
 3. :func:`network_observations` — the identified detections as
-   :class:`pipeline.network_adjustment.NetworkObservations` (stations in the order the tables
+   :class:`pipeline.network.adjustment.NetworkObservations` (stations in the order the tables
    give them, so the first station is the default datum).
 
 Frames: detections are in each station's levelled station frame (origin at the LiDAR centre, z
@@ -215,8 +215,8 @@ class PlanGeometry:
 
 def read_plan_geometry(path: Path) -> PlanGeometry:
     """Markers, stations and requirement of a ``plan.json`` (checked by
-    :func:`planner.plan_file.read_plan`, typed by :func:`planner.plan_file.plan_layout`; the
-    terrain is not loaded).
+    :func:`planner.outputs.plan_file.read_plan`, typed by
+    :func:`planner.outputs.plan_file.plan_layout`; the terrain is not loaded).
 
     Parameters
     ----------
@@ -230,10 +230,10 @@ def read_plan_geometry(path: Path) -> PlanGeometry:
     Raises
     ------
     InputFileError
-        As :func:`planner.plan_file.read_plan`, or an inclinometer or heading-prior sigma in its
-        configuration that is not a number in (0, 10] degrees.
+        As :func:`planner.outputs.plan_file.read_plan`, or an inclinometer or heading-prior sigma in
+        its configuration that is not a number in (0, 10] degrees.
     """
-    from planner.plan_file import plan_dem_path, plan_layout, read_plan
+    from planner.outputs.plan_file import plan_dem_path, plan_layout, read_plan
 
     doc = read_plan(path, "--plan", full=True)
     cfg = doc["provenance"].get("config", {})
@@ -288,7 +288,7 @@ def identify_with_plan(stations: list[StationDetections], plan: PlanGeometry,
                        odometry_sigma_m: float, odometry_heading_sigma_rad: float) -> Identified:
     """Marker ids by gated association with the plan's markers, from each station's nominal
     (planned) pose with the odometry's sigma
-    (:func:`pipeline.marker_association.associate_with_plan`).
+    (:func:`pipeline.network.association.associate_with_plan`).
 
     Raises
     ------
@@ -302,7 +302,7 @@ def identify_with_plan(stations: list[StationDetections], plan: PlanGeometry,
             f"station(s) {', '.join(foreign)} of the marker tables are not in --plan "
             f"{plan.path} (it holds {_id_range(plan.station_ids)}); are the tables from "
             "another site? Give that site's plan, or leave out --plan to associate by geometry")
-    from pipeline.marker_association import associate_with_plan
+    from pipeline.network.association import associate_with_plan
 
     ids, reasons = [], []
     for s in stations:
@@ -325,9 +325,9 @@ def identify_with_plan(stations: list[StationDetections], plan: PlanGeometry,
 def identify_by_geometry(stations: list[StationDetections],
                          inclinometer_sigma_rad: float) -> Identified:
     """Marker ids from consistent inter-marker distances across stations
-    (:func:`pipeline.marker_association.associate_by_geometry`, with each detection's sigma and
+    (:func:`pipeline.network.association.associate_by_geometry`, with each detection's sigma and
     the inclinometer's residual tilt); a marker seen by one station gets an id of its own."""
-    from pipeline.marker_association import associate_by_geometry
+    from pipeline.network.association import associate_by_geometry
 
     found = associate_by_geometry([(s.station_id, s.xyz_m) for s in stations],
                                   [s.sigma_m for s in stations],
@@ -351,7 +351,7 @@ def identify_from_table(stations: list[StationDetections]) -> Identified:
 
 
 def network_observations(identified: Identified):
-    """The identified detections as :class:`pipeline.network_adjustment.NetworkObservations`.
+    """The identified detections as :class:`pipeline.network.adjustment.NetworkObservations`.
 
     Stations keep the order of ``identified.stations`` (those with no identified detection are
     left out); markers are numbered in order of first sight. Unidentified detections are left
@@ -363,10 +363,10 @@ def network_observations(identified: Identified):
 
     Returns
     -------
-    obs : pipeline.network_adjustment.NetworkObservations
+    obs : pipeline.network.adjustment.NetworkObservations
         Levelled station frames, m; ``sigma_m`` the error model's.
     """
-    from pipeline.network_adjustment import NetworkObservations
+    from pipeline.network.adjustment import NetworkObservations
 
     station_ids, marker_ids = [], {}
     st, mk, xyz, sig = [], [], [], []
@@ -391,7 +391,7 @@ def read_control(path: Path):
 
     Returns
     -------
-    control : tuple of pipeline.network_adjustment.ControlPoint
+    control : tuple of pipeline.network.adjustment.ControlPoint
 
     Raises
     ------
@@ -399,7 +399,7 @@ def read_control(path: Path):
         Missing file, missing columns, no rows, repeated or empty ids, non-finite numbers or a
         sigma that is not > 0.
     """
-    from pipeline.network_adjustment import ControlPoint
+    from pipeline.network.adjustment import ControlPoint
 
     what = f"--control {path}"
     header, rows = read_csv(path, what, CONTROL_COLUMNS,
@@ -465,17 +465,17 @@ def nominal_poses(plan, obs):
     Parameters
     ----------
     plan : PlanGeometry or None
-    obs : pipeline.network_adjustment.NetworkObservations
+    obs : pipeline.network.adjustment.NetworkObservations
 
     Returns
     -------
-    nominal : pipeline.network_adjustment.NominalPoses or None
+    nominal : pipeline.network.adjustment.NominalPoses or None
         Positions (s, 3), site frame, m, and headings (s,), rad, in ``obs.station_ids``'
         order (the plan's order is not the tables'); ``None`` without a plan.
     """
     if plan is None:
         return None
-    from pipeline.network_adjustment import NominalPoses
+    from pipeline.network.adjustment import NominalPoses
 
     k = [plan.station_ids.index(s) for s in obs.station_ids]
     return NominalPoses(plan.station_xyz_m[k], plan.station_heading_rad[k])

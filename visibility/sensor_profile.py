@@ -57,7 +57,7 @@ class SensorProfile:
     turntable : TurntableErrors
     reference : TotalStationReference
     calibration : dict or None
-        How the profile was fitted (see :mod:`visibility.sensor_calibration`).
+        How the profile was fitted (see :mod:`planner.studies.sensor_calibration`).
     """
 
     name: str

@@ -15,8 +15,8 @@
     0.5-2 m, 100 stations on a jittered 30 m grid, 121 markers on the offset 30 m grid.
 ``km``
     A kilometre-scale crater field: DEM 1 km x 1 km at 0.25 m cells (4001 x 4001 cells,
-    32 M triangles: too big for one ray scene, so plans tile it, :mod:`planner.sight`). Random
-    craters 1-40 m from the equilibrium SFD (``b = 2``) at 5 % of the mare density, rocks
+    32 M triangles: too big for one ray scene, so plans tile it, :mod:`planner.problem.sight`).
+    Random craters 1-40 m from the equilibrium SFD (``b = 2``) at 5 % of the mare density, rocks
     0.3-1.5 m (Golombek & Rapp, k = 1 %). About 300 stations every 20 m along a serpentine
     rover traverse (six 900 m east-west legs 160 m apart, jittered 2 m), markers every 60 m
     along the legs, 10 m to the side.

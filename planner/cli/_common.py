@@ -30,7 +30,7 @@ option                      meaning (and the value the command receives)
 ``--config FILE``           TOML plan settings; ``--boundary``, ``--exclude``: GeoJSON polygons
 ``--time-limit S``          solver time limit, seconds
 ``--network``               network mode: markers and stations estimated together, tied to
-                            the reference station (:mod:`planner.network_accuracy`)
+                            the reference station (:mod:`planner.accuracy.network`)
 ``--reference-station ID``  the datum station of network mode (default the first station);
                             refused outside network mode (:func:`network_settings`)
 ``--scheduler ADDRESS``     where the per-station tasks run: ``local`` (a LocalCluster sized to
@@ -42,7 +42,7 @@ option                      meaning (and the value the command receives)
 Helpers: :func:`emit_summary` (JSON or human summary), :func:`report_timings` (step timings on
 stderr, never in files), :func:`given_paths` (the inputs an output folder must not contain).
 ``--station-ids`` is checked against the stations at hand by
-:func:`planner.planning.select_stations`.
+:func:`planner.problem.inputs.select_stations`.
 """
 
 from __future__ import annotations
@@ -363,7 +363,7 @@ def network_settings(config, network: bool | None, reference_station: str | None
     """``config`` (a :class:`~planner.config.PlanConfig`) with ``--network`` and
     ``--reference-station`` applied; :func:`require_network` refuses the datum outside
     network mode. Whether the station exists is checked where the stations are known
-    (:func:`planner.network_accuracy.network_model`)."""
+    (:func:`planner.accuracy.network.network_model`)."""
     config = with_options(config, network=True if network else None,
                           reference_station=reference_station)
     require_network(reference_station, config.network)

@@ -135,10 +135,10 @@ def command(tables, out, overwrite, error_model, plan_path, identity, odometry_s
     timings: dict[str, float] = {}
     inputs = given_paths(*tables, plan_path, control_path, error_model.path)
     with output_folder(out, overwrite, "adjust", inputs=inputs) as stage:
-        from pipeline.network_adjustment import AdjustmentSettings, Datum, adjust
+        from pipeline.network.adjustment import AdjustmentSettings, Datum, adjust
         from planner import network_observations as no
-        from planner.network_files import write_network_files
-        from planner.network_record import AdjustmentRun, frame_note
+        from planner.network.files import write_network_files
+        from planner.network.record import AdjustmentRun, frame_note
 
         t0 = time.perf_counter()
         plan = no.read_plan_geometry(plan_path) if plan_path is not None else None

@@ -35,10 +35,10 @@ from planner.cli._common import (
               help="Profile whose other parameters stay fixed (calibrated, datasheet or a file).")
 @click.option("--fix", "fixed", multiple=True, metavar="NAME=VALUE",
               help="Fix a profile parameter (repeatable), e.g. reference.aim_sigma_m=0.003; "
-                   "default: the field priors of visibility.sensor_calibration.")
+                   "default: the field priors of planner.studies.sensor_calibration.")
 @click.option("--fit", "free", multiple=True, metavar="NAME=LOW:HIGH",
               help="A parameter to fit and its search range (one or two; repeatable). "
-                   "Default: the one of visibility.sensor_calibration.DEFAULT_FREE.")
+                   "Default: the one of planner.studies.sensor_calibration.DEFAULT_FREE.")
 @click.option("--name", default="calibrated", show_default=True,
               help="Name of the written profile.")
 @frames_option
@@ -81,13 +81,13 @@ def command(summary, marker_table, reference, out, overwrite, base_profile, fixe
 
     from markerplan.errors import ConfigError
     from markerplan.output_folder import output_folder
-    from visibility.calibration_report import write_calibration
-    from visibility.field_summary import (
+    from planner.studies.calibration_report import write_calibration
+    from planner.studies.field_summary import (
         FIELD_EXPERIMENT_CSV,
         positions_from_marker_table,
         read_field_summary,
     )
-    from visibility.sensor_calibration import (
+    from planner.studies.sensor_calibration import (
         DEFAULT_FREE,
         FIELD_PRIORS,
         CalibrationSettings,

@@ -99,10 +99,10 @@ def command(site_name, site_seed, dem_path, reproject, stations_path, station_id
     """
     from markerplan.output_folder import output_folder
     from planner.distributed import executor
-    from planner.gis_output import write_stand_map
-    from planner.plan_map import draw_plan_map
-    from planner.report import plan_timings, summary, write_plan_files
-    from planner.stand_map import stand_map
+    from planner.outputs.gis import write_stand_map
+    from planner.outputs.plan_map import draw_plan_map
+    from planner.outputs.report import plan_timings, summary, write_plan_files
+    from planner.outputs.stand_map import stand_map
 
     inputs_given = given_paths(dem_path, stations_path, boundary_path, error_model.path,
                                config_path, visibility_path, *exclude_paths,
@@ -166,7 +166,8 @@ def _plan(site_name, site_seed, dem_path, stations_path, station_ids, boundary_p
     casting's station blocks (:func:`visibility.visibility_matrix.tiled_visibility`)."""
     from markerplan.errors import ConfigError
     from planner.config import PlanConfig, load_config
-    from planner.planning import load_inputs, make_plan
+    from planner.problem.inputs import load_inputs
+    from planner.run import make_plan
 
     config = with_options(load_config(config_path) if config_path else PlanConfig(),
                           redundant=True if redundant else None, budget=budget,
@@ -181,7 +182,7 @@ def _plan(site_name, site_seed, dem_path, stations_path, station_ids, boundary_p
         config = config.replace(existing=tuple(inputs.existing_ids))
     problem = None
     if visibility_path is not None:
-        from planner.visibility_io import read_visibility_table
+        from planner.problem.visibility_table import read_visibility_table
 
         problem = read_visibility_table(visibility_path, inputs.station_ids, inputs.station_xyz)
         if inputs.existing_ids:

@@ -74,7 +74,7 @@ def command(out, overwrite, frames, replicates, seed, profile, rpm, range_noise_
 
     from markerplan.output_folder import output_folder
     from planner.distributed import executor
-    from visibility.range_experiment import run_range_study, write_range_study
+    from planner.studies.range_experiment import run_range_study, write_range_study
 
     progress = not as_json or sys.stderr.isatty()
     with executor(scheduler, workers, progress) as ex, \

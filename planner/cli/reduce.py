@@ -145,7 +145,7 @@ def _study(layout_spec, sources, error_model, config_path, free, keep_ids, drop_
     from markerplan.errors import ConfigError
     from pipeline.rig import MountingOffsets
     from planner.config import load_config
-    from planner.planning import known_ids
+    from planner.problem.inputs import known_ids
     from planner.reduction.report import reduce_record
     from planner.reduction.study import layout_problem, resolve_inputs, run_study
 

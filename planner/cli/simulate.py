@@ -88,7 +88,7 @@ def command(site_name: str, site_seed: int | None, dem_path: Path | None, reproj
     from tqdm import tqdm
 
     from markerplan.output_folder import output_folder
-    from planner.planning import select_stations
+    from planner.problem.inputs import select_stations
     from visibility.simulate import simulate_site, write_site_json
 
     sensor = profile.sensor_config(rpm, range_noise_m=_metres(range_noise_mm),
@@ -125,7 +125,7 @@ def _site(site_name, site_seed, dem_path, dem_fill, stations_path, marker_radius
     are then in its file's CRS), stations and marker radius given."""
     import numpy as np
 
-    from planner.planning import read_stations
+    from planner.problem.inputs import read_stations
     from visibility.dem import read_dem
     from visibility.sites import (
         load_site,

@@ -93,9 +93,9 @@ def command(plan_path, error_model, seed, station_ids, offsets, profile, network
     from markerplan.errors import InfeasiblePlanError
     from markerplan.output_folder import output_folder
     from planner.distributed import executor
-    from planner.plan_file import load_plan
-    from planner.planning import select_stations
-    from planner.verify import verify_markdown, verify_plan, verify_record
+    from planner.outputs.plan_file import load_plan
+    from planner.problem.inputs import select_stations
+    from planner.verify.known_control import verify_markdown, verify_plan, verify_record
 
     plan = load_plan(plan_path)
     ids = select_stations([s.id for s in plan.stations], station_ids)
@@ -104,7 +104,7 @@ def command(plan_path, error_model, seed, station_ids, offsets, profile, network
     network = network or planned_network
     require_network(reference_station, network)
     if network:
-        from planner.verify_network import NetworkVerifySettings
+        from planner.verify.network import NetworkVerifySettings
 
         settings = NetworkVerifySettings(odometry_sigma_m, odometry_heading_sigma_deg)
         _verify_network(plan_path, plan, ids, inputs, error_model, seed, offsets, profile,
@@ -135,7 +135,7 @@ def command(plan_path, error_model, seed, station_ids, offsets, profile, network
 def _verify_network(plan_path, plan, ids, inputs, error_model, seed, offsets, profile, settings,
                     out, overwrite, as_json, datum, where):
     """``verify --network``: scan, write the marker table, adjust and compare
-    (:mod:`planner.verify_network`); exit code 1 when a station fails. ``datum``: the
+    (:mod:`planner.verify.network`); exit code 1 when a station fails. ``datum``: the
     ``--reference-station`` given (a network plan's own datum only); ``where``: ``(scheduler,
     workers)`` of the station tasks."""
     import json
@@ -144,8 +144,8 @@ def _verify_network(plan_path, plan, ids, inputs, error_model, seed, offsets, pr
     from markerplan.output_folder import output_folder
     from pipeline.marker_table import write_marker_table
     from planner.distributed import executor
-    from planner.plan_file import read_plan
-    from planner.verify_network import (
+    from planner.outputs.plan_file import read_plan
+    from planner.verify.network import (
         adjust_and_compare,
         network_markdown,
         network_record,

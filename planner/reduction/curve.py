@@ -1,10 +1,10 @@
 """What-if marker reduction: how few of a layout's markers still meet the requirement.
 
-For a :class:`~planner.usability.PlanProblem` whose candidate sites are the markers that may be
-kept (a layout, or with ``--free`` every candidate site), three studies:
+For a :class:`~planner.problem.usability.PlanProblem` whose candidate sites are the markers that may
+be kept (a layout, or with ``--free`` every candidate site), three studies:
 
 - :func:`tradeoff_curve`: for every count ``k``, the ``k`` markers that minimise the **worst
-  station's** predicted error (:mod:`planner.station_checks`), proven by integer programming;
+  station's** predicted error (:mod:`planner.accuracy.checks`), proven by integer programming;
 - :func:`drop_order`: remove one marker at a time, each time the one whose loss hurts least;
 - :func:`marker_losses`: for every marker, the layout without it (robustness).
 
@@ -35,7 +35,7 @@ subset plus its best additions, so the curve stays monotone.
 Network mode
 ------------
 With ``config.network`` the errors are the network's relative to the datum
-(:mod:`planner.network_accuracy`) and a count's worst error is the worst of its stations and its
+(:mod:`planner.accuracy.network`) and a count's worst error is the worst of its stations and its
 kept markers, as ``plan --network`` judges a layout. Each question "is there a ``k``-subset with
 everything <= ``eps``?" is then the planner's own network program
 (:func:`planner.program.plan_sites`, requirement ``eps``, budget row ``= k``): see
@@ -50,7 +50,9 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from markerplan.errors import ConfigError, InfeasiblePlanError, PlanTimeLimitError
-from planner.network_accuracy import network_model
+from planner.accuracy.checks import LayoutCheck, diagnose, evaluate_layout, station_infos
+from planner.accuracy.network import network_model
+from planner.problem.usability import PlanProblem, directions_ok
 from planner.program import (
     Model,
     RowKind,
@@ -60,8 +62,6 @@ from planner.program import (
     solve,
     with_tightening_rows,
 )
-from planner.station_checks import LayoutCheck, diagnose, evaluate_layout, station_infos
-from planner.usability import PlanProblem, directions_ok
 
 #: Final bisection step: a subset is proven optimal when nothing is feasible this far below it.
 REL_TOL = 1e-9
@@ -145,7 +145,7 @@ def _worst_marker(marker_error_m) -> float | None:
 
 
 def check_worst(check: LayoutCheck) -> float:
-    """Worst error of a :class:`~planner.station_checks.LayoutCheck`, m: the worst station,
+    """Worst error of a :class:`~planner.accuracy.checks.LayoutCheck`, m: the worst station,
     and in network mode also the worst selected marker (both relative to the datum)."""
     markers = _worst_marker(check.marker_error_m)
     worst = float(check.error_m.max())
@@ -819,7 +819,7 @@ def layout_checker(problem: PlanProblem, config):
 
 
 def failure_reason(check, s: int, config) -> str:
-    """Why station ``s`` fails in a :class:`~planner.station_checks.LayoutCheck` ("" when it
+    """Why station ``s`` fails in a :class:`~planner.accuracy.checks.LayoutCheck` ("" when it
     passes)."""
     why = []
     if check.count[s] < config.min_markers:

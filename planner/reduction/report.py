@@ -73,8 +73,8 @@ def _failing(prob, check, cfg) -> dict[str, str]:
 
 def _network(prob, cfg) -> dict:
     """The datum of a network-mode study (as ``plan.json``'s ``network.datum``)."""
-    from pipeline.network_adjustment import POSE_PARAMETERS
-    from planner.network_accuracy import network_model
+    from pipeline.network.adjustment import POSE_PARAMETERS
+    from planner.accuracy.network import network_model
 
     ref = prob.station_ids[network_model(prob, cfg).reference]
     return {"datum": {"kind": "station", "reference_station": ref,

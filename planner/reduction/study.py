@@ -2,10 +2,10 @@
 
 The layout comes from a plan (``plan.json``), a markers CSV (``id, x_m, y_m[, z_m]``, site
 frame) or the site preset's as-built layout (``"as-built"``), on the site inputs of
-:func:`planner.planning.load_inputs`. :func:`layout_problem` ray-casts the stations against the
-layout's markers (:func:`planner.sight.sight_problem`, as a plan does) or, with ``free``, against
-every candidate site plus the layout (:func:`planner.planning.build_problem`); the studies are
-:mod:`planner.reduction.curve`.
+:func:`planner.problem.inputs.load_inputs`. :func:`layout_problem` ray-casts the stations against
+the layout's markers (:func:`planner.problem.sight.sight_problem`, as a plan does) or, with
+``free``, against every candidate site plus the layout (:func:`planner.run.build_problem`); the
+studies are :mod:`planner.reduction.curve`.
 """
 
 from __future__ import annotations
@@ -18,9 +18,11 @@ import numpy as np
 import shapely
 
 from markerplan.errors import DataError, InputFileError
-from planner import plan_file
 from planner.config import PlanConfig, config_from_dict
-from planner.planning import build_problem, load_inputs, read_markers
+from planner.outputs import plan_file
+from planner.problem.inputs import load_inputs, read_markers
+from planner.problem.sight import sight_problem
+from planner.problem.usability import PlanProblem
 from planner.reduction.curve import (
     Curve,
     DropStep,
@@ -29,8 +31,7 @@ from planner.reduction.curve import (
     marker_losses,
     tradeoff_curve,
 )
-from planner.sight import sight_problem
-from planner.usability import PlanProblem
+from planner.run import build_problem
 
 AS_BUILT = "as-built"
 
@@ -102,7 +103,7 @@ def read_layout(spec: str, inputs) -> Layout:
     ----------
     spec : str
         ``"as-built"``, a ``plan.json`` written by ``markerplan plan`` or a markers CSV.
-    inputs : planner.planning.PlanInputs
+    inputs : planner.problem.inputs.PlanInputs
 
     Raises
     ------
@@ -143,13 +144,13 @@ def resolve_inputs(spec: str, site_name: str | None = None, site_seed: int | Non
     spec : str
         ``"as-built"``, a ``plan.json`` or a markers CSV (``id, x_m, y_m[, z_m]``).
     site_name, site_seed, dem_path, stations_path, boundary_path, exclude_paths, marker_radius_m
-        As for :func:`planner.planning.load_inputs` (``site``, ``site_seed``, ...).
+        As for :func:`planner.problem.inputs.load_inputs` (``site``, ``site_seed``, ...).
     station_ids : sequence of str, optional
-        Only these stations (:func:`planner.planning.select_stations`).
+        Only these stations (:func:`planner.problem.inputs.select_stations`).
     config : PlanConfig, optional
         Default: the plan's configuration, else ``PlanConfig()``.
     reproject : bool
-        As for :func:`~planner.planning.load_inputs` (default: as the plan's DEM was read).
+        As for :func:`~planner.problem.inputs.load_inputs` (default: as the plan's DEM was read).
         The DEM is read as far as the stations see (``config.max_range_m``).
 
     Returns
@@ -198,7 +199,7 @@ def _is_plan(spec: str) -> bool:
 
 def _read_plan(path: Path) -> dict:
     """A ``plan.json`` or a hand-written layout with ``schema`` and ``markers``
-    (:func:`planner.plan_file.read_plan`, ``INPUT``)."""
+    (:func:`planner.outputs.plan_file.read_plan`, ``INPUT``)."""
     return plan_file.read_plan(path, "INPUT", full=False)
 
 
@@ -230,7 +231,7 @@ def layout_problem(inputs, layout: Layout, config, error_model, free: bool = Fal
 
     Parameters
     ----------
-    inputs : planner.planning.PlanInputs
+    inputs : planner.problem.inputs.PlanInputs
     layout : Layout
     config : PlanConfig
     error_model : ErrorModel

@@ -1,6 +1,6 @@
 """``markerplan reduce --verify``: simulate and process the stations at chosen points of the
-trade-off curve, with :func:`planner.verify.verify_plans` (simulator + pipeline + 4-DoF WLS
-registration; every count's stations as one map), and set the achieved registration errors
+trade-off curve, with :func:`planner.verify.known_control.verify_plans` (simulator + pipeline +
+4-DoF WLS registration; every count's stations as one map), and set the achieved registration errors
 beside the predicted ones."""
 
 from __future__ import annotations
@@ -8,8 +8,8 @@ from __future__ import annotations
 import numpy as np
 
 from markerplan.errors import ConfigError
-from planner.plan_file import PlannedStation, SurveyPlan
-from planner.verify import verify_plans
+from planner.outputs.plan_file import PlannedStation, SurveyPlan
+from planner.verify.known_control import verify_plans
 
 
 def default_counts(study) -> tuple[int, ...]:
@@ -74,7 +74,7 @@ def verify_points(study, inputs, ks, error_model, seed: int = 0, progress: bool 
     progress : bool
     offsets : pipeline.rig.MountingOffsets, optional
         True mounting offsets of the simulated rig (default: none); see
-        :func:`planner.verify.verify_plan`.
+        :func:`planner.verify.known_control.verify_plan`.
     executor : planner.distributed.Executor, optional
         Where the stations run, every point's together under one progress bar (default: in
         this process).
@@ -106,6 +106,6 @@ def verify_points(study, inputs, ks, error_model, seed: int = 0, progress: bool 
                           "achieved_error_m": c.achieved_error_m,
                           "n_detected_markers": c.n_detected, "n_planned_markers": c.n_planned,
                           "passed": c.passed, "reason": c.reason} for c in checks]})
-    return {"seed": seed, "method": "planner.verify.verify_plan (simulate_markers -> "
+    return {"seed": seed, "method": "planner.verify.known_control.verify_plan (simulate_markers -> "
             "process_station -> 4-DoF WLS -> registration error over the working radius)",
             "points": points}

@@ -1,6 +1,6 @@
 """Inputs of ``markerplan adjust`` written from a simulated network (for the CLI tests).
 
-:func:`write_network_inputs` turns :func:`pipeline.network_simulation.simulated_network`'s
+:func:`write_network_inputs` turns :func:`pipeline.network.simulation.simulated_network`'s
 observations into ``markers.csv`` tables (:func:`pipeline.marker_table.write_marker_table`), as
 ``markerplan process`` writes them, with noise drawn from the error model's sigma at each
 detection's distance and elevation (the sigma ``adjust`` gives it), plus a ``plan.json`` whose
@@ -29,7 +29,7 @@ class NetworkInputs:
     station_ids: tuple[str, ...]
     marker_ids: tuple[str, ...]
     truth: object
-    """:class:`pipeline.network_simulation.NetworkTruth`."""
+    """:class:`pipeline.network.simulation.NetworkTruth`."""
 
 
 def _row(sid: str, mid: str, xyz: np.ndarray, accepted: bool = True) -> MarkerRow:
@@ -59,7 +59,7 @@ def write_network_inputs(folder: Path, n_stations: int = 6, seed: int = 3,
     NetworkInputs
     """
     from error_model import default_model
-    from pipeline.network_simulation import simulated_network
+    from pipeline.network.simulation import simulated_network
 
     obs, truth = simulated_network(n_stations=n_stations, seed=seed, noise_scale=0.0)
     rng = np.random.default_rng(seed + 100)

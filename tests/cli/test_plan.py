@@ -188,7 +188,7 @@ def test_a_stuck_network_greedy_is_a_warning_and_a_note(tmp_path, capsys, monkey
     itself still meets the requirement."""
     import re
 
-    import planner.baselines as baselines
+    import planner.program.baselines as baselines
 
     greedy = baselines.greedy_network
     monkeypatch.setattr(baselines, "greedy_network",

@@ -12,7 +12,7 @@ import json
 import numpy as np
 import pytest
 
-from planner.stand_map import cells_per_stand_cell, stand_grid
+from planner.outputs.stand_map import cells_per_stand_cell, stand_grid
 from visibility.dem import DEM, read_dem, write_dem
 
 X0, Y0, CELL, N = 500_000.0, 4_649_000.0, 0.2, 151
@@ -192,7 +192,7 @@ def test_default_site_without_crs_keeps_its_local_frame(valid_inputs):
     import pyogrio
     import rasterio
 
-    from planner.report import FRAME_NOTE
+    from planner.outputs.report import FRAME_NOTE
 
     out = valid_inputs / "plan"
     doc = _plan(out)
@@ -213,7 +213,7 @@ def test_the_plans_crs_reaches_the_network_geojson(planned):
     WGS84 lon/lat like markers.geojson, and names the CRS."""
     from rasterio.crs import CRS
 
-    from planner.network_files import network_geojson
+    from planner.network.files import network_geojson
     from planner.network_observations import read_plan_geometry
 
     _, out, _, dem = planned

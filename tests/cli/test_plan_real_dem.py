@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 import shapely
 
-from planner.candidates import edge_margin_m, valid_area
-from planner.sight import crosses_nodata
+from planner.problem.candidates import edge_margin_m, valid_area
+from planner.problem.sight import crosses_nodata
 from tests.cli.bad_input import Case, check_refused
 from tests.cli.invoke import run_cli
 from tests.planner.utm_dem import ORIGIN, utm_dem, utm_mask, write_stations
@@ -114,7 +114,7 @@ def test_site_named_after_the_dem_with_absolute_paths(utm_plan):
 
 def test_verify_and_reduce_read_the_plan_from_another_folder(utm_plan, tmp_path, capsys,
                                                             monkeypatch):
-    from planner.plan_file import load_plan
+    from planner.outputs.plan_file import load_plan
 
     cwd, doc = utm_plan
     monkeypatch.chdir(tmp_path)
@@ -131,7 +131,7 @@ def test_verify_and_reduce_read_the_plan_from_another_folder(utm_plan, tmp_path,
 def test_plan_a_dem_in_degrees_with_reproject(tmp_path, capsys, monkeypatch):
     """A DEM and stations in longitude/latitude: ``--reproject`` plans in a local metric CRS;
     the plan records it, and verify's reader reads the DEM the same way."""
-    from planner.plan_file import load_plan
+    from planner.outputs.plan_file import load_plan
 
     valid = np.ones((120, 150), bool)
     valid[:, :12] = False  # nodata along the west edge

@@ -61,7 +61,7 @@ def test_bad_options(tmp_path, capsys):
 def test_progress_advances_as_each_replicate_arrives():
     """The caller's progress moves with the results of ``map_tasks`` (an Executor's lazy,
     in-order iterator has no bar of its own), not once they are all back."""
-    from visibility.range_experiment import run_range_study
+    from planner.studies.range_experiment import run_range_study
 
     log = []
 

@@ -15,7 +15,7 @@ KEEP = ("M04", "M06", "M07", "M08", "M09", "M10", "M11")
 def _layout():
     """(id, x, y, z) of the :data:`KEEP` markers, as the site preset's as-built layout (seated
     on its DEM)."""
-    from planner.planning import load_inputs
+    from planner.problem.inputs import load_inputs
 
     inputs = load_inputs("default", None)
     return [(i, *map(float, c)) for i, c in zip(inputs.as_built_ids, inputs.as_built_xyz,

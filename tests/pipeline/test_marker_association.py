@@ -5,8 +5,8 @@ import pytest
 from scipy.stats import chi2
 
 from markerplan.errors import ConfigError
-from pipeline.marker_association import associate_by_geometry, associate_with_plan
-from pipeline.network_simulation import simulated_network
+from pipeline.network.association import associate_by_geometry, associate_with_plan
+from pipeline.network.simulation import simulated_network
 from pipeline.rig import rot_z
 
 ODOMETRY_M = 0.5

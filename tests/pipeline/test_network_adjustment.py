@@ -8,7 +8,7 @@ import pytest
 from scipy.stats import chi2
 
 from markerplan.errors import ConfigError, InputFileError
-from pipeline.network_adjustment import (
+from pipeline.network.adjustment import (
     AdjustmentSettings,
     ControlPoint,
     Datum,
@@ -16,7 +16,7 @@ from pipeline.network_adjustment import (
     NominalPoses,
     adjust,
 )
-from pipeline.network_simulation import simulated_network
+from pipeline.network.simulation import simulated_network
 
 NO_SNOOPING = AdjustmentSettings(snooping=False)
 

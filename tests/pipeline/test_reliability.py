@@ -6,9 +6,9 @@ import pytest
 from scipy.stats import norm
 
 from markerplan.errors import DataError
-from pipeline.network_adjustment import AdjustmentSettings, Datum, NetworkObservations, adjust
-from pipeline.network_simulation import simulated_network
-from pipeline.reliability import critical_value, non_centrality
+from pipeline.network.adjustment import AdjustmentSettings, Datum, NetworkObservations, adjust
+from pipeline.network.reliability import critical_value, non_centrality
+from pipeline.network.simulation import simulated_network
 
 
 def test_critical_value_and_non_centrality_of_baarda():

@@ -6,7 +6,7 @@ import itertools
 
 import numpy as np
 
-from planner.usability import OCCLUDED, USABLE, PlanProblem
+from planner.problem.usability import OCCLUDED, USABLE, PlanProblem
 
 
 def analytic_sigma(distance_m):
@@ -62,11 +62,11 @@ class AnalyticModel:
 
 
 def brute_force_optimum(problem: PlanProblem, config) -> int | None:
-    """Fewest sites of any layout that passes :func:`planner.station_checks.evaluate_layout`
+    """Fewest sites of any layout that passes :func:`planner.accuracy.checks.evaluate_layout`
     (known-control or network mode, as ``config`` says), by enumerating every subset; None
     when none passes."""
-    from planner.network_accuracy import network_model
-    from planner.station_checks import evaluate_layout, station_infos
+    from planner.accuracy.checks import evaluate_layout, station_infos
+    from planner.accuracy.network import network_model
 
     infos = None if config.network else station_infos(problem, config)
     net = network_model(problem, config) if config.network else None

@@ -3,8 +3,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from pipeline.rig import rot_z
-from planner import accuracy
-from planner.accuracy import CHI2_3_95, fit_pose, registration_error, station_error
+from planner.accuracy import known_control
+from planner.accuracy.known_control import CHI2_3_95, fit_pose, registration_error, station_error
 
 
 def test_symmetric_layout_matches_closed_form():
@@ -45,8 +45,8 @@ def test_batch_errors_agree_with_single():
     rng = np.random.default_rng(3)
     xy = rng.uniform(-15, 15, (5, 2))
     sig = rng.uniform(0.005, 0.02, 5)
-    j = accuracy.pair_information([0, 0], xy, sig)
-    batch = accuracy.errors_from_information(np.stack([j[:3].sum(0), j.sum(0)]), 10.0)
+    j = known_control.pair_information([0, 0], xy, sig)
+    batch = known_control.errors_from_information(np.stack([j[:3].sum(0), j.sum(0)]), 10.0)
     assert np.isclose(batch[0], station_error([0, 0], xy[:3], sig[:3], 10.0))
     assert np.isclose(batch[1], station_error([0, 0], xy, sig, 10.0))
 
@@ -69,5 +69,5 @@ def test_closed_form_largest_eigenvalue():
     m = rng.normal(size=(500, 3, 3))
     s = m @ m.transpose(0, 2, 1)
     s[0] = np.eye(3) * 2.0  # repeated eigenvalues
-    assert np.allclose(accuracy.lambda_max_sym3(s), np.linalg.eigvalsh(s)[:, -1], rtol=1e-9,
+    assert np.allclose(known_control.lambda_max_sym3(s), np.linalg.eigvalsh(s)[:, -1], rtol=1e-9,
                        atol=1e-12)

@@ -3,17 +3,17 @@ import time
 import numpy as np
 import pytest
 
-from planner.baselines import (
+from planner.accuracy.checks import evaluate_layout
+from planner.accuracy.network import network_model
+from planner.config import PlanConfig
+from planner.program import plan_sites
+from planner.program.baselines import (
     GreedyStuckError,
     greedy_cover,
     greedy_network,
     network_baseline,
     regular_grid,
 )
-from planner.config import PlanConfig
-from planner.network_accuracy import network_model
-from planner.program import plan_sites
-from planner.station_checks import evaluate_layout
 from tests.planner.instances import make_problem
 
 

@@ -5,8 +5,8 @@ import numpy as np
 import pytest
 
 from markerplan.errors import ConfigError, DataError, InputFileError
-from planner.candidates import candidate_sites, ground_slope_rad, load_polygons
 from planner.config import PlanConfig
+from planner.problem.candidates import candidate_sites, ground_slope_rad, load_polygons
 from visibility.dem import DEM
 
 
@@ -96,7 +96,7 @@ def test_sites_out_of_range_of_every_station_are_dropped():
 
 
 def test_grid_limit_counts_the_sites_in_range(monkeypatch):
-    import planner.candidates as candidates
+    import planner.problem.candidates as candidates
 
     dem = DEM(np.zeros((201, 201)), (-10.0, -10.0), 0.1)
     cfg = PlanConfig(grid_spacing_m=0.5, max_range_m=2.0, min_station_distance_m=0.5)
@@ -114,7 +114,7 @@ def test_grid_limit_counts_the_sites_in_range(monkeypatch):
 def test_dropping_out_of_range_sites_leaves_the_plan_unchanged(monkeypatch):
     """The default site planned with a 12 m range: the same markers (by position) whether or not
     the sites out of every station's range were ray cast."""
-    import planner.planning as planning
+    import planner.problem.inputs as planning
     from error_model import default_model
 
     inputs = planning.load_inputs("default")

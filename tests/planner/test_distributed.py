@@ -233,12 +233,12 @@ def test_unreachable_scheduler_is_one_line(monkeypatch):
 
 
 def test_cli_reports_a_failing_station_without_traceback(tmp_path, capsys, monkeypatch):
-    import planner.verify
+    import planner.verify.known_control
 
     def broken(*args, **kwargs):
         raise DataError("simulated failure")
 
-    monkeypatch.setattr(planner.verify, "simulate_markers", broken)
+    monkeypatch.setattr(planner.verify.known_control, "simulate_markers", broken)
     plan = tmp_path / "plan"
     code, _, err = run_cli(capsys, ["plan", "--out", str(plan)])
     assert code == 0, err
@@ -402,12 +402,13 @@ def test_several_plans_are_one_map_under_one_bar(monkeypatch):
 
     import numpy as np
 
-    import planner.verify
-    from planner.plan_file import PlannedStation, SurveyPlan
-    from planner.verify import map_plan_stations
+    import planner.verify.known_control
+    from planner.outputs.plan_file import PlannedStation, SurveyPlan
+    from planner.verify.known_control import map_plan_stations
     from visibility.terrain import TerrainSpec, generate_terrain
 
-    monkeypatch.setattr(planner.verify, "simulate_markers", lambda *a, **k: (None, {}))
+    monkeypatch.setattr(planner.verify.known_control, "simulate_markers",
+                        lambda *a, **k: (None, {}))
     bars, tqdm = [], distributed.tqdm
     monkeypatch.setattr(distributed, "tqdm", lambda *a, **k: bars.append(k["total"]) or
                         tqdm(*a, **k))

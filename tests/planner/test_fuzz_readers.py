@@ -17,12 +17,12 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from markerplan.errors import MarkerPlanError
-from planner.candidates import load_polygons
 from planner.config import BOUNDS, PlanConfig, load_config
-from planner.plan_file import read_plan
-from planner.planning import read_markers, read_stations
+from planner.outputs.plan_file import read_plan
+from planner.problem.candidates import load_polygons
+from planner.problem.inputs import read_markers, read_stations
+from planner.problem.visibility_table import REQUIRED, read_visibility_table
 from planner.reduction.study import _plan_layout
-from planner.visibility_io import REQUIRED, read_visibility_table
 from tests.json_paths import json_paths
 
 FAST = settings(max_examples=60, deadline=None,

@@ -1,5 +1,5 @@
-"""planner.gis_output and planner.stand_map: CRS naming, WGS84 GeoJSON, GeoPackage and GeoTIFF
-writing in one process, and the stand map against the planner's own station checks."""
+"""planner.outputs.gis and planner.outputs.stand_map: CRS naming, WGS84 GeoJSON, GeoPackage and
+GeoTIFF writing in one process, and the stand map against the planner's own station checks."""
 
 from dataclasses import replace
 
@@ -8,7 +8,7 @@ import pytest
 import shapely
 from rasterio.crs import CRS
 
-from planner.gis_output import (
+from planner.outputs.gis import (
     crs_name,
     geojson_crs_members,
     geojson_positions,
@@ -16,7 +16,7 @@ from planner.gis_output import (
     write_gpkg_layers,
     write_stand_map,
 )
-from planner.stand_map import StandMap, cells_per_stand_cell, stand_grid, stand_map
+from planner.outputs.stand_map import StandMap, cells_per_stand_cell, stand_grid, stand_map
 
 UTM = CRS.from_epsg(32633).to_wkt()
 MOON = CRS.from_user_input("IAU_2015:30100").to_wkt()
@@ -100,7 +100,8 @@ def holed_plan():
     """The default site's plan on its DEM with a nodata hole west of the stations."""
     from error_model import default_model
     from planner.config import PlanConfig
-    from planner.planning import load_inputs, make_plan
+    from planner.problem.inputs import load_inputs
+    from planner.run import make_plan
     from visibility.dem import DEM
 
     inputs = load_inputs("default")
@@ -113,8 +114,8 @@ def holed_plan():
 
 
 def test_stand_map_agrees_with_the_planners_station_checks(holed_plan):
-    from planner.sight import sight_problem
-    from planner.station_checks import evaluate_layout
+    from planner.accuracy.checks import evaluate_layout
+    from planner.problem.sight import sight_problem
 
     outcome, model = holed_plan
     cfg, dem = outcome.config, outcome.inputs.dem

@@ -6,14 +6,14 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from markerplan.errors import ConfigError
-from planner import accuracy
-from planner.config import PlanConfig
-from planner.network_accuracy import (
+from planner.accuracy import known_control
+from planner.accuracy.network import (
     GrowingCovariance,
     NetworkModel,
     network_model,
     pose_errors_from_covariance,
 )
+from planner.config import PlanConfig
 from tests.planner.instances import make_problem, ring
 
 INCL = np.radians(0.01)
@@ -77,13 +77,13 @@ def test_schur_contribution_matches_the_full_adjustment():
 
 def test_six_parameter_errors_equal_known_control_with_the_tilt_as_parameters():
     rng = np.random.default_rng(2)
-    j = accuracy.pair_information([0, 0], rng.uniform(-20, 20, (5, 2)),
+    j = known_control.pair_information([0, 0], rng.uniform(-20, 20, (5, 2)),
                                   rng.uniform(0.005, 0.02, 5)).sum(axis=0)
     c4 = np.linalg.inv(j)
     c6 = np.zeros((1, 6, 6))
     c6[0, :4, :4] = c4
     c6[0, 4, 4] = c6[0, 5, 5] = INCL**2
-    e4 = accuracy.errors_from_information(j[None], 10.0, INCL)
+    e4 = known_control.errors_from_information(j[None], 10.0, INCL)
     np.testing.assert_allclose(pose_errors_from_covariance(c6, 10.0), e4, rtol=1e-9)
     with pytest.raises(ConfigError, match="shape"):
         pose_errors_from_covariance(np.zeros((2, 4, 4)), 10.0)

@@ -4,11 +4,11 @@ import numpy as np
 import pytest
 
 from markerplan.errors import ConfigError, InfeasiblePlanError, PlanTimeLimitError
+from planner.accuracy.checks import evaluate_layout
+from planner.accuracy.network import network_model
 from planner.config import PlanConfig
-from planner.network_accuracy import network_model
+from planner.problem.usability import directions_ok
 from planner.program import plan_sites
-from planner.station_checks import evaluate_layout
-from planner.usability import directions_ok
 from tests.planner.instances import brute_force_optimum, make_problem, ring
 
 
@@ -125,7 +125,7 @@ def test_time_limit_returns_the_incumbent_with_the_proven_bound():
 
 
 def test_network_greedy_in_redundant_mode_survives_any_loss():
-    from planner.baselines import greedy_network
+    from planner.program.baselines import greedy_network
 
     p = _instance(5)
     cfg = PlanConfig(network=True, redundant=True, min_markers=3, min_sectors=2,
@@ -178,8 +178,8 @@ def test_a_greedy_that_takes_the_whole_time_limit_still_leaves_a_root_bound(monk
     at most the optimum and its gap."""
     import time
 
-    import planner.baselines as baselines
     import planner.program as program
+    import planner.program.baselines as baselines
 
     monkeypatch.setattr(program, "_SPARSE_ABOVE_SITES", 0)
     p, cfg = _reachable_network_case(5)
@@ -202,8 +202,8 @@ def test_a_stuck_greedy_leaves_the_large_problem_path_without_a_starting_layout(
     """When the greedy incumbent gets stuck, the plan goes on without it (no upper bound, no
     root relaxation) and still finds the optimum; the greedy is reported as not meeting the
     requirement, as it is when planning runs the greedy itself (small problems)."""
-    import planner.baselines as baselines
     import planner.program as program
+    import planner.program.baselines as baselines
 
     monkeypatch.setattr(program, "_SPARSE_ABOVE_SITES", 0)
     p, cfg = _reachable_network_case(60)
@@ -238,7 +238,7 @@ def test_when_no_tangent_applies_and_rows_are_long_the_long_no_good_rows_are_cut
     the worst stations' long rows are cut instead of failing with 'no cut was found', and the
     plan still passes."""
     import planner.program as program
-    from planner.network_accuracy import NetworkModel
+    from planner.accuracy.network import NetworkModel
 
     monkeypatch.setattr(program, "_SPARSE_ABOVE_SITES", 0)
     monkeypatch.setattr(program, "_MAX_TERMS", 1)

@@ -12,15 +12,15 @@ import numpy as np
 import pytest
 from scipy.stats import chi2
 
-from pipeline.network_adjustment import (
+from pipeline.network.adjustment import (
     AdjustmentSettings,
     Datum,
     NetworkAdjustment,
     NetworkObservations,
 )
-from pipeline.reliability import Rejection
-from planner import network_record as nr
-from planner.network_files import FILES, write_network_files
+from pipeline.network.reliability import Rejection
+from planner.network import record as nr
+from planner.network.files import FILES, write_network_files
 
 CHI2_3 = chi2.ppf(0.95, 3)
 

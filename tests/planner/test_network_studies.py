@@ -2,9 +2,9 @@ import json
 
 import numpy as np
 
-from planner import network_studies as ns
+from planner.accuracy.network import network_model
 from planner.config import PlanConfig
-from planner.network_accuracy import network_model
+from planner.studies import network as ns
 from tests.planner.instances import make_problem
 
 

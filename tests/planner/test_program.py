@@ -5,7 +5,9 @@ import numpy as np
 import pytest
 
 from markerplan.errors import ConfigError, InfeasiblePlanError
+from planner.accuracy.checks import evaluate_layout
 from planner.config import PlanConfig
+from planner.problem.usability import sector_index
 from planner.program import (
     RowKind,
     build_model,
@@ -14,8 +16,6 @@ from planner.program import (
     solve,
     with_tightening_rows,
 )
-from planner.station_checks import evaluate_layout
-from planner.usability import sector_index
 from tests.planner.instances import brute_force_optimum, make_problem, ring
 
 LOOSE = PlanConfig(requirement_m=0.10, working_radius_m=10.0, max_range_m=30.0)

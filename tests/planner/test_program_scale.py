@@ -9,9 +9,9 @@ import scipy.sparse as sp
 
 from planner import program
 from planner.config import PlanConfig
-from planner.highs_model import HighsOutcome, run_highs, solver_record
+from planner.outputs.report import report_markdown
 from planner.program import aggregate_columns, build_model, plan_sites, solve
-from planner.report import report_markdown
+from planner.program.highs import HighsOutcome, run_highs, solver_record
 from tests.planner.instances import brute_force_optimum, make_problem
 
 LOOSE = PlanConfig(requirement_m=5.0, working_radius_m=10.0, max_range_m=14.0)
@@ -181,8 +181,8 @@ def test_directions_only_model_is_the_full_model_without_information_rows():
 
 
 def test_station_error_from_its_markers_matches_the_cached_information():
-    from planner import accuracy
-    from planner.station_checks import StationInfo
+    from planner.accuracy import known_control
+    from planner.accuracy.checks import StationInfo
 
     p = _clustered(2)
     for s in range(p.n_stations):
@@ -191,7 +191,7 @@ def test_station_error_from_its_markers_matches_the_cached_information():
             continue
         picked = info.sites[::2]
         j = info.info[::2].sum(axis=0)  # all sites' information, computed on first use
-        expected = accuracy.errors_from_information(j[None], info.radius, info.incl)[0]
+        expected = known_control.errors_from_information(j[None], info.radius, info.incl)[0]
         assert info.error(picked) == expected  # bit for bit
         assert info.error(np.r_[picked, -1]) == expected  # not a usable site: ignored
         assert np.array_equal(info.rows(np.r_[info.sites[1], 10**6]), [1])

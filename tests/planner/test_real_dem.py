@@ -1,5 +1,5 @@
 """Planning on a DEM with nodata: candidate sites, sight lines, stations and the default
-boundary (:mod:`planner.candidates`, :mod:`planner.sight`, :mod:`planner.planning`)."""
+boundary (:mod:`planner.problem.candidates`, :mod:`planner.problem.sight`, :mod:`planner.run`)."""
 
 from types import SimpleNamespace
 
@@ -10,16 +10,16 @@ import shapely.affinity
 
 from error_model import default_model
 from markerplan.errors import DataError
-from planner.candidates import (
+from planner.config import PlanConfig
+from planner.problem.candidates import (
     candidate_sites,
     edge_margin_m,
     on_terrain,
     valid_area,
 )
-from planner.config import PlanConfig
-from planner.planning import default_boundary, read_stations
-from planner.sight import crosses_nodata, sight_problem
-from planner.usability import OCCLUDED, USABLE
+from planner.problem.inputs import default_boundary, read_stations
+from planner.problem.sight import crosses_nodata, sight_problem
+from planner.problem.usability import OCCLUDED, USABLE
 from tests.planner.utm_dem import ORIGIN, local_grid, utm_dem, utm_mask
 from visibility.dem import DEM
 
@@ -151,7 +151,7 @@ def test_dem_read_only_as_far_as_the_stations_see(tmp_path):
     """A 400 m DEM with two stations in one corner: load_inputs reads the stations' window
     (their box grown by the sight radius and the margin), records it, and the default boundary
     keeps the edge margin from the window's edge."""
-    from planner.planning import WINDOW_MARGIN_M, load_inputs, sight_window
+    from planner.problem.inputs import WINDOW_MARGIN_M, load_inputs, sight_window
     from visibility.dem import write_dem
 
     x = np.arange(401.0)
@@ -187,7 +187,7 @@ def test_reproject_maps_every_input_file_into_the_dem(tmp_path):
     import json
 
     from markerplan.errors import InputFileError
-    from planner.planning import load_inputs
+    from planner.problem.inputs import load_inputs
     from visibility.dem import read_dem, to_dem_xy, write_dem
 
     cell = 5e-6  # degrees: about 0.55 m north-south, 0.44 m east-west at 37 N

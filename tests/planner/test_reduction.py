@@ -10,6 +10,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from markerplan.errors import ConfigError, InfeasiblePlanError
+from planner.accuracy.checks import evaluate_layout, station_infos
 from planner.config import PlanConfig
 from planner.program import plan_sites
 from planner.reduction.curve import (
@@ -19,7 +20,6 @@ from planner.reduction.curve import (
     tradeoff_curve,
 )
 from planner.reduction.study import run_study
-from planner.station_checks import evaluate_layout, station_infos
 from tests.planner.instances import make_problem, ring
 
 CONFIG = PlanConfig(requirement_m=0.03, working_radius_m=10.0)
@@ -237,7 +237,7 @@ NETWORK = PlanConfig(network=True, min_markers=3, min_sectors=2, max_range_m=16,
 def _network_brute_force(problem, config, k):
     """Least worst error (stations and kept markers, relative to the datum) over all k-subsets
     meeting count and directions."""
-    from planner.network_accuracy import network_model
+    from planner.accuracy.network import network_model
 
     net = network_model(problem, config)
     best = np.inf
@@ -258,7 +258,7 @@ def network_curves():
 
 
 def test_network_curve_is_the_exact_minimax_of_the_networks_errors(network_curves):
-    from planner.network_accuracy import network_model
+    from planner.accuracy.network import network_model
 
     problem, curve, _ = network_curves
     net = network_model(problem, NETWORK)

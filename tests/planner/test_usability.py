@@ -5,7 +5,7 @@ import pytest
 
 from markerplan.errors import ConfigError
 from planner.config import PlanConfig
-from planner.usability import (
+from planner.problem.usability import (
     OCCLUDED,
     OUT_OF_DOMAIN,
     TOO_INACCURATE,

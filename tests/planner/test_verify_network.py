@@ -8,8 +8,8 @@ import pytest
 
 from error_model import default_model
 from markerplan.errors import ConfigError
-from planner.accuracy import pose_difference_m
-from planner.verify_network import (
+from planner.accuracy.known_control import pose_difference_m
+from planner.verify.network import (
     NetworkVerifySettings,
     TrueStation,
     adjust_and_compare,

@@ -6,9 +6,9 @@ import pytest
 
 from markerplan.errors import InputFileError
 from planner.config import PlanConfig
+from planner.problem.usability import USABLE, PlanProblem
+from planner.problem.visibility_table import REQUIRED, read_visibility_table
 from planner.program import plan_sites
-from planner.usability import USABLE, PlanProblem
-from planner.visibility_io import REQUIRED, read_visibility_table
 from tests.planner.instances import make_problem, ring
 
 

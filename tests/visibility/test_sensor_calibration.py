@@ -4,9 +4,9 @@ field-summary readers against hand-computed statistics."""
 import numpy as np
 import pytest
 
-import visibility.sensor_calibration as cal
+import planner.studies.sensor_calibration as cal
 from markerplan.errors import ConfigError
-from visibility.field_summary import (
+from planner.studies.field_summary import (
     FIELD_EXPERIMENT_CSV,
     FieldPosition,
     positions_from_marker_table,

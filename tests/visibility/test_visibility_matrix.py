@@ -2,7 +2,7 @@ import numpy as np
 import pytest
 
 from planner.config import PlanConfig
-from planner.usability import OCCLUDED, USABLE, problem_from_visibility
+from planner.problem.usability import OCCLUDED, USABLE, problem_from_visibility
 from tests.planner.instances import AnalyticModel
 from visibility.dem import DEM
 from visibility.scene import RayScene

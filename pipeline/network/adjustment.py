@@ -1,0 +1,985 @@
+"""Network adjustment: station poses and marker centres estimated together from many stations.
+
+Model
+-----
+Station ``s`` has the pose ``(x, y, z, heading, roll, pitch)`` (:data:`POSE_PARAMETERS`) in the
+site frame; marker ``j`` the centre ``m_j``. A marker centre ``p`` measured by the station in its
+levelled station frame (origin at the LiDAR centre, z up, x along the station's nominal heading)
+gives the observation equation
+
+    t_s + Rz(heading_s) Ry(pitch_s) Rx(roll_s) p - m_j = e,   e ~ N(0, sigma^2 / 3 I3)
+
+(``sigma`` the error model's 1-sigma 3D centre error, isotropic). Roll and pitch are the
+inclinometer's residual errors: unknowns with the prior ``0 +- inclinometer_sigma_rad`` each,
+because a tilt error is common to all of a station's observations (correlated), which treating
+it as noise would ignore. The rotation is exact (``pipeline.rig.station_to_site_matrix``); at
+zero tilt its derivatives are the design blocks of the shared network spec. An optional heading
+prior (sun sensor) observes each heading around its nominal value.
+
+Solution
+--------
+Gauss-Newton on the sparse normal equations (``scipy.sparse``, SuperLU), assembled from each
+observation's 9 x 9 block into a sparsity pattern fixed across iterations. A parameter the datum
+fixes gets a unit row and column (its step is 0); the free datum's minimal constraints
+``B dx = 0`` border the system. The full covariance (dense, a priori: sigma0 = 1) comes from the
+normal matrix at convergence with the markers eliminated first (their block is 3 x 3
+block-diagonal, as in bundle adjustment), so only a matrix of the stations' size is inverted.
+Between data-snooping rounds the covariance is downdated for the removed observation
+(Sherman-Morrison-Woodbury); the final solution's covariance is computed afresh.
+
+Datum
+-----
+The observations are invariant to translating the whole network and rotating it about the
+vertical (gravity, through the inclinometers, fixes the tilt): a defect of 4.
+
+``"station"``
+    the reference station's x, y, z and heading are fixed (at ``Datum.reference_pose``, else its
+    nominal pose, else the origin with heading 0); its roll and pitch keep their priors.
+``"control"``
+    markers with known coordinates and per-axis sigmas (a lander's fiducials) are weighted
+    observations; they must fix all four defects (two control points at different horizontal
+    positions, or one with a heading prior).
+``"free"``
+    minimal constraints on the stations: their centroid and their mean rotation about the
+    vertical stay at the initial values (inner constraints over the stations' x, y, z and
+    heading); covariances are then relative to the stations' centroid. With a heading prior the
+    rotation is observed, and only the translation is constrained.
+
+Initial values come from :class:`NominalPoses` (odometry or the plan) when given; otherwise the
+network is chained outward from the reference station, each station placed by a closed-form
+weighted 2D Procrustes fit (heading and 3D translation) on the markers already placed, which
+needs at least two shared markers — the same rule that decides whether a station is tied.
+Reliability (redundancy numbers, w-tests, data snooping, MDBs) is in
+:mod:`pipeline.network.reliability`.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.sparse as sp
+import scipy.sparse.linalg
+from scipy.stats import chi2
+
+from markerplan.errors import ConfigError, DataError, InputFileError
+from pipeline.network.reliability import (
+    Rejection,
+    data_snooping,
+    non_centrality,
+    observation_reliability,
+    w_tests,
+)
+from pipeline.rig import fit_heading_shift, rot_x, rot_y, rot_z
+
+#: Order of a station's pose parameters (site frame; m and rad).
+POSE_PARAMETERS = ("x_m", "y_m", "z_m", "heading_rad", "roll_rad", "pitch_rad")
+
+#: The datum options of :class:`Datum`.
+DATUM_KINDS = ("station", "control", "free")
+
+#: chi-square 95 % quantile, 3 degrees of freedom: the 95 % ellipsoid's scale.
+ELLIPSOID_CHI2_95 = float(chi2.ppf(0.95, 3))
+
+#: Names of the datum defects (translation x, y, z; rotation about the vertical).
+_DEFECT_NAMES = ("translation x", "translation y", "translation z",
+                 "heading (rotation about the vertical)")
+
+#: Between data-snooping rounds the covariance is downdated while no station angle moved more
+#: than this since it was computed (the design changes by about that fraction; w by less).
+_DOWNDATE_ANGLE_RAD = 1e-3
+
+#: A Gauss-Newton step below this (m or rad) ends the iteration: far below any sigma, and
+#: convergence is quadratic for exact data, so the truth is then recovered to ~1e-14 m.
+_STEP_TOLERANCE = 1e-8
+
+
+def _ids(values, name: str) -> tuple[str, ...]:
+    ids = tuple(str(v) for v in values)
+    if len(set(ids)) != len(ids):
+        seen: set[str] = set()
+        twice = sorted({i for i in ids if i in seen or seen.add(i)})
+        raise InputFileError(f"`{name}` must be unique, got {', '.join(twice)} more than once")
+    return ids
+
+
+@dataclass(frozen=True)
+class NetworkObservations:
+    """Marker centres measured by the stations of a network.
+
+    Attributes
+    ----------
+    station_ids : tuple of str, (s,)
+    marker_ids : tuple of str, (k,)
+        Every marker must be observed at least once.
+    station : (n,) int
+        Index into ``station_ids`` of each observation.
+    marker : (n,) int
+        Index into ``marker_ids`` of each observation.
+    xyz_m : (n, 3) float
+        Marker centre in the observing station's levelled frame, m.
+    sigma_m : (n,) float
+        1-sigma 3D centre error (per-axis variance ``sigma**2 / 3``), m.
+
+    Raises
+    ------
+    InputFileError
+        Repeated ids, wrong shapes, indices out of range, coordinates or sigmas that are not
+        finite, sigmas <= 0, or a marker id with no observation.
+    """
+
+    station_ids: tuple[str, ...]
+    marker_ids: tuple[str, ...]
+    station: np.ndarray
+    marker: np.ndarray
+    xyz_m: np.ndarray
+    sigma_m: np.ndarray
+
+    def __post_init__(self):
+        set_ = object.__setattr__
+        set_(self, "station_ids", _ids(self.station_ids, "station_ids"))
+        set_(self, "marker_ids", _ids(self.marker_ids, "marker_ids"))
+        for name, dtype in (("station", int), ("marker", int), ("xyz_m", float),
+                            ("sigma_m", float)):
+            try:
+                set_(self, name, np.asarray(getattr(self, name), dtype=dtype))
+            except (TypeError, ValueError) as exc:
+                raise InputFileError(f"`{name}` must be numeric: {exc}") from None
+        if self.station.ndim != 1:
+            raise InputFileError(f"`station` must have shape (n,), got {self.station.shape}")
+        n = self.station.shape[0]
+        expected = {"station": (n,), "marker": (n,), "xyz_m": (n, 3), "sigma_m": (n,)}
+        for name, shape in expected.items():
+            if getattr(self, name).shape != shape:
+                raise InputFileError(f"`{name}` must have shape {shape} (n observations), "
+                                     f"got {getattr(self, name).shape}")
+        for name, ids in (("station", self.station_ids), ("marker", self.marker_ids)):
+            idx = getattr(self, name)
+            if idx.size and (idx.min() < 0 or idx.max() >= len(ids)):
+                raise InputFileError(f"`{name}` indices must lie in [0, {len(ids)}), got "
+                                     f"{idx.min()}..{idx.max()}")
+        bad = ~np.isfinite(self.xyz_m).all(axis=1)
+        if bad.any():
+            raise InputFileError(f"`xyz_m` must be finite, got {self.xyz_m[bad][0].tolist()} "
+                                 f"({self._name(int(np.flatnonzero(bad)[0]))})")
+        bad = ~(np.isfinite(self.sigma_m) & (self.sigma_m > 0))
+        if bad.any():
+            i = int(np.flatnonzero(bad)[0])
+            raise InputFileError(f"`sigma_m` must be finite and > 0, got {self.sigma_m[i]} "
+                                 f"({self._name(i)})")
+        unseen = np.setdiff1d(np.arange(len(self.marker_ids)), self.marker)
+        if unseen.size:
+            raise InputFileError("every marker needs an observation; none of "
+                                 + ", ".join(self.marker_ids[j] for j in unseen[:10]))
+
+    def _name(self, i: int) -> str:
+        return (f"station {self.station_ids[self.station[i]]}, "
+                f"marker {self.marker_ids[self.marker[i]]}")
+
+    @property
+    def n(self) -> int:
+        """Number of point observations."""
+        return int(self.station.shape[0])
+
+    def subset(self, keep: np.ndarray) -> NetworkObservations:
+        """The observations where ``keep`` ((n,) bool) is True, with the same id tuples."""
+        return NetworkObservations(self.station_ids, self.marker_ids, self.station[keep],
+                                   self.marker[keep], self.xyz_m[keep], self.sigma_m[keep])
+
+
+@dataclass(frozen=True)
+class ControlPoint:
+    """A marker with known site coordinates (e.g. a lander's fiducial).
+
+    Attributes
+    ----------
+    marker_id : str
+    xyz_m : (3,) float
+        Site-frame coordinates, m.
+    sigma_m : (3,) float
+        Per-axis 1-sigma of ``xyz_m``, m (> 0).
+    """
+
+    marker_id: str
+    xyz_m: np.ndarray
+    sigma_m: np.ndarray
+
+    def __post_init__(self):
+        object.__setattr__(self, "marker_id", str(self.marker_id))
+        for name in ("xyz_m", "sigma_m"):
+            value = np.asarray(getattr(self, name), dtype=float)
+            if value.shape != (3,) or not np.isfinite(value).all():
+                raise ConfigError(f"control point {self.marker_id}: `{name}` must be 3 finite "
+                                  f"numbers, got {value.tolist()}")
+            object.__setattr__(self, name, value)
+        if (self.sigma_m <= 0).any():
+            raise ConfigError(f"control point {self.marker_id}: `sigma_m` must be > 0, got "
+                              f"{self.sigma_m.tolist()}")
+
+
+@dataclass(frozen=True)
+class Datum:
+    """What fixes the network's 4-DoF datum defect (see the module doc).
+
+    Attributes
+    ----------
+    kind : {"station", "control", "free"}
+    reference_station : str or None
+        The station the network is chained from and, for ``"station"``, whose x, y, z, heading
+        are fixed; None means the first station.
+    control : tuple of ControlPoint
+        The control points of ``"control"`` (and only there).
+    reference_pose : (4,) float or None
+        ``(x_m, y_m, z_m, heading_rad)`` of the reference station for ``"station"``; None
+        means its nominal pose, or the origin with heading 0 without nominal poses.
+    """
+
+    kind: str = "station"
+    reference_station: str | None = None
+    control: tuple[ControlPoint, ...] = ()
+    reference_pose: tuple[float, float, float, float] | None = None
+
+    def __post_init__(self):
+        if self.kind not in DATUM_KINDS:
+            raise ConfigError(f"datum kind must be one of {', '.join(DATUM_KINDS)}, "
+                              f"got {self.kind!r}")
+        object.__setattr__(self, "control", tuple(self.control))
+        if (self.kind == "control") != bool(self.control):
+            raise ConfigError("control points are needed by, and only used with, the 'control' "
+                              f"datum; got kind {self.kind!r} with {len(self.control)} points")
+        _ids([c.marker_id for c in self.control], "control marker ids")
+        if self.reference_pose is not None:
+            pose = tuple(float(v) for v in self.reference_pose)
+            if self.kind != "station" or len(pose) != 4 or not np.isfinite(pose).all():
+                raise ConfigError("`reference_pose` must be 4 finite numbers (x, y, z, heading) "
+                                  f"of the 'station' datum, got {self.reference_pose!r} with "
+                                  f"kind {self.kind!r}")
+            object.__setattr__(self, "reference_pose", pose)
+
+    def describe(self, station_ids: tuple[str, ...]) -> str:
+        """One line naming the datum, for reports, e.g. ``"reference station S1 (x, y, z,
+        heading fixed)"``.
+
+        Examples
+        --------
+        >>> Datum().describe(("S1", "S2"))
+        'reference station S1 (x, y, z, heading fixed)'
+        """
+        if self.kind == "station":
+            return (f"reference station {self.reference_station or station_ids[0]} "
+                    "(x, y, z, heading fixed)")
+        if self.kind == "control":
+            return "control points " + ", ".join(c.marker_id for c in self.control)
+        return "free network (minimal constraints on the stations' centroid and mean heading)"
+
+
+@dataclass(frozen=True)
+class NominalPoses:
+    """Nominal station poses (odometry or the plan): initial values and heading-prior centre.
+
+    Attributes
+    ----------
+    position_m : (s, 3) float
+        Site frame, m.
+    heading_rad : (s,) float
+        Rotation about the vertical from the levelled station frame to the site frame, rad.
+    """
+
+    position_m: np.ndarray
+    heading_rad: np.ndarray
+
+    def __post_init__(self):
+        position = np.asarray(self.position_m, dtype=float)
+        heading = np.asarray(self.heading_rad, dtype=float)
+        if (position.ndim != 2 or position.shape[1] != 3 or heading.shape != position.shape[:1]
+                or not (np.isfinite(position).all() and np.isfinite(heading).all())):
+            raise ConfigError("nominal poses must be finite `position_m` (s, 3) and "
+                              f"`heading_rad` (s,), got {position.shape} and {heading.shape}")
+        object.__setattr__(self, "position_m", position)
+        object.__setattr__(self, "heading_rad", heading)
+
+
+@dataclass(frozen=True)
+class AdjustmentSettings:
+    """Priors, test levels and iteration limits of :func:`adjust`.
+
+    Attributes
+    ----------
+    inclinometer_sigma_rad : float
+        1-sigma of each station's roll and pitch prior (0), rad (> 0).
+    heading_prior_sigma_rad : float or None
+        1-sigma of a heading observation around the nominal heading (sun sensor), rad; None for
+        none. Needs nominal poses.
+    alpha0, beta0 : float
+        Significance level and power of the w-test (Baarda), in (0, 1).
+    snooping : bool
+        Remove blunders by data snooping.
+    max_rejections : int
+        Most observations data snooping may remove.
+    max_iterations : int
+        Gauss-Newton iterations before giving up.
+    """
+
+    inclinometer_sigma_rad: float = math.radians(0.01)
+    heading_prior_sigma_rad: float | None = None
+    alpha0: float = 0.001
+    beta0: float = 0.80
+    snooping: bool = True
+    max_rejections: int = 20
+    max_iterations: int = 20
+
+    def __post_init__(self):
+        def positive(name, value):
+            if not (isinstance(value, int | float) and np.isfinite(value) and value > 0):
+                raise ConfigError(f"{name} must be a number > 0, got {value!r}")
+
+        positive("inclinometer_sigma_rad", self.inclinometer_sigma_rad)
+        if self.heading_prior_sigma_rad is not None:
+            positive("heading_prior_sigma_rad", self.heading_prior_sigma_rad)
+        for name in ("alpha0", "beta0"):
+            value = getattr(self, name)
+            if not (isinstance(value, int | float) and 0 < value < 1):
+                raise ConfigError(f"{name} must lie in (0, 1), got {value!r}")
+        for name, least in (("max_rejections", 0), ("max_iterations", 1)):
+            value = getattr(self, name)
+            if not (isinstance(value, int) and value >= least):
+                raise ConfigError(f"{name} must be an integer >= {least}, got {value!r}")
+
+
+@dataclass
+class NetworkAdjustment:
+    """Result of :func:`adjust`. Parameters are ordered stations first (6 each, in
+    :data:`POSE_PARAMETERS` order), then markers (x, y, z each).
+
+    Attributes
+    ----------
+    observations : NetworkObservations
+        The observations kept (after data snooping).
+    pose : (s, 6) float
+        Station poses, site frame, m and rad (heading wrapped to [-pi, pi)).
+    marker_xyz_m : (k, 3) float
+        Marker centres, site frame, m.
+    covariance : (6s + 3k, 6s + 3k) float
+        A-priori covariance (sigma0 = 1) relative to the datum; m^2, rad^2. Rows of parameters
+        the datum fixes are zero.
+    residuals_m : (n, 3) float
+        ``m_j - (t_s + R_s p)`` per kept observation, site-frame axes, m.
+    redundancy, w_test, mdb_m, mdb_effect_m
+        See :class:`pipeline.network.reliability.ObservationReliability` (kept observations).
+    sigma0_squared : float
+        A-posteriori variance factor (pseudo-observations included); nan when ``dof == 0``.
+    dof : int
+        Degrees of freedom (redundancy).
+    iterations : int
+        Gauss-Newton iterations of the last solution.
+    rejected : list of Rejection
+        Observations removed by data snooping, in order.
+    datum : Datum
+    settings : AdjustmentSettings
+    """
+
+    observations: NetworkObservations
+    pose: np.ndarray
+    marker_xyz_m: np.ndarray
+    covariance: np.ndarray
+    residuals_m: np.ndarray
+    redundancy: np.ndarray
+    w_test: np.ndarray
+    mdb_m: np.ndarray
+    mdb_effect_m: np.ndarray
+    sigma0_squared: float
+    dof: int
+    iterations: int
+    rejected: list[Rejection] = field(default_factory=list)
+    datum: Datum = field(default_factory=Datum)
+    settings: AdjustmentSettings = field(default_factory=AdjustmentSettings)
+
+    def _station_index(self, station: int | str) -> int:
+        ids = self.observations.station_ids
+        return ids.index(station) if isinstance(station, str) else int(station)
+
+    def station_covariance(self, station: int | str) -> np.ndarray:
+        """(6, 6) covariance of a station's pose (index or id), m^2 / rad^2."""
+        i = 6 * self._station_index(station)
+        return self.covariance[i:i + 6, i:i + 6]
+
+    def marker_covariance(self, marker: int | str) -> np.ndarray:
+        """(3, 3) covariance of a marker's centre (index or id), m^2."""
+        ids = self.observations.marker_ids
+        j = 6 * len(self.observations.station_ids) + 3 * (
+            ids.index(marker) if isinstance(marker, str) else int(marker))
+        return self.covariance[j:j + 3, j:j + 3]
+
+    @staticmethod
+    def ellipsoid(cov3: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """95 % error ellipsoid of a point with covariance ``cov3``.
+
+        Parameters
+        ----------
+        cov3 : (3, 3) float
+            Covariance, m^2.
+
+        Returns
+        -------
+        semi_axes_m : (3,) float
+            ``sqrt(chi2_3(0.95) * eigenvalue)``, ascending, m.
+        axes : (3, 3) float
+            Unit axis directions as columns, in the same order.
+
+        Examples
+        --------
+        >>> a, v = NetworkAdjustment.ellipsoid(np.diag([1e-4, 4e-4, 1e-4]))
+        >>> np.round(a, 4).tolist(), np.abs(v[:, 2]).round(3).tolist()
+        ([0.028, 0.028, 0.0559], [0.0, 1.0, 0.0])
+        """
+        lam, vec = np.linalg.eigh(np.asarray(cov3, dtype=float))
+        return np.sqrt(ELLIPSOID_CHI2_95 * np.clip(lam, 0.0, None)), vec
+
+
+def tie_order(obs: NetworkObservations, keep: np.ndarray, reference: int
+              ) -> tuple[list[int], list[int]]:
+    """Stations in the order they can be tied to the reference, and those that cannot.
+
+    A station is tied when it shares at least 2 markers with the stations already tied.
+
+    Parameters
+    ----------
+    obs : NetworkObservations
+    keep : (n,) bool
+        Observations to use.
+    reference : int
+        Index of the reference station.
+
+    Returns
+    -------
+    order : list of int
+        Tied station indices, reference first, in the order they are tied.
+    untied : list of int
+        The other station indices.
+    """
+    s, k = len(obs.station_ids), len(obs.marker_ids)
+    seen = np.zeros((s, k), dtype=bool)
+    seen[obs.station[keep], obs.marker[keep]] = True
+    placed = np.zeros(k, dtype=bool)
+    shared = np.zeros(s, dtype=int)  # markers each station shares with the placed ones
+    order, untied = [], np.ones(s, dtype=bool)
+    best = reference
+    while True:
+        order.append(best)
+        untied[best] = False
+        new = seen[best] & ~placed
+        placed |= new
+        shared += seen[:, new].sum(axis=1)
+        if not untied.any():
+            break
+        best = int(np.argmax(np.where(untied, shared, -1)))
+        if shared[best] < 2:
+            break
+    return order, np.flatnonzero(untied).tolist()
+
+
+def _check_tied(obs: NetworkObservations, keep: np.ndarray, reference: int) -> list[int]:
+    order, untied = tie_order(obs, keep, reference)
+    if untied:
+        names = ", ".join(obs.station_ids[i] for i in untied)
+        raise InputFileError(f"stations {names} share fewer than 2 markers with the part of the "
+                             f"network holding the reference {obs.station_ids[reference]}")
+    return order
+
+
+def _chained_initial(obs: NetworkObservations, order: list[int], reference_pose: np.ndarray
+                     ) -> tuple[np.ndarray, np.ndarray]:
+    """Initial poses (s, 6) and markers (k, 3) chained outward from the reference station."""
+    s, k = len(obs.station_ids), len(obs.marker_ids)
+    pose = np.zeros((s, 6))
+    markers = np.full((k, 3), np.nan)
+    weight = 1.0 / obs.sigma_m**2
+    for position, i in enumerate(order):
+        rows = np.flatnonzero(obs.station == i)
+        known = rows[~np.isnan(markers[obs.marker[rows], 0])]
+        if position == 0:
+            pose[i, :4] = reference_pose
+        else:
+            heading, t, _, _ = fit_heading_shift(obs.xyz_m[known],
+                                                 markers[obs.marker[known]], weight[known])
+            pose[i, :3], pose[i, 3] = t, heading
+        new = rows[np.isnan(markers[obs.marker[rows], 0])]
+        markers[obs.marker[new]] = pose[i, :3] + obs.xyz_m[new] @ rot_z(pose[i, 3]).T
+    return pose, markers
+
+
+def _rotations(pose: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    return rot_z(pose[:, 3]), rot_y(pose[:, 5]), rot_x(pose[:, 4])
+
+
+def _markers_from_poses(obs: NetworkObservations, pose: np.ndarray) -> np.ndarray:
+    """Each marker's weighted mean position as its stations (at ``pose``) see it, (k, 3)."""
+    rz, ry, rx = _rotations(pose)
+    r = rz @ ry @ rx
+    site = pose[obs.station, :3] + np.einsum("nij,nj->ni", r[obs.station], obs.xyz_m)
+    w = 1.0 / obs.sigma_m**2
+    k = len(obs.marker_ids)
+    total = np.bincount(obs.marker, weights=w, minlength=k)
+    return np.column_stack([np.bincount(obs.marker, weights=w * site[:, a], minlength=k)
+                            for a in range(3)]) / total[:, None]
+
+
+@dataclass
+class _Problem:
+    """Everything of one adjustment that does not change between iterations."""
+
+    obs: NetworkObservations
+    prior_index: np.ndarray   # (q,) parameter observed directly by a pseudo-observation
+    prior_value: np.ndarray   # (q,) its observed value (m or rad)
+    prior_weight: np.ndarray  # (q,) 1 / sigma^2
+    prior_is_heading: np.ndarray  # (q,) bool: misclosure wrapped to [-pi, pi)
+    fixed: np.ndarray         # (u,) bool: parameters the 'station' datum fixes
+    free_defects: np.ndarray  # (d,) defect directions the 'free' datum constrains
+
+
+@dataclass
+class _Solution:
+    pose: np.ndarray
+    markers: np.ndarray
+    blocks: np.ndarray        # (n, 3, 9) design blocks at the solution
+    columns: np.ndarray       # (n, 9) their parameter indices
+    misclosure: np.ndarray    # (n, 3) f = t + R p - m at the solution
+    prior_misclosure: np.ndarray
+    covariance: np.ndarray | None
+    n_constraints: int
+    iterations: int
+    converged: bool
+    normal: sp.csc_matrix     # (bordered) normal matrix at the solution
+    covariance_angles: np.ndarray | None = None  # (s, 3) angles the covariance is linearised at
+
+
+def _linearise(obs: NetworkObservations, pose: np.ndarray, markers: np.ndarray
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Design blocks (n, 3, 9), their parameter columns (n, 9) (the station's 6 pose
+    parameters, then the marker's x, y, z) and the misclosure ``f = t + R p - m`` (n, 3)."""
+    n, s = obs.n, len(obs.station_ids)
+    rz, ry, rx = _rotations(pose[obs.station])
+    a = np.einsum("nij,nj->ni", rx, obs.xyz_m)
+    b = np.einsum("nij,nj->ni", ry, a)
+    q = np.einsum("nij,nj->ni", rz, b)
+    f = pose[obs.station, :3] + q - markers[obs.marker]
+    block = np.zeros((n, 3, 9))
+    block[:, [0, 1, 2], [0, 1, 2]] = 1.0
+    block[:, 0, 3], block[:, 1, 3] = -q[:, 1], q[:, 0]
+    zero = np.zeros(n)
+    d_roll = np.column_stack([zero, -a[:, 2], a[:, 1]])   # e_x x (Rx p)
+    d_pitch = np.column_stack([b[:, 2], zero, -b[:, 0]])  # e_y x (Ry Rx p)
+    block[:, :, 4] = np.einsum("nij,nj->ni", rz @ ry, d_roll)
+    block[:, :, 5] = np.einsum("nij,nj->ni", rz, d_pitch)
+    block[:, [0, 1, 2], [6, 7, 8]] = -1.0
+    columns = np.concatenate([6 * obs.station[:, None] + np.arange(6),
+                              6 * s + 3 * obs.marker[:, None] + np.arange(3)], axis=1)
+    return block, columns, f
+
+
+def _defect_basis(pose: np.ndarray, markers: np.ndarray) -> np.ndarray:
+    """(u, 4) parameter changes of a translation (x, y, z, 1 m) and a rotation about the vertical
+    through the stations' centroid (1 rad): the datum defect."""
+    s, k = pose.shape[0], markers.shape[0]
+    centre = pose[:, :2].mean(axis=0)
+    g = np.zeros((6 * s + 3 * k, 4))
+    for rows, xy in ((6 * np.arange(s), pose[:, :2]), (6 * s + 3 * np.arange(k), markers[:, :2])):
+        for axis in range(3):
+            g[rows + axis, axis] = 1.0
+        g[rows, 3] = -(xy[:, 1] - centre[1])
+        g[rows + 1, 3] = xy[:, 0] - centre[0]
+    g[6 * np.arange(s) + 3, 3] = 1.0
+    return g
+
+
+def _undetermined_defects(g: np.ndarray, prior_index: np.ndarray, prior_weight: np.ndarray
+                          ) -> list[int]:
+    """Defect directions (0-2 translation, 3 rotation) the pseudo-observations leave free."""
+    gp = g[prior_index]
+    m = gp.T @ (prior_weight[:, None] * gp)
+    free = [a for a in range(3) if m[a, a] <= 0.0]
+    fixed = [a for a in range(3) if m[a, a] > 0.0]
+    rot = m[3, 3]
+    if fixed:
+        rot -= m[3, fixed] @ np.linalg.solve(m[np.ix_(fixed, fixed)], m[fixed, 3])
+    if rot <= 1e-9 * max(m[3, 3], 1e-300):
+        free.append(3)
+    return free
+
+
+def _constraints(problem: _Problem, pose: np.ndarray, markers: np.ndarray) -> np.ndarray:
+    """(d, u) minimal constraints ``B dx = 0`` of the free datum (d = 0 for the others): the
+    defect directions restricted to the stations' x, y, z and heading."""
+    u = pose.shape[0] * 6 + markers.shape[0] * 3
+    if not problem.free_defects.size:
+        return np.zeros((0, u))
+    g = _defect_basis(pose, markers)[:, problem.free_defects]
+    on_stations = np.zeros(u, dtype=bool)
+    on_stations[: 6 * pose.shape[0]] = np.tile([1, 1, 1, 1, 0, 0], pose.shape[0]) > 0
+    return (g * on_stations[:, None]).T
+
+
+def _prior_misclosure(problem: _Problem, params: np.ndarray) -> np.ndarray:
+    f = params[problem.prior_index] - problem.prior_value
+    return np.where(problem.prior_is_heading, (f + np.pi) % (2 * np.pi) - np.pi, f)
+
+
+def _prior_misclosure(problem: _Problem, params: np.ndarray) -> np.ndarray:
+    f = params[problem.prior_index] - problem.prior_value
+    return np.where(problem.prior_is_heading, (f + np.pi) % (2 * np.pi) - np.pi, f)
+
+
+@dataclass
+class _Assembly:
+    """Sparsity pattern of the (bordered) normal matrix of one set of observations, the same in
+    every Gauss-Newton iteration: where each contribution goes in CSC storage."""
+
+    keep: np.ndarray     # (n, 9, 9) bool: block entries that touch no fixed parameter
+    prior: np.ndarray    # (q,) bool: pseudo-observations of parameters that are not fixed
+    n_fixed: int
+    slot: np.ndarray     # (e,) index into the CSC data of each contribution
+    indices: np.ndarray  # CSC row indices
+    indptr: np.ndarray   # CSC column pointers
+    size: int            # u + number of constraints
+
+
+def _assembly(problem: _Problem, columns: np.ndarray, b: np.ndarray) -> _Assembly:
+    """The pattern of :func:`_normal_system`: observation blocks, priors, a unit diagonal for
+    each fixed parameter, the border ``B`` (rows) and ``B^T`` (columns)."""
+    u = problem.fixed.size
+    size = u + b.shape[0]
+    keep = ~(problem.fixed[columns][:, :, None] | problem.fixed[columns][:, None, :])
+    fixed = np.flatnonzero(problem.fixed)
+    prior = ~problem.fixed[problem.prior_index]
+    border_r, border_c = np.nonzero(b)
+    row = np.concatenate([np.broadcast_to(columns[:, :, None], keep.shape)[keep],
+                          problem.prior_index[prior], fixed, u + border_r, border_c])
+    col = np.concatenate([np.broadcast_to(columns[:, None, :], keep.shape)[keep],
+                          problem.prior_index[prior], fixed, border_c, u + border_r])
+    unique, slot = np.unique(col * size + row, return_inverse=True)
+    return _Assembly(keep, prior, fixed.size, slot, unique % size,
+                     np.searchsorted(unique, np.arange(size + 1) * size), size)
+
+
+def _normal_system(problem: _Problem, assembly: _Assembly, blocks: np.ndarray,
+                   columns: np.ndarray, f: np.ndarray, fp: np.ndarray, b: np.ndarray
+                   ) -> tuple[sp.csc_matrix, np.ndarray]:
+    """Normal equations of the Gauss-Newton step ``N dx = -A^T P f``, assembled from the
+    observations' 9 x 9 blocks (sparse), bordered by the minimal constraints ``B`` when there
+    are any. A parameter the datum fixes gets a unit row and column (its step is 0)."""
+    u = problem.fixed.size
+    weighted = blocks * (3.0 / problem.obs.sigma_m**2)[:, None, None]
+    border = b[b != 0]
+    values = np.concatenate([(weighted.transpose(0, 2, 1) @ blocks)[assembly.keep],
+                             problem.prior_weight[assembly.prior], np.ones(assembly.n_fixed),
+                             border, border])
+    normal = sp.csc_matrix((np.bincount(assembly.slot, values, minlength=assembly.indices.size),
+                            assembly.indices, assembly.indptr),
+                           shape=(assembly.size, assembly.size))
+    rhs = -(np.bincount(columns.ravel(), np.sum(weighted * f[:, :, None], axis=1).ravel(),
+                        minlength=u)
+            + np.bincount(problem.prior_index, problem.prior_weight * fp, minlength=u))
+    rhs[problem.fixed] = 0.0
+    return normal, np.concatenate([rhs, np.zeros(b.shape[0])])
+
+
+def _covariance(normal: sp.csc_matrix, n_station_params: int, u: int, fixed: np.ndarray
+                ) -> np.ndarray:
+    """(u, u) covariance: the upper-left block of the inverse of the (bordered) normal matrix,
+    with the fixed parameters' rows and columns zeroed.
+
+    The markers are eliminated first (Schur complement, as in bundle adjustment): their block
+    ``N_mm`` is block-diagonal (3 x 3 per marker) and the border touches stations only, so
+    ``Q_ss = (N_ss - E N_ms)^-1`` with ``E = N_sm N_mm^-1``, ``Q_sm = -Q_ss E`` and
+    ``Q_mm = N_mm^-1 - E^T Q_sm`` — one dense inverse of the stations' size (plus border).
+    """
+    normal = normal.tocsr()
+    ns, k = n_station_params, (u - n_station_params) // 3
+    x = np.r_[0:ns, u:normal.shape[0]]  # stations and border
+    n_xm = normal[x][:, ns:u]
+    n_mm = normal[ns:u][:, ns:u].toarray().reshape(k, 3, k, 3)
+    m_inv = np.linalg.inv(n_mm[np.arange(k), :, np.arange(k), :])
+    e = n_xm @ sp.bsr_matrix((m_inv, np.arange(k), np.arange(k + 1)), shape=(3 * k, 3 * k))
+    schur = normal[x][:, x].toarray() - (e @ n_xm.T).toarray()
+    try:
+        q_ss = np.linalg.inv(schur)[:ns, :ns]
+    except np.linalg.LinAlgError:
+        q_ss = np.full((ns, ns), np.nan)
+    if not (np.isfinite(np.diag(q_ss)).all() and (np.diag(q_ss)[~fixed[:ns]] > 0).all()):
+        raise DataError("the network's normal matrix is singular (a station tied only by "
+                        "markers on one vertical line?)")
+    e = e[:ns].tocsr()
+    q_sm = -np.asarray((e.T @ q_ss).T)
+    q_mm = -np.asarray(e.T @ q_sm)
+    q_mm.reshape(k, 3, k, 3)[np.arange(k), :, np.arange(k), :] += m_inv
+    cov = np.empty((u, u))
+    cov[:ns, :ns], cov[:ns, ns:], cov[ns:, :ns], cov[ns:, ns:] = q_ss, q_sm, q_sm.T, q_mm
+    cov[fixed, :] = 0.0
+    cov[:, fixed] = 0.0
+    return cov
+
+
+def _downdated(covariance: np.ndarray, blocks: np.ndarray, columns: np.ndarray,
+               weight: np.ndarray) -> np.ndarray:
+    """Covariance after removing one point observation (Sherman-Morrison-Woodbury):
+    ``Q + Q U (W^-1 - U^T Q U)^-1 U^T Q`` with ``U = A_i^T`` (u, 3); also under minimal
+    constraints, since the border is unchanged.
+
+    Parameters
+    ----------
+    covariance : (u, u) float
+    blocks : (3, 9) float
+        The observation's design block.
+    columns : (9,) int
+    weight : (3,) float
+        Its component weights, 1/m^2.
+    """
+    qu = covariance[:, columns] @ blocks.T
+    residual_cov = np.diag(1.0 / weight) - blocks @ qu[columns]
+    return covariance + qu @ np.linalg.solve(residual_cov, qu.T)
+
+
+def _solve(problem: _Problem, pose: np.ndarray, markers: np.ndarray, max_iterations: int,
+           must_converge: bool = True) -> _Solution:
+    """Gauss-Newton from ``pose``/``markers`` to convergence (covariance left to the caller).
+
+    Without convergence in ``max_iterations`` steps: DataError, or with ``must_converge=False``
+    the last iterate (``converged`` False) — a blunder of metres makes Gauss-Newton converge
+    slowly, and its w-tests at the iterate already point at it.
+    """
+    s = pose.shape[0]
+    params = np.concatenate([pose.ravel(), markers.ravel()])
+    u = params.size
+    b = _constraints(problem, pose, markers)
+    step = np.full(1, np.inf)
+    for iteration in range(1, max_iterations + 2):
+        pose, markers = params[: 6 * s].reshape(s, 6), params[6 * s:].reshape(-1, 3)
+        blocks, columns, f = _linearise(problem.obs, pose, markers)
+        if iteration == 1:
+            assembly = _assembly(problem, columns, b)
+        fp = _prior_misclosure(problem, params)
+        normal, rhs = _normal_system(problem, assembly, blocks, columns, f, fp, b)
+        converged = np.abs(step).max() < _STEP_TOLERANCE
+        if converged or iteration > max_iterations:
+            break
+        try:
+            step = scipy.sparse.linalg.splu(normal).solve(rhs)[:u]
+        except RuntimeError:
+            raise DataError("the network's normal equations are singular (a station tied only "
+                            "by markers on one vertical line?)") from None
+        params = params + step
+    if must_converge and not converged:
+        raise DataError(f"the adjustment did not converge in {max_iterations} iterations "
+                        f"(last step {np.abs(step).max():.3g}); a blunder? (data snooping "
+                        "finds it)")
+    return _Solution(pose, markers, blocks, columns, f, fp, None, b.shape[0], iteration - 1,
+                     bool(converged), normal)
+
+
+def _adjust_iv(obs, datum, settings, nominal) -> int:
+    if not isinstance(obs, NetworkObservations):
+        raise ConfigError(f"`obs` must be NetworkObservations, got {type(obs).__name__}")
+    s = len(obs.station_ids)
+    if s == 0:
+        raise InputFileError("the network has no stations")
+    reference = datum.reference_station or obs.station_ids[0]
+    if reference not in obs.station_ids:
+        raise ConfigError(f"reference station {reference!r} is not in the network (stations "
+                          f"{', '.join(obs.station_ids[:10])}{', ...' if s > 10 else ''})")
+    missing = [c.marker_id for c in datum.control if c.marker_id not in obs.marker_ids]
+    if missing:
+        raise ConfigError(f"control points {', '.join(missing)} are not markers of the network")
+    if nominal is not None and nominal.heading_rad.shape != (s,):
+        raise ConfigError(f"nominal poses must be given for all {s} stations, got "
+                          f"{nominal.heading_rad.shape[0]}")
+    if settings.heading_prior_sigma_rad is not None and nominal is None:
+        raise ConfigError("a heading prior (heading_prior_sigma_rad) needs nominal poses "
+                          "(its centre)")
+    return obs.station_ids.index(reference)
+
+
+def _problem(obs: NetworkObservations, datum: Datum, settings: AdjustmentSettings,
+             nominal: NominalPoses | None, pose: np.ndarray, markers: np.ndarray,
+             reference: int) -> _Problem:
+    """Pseudo-observations and datum constraints; refuses a datum that leaves a defect free."""
+    s = len(obs.station_ids)
+    stations = np.arange(s)
+    index = [6 * stations + 4, 6 * stations + 5]
+    value = [np.zeros(s), np.zeros(s)]
+    weight = [np.full(2 * s, settings.inclinometer_sigma_rad**-2.0)]
+    heading = [np.zeros(2 * s, dtype=bool)]
+    if settings.heading_prior_sigma_rad is not None:
+        index.append(6 * stations + 3)
+        value.append(nominal.heading_rad)
+        weight.append(np.full(s, settings.heading_prior_sigma_rad**-2.0))
+        heading.append(np.ones(s, dtype=bool))
+    for c in datum.control:
+        index.append(6 * s + 3 * obs.marker_ids.index(c.marker_id) + np.arange(3))
+        value.append(c.xyz_m)
+        weight.append(c.sigma_m**-2.0)
+        heading.append(np.zeros(3, dtype=bool))
+    problem = _Problem(obs, np.concatenate(index), np.concatenate(value),
+                       np.concatenate(weight), np.concatenate(heading),
+                       np.zeros(6 * s + 3 * len(obs.marker_ids), dtype=bool),
+                       np.zeros(0, dtype=int))
+    if datum.kind == "station":
+        problem.fixed[6 * reference + np.arange(4)] = True
+        return problem
+    free = _undetermined_defects(_defect_basis(pose, markers), problem.prior_index,
+                                 problem.prior_weight)
+    if datum.kind == "control" and free:
+        raise ConfigError(f"the control points ({', '.join(c.marker_id for c in datum.control)})"
+                          f" leave {', '.join(_DEFECT_NAMES[a] for a in free)} free: give "
+                          "control points at >= 2 horizontal positions (or a heading prior)")
+    problem.free_defects = np.asarray(free, dtype=int)
+    return problem
+
+
+def _initial(obs: NetworkObservations, datum: Datum, nominal: NominalPoses | None,
+             order: list[int]) -> tuple[np.ndarray, np.ndarray]:
+    """Initial poses (s, 6) and markers (k, 3), site frame (see the module doc)."""
+    reference = order[0]
+    if datum.reference_pose is not None:
+        reference_pose = np.asarray(datum.reference_pose)
+    elif nominal is not None:
+        reference_pose = np.append(nominal.position_m[reference], nominal.heading_rad[reference])
+    else:
+        reference_pose = np.zeros(4)
+    if nominal is None:
+        pose, markers = _chained_initial(obs, order, reference_pose)
+        if datum.control:
+            idx = [obs.marker_ids.index(c.marker_id) for c in datum.control]
+            control_xyz = np.array([c.xyz_m for c in datum.control])
+            control_weight = np.array([1.0 / np.sum(c.sigma_m**2) for c in datum.control])
+            heading, t, _, _ = fit_heading_shift(markers[idx], control_xyz, control_weight)
+            pose[:, :3] = t + pose[:, :3] @ rot_z(heading).T
+            pose[:, 3] += heading
+            markers = t + markers @ rot_z(heading).T
+        return pose, markers
+    pose = np.zeros((len(obs.station_ids), 6))
+    pose[:, :3], pose[:, 3] = nominal.position_m, nominal.heading_rad
+    pose[reference, :4] = reference_pose
+    return pose, _markers_from_poses(obs, pose)
+
+
+def adjust(obs: NetworkObservations, datum: Datum = Datum(),
+           settings: AdjustmentSettings = AdjustmentSettings(),
+           nominal: NominalPoses | None = None) -> NetworkAdjustment:
+    """Adjust a network of stations and markers; test it and remove blunders (data snooping).
+
+    Parameters
+    ----------
+    obs : NetworkObservations
+        Marker centres measured by the stations (levelled station frames).
+    datum : Datum
+        What fixes the network (default: the first station).
+    settings : AdjustmentSettings
+        Priors, test levels, limits.
+    nominal : NominalPoses or None
+        Nominal poses (initial values, heading-prior centre); None chains initial values from
+        the reference station.
+
+    Returns
+    -------
+    NetworkAdjustment
+
+    Raises
+    ------
+    InputFileError
+        Stations that share fewer than 2 markers with the reference's part of the network
+        (named), or malformed observations.
+    ConfigError
+        Unknown reference station or control ids, a datum that leaves a defect free (named),
+        a heading prior without nominal poses.
+    DataError
+        Singular normal equations or no convergence.
+
+    Notes
+    -----
+    Data snooping (``settings.snooping``) removes the point observation with the largest
+    ``|w| > Phi^-1(1 - alpha0 / 2)`` and re-adjusts, up to ``settings.max_rejections`` times. It
+    stops early, keeping the observation, when removing it would leave a station tied by fewer
+    than two markers or its marker with no observation; its ``|w|`` then stays above the critical
+    value in ``w_test`` for the report to show.
+
+    Examples
+    --------
+    >>> from pipeline.network.simulation import simulated_network
+    >>> obs, truth = simulated_network(n_stations=4, seed=1)
+    >>> result = adjust(obs, settings=AdjustmentSettings(snooping=False),
+    ...                 nominal=truth.nominal)
+    >>> result.pose.shape, result.covariance.shape == (6 * 4 + 3 * len(obs.marker_ids),) * 2
+    ((4, 6), True)
+    >>> bool(np.abs(result.marker_xyz_m - truth.marker_xyz_m).max() < 0.05)
+    True
+    """
+    reference = _adjust_iv(obs, datum, settings, nominal)
+    order = _check_tied(obs, np.ones(obs.n, dtype=bool), reference)
+    pose0, markers0 = _initial(obs, datum, nominal, order)
+    problem = _problem(obs, datum, settings, nominal, pose0, markers0, reference)
+    delta0 = non_centrality(settings.alpha0, settings.beta0)
+    s, k = len(obs.station_ids), len(obs.marker_ids)
+    position_columns = np.concatenate([6 * np.arange(s)[:, None], 6 * s + 3 * np.arange(k)[:, None]]
+                                      ) + np.arange(3)
+
+    solved_keep = np.ones(obs.n, dtype=bool)
+    snooping = settings.snooping and settings.max_rejections > 0
+
+    def solve(keep, previous):
+        # After a removal the covariance is downdated (see _downdated) while the solution's
+        # angles (the design depends on no other parameter) stay within _DOWNDATE_ANGLE_RAD of
+        # those it was computed at; otherwise, e.g. once a blunder of metres is out, afresh.
+        problem.obs = obs.subset(keep)
+        start = (pose0, markers0) if previous is None else (previous.pose, previous.markers)
+        sol = _solve(problem, *start, settings.max_iterations, must_converge=not snooping)
+        if (previous is not None and np.abs(sol.pose[:, 3:] - previous.covariance_angles).max()
+                < _DOWNDATE_ANGLE_RAD):
+            row = int(np.flatnonzero(solved_keep & ~keep)[0])
+            i = int(np.count_nonzero(solved_keep[:row]))
+            sol.covariance = _downdated(previous.covariance, previous.blocks[i],
+                                        previous.columns[i], np.full(3, 3.0 / obs.sigma_m[row]**2))
+            sol.covariance_angles = previous.covariance_angles
+        else:
+            sol.covariance = _covariance(sol.normal, 6 * s, problem.fixed.size, problem.fixed)
+            sol.covariance_angles = sol.pose[:, 3:].copy()
+        solved_keep[:] = keep
+        weight = np.repeat(3.0 / problem.obs.sigma_m[:, None]**2, 3, axis=1)
+        return sol, w_tests(sol.blocks, sol.columns, weight, sol.covariance, -sol.misclosure)
+
+    def removable(keep, i):
+        trial = keep.copy()
+        trial[i] = False
+        return (np.any(obs.marker[trial] == obs.marker[i])
+                and not tie_order(obs, trial, reference)[1])
+
+    sol, keep, rejected = data_snooping(
+        solve, obs.n, settings.alpha0, settings.max_rejections if snooping else 0, removable)
+    kept = obs.subset(keep)
+    w = np.repeat(3.0 / kept.sigma_m[:, None]**2, 3, axis=1)
+    if not sol.converged:
+        w_last = np.abs(w_tests(sol.blocks, sol.columns, w, sol.covariance, -sol.misclosure))
+        i = int(np.flatnonzero(keep)[np.argmax(w_last.max(axis=1))])
+        raise DataError(f"the adjustment did not converge in {settings.max_iterations} "
+                        f"iterations after {len(rejected)} removals by data snooping; the "
+                        f"largest |w| ({w_last.max():.3g}) is at station "
+                        f"{obs.station_ids[obs.station[i]]}, marker "
+                        f"{obs.marker_ids[obs.marker[i]]}")
+    if not np.array_equal(sol.covariance_angles, sol.pose[:, 3:]):  # downdated: afresh
+        sol.covariance = _covariance(sol.normal, 6 * s, problem.fixed.size, problem.fixed)
+    rel = observation_reliability(sol.blocks, sol.columns, w, sol.covariance, -sol.misclosure,
+                                  position_columns, delta0)
+    dof = (3 * kept.n + problem.prior_index.size - problem.fixed.size + problem.fixed.sum()
+           + sol.n_constraints)
+    vpv = float(np.sum(w * sol.misclosure**2) + problem.prior_weight @ sol.prior_misclosure**2)
+    pose = sol.pose.copy()
+    pose[:, 3] = (pose[:, 3] + np.pi) % (2 * np.pi) - np.pi
+    return NetworkAdjustment(
+        observations=kept, pose=pose, marker_xyz_m=sol.markers, covariance=sol.covariance,
+        residuals_m=-sol.misclosure, redundancy=rel.redundancy, w_test=rel.w_test,
+        mdb_m=rel.mdb_m, mdb_effect_m=rel.mdb_effect_m,
+        sigma0_squared=vpv / dof if dof > 0 else float("nan"), dof=int(dof),
+        iterations=sol.iterations,
+        rejected=[Rejection(obs.station_ids[obs.station[i]], obs.marker_ids[obs.marker[i]], w_i,
+                            r) for i, w_i, r in rejected],
+        datum=datum, settings=settings)

@@ -1,0 +1,356 @@
+"""Per-station checks of a layout, exact (no integer program): what the planner, the baselines
+and the reduction studies all ask of a station.
+
+- :class:`StationInfo`: one station's usable sites, the information each contributes
+  (:func:`planner.accuracy.known_control.pair_information`) and the predicted error of any subset
+  (:func:`planner.accuracy.known_control.errors_from_information`), with the outer-approximation
+  tangents (:func:`planner.accuracy.known_control.linearisation`) and failing-set growth the
+  accuracy cuts use;
+- :func:`diagnose`: stations no layout can satisfy, and why;
+- :func:`evaluate_layout`: count, directions (:func:`planner.problem.usability.direction_status`)
+and
+  predicted error of a layout at every station -> :class:`LayoutCheck`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import cached_property
+
+import numpy as np
+
+from planner.accuracy import known_control
+from planner.problem.usability import (
+    OCCLUDED,
+    OUT_OF_DOMAIN,
+    TOO_INACCURATE,
+    PlanProblem,
+    direction_status,
+    sector_index,
+)
+
+
+class StationInfo:
+    """Cached usable sites of one station and the information each contributes.
+
+    Parameters
+    ----------
+    problem : PlanProblem
+    s : int
+        Station index.
+    config : PlanConfig
+        Uses ``working_radius_m`` and ``inclinometer_sigma_rad``.
+
+    Attributes
+    ----------
+    pairs : (u,) int
+        The station's usable pairs, ordered by site index.
+    sites : (u,) int
+        Their candidate-site indices.
+    sigma_m : (u,) float
+        Error-model 1-sigma 3D centre error of each, m.
+    info : (u, 4, 4) float
+        Pose information each site contributes
+        (:func:`planner.accuracy.known_control.pair_information`), computed on first use (checking a
+        layout needs only its markers' information).
+    radius : float
+        Working radius, m.
+    incl : float
+        Inclinometer 1-sigma, rad.
+    """
+
+    def __init__(self, problem: PlanProblem, s: int, config) -> None:
+        idx = problem.usable_pairs(s)
+        self.pairs = idx
+        self.sites = problem.pair_site[idx]
+        self.sigma_m = problem.pair_sigma_m[idx]
+        self.station_xyz = problem.station_xyz[s]
+        self.site_xyz = problem.site_xyz[self.sites]
+        self.radius = config.working_radius_m
+        self.incl = config.inclinometer_sigma_rad
+
+    @cached_property
+    def info(self) -> np.ndarray:
+        return self._information(np.arange(self.sites.size))
+
+    def _information(self, k: np.ndarray) -> np.ndarray:
+        """(len(k), 4, 4) float: information of the sites in rows ``k`` (per site the same
+        numbers as ``info[k]``)."""
+        if not k.size:
+            return np.zeros((0, 4, 4))
+        return known_control.pair_information(self.station_xyz, self.site_xyz[k], self.sigma_m[k])
+
+    def rows(self, sites) -> np.ndarray:
+        """Rows in ``sites`` of the usable ones among some candidate-site indices (int)."""
+        sites = np.atleast_1d(np.asarray(sites, np.int64))
+        k = np.minimum(np.searchsorted(self.sites, sites), max(self.sites.size - 1, 0))
+        return k[self.sites[k] == sites] if self.sites.size else k[:0]
+
+    def error(self, sites) -> float:
+        """Predicted error using the usable ones among ``sites`` (candidate-site indices), m."""
+        k = self.rows(sites)
+        if not k.size:
+            return float("inf")
+        j = self._information(k).sum(axis=0)
+        return float(known_control.errors_from_information(j[None], self.radius, self.incl)[0])
+
+    def oa_cuts(self, sites, requirement_m: float, exclude: int | None = None,
+                scale: float = 1.0, rim: str = "worst") -> list:
+        """Outer-approximation cuts linearised at ``scale`` x the information of ``sites``
+        (:func:`planner.accuracy.known_control.linearisation`), as ``(sites, coefficients, rhs)``
+        with the cut ``sum coef * x >= rhs``; only cuts with a positive right-hand side. ``exclude``
+        gets no coefficient (the cut then holds for the others alone)."""
+        k = self.rows(sites)
+        if not k.size:
+            return []
+        keep = np.ones(self.sites.size, bool)
+        if exclude is not None:
+            keep[self.rows(exclude)] = False
+        out = []
+        for v, rhs in known_control.linearisation(scale * self.info[k].sum(axis=0), self.radius,
+                                             self.incl, requirement_m, rim):
+            if rhs > 0:
+                coef = np.einsum("a,kab,b->k", v, self.info[keep], v)
+                out.append((self.sites[keep], coef / rhs, 1.0))
+        return out
+
+    def grow_failing(self, failing, exclude: int | None, requirement_m: float,
+                     max_skips: int = 25) -> np.ndarray:
+        """Grow a failing site set, least informative sites first, while it keeps failing.
+
+        Monotonicity makes "the set plus the next ``m`` sites in order still fails" monotone in
+        ``m``, so each run of additions is found by bisection; a site whose addition would make
+        the station pass is skipped (at most ``max_skips`` times). ``exclude`` is never added.
+        Returns candidate-site indices of the grown (still failing) set.
+        """
+        in_set = np.zeros(self.sites.size, bool)
+        in_set[self.rows(failing)] = True
+        order = np.argsort(1.0 / self.sigma_m**2, kind="stable")
+        skip = in_set.copy()
+        if exclude is not None:
+            skip[self.rows(exclude)] = True
+        order = order[~skip[order]]
+        total = self.info[in_set].sum(axis=0)
+        cum = np.concatenate([np.zeros((1, 4, 4)), np.cumsum(self.info[order], axis=0)])
+
+        def fails(a: int, b: int) -> bool:
+            trial = total + cum[b] - cum[a]
+            e = known_control.errors_from_information(trial[None], self.radius, self.incl)[0]
+            return bool(e > requirement_m)
+
+        pos, skips = 0, 0
+        while pos < order.size and skips <= max_skips:
+            lo, hi = 0, order.size - pos  # largest m with fails(pos, pos + m)
+            while lo < hi:
+                mid = (lo + hi + 1) // 2
+                if fails(pos, pos + mid):
+                    lo = mid
+                else:
+                    hi = mid - 1
+            in_set[order[pos:pos + lo]] = True
+            total = total + cum[pos + lo] - cum[pos]
+            pos += lo + 1
+            skips += 1
+        return self.sites[in_set]
+
+
+def station_infos(problem: PlanProblem, config) -> list[StationInfo]:
+    """:class:`StationInfo` of every station (cache it across repeated checks)."""
+    return [StationInfo(problem, s, config) for s in range(problem.n_stations)]
+
+
+def diagnose(problem: PlanProblem, config, infos: list[StationInfo] | None = None,
+             accuracy_check: bool = True) -> dict[str, str]:
+    """Stations that no layout can satisfy, with the reason (empty dict: none found).
+
+    Checks, per station and with every allowed usable site selected: any site in range, any
+    unoccluded, enough usable sites, enough sectors, accuracy reachable (and, in redundant mode,
+    reachable after losing any one site). ``accuracy_check=False`` leaves out the two accuracy
+    checks (network mode judges accuracy with
+    :meth:`planner.accuracy.network.NetworkModel.diagnose`).
+    """
+    infos = infos or station_infos(problem, config)
+    forbidden = problem.site_mask(config.forbidden, "forbidden")
+    allowed = ~forbidden
+    min_count = config.min_markers + (1 if config.redundant else 0)
+    out = {}
+    for s in range(problem.n_stations):
+        sid = problem.station_ids[s]
+        pairs = np.flatnonzero(problem.pair_station == s)
+        pairs = pairs[allowed[problem.pair_site[pairs]]]
+        if pairs.size == 0:
+            out[sid] = f"no candidate site within {config.max_range_m:g} m (no site in range)"
+            continue
+        reason = problem.pair_reason[pairs]
+        idx = pairs[reason == 0]
+        if idx.size == 0:
+            if np.all(reason == OCCLUDED):
+                out[sid] = f"all {pairs.size} sites in range are occluded"
+            else:
+                out[sid] = (f"no usable site: {np.sum(reason == OCCLUDED)} occluded, "
+                            f"{np.sum(reason == OUT_OF_DOMAIN)} outside the error model's "
+                            f"domain, {np.sum(reason == TOO_INACCURATE)} with 95 % centre error "
+                            f"above {config.requirement_m:g} m")
+            continue
+        sites = problem.pair_site[idx]
+        sel = np.zeros(problem.n_sites, bool)
+        sel[sites] = True
+        count, sectors = direction_status(problem, sel, config.n_sectors)
+        if count[s] < min_count:
+            out[sid] = f"too few usable sites: {count[s]} (needs {min_count})"
+            continue
+        if sectors[s] < config.min_sectors:
+            out[sid] = (f"too few directions: usable sites in {sectors[s]} of "
+                        f"{config.n_sectors} sectors (needs {config.min_sectors})")
+            continue
+        if config.redundant:
+            per = np.bincount(sector_index(problem.pair_bearing_rad[idx], config.n_sectors),
+                              minlength=config.n_sectors)
+            left = int((per > 0).sum()) - int(np.any(per == 1))
+            if left < config.min_sectors:
+                out[sid] = (f"too few directions after losing one marker: the usable sites "
+                            f"leave {left} of {config.n_sectors} sectors (needs "
+                            f"{config.min_sectors})")
+                continue
+        if not accuracy_check:
+            continue
+        err = infos[s].error(sites)
+        if err > config.requirement_m:
+            out[sid] = (f"accuracy unreachable: all {sites.size} usable sites give "
+                        f"{err:.3f} m > {config.requirement_m:g} m")
+            continue
+        if config.redundant:
+            worst = max(infos[s].error(np.delete(sites, i)) for i in range(sites.size))
+            if worst > config.requirement_m:
+                out[sid] = (f"accuracy unreachable after losing one marker: {worst:.3f} m > "
+                            f"{config.requirement_m:g} m")
+    return out
+
+
+@dataclass(frozen=True)
+class LayoutCheck:
+    """Whether a marker layout meets the requirement at every station.
+
+    Attributes
+    ----------
+    count, sectors : (s,) int
+        Usable selected markers and occupied sectors per station.
+    error_m : (s,) float
+        Predicted error per station, m.
+    worst_loss_error_m : (s,) float or None
+        Redundant mode: worst predicted error after losing any one of the station's markers.
+    worst_loss_sectors : (s,) int or None
+        Redundant mode: fewest occupied sectors after losing any one marker.
+    ok : (s,) bool
+    marker_error_m : (n,) float or None
+        Network mode: predicted 95 % error of each selected marker relative to the datum
+        (nan where no marker is selected), m.
+    markers_ok : bool
+        Network mode: every selected marker meets the requirement (always True otherwise).
+    """
+
+    count: np.ndarray
+    sectors: np.ndarray
+    error_m: np.ndarray
+    worst_loss_error_m: np.ndarray | None
+    worst_loss_sectors: np.ndarray | None
+    ok: np.ndarray
+    marker_error_m: np.ndarray | None = None
+    markers_ok: bool = True
+
+    @property
+    def all_ok(self) -> bool:
+        return bool(self.ok.all()) and self.markers_ok
+
+
+def evaluate_layout(problem: PlanProblem, selected: np.ndarray, config,
+                    infos: list[StationInfo] | None = None, net=None) -> LayoutCheck:
+    """Check directions and predicted accuracy of a layout at every station.
+
+    Parameters
+    ----------
+    problem : PlanProblem
+    selected : (n,) bool
+        Candidate sites holding a marker.
+    config : PlanConfig
+        In redundant mode the layout must also survive the loss of any one marker; in network
+        mode (``config.network``) the accuracy of every station and selected marker is the
+        network's (:mod:`planner.accuracy.network`).
+    infos : list of StationInfo, optional
+        Cache from :func:`station_infos`.
+    net : planner.accuracy.network.NetworkModel, optional
+        Network mode: cache from :func:`planner.accuracy.network.network_model`.
+    """
+    selected = np.asarray(selected, dtype=bool)
+    if config.network:
+        return _evaluate_network(problem, selected, config, net)
+    infos = infos or station_infos(problem, config)
+    count, sectors = direction_status(problem, selected, config.n_sectors)
+    err = np.array([infos[s].error(infos[s].sites[selected[infos[s].sites]])
+                    for s in range(problem.n_stations)])
+    ok = (count >= config.min_markers) & (sectors >= config.min_sectors) \
+        & (err <= config.requirement_m)
+    worst_err = worst_sec = None
+    if config.redundant:
+        worst_err = err.copy()
+        for s in range(problem.n_stations):
+            info = infos[s]
+            chosen = info.sites[selected[info.sites]]
+            if chosen.size:
+                parts = info.info[selected[info.sites]]
+                without = parts.sum(axis=0)[None] - parts  # J after losing each marker
+                worst_err[s] = max(worst_err[s], float(known_control.errors_from_information(
+                    without, info.radius, info.incl).max()))
+        worst_sec = _worst_loss_sectors(problem, selected, config, sectors)
+        ok &= _survives_loss(count, worst_sec, worst_err, config)
+    return LayoutCheck(count=count, sectors=sectors, error_m=err, worst_loss_error_m=worst_err,
+                       worst_loss_sectors=worst_sec, ok=ok)
+
+
+def _worst_loss_sectors(problem: PlanProblem, selected: np.ndarray, config,
+                        sectors: np.ndarray) -> np.ndarray:
+    """(s,) int: fewest occupied sectors of each station after losing any one selected marker
+    (``sectors``, the occupied sectors of the whole layout, where a station has none)."""
+    worst = sectors.copy()
+    for s in range(problem.n_stations):
+        sel_pairs = problem.selected_pairs(s, selected)
+        if sel_pairs.size:
+            sec = sector_index(problem.pair_bearing_rad[sel_pairs], config.n_sectors)
+            per = np.bincount(sec, minlength=config.n_sectors)
+            worst[s] = int((per > 0).sum()) - int(np.any(per == 1))
+    return worst
+
+
+def _survives_loss(count: np.ndarray, worst_sectors: np.ndarray, worst_error_m: np.ndarray,
+                   config) -> np.ndarray:
+    """(s,) bool: the redundant-mode rule, given each station's marker count, fewest sectors
+    and worst error after losing any one marker."""
+    return (count >= config.min_markers + 1) & (worst_sectors >= config.min_sectors) \
+        & (worst_error_m <= config.requirement_m)
+
+
+def _evaluate_network(problem: PlanProblem, selected: np.ndarray, config, net) -> LayoutCheck:
+    """:func:`evaluate_layout` in network mode (directions as always, accuracy of the whole
+    network: every station and every selected marker relative to the datum; redundant mode:
+    every station also after losing any one marker)."""
+    from planner.accuracy.network import network_model
+
+    net = net or network_model(problem, config)
+    count, sectors = direction_status(problem, selected, config.n_sectors)
+    j = net.information(selected)
+    cov = net.covariance(j)
+    err = net.station_errors_from(cov)
+    markers = np.flatnonzero(selected)
+    merr = np.full(problem.n_sites, np.nan)
+    merr[markers] = net.marker_errors(cov, markers)
+    ok = (count >= config.min_markers) & (sectors >= config.min_sectors) \
+        & (err <= config.requirement_m)
+    worst_err = worst_sec = None
+    if config.redundant:
+        _, loss, _ = net.loss_station_errors(selected, j)
+        worst_err = np.max(np.vstack([err[None], loss]), axis=0)
+        worst_sec = _worst_loss_sectors(problem, selected, config, sectors)
+        ok &= _survives_loss(count, worst_sec, worst_err, config)
+    return LayoutCheck(count=count, sectors=sectors, error_m=err, worst_loss_error_m=worst_err,
+                       worst_loss_sectors=worst_sec, ok=ok, marker_error_m=merr,
+                       markers_ok=bool(np.all(merr[markers] <= config.requirement_m)))

@@ -1,0 +1,844 @@
+"""Predicted accuracy of stations and markers in network mode: the whole network's information.
+
+Model (shared with :mod:`pipeline.network.adjustment`, see ``POSE_PARAMETERS``)
+-------------------------------------------------------------------------------
+Every station has 6 pose parameters (x, y, z, heading, roll, pitch); roll and pitch carry the
+inclinometer's prior ``0 +- inclinometer_sigma_rad``; the datum is the reference station (the
+first by default) whose x, y, z and heading are fixed. Markers are unknowns. Station ``s``
+measures the marker at candidate site ``j`` at the levelled offset ``p = site - station``
+(planning evaluates the design at the nominal geometry, heading 0, in the site frame) with
+per-axis weight ``w_sj = 3 / sigma_sj^2``; its design block ``H_sj`` (3 x 6) is
+:func:`planner.accuracy.known_control.pose_design_blocks`.
+
+Eliminating the marker's 3 coordinates (Schur complement) leaves the fixed positive
+semi-definite contribution of site ``j`` on the poses of the stations ``S_j`` that can use it::
+
+    J^(j) = sum_s w_s H_s^T H_s - (1 / W_j) (sum_s w_s H_s)^T (sum_s w_s H_s),  W_j = sum_s w_s
+
+so the pose information of a layout ``x`` (0/1 per site) is ``J(x) = J_prior + sum_j x_j J^(j)``,
+linear in the selection. ``v^T J^(j) v = sum_s w_s |a_s - a_bar|^2`` with ``a_s = H_s v_s`` and
+``a_bar`` their ``w``-weighted mean: the weighted spread of what the stations would see of a
+pose change ``v`` (:meth:`NetworkModel.site_coefficients` vectorises it over all pairs). A site
+seen by one station only contributes nothing (its marker absorbs it): a network needs markers
+that tie stations together.
+
+Errors
+------
+Station ``k``'s error is known-control mode's 95 % bound ``sqrt(chi2_3(0.95) max_q
+lambda_max(G(q) C_k G(q)^T))`` over the station and its working-radius rim
+(:func:`pose_errors_from_covariance`, :func:`planner.accuracy.known_control.rim_covariances`), with
+the 6 x 6 block ``C_k`` of ``C = J^-1`` (zero rows for the datum's fixed parameters). A selected
+marker at ``j`` is estimated as the weighted mean of its stations' registered measurements:
+covariance ``I / W_j + M_j C M_j^T`` with ``M_j = (1 / W_j) sum_s w_s H_s``
+(:meth:`NetworkModel.marker_errors`).
+
+Convexity and monotonicity
+--------------------------
+``h(J) = g^T J^-1 g`` is convex in ``J`` for every fixed ``g`` (``J -> J^-1`` is operator
+convex), and a station's worst-case variance is the maximum of such functions over rim points
+and directions (``g = G(q)^T u``), so its tangent at any ``J0`` (``v = J0^-1 g``,
+``h0 = g^T v``) bounds it from below: ``h(J) >= 2 h0 - v^T J v``. The requirement
+``h(J) <= b = requirement^2 / chi2_3(0.95)`` therefore implies the linear cut
+``sum_j (v^T J^(j) v) x_j >= 2 h0 - b - v^T J_prior v`` (:meth:`NetworkModel.tangent_cuts`),
+valid for every layout. Adding a site adds the PSD ``J^(j)``, so ``J`` grows in the Loewner
+order, ``C`` shrinks, and no station's (or selected marker's) error ever grows: every subset of a
+failing layout fails too, which makes the no-good cuts of :mod:`planner.program` valid.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.linalg
+from scipy.sparse import csr_array
+from scipy.sparse.csgraph import connected_components
+
+from markerplan.errors import ConfigError
+from pipeline.network.adjustment import POSE_PARAMETERS  # noqa: F401 (re-exported)
+from planner.accuracy import known_control
+from planner.accuracy.known_control import CHI2_3_95, lambda_max_sym3
+from planner.problem.usability import PlanProblem
+
+_CHUNK = 100_000
+#: Candidate sites whose low-rank factors are held at once (`GrowingCovariance.null_reductions`).
+_SITES_CHUNK = 512
+
+
+def pose_errors_from_covariance(cov, working_radius_m: float) -> np.ndarray:
+    """95 % station error from 6 x 6 pose covariances, over the station and its rim, m.
+
+    Parameters
+    ----------
+    cov : (k, 6, 6) float
+        Covariance of ``POSE_PARAMETERS`` (m^2, m rad, rad^2), relative to the datum.
+    working_radius_m : float
+        Radius of the station's working disc, m (> 0).
+
+    Returns
+    -------
+    error_m : (k,) float
+        ``sqrt(chi2_3(0.95) * max_q lambda_max(G(q) C G(q)^T))`` over the station itself and
+        72 rim points at its height; ``inf`` where ``cov`` is not finite.
+
+    Examples
+    --------
+    >>> c = np.zeros((2, 6, 6)); c[0, :3, :3] = np.eye(3) * 1e-4; c[1, 3, 3] = 1e-6
+    >>> np.round(pose_errors_from_covariance(c, 10.0), 4).tolist()
+    [0.028, 0.028]
+    >>> pose_errors_from_covariance(np.zeros((0, 6, 6)), 10.0).shape
+    (0,)
+    """
+    cov = np.asarray(cov, dtype=float)
+    if cov.ndim != 3 or cov.shape[1:] != (6, 6):
+        raise ConfigError(f"`cov` must have shape (k, 6, 6), got {cov.shape}")
+    if not (np.isfinite(working_radius_m) and working_radius_m > 0):
+        raise ConfigError(f"`working_radius_m` must be finite and > 0, got {working_radius_m!r}")
+    out = np.full(cov.shape[0], np.inf)
+    ok = np.isfinite(cov).all(axis=(1, 2))
+    if ok.any():
+        sig = known_control.rim_covariances(cov[ok], working_radius_m)
+        out[ok] = np.sqrt(CHI2_3_95 * np.maximum(lambda_max_sym3(sig).max(axis=1), 0.0))
+    return out
+
+
+@dataclass(frozen=True)
+class NetworkCovariance:
+    """Covariance of a layout's pose parameters.
+
+    Attributes
+    ----------
+    full : (6 s, 6 s) float
+        Covariance of every station's ``POSE_PARAMETERS`` (fixed parameters have zero rows);
+        rows of undetermined stations are meaningless (see ``determined``).
+    determined : (s,) bool
+        Stations whose pose the layout determines (tied to the datum).
+    """
+
+    full: np.ndarray
+    determined: np.ndarray
+
+    def station(self, k) -> np.ndarray:
+        """(6, 6) or (m, 6, 6) pose covariance blocks of station(s) ``k``."""
+        k = np.asarray(k)
+        idx = 6 * k[..., None] + np.arange(6)
+        return self.full[idx[..., :, None], idx[..., None, :]]
+
+
+class NetworkModel:
+    """A :class:`~planner.problem.usability.PlanProblem` as a network tied to a reference station.
+
+    Parameters
+    ----------
+    problem : PlanProblem
+    working_radius_m : float
+        Radius of each station's working disc, m.
+    inclinometer_sigma_rad : float
+        Roll/pitch prior, rad (0: roll and pitch fixed).
+    reference : int
+        Index of the datum station (x, y, z, heading fixed).
+    heading_prior_sigma_rad : float, optional
+        A heading prior on every non-reference station (e.g. a sun sensor), rad.
+
+    Attributes
+    ----------
+    free : (P,) int
+        Index into the ``6 s`` pose parameters of each free (estimated) parameter.
+    prior : (P,) float
+        Diagonal prior information of the free parameters.
+    pair_station, pair_site : (p,) int
+        Usable pairs, sorted by site then station.
+    weight : (p,) float
+        ``3 / sigma^2`` per axis, 1/m^2.
+    design : (p, 3, 6) float
+        ``H`` of each pair.
+    site_weight : (n,) float
+        ``W_j``; 0 for sites no station can use.
+    n_stations_seeing : (n,) int
+        ``|S_j|``.
+    """
+
+    def __init__(self, problem: PlanProblem, working_radius_m: float,
+                 inclinometer_sigma_rad: float, reference: int = 0,
+                 heading_prior_sigma_rad: float | None = None) -> None:
+        if not 0 <= reference < problem.n_stations:
+            raise ConfigError(f"`reference` must index one of the {problem.n_stations} "
+                              f"stations, got {reference!r}")
+        self.problem = problem
+        self.radius = float(working_radius_m)
+        self.incl = float(inclinometer_sigma_rad)
+        self.reference = int(reference)
+        s = problem.n_stations
+        fixed = np.zeros((s, 6), bool)
+        fixed[reference, :4] = True
+        prior = np.zeros((s, 6))
+        if self.incl > 0:
+            prior[:, 4:] = 1.0 / self.incl**2
+        else:
+            fixed[:, 4:] = True
+        if heading_prior_sigma_rad is not None:
+            prior[:, 3] = 1.0 / heading_prior_sigma_rad**2
+        self.heading_prior = heading_prior_sigma_rad is not None
+        self.free = np.flatnonzero(~fixed.ravel())
+        #: (6 s,) int: each pose parameter's index among the free ones (-1: fixed)
+        self.free_position = np.full(6 * s, -1)
+        self.free_position[self.free] = np.arange(self.free.size)
+        self.prior = prior.ravel()[self.free]
+        idx = np.flatnonzero(problem.pair_usable)
+        idx = idx[np.lexsort((problem.pair_station[idx], problem.pair_site[idx]))]
+        self.pair_station = problem.pair_station[idx]
+        self.pair_site = problem.pair_site[idx]
+        self.weight = 3.0 / problem.pair_sigma_m[idx] ** 2
+        self.design = known_control.pose_design_blocks(
+            problem.site_xyz[self.pair_site] - problem.station_xyz[self.pair_station])
+        n = problem.n_sites
+        self.site_weight = np.bincount(self.pair_site, self.weight, minlength=n)
+        self.n_stations_seeing = np.bincount(self.pair_site, minlength=n)
+        self.site_start = np.r_[0, np.cumsum(self.n_stations_seeing)]
+        self._site_sum = csr_array((np.ones(self.pair_site.size),
+                                    (self.pair_site, np.arange(self.pair_site.size))),
+                                   shape=(n, self.pair_site.size))  # (n, p): sum over a site
+        # ordered pairs (a, b) of pairs of one site, for sites seen by >= 2 stations
+        k = self.n_stations_seeing
+        multi = np.flatnonzero(k >= 2)
+        reps = k[multi] ** 2
+        site = np.repeat(multi, reps)
+        off = np.arange(reps.sum()) - np.repeat(np.cumsum(reps) - reps, reps)
+        kk = k[site]
+        self.tie_site = site
+        self.tie_a = self.site_start[site] + off // kk
+        self.tie_b = self.site_start[site] + off % kk
+        wa, wb = self.weight[self.tie_a], self.weight[self.tie_b]
+        self.tie_coef = np.where(self.tie_a == self.tie_b, wa, 0.0) - wa * wb \
+            / self.site_weight[site]
+
+    # -- information and covariance ------------------------------------------------------------
+    @property
+    def n_params(self) -> int:
+        return self.free.size
+
+    @property
+    def tying(self) -> np.ndarray:
+        """(n,) bool: sites whose contribution ``J^(j)`` is not zero (seen by >= 2 stations)."""
+        return self.n_stations_seeing >= 2
+
+    def information(self, x) -> np.ndarray:
+        """Pose information ``J(x) = J_prior + sum_j x_j J^(j)`` of the free parameters.
+
+        Parameters
+        ----------
+        x : (n,) bool or float
+            Selection (or non-negative weights) of the candidate sites.
+
+        Returns
+        -------
+        J : (P, P) float
+        """
+        j = self.site_information(x)
+        j[np.diag_indices_from(j)] += self.prior
+        return j
+
+    def site_information(self, x) -> np.ndarray:
+        """The sites' share of the information, ``sum_j x_j J^(j)`` (no prior), (P, P); ``x``
+        as in :meth:`information`."""
+        x = np.asarray(x, dtype=float)
+        n6 = 6 * self.problem.n_stations
+        acc = np.zeros(n6 * n6)
+        take = np.flatnonzero(x[self.tie_site] != 0)
+        for lo in range(0, take.size, _CHUNK):
+            t = take[lo:lo + _CHUNK]
+            a, b = self.tie_a[t], self.tie_b[t]
+            c = self.tie_coef[t] * x[self.tie_site[t]]
+            blocks = np.einsum("q,qia,qib->qab", c, self.design[a], self.design[b])
+            ra = 6 * self.pair_station[a][:, None] + np.arange(6)
+            rb = 6 * self.pair_station[b][:, None] + np.arange(6)
+            flat = ra[:, :, None] * n6 + rb[:, None, :]
+            acc += np.bincount(flat.ravel(), blocks.ravel(), minlength=n6 * n6)
+        full = acc.reshape(n6, n6)
+        j = full[np.ix_(self.free, self.free)]
+        return 0.5 * (j + j.T)
+
+    def covariance(self, j: np.ndarray) -> NetworkCovariance:
+        """Covariance of the free parameters from the information ``j``, with undetermined
+        stations (a rank-deficient ``j``: not tied to the datum, or heading free) flagged."""
+        s = self.problem.n_stations
+        n6 = 6 * s
+        determined = np.ones(s, bool)
+        c = None
+        try:
+            factor = scipy.linalg.cho_factor(j)
+            # a pivot that is a vanishing fraction of its diagonal: numerically singular
+            if np.min(np.diag(factor[0]) ** 2 / np.diag(j)) > 1e-10:
+                c = scipy.linalg.cho_solve(factor, np.eye(j.shape[0]))
+        except np.linalg.LinAlgError:
+            pass
+        if c is None:
+            scale = np.sqrt(np.maximum(np.diag(j), 1e-300))
+            js = j / scale[:, None] / scale[None, :]
+            lam, vec = np.linalg.eigh(js)
+            null = lam <= 1e-10 * max(lam[-1], 1e-300)
+            inv = np.where(null, 0.0, 1.0 / np.where(null, 1.0, lam))
+            c = (vec * inv) @ vec.T / scale[:, None] / scale[None, :]
+            determined = self.determined_by(vec[:, null])
+        full = np.zeros((n6, n6))
+        full[np.ix_(self.free, self.free)] = 0.5 * (c + c.T)
+        return NetworkCovariance(full=full, determined=determined)
+
+    def determined_by(self, null: np.ndarray) -> np.ndarray:
+        """(s,) bool: the stations no null vector of the information moves (each pose
+        parameter's row of ``null``, (P, d), has norm below ``1e-6``)."""
+        moved = np.zeros(6 * self.problem.n_stations)
+        moved[self.free] = np.linalg.norm(null, axis=1)
+        return moved.reshape(-1, 6).max(axis=1) < 1e-6
+
+    def site_factor(self, site: int) -> tuple[np.ndarray, np.ndarray]:
+        """A low-rank factor of one site's information ``J^(j)``.
+
+        ``J^(j) = B^T (D kron I_3) B`` with ``B`` the block diagonal of the ``m`` stations'
+        ``H_s`` and ``D = diag(w) - w w^T / W_j`` (positive semi-definite, rank ``m - 1``);
+        ``D = L L^T`` from its eigen-decomposition gives ``U = B^T (L kron I_3)``.
+
+        Parameters
+        ----------
+        site : int
+            Candidate site ``j``.
+
+        Returns
+        -------
+        index : (6 m,) int
+            The pose parameters (of all ``6 s``, fixed ones included) of the stations that use
+            the site.
+        factor : (6 m, r) float
+            ``U`` with ``J^(j) = U U^T`` on ``index`` (``r = 3 (m - 1)``; 0 columns when
+            ``m < 2``). Rows of fixed parameters are to be ignored.
+        """
+        m = int(self.n_stations_seeing[site])
+        if m < 2:
+            lo = self.site_start[site]
+            index = (6 * self.pair_station[lo:lo + m][:, None] + np.arange(6)).ravel()
+            return index, np.zeros((index.size, 0))
+        _, index, u = next(self.site_factors(np.array([site])))
+        return index[0], u[0]
+
+    def site_factors(self, sites: np.ndarray):
+        """:meth:`site_factor` of many sites at once, grouped by how many stations use them.
+
+        Parameters
+        ----------
+        sites : (k,) int
+            Candidate sites; those fewer than two stations use are skipped (no factor).
+
+        Yields
+        ------
+        group : (g,) int
+            The sites of ``sites`` that ``m >= 2`` stations use (one ``m`` per group, rising).
+        index : (g, 6 m) int
+            Each site's pose parameters, as :meth:`site_factor`.
+        factor : (g, 6 m, 3 (m - 1)) float
+            Each site's ``U``, as :meth:`site_factor`.
+        """
+        sites = np.asarray(sites, dtype=np.int64)
+        seen = self.n_stations_seeing[sites]
+        for m in np.unique(seen[seen >= 2]):
+            group = sites[seen == m]
+            pairs = self.site_start[group][:, None] + np.arange(m)  # (g, m)
+            w = self.weight[pairs]
+            d = w[:, :, None] * np.eye(m) - w[:, :, None] * w[:, None, :] \
+                / w.sum(axis=1)[:, None, None]
+            lam, vec = np.linalg.eigh(d)
+            root = vec[:, :, 1:] * np.sqrt(np.maximum(lam[:, None, 1:], 0.0))  # lam[:, 0] = 0
+            u = np.einsum("gaib,gak->gabki", self.design[pairs], root)  # (g, m, 6, m - 1, 3)
+            index = (6 * self.pair_station[pairs][:, :, None] + np.arange(6)).reshape(
+                group.size, -1)
+            yield group, index, u.reshape(group.size, 6 * m, -1)
+
+    def station_errors_from(self, cov: NetworkCovariance) -> np.ndarray:
+        """(s,) 95 % station errors of a covariance, m (``inf`` where undetermined)."""
+        err = pose_errors_from_covariance(cov.station(np.arange(self.problem.n_stations)),
+                                          self.radius)
+        return np.where(cov.determined, err, np.inf)
+
+    def station_errors(self, selected) -> np.ndarray:
+        """(s,) predicted 95 % error of every station with the layout ``selected``, m."""
+        return self.station_errors_from(self.covariance(self.information(selected)))
+
+    def loss_station_errors(self, selected, j: np.ndarray
+                            ) -> tuple[np.ndarray, np.ndarray, list]:
+        """Station errors after losing each one of a layout's selected tying markers.
+
+        A marker seen by one station only adds nothing to the network's information, so
+        losing it changes no station's accuracy; only tying markers are tried.
+
+        Parameters
+        ----------
+        selected : (n,) bool
+        j : (P, P) float
+            The layout's information, ``information(selected)`` (callers have it already).
+
+        Returns
+        -------
+        markers : (m,) int
+            The selected tying sites, in site order.
+        errors : (m, s) float
+            95 % error of every station without marker ``markers[i]``, m (``inf`` where the
+            loss leaves a station undetermined).
+        covariances : list of NetworkCovariance, (m,)
+            The pose covariance without each marker (for tangent cuts).
+        """
+        sel = np.asarray(selected, bool)
+        markers = np.flatnonzero(sel & self.tying)
+        errors = np.empty((markers.size, self.problem.n_stations))
+        covariances = []
+        for i, m in enumerate(markers):
+            one = np.zeros(self.problem.n_sites)
+            one[m] = 1.0
+            cov = self.covariance(j - self.site_information(one))
+            errors[i] = self.station_errors_from(cov)
+            covariances.append(cov)
+        return markers, errors, covariances
+
+    def _pairs_of(self, sites: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Pair indices of ``sites`` and, for each, the position of its site in ``sites``."""
+        k = self.n_stations_seeing[sites]
+        pos = np.repeat(np.arange(sites.size), k)
+        start = np.repeat(self.site_start[sites], k)
+        off = np.arange(k.sum()) - np.repeat(np.cumsum(k) - k, k)
+        return start + off, pos
+
+    def marker_covariances(self, cov: NetworkCovariance, sites) -> np.ndarray:
+        """(m, 3, 3) covariance of the markers at candidate sites ``sites``, m^2: ``I / W_j +
+        M_j C M_j^T`` (every station that can use the site measures it). Sites no station
+        can use, or seen from an undetermined station, get ``inf``."""
+        sites = np.asarray(sites, dtype=np.int64).reshape(-1)
+        out = np.zeros((sites.size, 3, 3))
+        w_site = self.site_weight[sites]
+        pairs, pos = self._pairs_of(sites)
+        ka = self.n_stations_seeing[sites]
+        # ordered pairs of pairs within each site
+        reps = ka**2
+        site_pos = np.repeat(np.arange(sites.size), reps)
+        off = np.arange(reps.sum()) - np.repeat(np.cumsum(reps) - reps, reps)
+        first = np.repeat(np.cumsum(ka) - ka, reps)
+        kk = ka[site_pos]
+        a = pairs[first + off // kk]
+        b = pairs[first + off % kk]
+        for lo in range(0, a.size, _CHUNK):
+            aa, bb, sp_ = a[lo:lo + _CHUNK], b[lo:lo + _CHUNK], site_pos[lo:lo + _CHUNK]
+            ia = 6 * self.pair_station[aa][:, None] + np.arange(6)
+            ib = 6 * self.pair_station[bb][:, None] + np.arange(6)
+            cab = cov.full[ia[:, :, None], ib[:, None, :]]
+            f = self.weight[aa] * self.weight[bb] / w_site[sp_] ** 2
+            blk = np.einsum("q,qia,qab,qjb->qij", f, self.design[aa], cab, self.design[bb])
+            np.add.at(out, sp_, blk)
+        out += np.where(w_site > 0, 1.0 / np.where(w_site > 0, w_site, 1.0), 0.0)[:, None, None] \
+            * np.eye(3)
+        undetermined = np.zeros(sites.size, bool)
+        np.logical_or.at(undetermined, pos, ~cov.determined[self.pair_station[pairs]])
+        out[(w_site <= 0) | undetermined] = np.inf
+        return out
+
+    def marker_errors(self, cov: NetworkCovariance, sites) -> np.ndarray:
+        """(m,) 95 % error of the markers at ``sites``, relative to the datum, m."""
+        c = self.marker_covariances(cov, sites)
+        out = np.full(c.shape[0], np.inf)
+        ok = np.isfinite(c).all(axis=(1, 2))
+        out[ok] = np.sqrt(CHI2_3_95 * np.maximum(lambda_max_sym3(c[ok]), 0.0))
+        return out
+
+    # -- cuts ----------------------------------------------------------------------------------
+    def site_coefficients(self, v: np.ndarray) -> np.ndarray:
+        """``v^T J^(j) v`` for every site and every direction ``v``.
+
+        Parameters
+        ----------
+        v : (m, P) float
+            Directions in the free parameters.
+
+        Returns
+        -------
+        coef : (m, n) float, >= 0
+            The weighted spread ``sum_s w_s |a_s - a_bar|^2`` of ``a_s = H_s v_s``.
+        """
+        v = np.atleast_2d(np.asarray(v, dtype=float))
+        m = v.shape[0]
+        vf = np.zeros((6 * self.problem.n_stations, m))
+        vf[self.free] = v.T
+        vs = vf.reshape(-1, 6, m)[self.pair_station]  # (p, 6, m)
+        a = np.matmul(self.design, vs).reshape(-1, 3 * m)  # (p, 3 m): a_s for every direction
+        w = self.weight[:, None]
+        with np.errstate(invalid="ignore", divide="ignore"):
+            inv_w = np.where(self.site_weight > 0, 1.0 / self.site_weight, 0.0)
+        mean = (self._site_sum @ (w * a)) * inv_w[:, None]  # (n, 3 m)
+        d = a - mean[self.pair_site]
+        spread = (w * d * d).reshape(-1, 3, m).sum(axis=1)  # (p, m)
+        return (self._site_sum @ spread).T
+
+    def station_tangents(self, cov: NetworkCovariance, stations, requirement_m: float,
+                         rim: str = "worst") -> list[tuple[int, np.ndarray, float]]:
+        """Tangent (outer-approximation) cuts of the station requirement at a covariance.
+
+        Parameters
+        ----------
+        cov : NetworkCovariance
+            ``J0^-1`` (must be determined for ``stations``).
+        stations : sequence of int
+        requirement_m : float
+        rim : {"worst", "spread"}
+            Tangent at the worst rim point, or at the station and 8 rim points.
+
+        Returns
+        -------
+        cuts : list of (station, coef (n,), rhs)
+            ``sum_j coef_j x_j >= rhs``; only cuts with ``rhs > 0``.
+        """
+        gs, owners = self._station_gradients(cov, stations, rim)
+        return self._tangents(cov, gs, owners, requirement_m**2 / CHI2_3_95, np.zeros(len(gs)))
+
+    def scaled_covariances(self, sites_information: np.ndarray, scales, stations):
+        """Station blocks of the covariances of ``J(t) = J_prior + t S`` for many ``t``.
+
+        One generalised eigen-decomposition ``S V = (J_prior + S) V diag(mu)`` with ``V^T
+        (J_prior + S) V = I`` gives ``J(t)^-1 = V diag(1 / (1 - mu + t mu)) V^T`` for every
+        ``t > 0``: ``O(P^3)`` once and ``O(P^2)`` per station instead of ``O(P^3)`` each.
+
+        Parameters
+        ----------
+        sites_information : (P, P) float
+            ``S``, e.g. :meth:`site_information` of every open site; ``J_prior + S`` must be
+            positive definite (every station determined).
+        scales : (k,) float
+            ``t`` per station, > 0.
+        stations : (k,) int
+
+        Returns
+        -------
+        covariances : iterator of (station, NetworkCovariance)
+            Per station, in order, a covariance whose ``full`` holds the rows and columns of
+            ``station``'s pose parameters only (zero elsewhere): all that
+            :meth:`station_tangents` and :meth:`station_errors_from` of that station read.
+
+        Raises
+        ------
+        numpy.linalg.LinAlgError
+            ``J_prior + S`` is not positive definite.
+        """
+        mu, vec = scipy.linalg.eigh(sites_information, sites_information + np.diag(self.prior))
+        return self._scaled_station_rows(mu, vec, scales, stations)
+
+    def _scaled_station_rows(self, mu, vec, scales, stations):
+        s = self.problem.n_stations
+        position = self.free_position
+        for k, t in zip(stations, scales, strict=True):
+            params = 6 * int(k) + np.arange(6)
+            own = params[position[params] >= 0]
+            rows = (vec[position[own]] / (1.0 - mu + t * mu)) @ vec.T  # (q, P)
+            full = np.zeros((6 * s, 6 * s))
+            full[np.ix_(own, self.free)] = rows
+            full[np.ix_(self.free, own)] = rows.T
+            yield int(k), NetworkCovariance(full=full, determined=np.ones(s, bool))
+
+    def worst_direction_gain(self, cov: NetworkCovariance, k: int) -> np.ndarray:
+        """(n,) ``v^T J^(j) v`` at station ``k``'s worst rim point and direction: the first-order
+        reduction of its worst variance that adding each site brings (``v = C g``)."""
+        gs, _ = self._station_gradients(cov, [k], "worst", force=True)
+        v = (np.asarray(gs) @ cov.full)[:, self.free]
+        return self.site_coefficients(v)[0]
+
+    def _station_gradients(self, cov, stations, rim, force=False):
+        """``g = G_k(q)^T u`` (in all ``6 s`` parameters) at the chosen rim points of each
+        station's worst direction ``u``; undetermined stations are skipped unless ``force``."""
+        g_rim = known_control.rim_design_blocks(self.radius)  # (r, 3, 6)
+        gs, owners = [], []
+        for k in stations:
+            if not cov.determined[k] and not force:
+                continue
+            ck = cov.station(int(k))
+            sig = np.einsum("ria,ab,rjb->rij", g_rim, ck, g_rim)
+            lam, vec = np.linalg.eigh(sig)
+            if rim == "worst":
+                points = [int(np.argmax(lam[:, -1]))]
+            else:
+                points = [0, *range(1, g_rim.shape[0], (g_rim.shape[0] - 1) // 8)]
+            for r in points:
+                g = np.zeros(6 * self.problem.n_stations)
+                g[6 * int(k):6 * int(k) + 6] = g_rim[r].T @ vec[r, :, -1]
+                gs.append(g)
+                owners.append(int(k))
+        return gs, owners
+
+    def marker_tangents(self, cov: NetworkCovariance, sites, requirement_m: float
+                        ) -> list[tuple[int, np.ndarray, float]]:
+        """Tangent cuts of the marker requirement for markers at ``sites``: ``(site, coef,
+        rhs)`` meaning ``x_site = 1  =>  sum_j coef_j x_j >= rhs`` (``rhs > 0`` only)."""
+        sites = np.asarray(sites, dtype=np.int64).reshape(-1)
+        if sites.size == 0:
+            return []
+        c = self.marker_covariances(cov, sites)
+        b = requirement_m**2 / CHI2_3_95
+        gs, owners, const = [], [], []
+        for i, j in enumerate(sites):
+            if not np.isfinite(c[i]).all():
+                continue
+            u = np.linalg.eigh(c[i])[1][:, -1]
+            lo, hi = self.site_start[j], self.site_start[j + 1]
+            g = np.zeros(6 * self.problem.n_stations)
+            for p in range(lo, hi):
+                s = self.pair_station[p]
+                g[6 * s:6 * s + 6] += self.weight[p] / self.site_weight[j] * self.design[p].T @ u
+            gs.append(g)
+            owners.append(int(j))
+            const.append(1.0 / self.site_weight[j])
+        return self._tangents(cov, gs, owners, b, np.asarray(const))
+
+    def _tangents(self, cov, gs, owners, b, const):
+        if not gs:
+            return []
+        g = np.asarray(gs)
+        v = g @ cov.full  # (m, 6 s); rows of fixed parameters are zero
+        h0 = np.einsum("ma,ma->m", v, g)
+        vfree = v[:, self.free]
+        rhs = 2.0 * h0 - (b - const) - np.einsum("ma,a,ma->m", vfree, self.prior, vfree)
+        out = []
+        keep = np.flatnonzero(rhs > 0)
+        for lo in range(0, keep.size, 16):
+            sel = keep[lo:lo + 16]
+            coef = self.site_coefficients(vfree[sel])
+            for i, m in enumerate(sel):
+                out.append((owners[m], coef[i], float(rhs[m])))
+        return out
+
+    # -- structure -----------------------------------------------------------------------------
+    def ties(self, selected) -> np.ndarray:
+        """(s, s) int: number of selected sites each pair of stations shares (diagonal 0)."""
+        sel = np.asarray(selected, bool)
+        use = sel[self.pair_site]
+        st, si = self.pair_station[use], self.pair_site[use]
+        s, n = self.problem.n_stations, self.problem.n_sites
+        inc = csr_array((np.ones(st.size), (st, si)), shape=(s, n))
+        t = (inc @ inc.T).toarray().astype(np.int64)
+        np.fill_diagonal(t, 0)
+        return t
+
+    def connected_to_reference(self, selected) -> np.ndarray:
+        """(s,) bool: stations linked to the reference by a chain of shared selected sites."""
+        t = self.ties(selected)
+        _, comp = connected_components(csr_array(t > 0), directed=False)
+        return comp == comp[self.reference]
+
+    def diagnose(self, available, requirement_m: float) -> dict[str, str]:
+        """Stations no layout within ``available`` can tie to the reference well enough.
+
+        Parameters
+        ----------
+        available : (n,) bool
+            Sites a layout may use (every allowed site; by monotonicity the best case).
+        requirement_m : float
+
+        Returns
+        -------
+        reasons : dict of station id -> reason
+            "disconnected" (no chain of shared usable sites reaches the reference), "heading
+            undetermined" (tied through markers at one place only), "too far from the
+            reference" (the error at the station itself already exceeds the requirement) or
+            "heading too weak" (the lever arm to the working-radius rim does).
+        """
+        p = self.problem
+        ids = p.station_ids
+        ref = ids[self.reference]
+        linked = self.connected_to_reference(available)
+        out = {}
+        for k in np.flatnonzero(~linked):
+            out[ids[k]] = (f"disconnected: shares no usable marker site with the part of the "
+                           f"network holding the reference {ref}")
+        if out:
+            return out
+        cov = self.covariance(self.information(available))
+        err = self.station_errors_from(cov)
+        blocks = cov.station(np.arange(p.n_stations))
+        at_station = np.sqrt(CHI2_3_95 * np.maximum(lambda_max_sym3(blocks[:, :3, :3]), 0.0))
+        dist = np.linalg.norm(p.station_xyz[:, :2] - p.station_xyz[self.reference, :2], axis=1)
+        for k in range(p.n_stations):
+            if not cov.determined[k]:
+                out[ids[k]] = ("heading undetermined: tied to the network only through markers "
+                               "at one place; it needs two shared sites apart")
+            elif err[k] > requirement_m and at_station[k] > requirement_m:
+                out[ids[k]] = (f"too far from the reference: {at_station[k]:.3f} m at the station "
+                               f"itself with every usable site ({dist[k]:.0f} m from {ref}), "
+                               f"above {requirement_m:g} m")
+            elif err[k] > requirement_m:
+                out[ids[k]] = (f"heading too weak: {err[k]:.3f} m at the {self.radius:g} m "
+                               f"working-radius rim ({at_station[k]:.3f} m at the station "
+                               f"itself) with every usable site, above {requirement_m:g} m")
+        return out
+
+
+class GrowingCovariance:
+    """The information and covariance of a layout that grows one site at a time.
+
+    Adding site ``j`` adds ``J^(j) = U U^T`` (:meth:`NetworkModel.site_factor`, rank
+    ``r <= 3 (m - 1)`` for a site ``m`` stations use) to the information. While every station
+    is determined the covariance follows by the Woodbury identity ``C' = C - C U (I + U^T C
+    U)^-1 U^T C`` in ``O(P^2 r)`` instead of a fresh ``O(P^3)`` inverse; it is recomputed by
+    :meth:`NetworkModel.covariance` every ``refresh`` updates (round-off does not accumulate).
+    While some station is undetermined, the null space of the information is tracked instead
+    (adding ``U U^T`` leaves the null vectors ``n`` with ``U^T n = 0``), and the covariance is
+    only computed when asked for. Equal to :meth:`NetworkModel.covariance` of the grown
+    information up to round-off.
+
+    Parameters
+    ----------
+    net : NetworkModel
+    j : (P, P) float
+        Information of the starting layout (copied), e.g. ``net.information(selected)``.
+    refresh : int
+        Updates between recomputations (>= 1).
+
+    Attributes
+    ----------
+    j : (P, P) float
+        The current information.
+    """
+
+    #: ``|U^T n|`` below this fraction of ``|U|`` leaves ``n`` in the null space.
+    NULL_TOLERANCE = 1e-8
+
+    def __init__(self, net: NetworkModel, j: np.ndarray, refresh: int = 50) -> None:
+        if refresh < 1:
+            raise ConfigError(f"`refresh` must be >= 1, got {refresh!r}")
+        self.net = net
+        self.j = np.array(j, dtype=float)
+        self.refresh = int(refresh)
+        self._recompute()
+        self._null = np.zeros((net.free.size, 0))
+        if not self._cov.determined.all():
+            self._null = self._null_space()
+
+    def _recompute(self) -> None:
+        self._cov = self.net.covariance(self.j)
+        self._updates = 0
+
+    def _null_space(self) -> np.ndarray:
+        """(P, d) orthonormal basis of the null space of ``j``, each vector within one
+        connected block of ``j``, by :meth:`NetworkModel.covariance`'s criterion (eigenvalues
+        of the diagonally scaled ``j`` below ``1e-10`` of the largest)."""
+        _, block = connected_components(csr_array(self.j != 0), directed=False)
+        scale = np.sqrt(np.maximum(np.diag(self.j), 1e-300))
+        parts = []
+        for b in np.unique(block):
+            idx = np.flatnonzero(block == b)
+            lam, vec = np.linalg.eigh(self.j[np.ix_(idx, idx)] / scale[idx, None]
+                                      / scale[None, idx])
+            parts.append((idx, lam, vec))
+        top = max(max(lam[-1] for _, lam, _ in parts), 1e-300)
+        null = np.zeros((self.j.shape[0], 0))
+        for idx, lam, vec in parts:
+            v = vec[:, lam <= 1e-10 * top] / scale[idx, None]
+            if v.shape[1]:
+                part = np.zeros((self.j.shape[0], v.shape[1]))
+                part[idx] = np.linalg.qr(v)[0]  # orthonormal in the unscaled parameters
+                null = np.column_stack([null, part])
+        return null
+
+    @property
+    def determined(self) -> np.ndarray:
+        """(s,) bool: stations whose pose the layout determines (no null vector moves them)."""
+        if not self._null.shape[1]:
+            return self._cov.determined
+        return self.net.determined_by(self._null)
+
+    @property
+    def cov(self) -> NetworkCovariance:
+        """The covariance of ``j`` (updated in place by :meth:`add`: do not keep it across)."""
+        if self._cov is None:
+            self._recompute()
+        return self._cov
+
+    def add(self, site: int) -> None:
+        """Add candidate site ``site`` to the layout."""
+        index, u = self.net.site_factor(site)
+        if u.shape[1] == 0:
+            return  # a site one station uses adds no information
+        pos = self.net.free_position[index]
+        free = pos >= 0
+        uf = u[free]
+        self.j[np.ix_(pos[free], pos[free])] += uf @ uf.T
+        if self._null.shape[1]:
+            self._shrink_null(pos[free], uf)
+        if self._cov is None or not self._cov.determined.all() \
+                or self._updates + 1 >= self.refresh:
+            # stale until asked for while undetermined; recomputed once determined
+            self._cov = None
+            if not self._null.shape[1]:
+                self._recompute()
+            return
+        full = self._cov.full
+        cu = full[:, index] @ u  # (6 s, r); rows and columns of fixed parameters are zero
+        inner = np.eye(u.shape[1]) + u.T @ cu[index]
+        z = scipy.linalg.solve_triangular(np.linalg.cholesky(inner), cu.T, lower=True)
+        full -= z.T @ z
+        self._updates += 1
+
+    def null_reductions(self, sites: np.ndarray) -> np.ndarray:
+        """(k,) int: how many free movements (null directions of ``j``) adding each of
+        ``sites`` ((k,) int, distinct) alone would remove: the rank of ``U^T N`` (``N`` the
+        null basis), counting singular values above ``NULL_TOLERANCE`` times ``|U|``, as
+        :meth:`add` does."""
+        sites = np.asarray(sites, dtype=np.int64)
+        removed = np.zeros(sites.size, dtype=np.int64)
+        if not self._null.shape[1]:
+            return removed
+        n_free = self._null.shape[0]
+        null = np.vstack([self._null, np.zeros((1, self._null.shape[1]))])  # row n_free: 0
+        where = {int(j): i for i, j in enumerate(sites)}
+        for lo in range(0, sites.size, _SITES_CHUNK):  # bounded memory: factors of a chunk
+            for group, index, u in self.net.site_factors(sites[lo:lo + _SITES_CHUNK]):
+                pos = self.net.free_position[index]  # (g, 6 m)
+                fixed = pos < 0
+                u = np.where(fixed[:, :, None], 0.0, u)
+                m = np.einsum("gpr,gpd->grd", u, null[np.where(fixed, n_free, pos)])
+                sig = np.linalg.svd(m, compute_uv=False)
+                tol = self.NULL_TOLERANCE * np.linalg.norm(u, 2, axis=(1, 2))
+                removed[[where[int(j)] for j in group]] = np.sum(sig > tol[:, None], axis=1)
+        return removed
+
+    def _null_split(self, pos: np.ndarray, uf: np.ndarray) -> tuple[np.ndarray, int, np.ndarray]:
+        """The null vectors an added ``U U^T`` (rows ``pos``) touches (column indices), how
+        many of their directions it removes, and the right singular vectors of ``U^T N``
+        (rows past that count span what stays null)."""
+        touched = np.flatnonzero(np.any(self._null[pos] != 0, axis=0))
+        if not touched.size:
+            return touched, 0, np.zeros((0, 0))
+        m = uf.T @ self._null[np.ix_(pos, touched)]  # (r, t)
+        _, sig, vt = np.linalg.svd(m)
+        tol = self.NULL_TOLERANCE * np.linalg.norm(uf, 2)
+        return touched, int(np.sum(sig > tol)), vt
+
+    def _shrink_null(self, pos: np.ndarray, uf: np.ndarray) -> None:
+        """Keep the null vectors the added ``U U^T`` (rows ``pos``) leaves null."""
+        touched, rank, vt = self._null_split(pos, uf)
+        if not touched.size:
+            return
+        kept = self._null[:, touched] @ vt[rank:].T
+        rest = np.delete(self._null, touched, axis=1)
+        self._null = np.column_stack([rest, kept])
+
+
+def network_model(problem: PlanProblem, config) -> NetworkModel:
+    """The :class:`NetworkModel` of a problem for a :class:`~planner.config.PlanConfig`
+    (``working_radius_m``, ``inclinometer_sigma_rad``, ``reference_station``,
+    ``heading_prior_sigma_rad``).
+
+    Raises
+    ------
+    ConfigError
+        ``reference_station`` names no station of the problem.
+    """
+    ref = 0
+    if config.reference_station is not None:
+        if config.reference_station not in problem.station_ids:
+            shown = ", ".join(problem.station_ids[:20])
+            raise ConfigError(f"`reference_station` {config.reference_station!r} is not a "
+                              f"station of this plan; valid ids are {shown}")
+        ref = problem.station_ids.index(config.reference_station)
+    return NetworkModel(problem, config.working_radius_m, config.inclinometer_sigma_rad,
+                        reference=ref, heading_prior_sigma_rad=config.heading_prior_sigma_rad)

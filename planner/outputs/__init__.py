@@ -1,0 +1,11 @@
+"""What ``markerplan plan`` writes.
+
+- :mod:`planner.outputs.plan_file`: ``plan.json``, its one writer, its one reader and the typed
+  plan that ``verify`` works on;
+- :mod:`planner.outputs.report`: ``markers.csv``, ``markers.geojson``, ``report.md`` and the JSON
+  summary;
+- :mod:`planner.outputs.plan_map`: the placement map ``map.png``;
+- :mod:`planner.outputs.stand_map`: where the rover can stand, cell by cell over the DEM;
+- :mod:`planner.outputs.gis`: ``plan.gpkg``, the stand-map GeoTIFFs and GeoJSON coordinates, in
+  the DEM's CRS.
+"""

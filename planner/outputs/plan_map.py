@@ -1,0 +1,209 @@
+"""The placement map (``map.png``): hillshaded terrain, craters, stations coloured by predicted
+error, chosen markers, the lines of sight each station uses, legend and scale bar.
+
+Site frame (x to the right, y up), metres: the DEM's CRS, named on the axes, when it has one.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+#: Above this many stations (or markers) the map leaves out their text labels.
+MAX_LABELS = 30
+#: Colour covering the DEM's nodata cells (no measured terrain).
+NODATA_COLOUR = "#e8d9c5"
+
+
+def draw_plan_map(outcome, path: Path, dpi: int = 150) -> Path:
+    """Draw the map of a :class:`~planner.run.PlanOutcome` into ``path`` (PNG)."""
+    # lazy: pyplot takes ~1 s to import, paid only once a figure is drawn (not by a refused input)
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.colors import LightSource, ListedColormap
+    from matplotlib.lines import Line2D
+    from matplotlib.patches import Circle, Patch, Polygon
+    from mpl_toolkits.axes_grid1.anchored_artists import AnchoredSizeBar
+
+    inp, prob, res, cfg = outcome.inputs, outcome.problem, outcome.result, outcome.config
+    dem = inp.dem
+    xmin, xmax, ymin, ymax = _view(inp, prob)
+    fig, ax = plt.subplots(figsize=(9.0, 8.6), layout="constrained")
+    # hillshade of the DEM, cropped to the view
+    gx, gy = dem.grid_xy()
+    ci = (gx >= xmin - 1) & (gx <= xmax + 1)
+    cj = (gy >= ymin - 1) & (gy <= ymax + 1)
+    # the view is a contiguous block of cells: stride it as a view, never copy the whole DEM
+    cols = slice(int(np.argmax(ci)), int(np.flatnonzero(ci)[-1]) + 1)
+    rows = slice(int(np.argmax(cj)), int(np.flatnonzero(cj)[-1]) + 1)
+    step = max(1, int(np.ceil(max(rows.stop - rows.start, cols.stop - cols.start) / 1200)))
+    view = (slice(rows.start, rows.stop, step), slice(cols.start, cols.stop, step))
+    h = dem.heights_m[view]
+    ls = LightSource(azdeg=315, altdeg=35)
+    # LightSource expects row 0 at the top (north); our rows run along +y, so flip and back
+    shade = ls.hillshade(h[::-1], vert_exag=3.0, dx=dem.cell_size_m * step,
+                         dy=dem.cell_size_m * step)[::-1]
+    extent = (gx[ci][0], gx[ci][-1], gy[cj][0], gy[cj][-1])
+    ax.imshow(shade, cmap="gray", origin="lower", extent=extent, vmin=0, vmax=1,
+              interpolation="bilinear")
+    # nodata: its filled heights are no terrain, so cover them
+    nodata = ~dem.valid_mask()[view]
+    if nodata.any():
+        ax.imshow(np.ma.masked_where(~nodata, nodata), cmap=ListedColormap([NODATA_COLOUR]),
+                  origin="lower", extent=extent, interpolation="nearest", zorder=1)
+    for c in inp.craters:
+        ax.add_patch(Circle(c.centre_xy_m, 0.5 * c.diameter_m, fill=False, ec="#8c6d31",
+                            lw=1.0, ls="--", alpha=0.9))
+    if inp.boundary_xy is not None:
+        ax.add_patch(Polygon(np.asarray(inp.boundary_xy), closed=True, fill=False, ec="#1f77b4",
+                             lw=1.2, ls=":"))
+    for poly in inp.exclusions:
+        ax.add_patch(Polygon(np.asarray(poly.exterior.coords), closed=True, fc="#d62728",
+                             alpha=0.15, ec="#d62728", lw=0.8))
+    # lines of sight each station uses
+    for s in range(prob.n_stations):
+        for j in prob.pair_site[prob.selected_pairs(s, res.selected)]:
+            ax.plot([prob.station_xyz[s, 0], prob.site_xyz[j, 0]],
+                    [prob.station_xyz[s, 1], prob.site_xyz[j, 1]], color="#ffbf00", lw=0.9,
+                    alpha=0.8, zorder=3)
+    if len(inp.as_built_ids):
+        ax.scatter(inp.as_built_xyz[:, 0], inp.as_built_xyz[:, 1], marker="x", s=30,
+                   c="#444444", lw=1.0, zorder=4)
+    sel = np.flatnonzero(res.selected)
+    ax.scatter(prob.site_xyz[sel, 0], prob.site_xyz[sel, 1], s=90, c="#e41a1c",
+               edgecolors="white", linewidths=1.2, zorder=10)  # above station labels
+    # ids and errors beside every symbol read well up to a few dozen; beyond that they hide the
+    # map, and the colour (stations) and markers.csv (ids) carry the same information
+    label_markers = len(sel) <= MAX_LABELS
+    label_stations = prob.n_stations <= MAX_LABELS
+    for j in sel if label_markers else ():
+        ax.annotate(prob.site_ids[j], prob.site_xyz[j, :2], xytext=(6, 6),
+                    textcoords="offset points", fontsize=8, color="#e41a1c", weight="bold",
+                    zorder=11)
+    err_mm = 1e3 * res.check.error_m
+    req_mm = 1e3 * cfg.requirement_m
+    failing = ~res.check.ok
+    sc = draw_stations(ax, prob.station_xyz[:, :2], prob.station_ids, err_mm, req_mm, failing,
+                       label_stations)
+    cb = fig.colorbar(sc, ax=ax, shrink=0.8, pad=0.01,
+                      extend="max" if failing.any() else "neither")
+    cb.set_label(f"predicted station error, 95 % (mm); requirement {req_mm:g} mm")
+    ax.set_xlim(xmin, xmax)
+    ax.set_ylim(ymin, ymax)
+    ax.set_aspect("equal")
+    frame = axis_frame(dem.crs)
+    ax.set_xlabel(f"x (m, {frame})")
+    ax.set_ylabel(f"y (m, {frame})")
+    ax.ticklabel_format(useOffset=False, style="plain")  # CRS coordinates in full, no "+5e5"
+    bar = _nice_125((xmax - xmin) / 5)
+    ax.add_artist(AnchoredSizeBar(ax.transData, bar, f"{bar:g} m", "lower right", pad=0.5,
+                                  color="black", frameon=True, size_vertical=(ymax - ymin) / 200))
+    handles = [
+        Line2D([], [], marker="^", ls="", mfc="#3b528b", mec="black", ms=10,
+               label="station (colour: predicted error)"),
+        Line2D([], [], marker="o", ls="", mfc="#e41a1c", mec="white", ms=10,
+               label=f"planned marker ({len(sel)})"),
+        Line2D([], [], color="#ffbf00", lw=1.2, label="line of sight used"),
+    ]
+    if failing.any():
+        handles.append(Line2D([], [], marker="^", ls="", mfc="none", mec="#d62728", mew=2,
+                              ms=13, label="station failing the requirement"))
+    if len(inp.as_built_ids):
+        handles.append(Line2D([], [], marker="x", ls="", color="#444444", ms=7,
+                              label=f"as-built marker ({len(inp.as_built_ids)})"))
+    if inp.craters:
+        handles.append(Line2D([], [], color="#8c6d31", ls="--", label="crater rim"))
+    if inp.boundary_xy is not None:
+        handles.append(Line2D([], [], color="#1f77b4", ls=":", label="site boundary"))
+    if nodata.any():
+        handles.append(Patch(fc=NODATA_COLOUR, ec="none", label="DEM nodata"))
+    fig.legend(handles=handles, loc="outside lower center", ncols=min(len(handles), 4),
+               fontsize=8, frameon=False)
+    sol = res.solution
+    ax.set_title(f"markerplan — site '{inp.site_name}': {len(sel)} markers, "
+                 f"{int(res.check.ok.sum())}/{prob.n_stations} stations ≤ "
+                 f"{cfg.requirement_m:g} m ({sol.status})", fontsize=11)
+    path = Path(path)
+    fig.savefig(path, dpi=dpi, metadata={"Software": None})
+    plt.close(fig)
+    return path
+
+
+def axis_frame(crs: str | None) -> str:
+    """The frame named on a map's axes: the DEM's CRS by name, or the local site frame.
+
+    >>> axis_frame(None)
+    'site frame — local metres'
+    """
+    from planner.outputs.gis import crs_name
+
+    return "site frame — local metres" if crs is None else crs_name(crs)
+
+
+def draw_stations(ax, xy: np.ndarray, ids, error_mm: np.ndarray, requirement_mm: float,
+                  failing: np.ndarray, labels: bool):
+    """Stations as triangles coloured by their 95 % error (viridis from 0 to the requirement,
+    or tighter when every station is far inside it), failing ones ringed in red, each labelled
+    with its id and error; returns the scatter for the colour bar.
+
+    Parameters
+    ----------
+    ax : matplotlib Axes
+    xy : (s, 2) float
+        Station positions, site frame, m.
+    ids : sequence of str
+    error_mm : (s,) float
+        95 % station errors, mm (non-finite: unregistrable).
+    requirement_mm : float
+    failing : (s,) bool
+    labels : bool
+        Write id and error beside every station.
+    """
+    from matplotlib.colors import Normalize
+
+    finite = error_mm[np.isfinite(error_mm)]
+    # colour range: up to the requirement, or tighter when every station is far inside it, so
+    # that stations stay distinguishable (their errors are also written beside them)
+    top = (requirement_mm if not finite.size else
+           min(requirement_mm, _nice_125(1.2 * finite.max(), up=True)))
+    sc = ax.scatter(xy[:, 0], xy[:, 1],
+                    c=np.where(np.isfinite(error_mm), error_mm, 2 * requirement_mm),
+                    cmap="viridis", norm=Normalize(vmin=0.0, vmax=top), marker="^", s=140,
+                    edgecolors="black", linewidths=0.8, zorder=8)
+    if failing.any():
+        ax.scatter(xy[failing, 0], xy[failing, 1], marker="^", s=320, facecolors="none",
+                   edgecolors="#d62728", linewidths=2.0, zorder=8)
+    for s in range(len(ids)) if labels else ():
+        text = (f"{ids[s]} {error_mm[s]:.0f} mm" if np.isfinite(error_mm[s])
+                else f"{ids[s]} unregistrable")
+        ax.annotate(text, xy[s], xytext=(7, -12), textcoords="offset points", fontsize=8,
+                    weight="bold", zorder=9,
+                    bbox={"boxstyle": "round,pad=0.15", "fc": "white", "alpha": 0.7, "lw": 0})
+    return sc
+
+
+def _view(inp, prob) -> tuple[float, float, float, float]:
+    pts = [prob.station_xyz[:, :2]]
+    if inp.boundary_xy is not None:
+        pts.append(np.asarray(inp.boundary_xy))
+    else:
+        pts.append(prob.site_xyz[:, :2])
+    p = np.vstack(pts)
+    pad = 0.05 * max(np.ptp(p[:, 0]), np.ptp(p[:, 1]), 1.0)
+    xmin, xmax, ymin, ymax = inp.dem.extent()
+    return (max(p[:, 0].min() - pad, xmin), min(p[:, 0].max() + pad, xmax),
+            max(p[:, 1].min() - pad, ymin), min(p[:, 1].max() + pad, ymax))
+
+
+def _nice_125(x: float, up: bool = False) -> float:
+    """Largest 1-2-5 x 10^k not above ``x`` (> 0), or with ``up`` the smallest not below it.
+
+    >>> _nice_125(7.3), _nice_125(7.3, up=True), _nice_125(20.0), _nice_125(11.0, up=True)
+    (5.0, 10.0, 20.0, 20.0)
+    """
+    k = 10 ** np.floor(np.log10(x))
+    steps = [m * k for m in (1, 2, 5, 10)]
+    return float(min(v for v in steps if v >= x) if up else max(v for v in steps if v <= x))

@@ -1,0 +1,332 @@
+"""Plan outputs: ``plan.json`` (versioned schema), ``markers.csv``, ``markers.geojson``,
+``report.md``, and the one-object JSON summary of ``markerplan plan --json``.
+
+``plan.json`` schema ``markerplan-plan`` version 1 (all lengths in metres, site frame = the
+DEM's CRS when it has one):
+
+- ``schema``, ``schema_version``
+- ``provenance``: :func:`markerplan.provenance.provenance` of the resolved configuration, with
+  the error model, solver and inputs;
+- ``frame``: the coordinate frame in words (:func:`frame_note`: the DEM's CRS by name, or the
+  local site frame);
+- ``site``: name, seed, CRS name (None: local site frame), marker radius, boundary;
+- ``requirement``: requirement_m, sectors, markers, working radius, redundant;
+- ``solver``: name, HiGHS version, threads, time limit, target gap, status, objective, dual
+  bound, gap, iterations, cuts;
+- ``markers``: id, x_m, y_m, z_m, existing, stations that use it;
+- ``stations``: id, position, heading, predicted error, markers used, occupied sectors,
+  (redundant mode) worst error after losing one marker, meets_requirement;
+- ``baselines``: greedy, regular grid, as-built — markers, meets_requirement, saved, and
+  ``note`` (why it falls short: a stuck network greedy's message) when there is one;
+- ``candidates`` and ``visibility``: counts.
+
+No file holds a timing, so the same inputs give byte-identical files; :func:`plan_timings`
+gives them to the command's stderr and ``--json`` summary instead.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+
+from markerplan.provenance import provenance
+from planner.outputs.gis import crs_name, geojson_crs_members, geojson_positions, write_plan_gpkg
+from planner.outputs.plan_file import SCHEMA, SCHEMA_VERSION, write_plan
+from planner.problem.usability import sector_index
+from planner.program.highs import solver_record
+
+FRAME_NOTE = ("site frame: local metres (x, y horizontal, z up); not geographic coordinates, "
+              "not WGS84")
+
+
+def frame_note(crs: str | None) -> str:
+    """The plan's coordinate frame in words: :data:`FRAME_NOTE` without a CRS, else the DEM's
+    CRS by name.
+
+    >>> frame_note(None) == FRAME_NOTE
+    True
+    """
+    if crs is None:
+        return FRAME_NOTE
+    return f"the DEM's CRS, {crs_name(crs)}: x, y in metres of that CRS, z up (DEM heights, m)"
+
+
+def _num(v):
+    """JSON-safe float (None for nan/inf)."""
+    v = float(v)
+    return v if math.isfinite(v) else None
+
+
+def plan_record(outcome) -> dict:
+    """The ``plan.json`` document of a :class:`~planner.run.PlanOutcome`."""
+    inp, cfg, prob, res = outcome.inputs, outcome.config, outcome.problem, outcome.result
+    sol = res.solution
+    sel = np.flatnonzero(res.selected)
+    used_by: dict[int, list[str]] = {int(j): [] for j in sel}
+    stations = []
+    for s in range(prob.n_stations):
+        idx = prob.selected_pairs(s, res.selected)
+        for j in prob.pair_site[idx]:
+            used_by[int(j)].append(prob.station_ids[s])
+        rec = {"id": prob.station_ids[s],
+               "x_m": _num(prob.station_xyz[s, 0]), "y_m": _num(prob.station_xyz[s, 1]),
+               "z_m": _num(prob.station_xyz[s, 2]),
+               "heading_rad": _num(inp.station_heading_rad[s]),
+               "predicted_error_m": _num(res.check.error_m[s]),
+               "n_markers": int(res.check.count[s]), "n_sectors": int(res.check.sectors[s]),
+               "markers": [prob.site_ids[j] for j in prob.pair_site[idx]],
+               "sectors": sorted({int(k) for k in sector_index(prob.pair_bearing_rad[idx],
+                                                                 cfg.n_sectors)}),
+               "meets_requirement": bool(res.check.ok[s])}
+        if res.check.worst_loss_error_m is not None:
+            rec["worst_loss_error_m"] = _num(res.check.worst_loss_error_m[s])
+            rec["worst_loss_sectors"] = int(res.check.worst_loss_sectors[s])
+        stations.append(rec)
+    markers = [{"id": prob.site_ids[j], "x_m": _num(prob.site_xyz[j, 0]),
+                "y_m": _num(prob.site_xyz[j, 1]), "z_m": _num(prob.site_xyz[j, 2]),
+                "existing": bool(prob.site_existing[j]), "stations": used_by[int(j)]}
+               for j in sel]
+    n_plan = len(sel)
+    baselines = {}
+    for b in outcome.baselines:
+        key = b.name.replace(" ", "_")
+        baselines[key] = {"n_markers": b.n_markers, "meets_requirement": b.meets_requirement,
+                          "saved_by_plan": b.n_markers - n_plan if b.meets_requirement else None,
+                          "marker_ids": [prob.site_ids[j] for j in np.flatnonzero(b.selected)]}
+        if b.spacing_m is not None:
+            baselines[key]["spacing_m"] = b.spacing_m
+        if b.note is not None:
+            baselines[key]["note"] = b.note
+    if outcome.as_built is not None:
+        ab = outcome.as_built
+        baselines["as_built"] = {
+            "n_markers": len(inp.as_built_ids), "meets_requirement": ab.all_ok,
+            "saved_by_plan": len(inp.as_built_ids) - n_plan,
+            "station_error_m": [_num(v) for v in ab.error_m],
+            "station_sectors": [int(v) for v in ab.sectors]}
+    solver = {**solver_record(cfg.time_limit_s, cfg.mip_gap), "status": sol.status,
+              "objective": _num(sol.objective), "dual_bound": _num(sol.dual_bound),
+              "gap": _num(sol.gap),
+              "iterations": res.iterations, "accuracy_cuts": res.n_cuts,
+              "proven_optimal": sol.status == "optimal"}
+    vis = outcome.visibility
+    network = _network_record(outcome, stations, markers) if cfg.network else None
+    doc = {
+        "schema": SCHEMA, "schema_version": SCHEMA_VERSION,
+        "provenance": provenance(cfg.to_dict(), error_model=outcome.model_name,
+                                 solver={"name": solver["name"], "status": sol.status},
+                                 inputs=inp.sources),
+        "frame": frame_note(inp.dem.crs),
+        "site": {"name": inp.site_name, "seed": inp.site_seed, "crs": crs_name(inp.dem.crs),
+                 "crs_wkt": inp.dem.crs,
+                 "marker_radius_m": inp.marker_radius_m,
+                 "boundary_xy_m": None if inp.boundary_xy is None
+                 else np.asarray(inp.boundary_xy).tolist()},
+        "requirement": {"requirement_m": cfg.requirement_m, "n_sectors": cfg.n_sectors,
+                        "min_sectors": cfg.min_sectors, "min_markers": cfg.min_markers,
+                        "working_radius_m": cfg.working_radius_m, "redundant": cfg.redundant},
+        "solver": solver,
+        "n_markers": n_plan,
+        "meets_requirement": bool(res.check.all_ok),
+        "markers": markers,
+        "stations": stations,
+        "baselines": baselines,
+        "candidates": {"n_sites": prob.n_sites,
+                       "dropped": outcome.candidates.dropped if outcome.candidates else None},
+        "visibility": {"n_pairs": int(prob.pair_station.size),
+                       "n_usable": int(prob.pair_usable.sum()),
+                       "n_rays": int(vis.n_rays) if vis is not None else 0},
+    }
+    if network is not None:
+        doc["network"] = network
+    return doc
+
+
+def _network_record(outcome, stations: list[dict], markers: list[dict]) -> dict:
+    """Network mode: the datum, per-station ties and per-marker errors (added in place to
+    ``stations`` and ``markers``), and the weakest stations."""
+    from pipeline.network.adjustment import POSE_PARAMETERS
+    from planner.accuracy.network import network_model
+
+    cfg, prob, res = outcome.config, outcome.problem, outcome.result
+    net = network_model(prob, cfg)
+    ties = net.ties(res.selected)
+    for k, rec in enumerate(stations):
+        rec["tied_to"] = {prob.station_ids[o]: int(ties[k, o]) for o in np.flatnonzero(ties[k])}
+    for rec, j in zip(markers, np.flatnonzero(res.selected), strict=True):
+        rec["predicted_error_m"] = _num(res.check.marker_error_m[j])
+    order = np.argsort(-np.nan_to_num(res.check.error_m, posinf=1e300), kind="stable")
+    return {"datum": {"kind": "station", "reference_station": prob.station_ids[net.reference],
+                      "fixed": list(POSE_PARAMETERS[:4]),
+                      "inclinometer_sigma_deg": cfg.inclinometer_sigma_deg,
+                      "heading_prior_sigma_deg": cfg.heading_prior_sigma_deg},
+            "weakest_stations": [{"id": prob.station_ids[k],
+                                  "predicted_error_m": _num(res.check.error_m[k])}
+                                 for k in order[:5]],
+            "worst_marker_error_m": _num(np.nanmax(res.check.marker_error_m))
+            if res.selected.any() else None,
+            "n_station_ties": int((np.triu(ties) > 0).sum())}
+
+
+def plan_timings(outcome) -> dict[str, float]:
+    """Wall-clock seconds of the plan's steps (candidates, scene, visibility, solver)."""
+    return {**{k: round(v, 3) for k, v in outcome.timings_s.items()},
+            "solver": round(outcome.result.solve_time_s, 3)}
+
+
+def write_plan_files(outcome, folder: Path) -> dict:
+    """Write plan.json, markers.csv, markers.geojson, plan.gpkg
+    (:func:`planner.outputs.gis.write_plan_gpkg`) and report.md into ``folder`` (network mode:
+    also stations.csv, each station's error relative to the datum and its ties).
+
+    Returns the ``plan.json`` document.
+    """
+    folder = Path(folder)
+    doc = plan_record(outcome)
+    write_plan(doc, folder / "plan.json")
+    _write_markers_csv(doc, folder / "markers.csv")
+    if "network" in doc:
+        _write_stations_csv(doc, folder / "stations.csv")
+    _write_geojson(doc, outcome.inputs.dem.crs, folder / "markers.geojson")
+    write_plan_gpkg(outcome, doc, folder / "plan.gpkg")
+    (folder / "report.md").write_text(report_markdown(doc))
+    return doc
+
+
+def _write_markers_csv(doc: dict, path: Path) -> None:
+    with path.open("w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(["# markerplan plan markers; " + doc["frame"]])
+        w.writerow(["id", "x_m", "y_m", "z_m", "existing", "n_stations", "stations"])
+        for m in doc["markers"]:
+            w.writerow([m["id"], f"{m['x_m']:.3f}", f"{m['y_m']:.3f}", f"{m['z_m']:.3f}",
+                        int(m["existing"]), len(m["stations"]), " ".join(m["stations"])])
+
+
+def _write_stations_csv(doc: dict, path: Path) -> None:
+    ref = doc["network"]["datum"]["reference_station"]
+    with path.open("w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow([f"# markerplan plan stations, network mode (datum: station {ref}); "
+                    + doc["frame"]])
+        w.writerow(["id", "x_m", "y_m", "z_m", "network_error_m", "meets_requirement",
+                    "n_markers", "tied_to"])
+        for s in doc["stations"]:
+            err = s["predicted_error_m"]
+            w.writerow([s["id"], f"{s['x_m']:.3f}", f"{s['y_m']:.3f}", f"{s['z_m']:.3f}",
+                        "inf" if err is None else f"{err:.4f}", int(s["meets_requirement"]),
+                        s["n_markers"], " ".join(f"{k}:{v}" for k, v in s["tied_to"].items())])
+
+
+def _write_geojson(doc: dict, crs: str | None, path: Path) -> None:
+    """Markers and stations as GeoJSON Points: WGS84 longitude/latitude when the DEM's CRS is an
+    Earth CRS, else site frame / DEM CRS (:mod:`planner.outputs.gis`); ``x_m``, ``y_m`` are
+    always in the plan's frame."""
+    rows = doc["markers"] + doc["stations"]
+    where = geojson_positions(crs, [[r["x_m"], r["y_m"], r["z_m"]] for r in rows])
+    props = [{"id": m["id"], "kind": "marker", "existing": m["existing"],
+              "stations": m["stations"]} for m in doc["markers"]]
+    props += [{"id": s["id"], "kind": "station", "predicted_error_m": s["predicted_error_m"]}
+              for s in doc["stations"]]
+    feats = [{"type": "Feature", "geometry": {"type": "Point", "coordinates": xyz},
+              "properties": {**p, "x_m": r["x_m"], "y_m": r["y_m"]}}
+             for xyz, p, r in zip(where, props, rows, strict=True)]
+    gj = {"type": "FeatureCollection", "name": f"markerplan plan ({doc['site']['name']})",
+          **geojson_crs_members(crs, doc["frame"]), "features": feats}
+    path.write_text(json.dumps(gj, indent=2) + "\n")
+
+
+def _fmt(v, unit="m", digits=3):
+    return "n/a" if v is None else f"{v:.{digits}f} {unit}"
+
+
+def report_markdown(doc: dict) -> str:
+    """Human report of a ``plan.json`` document (Markdown)."""
+    req, sol = doc["requirement"], doc["solver"]
+    lines = [f"# Marker plan — site `{doc['site']['name']}`", "",
+             f"**{doc['n_markers']} markers** meet the requirement at "
+             f"{sum(s['meets_requirement'] for s in doc['stations'])} of "
+             f"{len(doc['stations'])} stations: predicted 95 % registered-position error "
+             f"≤ {req['requirement_m']:g} m over a {req['working_radius_m']:g} m working radius, "
+             f"≥ {req['min_markers']} markers in ≥ {req['min_sectors']} of {req['n_sectors']} "
+             f"sectors" + (", surviving the loss of any one marker" if req["redundant"] else "")
+             + ".", "",
+             "## Solver", "",
+             f"- {sol['name']}" + (f" {sol['version']}" if "version" in sol else "")
+             + f" status **{sol['status']}**"
+             + (" (proven optimal)" if sol["proven_optimal"] else
+                " — not proven optimal"),
+             f"- objective {sol['objective']}, dual bound {sol['dual_bound']}, gap {sol['gap']}",
+             f"- {sol['iterations']} solve(s), {sol['accuracy_cuts']} accuracy cut(s), "
+             f"solver time limit {sol['time_limit_s']:g} s, target gap {sol['target_gap']:g}"
+             + (f", {sol['threads']} thread(s)" if "threads" in sol else ""), "",
+             "## Compared with", "", "| layout | markers | meets requirement | plan saves |",
+             "|---|---:|---|---:|"]
+    for name, b in doc["baselines"].items():
+        label = name.replace("_", " ")
+        if "spacing_m" in b:
+            label += f" ({b['spacing_m']:g} m)"
+        saved = b.get("saved_by_plan")
+        lines.append(f"| {label} | {b['n_markers']} | {'yes' if b['meets_requirement'] else 'no'}"
+                     f" | {saved if saved is not None else '—'} |")
+    notes = [f"- {name.replace('_', ' ')}: {b['note']}" for name, b in doc["baselines"].items()
+             if "note" in b]
+    if notes:
+        lines += ["", *notes]
+    if "network" in doc:
+        net = doc["network"]
+        lines += ["", "## Network", "",
+                  f"Network mode: markers are unknowns; every error is relative to the datum, "
+                  f"station **{net['datum']['reference_station']}** (x, y, z and heading fixed; "
+                  "roll and pitch from the inclinometer, "
+                  f"{net['datum']['inclinometer_sigma_deg']:g} deg 1-sigma). "
+                  f"{net['n_station_ties']} station pairs share markers; worst "
+                  f"marker {_fmt(net['worst_marker_error_m'])}.", "",
+                  "Weakest stations: " + ", ".join(f"{w['id']} ({_fmt(w['predicted_error_m'])})"
+                                                   for w in net["weakest_stations"]) + ".", "",
+                  "| station | tied to (shared markers) |", "|---|---|"]
+        for s in doc["stations"]:
+            lines.append(f"| {s['id']} | " + (", ".join(f"{k} ({v})" for k, v in
+                                                         s["tied_to"].items()) or "—") + " |")
+    lines += ["", "## Stations", "",
+              "| station | predicted error | markers | sectors | markers used |",
+              "|---|---:|---:|---:|---|"]
+    for s in doc["stations"]:
+        lines.append(f"| {s['id']} | {_fmt(s['predicted_error_m'])} | {s['n_markers']} | "
+                     f"{s['n_sectors']} | {', '.join(s['markers'])} |")
+    lines += ["", "## Markers (" + doc["frame"] + ")", "", "| id | x | y | z | used by |",
+              "|---|---:|---:|---:|---|"]
+    for m in doc["markers"]:
+        lines.append(f"| {m['id']}{' (existing)' if m['existing'] else ''} | {m['x_m']:.2f} | "
+                     f"{m['y_m']:.2f} | {m['z_m']:.2f} | {', '.join(m['stations'])} |")
+    vis = doc["visibility"]
+    lines += ["", "## Inputs", "",
+              f"- {doc['candidates']['n_sites']} candidate sites; "
+              f"{vis['n_pairs']} station-site pairs in range, {vis['n_usable']} usable",
+              f"- error model: {doc['provenance']['error_model']}; markerplan "
+              f"{doc['provenance']['markerplan_version']}; config sha256 "
+              f"`{doc['provenance']['config_sha256'][:12]}`", ""]
+    return "\n".join(lines)
+
+
+def summary(doc: dict, out: Path) -> dict:
+    """The one-object ``--json`` summary of a plan."""
+    return {"out": str(out), "site": doc["site"]["name"], "n_markers": doc["n_markers"],
+            "meets_requirement": doc["meets_requirement"],
+            "status": doc["solver"]["status"], "objective": doc["solver"]["objective"],
+            "dual_bound": doc["solver"]["dual_bound"], "gap": doc["solver"]["gap"],
+            "worst_station_error_m": max((s["predicted_error_m"] or math.inf)
+                                         for s in doc["stations"]),
+            "baselines": {k: {"n_markers": v["n_markers"],
+                              "meets_requirement": v["meets_requirement"],
+                              **({"note": v["note"]} if "note" in v else {})}
+                          for k, v in doc["baselines"].items()},
+            "markers": [m["id"] for m in doc["markers"]],
+            **({"mode": "network",
+                "reference_station": doc["network"]["datum"]["reference_station"],
+                "worst_marker_error_m": doc["network"]["worst_marker_error_m"]}
+               if "network" in doc else {})}

@@ -1,0 +1,526 @@
+"""A planning run's inputs: the site preset (:mod:`visibility.sites`) or DEM, the stations,
+existing and as-built markers, the boundary and exclusion zones, read strictly into
+:class:`PlanInputs` by :func:`load_inputs`.
+
+Station and marker files are CSV or GeoJSON points (site frame, m; a missing height is the
+ground's plus the default); every refusal is one :class:`~markerplan.errors.InputFileError` line
+naming the file and the fix.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+import shapely
+
+from markerplan.errors import ConfigError, DataError, InputFileError
+from markerplan.reading import (
+    MAX_ABS_COORDINATE_M,
+    finite_number,
+    json_kind,
+    load_json,
+    read_csv,
+    require_type,
+    unique_ids,
+)
+from planner.config import MAX_MARKERS, MAX_STATIONS
+from planner.problem.candidates import (
+    edge_margin_m,
+    load_polygons,
+    valid_area,
+)
+from visibility.dem import read_dem, to_dem_xy
+from visibility.sites import load_site, site_with_marker_radius
+
+
+@dataclass
+class PlanInputs:
+    """Everything a plan is made for, site frame (metres).
+
+    Attributes
+    ----------
+    site_name : str
+        The site preset's name, or the DEM file's stem (``mydem`` for ``mydem.tif``).
+    site_seed : int or None
+        Terrain seed of the site preset (None on a DEM file).
+    dem : visibility.dem.DEM
+    station_ids : list of str
+    station_xyz : (s, 3) float
+        LiDAR centres, m.
+    station_heading_rad : (s,) float
+    boundary_xy : (k, 2) float or None
+        Where markers may go (None: the whole DEM; on a DEM with nodata and no
+        ``--boundary``, :func:`default_boundary`).
+    exclusions : list of shapely Polygon
+    craters : list
+        Objects with ``centre_xy_m`` and ``diameter_m`` (for the map and crater exclusion).
+    as_built_ids : list of str
+    as_built_xyz : (m, 3) float
+        The site's as-built marker layout (empty when not known), m.
+    existing_ids : list of str
+    existing_xyz : (e, 3) float
+        Markers already in the field, fixed in the plan, m.
+    marker_radius_m : float
+    sources : dict
+        Where each input came from (for provenance): the preset, and input files as absolute
+        paths.
+    """
+
+    site_name: str
+    site_seed: int | None
+    dem: object
+    station_ids: list[str]
+    station_xyz: np.ndarray
+    station_heading_rad: np.ndarray
+    boundary_xy: np.ndarray | None
+    exclusions: list
+    craters: list
+    as_built_ids: list[str]
+    as_built_xyz: np.ndarray
+    existing_ids: list[str] = field(default_factory=list)
+    existing_xyz: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    marker_radius_m: float = 0.10
+    lidar_height_m: float = 1.0
+    sources: dict = field(default_factory=dict)
+
+    def with_stations(self, ids: list[str]) -> PlanInputs:
+        """These inputs for the stations ``ids`` only (ids of :attr:`station_ids`, as
+        :func:`select_stations` checks them), in that order; ``sources`` records them."""
+        k = [self.station_ids.index(i) for i in ids]
+        return replace(self, station_ids=list(ids), station_xyz=self.station_xyz[k],
+                       station_heading_rad=self.station_heading_rad[k],
+                       sources={**self.sources, "station_ids": list(ids)})
+
+
+def select_stations(available: list[str], wanted: tuple[str, ...] | None) -> list[str]:
+    """The ``--station-ids`` among ``available`` (all of them when ``wanted`` is ``None``).
+
+    Raises
+    ------
+    ConfigError
+        An id that is not among ``available``; the message lists the valid ones.
+
+    Examples
+    --------
+    >>> select_stations(["S1", "S2", "S3"], ("S3", "S1"))
+    ['S3', 'S1']
+    >>> select_stations(["S1"], None)
+    ['S1']
+    """
+    if wanted is None:
+        return list(available)
+    return list(known_ids(wanted, available, "--station-ids", "station"))
+
+
+def known_ids(wanted, available, option: str, what: str) -> tuple[str, ...]:
+    """``wanted`` as a tuple, when every id is among ``available``.
+
+    Parameters
+    ----------
+    wanted, available : iterable of str
+    option : str
+        The option that gave ``wanted`` (for the message).
+    what : str
+        What the ids name (``"station"``, ``"marker"``).
+
+    Raises
+    ------
+    ConfigError
+        Names the unknown ids and lists the valid ones (the first 20).
+    """
+    wanted, available = tuple(wanted), list(available)
+    unknown = [i for i in wanted if i not in available]
+    if unknown:
+        shown = ", ".join(available[:20]) + (", ..." if len(available) > 20 else "")
+        raise ConfigError(f"{option}: unknown {what} id(s) {', '.join(unknown)}; valid ids are "
+                          f"{shown}")
+    return wanted
+
+
+def load_inputs(site: str = "default", site_seed: int | None = None, dem_path=None,
+                stations_path=None, boundary_path=None, exclude_paths=(),
+                existing: str | None = None, marker_radius_m: float | None = None,
+                station_ids=None, reproject: bool = False,
+                sight_radius_m: float | None = None) -> PlanInputs:
+    """Assemble the inputs of a plan from a site preset and optional files.
+
+    Parameters
+    ----------
+    site : str
+        Preset name (``visibility.sites``); supplies what no file replaces.
+    site_seed : int, optional
+        Terrain seed of the preset (default 0).
+    dem_path : path, optional
+        GeoTIFF / npz DEM in the site frame (replaces the preset terrain; the preset's craters
+        and as-built layout are then dropped, the site is named after the file). Needs
+        ``stations_path``: the preset's stations belong to the preset's terrain. Stations and
+        existing markers must stand on its measured terrain; where it has nodata, markers may
+        go only inside :func:`default_boundary` (or ``boundary_path``, kept
+        :func:`~planner.problem.candidates.edge_margin_m` off nodata).
+    stations_path : path, optional
+        Stations CSV (``id, x_m, y_m[, z_m][, heading_deg]``; ``z_m`` is the LiDAR centre, default
+        ground + rig height) or GeoJSON Points with an ``id`` property.
+    boundary_path : path, optional
+        GeoJSON with one polygon (no holes): where markers may go.
+    exclude_paths : sequence of path
+        GeoJSON polygons where no marker may go.
+    existing : str, optional
+        ``"as-built"`` (the preset's layout) or a markers CSV (``id, x_m, y_m[, z_m]``): markers
+        already in the field, fixed in the plan.
+    marker_radius_m : float, optional
+        Marker radius, m (default: the preset's); markers rest on the ground, so their centres
+        stand this far above it.
+    station_ids : sequence of str, optional
+        Only these of the stations (:func:`select_stations`); default all.
+    reproject : bool
+        Resample a DEM that is not metric and square (``read_dem(..., reproject=True)``); the
+        station, boundary, exclusion and existing-marker files are then in the DEM file's CRS
+        and mapped into the DEM's (:func:`visibility.dem.to_dem_xy`).
+    sight_radius_m : float, optional
+        Read only the part of the DEM within this distance of the stations
+        (:func:`sight_window`; e.g. ``config.max_range_m``, beyond which no pair counts);
+        default, and with ``reproject``, the whole DEM.
+
+    Raises
+    ------
+    ConfigError
+        ``dem_path`` without ``stations_path``, or an unknown preset.
+    InputFileError, DataError
+        A malformed input file (see :func:`read_stations`, :func:`read_markers`,
+        :func:`planner.problem.candidates.load_polygons`), or a point outside the DEM or on nodata.
+    """
+    if dem_path is not None and stations_path is None:
+        raise ConfigError(f"--dem {dem_path} needs --stations: the preset's stations belong to "
+                          "its own terrain, not to this DEM; give --stations with the stations "
+                          "on this DEM")
+    preset = load_site(site, site_seed)
+    if marker_radius_m is not None:
+        preset = site_with_marker_radius(preset, marker_radius_m)
+    sources = {"site": site, "seed": preset.seed}
+    dem = preset.dem
+    craters = list(preset.craters)
+    as_built_ids, as_built_xyz = list(preset.marker_ids), np.asarray(preset.marker_centres_m)
+    boundary = np.asarray(preset.boundary_xy_m, float) if len(preset.boundary_xy_m) else None
+    site_name, site_seed = site, preset.seed
+    station_points = (None if stations_path is None
+                      else _read_points(stations_path, "--stations", MAX_STATIONS))
+    if dem_path is not None:
+        window = None
+        if sight_radius_m is not None and not reproject:
+            window = sight_window([[p["x_m"], p["y_m"]] for p in station_points], sight_radius_m)
+        dem, window = _read_site_dem(dem_path, reproject, window)
+        sources.update(dem=_absolute(dem_path), reproject=bool(reproject))
+        if window is not None:
+            sources["dem_window"] = list(window)
+        site_name, site_seed = Path(dem_path).stem, None
+        craters = []
+        boundary = None if boundary_path is not None else default_boundary(
+            dem, float(preset.marker_radius_m))
+        as_built_ids, as_built_xyz = [], np.zeros((0, 3))
+    lidar_h = float(preset.lidar_height_m)
+    if station_points is not None:
+        ids, xyz, heading = place_stations(station_points, dem, lidar_h)
+        sources["stations"] = _absolute(stations_path)
+        as_built_ids, as_built_xyz = [], np.zeros((0, 3))
+    else:
+        ids = list(preset.station_ids)
+        _check_inside(dem, np.asarray(preset.station_xy_m), ids, "station")
+        xyz = np.column_stack([preset.station_xy_m,
+                               dem.height_at(preset.station_xy_m) + lidar_h])
+        heading = np.asarray(preset.station_heading_rad, float)
+    if boundary_path is not None:
+        boundary = _boundary_iv(_polygons_on_dem(load_polygons(boundary_path, "--boundary"),
+                                                 dem), boundary_path)
+        sources["boundary"] = _absolute(boundary_path)
+    exclusions = []
+    for p in exclude_paths:
+        exclusions += _polygons_on_dem(load_polygons(p, "--exclude"), dem)
+    if exclude_paths:
+        sources["exclude"] = [_absolute(p) for p in exclude_paths]
+    ex_ids, ex_xyz = [], np.zeros((0, 3))
+    if existing == "as-built":
+        if not as_built_ids:
+            raise InputFileError("--existing as-built: this input has no as-built layout (it is "
+                                 "dropped with --dem/--stations); give a markers CSV instead")
+        ex_ids, ex_xyz = list(as_built_ids), as_built_xyz.copy()
+    elif existing is not None:
+        ex_ids, ex_xyz = read_markers(existing, dem, float(preset.marker_radius_m))
+    if existing is not None:
+        sources["existing"] = existing if existing == "as-built" else _absolute(existing)
+    inputs = PlanInputs(site_name=site_name, site_seed=site_seed, dem=dem, station_ids=ids,
+                        station_xyz=xyz, station_heading_rad=heading, boundary_xy=boundary,
+                        exclusions=exclusions, craters=craters, as_built_ids=as_built_ids,
+                        as_built_xyz=as_built_xyz, existing_ids=ex_ids, existing_xyz=ex_xyz,
+                        marker_radius_m=float(preset.marker_radius_m), lidar_height_m=lidar_h,
+                        sources=sources)
+    if station_ids is None:
+        return inputs
+    return inputs.with_stations(select_stations(inputs.station_ids, station_ids))
+
+
+#: Room kept beyond the stations' sight radius when a DEM is read by window, m: the edge
+#: margin markers keep from the window's edge (:func:`~planner.problem.candidates.edge_margin_m`,
+#: two cells) for cells up to 2.5 m.
+WINDOW_MARGIN_M = 5.0
+
+
+def sight_window(station_xy, sight_radius_m: float) -> tuple[float, float, float, float]:
+    """The part of a DEM stations can see: their bounding box grown by ``sight_radius_m`` and
+    :data:`WINDOW_MARGIN_M`.
+
+    Parameters
+    ----------
+    station_xy : (s, 2) float
+        Stations in the DEM file's coordinates, m.
+    sight_radius_m : float
+        How far a station sees, m.
+
+    Returns
+    -------
+    window : (xmin, xmax, ymin, ymax) float
+        As :func:`visibility.dem.read_dem` takes it, m.
+
+    Examples
+    --------
+    >>> sight_window([[0.0, 0.0], [10.0, 4.0]], 30.0)
+    (-35.0, 45.0, -35.0, 39.0)
+    """
+    xy = np.asarray(station_xy, dtype=float).reshape(-1, 2)
+    r = sight_radius_m + WINDOW_MARGIN_M
+    return (float(xy[:, 0].min() - r), float(xy[:, 0].max() + r),
+            float(xy[:, 1].min() - r), float(xy[:, 1].max() + r))
+
+
+def _read_site_dem(path, reproject: bool, window) -> tuple[object, tuple | None]:
+    """``--dem`` read by ``window`` when it holds data, else whole; returns the DEM and the
+    window it was read by (``None``: whole).
+
+    A window that finds no data means the stations stand off the DEM's data (or the file is
+    refused whatever part is read, e.g. for its CRS); the whole file is then read so that the
+    one-line error names the real cause (the station, the CRS) rather than the window.
+    """
+    what = f"--dem {path}"
+    if window is not None:
+        try:
+            return read_dem(path, what=what, reproject=reproject, window=window), window
+        except DataError:
+            pass
+    return read_dem(path, what=what, reproject=reproject), None
+
+
+def _polygons_on_dem(polygons: list, dem) -> list:
+    """Polygons read in the DEM file's CRS, in the DEM's (:func:`visibility.dem.to_dem_xy`,
+    corner by corner)."""
+    if dem.source_crs is None:
+        return polygons
+    return [shapely.transform(p, lambda xy: to_dem_xy(dem, xy)) for p in polygons]
+
+
+def _absolute(path) -> str:
+    """``path`` made absolute (symbolic links resolved), as provenance records an input file,
+    so that ``verify`` and ``reduce`` find it from any folder."""
+    return str(Path(path).resolve())
+
+
+def default_boundary(dem, marker_radius_m: float) -> np.ndarray | None:
+    """Where markers may go on a DEM when no ``--boundary`` is given: the outline of its
+    largest piece of measured terrain, :func:`~planner.problem.candidates.edge_margin_m` inside it
+    (:func:`~planner.problem.candidates.valid_area`); ``None`` (the whole DEM) when it has no
+    nodata.
+
+    Returns
+    -------
+    corners : (k, 2) float or None
+        Site frame, m. Holes in that piece and other pieces of measured terrain are not part
+        of it; :func:`~planner.problem.candidates.candidate_sites` keeps markers off nodata anyway.
+    """
+    if dem.valid is None:
+        return None
+    area = valid_area(dem, edge_margin_m(dem, marker_radius_m))
+    largest = max(getattr(area, "geoms", [area]), key=lambda g: g.area)
+    return np.asarray(largest.exterior.coords, float)
+
+
+def _boundary_iv(polygons: list, path) -> np.ndarray:
+    """The corners (k, 2) of the one hole-free polygon a ``--boundary`` file must hold."""
+    if len(polygons) != 1:
+        raise InputFileError(f"--boundary {path}: holds {len(polygons)} polygons, the site "
+                             "boundary is one; give a single Polygon (exclude areas with "
+                             "--exclude)")
+    if len(polygons[0].interiors):
+        raise InputFileError(f"--boundary {path}: the polygon has holes; give its outline only "
+                             "and the holes with --exclude")
+    return np.asarray(polygons[0].exterior.coords, float)
+
+
+def _check_inside(dem, xy: np.ndarray, ids, label: str) -> None:
+    dem.require_inside(xy, ids, label, "move it inside or use a DEM covering it")
+
+
+#: Largest magnitude of a ``heading_deg``, degrees.
+MAX_ABS_HEADING_DEG = 360.0
+_POINT_COLUMNS = "id, x_m, y_m[, z_m][, heading_deg]"
+
+
+def _read_points(path, option: str, max_points: int = MAX_MARKERS) -> list[dict]:
+    """Points of a CSV (``id, x_m, y_m[, z_m][, heading_deg]``) or a GeoJSON FeatureCollection
+    of Points (``id`` and ``heading_deg`` properties, optional ``z`` coordinate).
+
+    Parameters
+    ----------
+    path : str or Path
+        ``.geojson`` / ``.json``: GeoJSON; anything else: CSV with a header row.
+    option : str
+        How messages name the input (``"--stations"``, ``"--existing"``, ``"INPUT"``).
+    max_points : int
+        Most points accepted.
+
+    Returns
+    -------
+    points : list of dict
+        ``id`` (str, unique, non-empty), ``x_m``, ``y_m`` (finite floats), ``z_m`` and
+        ``heading_deg`` (finite float or None when not given).
+
+    Raises
+    ------
+    InputFileError
+        Missing, unreadable or non-UTF-8 file; ragged CSV rows or missing columns; GeoJSON of
+        the wrong shape; no points or more than ``max_points``; a number that is not finite or
+        beyond :data:`~markerplan.reading.MAX_ABS_COORDINATE_M` (headings beyond
+        :data:`MAX_ABS_HEADING_DEG`); empty or repeated ids.
+    """
+    what = f"{option} {path}"
+    if Path(path).suffix.lower() in (".geojson", ".json"):
+        rows = _geojson_points(load_json(path, what), what)
+    else:
+        header, cells = read_csv(path, what, required=("id", "x_m", "y_m"),
+                                 fix=f"give a CSV with columns {_POINT_COLUMNS}")
+        rows = [dict(zip(header, (c.strip() for c in r), strict=True)) for r in cells]
+    if not rows:
+        raise InputFileError(f"{what}: no points found; give at least one row "
+                             f"({_POINT_COLUMNS})")
+    if len(rows) > max_points:
+        raise InputFileError(f"{what}: {len(rows)} points, more than the {max_points} accepted; "
+                             "give only the real points")
+    ids = unique_ids([r["id"] for r in rows], what)
+    points = []
+    for pid, r in zip(ids, rows, strict=True):
+        p = {"id": pid}
+        for key in ("x_m", "y_m", "z_m", "heading_deg"):
+            v = r.get(key)
+            if key in ("z_m", "heading_deg") and (v is None or v == ""):
+                p[key] = None
+                continue
+            p[key] = finite_number(v, f"{what}: {key} of {pid!r}",
+                                   MAX_ABS_HEADING_DEG if key == "heading_deg"
+                                   else MAX_ABS_COORDINATE_M)
+        points.append(p)
+    return points
+
+
+def _geojson_points(doc: dict, what: str) -> list[dict]:
+    """Rows (``id``, ``x_m``, ``y_m``, optional ``z_m``, ``heading_deg``) of a FeatureCollection
+    of Points; refuses any other shape, naming the feature."""
+    fix = "give a GeoJSON FeatureCollection of Points with an 'id' property"
+    if doc.get("type") != "FeatureCollection":
+        raise InputFileError(f"{what}: expected a GeoJSON FeatureCollection, got type "
+                             f"{doc.get('type')!r:.40}; {fix}")
+    feats = doc.get("features")
+    if not isinstance(feats, list):
+        raise InputFileError(f"{what}: 'features' must be a list, got {json_kind(feats)}; {fix}")
+    rows = []
+    for k, f in enumerate(feats):
+        where = f"{what}: feature {k}"
+        require_type(f, dict, where)
+        g = f.get("geometry")
+        if not isinstance(g, dict) or g.get("type") != "Point":
+            got = repr(g.get("type")) if isinstance(g, dict) else json_kind(g)
+            raise InputFileError(f"{where}: geometry must be a Point, got {got:.40}; {fix}")
+        c = g.get("coordinates")
+        if not isinstance(c, list) or len(c) not in (2, 3):
+            raise InputFileError(f"{where}: Point coordinates must be [x, y] or [x, y, z], got "
+                                 f"{c!r:.40}; give site-frame metres")
+        props = f.get("properties")
+        props = {} if props is None else require_type(props, dict, f"{where}: properties")
+        pid = props.get("id", f"P{k + 1}")
+        require_type(pid, (str, int), f"{where}: property 'id'")
+        row = {"id": str(pid).strip(), "x_m": c[0], "y_m": c[1]}
+        if len(c) > 2:
+            row["z_m"] = c[2]
+        if props.get("heading_deg") is not None:
+            row["heading_deg"] = props["heading_deg"]
+        rows.append(row)
+    return rows
+
+
+def read_stations(path, dem, lidar_height_m: float) -> tuple[list[str], np.ndarray, np.ndarray]:
+    """Stations from CSV/GeoJSON -> ids, LiDAR centres (s, 3) m, headings (s,) rad.
+
+    Parameters
+    ----------
+    path : str or Path
+        CSV ``id, x_m, y_m[, z_m][, heading_deg]`` or GeoJSON Points (see :func:`_read_points`);
+        at most :data:`planner.config.MAX_STATIONS` stations.
+    dem : visibility.dem.DEM
+        Terrain; every station must stand on its measured terrain.
+    lidar_height_m : float
+        LiDAR centre above the ground where ``z_m`` is not given, m.
+
+    Raises
+    ------
+    InputFileError, DataError
+        Unreadable or malformed file (see :func:`_read_points`), or a station outside the DEM
+        or on nodata.
+    """
+    return place_stations(_read_points(path, "--stations", MAX_STATIONS), dem, lidar_height_m)
+
+
+def place_stations(points: list[dict], dem, lidar_height_m: float
+                   ) -> tuple[list[str], np.ndarray, np.ndarray]:
+    """Stations read by :func:`_read_points` -> ids, LiDAR centres (s, 3) m, headings (s,) rad
+    on ``dem`` (see :func:`read_stations`)."""
+    ids, xyz = _points_on_dem(points, dem, lidar_height_m, "station")
+    heading = np.radians([p["heading_deg"] or 0.0 for p in points])
+    return ids, xyz, heading
+
+
+def read_markers(path, dem, marker_radius_m: float, option: str = "--existing"
+                 ) -> tuple[list[str], np.ndarray]:
+    """Markers CSV/GeoJSON (``id, x_m, y_m[, z_m]``) -> ids and centres (m, 3) m.
+
+    Parameters
+    ----------
+    path : str or Path
+        See :func:`_read_points`; at most :data:`planner.config.MAX_MARKERS` markers.
+    dem : visibility.dem.DEM
+        Terrain; every marker must stand on its measured terrain.
+    marker_radius_m : float
+        Default ``z``: ground + this radius, m.
+    option : str
+        Names the argument in error messages.
+
+    Raises
+    ------
+    InputFileError, DataError
+        Unreadable or malformed file (see :func:`_read_points`), or a marker outside the DEM
+        or on nodata.
+    """
+    return _points_on_dem(_read_points(path, option, MAX_MARKERS), dem, marker_radius_m,
+                          "marker")
+
+
+def _points_on_dem(points: list[dict], dem, height_m: float, label: str
+                   ) -> tuple[list[str], np.ndarray]:
+    """Ids and (k, 3) positions of :func:`_read_points` rows that must stand on the DEM's
+    measured terrain (:meth:`~visibility.dem.DEM.valid_at`), m; they are given in the DEM
+    file's CRS (:func:`visibility.dem.to_dem_xy`); a missing ``z_m`` is the ground plus
+    ``height_m``."""
+    ids = [p["id"] for p in points]
+    xy = to_dem_xy(dem, np.array([[p["x_m"], p["y_m"]] for p in points], float))
+    _check_inside(dem, xy, ids, label)
+    ground = dem.height_at(xy)
+    z = np.array([g + height_m if p["z_m"] is None else p["z_m"]
+                  for p, g in zip(points, ground, strict=True)], float)
+    return ids, np.column_stack([xy, z])

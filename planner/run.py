@@ -1,0 +1,131 @@
+"""One planning run, end to end: candidates -> visibility -> program -> baselines.
+
+The CLI (``markerplan plan``), the benchmarks and notebooks call
+:func:`planner.problem.inputs.load_inputs` and :func:`make_plan`. Candidate sites are
+:mod:`planner.problem.candidates`, what each station sees :mod:`planner.problem.sight`, the plan
+:func:`planner.program.plan_sites`, the baselines :mod:`planner.program.baselines` and the as-built
+check :func:`planner.accuracy.checks.evaluate_layout`.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from markerplan.errors import InputFileError
+from planner.accuracy.checks import LayoutCheck, evaluate_layout
+from planner.problem.candidates import Candidates, candidate_sites
+from planner.problem.inputs import PlanInputs
+from planner.problem.sight import sight_problem
+from planner.problem.usability import PlanProblem
+from planner.program import PlanResult, plan_sites
+from planner.program.baselines import Baseline, greedy_cover, network_baseline, regular_grid
+
+
+@dataclass
+class PlanOutcome:
+    """A finished planning run (inputs, intermediate products, the plan and the baselines;
+    ``candidates`` and ``visibility`` are ``None`` for a plan from a visibility table)."""
+
+    inputs: PlanInputs
+    config: object
+    model_name: str
+    problem: PlanProblem
+    candidates: Candidates | None
+    visibility: object | None
+    result: PlanResult
+    baselines: list[Baseline]
+    as_built: LayoutCheck | None
+    timings_s: dict
+
+    @property
+    def selected_ids(self) -> list[str]:
+        return [self.problem.site_ids[j] for j in np.flatnonzero(self.result.selected)]
+
+
+def build_problem(inputs: PlanInputs, config, error_model, progress: bool = True,
+                  map_groups=map) -> tuple[PlanProblem, Candidates, object, dict]:
+    """Candidates + visibility matrix + usability (:func:`planner.problem.sight.sight_problem`, its
+    station groups mapped over by ``map_groups``) -> the program's input.
+
+    Returns ``(problem, candidates, visibility, timings_s)``; existing markers are appended to
+    the candidate sites (ids as given) and fixed.
+    """
+    timings = {}
+    t = time.perf_counter()
+    cand = candidate_sites(inputs.dem, config, boundary=inputs.boundary_xy,
+                           exclusions=inputs.exclusions, station_xy=inputs.station_xyz,
+                           craters=inputs.craters, marker_radius_m=inputs.marker_radius_m)
+    timings["candidates"] = time.perf_counter() - t
+    site_ids = list(cand.ids) + list(inputs.existing_ids)
+    if len(set(site_ids)) != len(site_ids):
+        raise InputFileError("existing marker ids clash with candidate ids (C00000...); "
+                             "rename the existing markers")
+    site_xyz = np.vstack([cand.centre_m, inputs.existing_xyz])
+    existing = np.r_[np.zeros(len(cand), bool), np.ones(len(inputs.existing_ids), bool)]
+    sight = sight_problem(inputs, site_ids, site_xyz, config, error_model,
+                          site_existing=existing, progress=progress, map_groups=map_groups)
+    timings.update(sight.timings_s)
+    return sight.problem, cand, sight.visibility, timings
+
+
+def make_plan(inputs: PlanInputs, config, error_model, model_name: str = "default",
+              problem: PlanProblem | None = None, progress: bool = True,
+              map_groups=map) -> PlanOutcome:
+    """Run the whole plan: candidates, visibility, integer program, baselines, as-built check.
+
+    Parameters
+    ----------
+    inputs : PlanInputs
+    config : PlanConfig
+    error_model : ErrorModel
+        Used unless ``problem`` is given.
+    model_name : str
+        How the error model is named in the outputs.
+    problem : PlanProblem, optional
+        Plan from this (e.g. a ``--visibility`` table) instead of ray casting.
+    progress : bool
+        Progress bars on stderr.
+    map_groups : callable
+        How the ray casting's station groups are mapped over (built-in ``map``: one at a time
+        here), see :func:`planner.problem.sight.sight_problem`.
+    """
+    timings: dict = {}
+    cand = vis = None
+    if problem is None:
+        problem, cand, vis, timings = build_problem(inputs, config, error_model, progress,
+                                                    map_groups)
+    t = time.perf_counter()
+    result = plan_sites(problem, config)
+    timings["program"] = time.perf_counter() - t
+    t = time.perf_counter()
+    if config.network:
+        baselines = [result.greedy or network_baseline(problem, config)]
+    else:
+        baselines = [greedy_cover(problem, config)]
+        x0, y0, x1, y1 = plan_bounds(inputs, problem)
+        baselines.append(regular_grid(problem, config, (x0, y0, x1, y1)))
+    timings["baselines"] = time.perf_counter() - t
+    as_built = None
+    if vis is not None and len(inputs.as_built_ids):
+        pab = sight_problem(inputs, inputs.as_built_ids, inputs.as_built_xyz, config,
+                            error_model, progress=False, map_groups=map_groups).problem
+        as_built = evaluate_layout(pab, np.ones(len(inputs.as_built_ids), bool),
+                                   config.replace(existing=(), forbidden=()))
+    return PlanOutcome(inputs=inputs, config=config, model_name=model_name, problem=problem,
+                       candidates=cand, visibility=vis, result=result, baselines=baselines,
+                       as_built=as_built, timings_s=timings)
+
+
+def plan_bounds(inputs: PlanInputs, problem: PlanProblem) -> tuple[float, float, float, float]:
+    """(xmin, ymin, xmax, ymax) the regular-grid baseline covers, site frame, m: the site's
+    boundary when it has one, else the candidate sites' extent."""
+    if inputs.boundary_xy is not None:
+        b = np.asarray(inputs.boundary_xy)
+        return float(b[:, 0].min()), float(b[:, 1].min()), float(b[:, 0].max()), \
+            float(b[:, 1].max())
+    xy = problem.site_xyz[:, :2]
+    return float(xy[:, 0].min()), float(xy[:, 1].min()), float(xy[:, 0].max()), \
+        float(xy[:, 1].max())

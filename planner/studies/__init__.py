@@ -1,0 +1,9 @@
+"""Studies that run the whole chain (simulate -> process -> fit) to answer one question.
+
+- :mod:`planner.studies.range_experiment`: the published range experiment, simulated;
+- :mod:`planner.studies.field_summary`: what a field experiment measured, per LiDAR position;
+- :mod:`planner.studies.sensor_calibration`: a sensor profile's free parameters fitted to a field
+  experiment by simulation;
+- :mod:`planner.studies.calibration_report`: the files of ``markerplan calibrate-sensor``;
+- :mod:`planner.studies.network`: what planning a network instead of known control changes.
+"""

@@ -1,0 +1,392 @@
+"""Verify a plan by simulation: scan every station with the planned markers, process the scans
+with the pipeline, register each station to its detected markers, and compare the achieved
+registration error with the plan's prediction.
+
+Per station:
+
+1. ``visibility.simulate.simulate_markers`` — a full turntable scan of the station's terrain
+   tile (the station ± the sensor's maximum range) with only the planned markers, at the
+   planned station pose, with the sensor and turntable errors
+   of a sensor profile (:mod:`visibility.sensor_profile`, ``calibrated`` by default);
+2. ``pipeline.process.process_station`` — the published chain; detections are matched to the
+   planned markers projected into the station frame with the *planned* (nominal) pose;
+3. weighted least squares (:func:`planner.accuracy.known_control.fit_pose`, 4 DoF: x, y, z, heading;
+roll and
+   pitch are known, as from the inclinometer) from the accepted, matched markers, each weighted
+   by the error model's sigma at its measured distance and elevation;
+4. achieved error = the largest 3D difference, over the working radius, between the registered
+   and the true mapping of the station frame into the site frame
+   (:func:`planner.accuracy.known_control.registration_error`).
+
+The plan passes only if every station's achieved error is within the requirement.
+
+Each station is one task (:func:`station_task`: simulate, then process, returning only the small
+result), mapped by :mod:`planner.distributed` in process or over a dask cluster, with the same
+results either way.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import functools
+import itertools
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from markerplan.provenance import provenance
+from pipeline.evaluation import Reference
+from pipeline.process import process_station
+from pipeline.rig import MountingOffsets, station_to_site_matrix
+from pipeline.scan_format import StationScan
+from pipeline.stages import build_config
+from planner import distributed
+from planner.accuracy import known_control
+from planner.distributed import Executor
+from planner.outputs.plan_file import PlannedStation, SurveyPlan
+from visibility.dem import DEM
+from visibility.sensor_profile import SensorProfile, default_profile
+from visibility.simulate import simulate_markers
+
+#: Schema of ``verify.json``, both modes (``mode`` tells a network verification apart).
+VERIFY_SCHEMA = "markerplan-verify"
+VERIFY_SCHEMA_VERSION = 1
+
+#: Smallest number of matched markers that can fix x, y, z and heading.
+MIN_MATCHED = 2
+
+
+@dataclass
+class StationCheck:
+    """Verification of one station."""
+
+    station_id: str
+    predicted_error_m: float | None
+    achieved_error_m: float | None
+    n_planned: int
+    n_detected: int
+    passed: bool
+    reason: str
+    marker_errors_m: dict
+
+
+def verify_plan(plan: SurveyPlan, error_model, seed: int = 0, progress: bool = True,
+                offsets: MountingOffsets | None = None,
+                station_ids: list[str] | None = None,
+                profile: SensorProfile | None = None,
+                executor: Executor | None = None) -> list[StationCheck]:
+    """Simulate, process and register every station of a plan (see module docstring).
+
+    Parameters
+    ----------
+    plan : SurveyPlan
+        Terrain, stations, markers (with their radius, which both the simulation and the
+        pipeline's fit use) and the requirement.
+    error_model : ErrorModel
+        Gives the registration weights.
+    seed : int
+        Simulation seed (the plan's station ``k`` uses ``seed + k``, whichever are verified).
+    progress : bool
+        Progress bar on stderr (when no ``executor`` is given).
+    offsets : pipeline.rig.MountingOffsets, optional
+        True mounting offsets of the simulated rig (default: none). The pipeline self-calibrates
+        them from each station's scan, as it would in the field.
+    station_ids : list of str, optional
+        Verify only these stations (default: all), in the plan's order.
+    profile : SensorProfile, optional
+        Sensor and turntable errors of the simulated rig (default: the shipped
+        ``calibrated`` profile), at 600 rpm.
+    executor : planner.distributed.Executor, optional
+        Where the stations run (default: one after another in this process); the checks are
+        the same either way.
+
+    Returns
+    -------
+    checks : list of StationCheck
+        In the plan's station order.
+    """
+    return verify_plans([plan], error_model, seed, progress, offsets, station_ids, profile,
+                        executor)[0]
+
+
+def verify_plans(plans: Sequence[SurveyPlan], error_model, seed: int = 0,
+                 progress: bool = True, offsets: MountingOffsets | None = None,
+                 station_ids: list[str] | None = None, profile: SensorProfile | None = None,
+                 executor: Executor | None = None, names: Sequence[str] | None = None
+                 ) -> list[list[StationCheck]]:
+    """:func:`verify_plan` of several plans on one terrain (``reduce --verify``'s counts) as
+    one map: every station of every plan is a task, all under one progress bar.
+
+    Parameters
+    ----------
+    plans : sequence of SurveyPlan
+        Sharing one DEM (the same object).
+    error_model, seed, progress, offsets, station_ids, profile, executor
+        As :func:`verify_plan`.
+    names : sequence of str, optional
+        A name per plan for the task errors (e.g. ``k=11``).
+
+    Returns
+    -------
+    checks : list of list of StationCheck
+        Per plan, in the plan's station order.
+    """
+    checks = [functools.partial(check_station, tuple(plan.marker_ids), plan.marker_xyz_m,
+                                build_config({"fit": {"radius_m": plan.marker_radius_m}}),
+                                error_model, plan.requirement_m, plan.working_radius_m, seed)
+              for plan in plans]
+    return map_plan_stations(plans, checks, seed, progress, offsets, station_ids, profile,
+                             executor, names)
+
+
+def check_station(ids: tuple[str, ...], centres: np.ndarray, cfg: dict, error_model,
+                  requirement_m: float, working_radius_m: float, seed: int,
+                  st: PlannedStation, scan: StationScan, truth: dict) -> StationCheck:
+    """Steps 2-4 of the module docstring for one simulated station.
+
+    Parameters
+    ----------
+    ids : tuple of str
+        The plan's marker ids.
+    centres : (m, 3) float
+        Their centres, site frame, metres.
+    cfg : dict
+        Pipeline configuration (:func:`pipeline.stages.build_config`).
+    error_model : ErrorModel
+    requirement_m, working_radius_m : float
+        The plan's requirement and working radius, metres.
+    seed : int
+        The pipeline's seed.
+    st : PlannedStation
+    scan : StationScan
+    truth : dict
+        The simulator's truth (:func:`visibility.simulate.simulate_markers`).
+
+    Returns
+    -------
+    check : StationCheck
+    """
+    ids = list(ids)
+    rot = station_to_site_matrix(st.heading_rad)
+    nominal = (centres - st.position_m) @ rot  # planned markers in the planned station frame
+    ref = Reference(tuple(ids), nominal, st.id, "plan (nominal pose)")
+    result = process_station(scan, cfg, ref, seed=seed)
+    rows = [r for r in result.rows if r.accepted and r.marker_id]
+    marker_err = {r.marker_id: r.error_m for r in rows}
+    n_planned = len(st.marker_ids)
+    if len(rows) < MIN_MATCHED:
+        return StationCheck(st.id, st.predicted_error_m, None, n_planned, len(rows), False,
+                            f"only {len(rows)} planned marker(s) detected and accepted (needs "
+                            f"{MIN_MATCHED})", marker_err)
+    p = np.array([r.centre_m for r in rows])
+    site_xyz = centres[[ids.index(r.marker_id) for r in rows]]
+    sigma = np.asarray(error_model.predict(np.array([r.distance_m for r in rows]),
+                                           np.radians([r.elevation_deg for r in rows]))
+                       .sigma_m, float)
+    sigma = np.maximum(sigma, 1e-4)
+    t, psi = known_control.fit_pose(p, site_xyz, sigma, heading0_rad=st.heading_rad)
+    true_pose = truth["station_pose"]
+    achieved = known_control.registration_error(t, psi, true_pose["position_m"],
+                                           true_pose["heading_rad"], working_radius_m)
+    ok = achieved <= requirement_m
+    missing = sorted(set(st.marker_ids) - {r.marker_id for r in rows})
+    reason = "ok" if ok else f"achieved {achieved:.3f} m > requirement {requirement_m:g} m"
+    if missing:
+        reason += f" (planned markers not detected: {', '.join(missing)})"
+    return StationCheck(st.id, st.predicted_error_m, achieved, n_planned, len(rows), ok, reason,
+                        marker_err)
+
+
+@dataclass(frozen=True)
+class StationJob:
+    """One station's task: what :func:`station_task` needs besides the DEM (small, picklable).
+
+    Attributes
+    ----------
+    station : PlannedStation
+    seed : int
+        The simulation's seed (``seed + k`` for the plan's station ``k``).
+    marker_ids : tuple of str
+    marker_xyz_m : (m, 3) float
+        Planned marker centres, site frame, metres.
+    marker_radius_m : float
+    profile : SensorProfile
+    offsets : MountingOffsets
+        True mounting offsets of the simulated rig.
+    process : callable
+        ``process(station, scan, truth)`` -> the task's small result (a module-level function
+        or a ``functools.partial`` of one).
+    threads : int or None
+        Ray-casting threads (None: all cores).
+    """
+
+    station: PlannedStation
+    seed: int
+    marker_ids: tuple[str, ...]
+    marker_xyz_m: np.ndarray
+    marker_radius_m: float
+    profile: SensorProfile
+    offsets: MountingOffsets
+    process: Callable
+    threads: int | None = None
+
+
+def station_tile(dem: DEM, position_m: np.ndarray, reach_m: float) -> DEM:
+    """The DEM tile a station's scan can reach: its position ± ``reach_m`` (the sensor's
+    maximum range), on the DEM's own grid (:meth:`visibility.dem.DEM.crop`).
+
+    Parameters
+    ----------
+    dem : DEM
+    position_m : (3,) float
+        Station (LiDAR centre), site frame, metres.
+    reach_m : float
+        Half-width of the tile, metres.
+
+    Returns
+    -------
+    tile : DEM
+    """
+    x, y = float(position_m[0]), float(position_m[1])
+    return dem.crop(x - reach_m, x + reach_m, y - reach_m, y + reach_m)
+
+
+def station_task(dem: DEM, job: StationJob):
+    """Simulate one planned station on its DEM tile with the planned markers, then hand the
+    scan to ``job.process`` and return what it returns (never the scan itself).
+
+    The Embree scene is built here, on the worker, from the tile (it is never pickled); the
+    same function runs in process and on a cluster, so the results are the same.
+
+    Parameters
+    ----------
+    dem : DEM
+        The plan's whole terrain (sent to each worker once).
+    job : StationJob
+
+    Returns
+    -------
+    result : object
+        ``job.process(station, scan, truth)``.
+    """
+    st, profile = job.station, job.profile
+    sensor = profile.sensor_config()
+    rig = profile.rig_config(offsets=job.offsets)
+    tile = station_tile(dem, st.position_m, sensor.max_range_m)
+    scan, truth = simulate_markers(tile, st.position_m, st.heading_rad, job.marker_xyz_m,
+                                   sensor, rig, seed=job.seed,
+                                   marker_radius_m=job.marker_radius_m,
+                                   marker_ids=list(job.marker_ids), station_id=st.id,
+                                   threads=job.threads, sensor_profile=profile.name)
+    return job.process(st, scan, truth)
+
+
+def map_stations(plan: SurveyPlan, process: Callable, seed: int = 0, progress: bool = True,
+                 offsets: MountingOffsets | None = None, station_ids: list[str] | None = None,
+                 profile: SensorProfile | None = None, executor: Executor | None = None) -> list:
+    """Simulate the chosen stations of a plan at their planned poses (step 1 of the module
+    docstring) and ``process`` each, as one :func:`station_task` per station.
+
+    Parameters
+    ----------
+    plan : SurveyPlan
+    process : callable
+        ``process(station, scan, truth)`` -> a station's result; picklable.
+    seed, progress, offsets, station_ids, profile, executor
+        As :func:`verify_plan`.
+
+    Returns
+    -------
+    results : list
+        ``process``'s results in the plan's station order.
+    """
+    return map_plan_stations([plan], [process], seed, progress, offsets, station_ids, profile,
+                             executor)[0]
+
+
+def map_plan_stations(plans: Sequence[SurveyPlan], processes: Sequence[Callable],
+                      seed: int = 0, progress: bool = True,
+                      offsets: MountingOffsets | None = None,
+                      station_ids: list[str] | None = None,
+                      profile: SensorProfile | None = None, executor: Executor | None = None,
+                      names: Sequence[str] | None = None) -> list[list]:
+    """:func:`map_stations` of several plans on one terrain as one map (one progress bar).
+
+    Parameters
+    ----------
+    plans : sequence of SurveyPlan
+        Sharing one DEM (the same object: it is sent to each worker once).
+    processes : sequence of callable
+        ``process`` of each plan, as :func:`map_stations` takes it.
+    seed, progress, offsets, station_ids, profile, executor
+        As :func:`verify_plan`.
+    names : sequence of str, optional
+        A name per plan for the task errors (``station S2 (k=11)``); default none.
+
+    Returns
+    -------
+    results : list of list
+        Per plan, its ``process``'s results in the plan's station order.
+    """
+    if any(plan.dem is not plans[0].dem for plan in plans):
+        raise ValueError("map_plan_stations: the plans must share one DEM object")
+    profile = profile or default_profile()
+    offsets = offsets or MountingOffsets()
+    chosen = [[(k, st) for k, st in enumerate(plan.stations)
+               if station_ids is None or st.id in station_ids] for plan in plans]
+    n_tasks = sum(len(c) for c in chosen)
+    suffix = [f" ({name})" for name in names] if names is not None else [""] * len(plans)
+    with contextlib.ExitStack() as stack:
+        if executor is None:
+            executor = stack.enter_context(distributed.executor(distributed.IN_PROCESS,
+                                                                progress=progress))
+        jobs = [StationJob(st, seed + k, tuple(plan.marker_ids), plan.marker_xyz_m,
+                           plan.marker_radius_m, profile, offsets, process,
+                           executor.threads(n_tasks))
+                for plan, process, stations in zip(plans, processes, chosen, strict=True)
+                for k, st in stations]
+        labels = [f"station {st.id}{end}" for stations, end in zip(chosen, suffix, strict=True)
+                  for _, st in stations]
+        results = iter(executor.map(station_task, jobs, shared=plans[0].dem, labels=labels,
+                                    desc="verify"))
+    return [list(itertools.islice(results, len(stations))) for stations in chosen]
+
+
+def verify_record(plan: SurveyPlan, checks: list[StationCheck], seed: int, model_name: str,
+                  offsets: MountingOffsets | None = None,
+                  profile: SensorProfile | None = None) -> dict:
+    """The ``verify.json`` document (``offsets``: the simulated rig's true mounting offsets;
+    ``profile``: its sensor profile, default the shipped one, recorded in the provenance)."""
+    true_offsets = (offsets or MountingOffsets()).to_dict()
+    profile = profile or default_profile()
+    return {
+        "schema": VERIFY_SCHEMA, "schema_version": VERIFY_SCHEMA_VERSION,
+        "provenance": provenance({"seed": seed, "error_model": model_name,
+                                  "mounting_offsets": true_offsets,
+                                  "sensor_profile": profile.to_dict(),
+                                  "plan_config_sha256": plan.provenance["config_sha256"]},
+                                 plan=plan.provenance),
+        "requirement_m": plan.requirement_m,
+        "passed": all(c.passed for c in checks),
+        "stations": [{"id": c.station_id, "predicted_error_m": c.predicted_error_m,
+                      "achieved_error_m": c.achieved_error_m, "n_planned_markers": c.n_planned,
+                      "n_detected_markers": c.n_detected, "passed": c.passed,
+                      "reason": c.reason, "marker_centre_errors_m": c.marker_errors_m}
+                     for c in checks],
+    }
+
+
+def verify_markdown(rec: dict) -> str:
+    """Human report of a verification."""
+    lines = [f"# Plan verification — {'PASSED' if rec['passed'] else 'FAILED'}", "",
+             f"Requirement: achieved registration error ≤ {rec['requirement_m']:g} m at every "
+             "station (simulated scans, processed by the pipeline, 4-DoF WLS registration).", "",
+             "| station | predicted | achieved | markers detected / planned | result |",
+             "|---|---:|---:|---:|---|"]
+    for s in rec["stations"]:
+        pred = "—" if s["predicted_error_m"] is None else f"{s['predicted_error_m']:.4f} m"
+        ach = "—" if s["achieved_error_m"] is None else f"{s['achieved_error_m']:.4f} m"
+        lines.append(f"| {s['id']} | {pred} | {ach} | {s['n_detected_markers']} / "
+                     f"{s['n_planned_markers']} | {s['reason']} |")
+    return "\n".join(lines) + "\n"

@@ -1,0 +1,577 @@
+"""Verify a plan in network mode: simulate and process every station, identify the markers
+without the simulator's truth, adjust the whole network, and compare the achieved station and
+marker errors with the predicted ones.
+
+The closed loop of issue 12 (``markerplan verify --network``), in two steps:
+
+1. :func:`scan_plan` — every chosen station is simulated at its planned pose with only the
+   planned markers (:func:`planner.verify.known_control.map_stations`: the sensor profile and the
+   mis-mounted rig of known-control ``verify``) and processed by the published chain
+   (:func:`pipeline.process.process_station`) *without* a reference, so the marker table's
+   ``marker_id`` column stays empty. The truth of every station (its pose and the markers' true
+   centres) is kept apart, for the comparison only.
+2. :func:`adjust_and_compare` — the marker table goes through the steps of ``markerplan adjust``
+   (:mod:`planner.network_observations` and :mod:`planner.cli.adjust`): detections weighted by
+   the error model; identified by gated association with the plan's markers from each station's
+   planned pose taken as rover odometry with its sigma; a network adjustment tied to the plan's
+   reference station (default the first; its planned pose is the datum), data snooping on. Then,
+   against the truth:
+
+   - achieved station error: the largest 3D difference over the station and its working-radius
+     rim (at its height) between the adjusted and the true mapping of the levelled station frame
+     into the site frame, all six pose parameters
+     (:func:`planner.accuracy.known_control.pose_difference_m`);
+   - achieved marker error: the adjusted minus the true centre, its length.
+
+   Each is set beside the plan's prediction (the station's ``predicted_error_m``; a marker's
+   ``predicted_error_m`` where the plan gives one, as a network plan may) and beside the
+   adjustment's own 95 % figure from its covariance (what ``adjust`` would state for these
+   scans).
+
+The plan passes when every chosen station took part in the adjustment and its achieved error
+is within the requirement (markers are reported, not judged: the requirement is the stations').
+Because the plan's markers are simulated at their planned centres and the stations at their
+planned poses, the truth is the plan; the pipeline and the adjustment never see it. Two
+consequences: the odometry error only widens the association's gate (the rover is exactly where
+it was planned to be), and a plan's heading prior (sun sensor) is centred on the true heading,
+an exact sun sensor, so with a heading prior the achieved errors are somewhat optimistic.
+A station that identifies no planned marker, or shares fewer than two identified markers with
+the part of the network holding the reference, fails with that reason and is left out of the
+adjustment (:func:`tied_network`); the others are still adjusted and compared.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from markerplan.errors import ConfigError, InputFileError
+from markerplan.provenance import provenance
+from pipeline.marker_table import MarkerRow
+from pipeline.rig import MountingOffsets
+from planner.accuracy import known_control
+from planner.distributed import Executor
+from planner.outputs.plan_file import SurveyPlan
+from planner.verify.known_control import VERIFY_SCHEMA, VERIFY_SCHEMA_VERSION
+from visibility.sensor_profile import SensorProfile
+
+
+@dataclass(frozen=True)
+class TrueStation:
+    """The simulator's truth of one station, kept apart from the pipeline for the comparison.
+
+    Attributes
+    ----------
+    station_id : str
+    pose : (6,) float
+        ``POSE_PARAMETERS`` (x, y, z, heading, roll, pitch), site frame, m and rad.
+    marker_xyz_m : dict of str to (3,) float
+        True centre of every simulated marker, site frame, m.
+    """
+
+    station_id: str
+    pose: np.ndarray
+    marker_xyz_m: dict[str, np.ndarray]
+
+    @classmethod
+    def from_truth(cls, truth: dict) -> TrueStation:
+        """From a truth record (:func:`visibility.simulate.simulate_markers`' second value)."""
+        p = truth["station_pose"]
+        pose = np.array([*p["position_m"], p["heading_rad"], p.get("roll_rad", 0.0),
+                         p.get("pitch_rad", 0.0)], dtype=float)
+        return cls(truth["station_id"], pose,
+                   {m["id"]: np.array(m["centre_site_m"], dtype=float) for m in truth["markers"]})
+
+
+@dataclass(frozen=True)
+class NetworkVerifySettings:
+    """Options of the identification and the adjustment (``markerplan adjust``'s meaning).
+
+    Attributes
+    ----------
+    odometry_sigma_m : float
+        1-sigma error of a station's planned position as rover odometry, m (the gate).
+    odometry_heading_sigma_deg : float
+        1-sigma error of a station's planned heading, degrees.
+    snooping : bool
+        Remove blunders by data snooping (else only flag them).
+    alpha0, beta0 : float
+        Significance level and power of the w-test.
+    """
+
+    odometry_sigma_m: float = 0.5
+    odometry_heading_sigma_deg: float = 2.0
+    snooping: bool = True
+    alpha0: float = 0.001
+    beta0: float = 0.80
+
+    def __post_init__(self):
+        for name, high in (("odometry_sigma_m", 50.0), ("odometry_heading_sigma_deg", 90.0)):
+            v = getattr(self, name)
+            if not (isinstance(v, (int, float)) and 0.0 < v <= high):
+                raise ConfigError(f"`{name}` must be in (0, {high:g}], got {v!r:.40}")
+        for name in ("alpha0", "beta0"):
+            v = getattr(self, name)
+            if not (isinstance(v, (int, float)) and 0.0 < v < 1.0):
+                raise ConfigError(f"`{name}` must be in (0, 1), got {v!r:.40}")
+
+
+@dataclass
+class StationOutcome:
+    """Predicted against achieved for one station (errors in m; ``None`` where there is none)."""
+
+    station_id: str
+    predicted_error_m: float | None
+    stated_error_m: float | None
+    """The adjustment's 95 % station error from its covariance."""
+    achieved_error_m: float | None
+    n_accepted: int
+    """Accepted detections in the station's marker table."""
+    n_identified: int
+    """Detections the association gave a planned marker's id."""
+    n_used: int
+    """Observations the adjustment kept (after data snooping)."""
+    passed: bool
+    reason: str
+
+
+@dataclass
+class MarkerOutcome:
+    """Predicted against achieved for one marker (errors in m)."""
+
+    marker_id: str
+    predicted_error_m: float | None
+    stated_error_m: float
+    """Largest semi-axis of the adjustment's 95 % error ellipsoid."""
+    achieved_error_m: float
+    """Length of the adjusted minus the true centre."""
+    achieved_xyz_m: tuple[float, float, float]
+    """Adjusted minus true centre per axis, site frame."""
+    stations: tuple[str, ...]
+
+
+@dataclass
+class NetworkVerification:
+    """Result of :func:`adjust_and_compare`."""
+
+    stations: list[StationOutcome]
+    markers: list[MarkerOutcome]
+    reference_station: str
+    config: dict
+    """The resolved configuration of the identification and adjustment (``adjust``'s)."""
+    rejected: list[dict] = field(default_factory=list)
+    """Observations removed by data snooping: station, marker (the association's id), w."""
+    unidentified: int = 0
+    """Accepted detections the association left without an id."""
+    sigma0_squared: float | None = None
+    dof: int = 0
+
+    @property
+    def passed(self) -> bool:
+        return all(s.passed for s in self.stations)
+
+
+def reference_station(named: str | None, plan_stations, chosen) -> str:
+    """The datum station of a network verification: the one the plan names, else its first.
+
+    Parameters
+    ----------
+    named : str or None
+        The plan's ``reference_station`` (its configuration's), if any.
+    plan_stations : sequence of str
+        The plan's station ids, in order.
+    chosen : sequence of str
+        The stations to verify (``--station-ids``).
+
+    Raises
+    ------
+    ConfigError
+        The plan names a station it lacks, or the reference is not among ``chosen``.
+
+    Examples
+    --------
+    >>> reference_station(None, ["S1", "S2"], ["S1", "S2"])
+    'S1'
+    >>> reference_station("S2", ["S1", "S2"], ["S1"])  # doctest: +ELLIPSIS
+    Traceback (most recent call last):
+    ...
+    markerplan.errors.ConfigError: the plan's reference station S2 ... in --station-ids
+    """
+    reference = named or plan_stations[0]
+    if reference not in plan_stations:
+        raise ConfigError(f"the plan's reference station {reference} is not one of its stations "
+                          f"({', '.join(plan_stations[:10])}); regenerate it with "
+                          "`markerplan plan --network`")
+    if reference not in chosen:
+        raise ConfigError(f"the plan's reference station {reference} (the datum of network "
+                          f"mode) is not among the stations verified ({', '.join(chosen)}); "
+                          "include it in --station-ids")
+    return reference
+
+
+def scan_plan(plan: SurveyPlan, seed: int = 0, progress: bool = True,
+              offsets: MountingOffsets | None = None, station_ids: list[str] | None = None,
+              profile: SensorProfile | None = None, executor: Executor | None = None
+              ) -> tuple[list[MarkerRow], dict[str, TrueStation]]:
+    """Simulate and process the chosen stations of a plan (step 1 of the module docstring).
+
+    Parameters are those of :func:`planner.verify.known_control.verify_plan`.
+
+    Returns
+    -------
+    rows : list of MarkerRow
+        Every candidate of every station (accepted or not), ``marker_id`` empty, in the plan's
+        station order: a ``markers.csv`` as ``markerplan process`` writes it.
+    truth : dict of str to TrueStation
+        Per station id.
+    """
+    from pipeline.stages import build_config
+    from planner.verify.known_control import map_stations
+
+    cfg = build_config({"fit": {"radius_m": plan.marker_radius_m}})
+    done = map_stations(plan, functools.partial(station_rows, cfg, seed), seed, progress,
+                        offsets, station_ids, profile, executor)
+    rows = [r for station, _ in done for r in station]
+    return rows, {true.station_id: true for _, true in done}
+
+
+def station_rows(cfg: dict, seed: int, st, scan, truth: dict
+                 ) -> tuple[list[MarkerRow], TrueStation]:
+    """One simulated station's marker-table rows (no reference: identification comes later)
+    and its truth; ``cfg`` and ``seed`` are the pipeline's (a
+    :func:`planner.verify.known_control.station_task` ``process``)."""
+    from pipeline.process import process_station
+
+    return process_station(scan, cfg, None, seed=seed).rows, TrueStation.from_truth(truth)
+
+
+def adjust_and_compare(tables: list[Path], plan_path: Path, error_model,
+                       truth: dict[str, TrueStation], predicted_station: dict[str, float | None],
+                       predicted_marker: dict[str, float | None] | None = None,
+                       settings: NetworkVerifySettings = NetworkVerifySettings(),
+                       error_model_name: str = "",
+                       planned_markers: dict[str, tuple[str, ...]] | None = None,
+                       reference: str | None = None) -> NetworkVerification:
+    """Identify, adjust and compare (step 2 of the module docstring).
+
+    Parameters
+    ----------
+    tables : list of Path
+        ``markers.csv`` of the stations (:func:`scan_plan`'s rows, written).
+    plan_path : Path
+        The ``plan.json``: planned markers and poses (association, initial values, datum), its
+        reference station, inclinometer, heading prior, working radius and requirement.
+    error_model : error_model.model.ErrorModel
+        Weights of the detections.
+    truth : dict of str to TrueStation
+        The stations to judge (their ids); the truth is used only for the comparison.
+    predicted_station, predicted_marker : dict of str to (float or None)
+        The plan's predicted 95 % errors, m (markers: where the plan has them).
+    settings : NetworkVerifySettings
+    error_model_name : str
+        Recorded in the configuration.
+    planned_markers : dict of str to tuple of str, optional
+        The markers the plan gives each station: those the association did not identify are
+        named in its ``reason``.
+    reference : str, optional
+        The datum station (``verify --reference-station``); default the plan's.
+
+    Returns
+    -------
+    NetworkVerification
+
+    Raises
+    ------
+    ConfigError
+        The reference station is not among the stations in ``truth``.
+    InputFileError
+        As ``markerplan adjust``: no accepted detection, stations the association cannot tie
+        to the network (named), a plan that is not one.
+    """
+    from pipeline.network.adjustment import AdjustmentSettings, Datum, adjust
+    from planner import network_observations as no
+    from planner.network.record import station_errors
+
+    plan = no.read_plan_geometry(plan_path)
+    reference = reference_station(reference or plan.reference_station, plan.station_ids,
+                                  list(truth))
+    stations = no.read_detections(list(tables), error_model)
+    if reference not in [s.station_id for s in stations]:
+        raise InputFileError(f"the reference station {reference} (the datum) has no accepted "
+                             "detection, so the network has no datum; the plan cannot be "
+                             "verified in network mode")
+    config = no.resolved_configuration(
+        tables=[str(t) for t in tables], plan=str(plan_path), control=None,
+        error_model=error_model_name, marker_ids="plan", datum="station",
+        reference_station=reference,
+        odometry_sigma_m=settings.odometry_sigma_m,
+        odometry_heading_sigma_deg=settings.odometry_heading_sigma_deg,
+        heading_prior_sigma_deg=None, inclinometer_sigma_deg=None, working_radius_m=None,
+        requirement_m=None, snooping=settings.snooping, alpha0=settings.alpha0,
+        beta0=settings.beta0, plan_geometry=plan)
+    identified, left_out, n_named = tied_network(stations, plan, reference, settings)
+    obs = no.network_observations(identified)
+    heading_prior = config["heading_prior_sigma_deg"]
+    result = adjust(obs, Datum("station", reference), AdjustmentSettings(
+        inclinometer_sigma_rad=math.radians(config["inclinometer_sigma_deg"]),
+        heading_prior_sigma_rad=None if heading_prior is None else math.radians(heading_prior),
+        alpha0=settings.alpha0, beta0=settings.beta0, snooping=settings.snooping),
+        no.nominal_poses(plan, obs))
+    radius, requirement = config["working_radius_m"], config["requirement_m"]
+
+    kept = result.observations
+    s_ids = kept.station_ids
+    stated = station_errors(np.stack([result.station_covariance(i) for i in range(len(s_ids))]),
+                            result.pose[:, 3], radius)
+    accepted = {s.station_id: len(s.xyz_m) for s in stations}
+    named = {s.station_id: {i for i in ids if i is not None}
+             for s, ids in zip(identified.stations, identified.ids, strict=True)}
+    named_count = {**n_named, **{sid: len(ids) for sid, ids in named.items()}}
+    outcomes = []
+    for sid in truth:
+        pred = predicted_station.get(sid)
+        if sid not in s_ids:
+            why = left_out.get(sid, "no accepted detection")
+            outcomes.append(StationOutcome(sid, pred, None, None, accepted.get(sid, 0),
+                                           named_count.get(sid, 0), 0, False,
+                                           f"not in the adjustment: {why}"))
+            continue
+        i = s_ids.index(sid)
+        achieved = known_control.pose_difference_m(result.pose[i], truth[sid].pose, radius)
+        ok = achieved <= requirement
+        reason = "ok" if ok else f"achieved {achieved:.3f} m > requirement {requirement:g} m"
+        missing = sorted(set((planned_markers or {}).get(sid, ())) - named[sid])
+        if missing:
+            reason += f" (planned markers not identified: {', '.join(missing)})"
+        outcomes.append(StationOutcome(sid, pred, float(stated[i]), achieved, accepted[sid],
+                                       len(named[sid]), int(np.sum(kept.station == i)), ok,
+                                       reason))
+
+    markers = _marker_outcomes(result, plan.marker_ids, truth, predicted_marker or {})
+    rejected = [{"station_id": r.station_id, "marker_id": r.marker_id, "w": float(r.w)}
+                for r in result.rejected]
+    sigma0 = None if not np.isfinite(result.sigma0_squared) else float(result.sigma0_squared)
+    return NetworkVerification(outcomes, markers, reference, config, rejected,
+                               len(identified.unidentified), sigma0, int(result.dof))
+
+
+def _marker_outcomes(result, plan_marker_ids: tuple[str, ...], truth: dict[str, TrueStation],
+                     predicted: dict[str, float | None]) -> list[MarkerOutcome]:
+    """Every adjusted marker against its true centre and its prediction, in the plan's order."""
+    from planner.network.record import ellipsoid_axes
+
+    kept = result.observations
+    true_centres = {m: c for t in truth.values() for m, c in t.marker_xyz_m.items()}
+    axes = ellipsoid_axes(np.stack([result.marker_covariance(j)
+                                    for j in range(len(kept.marker_ids))]))
+    out = []
+    for j in sorted(range(len(kept.marker_ids)),
+                    key=lambda j: plan_marker_ids.index(kept.marker_ids[j])):
+        mid = kept.marker_ids[j]
+        diff = result.marker_xyz_m[j] - true_centres[mid]
+        seen = tuple(kept.station_ids[i] for i in np.unique(kept.station[kept.marker == j]))
+        out.append(MarkerOutcome(mid, predicted.get(mid), float(axes[j, 0]),
+                                 float(np.linalg.norm(diff)), tuple(float(v) for v in diff),
+                                 seen))
+    return out
+
+
+def tied_network(stations: list, plan, reference: str, settings: NetworkVerifySettings):
+    """Identify every station's detections with the plan's markers and keep the stations tied to
+    the reference; a station that is not is a failed station of the verification, not an error.
+
+    Parameters
+    ----------
+    stations : list of planner.network_observations.StationDetections
+    plan : planner.network_observations.PlanGeometry
+    reference : str
+        The datum station.
+    settings : NetworkVerifySettings
+        The odometry sigmas of the gated association.
+
+    Returns
+    -------
+    identified : planner.network_observations.Identified
+        The stations kept (tied to the reference through chains of >= 2 shared identified
+        markers, as :func:`pipeline.network.adjustment.adjust` requires) and their ids.
+    left_out : dict of str to str
+        Why each other station was left out.
+    n_identified : dict of str to int
+        Identified detections of every station, kept or not.
+
+    Raises
+    ------
+    InputFileError
+        The reference station has no identified detection (the network has no datum).
+    """
+    from pipeline.network.adjustment import tie_order
+    from planner import network_observations as no
+
+    left_out: dict[str, str] = {}
+    n_identified: dict[str, int] = {}
+    kept, ids, reasons = [], [], []
+    for s in stations:
+        try:
+            one = no.identify_with_plan([s], plan, settings.odometry_sigma_m,
+                                        math.radians(settings.odometry_heading_sigma_deg))
+        except InputFileError:  # no detection inside the odometry gate of a planned marker
+            left_out[s.station_id] = ("none of its detections matches a planned marker within "
+                                      "the odometry's sigma")
+            continue
+        n_identified[s.station_id] = sum(i is not None for i in one.ids[0])
+        if n_identified[s.station_id]:
+            kept.append(s)
+            ids += one.ids
+            reasons += one.reasons
+        else:
+            left_out[s.station_id] = "no detection identified (ambiguous association)"
+    identified = no.Identified(kept, ids, "plan", reasons)
+    obs = no.network_observations(identified)
+    if reference not in obs.station_ids:
+        why = left_out.get(reference, "no accepted detection")
+        raise InputFileError(f"the reference station {reference} (the datum) has no detection "
+                             f"identified with a planned marker ({why}), so the network has no "
+                             "datum and cannot be verified")
+    _, untied = tie_order(obs, np.ones(obs.n, dtype=bool), obs.station_ids.index(reference))
+    if untied:
+        names = {obs.station_ids[i] for i in untied}
+        for k, sid in enumerate(obs.station_ids):
+            if sid in names:
+                n = len(set(obs.marker[obs.station == k]))
+                left_out[sid] = (f"{n} identified marker(s), fewer than 2 shared with the part "
+                                 f"of the network holding the reference {reference}")
+        keep = [k for k, s in enumerate(kept) if s.station_id not in names]
+        identified = no.Identified([kept[k] for k in keep], [ids[k] for k in keep], "plan",
+                                   [reasons[k] for k in keep])
+    return identified, left_out, n_identified
+
+
+def network_record(plan: SurveyPlan, check: NetworkVerification, seed: int, model_name: str,
+                   offsets: MountingOffsets | None, profile: SensorProfile) -> dict:
+    """The ``verify.json`` document of network mode (``mode: "network"``; configuration,
+    version, sensor profile and the rig's true mounting offsets in the provenance)."""
+    cfg = {key: value for key, value in check.config.items() if key != "tables"}
+    stations = [{"id": s.station_id, "predicted_error_m": s.predicted_error_m,
+                 "adjustment_error_95_m": s.stated_error_m,
+                 "achieved_error_m": s.achieved_error_m, "n_detected_markers": s.n_accepted,
+                 "n_identified": s.n_identified, "n_used": s.n_used, "passed": s.passed,
+                 "reason": s.reason} for s in check.stations]
+    markers = [{"id": m.marker_id, "predicted_error_m": m.predicted_error_m,
+                "adjustment_error_95_m": m.stated_error_m, "achieved_error_m": m.achieved_error_m,
+                "achieved_xyz_m": list(m.achieved_xyz_m), "stations": list(m.stations)}
+               for m in check.markers]
+    return {
+        "schema": VERIFY_SCHEMA, "schema_version": VERIFY_SCHEMA_VERSION, "mode": "network",
+        "provenance": provenance({"seed": seed, "error_model": model_name,
+                                  "mounting_offsets": (offsets or MountingOffsets()).to_dict(),
+                                  "sensor_profile": profile.to_dict(),
+                                  "plan_config_sha256": plan.provenance.get("config_sha256"),
+                                  "network": cfg}, plan=plan.provenance),
+        "requirement_m": check.config["requirement_m"],
+        "working_radius_m": check.config["working_radius_m"],
+        "datum": f"station {check.reference_station} (x, y, z, heading at its planned pose)",
+        "passed": check.passed,
+        "worst": {"predicted_error_m": _worst(s.predicted_error_m for s in check.stations),
+                  "adjustment_error_95_m": _worst(s.stated_error_m for s in check.stations),
+                  "achieved_error_m": _worst(s.achieved_error_m for s in check.stations),
+                  "achieved_station": _worst_id(check.stations),
+                  "not_adjusted": [s.station_id for s in check.stations
+                                   if s.achieved_error_m is None],
+                  "marker_achieved_error_m": _worst(m.achieved_error_m for m in check.markers),
+                  "marker_predicted_error_m": _worst(m.predicted_error_m
+                                                     for m in check.markers)},
+        "adjustment": {"sigma0_squared": check.sigma0_squared, "dof": check.dof,
+                       "rejected": check.rejected,
+                       "unidentified_detections": check.unidentified},
+        "stations": stations,
+        "markers": markers,
+    }
+
+
+def _worst(values) -> float | None:
+    """Largest of the values that are not ``None`` (``None`` if there are none).
+
+    >>> _worst([0.1, None, 0.3]), _worst([None])
+    (0.3, None)
+    """
+    given = [v for v in values if v is not None]
+    return max(given) if given else None
+
+
+def _worst_id(stations: list[StationOutcome]) -> str | None:
+    """The adjusted station with the largest achieved error (``None`` if none was adjusted)."""
+    done = [s for s in stations if s.achieved_error_m is not None]
+    return max(done, key=lambda s: s.achieved_error_m).station_id if done else None
+
+
+def network_markdown(rec: dict) -> str:
+    """Human report of a network-mode verification: predicted against achieved, per station
+    and worst, then per marker."""
+    def mm(v):
+        return "—" if v is None else f"{1e3 * v:.1f} mm"
+
+    w = rec["worst"]
+    lines = [f"# Plan verification, network mode — {'PASSED' if rec['passed'] else 'FAILED'}",
+             "", f"Datum: {rec['datum']}. Requirement: achieved station error ≤ "
+             f"{rec['requirement_m']:g} m over a {rec['working_radius_m']:g} m working radius at "
+             "every station (simulated scans processed by the pipeline; markers identified by "
+             "gated association with the plan from the planned poses; network adjustment).", "",
+             f"Worst station: predicted {mm(w['predicted_error_m'])}, adjustment's 95 % "
+             f"{mm(w['adjustment_error_95_m'])}, achieved {mm(w['achieved_error_m'])} "
+             f"({w['achieved_station']})"
+             + (f"; not in the adjustment: {', '.join(w['not_adjusted'])}."
+                if w["not_adjusted"] else "."), "",
+             "| station | predicted | adjustment 95 % | achieved | detected / identified / used "
+             "| result |", "|---|---:|---:|---:|---:|---|"]
+    for s in rec["stations"]:
+        lines.append(f"| {s['id']} | {mm(s['predicted_error_m'])} | "
+                     f"{mm(s['adjustment_error_95_m'])} | {mm(s['achieved_error_m'])} | "
+                     f"{s['n_detected_markers']} / {s['n_identified']} / {s['n_used']} | "
+                     f"{s['reason']} |")
+    lines += ["", "| marker | predicted | adjustment 95 % | achieved | stations |",
+              "|---|---:|---:|---:|---|"]
+    for m in rec["markers"]:
+        lines.append(f"| {m['id']} | {mm(m['predicted_error_m'])} | "
+                     f"{mm(m['adjustment_error_95_m'])} | {mm(m['achieved_error_m'])} | "
+                     f"{', '.join(m['stations'])} |")
+    adj = rec["adjustment"]
+    removed = ", ".join(f"{r['station_id']}->{r['marker_id']} (w {r['w']:.1f})"
+                        for r in adj["rejected"]) or "none"
+    s0 = "n/a" if adj["sigma0_squared"] is None else f"{adj['sigma0_squared']:.3f}"
+    lines += ["", f"Adjustment: sigma0² {s0}, dof {adj['dof']}; removed by data snooping: "
+              f"{removed}; detections left unidentified: {adj['unidentified_detections']}.",
+              "", "`markers.csv` holds every station's detections: with every station tied, "
+              "`markerplan adjust markers.csv --plan PLAN --out DIR` repeats the adjustment "
+              "with its full report."]
+    return "\n".join(lines) + "\n"
+
+
+def network_summary_line(rec: dict, out) -> str:
+    """The command's human summary: worst achieved against predicted station error.
+
+    >>> rec = {"passed": True, "requirement_m": 0.1, "datum": "station S1 (...)",
+    ...        "worst": {"achieved_error_m": 0.012, "achieved_station": "S5",
+    ...                  "predicted_error_m": 0.03, "adjustment_error_95_m": 0.02,
+    ...                  "marker_achieved_error_m": 0.004, "not_adjusted": []}}
+    >>> print(network_summary_line(rec, "v"))  # doctest: +NORMALIZE_WHITESPACE
+    PASSED (network mode, datum station S1): worst station error achieved 0.0120 m (S5),
+    predicted 0.0300 m, adjustment's 95 % 0.0200 m (requirement 0.1 m); worst marker achieved
+    0.0040 m -> v/
+    """
+    w = rec["worst"]
+
+    def m(v):
+        return "—" if v is None else f"{v:.4f} m"
+
+    return (f"{'PASSED' if rec['passed'] else 'FAILED'} (network mode, datum "
+            f"{rec['datum'].split(' (')[0]}): worst station error achieved "
+            f"{m(w['achieved_error_m'])} ({w['achieved_station']}), predicted "
+            f"{m(w['predicted_error_m'])}, adjustment's 95 % {m(w['adjustment_error_95_m'])} "
+            f"(requirement {rec['requirement_m']:g} m); worst marker achieved "
+            f"{m(w['marker_achieved_error_m'])}"
+            + (f"; not adjusted: {', '.join(w['not_adjusted'])}" if w["not_adjusted"] else "")
+            + f" -> {out}/")
