@@ -1,4 +1,4 @@
-"""Network adjustment speed: 100 stations, about 1,000 marker observations (issue 12: < 1 s).
+"""Network adjustment speed: 100 stations, about 1,000 marker observations (aim: < 1 s).
 
 Prints the median wall time of
   (a) :func:`pipeline.network.adjustment.adjust` as shipped: Gauss-Newton on the sparse normal

@@ -39,7 +39,7 @@ import time
 from pathlib import Path
 
 from error_model.default import default_model
-from pipeline.stages import build_config
+from pipeline.survey import ProcessingSettings, processing_config
 from planner.distributed import IN_PROCESS, LOCAL, executor
 from planner.outputs.plan_file import load_plan
 from planner.verify.known_control import check_station, map_stations
@@ -65,7 +65,7 @@ def verify(plan, ids, scheduler, workers):
     """Wall seconds of verifying ``ids``, the checks, and the processing seconds per task."""
     model = default_model()
     check = functools.partial(check_station, tuple(plan.marker_ids), plan.marker_xyz_m,
-                              build_config({"fit": {"radius_m": plan.marker_radius_m}}),
+                              processing_config(ProcessingSettings(marker_radius_m=plan.marker_radius_m)),
                               model, plan.requirement_m, plan.working_radius_m, 0)
     t0 = time.perf_counter()
     with executor(scheduler, workers) as ex:

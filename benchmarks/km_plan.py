@@ -127,7 +127,7 @@ def main() -> None:
              ["--network", "--reference-station", site["centre_station"]]))
     for name, cfg, limit, extra in runs:
         out = root / name
-        cmd = [cli, "plan", "--site", "km", "--config", str(cfg), "--time-limit", str(limit),
+        cmd = [cli, "plan", "--site", "km", "--config", str(cfg), "--time-limit-s", str(limit),
                "--json", "--out", str(out), "--overwrite", *extra]
         code, wall, peak = _child(cmd, root / f"{name}.log")
         if code:

@@ -10,7 +10,7 @@ Builds the site's network problem (``km``: datum at the station nearest the cent
 
 - old: ``net.information(selected)`` and ``net.covariance`` of it (and, while some station
   is undetermined, of the regularised ``J + 0.05 J_all`` too), as the greedy did per step;
-- new: :meth:`planner.accuracy.network.GrowingCovariance.add` on the layout (and on the
+- new: :meth:`planner.accuracy.growing.GrowingCovariance.add` on the layout (and on the
   regularised information while undetermined).
 
 Phase "undetermined" starts from the greedy's directions-only cover (stations not yet tied)
@@ -46,7 +46,7 @@ from process_speed import run_worker
 
 def _replay(net, start: np.ndarray, sites: np.ndarray, j_all: np.ndarray) -> dict:
     """Seconds per step of the old and the new update over ``sites`` added to ``start``."""
-    from planner.accuracy.network import GrowingCovariance
+    from planner.accuracy.growing import GrowingCovariance
 
     selected = start.copy()
     old = []

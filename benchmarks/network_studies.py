@@ -1,4 +1,4 @@
-"""Network-mode studies (issue 12, item 4): known control against network mode, error against
+"""Network-mode studies: known control against network mode, error against
 distance from the reference, the trade-off curve, what a heading prior buys, and the greedy and
 regular-grid baselines, per site.
 

@@ -23,7 +23,7 @@ from pathlib import Path
 
 
 def _plan(cli: str, args: argparse.Namespace, config: Path, out: Path) -> dict:
-    cmd = [cli, "plan", "--site", args.site, "--config", str(config), "--time-limit",
+    cmd = [cli, "plan", "--site", args.site, "--config", str(config), "--time-limit-s",
            str(args.time_limit), "--json", "--out", str(out), "--overwrite", *args.extra]
     env = {**os.environ, "OPENBLAS_NUM_THREADS": "1"}
     t = time.perf_counter()

@@ -212,7 +212,7 @@ def fit_data(table: MarkerTable, min_rows: int, extra_names: Iterable[str] = (),
                             f"{names}")
         if estimator is None and len(names) > 1:
             raise DataError(f"{where}: rows come from several estimators {names}; choose one "
-                            "(config `estimator`, CLI --estimator)")
+                            "(`estimator`)")
         if estimator is not None:
             chosen = table["estimator"].astype(str) == estimator
     elif estimator is not None:

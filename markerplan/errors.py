@@ -31,6 +31,12 @@ class InfeasiblePlanError(MarkerPlanError, RuntimeError):
     """No marker layout can satisfy the requirement; the message names failing stations and why."""
 
 
+class VerificationFailedError(MarkerPlanError, RuntimeError):
+    """A plan was verified and some station's achieved error fails the requirement (or could not
+    be measured); the message names the failing stations and why. The plan was feasible: this
+    is the simulated survey's verdict, not the planner's."""
+
+
 class PlanTimeLimitError(InfeasiblePlanError):
     """The search ended (its time limit, or the solver returned no layout) before any layout
     passed: nothing is proven infeasible, more time may find one."""

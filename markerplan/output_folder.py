@@ -133,23 +133,23 @@ def check_destination(out: Path, overwrite: bool, inputs: Iterable[Path] = ()) -
     resolved = Path(out).expanduser().resolve()
     reason = _forbidden_reason(resolved, inputs)
     if reason is not None:
-        raise OutputError(f"--out {out} {reason}; markerplan replaces its --out folder, so "
-                          "give a new folder for the results, e.g. --out results/")
+        raise OutputError(f"`out` {out} {reason}; markerplan replaces its `out` folder, so "
+                          "give a new folder for the results, e.g. `out` results/")
     if resolved.exists() and not resolved.is_dir():
-        raise OutputError(f"--out {out} exists and is not a folder; choose another path")
+        raise OutputError(f"`out` {out} exists and is not a folder; choose another path")
     if resolved.is_dir() and any(resolved.iterdir()):
         if not overwrite:
-            raise OutputError(f"--out {out} already exists; pass --overwrite to replace it or "
+            raise OutputError(f"`out` {out} already exists; pass `overwrite` to replace it or "
                               "choose another folder")
         foreign = _foreign_content(resolved)
         if foreign is not None:
-            raise OutputError(f"--out {out} cannot be overwritten: {foreign}; move what you "
+            raise OutputError(f"`out` {out} cannot be overwritten: {foreign}; move what you "
                               "want to keep out of it, or choose another folder")
     probe = resolved.parent
     while not probe.exists():
         probe = probe.parent
     if not probe.is_dir() or not os.access(probe, os.W_OK | os.X_OK):
-        raise OutputError(f"--out {out} is not writable (no write permission in {probe}); "
+        raise OutputError(f"`out` {out} is not writable (no write permission in {probe}); "
                           "choose a writable folder")
     return resolved
 
@@ -183,7 +183,7 @@ def _lock(destination: Path, out: Path) -> Iterator[None]:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
             os.close(fd)
-            raise OutputError(f"--out {out} is being written by another markerplan run; wait "
+            raise OutputError(f"`out` {out} is being written by another markerplan run; wait "
                               "for it to finish or choose another folder") from None
         try:  # the holder before us may have removed the file between our open and flock
             same = os.fstat(fd).st_ino == os.stat(path).st_ino
@@ -239,7 +239,7 @@ def _move_into_place(stage: Path, destination: Path, out: Path, overwrite: bool,
     if occupied and not (overwrite and existed_before):
         kept = _free_sibling(destination)
         os.rename(stage, kept)
-        raise OutputError(f"--out {out} appeared while this run was working and was kept; this "
+        raise OutputError(f"`out` {out} appeared while this run was working and was kept; this "
                           f"run's results are in {kept}")
     if not occupied:
         if destination.is_dir():
@@ -250,7 +250,7 @@ def _move_into_place(stage: Path, destination: Path, out: Path, overwrite: bool,
     if foreign is not None:
         kept = _free_sibling(destination)
         os.rename(stage, kept)
-        raise OutputError(f"--out {out} changed during the run ({foreign}) and was kept; this "
+        raise OutputError(f"`out` {out} changed during the run ({foreign}) and was kept; this "
                           f"run's results are in {kept}")
     old = Path(tempfile.mkdtemp(prefix=f".{destination.name}.old-", dir=destination.parent))
     os.rename(destination, old / "previous")
@@ -300,7 +300,7 @@ def output_folder(out: Path, overwrite: bool, command: str,
         try:
             created = _make_parents(destination.parent)
         except OSError as exc:
-            raise OutputError(f"--out {out} cannot be created ({exc.strerror}); choose a "
+            raise OutputError(f"`out` {out} cannot be created ({exc.strerror}); choose a "
                               "writable folder") from exc
         try:
             with _lock(destination, out):
@@ -329,4 +329,4 @@ def _write_error(out: Path, exc: OSError) -> str:
         fix = "free some space or choose a folder on another disk"
     else:
         fix = "check the folder and try again"
-    return f"--out {out}: writing failed{where}: {exc.strerror or exc}; nothing was written; {fix}"
+    return f"`out` {out}: writing failed{where}: {exc.strerror or exc}; nothing was written; {fix}"

@@ -215,6 +215,10 @@ def read_csv(path: str | Path, what: str, required: Iterable[str] = (),
              fix: str = "") -> tuple[list[str], list[list[str]]]:
     """Header and rows of a UTF-8 CSV; ragged rows and missing columns refused.
 
+    The header is the first row. Leading one-cell rows starting with ``#`` are skipped: the
+    ``markers.csv`` and ``stations.csv`` of older plans put a quoted ``# markerplan plan ...``
+    comment line before their header.
+
     Parameters
     ----------
     path : str or Path
@@ -238,6 +242,8 @@ def read_csv(path: str | Path, what: str, required: Iterable[str] = (),
         records = [r for r in csv.reader(io.StringIO(text, newline="")) if r]
     except csv.Error as exc:
         raise InputFileError(f"{what}: not a readable CSV ({exc})") from exc
+    while records and len(records[0]) == 1 and records[0][0].lstrip().startswith("#"):
+        del records[0]
     if not records:
         raise InputFileError(f"{what}: file is empty; expected a header row")
     header = [h.strip() for h in records[0]]

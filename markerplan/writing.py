@@ -4,6 +4,10 @@ fallback for numpy values.
 - CSV cells (:func:`csv_cell`, :func:`write_csv`): empty for no value (``None``, NaN,
   infinity), ``true`` / ``false`` for booleans, floats with six decimals, anything else as
   ``str``; ``\\n`` line ends.
+- GIS sidecars of a coordinate table ``name.csv`` (:func:`write_gis_sidecars`): ``name.csvt``,
+  the column types GDAL and QGIS read (:func:`column_types`), and, when the coordinates have a
+  CRS, ``name.prj``, its WKT in the ESRI dialect. The header is always a CSV's first line, so
+  pandas, QGIS and spreadsheets read it with their default settings.
 - JSON (:func:`json_default`, the ``default=`` of :func:`json.dumps`): numpy arrays as lists,
   numpy scalars as Python numbers, a non-finite numpy float as ``null``.
 """
@@ -81,3 +85,78 @@ def write_csv(path: str | Path, columns: tuple[str, ...], records: Iterable[Mapp
         for rec in records:
             w.writerow([csv_cell(rec[c]) for c in columns])
     return path
+
+
+def column_types(columns: tuple[str, ...], records: Iterable[Mapping[str, Any]]
+                 ) -> tuple[str, ...]:
+    """The ``.csvt`` type of each column, from the values :func:`write_csv` would write.
+
+    ``Integer`` when every value is an integer, ``Real`` when every value is a number (an empty
+    cell, None or NaN, fits both), else ``String`` (booleans too: their cells are ``true`` /
+    ``false``); a column without any value is ``String``.
+
+    Examples
+    --------
+    >>> column_types(("a", "b", "c", "d"), [{"a": 1, "b": 1, "c": True, "d": None},
+    ...                                     {"a": 2, "b": 0.5, "c": False, "d": None}])
+    ('Integer', 'Real', 'String', 'String')
+    """
+    records = list(records)
+    types = []
+    for c in columns:
+        values = [r[c] for r in records if r[c] is not None]
+        if not values or any(isinstance(v, bool | np.bool_) or not isinstance(v, int | float
+                                                                               | np.number)
+                             for v in values):
+            types.append("String")
+        elif all(isinstance(v, int | np.integer) for v in values):
+            types.append("Integer")
+        else:
+            types.append("Real")
+    return tuple(types)
+
+
+def esri_wkt(crs_wkt: str) -> str:
+    """``crs_wkt`` in the ESRI dialect of a ``.prj`` file, or unchanged when that dialect cannot
+    express it (GDAL and QGIS also read WKT 1 and 2 there).
+
+    >>> from rasterio.crs import CRS
+    >>> esri_wkt(CRS.from_epsg(32633).to_wkt())[:30]
+    'PROJCS["WGS_1984_UTM_Zone_33N"'
+    """
+    from rasterio.crs import CRS
+    from rasterio.errors import CRSError
+
+    try:
+        return CRS.from_wkt(crs_wkt).to_wkt(version="WKT1_ESRI")
+    except CRSError:
+        return crs_wkt
+
+
+def write_gis_sidecars(path: str | Path, types: tuple[str, ...], crs_wkt: str | None
+                       ) -> list[Path]:
+    """Write the sidecars that GDAL and QGIS read beside the coordinate table ``path``.
+
+    Parameters
+    ----------
+    path : str or Path
+        The CSV (``name.csv``).
+    types : tuple of str
+        One ``.csvt`` type per column, in the header's order: ``Integer``, ``Real`` or
+        ``String`` (:func:`column_types`).
+    crs_wkt : str or None
+        WKT of the coordinates' CRS; None (a local frame) writes no ``.prj``.
+
+    Returns
+    -------
+    written : list of Path
+        ``name.csvt`` (one line, each type quoted), then ``name.prj`` (:func:`esri_wkt`, one
+        line) when there is a CRS.
+    """
+    path = Path(path)
+    written = [path.with_suffix(".csvt")]
+    written[0].write_text(",".join(f'"{t}"' for t in types) + "\n")
+    if crs_wkt is not None:
+        written.append(path.with_suffix(".prj"))
+        written[1].write_text(esri_wkt(crs_wkt) + "\n")
+    return written

@@ -31,9 +31,9 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from markerplan.errors import ConfigError, DataError
+from pipeline.geometric_sphere_fit import lsq_fixed_radius
 from pipeline.rig import MountingOffsets, sensor_to_station
 from pipeline.scan_format import StationScan
-from pipeline.sphere_fit import lsq_fixed_radius
 
 
 @dataclass(frozen=True)
@@ -169,7 +169,7 @@ def estimate_rotation_offsets(scan: StationScan, offsets: MountingOffsets | None
     if gap > MAX_TURN_GAP_RAD:
         raise DataError(f"scan {scan.station_id}: its {scan.n_frames} frame(s) leave "
                         f"{np.degrees(gap):.0f} deg of the turn unscanned; self-calibration "
-                        "needs frames over a full turn: pass --no-calibrate (known or zero "
+                        "needs frames over a full turn: skip it (`calibrate=False`: known or zero "
                         "offsets) or give the turntable's angle log")
     face = direct_face(scan)
     band = (scan.range_m >= cfg.min_range_m) & (scan.range_m <= cfg.max_range_m)

@@ -163,7 +163,7 @@ def check_formats(formats: tuple[str, ...]) -> None:
     unknown = sorted(set(formats) - set(FORMATS))
     if unknown:
         raise ConfigError(f"unknown point-cloud format(s) {', '.join(unknown)}; choose from "
-                          f"{', '.join(FORMATS)}, e.g. --cloud las,ply")
+                          f"{', '.join(FORMATS)}, e.g. `cloud_formats` las,ply")
 
 
 def write_station_clouds(folder: str | Path, cloud: ClassifiedCloud, formats: tuple[str, ...],

@@ -28,6 +28,7 @@ from pipeline.calibration import estimate_axis_offset, estimate_rotation_offsets
 from pipeline.clustering import euclidean_clusters
 from pipeline.evaluation import Reference, evaluate_rows
 from pipeline.gate import RangeIndex, research, two_box_gate, within_range_bands
+from pipeline.geometric_sphere_fit import cap_start
 from pipeline.ground import remove_ground
 from pipeline.kernels import range_thinned
 from pipeline.marker_table import MarkerRow, line_of_sight
@@ -35,7 +36,7 @@ from pipeline.quality import MarkerMetrics, marker_metrics, quality_gate
 from pipeline.rig import MountingOffsets, sensor_to_station
 from pipeline.scan_format import StationScan
 from pipeline.sensor_noise import RangeNoise
-from pipeline.sphere_fit import SphereFit, cap_start, fit_sphere
+from pipeline.sphere_fit import SphereFit, fit_sphere
 from pipeline.stages import ProcessConfig, build_config, noise_widened
 from pipeline.synthesis import StationCloud, synthesize
 

@@ -17,19 +17,19 @@ visible_fraction
 radius_fit_m
     Radius of a free-radius sphere through the points used (the "radius check": rocks are not
     0.10 m spheres). Without the noise: geometric least squares
-    (:func:`~pipeline.sphere_fit.fit_free_radius`, biased small by range noise); with it:
-    the line-of-sight fit (:func:`~pipeline.sphere_fit.fit_line_of_sight`), unbiased, of the
+    (:func:`~pipeline.geometric_sphere_fit.fit_free_radius`, biased small by range noise); with it:
+    the line-of-sight fit (:func:`~pipeline.line_of_sight_fit.fit_line_of_sight`), unbiased, of the
     points whose beams pass within ``R sin 60 deg`` of the centre
-    (:func:`~pipeline.sphere_fit.beam_cap`; drops the ground an ICP fit may have used).
+    (:func:`~pipeline.line_of_sight_fit.beam_cap`; drops the ground an ICP fit may have used).
 radius_sigma_m
     Standard error that range noise gives ``radius_fit_m`` if the points were a marker of
-    radius ``R`` at the fitted centre (:func:`~pipeline.sphere_fit.radius_standard_error`:
+    radius ``R`` at the fitted centre (:func:`~pipeline.line_of_sight_fit.radius_standard_error`:
     ``(J^T W J)^-1`` of the line-of-sight fit, weights ``1 / sigma_i^2``); 0 when the noise is
     unknown. It grows as the points thin out with range (about 6 mm at 5 m, 12 mm at 14 m,
     50 mm at 25 m for ``s = 45 mm``, ``R = 0.1 m``; measured spread 5, 16 and diverging).
 expected_rms_m
     The fit RMS a clean sphere gives under the sensor's noise
-    (:func:`~pipeline.sphere_fit.expected_rms`): the RMS over the points used of
+    (:func:`~pipeline.line_of_sight_fit.expected_rms`): the RMS over the points used of
     ``sigma_i cos i_i`` (range noise seen along the surface normal; ``sigma_i`` from
     :class:`~pipeline.sensor_noise.RangeNoise` at the point's range and incidence ``i_i``).
     NaN when the noise is unknown.
@@ -47,15 +47,15 @@ from dataclasses import dataclass
 import numpy as np
 
 from markerplan.errors import ConfigError
-from pipeline.sensor_noise import RangeNoise
-from pipeline.sphere_fit import (
-    SphereFit,
+from pipeline.geometric_sphere_fit import fit_free_radius
+from pipeline.line_of_sight_fit import (
     beam_cap,
     expected_rms,
-    fit_free_radius,
     fit_line_of_sight,
     radius_standard_error,
 )
+from pipeline.sensor_noise import RangeNoise
+from pipeline.sphere_fit import SphereFit
 
 _POINTS_PER_CELL = 6
 _INNER = 0.8

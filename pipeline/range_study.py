@@ -8,9 +8,9 @@ markers out, extracts and fits each one, and aggregates the marker tables of the
 
 Extraction: each marker's points are re-searched within ``research_radius_m`` of its known
 position (as a total station would guide it); the start of the fit is computed from the points
-above the marker's equator only (:func:`pipeline.sphere_fit.cap_start`), so the estimators see
-the same input as in :mod:`pipeline.process` and do not start from the truth. Given the
-sensor's range noise, the fit and the quality gate take their scales from it, as in
+above the marker's equator only (:func:`pipeline.geometric_sphere_fit.cap_start`), so the
+estimators see the same input as in :mod:`pipeline.process` and do not start from the truth.
+Given the sensor's range noise, the fit and the quality gate take their scales from it, as in
 :mod:`pipeline.process`.
 """
 
@@ -21,12 +21,13 @@ import numpy as np
 from markerplan.constants import GOLDEN_ANGLE_RAD
 from markerplan.errors import ConfigError, DataError
 from pipeline.gate import RangeIndex
+from pipeline.geometric_sphere_fit import cap_start
 from pipeline.marker_table import MarkerRow, line_of_sight
 from pipeline.quality import QualityConfig, marker_metrics, quality_gate
 from pipeline.rig import MountingOffsets
 from pipeline.scan_format import StationScan
 from pipeline.sensor_noise import RangeNoise
-from pipeline.sphere_fit import METHODS, cap_start, fit_sphere
+from pipeline.sphere_fit import METHODS, fit_sphere
 from pipeline.synthesis import synthesize
 
 #: Horizontal LiDAR-to-marker distances of the published range experiment, metres.

@@ -10,39 +10,28 @@ position of the scanner in that same frame, and return a :class:`SphereFit`.
     half a radius behind it are fitted with the radius fixed; (2) keep the points inside the
     cone of half-angle 60 deg about the centre->scanner line (apex at the centre) that also lie
     within the cylinder of radius ``R sin 60 deg`` about the scanner->centre line; (3) fit with
-    the radius fixed, drop points whose residual exceeds 3 standard deviations, fit again;
-    repeat (2)-(3) from the new centre until the centre moves less than ``tol_m`` (or
-    ``max_iter`` times: a loop that does not converge cycles through a few point sets, and is
-    stopped where ``max_iter`` would leave it once the cycle has been seen twice).
+    the radius fixed (:func:`~pipeline.geometric_sphere_fit.lsq_fixed_radius`), drop points
+    whose residual exceeds 3 standard deviations, fit again; repeat (2)-(3) from the new centre
+    until the centre moves less than ``tol_m`` (or ``max_iter`` times: a loop that does not
+    converge cycles through a few point sets, and is stopped where ``max_iter`` would leave it
+    once the cycle has been seen twice).
 
     *With the sensor's range noise given* (``noise``, a :class:`~pipeline.sensor_noise.RangeNoise`)
-    the same procedure runs on line-of-sight residuals instead (:func:`fit_line_of_sight`):
-    (2) keeps the beams (sensor -> point directions) that pass the centre closer than
-    ``R sin 60 deg`` (the ASTM cylinder, tested on the beam, not on the noisy point); (3) fits by
-    weighted least squares of ``range - t(c)`` (``t(c)``: range at which the beam meets the
-    sphere, weights ``1 / sigma_i^2`` from the noise at the point's range and incidence) and
-    trims at 3 standard deviations of ``(range - t) / sigma_i``. Range noise ``n`` along the
-    beam moves a point off the sphere by ``|p - c| - R = -n cos i + n^2 sin^2 i / (2R) + ...``,
-    whose mean ``s^2 sin^2 i / (2R)`` makes rim points look outside the sphere; the 60 deg cone
-    about the centre also drops rim points pushed behind it (large positive ``n``) and keeps those
-    pulled forward. Both pull a fixed-radius fit toward the sensor: about 2 mm at
-    ``s = 15 mm`` and 24 mm at ``s = 45 mm`` for ``R = 0.1 m``, whatever the number of points
-    (scaling the radius per point by ``R + s^2 sin^2 i / (2R)`` leaves 17 mm). The range
-    residual at the true centre is the noise itself, independent of the selection, so this fit
-    has no such bias (below 1 mm in the Monte-Carlo test,
-    ``tests/pipeline/test_noise_aware_fit.py``).
+    the same procedure runs on line-of-sight residuals instead
+    (:func:`pipeline.line_of_sight_fit.astm_beam_steps`): (2) tests the cylinder on each beam,
+    (3) fits the measured ranges by weighted least squares and trims on the normalised range
+    residuals. This removes the pull toward the sensor that range noise gives the fit of
+    ``|p - c| - R`` (the docstring of :mod:`pipeline.line_of_sight_fit`).
 ``hemisphere-icp``
     The published marker method: point-to-point ICP of a known-radius hemisphere model (a
     dense point cloud of the sphere's half that faces the scanner) to the points, solving a
     translation only. Correspondences farther than ``max_correspondence_m`` are ignored. It is
     run as published, with or without ``noise``.
 
-A free-radius fit serves the quality gate's radius check: :func:`fit_free_radius` (geometric
-least squares, biased small by range noise: 87 mm at ``s = 15 mm``, 62 mm at ``s = 45 mm`` for
-``R = 0.1 m``) or, with the noise known, :func:`fit_line_of_sight` with ``free_radius=True``
-(unbiased) and :func:`radius_standard_error`.
+The free-radius fits of the quality gate's radius check are
+:func:`pipeline.geometric_sphere_fit.fit_free_radius` and, with the noise known,
+:func:`pipeline.line_of_sight_fit.fit_line_of_sight`.
 """
-
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -53,16 +42,12 @@ from scipy.spatial import cKDTree
 from markerplan.constants import GOLDEN_ANGLE_RAD
 from markerplan.errors import ConfigError, DataError
 from markerplan.reading import MAX_ABS_COORDINATE_M
-from pipeline.sensor_noise import MAX_TAN_INCIDENCE, RangeNoise
+from pipeline.geometric_sphere_fit import ASTM_CONE_DEG, MIN_POINTS, lsq_fixed_radius
+from pipeline.line_of_sight_fit import astm_beam_steps
+from pipeline.sensor_noise import RangeNoise
 
 METHODS = ("fixed-radius", "hemisphere-icp")
 DEFAULT_METHOD = "fixed-radius"
-#: ASTM E3125-17 full cone angle about the scanner line of sight, degrees.
-ASTM_CONE_DEG = 120.0
-_MIN_POINTS = 4
-#: Line-of-sight fits: beams are treated as meeting the sphere at no more than this incidence
-#: (cos), so a beam that misses the current sphere still has a finite residual and gradient.
-_MIN_COS_INCIDENCE = 1.0 / np.hypot(1.0, MAX_TAN_INCIDENCE)
 
 
 @dataclass(frozen=True)
@@ -137,8 +122,8 @@ def fit_sphere(points_m: np.ndarray, radius_m: float, sensor_m=(0.0, 0.0, 0.0),
         the closest surface; give a start when ground in front of the sphere is included.
     noise : RangeNoise, optional
         The scanner's range noise. ``fixed-radius`` then fits line-of-sight residuals, which
-        removes the noise bias (module docstring); ``None`` (default): the ASTM fit of
-        ``|p - c| - R``. ``hemisphere-icp`` does not use it.
+        removes the noise bias (:mod:`pipeline.line_of_sight_fit`); ``None`` (default): the
+        ASTM fit of ``|p - c| - R``. ``hemisphere-icp`` does not use it.
 
     Returns
     -------
@@ -189,8 +174,8 @@ def _fit_sphere_iv(points_m, radius_m, sensor_m, method, tol_m, max_iter, max_co
         raise DataError(f"`points_m` must be an (n, 3) array of numbers ({exc})") from exc
     if p.ndim != 2 or p.shape[1] != 3:
         raise DataError(f"`points_m` must have shape (n, 3), got {p.shape}")
-    if p.shape[0] < _MIN_POINTS:
-        raise DataError(f"`points_m` needs at least {_MIN_POINTS} points to fit a sphere, "
+    if p.shape[0] < MIN_POINTS:
+        raise DataError(f"`points_m` needs at least {MIN_POINTS} points to fit a sphere, "
                         f"got {p.shape[0]}")
     if not np.all(np.isfinite(p)):
         raise DataError("`points_m` contains NaN or infinite coordinates; drop them first")
@@ -259,69 +244,6 @@ def _result_iv(fit: SphereFit) -> SphereFit:
     return fit
 
 
-def lsq_fixed_radius(points_m: np.ndarray, radius_m: float, centre0_m: np.ndarray,
-                     max_iter: int = 50, tol_m: float = 1e-10) -> np.ndarray:
-    """Geometric least-squares sphere centre with the radius fixed (Gauss-Newton).
-
-    Minimises ``sum (|p_i - c| - R)^2`` over ``c`` from ``centre0_m``, compiled
-    (:func:`pipeline.kernels.gauss_newton_fixed_radius`): it runs hundreds of times per station.
-
-    Parameters
-    ----------
-    points_m : (n, 3) float
-    radius_m : float
-    centre0_m : (3,) float
-        Start; must lie on the correct (far) side of the surface for a cap.
-
-    Returns
-    -------
-    centre_m : (3,) float
-    """
-    # imported here: planning imports this module, and numba costs 0.4 s and 90 MB to import
-    from pipeline.kernels import gauss_newton_fixed_radius
-
-    return gauss_newton_fixed_radius(np.ascontiguousarray(points_m, dtype=float), float(radius_m),
-                                     np.array(centre0_m, dtype=float).reshape(3),
-                                     int(max_iter), float(tol_m))
-
-
-def fit_free_radius(points_m: np.ndarray, centre0_m: np.ndarray, radius0_m: float,
-                    max_iter: int = 50) -> tuple[np.ndarray, float, float]:
-    """Geometric least-squares sphere with a free radius (Levenberg-style Gauss-Newton).
-
-    Parameters
-    ----------
-    points_m : (n, 3) float
-    centre0_m : (3,) float
-        Start centre.
-    radius0_m : float
-        Start radius.
-
-    Returns
-    -------
-    centre_m : (3,) float
-    radius_m : float
-    rms_m : float
-    """
-    x = np.append(np.asarray(centre0_m, dtype=float), float(radius0_m))
-    lam = 1e-6
-    for _ in range(max_iter):
-        d = points_m - x[:3]
-        n = np.maximum(np.linalg.norm(d, axis=1), 1e-12)
-        r = n - x[3]
-        jac = np.column_stack([-d / n[:, None], -np.ones_like(n)])
-        a = jac.T @ jac
-        try:
-            step = np.linalg.solve(a + lam * np.diag(np.diag(a) + 1e-12), -jac.T @ r)
-        except np.linalg.LinAlgError:
-            break
-        x = x + step
-        if np.linalg.norm(step) < 1e-10:
-            break
-    res = np.linalg.norm(points_m - x[:3], axis=1) - x[3]
-    return x[:3], float(abs(x[3])), float(np.sqrt(np.mean(res ** 2)))
-
-
 def _closest_point_start(p: np.ndarray, radius: float, sensor: np.ndarray
                          ) -> tuple[np.ndarray, np.ndarray]:
     """ASTM/NIST closest-point initial estimate; returns (centre, mask of points used)."""
@@ -338,32 +260,6 @@ def _closest_point_start(p: np.ndarray, radius: float, sensor: np.ndarray
     los = (centroid - sensor) / max(np.linalg.norm(centroid - sensor), 1e-12)
     start = sensor + los * (front + radius)
     return lsq_fixed_radius(p[near], radius, start), near
-
-
-def cap_start(points_m: np.ndarray, radius_m: float, sensor_m=(0.0, 0.0, 0.0)) -> np.ndarray:
-    """Initial centre from points known to lie on the sphere's sensor-facing cap.
-
-    The centroid is pushed half a radius away from the sensor, then refined by a fixed-radius
-    fit of those points.
-
-    Parameters
-    ----------
-    points_m : (n, 3) float
-        Cap points (e.g. the above-ground cluster of a candidate), metres.
-    radius_m : float
-    sensor_m : (3,) float
-
-    Returns
-    -------
-    centre_m : (3,) float
-    """
-    sensor = np.asarray(sensor_m, dtype=float)
-    centroid = points_m.mean(axis=0)
-    los = (centroid - sensor) / max(np.linalg.norm(centroid - sensor), 1e-12)
-    start = centroid + 0.5 * radius_m * los
-    if points_m.shape[0] < _MIN_POINTS:
-        return start
-    return lsq_fixed_radius(points_m, radius_m, start)
 
 
 def _cone_cylinder(p: np.ndarray, radius: float, sensor: np.ndarray, centre: np.ndarray,
@@ -396,19 +292,19 @@ def _astm_e3125(p, radius, sensor, centre, tol_m, max_iter, noise=None) -> Spher
     up to the Gauss-Newton stopping tolerance, the same centre, at a fraction of the cost.
     """
     select, solve = (_geometric_steps(p, radius, sensor) if noise is None
-                     else _line_of_sight_steps(p, radius, sensor, noise))
+                     else astm_beam_steps(p, radius, sensor, noise))
     used = np.ones(p.shape[0], dtype=bool)
     converged = False
     it = 0
     states, history = [], []  # point sets selected and kept; (centre, used) after each iteration
     for it in range(1, max_iter + 1):  # noqa: B007 - `it` is reported
         sel = select(centre)
-        if sel.sum() < _MIN_POINTS:
+        if sel.sum() < MIN_POINTS:
             break
         c1, res = solve(sel, centre)
         keep = np.zeros_like(sel)
         keep[np.flatnonzero(sel)[np.abs(res) < 3 * np.std(res)]] = True
-        if keep.sum() < _MIN_POINTS:
+        if keep.sum() < MIN_POINTS:
             keep = sel
         new, _ = solve(keep, c1)
         moved = float(np.linalg.norm(new - centre))
@@ -455,266 +351,6 @@ def _geometric_steps(p, radius, sensor):
         return c, _residuals(p[sel], c, radius)
 
     return select, solve
-
-
-def _line_of_sight_steps(p, radius, sensor, noise):
-    """The ASTM steps on the beams: the cylinder tested on each beam, and the line-of-sight fit
-    with its normalised range residuals ``(rho - t) / sigma``."""
-    rng, beam = _beams(p, sensor)
-    max_miss = radius * np.sin(np.radians(ASTM_CONE_DEG / 2))
-
-    def select(centre):
-        return _beam_cylinder(beam, centre - sensor, max_miss)
-
-    def solve(sel, start):
-        c = _los_solve(rng[sel], beam[sel], start - sensor, radius, noise)[0]
-        return c + sensor, _los_z(rng[sel], beam[sel], c, radius, noise)
-
-    return select, solve
-
-
-@dataclass(frozen=True)
-class LineOfSightFit:
-    """Result of :func:`fit_line_of_sight`.
-
-    Attributes
-    ----------
-    centre_m : (3,) float
-        Centre, metres, frame of the input points.
-    radius_m : float
-        Fitted (``free_radius``) or given radius, metres.
-    """
-
-    centre_m: np.ndarray
-    radius_m: float
-
-
-def fit_line_of_sight(points_m: np.ndarray, radius_m: float, noise: RangeNoise,
-                      sensor_m=(0.0, 0.0, 0.0), centre0_m: np.ndarray | None = None,
-                      free_radius: bool = False) -> LineOfSightFit:
-    """Weighted least-squares sphere on line-of-sight range residuals (Gauss-Newton).
-
-    Minimises ``sum ((rho_i - t_i(c, R)) / sigma_i)^2``: ``rho_i = |p_i - sensor|`` is the
-    measured range, ``t_i`` the range at which the beam through ``p_i`` meets the sphere (at
-    most 84 deg incidence), ``sigma_i`` the noise's total sigma at ``rho_i`` and the incidence.
-    Unbiased under range noise along the beam, unlike the geometric fits
-    (:func:`lsq_fixed_radius`, :func:`fit_free_radius`).
-
-    Parameters
-    ----------
-    points_m : (n, 3) float
-        Points on the sphere's sensor-facing side, metres, n >= 4.
-    radius_m : float
-        Known radius (``free_radius=False``) or start radius, metres.
-    noise : RangeNoise
-    sensor_m : (3,) float
-        Scanner origin, metres.
-    centre0_m : (3,) float, optional
-        Start centre (default: :func:`cap_start`).
-    free_radius : bool
-        Fit the radius too.
-
-    Returns
-    -------
-    LineOfSightFit
-
-    Examples
-    --------
-    >>> import numpy as np
-    >>> g = np.stack(np.meshgrid(np.linspace(-.09, .09, 7), np.linspace(-.09, .09, 7)), -1)
-    >>> g = g.reshape(-1, 2)[np.hypot(*g.reshape(-1, 2).T) < 0.1]
-    >>> p = np.column_stack([5 - np.sqrt(0.01 - (g ** 2).sum(1)), g])  # exact cap, sensor at 0
-    >>> f = fit_line_of_sight(p, 0.12, RangeNoise(0.015), free_radius=True)
-    >>> np.round(f.centre_m, 6).tolist() == [5, 0, 0], round(f.radius_m, 6)
-    (True, 0.1)
-    """
-    sensor = np.asarray(sensor_m, dtype=float)
-    rng, beam = _beams(np.asarray(points_m, dtype=float), sensor)
-    start = cap_start(points_m, radius_m, sensor) if centre0_m is None else centre0_m
-    c, r, _ = _los_solve(rng, beam, np.asarray(start, float) - sensor, float(radius_m), noise,
-                         free_radius)
-    return LineOfSightFit(c + sensor, r)
-
-
-def radius_standard_error(points_m: np.ndarray, centre_m: np.ndarray, radius_m: float,
-                          noise: RangeNoise, sensor_m=(0.0, 0.0, 0.0)) -> float:
-    """Standard error of a free-radius :func:`fit_line_of_sight` if the points' beams met the
-    sphere ``(centre_m, radius_m)``, metres.
-
-    ``sqrt([(J^T W J)^-1]_RR)`` at that sphere (``W = diag(1 / sigma_i^2)``): the spread that
-    range noise alone gives the free radius of a marker seen with these beams, the scale of
-    the quality gate's radius check. Evaluated at the marker hypothesis, not at the free fit,
-    so a flat patch of a boulder (whose free radius is poorly determined) does not widen it.
-
-    Examples
-    --------
-    >>> import numpy as np
-    >>> g = np.stack(np.meshgrid(np.linspace(-.08, .08, 9), np.linspace(-.08, .08, 9)), -1)
-    >>> g = g.reshape(-1, 2)[np.hypot(*g.reshape(-1, 2).T) <= 0.08]  # beams up to 53 deg
-    >>> p = np.column_stack([np.full(len(g), 4.95), g])  # only the beam directions count
-    >>> se = radius_standard_error(p, np.array([5.0, 0, 0]), 0.1, RangeNoise(0.015, 0, 0, 0))
-    >>> round(se, 4)  # 49 points of 15 mm noise
-    0.0115
-    """
-    sensor = np.asarray(sensor_m, dtype=float)
-    rng, beam = _beams(np.asarray(points_m, dtype=float), sensor)
-    jac, w, _ = _los_system(rng, beam, np.append(np.asarray(centre_m, float) - sensor, radius_m),
-                            noise, True)
-    try:
-        return float(np.sqrt(np.linalg.inv(jac.T @ (w[:, None] * jac))[3, 3]))
-    except np.linalg.LinAlgError:
-        return float("inf")
-
-
-def expected_rms(points_m: np.ndarray, centre_m: np.ndarray, radius_m: float, noise: RangeNoise,
-                 sensor_m=(0.0, 0.0, 0.0)) -> float:
-    """RMS of ``|p - c| - R`` that range noise alone gives on a sphere, metres.
-
-    The RMS over the points of ``sigma_i cos i_i``: ``sigma_i`` is the noise's total sigma at
-    the point's range and at the incidence ``i_i`` of its beam on the sphere ``(centre_m,
-    radius_m)``; ``cos i`` projects the range error onto the surface normal.
-
-    Parameters
-    ----------
-    points_m : (n, 3) float
-    centre_m : (3,) float
-    radius_m : float
-    noise : RangeNoise
-    sensor_m : (3,) float
-
-    Examples
-    --------
-    >>> import numpy as np
-    >>> p = np.array([[4.9, 0, 0], [4.95, 0.0866, 0]])  # incidence 0 and ~61 deg
-    >>> round(expected_rms(p, np.array([5.0, 0, 0]), 0.1, RangeNoise(0.02, 0, 0, 0)), 4)
-    0.0157
-    """
-    sensor = np.asarray(sensor_m, dtype=float)
-    rng, beam = _beams(np.asarray(points_m, dtype=float), sensor)
-    _, h, _ = _los_range(beam, np.asarray(centre_m, dtype=float) - sensor, radius_m)
-    return float(np.sqrt(np.mean((_los_sigma(rng, h, radius_m, noise) * h / radius_m) ** 2)))
-
-
-def beam_cap(points_m: np.ndarray, centre_m: np.ndarray, radius_m: float,
-             sensor_m=(0.0, 0.0, 0.0)) -> np.ndarray:
-    """Points whose beams pass the centre closer than ``R sin 60 deg`` (the ASTM cylinder tested
-    on the beam, independent of the range noise).
-
-    Returns
-    -------
-    inside : (n,) bool
-
-    Examples
-    --------
-    >>> import numpy as np
-    >>> beam_cap(np.array([[4.9, 0, 0], [4.9, 0.095, 0], [5.2, 0, 0.5]]), np.array([5.0, 0, 0]),
-    ...          0.1).tolist()
-    [True, False, False]
-    """
-    sensor = np.asarray(sensor_m, dtype=float)
-    _, beam = _beams(np.asarray(points_m, dtype=float), sensor)
-    return _beam_cylinder(beam, np.asarray(centre_m, float) - sensor,
-                          radius_m * np.sin(np.radians(ASTM_CONE_DEG / 2)))
-
-
-def _beams(p: np.ndarray, sensor: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Measured range (n,) and unit beam direction (n, 3) of each point from ``sensor``."""
-    d = p - sensor
-    rng = np.linalg.norm(d, axis=1)
-    return rng, d / np.maximum(rng, 1e-12)[:, None]
-
-
-def _beam_cylinder(beam: np.ndarray, centre: np.ndarray, max_miss_m: float) -> np.ndarray:
-    """Beams (sensor at the origin) passing ``centre`` ahead closer than ``max_miss_m``."""
-    along = beam @ centre
-    return (along > 0) & (centre @ centre - along ** 2 < max_miss_m ** 2)
-
-
-def _los_range(beam: np.ndarray, centre: np.ndarray, radius: float
-               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Range ``t`` (n,) at which each beam meets the sphere (sensor at the origin), ``h = R cos
-    i`` (n,) and the point ``t * beam`` (n, 3); incidence capped (:data:`_MIN_COS_INCIDENCE`)."""
-    along = beam @ centre
-    h = np.sqrt(np.maximum(radius ** 2 - (centre @ centre - along ** 2),
-                           (radius * _MIN_COS_INCIDENCE) ** 2))
-    t = along - h
-    return t, h, t[:, None] * beam
-
-
-def _los_sigma(rng: np.ndarray, h: np.ndarray, radius: float, noise: RangeNoise) -> np.ndarray:
-    """Total range sigma (n,) at each point's range and incidence (``cos i = h / R``)."""
-    return noise.total_sigma_m(rng, np.sqrt(np.maximum(radius ** 2 - h ** 2, 0.0)) / h)
-
-
-def _los_z(rng, beam, centre, radius, noise) -> np.ndarray:
-    """Normalised range residuals ``(rho - t) / sigma`` (n,), sensor at the origin."""
-    t, h, _ = _los_range(beam, centre, radius)
-    return (rng - t) / _los_sigma(rng, h, radius, noise)
-
-
-def _los_system(rng, beam, x, noise, free_radius
-                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Jacobian (n, 3 or 4), weights (n,) and residuals ``rho - t`` (n,) of the line-of-sight
-    problem at ``x = (centre, R)``, sensor at the origin."""
-    t, h, q = _los_range(beam, x[:3], x[3])
-    jac = (q - x[:3]) / h[:, None]  # d(rho - t)/dc
-    if free_radius:
-        jac = np.column_stack([jac, x[3] / h])  # d(rho - t)/dR
-    return jac, 1.0 / _los_sigma(rng, h, x[3], noise) ** 2, rng - t
-
-
-def _los_solve(rng, beam, centre, radius, noise, free_radius=False, max_iter=50, tol_m=1e-10
-               ) -> tuple[np.ndarray, float, np.ndarray]:
-    """Gauss-Newton of :func:`fit_line_of_sight`, sensor at the origin.
-
-    A fixed radius runs the compiled loop :func:`pipeline.kernels.los_gauss_newton_fixed` (the
-    hundreds of small fits of a station's markers). A free radius runs the problem of
-    :func:`_los_system` in numpy with its invariants hoisted out of the iterations (the range
-    part of each point's variance) and ``J^T W J`` and ``J^T W r`` from one product
-    (``V^T diag(w / h^2) [V, h r]`` with ``V = [t beam - c, R]``); a singular matrix ends the
-    iterations. Each step is capped at half the radius.
-
-    Returns the centre (3,), the radius and the covariance ((3, 3) or (4, 4) with the radius)
-    of the estimate under the noise model.
-    """
-    var0 = noise.total_sigma_m(rng) ** 2  # variance at normal incidence, (n,)
-    inc2 = noise.incidence_noise_m ** 2
-    if not free_radius:
-        from pipeline.kernels import los_gauss_newton_fixed  # as in lsq_fixed_radius
-
-        c, cov = los_gauss_newton_fixed(
-            np.ascontiguousarray(rng, dtype=float), np.ascontiguousarray(beam, dtype=float),
-            np.array(centre, dtype=float), float(radius), np.ascontiguousarray(var0, dtype=float),
-            float(inc2), float(_MIN_COS_INCIDENCE), int(max_iter), float(tol_m))
-        return c, float(radius), cov
-    x = np.array([*np.asarray(centre, dtype=float), radius], dtype=float)
-    cov = np.full((4, 4), np.nan)
-    v = np.empty((rng.size, 5))  # [rows of the Jacobian times h, h * residual]
-    for _ in range(max_iter):
-        c, r2 = x[:3], x[3] * x[3]
-        along = beam @ c
-        h2 = along * along
-        h2 += r2 - float(c @ c)
-        np.maximum(h2, r2 * _MIN_COS_INCIDENCE ** 2, out=h2)
-        h = np.sqrt(h2)
-        t = along - h
-        var = var0 + inc2 * np.maximum(r2 - h2, 0.0) / h2 if inc2 else var0
-        np.multiply(t[:, None], beam, out=v[:, :3])
-        v[:, :3] -= c
-        v[:, 3] = x[3]
-        np.multiply(rng - t, h, out=v[:, 4])
-        m = (v[:, :4] * (1.0 / (var * h2))[:, None]).T @ v  # [J^T W J, J^T W r]
-        try:
-            cov = np.linalg.inv(m[:, :4])
-        except np.linalg.LinAlgError:
-            break
-        step = -cov @ m[:, 4]
-        length = float(np.sqrt(step @ step))
-        damp = min(1.0, 0.5 * x[3] / max(length, 1e-300))
-        x += step * damp
-        if (length if damp == 1.0 else length * damp) < tol_m:
-            break
-    return x[:3].copy(), float(abs(x[3])), cov
 
 
 def hemisphere_model(radius_m: float, spacing_m: float | None = None) -> np.ndarray:
@@ -764,7 +400,7 @@ def _hemisphere_icp(p, radius, sensor, centre, max_corr, tol_m, max_iter) -> Sph
         model = model_local @ _facing_rotation(los).T + centre
         dist, idx = cKDTree(model).query(p, k=1)
         used = dist < max_corr
-        if used.sum() < _MIN_POINTS:
+        if used.sum() < MIN_POINTS:
             break
         step = (p[used] - model[idx[used]]).mean(axis=0)
         centre = centre + step

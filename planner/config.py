@@ -295,7 +295,7 @@ def load_config(path: str | Path, base: PlanConfig | None = None) -> PlanConfig:
         (:data:`BOUNDS`), each naming the file and the setting.
     """
     path = Path(path)
-    where = f"--config {path}"
+    where = f"`config_path` {path}"
     text = read_text(path, where)
     try:
         values = tomllib.loads(text)

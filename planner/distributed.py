@@ -301,8 +301,8 @@ def executor(scheduler: str | None = LOCAL, workers: int | None = None,
     """
     scheduler = LOCAL if scheduler is None else scheduler
     if workers is not None and scheduler != LOCAL:
-        raise ConfigError(f"--workers {workers} sizes the local cluster only; drop it with "
-                          f"--scheduler {scheduler} (the running cluster has its own workers)")
+        raise ConfigError(f"`workers` {workers} sizes the local cluster only; drop it with "
+                          f"`scheduler` {scheduler} (the running cluster has its own workers)")
     if scheduler == IN_PROCESS:
         yield Executor(None, progress, retries)
         return
@@ -322,8 +322,8 @@ def executor(scheduler: str | None = LOCAL, workers: int | None = None,
     try:
         client = Client(scheduler, timeout=CONNECT_TIMEOUT_S)
     except (OSError, TimeoutError, ValueError) as exc:
-        raise ConfigError(f"--scheduler {scheduler}: no dask scheduler answers there "
+        raise ConfigError(f"`scheduler` {scheduler}: no dask scheduler answers there "
                           f"({type(exc).__name__}); start one with `dask scheduler` and "
-                          "`dask worker ADDRESS`, or use --scheduler local") from None
+                          "`dask worker ADDRESS`, or use `scheduler` local") from None
     with client:
         yield Executor(client, progress, retries)

@@ -77,7 +77,7 @@ def run_variants(folder: Path, profile: str, replicates: int, frames: int,
         out = folder / f"h{height:.1f}_slope{slope:+.0f}"
         cli.main(args=["range-study", "--out", str(out), "--sensor-profile", profile,
                        "--replicates", str(replicates), "--frames", str(frames),
-                       "--seed", str(seed + k * replicates), "--lidar-height", str(height),
+                       "--seed", str(seed + k * replicates), "--lidar-height-m", str(height),
                        "--slope-deg", str(slope)],
                  prog_name="markerplan", standalone_mode=False)
         tables.append(out / "markers.csv")

@@ -40,7 +40,7 @@ def test_result_lands_with_its_provenance_and_nothing_else(tmp_path):
 def test_overwrite_replaces_a_folder_markerplan_wrote(tmp_path):
     out = tmp_path / "out"
     write_result(out, overwrite=False)
-    with pytest.raises(OutputError, match="--overwrite"):
+    with pytest.raises(OutputError, match="`overwrite`"):
         write_result(out, overwrite=False)
     with output_folder(out, overwrite=True, command="test") as stage:
         (stage / "c.txt").write_text("c\n")
@@ -130,7 +130,7 @@ def test_a_signal_to_a_running_command_leaves_nothing(tmp_path, signum):
             print("writing", flush=True)
             time.sleep(60)
         of.write_provenance = slow
-        main(["range-study", "--frames", "4", "--replicates", "1", "--max-distance", "2",
+        main(["range-study", "--frames", "4", "--replicates", "1", "--max-distance-m", "2",
               "--out", {str(tmp_path / "out")!r}])
     """)
     # a shell without job control starts background jobs with SIGINT ignored, and Python keeps

@@ -32,7 +32,7 @@ _SITE_FRAME_WKT = ('ENGCRS["site frame",EDATUM["site"],CS[Cartesian,2],'
 #: Ellipsoid or sphere parameters of a PROJ dict, kept by the local CRS of a reprojection.
 _SHAPE_KEYS = ("datum", "ellps", "R", "a", "b", "rf", "f", "towgs84")
 #: How a refusal names the way out on reading (the CLI option, then the library call).
-_REPROJECT_FIX = "pass --reproject (read_dem(..., reproject=True)) to resample it"
+_REPROJECT_FIX = "pass `reproject` (read_dem(..., reproject=True)) to resample it"
 
 
 class Raster(NamedTuple):

@@ -2,9 +2,14 @@
 
 Turning observations into coordinates knows nothing of planning.
 
+- :mod:`pipeline.network.detections`: from ``markers.csv`` tables to the observations;
 - :mod:`pipeline.network.association`: which detections of different stations are one marker;
+- :mod:`pipeline.network.observations`: the observation types, the datum and nominal poses;
+- :mod:`pipeline.network.design`: the linearised observation model (design blocks and weights)
+  that the adjustment and the planner's predicted accuracy share;
 - :mod:`pipeline.network.adjustment`: station poses and marker centres estimated together (the
-  observation types, the datum, the least-squares solution and its covariance);
+  least-squares solution and its covariance);
 - :mod:`pipeline.network.reliability`: Baarda's reliability and data snooping;
-- :mod:`pipeline.network.simulation`: synthetic networks with known truth.
+- :mod:`pipeline.network.simulation`: synthetic networks with known truth;
+- :mod:`pipeline.network.run`: marker tables in, adjusted network out.
 """

@@ -2,19 +2,21 @@
 
 Model
 -----
-Station ``s`` has the pose ``(x, y, z, heading, roll, pitch)`` (:data:`POSE_PARAMETERS`) in the
-site frame; marker ``j`` the centre ``m_j``. A marker centre ``p`` measured by the station in its
-levelled station frame (origin at the LiDAR centre, z up, x along the station's nominal heading)
+Station ``s`` has the pose ``(x, y, z, heading, roll, pitch)``
+(:data:`pipeline.network.observations.POSE_PARAMETERS`) in the site frame; marker ``j`` the
+centre ``m_j``. A marker centre ``p`` measured by the station in its levelled station frame
 gives the observation equation
 
     t_s + Rz(heading_s) Ry(pitch_s) Rx(roll_s) p - m_j = e,   e ~ N(0, sigma^2 / 3 I3)
 
-(``sigma`` the error model's 1-sigma 3D centre error, isotropic). Roll and pitch are the
-inclinometer's residual errors: unknowns with the prior ``0 +- inclinometer_sigma_rad`` each,
-because a tilt error is common to all of a station's observations (correlated), which treating
-it as noise would ignore. The rotation is exact (``pipeline.rig.station_to_site_matrix``); at
-zero tilt its derivatives are the design blocks of the shared network spec. An optional heading
-prior (sun sensor) observes each heading around its nominal value.
+whose design blocks and weights are :mod:`pipeline.network.design` (shared with the planner's
+predicted accuracy). Roll and pitch are the inclinometer's residual errors: unknowns with the
+prior ``0 +- inclinometer_sigma_rad`` each, because a tilt error is common to all of a station's
+observations (correlated), which treating it as noise would ignore. The rotation is exact
+(``pipeline.rig.station_to_site_matrix``) and linearised at each iterate. An optional heading
+prior (sun sensor) observes each heading around its nominal value. The observations, the datum
+(what fixes the network's 4-DoF defect) and the nominal poses are
+:mod:`pipeline.network.observations`.
 
 Solution
 --------
@@ -26,24 +28,6 @@ normal matrix at convergence with the markers eliminated first (their block is 3
 block-diagonal, as in bundle adjustment), so only a matrix of the stations' size is inverted.
 Between data-snooping rounds the covariance is downdated for the removed observation
 (Sherman-Morrison-Woodbury); the final solution's covariance is computed afresh.
-
-Datum
------
-The observations are invariant to translating the whole network and rotating it about the
-vertical (gravity, through the inclinometers, fixes the tilt): a defect of 4.
-
-``"station"``
-    the reference station's x, y, z and heading are fixed (at ``Datum.reference_pose``, else its
-    nominal pose, else the origin with heading 0); its roll and pitch keep their priors.
-``"control"``
-    markers with known coordinates and per-axis sigmas (a lander's fiducials) are weighted
-    observations; they must fix all four defects (two control points at different horizontal
-    positions, or one with a heading prior).
-``"free"``
-    minimal constraints on the stations: their centroid and their mean rotation about the
-    vertical stay at the initial values (inner constraints over the stations' x, y, z and
-    heading); covariances are then relative to the stations' centroid. With a heading prior the
-    rotation is observed, and only the translation is constrained.
 
 Initial values come from :class:`NominalPoses` (odometry or the plan) when given; otherwise the
 network is chained outward from the reference station, each station placed by a closed-form
@@ -64,6 +48,8 @@ import scipy.sparse.linalg
 from scipy.stats import chi2
 
 from markerplan.errors import ConfigError, DataError, InputFileError
+from pipeline.network.design import axis_weight, pose_design_blocks, station_rotations
+from pipeline.network.observations import Datum, NetworkObservations, NominalPoses
 from pipeline.network.reliability import (
     Rejection,
     data_snooping,
@@ -71,13 +57,7 @@ from pipeline.network.reliability import (
     observation_reliability,
     w_tests,
 )
-from pipeline.rig import fit_heading_shift, rot_x, rot_y, rot_z
-
-#: Order of a station's pose parameters (site frame; m and rad).
-POSE_PARAMETERS = ("x_m", "y_m", "z_m", "heading_rad", "roll_rad", "pitch_rad")
-
-#: The datum options of :class:`Datum`.
-DATUM_KINDS = ("station", "control", "free")
+from pipeline.rig import fit_heading_shift, rot_z
 
 #: chi-square 95 % quantile, 3 degrees of freedom: the 95 % ellipsoid's scale.
 ELLIPSOID_CHI2_95 = float(chi2.ppf(0.95, 3))
@@ -93,211 +73,6 @@ _DOWNDATE_ANGLE_RAD = 1e-3
 #: A Gauss-Newton step below this (m or rad) ends the iteration: far below any sigma, and
 #: convergence is quadratic for exact data, so the truth is then recovered to ~1e-14 m.
 _STEP_TOLERANCE = 1e-8
-
-
-def _ids(values, name: str) -> tuple[str, ...]:
-    ids = tuple(str(v) for v in values)
-    if len(set(ids)) != len(ids):
-        seen: set[str] = set()
-        twice = sorted({i for i in ids if i in seen or seen.add(i)})
-        raise InputFileError(f"`{name}` must be unique, got {', '.join(twice)} more than once")
-    return ids
-
-
-@dataclass(frozen=True)
-class NetworkObservations:
-    """Marker centres measured by the stations of a network.
-
-    Attributes
-    ----------
-    station_ids : tuple of str, (s,)
-    marker_ids : tuple of str, (k,)
-        Every marker must be observed at least once.
-    station : (n,) int
-        Index into ``station_ids`` of each observation.
-    marker : (n,) int
-        Index into ``marker_ids`` of each observation.
-    xyz_m : (n, 3) float
-        Marker centre in the observing station's levelled frame, m.
-    sigma_m : (n,) float
-        1-sigma 3D centre error (per-axis variance ``sigma**2 / 3``), m.
-
-    Raises
-    ------
-    InputFileError
-        Repeated ids, wrong shapes, indices out of range, coordinates or sigmas that are not
-        finite, sigmas <= 0, or a marker id with no observation.
-    """
-
-    station_ids: tuple[str, ...]
-    marker_ids: tuple[str, ...]
-    station: np.ndarray
-    marker: np.ndarray
-    xyz_m: np.ndarray
-    sigma_m: np.ndarray
-
-    def __post_init__(self):
-        set_ = object.__setattr__
-        set_(self, "station_ids", _ids(self.station_ids, "station_ids"))
-        set_(self, "marker_ids", _ids(self.marker_ids, "marker_ids"))
-        for name, dtype in (("station", int), ("marker", int), ("xyz_m", float),
-                            ("sigma_m", float)):
-            try:
-                set_(self, name, np.asarray(getattr(self, name), dtype=dtype))
-            except (TypeError, ValueError) as exc:
-                raise InputFileError(f"`{name}` must be numeric: {exc}") from None
-        if self.station.ndim != 1:
-            raise InputFileError(f"`station` must have shape (n,), got {self.station.shape}")
-        n = self.station.shape[0]
-        expected = {"station": (n,), "marker": (n,), "xyz_m": (n, 3), "sigma_m": (n,)}
-        for name, shape in expected.items():
-            if getattr(self, name).shape != shape:
-                raise InputFileError(f"`{name}` must have shape {shape} (n observations), "
-                                     f"got {getattr(self, name).shape}")
-        for name, ids in (("station", self.station_ids), ("marker", self.marker_ids)):
-            idx = getattr(self, name)
-            if idx.size and (idx.min() < 0 or idx.max() >= len(ids)):
-                raise InputFileError(f"`{name}` indices must lie in [0, {len(ids)}), got "
-                                     f"{idx.min()}..{idx.max()}")
-        bad = ~np.isfinite(self.xyz_m).all(axis=1)
-        if bad.any():
-            raise InputFileError(f"`xyz_m` must be finite, got {self.xyz_m[bad][0].tolist()} "
-                                 f"({self._name(int(np.flatnonzero(bad)[0]))})")
-        bad = ~(np.isfinite(self.sigma_m) & (self.sigma_m > 0))
-        if bad.any():
-            i = int(np.flatnonzero(bad)[0])
-            raise InputFileError(f"`sigma_m` must be finite and > 0, got {self.sigma_m[i]} "
-                                 f"({self._name(i)})")
-        unseen = np.setdiff1d(np.arange(len(self.marker_ids)), self.marker)
-        if unseen.size:
-            raise InputFileError("every marker needs an observation; none of "
-                                 + ", ".join(self.marker_ids[j] for j in unseen[:10]))
-
-    def _name(self, i: int) -> str:
-        return (f"station {self.station_ids[self.station[i]]}, "
-                f"marker {self.marker_ids[self.marker[i]]}")
-
-    @property
-    def n(self) -> int:
-        """Number of point observations."""
-        return int(self.station.shape[0])
-
-    def subset(self, keep: np.ndarray) -> NetworkObservations:
-        """The observations where ``keep`` ((n,) bool) is True, with the same id tuples."""
-        return NetworkObservations(self.station_ids, self.marker_ids, self.station[keep],
-                                   self.marker[keep], self.xyz_m[keep], self.sigma_m[keep])
-
-
-@dataclass(frozen=True)
-class ControlPoint:
-    """A marker with known site coordinates (e.g. a lander's fiducial).
-
-    Attributes
-    ----------
-    marker_id : str
-    xyz_m : (3,) float
-        Site-frame coordinates, m.
-    sigma_m : (3,) float
-        Per-axis 1-sigma of ``xyz_m``, m (> 0).
-    """
-
-    marker_id: str
-    xyz_m: np.ndarray
-    sigma_m: np.ndarray
-
-    def __post_init__(self):
-        object.__setattr__(self, "marker_id", str(self.marker_id))
-        for name in ("xyz_m", "sigma_m"):
-            value = np.asarray(getattr(self, name), dtype=float)
-            if value.shape != (3,) or not np.isfinite(value).all():
-                raise ConfigError(f"control point {self.marker_id}: `{name}` must be 3 finite "
-                                  f"numbers, got {value.tolist()}")
-            object.__setattr__(self, name, value)
-        if (self.sigma_m <= 0).any():
-            raise ConfigError(f"control point {self.marker_id}: `sigma_m` must be > 0, got "
-                              f"{self.sigma_m.tolist()}")
-
-
-@dataclass(frozen=True)
-class Datum:
-    """What fixes the network's 4-DoF datum defect (see the module doc).
-
-    Attributes
-    ----------
-    kind : {"station", "control", "free"}
-    reference_station : str or None
-        The station the network is chained from and, for ``"station"``, whose x, y, z, heading
-        are fixed; None means the first station.
-    control : tuple of ControlPoint
-        The control points of ``"control"`` (and only there).
-    reference_pose : (4,) float or None
-        ``(x_m, y_m, z_m, heading_rad)`` of the reference station for ``"station"``; None
-        means its nominal pose, or the origin with heading 0 without nominal poses.
-    """
-
-    kind: str = "station"
-    reference_station: str | None = None
-    control: tuple[ControlPoint, ...] = ()
-    reference_pose: tuple[float, float, float, float] | None = None
-
-    def __post_init__(self):
-        if self.kind not in DATUM_KINDS:
-            raise ConfigError(f"datum kind must be one of {', '.join(DATUM_KINDS)}, "
-                              f"got {self.kind!r}")
-        object.__setattr__(self, "control", tuple(self.control))
-        if (self.kind == "control") != bool(self.control):
-            raise ConfigError("control points are needed by, and only used with, the 'control' "
-                              f"datum; got kind {self.kind!r} with {len(self.control)} points")
-        _ids([c.marker_id for c in self.control], "control marker ids")
-        if self.reference_pose is not None:
-            pose = tuple(float(v) for v in self.reference_pose)
-            if self.kind != "station" or len(pose) != 4 or not np.isfinite(pose).all():
-                raise ConfigError("`reference_pose` must be 4 finite numbers (x, y, z, heading) "
-                                  f"of the 'station' datum, got {self.reference_pose!r} with "
-                                  f"kind {self.kind!r}")
-            object.__setattr__(self, "reference_pose", pose)
-
-    def describe(self, station_ids: tuple[str, ...]) -> str:
-        """One line naming the datum, for reports, e.g. ``"reference station S1 (x, y, z,
-        heading fixed)"``.
-
-        Examples
-        --------
-        >>> Datum().describe(("S1", "S2"))
-        'reference station S1 (x, y, z, heading fixed)'
-        """
-        if self.kind == "station":
-            return (f"reference station {self.reference_station or station_ids[0]} "
-                    "(x, y, z, heading fixed)")
-        if self.kind == "control":
-            return "control points " + ", ".join(c.marker_id for c in self.control)
-        return "free network (minimal constraints on the stations' centroid and mean heading)"
-
-
-@dataclass(frozen=True)
-class NominalPoses:
-    """Nominal station poses (odometry or the plan): initial values and heading-prior centre.
-
-    Attributes
-    ----------
-    position_m : (s, 3) float
-        Site frame, m.
-    heading_rad : (s,) float
-        Rotation about the vertical from the levelled station frame to the site frame, rad.
-    """
-
-    position_m: np.ndarray
-    heading_rad: np.ndarray
-
-    def __post_init__(self):
-        position = np.asarray(self.position_m, dtype=float)
-        heading = np.asarray(self.heading_rad, dtype=float)
-        if (position.ndim != 2 or position.shape[1] != 3 or heading.shape != position.shape[:1]
-                or not (np.isfinite(position).all() and np.isfinite(heading).all())):
-            raise ConfigError("nominal poses must be finite `position_m` (s, 3) and "
-                              f"`heading_rad` (s,), got {position.shape} and {heading.shape}")
-        object.__setattr__(self, "position_m", position)
-        object.__setattr__(self, "heading_rad", heading)
 
 
 @dataclass(frozen=True)
@@ -350,7 +125,7 @@ class AdjustmentSettings:
 @dataclass
 class NetworkAdjustment:
     """Result of :func:`adjust`. Parameters are ordered stations first (6 each, in
-    :data:`POSE_PARAMETERS` order), then markers (x, y, z each).
+    :data:`~pipeline.network.observations.POSE_PARAMETERS` order), then markers (x, y, z each).
 
     Attributes
     ----------
@@ -509,13 +284,9 @@ def _chained_initial(obs: NetworkObservations, order: list[int], reference_pose:
     return pose, markers
 
 
-def _rotations(pose: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    return rot_z(pose[:, 3]), rot_y(pose[:, 5]), rot_x(pose[:, 4])
-
-
 def _markers_from_poses(obs: NetworkObservations, pose: np.ndarray) -> np.ndarray:
     """Each marker's weighted mean position as its stations (at ``pose``) see it, (k, 3)."""
-    rz, ry, rx = _rotations(pose)
+    rz, ry, rx = station_rotations(pose[:, 3:])
     r = rz @ ry @ rx
     site = pose[obs.station, :3] + np.einsum("nij,nj->ni", r[obs.station], obs.xyz_m)
     w = 1.0 / obs.sigma_m**2
@@ -559,19 +330,10 @@ def _linearise(obs: NetworkObservations, pose: np.ndarray, markers: np.ndarray
     """Design blocks (n, 3, 9), their parameter columns (n, 9) (the station's 6 pose
     parameters, then the marker's x, y, z) and the misclosure ``f = t + R p - m`` (n, 3)."""
     n, s = obs.n, len(obs.station_ids)
-    rz, ry, rx = _rotations(pose[obs.station])
-    a = np.einsum("nij,nj->ni", rx, obs.xyz_m)
-    b = np.einsum("nij,nj->ni", ry, a)
-    q = np.einsum("nij,nj->ni", rz, b)
+    q, pose_block = pose_design_blocks(obs.xyz_m, pose[obs.station, 3:])
     f = pose[obs.station, :3] + q - markers[obs.marker]
     block = np.zeros((n, 3, 9))
-    block[:, [0, 1, 2], [0, 1, 2]] = 1.0
-    block[:, 0, 3], block[:, 1, 3] = -q[:, 1], q[:, 0]
-    zero = np.zeros(n)
-    d_roll = np.column_stack([zero, -a[:, 2], a[:, 1]])   # e_x x (Rx p)
-    d_pitch = np.column_stack([b[:, 2], zero, -b[:, 0]])  # e_y x (Ry Rx p)
-    block[:, :, 4] = np.einsum("nij,nj->ni", rz @ ry, d_roll)
-    block[:, :, 5] = np.einsum("nij,nj->ni", rz, d_pitch)
+    block[:, :, :6] = pose_block
     block[:, [0, 1, 2], [6, 7, 8]] = -1.0
     columns = np.concatenate([6 * obs.station[:, None] + np.arange(6),
                               6 * s + 3 * obs.marker[:, None] + np.arange(3)], axis=1)
@@ -625,11 +387,6 @@ def _prior_misclosure(problem: _Problem, params: np.ndarray) -> np.ndarray:
     return np.where(problem.prior_is_heading, (f + np.pi) % (2 * np.pi) - np.pi, f)
 
 
-def _prior_misclosure(problem: _Problem, params: np.ndarray) -> np.ndarray:
-    f = params[problem.prior_index] - problem.prior_value
-    return np.where(problem.prior_is_heading, (f + np.pi) % (2 * np.pi) - np.pi, f)
-
-
 @dataclass
 class _Assembly:
     """Sparsity pattern of the (bordered) normal matrix of one set of observations, the same in
@@ -669,7 +426,7 @@ def _normal_system(problem: _Problem, assembly: _Assembly, blocks: np.ndarray,
     observations' 9 x 9 blocks (sparse), bordered by the minimal constraints ``B`` when there
     are any. A parameter the datum fixes gets a unit row and column (its step is 0)."""
     u = problem.fixed.size
-    weighted = blocks * (3.0 / problem.obs.sigma_m**2)[:, None, None]
+    weighted = blocks * axis_weight(problem.obs.sigma_m)[:, None, None]
     border = b[b != 0]
     values = np.concatenate([(weighted.transpose(0, 2, 1) @ blocks)[assembly.keep],
                              problem.prior_weight[assembly.prior], np.ones(assembly.n_fixed),
@@ -783,10 +540,7 @@ def _adjust_iv(obs, datum, settings, nominal) -> int:
     s = len(obs.station_ids)
     if s == 0:
         raise InputFileError("the network has no stations")
-    reference = datum.reference_station or obs.station_ids[0]
-    if reference not in obs.station_ids:
-        raise ConfigError(f"reference station {reference!r} is not in the network (stations "
-                          f"{', '.join(obs.station_ids[:10])}{', ...' if s > 10 else ''})")
+    reference = datum.resolve(obs.station_ids)
     missing = [c.marker_id for c in datum.control if c.marker_id not in obs.marker_ids]
     if missing:
         raise ConfigError(f"control points {', '.join(missing)} are not markers of the network")
@@ -796,7 +550,7 @@ def _adjust_iv(obs, datum, settings, nominal) -> int:
     if settings.heading_prior_sigma_rad is not None and nominal is None:
         raise ConfigError("a heading prior (heading_prior_sigma_rad) needs nominal poses "
                           "(its centre)")
-    return obs.station_ids.index(reference)
+    return reference
 
 
 def _problem(obs: NetworkObservations, datum: Datum, settings: AdjustmentSettings,
@@ -863,7 +617,7 @@ def _initial(obs: NetworkObservations, datum: Datum, nominal: NominalPoses | Non
     return pose, _markers_from_poses(obs, pose)
 
 
-def adjust(obs: NetworkObservations, datum: Datum = Datum(),
+def adjust(obs: NetworkObservations, datum: Datum = Datum(),  # noqa: B008 (frozen)
            settings: AdjustmentSettings = AdjustmentSettings(),
            nominal: NominalPoses | None = None) -> NetworkAdjustment:
     """Adjust a network of stations and markers; test it and remove blunders (data snooping).
@@ -938,13 +692,14 @@ def adjust(obs: NetworkObservations, datum: Datum = Datum(),
             row = int(np.flatnonzero(solved_keep & ~keep)[0])
             i = int(np.count_nonzero(solved_keep[:row]))
             sol.covariance = _downdated(previous.covariance, previous.blocks[i],
-                                        previous.columns[i], np.full(3, 3.0 / obs.sigma_m[row]**2))
+                                        previous.columns[i],
+                                        np.full(3, axis_weight(obs.sigma_m[row])))
             sol.covariance_angles = previous.covariance_angles
         else:
             sol.covariance = _covariance(sol.normal, 6 * s, problem.fixed.size, problem.fixed)
             sol.covariance_angles = sol.pose[:, 3:].copy()
         solved_keep[:] = keep
-        weight = np.repeat(3.0 / problem.obs.sigma_m[:, None]**2, 3, axis=1)
+        weight = np.repeat(axis_weight(problem.obs.sigma_m[:, None]), 3, axis=1)
         return sol, w_tests(sol.blocks, sol.columns, weight, sol.covariance, -sol.misclosure)
 
     def removable(keep, i):
@@ -956,7 +711,7 @@ def adjust(obs: NetworkObservations, datum: Datum = Datum(),
     sol, keep, rejected = data_snooping(
         solve, obs.n, settings.alpha0, settings.max_rejections if snooping else 0, removable)
     kept = obs.subset(keep)
-    w = np.repeat(3.0 / kept.sigma_m[:, None]**2, 3, axis=1)
+    w = np.repeat(axis_weight(kept.sigma_m[:, None]), 3, axis=1)
     if not sol.converged:
         w_last = np.abs(w_tests(sol.blocks, sol.columns, w, sol.covariance, -sol.misclosure))
         i = int(np.flatnonzero(keep)[np.argmax(w_last.max(axis=1))])

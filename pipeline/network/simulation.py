@@ -22,7 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from markerplan.errors import ConfigError
-from pipeline.network.adjustment import NetworkObservations, NominalPoses
+from pipeline.network.observations import NetworkObservations, NominalPoses
 from pipeline.rig import station_to_site_matrix
 
 

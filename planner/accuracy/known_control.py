@@ -34,6 +34,7 @@ import numpy as np
 from scipy.stats import chi2
 
 from markerplan.errors import ConfigError
+from pipeline.network.design import pose_design_blocks
 from pipeline.rig import rot_z, station_to_site_matrix
 
 #: chi-square 95 % quantile with 3 degrees of freedom (3D position error).
@@ -122,7 +123,7 @@ def rim_covariances(cov: np.ndarray, working_radius_m: float) -> np.ndarray:
     ----------
     cov : (k, 4, 4) or (k, 6, 6) float
         Pose covariances: (x, y, z, heading) or (x, y, z, heading, roll, pitch)
-        (:data:`planner.accuracy.network.POSE_PARAMETERS`), m^2, m rad, rad^2.
+        (:data:`pipeline.network.observations.POSE_PARAMETERS`), m^2, m rad, rad^2.
     working_radius_m : float
         ``R``, m; the rim points lie at the station's height.
 
@@ -131,7 +132,7 @@ def rim_covariances(cov: np.ndarray, working_radius_m: float) -> np.ndarray:
     sigma : (k, 73, 3, 3) float
         Covariance of the registered position of each point, m^2. With 6 parameters the
         roll and pitch columns ``(0, 0, q_y)``, ``(0, 0, -q_x)`` of ``G(q)``
-        (:func:`pose_design_blocks`) add their terms; the 4-parameter part is the same
+        (:func:`rim_design_blocks`) add their terms; the 4-parameter part is the same
         arithmetic either way.
 
     Examples
@@ -159,36 +160,13 @@ def rim_covariances(cov: np.ndarray, working_radius_m: float) -> np.ndarray:
     return sig
 
 
-def pose_design_blocks(offset_xyz: np.ndarray) -> np.ndarray:
-    """(k, 3, 6) design blocks of points at levelled offsets ``p`` from a station (heading 0).
-
-    Columns: ``d m / d(x, y, z) = I3``, heading ``(-p_y, p_x, 0)``, roll ``(0, -p_z, p_y)``,
-    pitch ``(p_z, 0, -p_x)`` — the 6-parameter model of network mode (the first four columns
-    are those of the 4-parameter blocks of known-control mode).
-
-    Examples
-    --------
-    >>> pose_design_blocks(np.array([[1.0, 2.0, 3.0]]))[0]
-    array([[ 1.,  0.,  0., -2.,  0.,  3.],
-           [ 0.,  1.,  0.,  1., -3.,  0.],
-           [ 0.,  0.,  1.,  0.,  2., -1.]])
-    """
-    p = np.asarray(offset_xyz, dtype=float).reshape(-1, 3)
-    h = np.zeros((p.shape[0], 3, 6))
-    h[:, :, :4] = _design_blocks(p[:, :2])
-    h[:, 1, 4] = -p[:, 2]
-    h[:, 2, 4] = p[:, 1]
-    h[:, 0, 5] = p[:, 2]
-    h[:, 2, 5] = -p[:, 0]
-    return h
-
-
 def rim_design_blocks(working_radius_m: float) -> np.ndarray:
-    """(73, 3, 6) :func:`pose_design_blocks` of the station and the 72 rim points of
-    :func:`rim_covariances`, in the same order."""
+    """(73, 3, 6) network-mode design blocks ``G(q)`` of the station and the 72 rim points of
+    :func:`rim_covariances`, in the same order (heading and tilts 0:
+    :func:`pipeline.network.design.pose_design_blocks`)."""
     g = _rim_blocks(working_radius_m)
     q = np.column_stack([g[:, 1, 3], -g[:, 0, 3], np.zeros(g.shape[0])])
-    return pose_design_blocks(q)
+    return pose_design_blocks(q)[1]
 
 
 def lambda_max_sym3(a: np.ndarray) -> np.ndarray:

@@ -7,6 +7,7 @@ imports its heavy dependencies inside the command function.
 from __future__ import annotations
 
 import importlib
+import re
 import sys
 
 import click
@@ -62,16 +63,67 @@ def cli() -> None:
     """
 
 
+def command_line_names(argv: list[str]) -> dict[str, str]:
+    """{parameter name: its spelling on the command line} of the sub-command ``argv`` runs:
+    an option's flag (``time_limit_s`` -> ``--time-limit-s``; a ``--no-x`` flag also as
+    ``x=False``), an argument's metavar (``plan_path`` -> ``PLAN``); empty without a known
+    sub-command. An option that is also a field of the plan settings
+    (:class:`~planner.config.PlanConfig`, e.g. ``reference_station``) is spelled as its flag
+    only when ``argv`` gives the option (in either spelling): else the value is a ``--config``
+    file's or a plan's, which name the field.
+
+    >>> names = command_line_names(["plan", "--network", "--time-limit", "5"])
+    >>> names["time_limit_s"], names["out"], "reference_station" in names
+    ('--time-limit-s', '--out', False)
+    """
+    import dataclasses
+
+    from planner.cli._common import DEPRECATED_SUFFIX
+    from planner.config import PlanConfig
+
+    name = next((a for a in argv if a in COMMANDS), None)
+    if name is None:
+        return {}
+    command = importlib.import_module(f"planner.cli.{COMMANDS[name]}").command
+    fields = {f.name for f in dataclasses.fields(PlanConfig)}
+    given = {param.name.removesuffix(DEPRECATED_SUFFIX) for param in command.params
+             if any(a == o or a.startswith(f"{o}=") for a in argv for o in param.opts)}
+    names = {}
+    for param in command.params:
+        if isinstance(param, click.Option) and not param.hidden and (
+                param.name not in fields or param.name in given):
+            names[param.name] = param.opts[0]
+            if param.is_flag and param.name.startswith("no_"):
+                names[f"{param.name[3:]}=False"] = param.opts[0]
+        elif isinstance(param, click.Argument):
+            names[param.name] = param.human_readable_name
+    return names
+
+
+def user_message(message: str, names: dict[str, str]) -> str:
+    """A library message for the command line: each backquoted name of a parameter of the
+    command spelled as the user gives it (library messages name arguments and configuration
+    fields, never flags), other names left as they are.
+
+    >>> user_message("`out` o exists; pass `overwrite`; `gap` < 0", {"out": "--out",
+    ...              "overwrite": "--overwrite"})
+    '--out o exists; pass --overwrite; `gap` < 0'
+    """
+    return re.sub(r"`(\w+(?:=False)?)`", lambda m: names.get(m.group(1), m.group(0)), message)
+
+
 def main(argv: list[str] | None = None) -> None:
     """Entry point: run the CLI, turning our errors into one line and exit code 1
-    (128 + the signal's number when SIGTERM or SIGHUP stopped it)."""
+    (128 + the signal's number when SIGTERM or SIGHUP stopped it); :func:`user_message`
+    spells the parameters a message names as the command line does."""
+    args = sys.argv[1:] if argv is None else list(argv)
     try:
-        cli.main(args=argv, prog_name="markerplan", standalone_mode=False)
+        cli.main(args=args, prog_name="markerplan", standalone_mode=False)
     except Terminated as exc:
         click.echo(f"error: {exc}", err=True)
         sys.exit(128 + exc.signum)
     except MarkerPlanError as exc:
-        click.echo(f"error: {exc}", err=True)
+        click.echo(f"error: {user_message(str(exc), command_line_names(args))}", err=True)
         sys.exit(1)
     except click.exceptions.Abort:
         click.echo("aborted", err=True)

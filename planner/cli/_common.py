@@ -10,15 +10,16 @@ option                      meaning (and the value the command receives)
 ``--json``                  one JSON summary object on stdout
 ``--site NAME``             site preset (``default``, ``large``, ``km``)
 ``--site-seed N``           seed of the preset's synthetic terrain
-``--seed N``                seed of the random noise (simulation) or resampling of the command
+``--seed N``                seed of the simulated noise (``fit-error-model``, which adds none,
+                            seeds its resampling with ``--resample-seed``)
 ``--dem FILE``              DEM instead of the preset's terrain (``Path``)
 ``--reproject``             resample a ``--dem`` in degrees (or on non-square cells) to a local
                             metric CRS; point and polygon files are then in the DEM file's CRS
                             (``bool``; :func:`visibility.dem.read_dem`, ``to_dem_xy``)
 ``--stations FILE``         stations CSV/GeoJSON (``Path``)
 ``--station-ids S1,S3``     which stations to work on (``tuple[str, ...]``)
-``--marker-radius M``       marker (sphere) radius, metres (``float``)
-``--lidar-height M``        LiDAR centre above the ground at the station, metres (``float``)
+``--marker-radius-m M``     marker (sphere) radius, metres (``float``)
+``--lidar-height-m M``      LiDAR centre above the ground at the station, metres (``float``)
 ``--error-model FILE``      error model (:class:`ErrorModelChoice`, the shipped one by default)
 ``--estimator NAME``        sphere-centre estimator, from :data:`pipeline.sphere_fit.METHODS`
 ``--sensor-profile NAME``   sensor, turntable and reference errors (a loaded
@@ -28,7 +29,7 @@ option                      meaning (and the value the command receives)
                             the rig's mounting offsets (one :class:`~pipeline.rig.MountingOffsets`
                             argument ``offsets``)
 ``--config FILE``           TOML plan settings; ``--boundary``, ``--exclude``: GeoJSON polygons
-``--time-limit S``          solver time limit, seconds
+``--time-limit-s S``        solver time limit, seconds
 ``--network``               network mode: markers and stations estimated together, tied to
                             the reference station (:mod:`planner.accuracy.network`)
 ``--reference-station ID``  the datum station of network mode (default the first station);
@@ -38,6 +39,9 @@ option                      meaning (and the value the command receives)
                             (``str``; :func:`planner.distributed.executor`)
 ``--workers N``             worker processes of the ``local`` cluster (default: one per core)
 ==========================  =====================================================================
+
+Options whose value has a unit carry it in the name (``-m``, ``-s``, ``-deg``, ``-mm``); a
+renamed option keeps its old spelling for one release (:func:`deprecated_alias`).
 
 Helpers: :func:`emit_summary` (JSON or human summary), :func:`report_timings` (step timings on
 stderr, never in files), :func:`given_paths` (the inputs an output folder must not contain).
@@ -105,6 +109,8 @@ RPM = click.IntRange(300, 1200)
 LIDAR_HEIGHT_M = FiniteRange(0.3, 3.0)
 #: Solver time limits, seconds (one day at most).
 TIME_LIMIT_S = FiniteRange(0.0, 86_400.0, min_open=True)
+#: Marker (sphere) radius, m.
+SPHERE_RADIUS_M = FiniteRange(0.01, 1.0)
 
 overwrite_option = click.option(
     "--overwrite", is_flag=True,
@@ -114,6 +120,51 @@ overwrite_option = click.option(
 json_option = click.option(
     "--json", "as_json", is_flag=True, help="Print one JSON summary object on stdout."
 )
+
+
+#: What :func:`deprecated_alias` appends to the parameter name of an old spelling.
+DEPRECATED_SUFFIX = "_deprecated_spelling"
+
+
+def warn_deprecated(old: str, new: str) -> None:
+    """The one deprecation line of a renamed spelling, on stderr:
+    ``warning: OLD is deprecated; use NEW``."""
+    click.echo(f"warning: {old} is deprecated; use {new}", err=True)
+
+
+def deprecated_alias(old: str, new: str, name: str, **attrs):
+    """A hidden option ``old`` for the option ``new``, kept for one release after a rename.
+
+    Both set the command's parameter ``name`` (given both, the later on the command line
+    wins); using ``old`` prints ``warning: OLD is deprecated; use NEW`` on stderr.
+
+    Parameters
+    ----------
+    old, new : str
+        The old and the new spelling, e.g. ``"--time-limit"`` and ``"--time-limit-s"``.
+    name : str
+        The parameter both set, e.g. ``"time_limit_s"``.
+    **attrs
+        As ``new``'s :func:`click.option` (``type``, ``metavar``, ``multiple``, ``callback``),
+        without a default (an option that takes a value, not a flag): a ``callback`` sees only
+        values given as ``old``.
+
+    Returns
+    -------
+    decorator
+        A :func:`click.option` decorator.
+    """
+    convert = attrs.pop("callback", None)
+
+    def warn(ctx, param, value):
+        if value is None or value == ():  # not given: ``new``'s value stands
+            return
+        warn_deprecated(old, new)
+        ctx.params[name] = value if convert is None else convert(ctx, param, value)
+        ctx.set_parameter_source(name, click.core.ParameterSource.COMMANDLINE)
+
+    return click.option(old, name + DEPRECATED_SUFFIX, hidden=True, expose_value=False,
+                        callback=warn, **attrs)
 
 
 def emit_summary(summary: dict[str, Any], as_json: bool, human: str | None = None) -> None:
@@ -187,9 +238,11 @@ def id_list(ctx, param, text: str | None) -> tuple[str, ...] | None:
     return ids
 
 
-def point_option(name: str, default: str, metavar: str, help_text: str):
+def point_option(name: str, default: str, metavar: str, help_text: str,
+                 dest: str | None = None, old: str | None = None):
     """An option of as many comma-separated finite numbers as ``default`` has, handed to the
-    command as a tuple of floats."""
+    command as a tuple of floats (parameter ``dest``, default from ``name``); ``old``: its former
+    spelling, kept as a :func:`deprecated_alias`."""
     count = len(default.split(","))
 
     def parse(ctx, param, text: str) -> tuple[float, ...]:
@@ -203,8 +256,12 @@ def point_option(name: str, default: str, metavar: str, help_text: str):
                                      f"{metavar}, got {text!r}", ctx, param)
         return values
 
-    return click.option(name, default=default, show_default=True, metavar=metavar,
-                        callback=parse, help=help_text)
+    option = click.option(name, *([dest] if dest else []), default=default, show_default=True,
+                          metavar=metavar, callback=parse, help=help_text)
+    if old is None:
+        return option
+    alias = deprecated_alias(old, name, dest, metavar=metavar, callback=parse)
+    return lambda f: option(alias(f))
 
 
 def site_option(default: str | None = "default"):
@@ -243,9 +300,14 @@ range_noise_option = click.option(
     help="1-sigma range noise at short range and normal incidence, mm; overrides the sensor "
          "profile's (datasheet: 15, +-3 cm read as 2 sigma).")
 
-lidar_height_option = click.option(
-    "--lidar-height", "lidar_height_m", type=LIDAR_HEIGHT_M, default=1.0, show_default=True,
-    help="LiDAR centre above the ground, metres.")
+def lidar_height_option(f):
+    """``--lidar-height-m M`` (old spelling ``--lidar-height``): the LiDAR centre above the
+    ground, metres."""
+    f = deprecated_alias("--lidar-height", "--lidar-height-m", "lidar_height_m",
+                         type=LIDAR_HEIGHT_M)(f)
+    return click.option(
+        "--lidar-height-m", "lidar_height_m", type=LIDAR_HEIGHT_M, default=1.0,
+        show_default=True, help="LiDAR centre above the ground, metres.")(f)
 
 dem_option = click.option(
     "--dem", "dem_path", type=FILE,
@@ -271,13 +333,26 @@ station_ids_option = click.option(
 
 def marker_radius_option(required: bool = False, default_help: str = "",
                          default: float | None = None):
-    """``--marker-radius M``: the marker (sphere) radius, metres."""
-    settings = {"required": True} if required else {}
-    if default is not None:
-        settings = {"default": default, "show_default": True}
-    return click.option(
-        "--marker-radius", "marker_radius_m", type=FiniteRange(0.01, 1.0), **settings,
-        help="Marker (sphere) radius, metres (a 0.20 m sphere has 0.1)." + default_help)
+    """``--marker-radius-m M`` (old spelling ``--marker-radius``): the marker (sphere) radius,
+    metres. ``required``: the command gets ``None`` when neither spelling is given and refuses
+    it with :func:`require_option` (click's own check would refuse the old spelling)."""
+    settings = {"default": default, "show_default": True} if default is not None else {}
+    option = click.option(
+        "--marker-radius-m", "marker_radius_m", type=SPHERE_RADIUS_M, **settings,
+        help="Marker (sphere) radius, metres (a 0.20 m sphere has 0.1)." + default_help
+             + ("  [required]" if required else ""))
+    alias = deprecated_alias("--marker-radius", "--marker-radius-m", "marker_radius_m",
+                             type=SPHERE_RADIUS_M)
+    return lambda f: option(alias(f))
+
+
+def require_option(value, flag: str) -> None:
+    """Refuse a missing required option as click does (exit 2), for one with an old spelling.
+
+    >>> require_option(0.1, "--marker-radius-m")
+    """
+    if value is None:
+        raise click.UsageError(f"Missing option '{flag}'.")
 
 
 error_model_option = click.option(
@@ -370,9 +445,12 @@ def network_settings(config, network: bool | None, reference_station: str | None
     return config
 
 
-time_limit_option = click.option(
-    "--time-limit", "time_limit_s", type=TIME_LIMIT_S,
-    help="Solver time limit for the whole run, seconds (default 60).")
+def time_limit_option(f):
+    """``--time-limit-s S`` (old spelling ``--time-limit``): the solver time limit, seconds."""
+    f = deprecated_alias("--time-limit", "--time-limit-s", "time_limit_s", type=TIME_LIMIT_S)(f)
+    return click.option(
+        "--time-limit-s", "time_limit_s", type=TIME_LIMIT_S,
+        help="Solver time limit for the whole run, seconds (default 60).")(f)
 
 
 def mounting_offset_options(command):

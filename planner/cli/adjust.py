@@ -3,6 +3,7 @@ tables, GeoJSON, report and map."""
 
 from __future__ import annotations
 
+import functools
 import math
 from pathlib import Path
 
@@ -11,6 +12,7 @@ import click
 from planner.cli._common import (
     FILE,
     FiniteRange,
+    deprecated_alias,
     emit_summary,
     error_model_option,
     given_paths,
@@ -18,6 +20,7 @@ from planner.cli._common import (
     out_option,
     overwrite_option,
     report_timings,
+    warn_deprecated,
 )
 
 #: Bounds of the angle sigmas, degrees: above 10 deg an inclinometer or sun sensor measures
@@ -41,22 +44,35 @@ def _datum_text(ctx, param, text: str | None) -> tuple[str, str | None] | None:
     if kind == "free" and not sep:
         return "free", None
     if kind != "station" or (sep and not sid):
-        raise click.BadParameter(f"give station, station:ID (e.g. station:S1) or free; for "
-                                 f"control points use --control FILE; got {text!r}", ctx, param)
+        raise click.BadParameter(f"give station or free (the datum station: --reference-station "
+                                 f"ID); for control points use --control FILE; got {text!r}",
+                                 ctx, param)
+    if sid:
+        warn_deprecated(f"--datum station:{sid}", f"--reference-station {sid}")
     return "station", sid or None
 
 
-def _datum_choice(datum: tuple[str, str | None] | None, control_path: Path | None
-                  ) -> tuple[str, str | None]:
-    """The datum's kind and reference station from ``--datum`` and ``--control``."""
+def _datum_choice(datum: tuple[str, str | None] | None, control_path: Path | None,
+                  reference_station: str | None) -> tuple[str, str | None]:
+    """The datum's kind and reference station from ``--datum``, ``--control`` and
+    ``--reference-station``."""
     from markerplan.errors import ConfigError
 
     if datum is not None and control_path is not None:
-        raise ConfigError("give one datum, got --datum and --control: --datum station[:ID] "
-                          "(default: the first station), --datum free, or --control FILE")
-    if control_path is not None:
-        return "control", None
-    return datum or ("station", None)
+        raise ConfigError("give one datum, got --datum and --control: --datum station "
+                          "(default; with --reference-station ID), --datum free, or --control "
+                          "FILE")
+    kind, named = ("control", None) if control_path is not None else datum or ("station", None)
+    if reference_station is None:
+        return kind, named
+    if kind != "station":
+        raise ConfigError(f"--reference-station {reference_station} names the datum station of "
+                          f"the station datum; drop it with "
+                          f"{'--control' if kind == 'control' else '--datum free'}")
+    if named is not None and named != reference_station:
+        raise ConfigError(f"--datum station:{named} and --reference-station "
+                          f"{reference_station} name two datum stations; give one")
+    return kind, reference_station
 
 
 @click.command("adjust")
@@ -78,11 +94,14 @@ def _datum_choice(datum: tuple[str, str | None] | None, control_path: Path | Non
                    "(gates the association with --plan).")
 @click.option("--odometry-heading-sigma-deg", type=ODOMETRY_HEADING_SIGMA_DEG, default=2.0,
               show_default=True, help="1-sigma error of a station's planned heading, degrees.")
-@click.option("--datum", "datum", metavar="station[:ID]|free", callback=_datum_text,
-              help="Datum: station[:ID] fixes the reference station's x, y, z and heading "
-                   "(default: the plan's reference station, else the first station of the "
-                   "tables); free puts minimal constraints on the stations' centroid and mean "
-                   "heading.")
+@click.option("--datum", "datum", metavar="station|free", callback=_datum_text,
+              help="Datum: station fixes the reference station's x, y, z and heading "
+                   "(--reference-station); free puts minimal constraints on the stations' "
+                   "centroid and mean heading.")
+@click.option("--reference-station", "reference_station", metavar="ID",
+              help="The datum station of --datum station (its x, y, z and heading fixed; every "
+                   "error is relative to it); default: the plan's reference station, else the "
+                   "first station of the tables.")
 @click.option("--control", "control_path", type=FILE,
               help="Datum: control points, CSV id,x_m,y_m,z_m,sigma_m (site frame; sigma_m per "
                    "coordinate), e.g. a lander's fiducials; they must fix position and heading.")
@@ -99,16 +118,18 @@ def _datum_choice(datum: tuple[str, str | None] | None, control_path: Path | Non
               help="Significance level of the w-test.")
 @click.option("--beta0", type=PROBABILITY, default=0.80, show_default=True,
               help="Power of the w-test (for the minimal detectable biases).")
-@click.option("--working-radius", "working_radius_m", type=RADIUS_M,
+@click.option("--working-radius-m", "working_radius_m", type=RADIUS_M,
               help="Radius around a station over which its station error is assessed, m "
                    "(default: the plan's, else 10).")
-@click.option("--requirement", "requirement_m", type=REQUIREMENT_M,
+@deprecated_alias("--working-radius", "--working-radius-m", "working_radius_m", type=RADIUS_M)
+@click.option("--requirement-m", "requirement_m", type=REQUIREMENT_M,
               help="Required 95 % station error, m (default: the plan's, else 0.1).")
+@deprecated_alias("--requirement", "--requirement-m", "requirement_m", type=REQUIREMENT_M)
 @json_option
 def command(tables, out, overwrite, error_model, plan_path, identity, odometry_sigma_m,
-            odometry_heading_sigma_deg, datum, control_path, heading_prior_sigma_deg,
-            inclinometer_sigma_deg, snooping, alpha0, beta0, working_radius_m, requirement_m,
-            as_json):
+            odometry_heading_sigma_deg, datum, reference_station, control_path,
+            heading_prior_sigma_deg, inclinometer_sigma_deg, snooping, alpha0, beta0,
+            working_radius_m, requirement_m, as_json):
     """Adjust a network: estimate every station's pose and every marker's centre together
     from the marker tables (markers.csv of `markerplan process`, accepted detections only) of
     several stations, relative to a datum; test the fit and remove blunders (data snooping).
@@ -128,55 +149,55 @@ def command(tables, out, overwrite, error_model, plan_path, identity, odometry_s
 
     from markerplan.output_folder import output_folder
 
-    kind, reference = _datum_choice(datum, control_path)
+    kind, reference = _datum_choice(datum, control_path, reference_station)
     if identity is None:
         identity = "plan" if plan_path is not None else "geometry"
     _check_identity(identity, plan_path, control_path, heading_prior_sigma_deg)
     timings: dict[str, float] = {}
     inputs = given_paths(*tables, plan_path, control_path, error_model.path)
     with output_folder(out, overwrite, "adjust", inputs=inputs) as stage:
-        from pipeline.network.adjustment import AdjustmentSettings, Datum, adjust
-        from planner import network_observations as no
+        from pipeline.network.adjustment import AdjustmentSettings
+        from pipeline.network.detections import read_control
+        from pipeline.network.run import adjust_tables
         from planner.network.files import write_network_files
+        from planner.network.plan_geometry import read_plan_geometry, resolved_configuration
         from planner.network.record import AdjustmentRun, frame_note
 
         t0 = time.perf_counter()
-        plan = no.read_plan_geometry(plan_path) if plan_path is not None else None
-        control = no.read_control(control_path) if control_path is not None else ()
-        stations = no.read_detections(list(tables), error_model.model)
-        config = no.resolved_configuration(
+        plan = read_plan_geometry(plan_path) if plan_path is not None else None
+        control = read_control(control_path) if control_path is not None else ()
+        config = resolved_configuration(
             tables=[str(t) for t in tables], plan=_str(plan_path), control=_str(control_path),
             error_model=error_model.name, marker_ids=identity, datum=kind,
-            reference_station=_reference(reference, kind, plan, stations),
-            odometry_sigma_m=odometry_sigma_m,
+            reference_station=None, odometry_sigma_m=odometry_sigma_m,
             odometry_heading_sigma_deg=odometry_heading_sigma_deg,
             heading_prior_sigma_deg=heading_prior_sigma_deg,
             inclinometer_sigma_deg=inclinometer_sigma_deg, working_radius_m=working_radius_m,
             requirement_m=requirement_m, snooping=snooping, alpha0=alpha0, beta0=beta0,
             plan_geometry=plan)
-        timings["read"] = time.perf_counter() - t0
-        t0 = time.perf_counter()
-        identified = _identify(identity, stations, plan, odometry_sigma_m,
-                               math.radians(odometry_heading_sigma_deg),
-                               math.radians(config["inclinometer_sigma_deg"]))
-        obs = no.network_observations(identified)
-        timings["identify"] = time.perf_counter() - t0
-        t0 = time.perf_counter()
         settings = AdjustmentSettings(
             inclinometer_sigma_rad=math.radians(config["inclinometer_sigma_deg"]),
             heading_prior_sigma_rad=_radians(config["heading_prior_sigma_deg"]),
             alpha0=alpha0, beta0=beta0, snooping=snooping)
-        datum = Datum(kind, config["reference_station"], control)
-        result = adjust(obs, datum, settings, no.nominal_poses(plan, obs))
-        timings["adjust"] = time.perf_counter() - t0
-        config.update(max_rejections=settings.max_rejections,
+        read_s = time.perf_counter() - t0
+        adjusted = adjust_tables(
+            tables, error_model.model, functools.partial(_reference, reference, kind, plan),
+            functools.partial(_identify, identity, plan=plan, odometry_sigma_m=odometry_sigma_m,
+                              odometry_heading_sigma_rad=math.radians(odometry_heading_sigma_deg),
+                              inclinometer_sigma_rad=settings.inclinometer_sigma_rad),
+            settings, kind, control, plan)
+        timings.update(adjusted.timings_s)
+        timings["read"] += read_s
+        result, obs, identified = adjusted.result, adjusted.observations, adjusted.identified
+        config.update(reference_station=adjusted.reference_station,
+                      max_rejections=settings.max_rejections,
                       max_iterations=settings.max_iterations)
         t0 = time.perf_counter()
         run = AdjustmentRun(
             result=result, observations=obs, config=config,
             working_radius_m=config["working_radius_m"], requirement_m=config["requirement_m"],
             identity=identity, frame=frame_note(
-                kind, config["reference_station"] or obs.station_ids[0], plan is not None,
+                kind, obs.station_ids[result.datum.resolve(obs.station_ids)], plan is not None,
                 plan.dem if plan else None, plan.crs if plan else None),
             inputs=_input_files(tables, plan_path, control_path),
             error_model=error_model.name, unidentified=identified.unidentified,
@@ -190,17 +211,13 @@ def command(tables, out, overwrite, error_model, plan_path, identity, odometry_s
 
 
 def _reference(reference: str | None, kind: str, plan, stations) -> str | None:
-    """The reference station: ``--datum station:ID`` (checked against the tables' stations),
+    """The reference station: ``--reference-station`` (checked against the tables' stations),
     else the plan's reference station when the tables hold it, else ``None`` (the first)."""
-    from markerplan.errors import ConfigError
+    from pipeline.network.observations import Datum
 
     ids = [s.station_id for s in stations]
     if reference:
-        if reference not in ids:
-            shown = ", ".join(ids[:10]) + (", ..." if len(ids) > 10 else "")
-            raise ConfigError(f"--datum station:{reference}: no station {reference} in the "
-                              f"marker tables (stations with accepted detections: {shown})")
-        return reference
+        return ids[Datum(reference_station=reference).resolve(ids)]
     if kind == "station" and plan is not None and plan.reference_station in ids:
         return plan.reference_station
     return None
@@ -241,15 +258,15 @@ def _check_identity(identity: str, plan_path, control_path, heading_prior) -> No
 def _identify(identity: str, stations, plan, odometry_sigma_m: float,
               odometry_heading_sigma_rad: float, inclinometer_sigma_rad: float):
     from markerplan.errors import InputFileError
-    from planner import network_observations as no
+    from pipeline.network import detections
 
     if identity == "plan":
-        identified = no.identify_with_plan(stations, plan, odometry_sigma_m,
-                                           odometry_heading_sigma_rad)
+        identified = detections.identify_with_plan(stations, plan, odometry_sigma_m,
+                                                   odometry_heading_sigma_rad)
     elif identity == "table":
-        identified = no.identify_from_table(stations)
+        identified = detections.identify_from_table(stations)
     else:
-        identified = no.identify_by_geometry(stations, inclinometer_sigma_rad)
+        identified = detections.identify_by_geometry(stations, inclinometer_sigma_rad)
     lost = [s.station_id for s, ids in zip(identified.stations, identified.ids, strict=True)
             if all(i is None for i in ids)]
     if lost:

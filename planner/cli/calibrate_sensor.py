@@ -10,6 +10,7 @@ import click
 from planner.cli._common import (
     FILE,
     FiniteRange,
+    deprecated_alias,
     emit_summary,
     frames_option,
     given_paths,
@@ -27,8 +28,10 @@ from planner.cli._common import (
 @click.option("--marker-table", "marker_table", type=FILE,
               help="Instead of SUMMARY: a markers.csv from `markerplan process` of real scans "
                    "(each station one position) ...")
-@click.option("--reference-csv", "reference", type=FILE,
-              help="... and the reference CSV (id,x_m,y_m,z_m) it was evaluated against.")
+@click.option("--reference", "reference", type=FILE,
+              help="Reference coordinates: with --marker-table, the total-station CSV "
+                   "(id,x_m,y_m,z_m) the table was evaluated against.")
+@deprecated_alias("--reference-csv", "--reference", "reference", type=FILE)
 @out_option(required=True)
 @overwrite_option
 @click.option("--base-profile", default="datasheet", show_default=True, metavar="NAME|FILE",
@@ -72,7 +75,7 @@ def command(summary, marker_table, reference, out, overwrite, base_profile, fixe
     Example:
       markerplan calibrate-sensor --out cal/
       markerplan simulate --sensor-profile cal/sensor_profile.json --out scans/
-      markerplan calibrate-sensor --marker-table tables/markers.csv --reference-csv ts.csv \\
+      markerplan calibrate-sensor --marker-table tables/markers.csv --reference ts.csv \\
           --fit sensor.range_noise_m=0.005:0.04 --out cal-real/
     """
     from dataclasses import asdict, replace
@@ -98,9 +101,9 @@ def command(summary, marker_table, reference, out, overwrite, base_profile, fixe
     from visibility.sensor_profile import load_profile
 
     if summary is not None and (marker_table or reference):
-        raise ConfigError("give either SUMMARY or --marker-table with --reference-csv, not both")
+        raise ConfigError("give either SUMMARY or --marker-table with --reference, not both")
     if (marker_table is None) != (reference is None):
-        raise ConfigError("--marker-table and --reference-csv go together; give both")
+        raise ConfigError("--marker-table and --reference go together; give both")
     base = load_profile(base_profile)
     settings_fixed = dict(FIELD_PRIORS) if not fixed else dict(parse_setting(t) for t in fixed)
     free_params = [FreeParameter.parse(t) for t in (free or DEFAULT_FREE)]

@@ -8,12 +8,13 @@ from pathlib import Path
 import click
 
 from planner.cli._common import (
+    SEED,
+    deprecated_alias,
     emit_summary,
     estimator_option,
     json_option,
     out_option,
     overwrite_option,
-    seed_option,
 )
 
 
@@ -23,7 +24,10 @@ from planner.cli._common import (
 @out_option(required=True)
 @click.option("--plot", is_flag=True,
               help="Also write model.png: errors against distance, sigma and the envelope.")
-@seed_option("Seed of the cross-validation folds and the bootstrap resampling.")
+@click.option("--resample-seed", "seed", type=SEED, default=0, show_default=True, metavar="N",
+              help="Seed of the cross-validation folds and the bootstrap resampling (there is "
+                   "no noise to seed).")
+@deprecated_alias("--seed", "--resample-seed", "seed", type=SEED, metavar="N")
 @click.option("--bootstrap", "n_bootstrap", type=click.IntRange(0, 10_000),
               help="Bootstrap replicates for the intervals (default 40; 0 disables; at most "
                    "10000).")

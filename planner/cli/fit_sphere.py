@@ -10,16 +10,18 @@ from planner.cli._common import (
     json_option,
     marker_radius_option,
     point_option,
+    require_option,
 )
 
 
 @click.command("fit-sphere")
 @click.argument("file", type=click.Path(dir_okay=False, path_type=str))
 @marker_radius_option(required=True)
-@point_option("--sensor", "0,0,0", "X,Y,Z", "Scanner origin in the file's frame, metres.")
+@point_option("--sensor-m", "0,0,0", "X,Y,Z", "Scanner origin in the file's frame, metres.",
+              "sensor", old="--sensor")
 @estimator_option()
 @json_option
-def command(file: str, marker_radius_m: float, sensor: tuple[float, float, float],
+def command(file: str, marker_radius_m: float | None, sensor: tuple[float, float, float],
             estimator: str, as_json: bool) -> None:
     """Fit a sphere of known radius to the points in FILE (x y z per line, metres).
 
@@ -27,8 +29,9 @@ def command(file: str, marker_radius_m: float, sensor: tuple[float, float, float
 
     \b
     Example:
-      markerplan fit-sphere SPH101.xyz --marker-radius 0.05 --json
+      markerplan fit-sphere SPH101.xyz --marker-radius-m 0.05 --json
     """
+    require_option(marker_radius_m, "--marker-radius-m")
     from pipeline.pointsets import read_points
     from pipeline.sphere_fit import fit_sphere
 

@@ -63,7 +63,7 @@ def command(capture: Path, log_path: Path | None, station_id: str | None, keep_p
     Example:
       markerplan import-pcap station1.pcap --turntable-log turntable.csv --out scans/
       markerplan import-pcap my.pcap --station-id S1 --out scans/
-      markerplan process scans/ --marker-radius 0.1 --out tables/
+      markerplan process scans/ --marker-radius-m 0.1 --out tables/
     """
     import time
 

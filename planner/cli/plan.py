@@ -12,6 +12,7 @@ from planner.cli._common import (
     boundary_option,
     config_option,
     dem_option,
+    deprecated_alias,
     emit_summary,
     error_model_option,
     exclude_option,
@@ -33,6 +34,9 @@ from planner.cli._common import (
     time_limit_option,
     with_options,
 )
+
+#: Cell size of the stand maps, m.
+CELL_M = click.FloatRange(min=0, min_open=True)
 
 
 @click.command("plan")
@@ -59,9 +63,10 @@ from planner.cli._common import (
 @network_option
 @reference_station_option
 @time_limit_option
-@click.option("--stand-map-cell", "stand_map_cell_m", type=click.FloatRange(min=0, min_open=True),
+@click.option("--stand-map-cell-m", "stand_map_cell_m", type=CELL_M,
               help="Cell size (m, rounded to whole DEM cells) of usable_markers.tif and "
                    "station_error.tif. Default: the finest with at most 40,000 cells.")
+@deprecated_alias("--stand-map-cell", "--stand-map-cell-m", "stand_map_cell_m", type=CELL_M)
 @scheduler_options
 @out_option(default="markerplan-out")
 @overwrite_option
@@ -89,11 +94,11 @@ def command(site_name, site_seed, dem_path, reproject, stations_path, station_id
     Examples:
       markerplan plan
       markerplan plan --site default --redundant --out plan-redundant/
-      markerplan plan --site large --site-seed 3 --marker-radius 0.15 --out plan-large/
+      markerplan plan --site large --site-seed 3 --marker-radius-m 0.15 --out plan-large/
       markerplan plan --network --out plan-network/
       markerplan plan --network --reference-station S4 --out plan-network-s4/
       markerplan plan --dem site.tif --stations stations.csv --exclude paths.geojson --out p/
-      markerplan plan --dem site.tif --stations stations.csv --stand-map-cell 2 --out p/
+      markerplan plan --dem site.tif --stations stations.csv --stand-map-cell-m 2 --out p/
       markerplan plan --dem lonlat.tif --reproject --stations lonlat.csv --out p/
       markerplan plan --site km --scheduler tcp://10.0.0.5:8786 --out plan-km/
     """

@@ -2,13 +2,13 @@
 
 from __future__ import annotations
 
-import sys
 from pathlib import Path
 
 import click
 
 from planner.cli._common import (
     FiniteRange,
+    deprecated_alias,
     emit_summary,
     estimator_option,
     id_list,
@@ -21,6 +21,9 @@ from planner.cli._common import (
     sensor_profile_option,
 )
 from visibility.sites import MARKER_RADIUS_M
+
+#: Quality gate: the largest fit RMS, m.
+MAX_RMS_M = FiniteRange(0.0, 1.0, min_open=True)
 
 
 def _parse_stage_options(items: tuple[str, ...]) -> dict[str, dict[str, object]]:
@@ -89,7 +92,7 @@ def _scan_inputs(paths: tuple[Path, ...]) -> tuple[list[Path], list[Path]]:
 
 
 def _marker_radius(given: float | None, references: list) -> float:
-    """``--marker-radius``, else the one the references (simulator truths) record, else
+    """``--marker-radius-m``, else the one the references (simulator truths) record, else
     0.1 m."""
     from markerplan.errors import InputFileError
 
@@ -99,7 +102,7 @@ def _marker_radius(given: float | None, references: list) -> float:
     if len(radii) > 1:
         raise InputFileError(f"the truth files record different marker radii "
                              f"({', '.join(f'{r:g}' for r in sorted(radii))} m); process each "
-                             "marker size separately, or give --marker-radius")
+                             "marker size separately, or give --marker-radius-m")
     return float(radii.pop()) if radii else MARKER_RADIUS_M
 
 
@@ -146,9 +149,10 @@ def _station_poses(truth_files: list[Path]) -> dict:
 @mounting_offset_options
 @click.option("--min-points", type=click.IntRange(1, 1_000_000),
               help="Quality gate: minimum points per marker.")
-@click.option("--max-rms", "max_rms_m", type=FiniteRange(0.0, 1.0, min_open=True),
+@click.option("--max-rms-m", "max_rms_m", type=MAX_RMS_M,
               help="Quality gate: maximum fit RMS, m (replaces the default of 3x the RMS the "
                    "sensor's noise gives).")
+@deprecated_alias("--max-rms", "--max-rms-m", "max_rms_m", type=MAX_RMS_M)
 @click.option("--min-visible-fraction", type=FiniteRange(0.0, 1.0),
               help="Quality gate: minimum visible fraction.")
 @click.option("--set", "stage_options", multiple=True, metavar="STAGE.OPTION=VALUE",
@@ -182,29 +186,17 @@ def command(scans, out, overwrite, references, estimator, marker_radius_m, no_ca
       markerplan process s1.scan.npz --reference total_station.csv --out t/
       markerplan process scans/ --cloud las,ply --out tables/
     """
-    import dataclasses
-
-    from tqdm import tqdm
-
     from markerplan.errors import InputFileError
     from markerplan.output_folder import output_folder
-    from markerplan.provenance import fingerprint_arrays, provenance
-    from pipeline.evaluation import check_references, pick_reference, read_reference
+    from markerplan.provenance import provenance
+    from pipeline.evaluation import check_references, read_reference
     from pipeline.point_cloud_io import check_formats, classify_cloud, write_station_clouds
-    from pipeline.process import process_station
     from pipeline.results import write_results
-    from pipeline.scan_format import read_scan
-    from pipeline.sensor_noise import RangeNoise
-    from pipeline.stages import build_config, with_offsets
+    from pipeline.survey import ProcessingSettings, process_scans, processing_config
 
     scans_given = scans
     scans, truths = _scan_inputs(scans)
     options = _parse_stage_options(stage_options)
-    options.setdefault("fit", {}).update(method=estimator)
-    quality = {"min_points": min_points, "max_rms_m": max_rms_m,
-               "max_rms_sigma": None if max_rms_m is None else 0.0,
-               "min_visible_fraction": min_visible_fraction}
-    options.setdefault("quality", {}).update({k: v for k, v in quality.items() if v is not None})
     ref_files = [f for p in references
                  for f in (sorted(p.glob("*.truth.json")) if p.is_dir() else [p])]
     if any(p.is_dir() for p in references) and not ref_files:
@@ -214,32 +206,29 @@ def command(scans, out, overwrite, references, estimator, marker_radius_m, no_ca
         ref_files = truths
     refs = [read_reference(p) for p in ref_files]
     check_references(refs)
-    if marker_radius_m is not None or "radius_m" not in options["fit"]:
-        options["fit"]["radius_m"] = _marker_radius(marker_radius_m, refs)
-    cfg = with_offsets(build_config(options), offsets, enabled=not no_calibrate)
+    radius_given = marker_radius_m is None and "radius_m" in options.get("fit", {})
+    cfg = processing_config(ProcessingSettings(
+        marker_radius_m=None if radius_given else _marker_radius(marker_radius_m, refs),
+        estimator=estimator, offsets=offsets, calibrate=not no_calibrate,
+        min_points=min_points, max_rms_m=max_rms_m, min_visible_fraction=min_visible_fraction,
+        stage_options=options))
     poses, crs_wkt = {}, None
     if cloud_formats:
         check_formats(cloud_formats)
         poses, crs_wkt = _station_poses(ref_files), _site_crs(scans_given)
     with output_folder(out, overwrite, "process", inputs=[*scans, *truths, *references]) as stage:
-        results, inputs, cloud_files = [], [], []
-        for path in tqdm(scans, desc="stations", file=sys.stderr, disable=None):
-            scan = read_scan(path)
-            noise = RangeNoise.recorded(scan.metadata.get("sensor", {}))
-            source = "scan" if noise else f"sensor profile {profile.name}"
-            noise = noise or profile.sensor.expected_scatter()
-            inputs.append({"scan": str(path), "station_id": scan.station_id,
-                           "sha256": fingerprint_arrays(scan.xyz_sensor_m, scan.frame_index,
-                                                        scan.turntable_angle_rad),
-                           "range_noise": {**dataclasses.asdict(noise), "source": source}})
-            results.append(process_station(scan, cfg, pick_reference(refs, scan.station_id),
-                                           noise=noise))
-            if cloud_formats:
-                cloud_files += write_station_clouds(
-                    stage, classify_cloud(scan, results[-1], cfg.ground), cloud_formats,
-                    poses.get(scan.station_id), crs_wkt)
-            del scan
-        prov = provenance(cfg.to_dict(), inputs=inputs,
+        cloud_files: list[str] = []
+
+        def write_cloud(scan, result) -> None:
+            cloud_files.extend(write_station_clouds(
+                stage, classify_cloud(scan, result, cfg.ground), cloud_formats,
+                poses.get(scan.station_id), crs_wkt))
+
+        survey = process_scans(scans, cfg, refs, profile.sensor.expected_scatter(),
+                               f"sensor profile {profile.name}",
+                               each=write_cloud if cloud_formats else None)
+        results = survey.results
+        prov = provenance(cfg.to_dict(), inputs=survey.inputs,
                           references=[r.source for r in refs], command="process")
         summary = write_results(stage, results, prov, cloud_files)
     timings = {f"{res.summary['station_id']} {step}": t

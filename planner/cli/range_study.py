@@ -8,6 +8,7 @@ import click
 
 from planner.cli._common import (
     FiniteRange,
+    deprecated_alias,
     emit_summary,
     frames_option,
     json_option,
@@ -26,6 +27,8 @@ from visibility.sites import MARKER_RADIUS_M
 #: Ground slope, degrees: regolith's angle of repose is about 30-35 deg, so markers on steeper
 #: ground do not stay put.
 SLOPE_DEG = FiniteRange(-30.0, 30.0)
+#: Farthest published distance kept, m.
+MAX_DISTANCE_M = FiniteRange(1.0, 100.0)
 
 
 @click.command("range-study")
@@ -39,9 +42,10 @@ SLOPE_DEG = FiniteRange(-30.0, 30.0)
 @rpm_option
 @range_noise_option
 @marker_radius_option(default=MARKER_RADIUS_M)
-@click.option("--max-distance", "max_distance_m", type=FiniteRange(1.0, 100.0),
+@click.option("--max-distance-m", "max_distance_m", type=MAX_DISTANCE_M,
               default=50.0, show_default=True,
               help="Drop the published distances beyond this, metres.")
+@deprecated_alias("--max-distance", "--max-distance-m", "max_distance_m", type=MAX_DISTANCE_M)
 @lidar_height_option
 @click.option("--slope-deg", type=SLOPE_DEG, default=0.0, show_default=True,
               help="Ground slope, degrees: a plane through the station's foot rising towards "
@@ -54,9 +58,9 @@ def command(out, overwrite, frames, replicates, seed, profile, rpm, range_noise_
     """Simulate the published range experiment and fit every marker with both estimators.
 
     Markers every 1 m from 1-15 m, every 2 m from 15-25 m, every 5 m from 25-50 m around one
-    station (0.20 m spheres unless --marker-radius says otherwise), on level ground or, with
+    station (0.20 m spheres unless --marker-radius-m says otherwise), on level ground or, with
     --slope-deg, resting on a planar slope (markers towards +x uphill, towards -x downhill);
-    the LiDAR centre stands --lidar-height above the station's foot. The sensor's and
+    the LiDAR centre stands --lidar-height-m above the station's foot. The sensor's and
     turntable's errors come from --sensor-profile (--range-noise-mm overrides its range
     noise). Writes markers.csv (marker table, all replicates), summary.csv (per estimator and
     distance: median density, median and 95th-percentile centre error), range_study.png and
@@ -67,7 +71,7 @@ def command(out, overwrite, frames, replicates, seed, profile, rpm, range_noise_
     Example:
       markerplan range-study --out range/ --replicates 3
       markerplan range-study --out quick/ --frames 100 --replicates 1
-      markerplan range-study --out slope/ --lidar-height 0.8 --slope-deg 15
+      markerplan range-study --out slope/ --lidar-height-m 0.8 --slope-deg 15
       markerplan range-study --out range/ --scheduler tcp://10.0.0.5:8786
     """
     from tqdm import tqdm

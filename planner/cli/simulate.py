@@ -74,7 +74,7 @@ def command(site_name: str, site_seed: int | None, dem_path: Path | None, reproj
     Writes station_<id>.scan.npz (pipeline scan format), station_<id>.truth.json (true marker
     centres, station pose, mounting offsets) and site.json (the layout) into --out. The
     preset's markers are scanned; --dem replaces its terrain and --stations its stations (the
-    LiDAR centre stands --lidar-height above the ground). The sensor's noise, beam footprint and
+    LiDAR centre stands --lidar-height-m above the ground). The sensor's noise, beam footprint and
     the turntable's errors come from --sensor-profile; --range-noise-mm, --incidence-noise-mm,
     --beam-divergence and --dropout override its values.
 
@@ -82,7 +82,7 @@ def command(site_name: str, site_seed: int | None, dem_path: Path | None, reproj
     Example:
       markerplan simulate --site default --out scans/
       markerplan simulate --station-ids S1,S2 --frames 200 --axis-offset-mm 5,-3 --out scans/
-      markerplan simulate --dem site.tif --stations stations.csv --marker-radius 0.15 --out s/
+      markerplan simulate --dem site.tif --stations stations.csv --marker-radius-m 0.15 --out s/
       markerplan simulate --sensor-profile datasheet --no-beam-divergence --out s/
     """
     from tqdm import tqdm
@@ -142,7 +142,7 @@ def _site(site_name, site_seed, dem_path, dem_fill, stations_path, marker_radius
         ids, xyz, heading = read_stations(stations_path, dem, lidar_height_m)
         if np.any(np.abs(xyz[:, 2] - dem.height_at(xyz[:, :2]) - lidar_height_m) > 1e-3):
             click.echo(f"note: the z_m of --stations {stations_path} are not used: the LiDAR "
-                       "centre stands --lidar-height above the ground", err=True)
+                       "centre stands --lidar-height-m above the ground", err=True)
         site = site_with_stations(site, ids, xyz, heading)
     if dem_path is not None:
         site = site_with_dem(site, dem)

@@ -90,7 +90,7 @@ def command(plan_path, error_model, seed, station_ids, offsets, profile, network
     """
     import json
 
-    from markerplan.errors import InfeasiblePlanError
+    from markerplan.errors import VerificationFailedError
     from markerplan.output_folder import output_folder
     from planner.distributed import executor
     from planner.outputs.plan_file import load_plan
@@ -129,7 +129,7 @@ def command(plan_path, error_model, seed, station_ids, offsets, profile, network
                  f"error {worst:.4f} m (requirement {rec['requirement_m']:g} m) -> {out}/")
     if not rec["passed"]:
         failing = [f"{s['id']}: {s['reason']}" for s in rec["stations"] if not s["passed"]]
-        raise InfeasiblePlanError("verification failed at " + "; ".join(failing))
+        raise VerificationFailedError("verification failed at " + "; ".join(failing))
 
 
 def _verify_network(plan_path, plan, ids, inputs, error_model, seed, offsets, profile, settings,
@@ -140,9 +140,10 @@ def _verify_network(plan_path, plan, ids, inputs, error_model, seed, offsets, pr
     workers)`` of the station tasks."""
     import json
 
-    from markerplan.errors import ConfigError, InfeasiblePlanError
+    from markerplan.errors import ConfigError, VerificationFailedError
     from markerplan.output_folder import output_folder
     from pipeline.marker_table import write_marker_table
+    from pipeline.network.observations import Datum
     from planner.distributed import executor
     from planner.outputs.plan_file import read_plan
     from planner.verify.network import (
@@ -160,13 +161,11 @@ def _verify_network(plan_path, plan, ids, inputs, error_model, seed, offsets, pr
     named = planned.get("reference_station")
     named = named if isinstance(named, str) else None
     station_list = [s["id"] for s in doc["stations"]]
-    if datum is not None and planned.get("network") and datum != (named or station_list[0]):
+    planned_datum = station_list[Datum(reference_station=named).resolve(station_list)]
+    if datum is not None and planned.get("network") and datum != planned_datum:
         raise ConfigError(f"--reference-station {datum}: the plan's predictions are relative to "
-                          f"its datum {named or station_list[0]}; verify against that datum, or "
+                          f"its datum {planned_datum}; verify against that datum, or "
                           f"re-plan with `markerplan plan --network --reference-station {datum}`")
-    if datum is not None and datum not in station_list:
-        raise ConfigError(f"`reference_station` {datum!r} is not a station of this plan; valid "
-                          f"ids are {', '.join(station_list[:20])}")
     reference_station(datum or named, station_list, ids)
     profile = profile or default_profile()
     progress = not as_json or sys.stderr.isatty()
@@ -197,4 +196,4 @@ def _verify_network(plan_path, plan, ids, inputs, error_model, seed, offsets, pr
     emit_summary(summary, as_json, network_summary_line(rec, out))
     if not rec["passed"]:
         failing = [f"{s['id']}: {s['reason']}" for s in rec["stations"] if not s["passed"]]
-        raise InfeasiblePlanError("verification failed at " + "; ".join(failing))
+        raise VerificationFailedError("verification failed at " + "; ".join(failing))

@@ -7,7 +7,9 @@ Written by :func:`write_network_files` into the command's output folder (numbers
 file               content
 ================== ===========================================================================
 stations.csv       adjusted poses, sigmas, 95 % ellipsoid semi-axes, 95 % station error
+stations.csvt      its column types, for QGIS / GDAL (``"String","Real",...``)
 markers.csv        adjusted centres, sigmas, 95 % ellipsoid semi-axes, stations that saw them
+markers.csvt       its column types
 observations.csv   every identified detection: residuals, redundancy numbers, w-tests, MDBs and
                    their effect; ``status`` kept / flagged / removed
 parameters.csv     the unknowns in the covariance's order, with values and sigmas (m, rad)
@@ -18,6 +20,10 @@ adjustment.json    the summary: configuration, version, solver status, datum, si
 report.md          the report a surveyor reads (:mod:`planner.network.report`)
 network.png        the network map (:mod:`planner.network.map`)
 ================== ===========================================================================
+
+Every CSV opens with its header. With a CRS (:attr:`planner.network.record.AdjustmentRun.crs`)
+``stations.prj`` and ``markers.prj`` (:data:`PRJ_FILES`) hold its WKT for GIS readers
+(:func:`markerplan.writing.write_gis_sidecars`); ``adjustment.json`` names the frame too.
 
 No file holds a timing or a host name, so the same inputs give byte-identical files.
 """
@@ -31,17 +37,20 @@ from typing import Any
 
 import numpy as np
 
-from markerplan.writing import json_default, write_csv
+from markerplan.writing import column_types, json_default, write_csv, write_gis_sidecars
 from planner.network import record as nr
 from planner.outputs.gis import geojson_crs_members, geojson_positions
 
-FILES = ("stations.csv", "markers.csv", "observations.csv", "parameters.csv", "covariance.npy",
-         "network.geojson", "adjustment.json", "report.md", "network.png")
+FILES = ("stations.csv", "stations.csvt", "markers.csv", "markers.csvt", "observations.csv",
+         "parameters.csv", "covariance.npy", "network.geojson", "adjustment.json", "report.md",
+         "network.png")
+#: Written besides :data:`FILES` when the coordinates have a CRS.
+PRJ_FILES = ("stations.prj", "markers.prj")
 
 
 def write_network_files(folder: str | Path, run: nr.AdjustmentRun, draw_map: bool = True
                         ) -> dict:
-    """Write every file of :data:`FILES` into ``folder``.
+    """Write every file of :data:`FILES` (and, with a CRS, :data:`PRJ_FILES`) into ``folder``.
 
     Parameters
     ----------
@@ -66,9 +75,13 @@ def write_network_files(folder: str | Path, run: nr.AdjustmentRun, draw_map: boo
     markers = nr.marker_rows(run)
     observations = nr.observation_rows(run, critical_value(run.result.settings.alpha0))
     files = [f for f in FILES if draw_map or f != "network.png"]
+    if run.crs is not None:
+        files += PRJ_FILES
     doc = finite_json(nr.adjustment_record(run, stations, markers, observations, files))
-    write_csv(folder / "stations.csv", nr.STATION_COLUMNS, stations)
-    write_csv(folder / "markers.csv", nr.MARKER_COLUMNS, markers)
+    for name, columns, rows in (("stations.csv", nr.STATION_COLUMNS, stations),
+                                ("markers.csv", nr.MARKER_COLUMNS, markers)):
+        write_csv(folder / name, columns, rows)
+        write_gis_sidecars(folder / name, column_types(columns, rows), run.crs)
     write_csv(folder / "observations.csv", nr.OBSERVATION_COLUMNS, observations)
     write_csv(folder / "parameters.csv", nr.PARAMETER_COLUMNS, nr.parameter_rows(run.result))
     np.save(folder / "covariance.npy", np.ascontiguousarray(run.result.covariance,

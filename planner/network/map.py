@@ -3,7 +3,8 @@ station error, markers, the ties (one line per kept observation; removed ones da
 every point's 95 % horizontal error ellipse drawn to scale, enlarged by one stated factor.
 
 Site frame, metres (x to the right, y up), the style of the plan's map
-(:mod:`planner.outputs.plan_map`).
+(:mod:`planner.outputs.plan_map`): a figure of the view's aspect ratio, labels that cover no
+other label and no symbol.
 """
 
 from __future__ import annotations
@@ -12,10 +13,23 @@ from pathlib import Path
 
 import numpy as np
 
-from planner.outputs.plan_map import MAX_LABELS, _nice_125, axis_frame, draw_stations
+from planner.outputs.plan_map import (
+    COLOUR_BAR_ASPECT,
+    MAX_LABELS,
+    _nice_125,
+    axis_frame,
+    draw_stations,
+    figure_size,
+    place_labels,
+    station_labels,
+)
 
 #: The largest ellipse is drawn at about this fraction of the map's width.
 ELLIPSE_FRACTION = 0.06
+#: Room above and below the axes, inches: the two-line title, the x label and the legend's rows.
+TITLE_LEGEND_IN = 2.1
+#: Text style of a marker's label.
+MARKER_LABEL_STYLE = {"fontsize": 7, "color": "#b2182b", "zorder": 10}
 
 
 def exaggeration(largest_semi_axis_m: float, extent_m: float) -> float:
@@ -75,7 +89,10 @@ def draw_network_map(run, stations: list[dict], markers: list[dict], observation
     largest = max((e[0] for group in ellipses for e in group), default=0.0)
     factor = exaggeration(largest, extent)
 
-    fig, ax = plt.subplots(figsize=(9.0, 8.6), layout="constrained")
+    xlim = (lo[0] - pad, hi[0] + pad)
+    ylim = (lo[1] - 2 * pad, hi[1] + pad)  # room for the scale bars
+    figsize, bar_at = figure_size(xlim[1] - xlim[0], ylim[1] - ylim[0], TITLE_LEGEND_IN)
+    fig, ax = plt.subplots(figsize=figsize, dpi=dpi, layout="constrained")
     ties = {"kept": [], "removed": []}
     for o in observations:
         i, j = s_index.get(o["station_id"]), m_index.get(o["marker_id"])
@@ -90,40 +107,44 @@ def draw_network_map(run, stations: list[dict], markers: list[dict], observation
             ax.add_patch(Ellipse((x, y), 2 * a * factor, 2 * b * factor, angle=angle,
                                  fill=False, ec=colour, lw=1.0, zorder=6))
     control = [m["control"] for m in markers]
-    ax.scatter(m_xy[:, 0], m_xy[:, 1], s=36, c=["#7b3294" if c else "#e41a1c" for c in control],
-               marker="o", edgecolors="white", linewidths=0.8, zorder=7)
+    symbols = [ax.scatter(m_xy[:, 0], m_xy[:, 1], s=36,
+                          c=["#7b3294" if c else "#e41a1c" for c in control], marker="o",
+                          edgecolors="white", linewidths=0.8, zorder=7)]
     err_mm = np.array([1e3 * s["station_error_95_m"] for s in stations])
     req_mm = 1e3 * run.requirement_m
     failing = np.array([not s["meets_requirement"] for s in stations], dtype=bool)
-    sc = draw_stations(ax, s_xy, [s["station_id"] for s in stations], err_mm, req_mm, failing,
-                       len(stations) <= MAX_LABELS)
+    sc, station_symbols = draw_stations(ax, s_xy, err_mm, req_mm, failing)
+    symbols += station_symbols
     ref = [i for i, s in enumerate(stations) if s["reference"]]
     if ref:
-        ax.scatter(s_xy[ref, 0], s_xy[ref, 1], marker="s", s=260, facecolors="none",
-                   edgecolors="black", linewidths=1.6, zorder=9)
+        symbols.append(ax.scatter(s_xy[ref, 0], s_xy[ref, 1], marker="s", s=260,
+                                  facecolors="none", edgecolors="black", linewidths=1.6,
+                                  zorder=9))
+    labels = (station_labels(s_xy, [s["station_id"] for s in stations], err_mm)
+              if len(stations) <= MAX_LABELS else [])
     if len(markers) <= MAX_LABELS:
-        for m, (x, y) in zip(markers, m_xy, strict=True):
-            ax.annotate(m["marker_id"], (x, y), xytext=(5, 5), textcoords="offset points",
-                        fontsize=7, color="#b2182b", zorder=10)
-    cb = fig.colorbar(sc, ax=ax, shrink=0.8, pad=0.01, extend="max" if failing.any() else
-                      "neither")
+        labels += [(m["marker_id"], xy, MARKER_LABEL_STYLE)
+                   for m, xy in zip(markers, m_xy, strict=True)]
+    cb = fig.colorbar(sc, ax=ax, shrink=0.8, pad=0.01, location=bar_at,
+                      aspect=COLOUR_BAR_ASPECT[bar_at],
+                      extend="max" if failing.any() else "neither")
     cb.set_label(f"station error, 95 % over {run.working_radius_m:g} m (mm); requirement "
                  f"{req_mm:g} mm")
-    ax.set_xlim(lo[0] - pad, hi[0] + pad)
-    ax.set_ylim(lo[1] - 2 * pad, hi[1] + pad)  # room for the scale bars
+    ax.set_xlim(*xlim)
+    ax.set_ylim(*ylim)
     ax.set_aspect("equal")
     frame = "site frame" if run.crs is None else axis_frame(run.crs)
     ax.set_xlabel(f"x (m, {frame})")
     ax.set_ylabel(f"y (m, {frame})")
     bar = _nice_125(extent / 5)
-    ax.add_artist(AnchoredSizeBar(ax.transData, bar, f"{bar:g} m (positions)", "lower right",
-                                  pad=0.5, color="black", frameon=True,
-                                  size_vertical=extent / 300))
     ell_bar = _nice_125(2.0 * largest) if largest > 0.0 else bar  # the largest axis
-    ax.add_artist(AnchoredSizeBar(ax.transData, ell_bar * factor,
-                                  f"{1e3 * ell_bar:g} mm (ellipses, ×{factor:g})", "lower left",
-                                  pad=0.5, color="#1f3b73", frameon=True,
-                                  size_vertical=extent / 300))
+    bars = [AnchoredSizeBar(ax.transData, bar, f"{bar:g} m (positions)", "lower right",
+                            pad=0.5, color="black", frameon=True, size_vertical=extent / 300),
+            AnchoredSizeBar(ax.transData, ell_bar * factor,
+                            f"{1e3 * ell_bar:g} mm (ellipses, ×{factor:g})", "lower left",
+                            pad=0.5, color="#1f3b73", frameon=True, size_vertical=extent / 300)]
+    for b in bars:
+        ax.add_artist(b)
     handles = [
         Line2D([], [], marker="^", ls="", mfc="#3b528b", mec="black", ms=10,
                label="station (colour: station error)"),
@@ -152,6 +173,7 @@ def draw_network_map(run, stations: list[dict], markers: list[dict], observation
                  f"{n_ok}/{len(stations)} ≤ {run.requirement_m:g} m\n"
                  f"datum: {res.datum.describe(res.observations.station_ids)}; "
                  f"ellipses 95 % ×{factor:g}", fontsize=10)
+    place_labels(fig, ax, labels, symbols, bars)
     path = Path(path)
     fig.savefig(path, dpi=dpi, metadata={"Software": None})
     plt.close(fig)

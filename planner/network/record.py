@@ -69,7 +69,7 @@ class AdjustmentRun:
     Attributes
     ----------
     result : pipeline.network.adjustment.NetworkAdjustment
-    observations : pipeline.network.adjustment.NetworkObservations
+    observations : pipeline.network.observations.NetworkObservations
         The observations given to the adjustment (before data snooping).
     config : dict
         The resolved configuration (JSON-serialisable): options, datum, settings.
@@ -250,7 +250,8 @@ def _reference_station(result) -> str | None:
     datum = result.datum
     if datum.kind != "station":
         return None
-    return datum.reference_station or result.observations.station_ids[0]
+    ids = result.observations.station_ids
+    return ids[datum.resolve(ids)]
 
 
 def station_rows(run: AdjustmentRun) -> list[dict]:
@@ -395,7 +396,7 @@ def parameter_rows(result) -> list[dict]:
     rows : list of dict
         ``parameter`` is ``<id>.<name>``, e.g. ``S1.heading_rad``, ``M3.z_m``.
     """
-    from pipeline.network.adjustment import POSE_PARAMETERS
+    from pipeline.network.observations import POSE_PARAMETERS
 
     obs = result.observations
     names = [("station", sid, p) for sid in obs.station_ids for p in POSE_PARAMETERS]

@@ -2,6 +2,8 @@
 error, chosen markers, the lines of sight each station uses, legend and scale bar.
 
 Site frame (x to the right, y up), metres: the DEM's CRS, named on the axes, when it has one.
+The figure takes the view's aspect ratio (:func:`figure_size`), and the labels are placed where
+they cover no other label and no symbol (:func:`place_labels`).
 """
 
 from __future__ import annotations
@@ -14,6 +16,20 @@ import numpy as np
 MAX_LABELS = 30
 #: Colour covering the DEM's nodata cells (no measured terrain).
 NODATA_COLOUR = "#e8d9c5"
+#: Label positions tried around a point, in order: distance (points) and direction (degrees,
+#: counter-clockwise from +x). Beyond the first ring a thin leader line joins label and point.
+LABEL_RADII_PT = (9.0, 18.0, 30.0)
+LABEL_DIRECTIONS_DEG = (45.0, -45.0, 0.0, 135.0, -135.0, 180.0, 90.0, -90.0)
+#: Clearance kept around each label and symbol, pixels (covers a label's rounded box).
+LABEL_PAD_PX = 2.0
+#: Largest side of a map figure, and the room it keeps around the axes (inches): the y axis's
+#: label and ticks, the colour bar with its label, and (height) title, x label and legend.
+MAX_FIGURE_IN = 9.0
+AXIS_LABELS_IN = 1.0
+COLOUR_BAR_IN = {"right": 1.1, "bottom": 0.5}
+#: Length over thickness of the colour bar, beside the axes (``right``) or under them.
+COLOUR_BAR_ASPECT = {"right": 20, "bottom": 40}
+TITLE_LEGEND_IN = 1.7
 
 
 def draw_plan_map(outcome, path: Path, dpi: int = 150) -> Path:
@@ -31,7 +47,8 @@ def draw_plan_map(outcome, path: Path, dpi: int = 150) -> Path:
     inp, prob, res, cfg = outcome.inputs, outcome.problem, outcome.result, outcome.config
     dem = inp.dem
     xmin, xmax, ymin, ymax = _view(inp, prob)
-    fig, ax = plt.subplots(figsize=(9.0, 8.6), layout="constrained")
+    figsize, bar_at = figure_size(xmax - xmin, ymax - ymin)
+    fig, ax = plt.subplots(figsize=figsize, dpi=dpi, layout="constrained")
     # hillshade of the DEM, cropped to the view
     gx, gy = dem.grid_xy()
     ci = (gx >= xmin - 1) & (gx <= xmax + 1)
@@ -70,25 +87,26 @@ def draw_plan_map(outcome, path: Path, dpi: int = 150) -> Path:
                     [prob.station_xyz[s, 1], prob.site_xyz[j, 1]], color="#ffbf00", lw=0.9,
                     alpha=0.8, zorder=3)
     if len(inp.as_built_ids):
-        ax.scatter(inp.as_built_xyz[:, 0], inp.as_built_xyz[:, 1], marker="x", s=30,
-                   c="#444444", lw=1.0, zorder=4)
+        symbols = [ax.scatter(inp.as_built_xyz[:, 0], inp.as_built_xyz[:, 1], marker="x",
+                              s=30, c="#444444", lw=1.0, zorder=4)]
+    else:
+        symbols = []
     sel = np.flatnonzero(res.selected)
-    ax.scatter(prob.site_xyz[sel, 0], prob.site_xyz[sel, 1], s=90, c="#e41a1c",
-               edgecolors="white", linewidths=1.2, zorder=10)  # above station labels
-    # ids and errors beside every symbol read well up to a few dozen; beyond that they hide the
-    # map, and the colour (stations) and markers.csv (ids) carry the same information
-    label_markers = len(sel) <= MAX_LABELS
-    label_stations = prob.n_stations <= MAX_LABELS
-    for j in sel if label_markers else ():
-        ax.annotate(prob.site_ids[j], prob.site_xyz[j, :2], xytext=(6, 6),
-                    textcoords="offset points", fontsize=8, color="#e41a1c", weight="bold",
-                    zorder=11)
+    symbols.append(ax.scatter(prob.site_xyz[sel, 0], prob.site_xyz[sel, 1], s=90, c="#e41a1c",
+                              edgecolors="white", linewidths=1.2, zorder=10))
     err_mm = 1e3 * res.check.error_m
     req_mm = 1e3 * cfg.requirement_m
     failing = ~res.check.ok
-    sc = draw_stations(ax, prob.station_xyz[:, :2], prob.station_ids, err_mm, req_mm, failing,
-                       label_stations)
-    cb = fig.colorbar(sc, ax=ax, shrink=0.8, pad=0.01,
+    sc, station_symbols = draw_stations(ax, prob.station_xyz[:, :2], err_mm, req_mm, failing)
+    symbols += station_symbols
+    # ids and errors beside every symbol read well up to a few dozen; beyond that they hide the
+    # map, and the colour (stations) and markers.csv (ids) carry the same information
+    labels = (station_labels(prob.station_xyz[:, :2], prob.station_ids, err_mm)
+              if prob.n_stations <= MAX_LABELS else [])
+    if len(sel) <= MAX_LABELS:
+        labels += [(prob.site_ids[j], prob.site_xyz[j, :2], MARKER_LABEL_STYLE) for j in sel]
+    cb = fig.colorbar(sc, ax=ax, shrink=0.8, pad=0.01, location=bar_at,
+                      aspect=COLOUR_BAR_ASPECT[bar_at],
                       extend="max" if failing.any() else "neither")
     cb.set_label(f"predicted station error, 95 % (mm); requirement {req_mm:g} mm")
     ax.set_xlim(xmin, xmax)
@@ -99,8 +117,9 @@ def draw_plan_map(outcome, path: Path, dpi: int = 150) -> Path:
     ax.set_ylabel(f"y (m, {frame})")
     ax.ticklabel_format(useOffset=False, style="plain")  # CRS coordinates in full, no "+5e5"
     bar = _nice_125((xmax - xmin) / 5)
-    ax.add_artist(AnchoredSizeBar(ax.transData, bar, f"{bar:g} m", "lower right", pad=0.5,
-                                  color="black", frameon=True, size_vertical=(ymax - ymin) / 200))
+    scale_bar = AnchoredSizeBar(ax.transData, bar, f"{bar:g} m", "lower right", pad=0.5,
+                                color="black", frameon=True, size_vertical=(ymax - ymin) / 200)
+    ax.add_artist(scale_bar)
     handles = [
         Line2D([], [], marker="^", ls="", mfc="#3b528b", mec="black", ms=10,
                label="station (colour: predicted error)"),
@@ -126,6 +145,7 @@ def draw_plan_map(outcome, path: Path, dpi: int = 150) -> Path:
     ax.set_title(f"markerplan — site '{inp.site_name}': {len(sel)} markers, "
                  f"{int(res.check.ok.sum())}/{prob.n_stations} stations ≤ "
                  f"{cfg.requirement_m:g} m ({sol.status})", fontsize=11)
+    place_labels(fig, ax, labels, symbols, [scale_bar])
     path = Path(path)
     fig.savefig(path, dpi=dpi, metadata={"Software": None})
     plt.close(fig)
@@ -143,24 +163,34 @@ def axis_frame(crs: str | None) -> str:
     return "site frame — local metres" if crs is None else crs_name(crs)
 
 
-def draw_stations(ax, xy: np.ndarray, ids, error_mm: np.ndarray, requirement_mm: float,
-                  failing: np.ndarray, labels: bool):
+#: Text style of a station's label (id and error) and of a marker's label (id).
+STATION_LABEL_STYLE = {"fontsize": 8, "weight": "bold", "zorder": 11,
+                       "bbox": {"boxstyle": "round,pad=0.15", "fc": "white", "alpha": 0.7,
+                                "lw": 0}}
+MARKER_LABEL_STYLE = {"fontsize": 8, "color": "#e41a1c", "weight": "bold", "zorder": 11}
+
+
+def draw_stations(ax, xy: np.ndarray, error_mm: np.ndarray, requirement_mm: float,
+                  failing: np.ndarray):
     """Stations as triangles coloured by their 95 % error (viridis from 0 to the requirement,
-    or tighter when every station is far inside it), failing ones ringed in red, each labelled
-    with its id and error; returns the scatter for the colour bar.
+    or tighter when every station is far inside it), failing ones ringed in red.
 
     Parameters
     ----------
     ax : matplotlib Axes
     xy : (s, 2) float
         Station positions, site frame, m.
-    ids : sequence of str
     error_mm : (s,) float
         95 % station errors, mm (non-finite: unregistrable).
     requirement_mm : float
     failing : (s,) bool
-    labels : bool
-        Write id and error beside every station.
+
+    Returns
+    -------
+    scatter : PathCollection
+        The triangles, for the colour bar.
+    symbols : list of PathCollection
+        Everything drawn (triangles and rings), for :func:`place_labels`.
     """
     from matplotlib.colors import Normalize
 
@@ -173,16 +203,132 @@ def draw_stations(ax, xy: np.ndarray, ids, error_mm: np.ndarray, requirement_mm:
                     c=np.where(np.isfinite(error_mm), error_mm, 2 * requirement_mm),
                     cmap="viridis", norm=Normalize(vmin=0.0, vmax=top), marker="^", s=140,
                     edgecolors="black", linewidths=0.8, zorder=8)
+    symbols = [sc]
     if failing.any():
-        ax.scatter(xy[failing, 0], xy[failing, 1], marker="^", s=320, facecolors="none",
-                   edgecolors="#d62728", linewidths=2.0, zorder=8)
-    for s in range(len(ids)) if labels else ():
-        text = (f"{ids[s]} {error_mm[s]:.0f} mm" if np.isfinite(error_mm[s])
-                else f"{ids[s]} unregistrable")
-        ax.annotate(text, xy[s], xytext=(7, -12), textcoords="offset points", fontsize=8,
-                    weight="bold", zorder=9,
-                    bbox={"boxstyle": "round,pad=0.15", "fc": "white", "alpha": 0.7, "lw": 0})
-    return sc
+        symbols.append(ax.scatter(xy[failing, 0], xy[failing, 1], marker="^", s=320,
+                                  facecolors="none", edgecolors="#d62728", linewidths=2.0,
+                                  zorder=8))
+    return sc, symbols
+
+
+def station_labels(xy: np.ndarray, ids, error_mm: np.ndarray) -> list[tuple]:
+    """One :func:`place_labels` label per station: its id and error in mm (or
+    ``unregistrable``), in :data:`STATION_LABEL_STYLE`.
+
+    >>> station_labels(np.zeros((2, 2)), ["S1", "S2"], np.array([12.4, np.inf]))[1][0]
+    'S2 unregistrable'
+    """
+    return [(f"{ids[s]} {error_mm[s]:.0f} mm" if np.isfinite(error_mm[s])
+             else f"{ids[s]} unregistrable", xy[s], STATION_LABEL_STYLE)
+            for s in range(len(ids))]
+
+
+def figure_size(width_m: float, height_m: float, extra_height_in: float = TITLE_LEGEND_IN
+                ) -> tuple[tuple[float, float], str]:
+    """Figure size (inches) whose axes take the view's aspect ratio, and where the colour bar
+    goes: ``"right"`` or, when that leaves the axes larger, ``"bottom"`` (wide views).
+
+    The axes' larger side is as large as :data:`MAX_FIGURE_IN` allows after the room for the
+    axis labels (:data:`AXIS_LABELS_IN`), the colour bar (:data:`COLOUR_BAR_IN`, its width
+    beside the axes or its height under them) and ``extra_height_in`` (title, x label,
+    legend).
+
+    >>> figure_size(40.0, 40.0), figure_size(40.0, 10.0)
+    (((9.0, 8.6), 'right'), ((9.0, 4.2), 'bottom'))
+    """
+    ratio = width_m / max(height_m, 1e-9)
+    best = None
+    for where, extra_w, extra_h in (
+            ("right", AXIS_LABELS_IN + COLOUR_BAR_IN["right"], extra_height_in),
+            ("bottom", AXIS_LABELS_IN, extra_height_in + COLOUR_BAR_IN["bottom"])):
+        axes_w = min(MAX_FIGURE_IN - extra_w, (MAX_FIGURE_IN - extra_h) * ratio)
+        size = (round(axes_w + extra_w, 2), round(axes_w / ratio + extra_h, 2))
+        if best is None or axes_w > best[0]:
+            best = (axes_w, size, where)
+    return best[1], best[2]
+
+
+def symbol_boxes(ax, collection) -> list:
+    """Display-space boxes (pixels) of the markers of a scatter ``collection``: a square of
+    the marker's size plus its edge line around each point."""
+    from matplotlib.transforms import Bbox
+
+    xy = ax.transData.transform(collection.get_offsets())
+    sizes = np.broadcast_to(collection.get_sizes(), (len(xy),))
+    widths = np.broadcast_to(collection.get_linewidths(), (len(xy),))
+    px = ax.figure.dpi / 72.0
+    half = 0.5 * (np.sqrt(sizes) + widths) * px
+    return [Bbox.from_extents(x - h, y - h, x + h, y + h)
+            for (x, y), h in zip(xy, half, strict=True)]
+
+
+def label_offsets() -> list[tuple[float, float, str, str]]:
+    """The tried offsets (points) with the text's alignment there, nearest first:
+    :data:`LABEL_RADII_PT` x :data:`LABEL_DIRECTIONS_DEG`.
+
+    >>> label_offsets()[0]
+    (6.36, 6.36, 'left', 'bottom')
+    """
+    out = []
+    for r in LABEL_RADII_PT:
+        for a in np.radians(LABEL_DIRECTIONS_DEG):
+            c, s = np.cos(a), np.sin(a)
+            out.append((round(float(r * c), 2), round(float(r * s), 2),
+                        "left" if c > 0.3 else "right" if c < -0.3 else "center",
+                        "bottom" if s > 0.3 else "top" if s < -0.3 else "center"))
+    return out
+
+
+def place_labels(fig, ax, labels: list[tuple], symbols: list, obstacles: list = ()) -> list:
+    """Write each label beside its point where its text covers no label placed before it, no
+    symbol and no obstacle, inside the axes; a label that fits nowhere is left out.
+
+    Tries :func:`label_offsets` in order (greedy, so the same figure gives the same
+    placement); beyond the first ring a thin leader line joins label and point. Freezes the
+    figure's layout first (the boxes are measured in it).
+
+    Parameters
+    ----------
+    fig, ax : matplotlib Figure and Axes
+        Drawn completely except for the labels.
+    labels : list of (str, (x, y), dict)
+        Text, point (data coordinates) and text style, in order of priority.
+    symbols : list of PathCollection
+        Scatters whose markers no label may cover (:func:`symbol_boxes`).
+    obstacles : list of Artist
+        Further artists no label may cover (e.g. the scale bar).
+
+    Returns
+    -------
+    placed : list of Annotation
+        The labels drawn (gid ``"label"``).
+    """
+    fig.canvas.draw()
+    fig.set_layout_engine("none")
+    renderer = fig.canvas.get_renderer()
+    frame = ax.get_window_extent(renderer)
+    taken = [b.padded(LABEL_PAD_PX) for sc in symbols for b in symbol_boxes(ax, sc)]
+    taken += [a.get_window_extent(renderer).padded(LABEL_PAD_PX) for a in obstacles]
+    placed = []
+    first_ring = len(LABEL_DIRECTIONS_DEG)
+    for text, xy, style in labels:
+        for k, (dx, dy, ha, va) in enumerate(label_offsets()):
+            ann = ax.annotate(text, xy, xytext=(dx, dy), textcoords="offset points", ha=ha,
+                              va=va, gid="label", **style)
+            box = ann.get_window_extent(renderer).padded(LABEL_PAD_PX)
+            inside = (box.x0 >= frame.x0 and box.y0 >= frame.y0 and box.x1 <= frame.x1
+                      and box.y1 <= frame.y1)
+            if inside and not any(box.overlaps(t) for t in taken):
+                taken.append(box)
+                placed.append(ann)
+                if k >= first_ring:
+                    ax.annotate("", xy, xytext=(dx, dy), textcoords="offset points",
+                                arrowprops={"arrowstyle": "-", "lw": 0.5, "shrinkA": 0,
+                                            "shrinkB": 0, "color": style.get("color", "black")},
+                                zorder=style["zorder"] - 1)
+                break
+            ann.remove()
+    return placed
 
 
 def _view(inp, prob) -> tuple[float, float, float, float]:

@@ -1,6 +1,12 @@
 """Plan outputs: ``plan.json`` (versioned schema), ``markers.csv``, ``markers.geojson``,
 ``report.md``, and the one-object JSON summary of ``markerplan plan --json``.
 
+The CSV tables open with their header (:data:`MARKER_COLUMNS`, :data:`STATION_COLUMNS`), so
+pandas, QGIS and spreadsheets read them with default settings; beside each, ``.csvt`` gives
+QGIS / GDAL the column types and, when the DEM has a CRS, ``.prj`` its WKT
+(:func:`markerplan.writing.write_gis_sidecars`). Their frame is ``plan.json``'s ``frame`` and
+``site.crs`` / ``site.crs_wkt``.
+
 ``plan.json`` schema ``markerplan-plan`` version 1 (all lengths in metres, site frame = the
 DEM's CRS when it has one):
 
@@ -34,6 +40,7 @@ from pathlib import Path
 import numpy as np
 
 from markerplan.provenance import provenance
+from markerplan.writing import write_gis_sidecars
 from planner.outputs.gis import crs_name, geojson_crs_members, geojson_positions, write_plan_gpkg
 from planner.outputs.plan_file import SCHEMA, SCHEMA_VERSION, write_plan
 from planner.problem.usability import sector_index
@@ -149,7 +156,7 @@ def plan_record(outcome) -> dict:
 def _network_record(outcome, stations: list[dict], markers: list[dict]) -> dict:
     """Network mode: the datum, per-station ties and per-marker errors (added in place to
     ``stations`` and ``markers``), and the weakest stations."""
-    from pipeline.network.adjustment import POSE_PARAMETERS
+    from pipeline.network.observations import POSE_PARAMETERS
     from planner.accuracy.network import network_model
 
     cfg, prob, res = outcome.config, outcome.problem, outcome.result
@@ -179,9 +186,10 @@ def plan_timings(outcome) -> dict[str, float]:
 
 
 def write_plan_files(outcome, folder: Path) -> dict:
-    """Write plan.json, markers.csv, markers.geojson, plan.gpkg
-    (:func:`planner.outputs.gis.write_plan_gpkg`) and report.md into ``folder`` (network mode:
-    also stations.csv, each station's error relative to the datum and its ties).
+    """Write plan.json, markers.csv (with .csvt and, with a CRS, .prj), markers.geojson,
+    plan.gpkg (:func:`planner.outputs.gis.write_plan_gpkg`) and report.md into ``folder``
+    (network mode: also stations.csv and its sidecars, each station's error relative to the
+    datum and its ties).
 
     Returns the ``plan.json`` document.
     """
@@ -197,29 +205,41 @@ def write_plan_files(outcome, folder: Path) -> dict:
     return doc
 
 
+#: ``markers.csv`` of a plan: header and ``.csvt`` column types.
+MARKER_COLUMNS = ("id", "x_m", "y_m", "z_m", "existing", "n_stations", "stations")
+MARKER_TYPES = ("String", "Real", "Real", "Real", "Integer", "Integer", "String")
+#: ``stations.csv`` of a network plan: header and ``.csvt`` column types.
+STATION_COLUMNS = ("id", "x_m", "y_m", "z_m", "network_error_m", "meets_requirement",
+                   "n_markers", "tied_to", "error_relative_to")
+STATION_TYPES = ("String", "Real", "Real", "Real", "Real", "Integer", "Integer", "String",
+                 "String")
+
+
 def _write_markers_csv(doc: dict, path: Path) -> None:
+    """``markers.csv`` (header first), its ``.csvt`` and, with a CRS, its ``.prj``."""
     with path.open("w", newline="") as fh:
         w = csv.writer(fh)
-        w.writerow(["# markerplan plan markers; " + doc["frame"]])
-        w.writerow(["id", "x_m", "y_m", "z_m", "existing", "n_stations", "stations"])
+        w.writerow(MARKER_COLUMNS)
         for m in doc["markers"]:
             w.writerow([m["id"], f"{m['x_m']:.3f}", f"{m['y_m']:.3f}", f"{m['z_m']:.3f}",
                         int(m["existing"]), len(m["stations"]), " ".join(m["stations"])])
+    write_gis_sidecars(path, MARKER_TYPES, doc["site"]["crs_wkt"])
 
 
 def _write_stations_csv(doc: dict, path: Path) -> None:
-    ref = doc["network"]["datum"]["reference_station"]
+    """Network mode's ``stations.csv`` (header first; ``error_relative_to`` names the datum),
+    its ``.csvt`` and, with a CRS, its ``.prj``."""
+    datum = f"station {doc['network']['datum']['reference_station']}"
     with path.open("w", newline="") as fh:
         w = csv.writer(fh)
-        w.writerow([f"# markerplan plan stations, network mode (datum: station {ref}); "
-                    + doc["frame"]])
-        w.writerow(["id", "x_m", "y_m", "z_m", "network_error_m", "meets_requirement",
-                    "n_markers", "tied_to"])
+        w.writerow(STATION_COLUMNS)
         for s in doc["stations"]:
             err = s["predicted_error_m"]
             w.writerow([s["id"], f"{s['x_m']:.3f}", f"{s['y_m']:.3f}", f"{s['z_m']:.3f}",
                         "inf" if err is None else f"{err:.4f}", int(s["meets_requirement"]),
-                        s["n_markers"], " ".join(f"{k}:{v}" for k, v in s["tied_to"].items())])
+                        s["n_markers"], " ".join(f"{k}:{v}" for k, v in s["tied_to"].items()),
+                        datum])
+    write_gis_sidecars(path, STATION_TYPES, doc["site"]["crs_wkt"])
 
 
 def _write_geojson(doc: dict, crs: str | None, path: Path) -> None:

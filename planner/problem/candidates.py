@@ -49,7 +49,7 @@ class Candidates:
         return len(self.ids)
 
 
-def load_polygons(path: str | Path, option: str = "--exclude") -> list[Polygon]:
+def load_polygons(path: str | Path, option: str = "`exclude_paths`") -> list[Polygon]:
     """Read polygons (site frame, metres) from a GeoJSON file.
 
     Accepts a FeatureCollection, a Feature or a bare geometry of type Polygon or MultiPolygon.
@@ -59,7 +59,8 @@ def load_polygons(path: str | Path, option: str = "--exclude") -> list[Polygon]:
     path : str or Path
         UTF-8 GeoJSON file.
     option : str
-        How messages name the input (``"--boundary"``, ``"--exclude"``).
+        How messages name the input (the argument, ``"`boundary_path`"`` or
+        ``"`exclude_paths`"``, which the CLI spells as its flags).
 
     Returns
     -------

@@ -111,7 +111,7 @@ def select_stations(available: list[str], wanted: tuple[str, ...] | None) -> lis
     """
     if wanted is None:
         return list(available)
-    return list(known_ids(wanted, available, "--station-ids", "station"))
+    return list(known_ids(wanted, available, "`station_ids`", "station"))
 
 
 def known_ids(wanted, available, option: str, what: str) -> tuple[str, ...]:
@@ -192,9 +192,9 @@ def load_inputs(site: str = "default", site_seed: int | None = None, dem_path=No
         :func:`planner.problem.candidates.load_polygons`), or a point outside the DEM or on nodata.
     """
     if dem_path is not None and stations_path is None:
-        raise ConfigError(f"--dem {dem_path} needs --stations: the preset's stations belong to "
-                          "its own terrain, not to this DEM; give --stations with the stations "
-                          "on this DEM")
+        raise ConfigError(f"`dem_path` {dem_path} needs `stations_path`: the preset's stations "
+                          "belong to its own terrain, not to this DEM; give `stations_path` with "
+                          "the stations on this DEM")
     preset = load_site(site, site_seed)
     if marker_radius_m is not None:
         preset = site_with_marker_radius(preset, marker_radius_m)
@@ -205,7 +205,7 @@ def load_inputs(site: str = "default", site_seed: int | None = None, dem_path=No
     boundary = np.asarray(preset.boundary_xy_m, float) if len(preset.boundary_xy_m) else None
     site_name, site_seed = site, preset.seed
     station_points = (None if stations_path is None
-                      else _read_points(stations_path, "--stations", MAX_STATIONS))
+                      else _read_points(stations_path, "`stations_path`", MAX_STATIONS))
     if dem_path is not None:
         window = None
         if sight_radius_m is not None and not reproject:
@@ -231,19 +231,20 @@ def load_inputs(site: str = "default", site_seed: int | None = None, dem_path=No
                                dem.height_at(preset.station_xy_m) + lidar_h])
         heading = np.asarray(preset.station_heading_rad, float)
     if boundary_path is not None:
-        boundary = _boundary_iv(_polygons_on_dem(load_polygons(boundary_path, "--boundary"),
+        boundary = _boundary_iv(_polygons_on_dem(load_polygons(boundary_path, "`boundary_path`"),
                                                  dem), boundary_path)
         sources["boundary"] = _absolute(boundary_path)
     exclusions = []
     for p in exclude_paths:
-        exclusions += _polygons_on_dem(load_polygons(p, "--exclude"), dem)
+        exclusions += _polygons_on_dem(load_polygons(p, "`exclude_paths`"), dem)
     if exclude_paths:
         sources["exclude"] = [_absolute(p) for p in exclude_paths]
     ex_ids, ex_xyz = [], np.zeros((0, 3))
     if existing == "as-built":
         if not as_built_ids:
-            raise InputFileError("--existing as-built: this input has no as-built layout (it is "
-                                 "dropped with --dem/--stations); give a markers CSV instead")
+            raise InputFileError("`existing` as-built: this input has no as-built layout (it is "
+                                 "dropped with `dem_path`/`stations_path`); give a markers CSV "
+                                 "instead")
         ex_ids, ex_xyz = list(as_built_ids), as_built_xyz.copy()
     elif existing is not None:
         ex_ids, ex_xyz = read_markers(existing, dem, float(preset.marker_radius_m))
@@ -301,7 +302,7 @@ def _read_site_dem(path, reproject: bool, window) -> tuple[object, tuple | None]
     refused whatever part is read, e.g. for its CRS); the whole file is then read so that the
     one-line error names the real cause (the station, the CRS) rather than the window.
     """
-    what = f"--dem {path}"
+    what = f"`dem_path` {path}"
     if window is not None:
         try:
             return read_dem(path, what=what, reproject=reproject, window=window), window
@@ -346,12 +347,12 @@ def default_boundary(dem, marker_radius_m: float) -> np.ndarray | None:
 def _boundary_iv(polygons: list, path) -> np.ndarray:
     """The corners (k, 2) of the one hole-free polygon a ``--boundary`` file must hold."""
     if len(polygons) != 1:
-        raise InputFileError(f"--boundary {path}: holds {len(polygons)} polygons, the site "
+        raise InputFileError(f"`boundary_path` {path}: holds {len(polygons)} polygons, the site "
                              "boundary is one; give a single Polygon (exclude areas with "
-                             "--exclude)")
+                             "`exclude_paths`)")
     if len(polygons[0].interiors):
-        raise InputFileError(f"--boundary {path}: the polygon has holes; give its outline only "
-                             "and the holes with --exclude")
+        raise InputFileError(f"`boundary_path` {path}: the polygon has holes; give its outline "
+                             "only and the holes with `exclude_paths`")
     return np.asarray(polygons[0].exterior.coords, float)
 
 
@@ -373,7 +374,8 @@ def _read_points(path, option: str, max_points: int = MAX_MARKERS) -> list[dict]
     path : str or Path
         ``.geojson`` / ``.json``: GeoJSON; anything else: CSV with a header row.
     option : str
-        How messages name the input (``"--stations"``, ``"--existing"``, ``"INPUT"``).
+        How messages name the input: the argument (``"`stations_path`"``, ``"`existing`"``,
+        which the CLI spells as its flags) or ``"INPUT"``.
     max_points : int
         Most points accepted.
 
@@ -474,7 +476,7 @@ def read_stations(path, dem, lidar_height_m: float) -> tuple[list[str], np.ndarr
         Unreadable or malformed file (see :func:`_read_points`), or a station outside the DEM
         or on nodata.
     """
-    return place_stations(_read_points(path, "--stations", MAX_STATIONS), dem, lidar_height_m)
+    return place_stations(_read_points(path, "`stations_path`", MAX_STATIONS), dem, lidar_height_m)
 
 
 def place_stations(points: list[dict], dem, lidar_height_m: float
@@ -486,7 +488,7 @@ def place_stations(points: list[dict], dem, lidar_height_m: float
     return ids, xyz, heading
 
 
-def read_markers(path, dem, marker_radius_m: float, option: str = "--existing"
+def read_markers(path, dem, marker_radius_m: float, option: str = "`existing`"
                  ) -> tuple[list[str], np.ndarray]:
     """Markers CSV/GeoJSON (``id, x_m, y_m[, z_m]``) -> ids and centres (m, 3) m.
 

@@ -63,7 +63,7 @@ def read_visibility_table(path: str | Path, station_ids, station_xyz) -> PlanPro
         distance, inconsistent site coordinates, a repeated pair, no rows or more than
         :data:`MAX_ROWS` — naming the file, the line and the fix.
     """
-    where = f"--visibility {path}"
+    where = f"`visibility_path` {path}"
     header, cells = read_csv(path, where, required=REQUIRED,
                              fix=f"required: {', '.join(REQUIRED)}")
     if not cells:

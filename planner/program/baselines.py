@@ -226,7 +226,7 @@ def greedy_network(problem: PlanProblem, config, net=None, max_steps: int = 5000
     requirement; in redundant mode then also of the station that fails worst after losing one
     marker. ``batch > 1`` adds, per step, a site for each of the ``batch`` first untied (then
     worst failing) stations (for large networks: fewer exact evaluations). The information and
-    covariance grow with each added site (:class:`planner.accuracy.network.GrowingCovariance`:
+    covariance grow with each added site (:class:`planner.accuracy.growing.GrowingCovariance`:
     a low-rank update per site, not a fresh inverse).
 
     ``deadline``: a :func:`time.perf_counter` value after which no further step starts (the
@@ -240,7 +240,8 @@ def greedy_network(problem: PlanProblem, config, net=None, max_steps: int = 5000
         marker, after ``max_steps`` steps, or at ``deadline``; the message says how many
         stations are untied, or which fail.
     """
-    from planner.accuracy.network import GrowingCovariance, network_model
+    from planner.accuracy.growing import GrowingCovariance
+    from planner.accuracy.network import network_model
 
     net = net or network_model(problem, config)
     req = config.requirement_m
@@ -342,7 +343,7 @@ def _tying_site(net, layout, available: np.ndarray, k: int) -> int | None:
     Parameters
     ----------
     net : planner.accuracy.network.NetworkModel
-    layout : planner.accuracy.network.GrowingCovariance
+    layout : planner.accuracy.growing.GrowingCovariance
     available : (n,) bool
         Sites that may be added.
     k : int

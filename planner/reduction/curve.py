@@ -1,28 +1,19 @@
-"""What-if marker reduction: how few of a layout's markers still meet the requirement.
+"""What-if marker reduction: the trade-off curve, how few of a layout's markers still meet the
+requirement.
 
 For a :class:`~planner.problem.usability.PlanProblem` whose candidate sites are the markers that may
-be kept (a layout, or with ``--free`` every candidate site), three studies:
-
-- :func:`tradeoff_curve`: for every count ``k``, the ``k`` markers that minimise the **worst
-  station's** predicted error (:mod:`planner.accuracy.checks`), proven by integer programming;
-- :func:`drop_order`: remove one marker at a time, each time the one whose loss hurts least;
-- :func:`marker_losses`: for every marker, the layout without it (robustness).
+be kept (a layout, or with ``--free`` every candidate site), :func:`tradeoff_curve` finds for
+every count ``k`` the ``k`` markers that minimise the **worst station's** predicted error
+(:mod:`planner.accuracy.checks`), proven by integer programming. The drop order and per-marker
+losses are :mod:`planner.reduction.losses`.
 
 Exact minimax by bisection on one model
 ---------------------------------------
 A station's predicted error never grows when a marker is added, so the worst-station error is
 monotone in the subset and "some ``k``-subset has worst error <= eps" is monotone in ``eps``.
-The planner's integer program (:func:`planner.program.build_model`: count and sector rows, the
-necessary information rows, lazily added accuracy cuts) with the requirement set to ``eps`` and a
-row ``sum_j x_j = k`` answers exactly that question. The least feasible ``eps`` is found by
-bisection, ending with a test just below the best subset found (``rel_tol``), which proves it
-optimal. One model is built and re-used: each query only changes row bounds —
-
-- the budget row: ``k <= sum_j x_j <= k`` (padding never hurts, so "= k" equals "<= k");
-- the information rows: ``sum_j (3 / sigma_sj^2) x_j >= chi2_3(0.95) / eps^2``;
-- each accuracy cut says "station ``s`` fails on the grown set ``T'``", i.e. it is valid for every
-  ``eps`` below the error of ``T'`` (its *threshold*): it is switched on (lower bound 1) for such
-  ``eps`` and off (lower bound 0, always satisfied) otherwise; cuts accumulate across queries.
+One integer program answers exactly that question (:mod:`planner.reduction.minimax`). The least
+feasible ``eps`` is found by bisection, ending with a test just below the best subset found
+(``rel_tol``), which proves it optimal.
 
 Each count starts from an incumbent (the best one-marker drop of the previous count's subset,
 or a subset the caller knows) and from the lower bound "no subset beats keeping every site"
@@ -38,30 +29,23 @@ With ``config.network`` the errors are the network's relative to the datum
 (:mod:`planner.accuracy.network`) and a count's worst error is the worst of its stations and its
 kept markers, as ``plan --network`` judges a layout. Each question "is there a ``k``-subset with
 everything <= ``eps``?" is then the planner's own network program
-(:func:`planner.program.plan_sites`, requirement ``eps``, budget row ``= k``): see
-:class:`_NetworkMinimax`. A kept marker's own error counts, so the curve need not be monotone.
+(:func:`planner.program.loop.plan_sites`, requirement ``eps``, budget row ``= k``): see
+:class:`~planner.reduction.minimax.NetworkMinimax`. A kept marker's own error counts, so the
+curve need not be monotone.
 """
 
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 
-from markerplan.errors import ConfigError, InfeasiblePlanError, PlanTimeLimitError
-from planner.accuracy.checks import LayoutCheck, diagnose, evaluate_layout, station_infos
-from planner.accuracy.network import network_model
+from markerplan.errors import ConfigError, InfeasiblePlanError
+from planner.accuracy.checks import diagnose
 from planner.problem.usability import PlanProblem, directions_ok
-from planner.program import (
-    Model,
-    RowKind,
-    accuracy_cuts,
-    build_model,
-    plan_sites,
-    solve,
-    with_tightening_rows,
-)
+from planner.reduction.losses import check_worst, reduction_iv, worst_marker
+from planner.reduction.minimax import MinimaxModel, NetworkMinimax
 
 #: Final bisection step: a subset is proven optimal when nothing is feasible this far below it.
 REL_TOL = 1e-9
@@ -126,7 +110,7 @@ class CurvePoint:
     @property
     def worst_marker_error_m(self) -> float | None:
         """Network mode: worst kept marker's error, m (``None`` otherwise)."""
-        return _worst_marker(self.marker_error_m)
+        return worst_marker(self.marker_error_m)
 
     @property
     def mean_error_m(self) -> float:
@@ -135,21 +119,6 @@ class CurvePoint:
     @property
     def meets_requirement(self) -> bool:
         return bool(self.ok.all()) and self.markers_ok
-
-
-def _worst_marker(marker_error_m) -> float | None:
-    """Largest error among the selected markers (nan: not selected); ``None`` if none."""
-    if marker_error_m is None or np.isnan(marker_error_m).all():
-        return None
-    return float(np.nanmax(marker_error_m))
-
-
-def check_worst(check: LayoutCheck) -> float:
-    """Worst error of a :class:`~planner.accuracy.checks.LayoutCheck`, m: the worst station,
-    and in network mode also the worst selected marker (both relative to the datum)."""
-    markers = _worst_marker(check.marker_error_m)
-    worst = float(check.error_m.max())
-    return worst if markers is None else max(worst, markers)
 
 
 @dataclass(frozen=True)
@@ -196,276 +165,6 @@ class Curve:
                 return p
         ks = [p.k for p in self.points] or [0]
         raise ConfigError(f"k must be one of the curve's counts {min(ks)}..{max(ks)}, got {k}")
-
-
-@dataclass(frozen=True)
-class DropStep:
-    """One step of the drop order.
-
-    Attributes
-    ----------
-    k : int
-        Markers left after the step.
-    removed : int
-        Candidate-site index of the marker removed.
-    check : LayoutCheck
-        Per-station count, sectors, predicted error and verdict of the remaining layout.
-    selected : (n,) bool
-        The remaining layout.
-    """
-
-    k: int
-    removed: int
-    check: LayoutCheck
-    selected: np.ndarray = field(repr=False)
-
-    @property
-    def worst_error_m(self) -> float:
-        """As :attr:`CurvePoint.worst_error_m`."""
-        return check_worst(self.check)
-
-    @property
-    def mean_error_m(self) -> float:
-        return float(self.check.error_m.mean())
-
-
-@dataclass(frozen=True)
-class MarkerLoss:
-    """The full layout without one marker.
-
-    Attributes
-    ----------
-    marker : int
-        Candidate-site index of the marker lost.
-    check : LayoutCheck
-        The layout without it.
-    failing : tuple of int
-        Stations that then fail (count, directions or accuracy).
-    """
-
-    marker: int
-    check: LayoutCheck
-    failing: tuple[int, ...]
-
-    @property
-    def worst_error_m(self) -> float:
-        """As :attr:`CurvePoint.worst_error_m`."""
-        return check_worst(self.check)
-
-
-def _reduction_iv(problem: PlanProblem, config, layout: np.ndarray) -> np.ndarray:
-    layout = np.asarray(layout, dtype=bool)
-    if layout.shape != (problem.n_sites,):
-        raise ConfigError(f"`layout` must have shape ({problem.n_sites},), got {layout.shape}")
-    if not layout.any():
-        raise ConfigError("`layout` must hold at least one marker, got none")
-    if config.redundant:
-        raise ConfigError("reduction studies do not support `redundant = true`; set it to false "
-                          "(robustness to losing one marker is reported per marker instead)")
-    if config.budget is not None:
-        raise ConfigError(f"reduction studies set the marker count themselves; leave `budget` "
-                          f"unset, got {config.budget}")
-    if np.any(problem.site_existing):
-        raise ConfigError("reduction studies may drop any marker; the problem must mark no site "
-                          "as existing (fixed)")
-    return layout
-
-
-class _MinimaxModel:
-    """One integer program answering "is there a k-subset with every station <= eps?"
-    (known-control mode)."""
-
-    #: The worst error never grows when a marker is added (so W*(k+1) bounds W*(k) below).
-    monotone = True
-    #: Bisect on eps (cheap queries); else descend from the incumbent, each query asking for
-    #: a strictly better subset, until one is infeasible.
-    bisect = True
-
-    def __init__(self, problem: PlanProblem, config, deadline: float) -> None:
-        self.problem = problem
-        self.config = config
-        self.deadline = deadline
-        self.infos = station_infos(problem, config)
-        self.net = None
-        base = build_model(problem, config)
-        nx = base.var_site.size
-        self.nx = nx
-        self.model: Model = base.with_rows(base.site_row(base.var_site), [0.0], [float(nx)],
-                                           [RowKind("budget")])
-        self.budget_row = self.model.A.shape[0] - 1
-        self.info_rows = np.array([i for i, k in enumerate(self.model.row_kind)
-                                   if k.family == "info"], dtype=np.int64)
-        self.cut_rows: list[int] = []
-        self.cut_threshold: list[float] = []
-        self.solve_time_s = 0.0
-        self.solve_cap_s = np.inf  # longest single solve, s
-
-    @property
-    def n_cuts(self) -> int:
-        """Accuracy cuts generated so far."""
-        return len(self.cut_rows)
-
-    def check(self, selected: np.ndarray) -> LayoutCheck:
-        """Count, directions and predicted errors of a subset."""
-        return evaluate_layout(self.problem, selected, self.config, self.infos, net=self.net)
-
-    def worst(self, selected: np.ndarray) -> float:
-        """Worst predicted error of a subset, m (:func:`check_worst`)."""
-        return float(max(info.error(info.sites[selected[info.sites]]) for info in self.infos))
-
-    def floor(self, allowed: np.ndarray) -> float:
-        """No subset of ``allowed`` has a worst error below this, m."""
-        return self.worst(allowed)
-
-    def _bounded(self, k: int | None, eps: float, count_objective: bool) -> Model:
-        lb, ub = self.model.row_lb.copy(), self.model.row_ub.copy()
-        if k is not None:
-            lb[self.budget_row] = ub[self.budget_row] = float(min(k, self.nx))
-        lb[self.info_rows] = (self.config.requirement_m / eps) ** 2 if np.isfinite(eps) else 0.0
-        if self.cut_rows:
-            lb[self.cut_rows] = np.where(np.asarray(self.cut_threshold) > eps, 1.0, 0.0)
-        c = np.zeros(self.model.n_vars)
-        if count_objective:
-            c[: self.nx] = 1.0
-        return replace(self.model, row_lb=lb, row_ub=ub, c=c)
-
-    def _solve(self, model: Model):
-        remaining = min(self.deadline - time.perf_counter(), self.solve_cap_s)
-        if remaining <= 0:
-            return None
-        sol = solve(model, remaining, 0.0)
-        self.solve_time_s += sol.solve_time_s
-        return sol
-
-    def min_count_directions(self) -> int | None:
-        """Fewest markers meeting every count and sector row (accuracy ignored); ``None`` when
-        infeasible."""
-        sol = self._solve(self._bounded(None, np.inf, count_objective=True))
-        if sol is None or sol.status not in ("optimal", "infeasible"):
-            raise PlanTimeLimitError(
-                "time limit reached before the fewest markers meeting the direction rows were "
-                "proven; raise --time-limit")
-        return None if sol.selected is None else int(sol.selected.sum())
-
-    def query(self, k: int, eps: float, statuses: list[str]):
-        """A ``k``-subset with every station error <= ``eps``, or ``None``.
-
-        Returns ``(selected, proven)``: ``selected`` is ``None`` when infeasible; ``proven`` is
-        False when a solve hit its time limit without an answer.
-        """
-        cfg = self.config.replace(requirement_m=eps) if np.isfinite(eps) else None
-        while True:
-            sol = self._solve(self._bounded(k, eps, count_objective=False))
-            if sol is None:
-                statuses.append("time_limit")
-                return None, False
-            statuses.append(sol.status)
-            if sol.selected is None:
-                return None, sol.status == "infeasible"
-            if cfg is None:
-                return sol.selected, True
-            rows, _, kinds = accuracy_cuts(self.problem, self.model, sol.selected, cfg,
-                                           self.infos)
-            if rows is None:
-                return sol.selected, True
-            # accuracy_cuts found each grown set failing at eps: its threshold is above eps
-            # even where a re-summed error rounds differently
-            thresholds = [max(self._threshold(rows[r:r + 1], kinds[r]), np.nextafter(eps, np.inf))
-                          for r in range(rows.shape[0])]
-            start = self.model.A.shape[0]
-            self.model = self.model.with_rows(rows, np.ones(len(kinds)),
-                                              np.full(len(kinds), np.inf), kinds)
-            self.cut_rows.extend(range(start, start + len(kinds)))
-            self.cut_threshold.extend(thresholds)
-
-    def _threshold(self, row, kind: RowKind) -> float:
-        """Error of the failing set a cut row excludes: the cut is valid for eps below it."""
-        info = self.infos[kind.station]
-        support = self.model.var_site[row.indices[row.indices < self.nx]]
-        return info.error(np.setdiff1d(info.sites, support))
-
-    def pad(self, selected: np.ndarray, k: int, pool: np.ndarray) -> np.ndarray:
-        """Add unused ``pool`` sites (in order) until ``k`` are selected (never hurts a
-        station)."""
-        out = selected.copy()
-        for j in np.flatnonzero(pool & ~out)[: max(0, k - int(out.sum()))]:
-            out[j] = True
-        return out
-
-
-#: Requirement standing for "none" when the network oracle is asked for any k-subset, m (as
-#: the planner's own "no requirement").
-_NO_REQUIREMENT_M = 1e9
-
-
-class _NetworkMinimax(_MinimaxModel):
-    """Network mode: "is there a k-subset with every station and every kept marker <= eps,
-    relative to the datum?", answered by the planner's own network program
-    (:func:`planner.program.plan_sites`, its network accuracy cuts) with the requirement set to
-    eps and the budget row bounded to exactly ``k`` on both sides.
-
-    The known-control model's count and sector rows still answer the direction questions
-    (:meth:`min_count_directions`). A kept marker's own error counts, so adding a marker may
-    raise the worst error: the curve need not be monotone and no count's optimum bounds
-    another's (:attr:`monotone` is False). A query is a whole cut loop, and one near the
-    optimum that proves infeasibility costs the most, so the search descends from the
-    incumbent instead of bisecting (:attr:`bisect` is False): on the default site's as-built
-    layout that takes less than half the queries.
-    """
-
-    monotone = False
-    bisect = False
-
-    def __init__(self, problem: PlanProblem, config, deadline: float) -> None:
-        super().__init__(problem, config, deadline)
-        self.net = network_model(problem, config)
-        self._n_cuts = 0
-
-    @property
-    def n_cuts(self) -> int:
-        return self._n_cuts
-
-    def worst(self, selected: np.ndarray) -> float:
-        return check_worst(self.check(selected))
-
-    def floor(self, allowed: np.ndarray) -> float:
-        """The stations' worst error with every allowed site (a marker's own error may make a
-        larger set worse, never a station's)."""
-        return float(self.net.station_errors(allowed).max())
-
-    def _exact_model(self, k: int, cfg) -> Model:
-        """The planner's model for ``cfg`` with ``sum x = k`` and its tightening rows."""
-        model = build_model(self.problem, cfg)
-        lb = model.row_lb.copy()
-        lb[[i for i, r in enumerate(model.row_kind) if r.family == "budget"]] = float(k)
-        return with_tightening_rows(self.problem, replace(model, row_lb=lb), cfg)
-
-    def query(self, k: int, eps: float, statuses: list[str]):
-        """As :meth:`_MinimaxModel.query`. ``plan_sites`` raises when no layout exists (proven
-        infeasible) or :class:`~markerplan.errors.PlanTimeLimitError` when its time limit ends
-        the search (not proven)."""
-        limit = min(self.deadline - time.perf_counter(), self.solve_cap_s)
-        if limit <= 0:
-            statuses.append("time_limit")
-            return None, False
-        k = min(k, self.nx)
-        cfg = self.config.replace(
-            requirement_m=float(eps) if np.isfinite(eps) else _NO_REQUIREMENT_M, budget=k,
-            time_limit_s=float(limit))
-        t = time.perf_counter()
-        try:
-            result = plan_sites(self.problem, cfg, self._exact_model(k, cfg))
-        except InfeasiblePlanError as exc:
-            self.solve_time_s += time.perf_counter() - t
-            proven = not isinstance(exc, PlanTimeLimitError)
-            statuses.append("infeasible" if proven else "time_limit")
-            return None, proven
-        self.solve_time_s += result.solve_time_s
-        self._n_cuts += result.n_cuts
-        statuses.append(result.status)
-        if int(result.selected.sum()) != k:  # a time-limited incumbent of another size
-            return None, False
-        return result.selected, True
 
 
 def tradeoff_curve(problem: PlanProblem, config, k_max: int | None = None,
@@ -516,10 +215,10 @@ def tradeoff_curve(problem: PlanProblem, config, k_max: int | None = None,
     InfeasiblePlanError
         No subset meets the count and direction rows, naming the stations and why.
     """
-    _reduction_iv(problem, config, np.ones(problem.n_sites, bool))
+    reduction_iv(problem, config, np.ones(problem.n_sites, bool))
     limit = config.time_limit_s if time_limit_s is None else float(time_limit_s)
     deadline = time.perf_counter() + limit
-    mm = (_NetworkMinimax if config.network else _MinimaxModel)(problem, config, deadline)
+    mm = (NetworkMinimax if config.network else MinimaxModel)(problem, config, deadline)
     if not mm.bisect:  # descent: a point is proven optimal (to REL_TOL) or not at all
         tol_m, exact = np.inf, True
     k_dir = mm.min_count_directions()
@@ -583,7 +282,7 @@ def tradeoff_curve(problem: PlanProblem, config, k_max: int | None = None,
                  n_cuts=mm.n_cuts, solve_time_s=mm.solve_time_s, complete=complete)
 
 
-def _monotone(mm: _MinimaxModel, points: list[CurvePoint], allowed: np.ndarray
+def _monotone(mm: MinimaxModel, points: list[CurvePoint], allowed: np.ndarray
               ) -> list[CurvePoint]:
     """Adding markers never hurts a station: where a smaller count's subset beats a larger
     count's (only possible when the larger one is not proven optimal, or in network mode, where
@@ -634,14 +333,14 @@ def _minimal(points: list[CurvePoint], k_feasible: int | None, k_dir: int,
         p.proven or p.lower_bound_m >= requirement_m for p in below)
 
 
-def _best_of(mm: _MinimaxModel, subsets) -> np.ndarray | None:
+def _best_of(mm: MinimaxModel, subsets) -> np.ndarray | None:
     """The subset with the lowest worst-station error among those meeting the direction rows."""
     ok = [np.asarray(x, bool) for x in subsets
           if x is not None and directions_ok(mm.problem, np.asarray(x, bool), mm.config).all()]
     return min(ok, key=lambda x: mm.worst(x)) if ok else None
 
 
-def _drop_one(mm: _MinimaxModel, selected: np.ndarray | None, kept: np.ndarray
+def _drop_one(mm: MinimaxModel, selected: np.ndarray | None, kept: np.ndarray
               ) -> np.ndarray | None:
     """The best subset one marker smaller that keeps every count and direction row, or None."""
     if selected is None:
@@ -657,7 +356,7 @@ def _drop_one(mm: _MinimaxModel, selected: np.ndarray | None, kept: np.ndarray
     return best
 
 
-def _minimax(mm: _MinimaxModel, k: int, incumbent: np.ndarray | None, lo: float,
+def _minimax(mm: MinimaxModel, k: int, incumbent: np.ndarray | None, lo: float,
              best_above: float | None, tol_m: float, exact: bool, statuses: list[str]
              ) -> tuple[np.ndarray | None, float, bool]:
     """Bisection for one k: (best subset, proven lower bound, proven optimal).
@@ -736,96 +435,3 @@ def _k_range_iv(k_min: int, k_max: int, k_dir: int, n: int) -> None:
     if not k_dir <= k_min <= k_max:
         raise ConfigError(f"`k_min` must be in {k_dir}..{k_max} (below {k_dir} markers no subset "
                           f"meets the direction rows), got {k_min}")
-
-
-def drop_order(problem: PlanProblem, config, layout: np.ndarray) -> list[DropStep]:
-    """Remove markers one at a time, each time the one whose loss hurts least.
-
-    Markers in ``config.existing`` are kept; markers in ``config.forbidden`` are removed before
-    the first step. At every step each remaining marker is tried (exact, by enumeration); the
-    removal chosen
-    keeps every station's count and directions if possible, then gives the lowest worst-station
-    error, then the lowest mean error, then the lowest index. Stops when every removal would
-    break a station's count or directions. A nested sequence: compare it with
-    :func:`tradeoff_curve`, whose subsets need not be nested.
-
-    Parameters
-    ----------
-    problem : PlanProblem
-    config : PlanConfig
-    layout : (n,) bool
-        The markers in the field.
-
-    Returns
-    -------
-    steps : list of DropStep
-    """
-    current = _reduction_iv(problem, config, layout) \
-        & ~problem.site_mask(config.forbidden, "forbidden")
-    kept = problem.site_mask(config.existing, "existing")
-    check = layout_checker(problem, config)
-    steps = []
-    while (current & ~kept).any():
-        best = None
-        for m in np.flatnonzero(current & ~kept):
-            trial = current.copy()
-            trial[m] = False
-            chk = check(trial)
-            directions = bool(np.all((chk.count >= config.min_markers)
-                                     & (chk.sectors >= config.min_sectors)))
-            key = (not directions, check_worst(chk), float(chk.error_m.mean()), int(m))
-            if best is None or key < best[0]:
-                best = (key, m, trial, chk)
-        if best[0][0]:  # every removal breaks directions somewhere
-            break
-        _, m, current, chk = best
-        steps.append(DropStep(k=int(current.sum()), removed=int(m), check=chk,
-                              selected=current.copy()))
-    return steps
-
-
-def marker_losses(problem: PlanProblem, config, layout: np.ndarray) -> list[MarkerLoss]:
-    """For every marker of ``layout``: the layout without it and the stations that then fail.
-
-    Parameters
-    ----------
-    problem : PlanProblem
-    config : PlanConfig
-    layout : (n,) bool
-
-    Returns
-    -------
-    losses : list of MarkerLoss
-        In site order.
-    """
-    layout = _reduction_iv(problem, config, layout)
-    check = layout_checker(problem, config)
-    out = []
-    for m in np.flatnonzero(layout):
-        trial = layout.copy()
-        trial[m] = False
-        chk = check(trial)
-        out.append(MarkerLoss(marker=int(m), check=chk,
-                              failing=tuple(int(s) for s in np.flatnonzero(~chk.ok))))
-    return out
-
-
-def layout_checker(problem: PlanProblem, config):
-    """``selected -> LayoutCheck`` for one problem (:func:`evaluate_layout` with its caches;
-    in network mode the network's accuracy relative to the datum)."""
-    infos = station_infos(problem, config)
-    net = network_model(problem, config) if config.network else None
-    return lambda selected: evaluate_layout(problem, selected, config, infos, net=net)
-
-
-def failure_reason(check, s: int, config) -> str:
-    """Why station ``s`` fails in a :class:`~planner.accuracy.checks.LayoutCheck` ("" when it
-    passes)."""
-    why = []
-    if check.count[s] < config.min_markers:
-        why.append(f"{int(check.count[s])} usable markers < {config.min_markers}")
-    if check.sectors[s] < config.min_sectors:
-        why.append(f"{int(check.sectors[s])} directions < {config.min_sectors}")
-    if check.error_m[s] > config.requirement_m:
-        why.append(f"error {check.error_m[s]:.4f} m > {config.requirement_m:g} m")
-    return "; ".join(why)

@@ -34,7 +34,7 @@ import numpy as np
 
 from markerplan.provenance import provenance
 from markerplan.writing import write_csv
-from planner.reduction.curve import check_worst, failure_reason
+from planner.reduction.losses import check_worst, failure_reason
 
 SCHEMA = "markerplan-reduce"
 SCHEMA_VERSION = 1
@@ -73,7 +73,7 @@ def _failing(prob, check, cfg) -> dict[str, str]:
 
 def _network(prob, cfg) -> dict:
     """The datum of a network-mode study (as ``plan.json``'s ``network.datum``)."""
-    from pipeline.network.adjustment import POSE_PARAMETERS
+    from pipeline.network.observations import POSE_PARAMETERS
     from planner.accuracy.network import network_model
 
     ref = prob.station_ids[network_model(prob, cfg).reference]

@@ -23,14 +23,8 @@ from planner.outputs import plan_file
 from planner.problem.inputs import load_inputs, read_markers
 from planner.problem.sight import sight_problem
 from planner.problem.usability import PlanProblem
-from planner.reduction.curve import (
-    Curve,
-    DropStep,
-    MarkerLoss,
-    drop_order,
-    marker_losses,
-    tradeoff_curve,
-)
+from planner.reduction.curve import Curve, tradeoff_curve
+from planner.reduction.losses import DropStep, MarkerLoss, drop_order, marker_losses
 from planner.run import build_problem
 
 AS_BUILT = "as-built"

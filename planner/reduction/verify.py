@@ -25,7 +25,7 @@ def _counts_iv(study, ks) -> tuple[int, ...]:
     on_curve = [p.k for p in study.curve.points]
     bad = [k for k in ks if k not in on_curve]
     if bad:
-        raise ConfigError(f"--verify-k must be counts on the curve ({min(on_curve)}.."
+        raise ConfigError(f"`verify_k` must be counts on the curve ({min(on_curve)}.."
                           f"{max(on_curve)}), got {', '.join(map(str, bad))}")
     return tuple(dict.fromkeys(ks))
 

@@ -7,7 +7,7 @@ Two sources:
 
 - a **summary CSV** with columns ``position`` (a name), ``distances_m`` (the distances,
   separated by spaces, metres) and ``mean_abs_edge_residual_m`` (metres); the published
-  experiment's is shipped as ``visibility/data/field_experiment_residuals.csv``;
+  experiment's is shipped as ``planner/studies/data/field_experiment_residuals.csv``;
 - a **marker table** written by ``markerplan process`` of real scans, with the reference CSV
   (``id,x_m,y_m,z_m``) it was evaluated against: accepted markers matched to a reference id
   give the distances, and their edges the residual (:func:`positions_from_marker_table`).
@@ -139,7 +139,8 @@ def positions_from_marker_table(table_path: str | Path, reference_path: str | Pa
         if len(rows) < MIN_MARKERS:
             raise DataError(f"{what}: station {station!r} has {len(rows)} accepted marker(s) "
                             f"matched to the reference; calibration needs {MIN_MARKERS} (process "
-                            "with --reference so markers carry reference ids)")
+                            "against the reference coordinates so markers carry reference "
+                            "ids)")
         ids = [r["marker_id"] for r in rows]
         est = np.array([[_cell(r, c, what) for c in ("x_m", "y_m", "z_m")] for r in rows])
         edges = edge_residuals(ids, est, np.array([ref_of[i] for i in ids]))

@@ -33,7 +33,7 @@ from planner.problem.usability import PlanProblem
 from planner.program import plan_sites
 from planner.program.baselines import greedy_network, regular_grid
 
-#: The studies, by letter (as in issue 12's item 4 and the script's ``--studies``).
+#: The studies, by letter (as the script's ``--studies`` names them).
 STUDIES = {"a": "known control vs network", "b": "error vs distance from the reference",
            "c": "trade-off curve", "d": "heading prior", "e": "baselines"}
 #: The key of each study's result in :func:`run_studies`'s document.

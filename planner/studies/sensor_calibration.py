@@ -45,7 +45,7 @@ from markerplan.errors import ConfigError, DataError
 from pipeline.evaluation import Reference
 from pipeline.process import process_station
 from pipeline.range_study import marker_layout
-from pipeline.stages import build_config
+from pipeline.survey import ProcessingSettings, processing_config
 from planner.studies.field_summary import FieldPosition
 from planner.studies.range_experiment import ground_dem
 from visibility.sensor_profile import SensorProfile, parameter_names
@@ -133,15 +133,15 @@ def parse_setting(text: str) -> tuple[str, float]:
     name, _, value = text.partition("=")
     name = name.strip()
     if name not in parameter_names():
-        raise ConfigError(f"--fix {text!r}: {name!r} is not a sensor-profile parameter; "
+        raise ConfigError(f"`fixed` {text!r}: {name!r} is not a sensor-profile parameter; "
                           f"parameters are {', '.join(parameter_names())}")
     try:
         number = float(value)
     except ValueError:
-        raise ConfigError(f"--fix {text!r}: expected NAME=VALUE with a number, e.g. "
+        raise ConfigError(f"`fixed` {text!r}: expected NAME=VALUE with a number, e.g. "
                           "reference.aim_sigma_m=0.003") from None
     if not np.isfinite(number):
-        raise ConfigError(f"--fix {text!r}: the value must be a finite number")
+        raise ConfigError(f"`fixed` {text!r}: the value must be a finite number")
     return name, number
 
 
@@ -251,7 +251,8 @@ def simulate_position(profile: SensorProfile, position: FieldPosition, index: in
     surveyed = profile.reference.survey(centres, radius, np.random.default_rng(seeds[1]))
     reference = Reference(tuple(ids), surveyed, scan.station_id, "simulated total station",
                           radius)
-    result = process_station(scan, build_config({"fit": {"radius_m": radius}}), reference)
+    result = process_station(scan, processing_config(ProcessingSettings(marker_radius_m=radius)),
+                             reference)
     stat = result.summary.get("mean_abs_edge_residual_m")
     return {"position": position.name, "replicate": replicate,
             "statistic_m": float("nan") if stat is None else float(stat),
@@ -322,7 +323,7 @@ def calibrate(positions: Sequence[FieldPosition], base: SensorProfile,
 
 def _calibrate_iv(positions, free, settings) -> None:
     if not 1 <= len(free) <= 2:
-        raise ConfigError(f"give one or two free parameters (--fit), got {len(free)}")
+        raise ConfigError(f"give one or two free parameters (`free`), got {len(free)}")
     names = [f.name for f in free]
     if len(set(names)) != len(names):
         raise ConfigError(f"free parameter {names[0]!r} is given twice; give each once")

@@ -8,8 +8,9 @@ Per station:
    tile (the station ± the sensor's maximum range) with only the planned markers, at the
    planned station pose, with the sensor and turntable errors
    of a sensor profile (:mod:`visibility.sensor_profile`, ``calibrated`` by default);
-2. ``pipeline.process.process_station`` — the published chain; detections are matched to the
-   planned markers projected into the station frame with the *planned* (nominal) pose;
+2. ``pipeline.process.process_station`` — the published chain, configured for the plan's marker
+   radius (:func:`pipeline.survey.processing_config`); detections are matched to the planned
+   markers projected into the station frame with the *planned* (nominal) pose;
 3. weighted least squares (:func:`planner.accuracy.known_control.fit_pose`, 4 DoF: x, y, z, heading;
 roll and
    pitch are known, as from the inclinometer) from the accepted, matched markers, each weighted
@@ -40,7 +41,8 @@ from pipeline.evaluation import Reference
 from pipeline.process import process_station
 from pipeline.rig import MountingOffsets, station_to_site_matrix
 from pipeline.scan_format import StationScan
-from pipeline.stages import build_config
+from pipeline.stages import ProcessConfig
+from pipeline.survey import ProcessingSettings, processing_config
 from planner import distributed
 from planner.accuracy import known_control
 from planner.distributed import Executor
@@ -133,14 +135,15 @@ def verify_plans(plans: Sequence[SurveyPlan], error_model, seed: int = 0,
         Per plan, in the plan's station order.
     """
     checks = [functools.partial(check_station, tuple(plan.marker_ids), plan.marker_xyz_m,
-                                build_config({"fit": {"radius_m": plan.marker_radius_m}}),
+                                processing_config(ProcessingSettings(
+                                    marker_radius_m=plan.marker_radius_m)),
                                 error_model, plan.requirement_m, plan.working_radius_m, seed)
               for plan in plans]
     return map_plan_stations(plans, checks, seed, progress, offsets, station_ids, profile,
                              executor, names)
 
 
-def check_station(ids: tuple[str, ...], centres: np.ndarray, cfg: dict, error_model,
+def check_station(ids: tuple[str, ...], centres: np.ndarray, cfg: ProcessConfig, error_model,
                   requirement_m: float, working_radius_m: float, seed: int,
                   st: PlannedStation, scan: StationScan, truth: dict) -> StationCheck:
     """Steps 2-4 of the module docstring for one simulated station.
@@ -151,8 +154,8 @@ def check_station(ids: tuple[str, ...], centres: np.ndarray, cfg: dict, error_mo
         The plan's marker ids.
     centres : (m, 3) float
         Their centres, site frame, metres.
-    cfg : dict
-        Pipeline configuration (:func:`pipeline.stages.build_config`).
+    cfg : ProcessConfig
+        Pipeline configuration (:func:`pipeline.survey.processing_config`).
     error_model : ErrorModel
     requirement_m, working_radius_m : float
         The plan's requirement and working radius, metres.

@@ -2,7 +2,7 @@
 without the simulator's truth, adjust the whole network, and compare the achieved station and
 marker errors with the predicted ones.
 
-The closed loop of issue 12 (``markerplan verify --network``), in two steps:
+The closed loop of ``markerplan verify --network``, in two steps:
 
 1. :func:`scan_plan` — every chosen station is simulated at its planned pose with only the
    planned markers (:func:`planner.verify.known_control.map_stations`: the sensor profile and the
@@ -11,9 +11,9 @@ The closed loop of issue 12 (``markerplan verify --network``), in two steps:
    ``marker_id`` column stays empty. The truth of every station (its pose and the markers' true
    centres) is kept apart, for the comparison only.
 2. :func:`adjust_and_compare` — the marker table goes through the steps of ``markerplan adjust``
-   (:mod:`planner.network_observations` and :mod:`planner.cli.adjust`): detections weighted by
-   the error model; identified by gated association with the plan's markers from each station's
-   planned pose taken as rover odometry with its sigma; a network adjustment tied to the plan's
+   (:func:`pipeline.network.run.adjust_tables`): detections weighted by the error model;
+   identified by gated association with the plan's markers from each station's planned pose
+   taken as rover odometry with its sigma; a network adjustment tied to the plan's
    reference station (default the first; its planned pose is the datum), data snooping on. Then,
    against the truth:
 
@@ -52,7 +52,10 @@ import numpy as np
 from markerplan.errors import ConfigError, InputFileError
 from markerplan.provenance import provenance
 from pipeline.marker_table import MarkerRow
+from pipeline.network.detections import Identified, StationDetections
+from pipeline.network.observations import Datum
 from pipeline.rig import MountingOffsets
+from pipeline.stages import ProcessConfig
 from planner.accuracy import known_control
 from planner.distributed import Executor
 from planner.outputs.plan_file import SurveyPlan
@@ -176,21 +179,23 @@ class NetworkVerification:
 
 
 def reference_station(named: str | None, plan_stations, chosen) -> str:
-    """The datum station of a network verification: the one the plan names, else its first.
+    """The datum station of a network verification: the one named, else the plan's first
+    (:meth:`pipeline.network.observations.Datum.resolve`).
 
     Parameters
     ----------
     named : str or None
-        The plan's ``reference_station`` (its configuration's), if any.
+        The reference station asked for, or the plan's ``reference_station`` (its
+        configuration's), if any.
     plan_stations : sequence of str
         The plan's station ids, in order.
     chosen : sequence of str
-        The stations to verify (``--station-ids``).
+        The stations to verify (``station_ids``).
 
     Raises
     ------
     ConfigError
-        The plan names a station it lacks, or the reference is not among ``chosen``.
+        ``named`` is not a station of the plan, or the reference is not among ``chosen``.
 
     Examples
     --------
@@ -199,17 +204,13 @@ def reference_station(named: str | None, plan_stations, chosen) -> str:
     >>> reference_station("S2", ["S1", "S2"], ["S1"])  # doctest: +ELLIPSIS
     Traceback (most recent call last):
     ...
-    markerplan.errors.ConfigError: the plan's reference station S2 ... in --station-ids
+    markerplan.errors.ConfigError: the plan's reference station S2 ... in `station_ids`
     """
-    reference = named or plan_stations[0]
-    if reference not in plan_stations:
-        raise ConfigError(f"the plan's reference station {reference} is not one of its stations "
-                          f"({', '.join(plan_stations[:10])}); regenerate it with "
-                          "`markerplan plan --network`")
+    reference = plan_stations[Datum(reference_station=named).resolve(plan_stations)]
     if reference not in chosen:
         raise ConfigError(f"the plan's reference station {reference} (the datum of network "
                           f"mode) is not among the stations verified ({', '.join(chosen)}); "
-                          "include it in --station-ids")
+                          "include it in `station_ids`")
     return reference
 
 
@@ -229,21 +230,21 @@ def scan_plan(plan: SurveyPlan, seed: int = 0, progress: bool = True,
     truth : dict of str to TrueStation
         Per station id.
     """
-    from pipeline.stages import build_config
+    from pipeline.survey import ProcessingSettings, processing_config
     from planner.verify.known_control import map_stations
 
-    cfg = build_config({"fit": {"radius_m": plan.marker_radius_m}})
+    cfg = processing_config(ProcessingSettings(marker_radius_m=plan.marker_radius_m))
     done = map_stations(plan, functools.partial(station_rows, cfg, seed), seed, progress,
                         offsets, station_ids, profile, executor)
     rows = [r for station, _ in done for r in station]
     return rows, {true.station_id: true for _, true in done}
 
 
-def station_rows(cfg: dict, seed: int, st, scan, truth: dict
+def station_rows(cfg: ProcessConfig, seed: int, st, scan, truth: dict
                  ) -> tuple[list[MarkerRow], TrueStation]:
     """One simulated station's marker-table rows (no reference: identification comes later)
-    and its truth; ``cfg`` and ``seed`` are the pipeline's (a
-    :func:`planner.verify.known_control.station_task` ``process``)."""
+    and its truth; ``cfg`` (:func:`pipeline.survey.processing_config`) and ``seed`` are the
+    pipeline's (a :func:`planner.verify.known_control.station_task` ``process``)."""
     from pipeline.process import process_station
 
     return process_station(scan, cfg, None, seed=seed).rows, TrueStation.from_truth(truth)
@@ -292,19 +293,15 @@ def adjust_and_compare(tables: list[Path], plan_path: Path, error_model,
         As ``markerplan adjust``: no accepted detection, stations the association cannot tie
         to the network (named), a plan that is not one.
     """
-    from pipeline.network.adjustment import AdjustmentSettings, Datum, adjust
-    from planner import network_observations as no
+    from pipeline.network.adjustment import AdjustmentSettings
+    from pipeline.network.run import adjust_tables
+    from planner.network.plan_geometry import read_plan_geometry, resolved_configuration
     from planner.network.record import station_errors
 
-    plan = no.read_plan_geometry(plan_path)
+    plan = read_plan_geometry(plan_path)
     reference = reference_station(reference or plan.reference_station, plan.station_ids,
                                   list(truth))
-    stations = no.read_detections(list(tables), error_model)
-    if reference not in [s.station_id for s in stations]:
-        raise InputFileError(f"the reference station {reference} (the datum) has no accepted "
-                             "detection, so the network has no datum; the plan cannot be "
-                             "verified in network mode")
-    config = no.resolved_configuration(
+    config = resolved_configuration(
         tables=[str(t) for t in tables], plan=str(plan_path), control=None,
         error_model=error_model_name, marker_ids="plan", datum="station",
         reference_station=reference,
@@ -313,14 +310,23 @@ def adjust_and_compare(tables: list[Path], plan_path: Path, error_model,
         heading_prior_sigma_deg=None, inclinometer_sigma_deg=None, working_radius_m=None,
         requirement_m=None, snooping=settings.snooping, alpha0=settings.alpha0,
         beta0=settings.beta0, plan_geometry=plan)
-    identified, left_out, n_named = tied_network(stations, plan, reference, settings)
-    obs = no.network_observations(identified)
     heading_prior = config["heading_prior_sigma_deg"]
-    result = adjust(obs, Datum("station", reference), AdjustmentSettings(
+    adjustment = AdjustmentSettings(
         inclinometer_sigma_rad=math.radians(config["inclinometer_sigma_deg"]),
         heading_prior_sigma_rad=None if heading_prior is None else math.radians(heading_prior),
-        alpha0=settings.alpha0, beta0=settings.beta0, snooping=settings.snooping),
-        no.nominal_poses(plan, obs))
+        alpha0=settings.alpha0, beta0=settings.beta0, snooping=settings.snooping)
+    left_out: dict[str, str] = {}
+    n_named: dict[str, int] = {}
+
+    def identify(stations: list[StationDetections]) -> Identified:
+        identified, out, counts = tied_network(stations, plan, reference, settings)
+        left_out.update(out)
+        n_named.update(counts)
+        return identified
+
+    adjusted = adjust_tables(tables, error_model, functools.partial(_datum_station, reference),
+                             identify, adjustment, plan=plan)
+    stations, identified, result = adjusted.stations, adjusted.identified, adjusted.result
     radius, requirement = config["working_radius_m"], config["requirement_m"]
 
     kept = result.observations
@@ -359,6 +365,16 @@ def adjust_and_compare(tables: list[Path], plan_path: Path, error_model,
                                len(identified.unidentified), sigma0, int(result.dof))
 
 
+def _datum_station(reference: str, stations: list) -> str:
+    """``reference``, checked to be among the stations with accepted detections (an
+    :func:`pipeline.network.run.adjust_tables` ``reference``)."""
+    if reference not in [s.station_id for s in stations]:
+        raise InputFileError(f"the reference station {reference} (the datum) has no accepted "
+                             "detection, so the network has no datum; the plan cannot be "
+                             "verified in network mode")
+    return reference
+
+
 def _marker_outcomes(result, plan_marker_ids: tuple[str, ...], truth: dict[str, TrueStation],
                      predicted: dict[str, float | None]) -> list[MarkerOutcome]:
     """Every adjusted marker against its true centre and its prediction, in the plan's order."""
@@ -386,8 +402,8 @@ def tied_network(stations: list, plan, reference: str, settings: NetworkVerifySe
 
     Parameters
     ----------
-    stations : list of planner.network_observations.StationDetections
-    plan : planner.network_observations.PlanGeometry
+    stations : list of pipeline.network.detections.StationDetections
+    plan : pipeline.network.detections.PlanGeometry
     reference : str
         The datum station.
     settings : NetworkVerifySettings
@@ -395,7 +411,7 @@ def tied_network(stations: list, plan, reference: str, settings: NetworkVerifySe
 
     Returns
     -------
-    identified : planner.network_observations.Identified
+    identified : pipeline.network.detections.Identified
         The stations kept (tied to the reference through chains of >= 2 shared identified
         markers, as :func:`pipeline.network.adjustment.adjust` requires) and their ids.
     left_out : dict of str to str
@@ -408,8 +424,8 @@ def tied_network(stations: list, plan, reference: str, settings: NetworkVerifySe
     InputFileError
         The reference station has no identified detection (the network has no datum).
     """
+    from pipeline.network import detections as no
     from pipeline.network.adjustment import tie_order
-    from planner import network_observations as no
 
     left_out: dict[str, str] = {}
     n_identified: dict[str, int] = {}

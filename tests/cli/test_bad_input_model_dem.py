@@ -1,4 +1,4 @@
-"""Bad error models, marker tables and DEMs are refused with one line (issue 9).
+"""Bad error models, marker tables and DEMs are refused with one line.
 
 Commands: ``fit-error-model`` (marker tables), ``plan``/``verify --error-model`` (model JSON),
 ``simulate``/``plan --dem`` (DEMs). Each case is checked by

@@ -44,10 +44,10 @@ CASES = [
     Case("table-without-reference", CAL + ["--marker-table", "{inputs}/markers.csv"],
          "go together"),
     Case("summary-and-table", CAL[:1] + ["s.csv"] + CAL[1:] + [
-        "--marker-table", "{inputs}/markers.csv", "--reference-csv", "{inputs}/reference.csv"],
+        "--marker-table", "{inputs}/markers.csv", "--reference", "{inputs}/reference.csv"],
         "either SUMMARY", files={"s.csv": HEADER + "1,5 6 7 8,0.01\n"}),
     Case("table-ids-not-in-reference", CAL + ["--marker-table", "{inputs}/markers.csv",
-                                              "--reference-csv", "ref.csv"],
+                                              "--reference", "ref.csv"],
          "matched to the reference", files={"ref.csv": "id,x_m,y_m,z_m\nX1,0,0,0\nX2,1,0,0\n"
                                                        "X3,0,1,0\n"}),
     Case("missing-summary-file", CAL[:1] + ["nope.csv"] + CAL[1:], "nope.csv: file not found"),

@@ -12,7 +12,7 @@ def test_fit_sphere_json_on_synthetic_cap(tmp_path, capsys, method):
     pts = noisy_cap([1.0, 4.0, 0.5], 0.1, (1, 0, 0), 500, 0.002, np.random.default_rng(3))
     f = tmp_path / "cap.xyz"
     np.savetxt(f, pts, delimiter="\t")
-    code, out, _ = run_cli(capsys, ["fit-sphere", str(f), "--marker-radius", "0.1", "--sensor",
+    code, out, _ = run_cli(capsys, ["fit-sphere", str(f), "--marker-radius-m", "0.1", "--sensor",
                                     "1,0,0", "--estimator", method, "--json"])
     assert code == 0
     res = json.loads(out)
@@ -25,7 +25,8 @@ def test_fit_sphere_on_all_nist_scans(real_data, capsys):
     files = sorted((real_data / "nist_spheres").glob("SPH*.xyz"))
     assert len(files) == 11
     for f in files:
-        code, out, _ = run_cli(capsys, ["fit-sphere", str(f), "--marker-radius", "0.05", "--json"])
+        code, out, _ = run_cli(capsys, ["fit-sphere", str(f), "--marker-radius-m", "0.05",
+                                        "--json"])
         assert code == 0
         centre = np.array(json.loads(out)["centre_m"])
         ref = _nist_reference(np.loadtxt(f), 0.05)
@@ -33,8 +34,8 @@ def test_fit_sphere_on_all_nist_scans(real_data, capsys):
 
 
 @pytest.mark.parametrize("args, content, needle", [
-    (["--marker-radius", "0.1"], "", "no points"),
-    (["--marker-radius", "0.1"], "1 2 x\n", "three numbers"),
+    (["--marker-radius-m", "0.1"], "", "no points"),
+    (["--marker-radius-m", "0.1"], "1 2 x\n", "three numbers"),
 ])
 def test_bad_input_one_line_error(tmp_path, capsys, args, content, needle):
     f = tmp_path / "p.xyz"
@@ -46,5 +47,5 @@ def test_bad_input_one_line_error(tmp_path, capsys, args, content, needle):
 
 def test_missing_file(tmp_path, capsys):
     code, _, err = run_cli(capsys, ["fit-sphere", str(tmp_path / "none.xyz"),
-                                    "--marker-radius", "0.1"])
+                                    "--marker-radius-m", "0.1"])
     assert code == 1 and "does not exist" in err

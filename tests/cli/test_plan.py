@@ -31,8 +31,8 @@ def default_plan(tmp_path_factory):
 def test_default_plan_meets_the_requirement_with_fewer_markers(default_plan):
     out, summary = default_plan
     assert sorted(p.name for p in out.iterdir()) == [
-        "map.png", "markers.csv", "markers.geojson", "plan.gpkg", "plan.json", "provenance.json",
-        "report.md", "station_error.tif", "usable_markers.tif"]
+        "map.png", "markers.csv", "markers.csvt", "markers.geojson", "plan.gpkg", "plan.json",
+        "provenance.json", "report.md", "station_error.tif", "usable_markers.tif"]
     doc = json.loads((out / "plan.json").read_text())
     assert doc["schema"] == "markerplan-plan" and doc["schema_version"] == 1
     assert summary["status"] == "optimal" and summary["meets_requirement"]
@@ -48,7 +48,10 @@ def test_default_plan_meets_the_requirement_with_fewer_markers(default_plan):
     prov = doc["provenance"]
     assert prov["config"]["requirement_m"] == 0.10 and prov["markerplan_version"]
     csv_lines = (out / "markers.csv").read_text().splitlines()
-    assert "local metres" in csv_lines[0] and len(csv_lines) == 2 + n
+    assert csv_lines[0] == "id,x_m,y_m,z_m,existing,n_stations,stations"
+    assert len(csv_lines) == 1 + n and "local metres" in doc["frame"]
+    assert (out / "markers.csvt").read_text() == (
+        '"String","Real","Real","Real","Integer","Integer","String"\n')
     gj = json.loads((out / "markers.geojson").read_text())
     assert "local metres" in gj["coordinate_frame"]
     assert sum(f["properties"]["kind"] == "marker" for f in gj["features"]) == n
@@ -161,7 +164,7 @@ def test_station_ids_select_and_travel_to_reduce(tmp_path, capsys):
 
 
 #: A fast plan of the default site: two stations, a coarse stand map, no cluster.
-_SMALL_PLAN = ["plan", "--station-ids", "S1,S2", "--stand-map-cell", "4", "--scheduler", "none"]
+_SMALL_PLAN = ["plan", "--station-ids", "S1,S2", "--stand-map-cell-m", "4", "--scheduler", "none"]
 
 
 def test_each_progress_bar_of_a_plan_has_its_own_label(tmp_path, capsys, monkeypatch):

@@ -2,7 +2,7 @@
 markers.geojson come out in the DEM's CRS (GeoJSON in WGS84 lon/lat), and twice the same.
 
 The DEM is a 30 m square of gentle hills near (500 000, 4 649 000) m; its four stations stand
-exactly on stand-map cell centres (``--stand-map-cell 0.6``: 3 DEM cells), so the stand map at
+exactly on stand-map cell centres (``--stand-map-cell-m 0.6``: 3 DEM cells), so the stand map at
 their cells must repeat what plan.json says of them.
 """
 
@@ -32,7 +32,7 @@ def _run(root, out):
 
     try:
         main(["plan", "--dem", str(root / "dem.tif"), "--stations", str(root / "stations.csv"),
-              "--boundary", str(root / "boundary.geojson"), "--stand-map-cell", str(STAND_CELL),
+              "--boundary", str(root / "boundary.geojson"), "--stand-map-cell-m", str(STAND_CELL),
               "--out", str(out)])
     except SystemExit as exc:  # pragma: no cover - a failing plan must say so
         raise AssertionError(f"markerplan plan exited {exc.code}") from exc
@@ -152,7 +152,9 @@ def test_report_and_frame_name_the_crs(planned):
     name = "WGS 84 / UTM zone 33N (EPSG:32633)"
     assert doc["site"]["crs"] == name and name in doc["frame"]
     assert name in (out / "report.md").read_text()
-    assert name in (out / "markers.csv").read_text().splitlines()[0]
+    assert (out / "markers.csv").read_text().startswith("id,x_m,y_m,z_m,")
+    prj = (out / "markers.prj").read_text()
+    assert prj.startswith('PROJCS["WGS_1984_UTM_Zone_33N"') and prj.endswith("]\n")
 
 
 def test_two_runs_give_byte_identical_files(planned):
@@ -174,7 +176,7 @@ def test_network_mode_writes_the_gpkg_relative_to_the_reference_station(planned,
 
     root = planned[0]
     main(["plan", "--dem", str(root / "dem.tif"), "--stations", str(root / "stations.csv"),
-          "--network", "--reference-station", "S2", "--stand-map-cell", "2",
+          "--network", "--reference-station", "S2", "--stand-map-cell-m", "2",
           "--out", str(tmp_path / "n")])
     doc = _plan(tmp_path / "n")
     _, _, geom, fields = read(tmp_path / "n" / "plan.gpkg", layer="stations")
@@ -214,7 +216,7 @@ def test_the_plans_crs_reaches_the_network_geojson(planned):
     from rasterio.crs import CRS
 
     from planner.network.files import network_geojson
-    from planner.network_observations import read_plan_geometry
+    from planner.network.plan_geometry import read_plan_geometry
 
     _, out, _, dem = planned
     geometry = read_plan_geometry(out / "plan.json")

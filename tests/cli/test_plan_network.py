@@ -26,8 +26,9 @@ def network_plan(tmp_path_factory):
 def test_network_plan_records_the_mode_datum_ties_and_errors(network_plan):
     out, summary = network_plan
     assert sorted(p.name for p in out.iterdir()) == [
-        "map.png", "markers.csv", "markers.geojson", "plan.gpkg", "plan.json", "provenance.json",
-        "report.md", "station_error.tif", "stations.csv", "usable_markers.tif"]
+        "map.png", "markers.csv", "markers.csvt", "markers.geojson", "plan.gpkg", "plan.json",
+        "provenance.json", "report.md", "station_error.tif", "stations.csv", "stations.csvt",
+        "usable_markers.tif"]
     assert summary["mode"] == "network" and summary["reference_station"] == "S1"
     assert summary["status"] == "optimal" and summary["meets_requirement"]
     doc = json.loads((out / "plan.json").read_text())
@@ -45,9 +46,9 @@ def test_network_plan_records_the_mode_datum_ties_and_errors(network_plan):
     assert doc["baselines"]["greedy"]["meets_requirement"]
     assert doc["n_markers"] <= doc["baselines"]["greedy"]["n_markers"]
     rows = list(csv.reader((out / "stations.csv").read_text().splitlines()))
-    assert rows[0][0].startswith("# markerplan plan stations, network mode (datum: station S1)")
-    assert rows[1][:5] == ["id", "x_m", "y_m", "z_m", "network_error_m"]
-    assert len(rows) == 2 + len(doc["stations"])
+    assert rows[0][:5] == ["id", "x_m", "y_m", "z_m", "network_error_m"]
+    assert rows[0][-1] == "error_relative_to" and {r[-1] for r in rows[1:]} == {"station S1"}
+    assert len(rows) == 1 + len(doc["stations"])
     assert "## Network" in (out / "report.md").read_text()
 
 
@@ -72,7 +73,7 @@ def test_reference_station_option_names_the_datum(tmp_path, capsys):
     assert doc["provenance"]["config"]["reference_station"] == "S3"
     assert doc["network"]["datum"]["reference_station"] == "S3"
     rows = list(csv.reader((out / "stations.csv").read_text().splitlines()))
-    assert "network mode (datum: station S3)" in rows[0][0]
+    assert rows[1][rows[0].index("error_relative_to")] == "station S3"
 
 
 def test_a_plan_not_proven_optimal_states_its_bound_and_gap():

@@ -153,7 +153,7 @@ def test_marker_radius_comes_from_the_truth(station, tmp_path, capsys):
     assert code == 0, err
     assert json.loads(stdout)["provenance"]["config"]["fit"]["radius_m"] == 0.15
     code, stdout, err = run_cli(capsys, ["process", str(folder), "--no-calibrate",
-                                         "--marker-radius", "0.1", "--out", str(tmp_path / "u"),
+                                         "--marker-radius-m", "0.1", "--out", str(tmp_path / "u"),
                                          "--json"])
     assert code == 0 and json.loads(stdout)["provenance"]["config"]["fit"]["radius_m"] == 0.1
 

@@ -13,7 +13,7 @@ pytest.importorskip("visibility.simulate")
 def test_quick_range_study(tmp_path, capsys):
     out = tmp_path / "rs"
     code, stdout, _ = run_cli(capsys, ["range-study", "--out", str(out), "--frames", "40",
-                                       "--replicates", "2", "--max-distance", "4", "--json"])
+                                       "--replicates", "2", "--max-distance-m", "4", "--json"])
     assert code == 0
     res = json.loads(stdout)
     assert sorted(p.name for p in out.iterdir()) == ["markers.csv", "provenance.json",
@@ -36,7 +36,7 @@ def test_slope_and_profile_recorded_and_markers_seen(tmp_path, capsys):
     out = tmp_path / "slope"
     code, stdout, _ = run_cli(capsys, [
         "range-study", "--out", str(out), "--frames", "50", "--replicates", "1",
-        "--max-distance", "10", "--lidar-height", "0.8", "--slope-deg", "15",
+        "--max-distance-m", "10", "--lidar-height-m", "0.8", "--slope-deg", "15",
         "--sensor-profile", "datasheet", "--range-noise-mm", "10", "--json"])
     assert code == 0
     config = json.loads((out / "summary.json").read_text())["provenance"]["config"]

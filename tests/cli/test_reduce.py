@@ -82,7 +82,7 @@ def _layout_csv(path, rows):
     (["--keep", "M99"], None, "unknown marker id(s) M99"),
     ([], [["A", 0.0, 6.0], ["B", 55.0, 0.0]], "marker B at (55.00, 0.00) m lies outside"),
     ([], [["A", 0.0, 6.0], ["B", 25.0, 0.0]], "lies outside the site boundary"),
-    (["--k-min", "1"], None, "`k_min` must be in"),
+    (["--k-min", "1"], None, "--k-min must be in"),
     (["--verify", "--verify-k", "12"], None, "--verify-k must be comma-separated counts"),
     (["--verify-k", "5"], None, "--verify-k needs --verify"),
     (["--axis-offset-mm", "15,0"], None, "add --verify or drop them"),

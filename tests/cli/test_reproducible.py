@@ -39,7 +39,7 @@ COMMANDS = {
     "process": lambda inputs, cwd: ["process", f"{inputs}/scan/station_S1.scan.npz",
                                     "--reference", f"{inputs}/scan"],
     "range-study": lambda inputs, cwd: ["range-study", "--frames", "30", "--replicates", "1",
-                                        "--max-distance", "6"],
+                                        "--max-distance-m", "6"],
     "fit-error-model": lambda inputs, cwd: ["fit-error-model", synthetic_tables(inputs, cwd),
                                             "--bootstrap", "3", "--plot"],
     "plan": lambda inputs, cwd: ["plan"],

@@ -132,7 +132,7 @@ def test_stations_file_and_marker_radius(tmp_path, capsys):
     stations = tmp_path / "stations.csv"
     stations.write_text("id,x_m,y_m,heading_deg\nA,3.0,4.0,90\n")
     out = tmp_path / "o"
-    code, _, err = run_cli(capsys, ["simulate", "--stations", str(stations), "--marker-radius",
+    code, _, err = run_cli(capsys, ["simulate", "--stations", str(stations), "--marker-radius-m",
                                     "0.15", "--frames", "2", "--out", str(out)])
     assert code == 0, err
     truth = read_truth(out / "station_A.truth.json")

@@ -44,6 +44,15 @@ def test_verify_passes_and_fails_with_the_reason(tmp_path, capsys, valid_inputs)
     strict.write_text(json.dumps(doc))
     code, _, err = run_cli(capsys, ["verify", str(strict), "--out", str(tmp_path / "v2")])
     assert code == 1 and "verification failed at S1: achieved" in err
+    # a failed verification is its own error, not an infeasible plan
+    from markerplan.errors import InfeasiblePlanError, VerificationFailedError
+    from planner.cli.verify import command as verify_command
+
+    with pytest.raises(VerificationFailedError, match="^verification failed at S1") as caught:
+        verify_command.main([str(strict), "--out", str(tmp_path / "v-failed")],
+                            standalone_mode=False)
+    assert isinstance(caught.value, RuntimeError)
+    assert not isinstance(caught.value, InfeasiblePlanError)
     rec = json.loads((tmp_path / "v2" / "verify.json").read_text())
     assert rec["passed"] is False
     [s] = rec["stations"]
@@ -56,7 +65,7 @@ def test_marker_radius_travels_from_plan_to_simulation_and_fit(tmp_path, capsys)
     """Plan with 0.15 m markers; verify must simulate and fit 0.15 m spheres (a 0.10 m fit of a
     0.15 m sphere puts its centre about 5 cm too far along the line of sight)."""
     plan_dir = tmp_path / "plan"
-    code, _, err = run_cli(capsys, ["plan", "--marker-radius", "0.15", "--out", str(plan_dir)])
+    code, _, err = run_cli(capsys, ["plan", "--marker-radius-m", "0.15", "--out", str(plan_dir)])
     assert code == 0, err
     doc = json.loads((plan_dir / "plan.json").read_text())
     assert doc["site"]["marker_radius_m"] == 0.15

@@ -21,8 +21,8 @@ def _hand_made_plan(tmp_path, **config):
 @pytest.mark.parametrize("args,config,needle", [
     (["--network", "--station-ids", "S2"], {}, "reference station S1 (the datum of network "
                                                "mode) is not among the stations verified (S2)"),
-    ([], {"network": True, "reference_station": "S9"}, "reference station S9 is not one of its "
-                                                        "stations (S1, S2)"),
+    ([], {"network": True, "reference_station": "S9"},
+     "`reference_station` 'S9' is not a station of the network; valid ids are S1, S2"),
     (["--network", "--odometry-sigma-m", "0"], {}, "--odometry-sigma-m"),
     # --reference-station: a network plan's predictions are relative to its own datum ...
     (["--reference-station", "S2"], {"network": True}, "the plan's predictions are relative "

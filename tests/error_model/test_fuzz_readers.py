@@ -1,6 +1,6 @@
 """Fuzzing the error model's readers: a mutated model JSON or marker table either reads into a
 usable object or raises a one-line :class:`~markerplan.errors.MarkerPlanError`, never anything
-else (issue 9)."""
+else."""
 
 from __future__ import annotations
 

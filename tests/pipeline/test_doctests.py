@@ -5,9 +5,9 @@ import importlib
 
 import pytest
 
-MODULES = ["pipeline.sphere_fit", "pipeline.clustering", "pipeline.gate", "pipeline.ground",
-           "pipeline.quality", "pipeline.marker_table", "pipeline.stages",
-           "pipeline.range_study"]
+MODULES = ["pipeline.sphere_fit", "pipeline.line_of_sight_fit", "pipeline.geometric_sphere_fit",
+           "pipeline.clustering", "pipeline.gate", "pipeline.ground", "pipeline.quality",
+           "pipeline.marker_table", "pipeline.stages", "pipeline.range_study"]
 
 
 @pytest.mark.parametrize("name", MODULES)

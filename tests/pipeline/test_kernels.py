@@ -4,9 +4,10 @@ import numpy as np
 import pytest
 
 from pipeline import kernels
+from pipeline.geometric_sphere_fit import lsq_fixed_radius
 from pipeline.ground import local_ground_height
+from pipeline.line_of_sight_fit import _MIN_COS_INCIDENCE, _los_solve
 from pipeline.sensor_noise import RangeNoise
-from pipeline.sphere_fit import _MIN_COS_INCIDENCE, _los_solve, lsq_fixed_radius
 
 
 def _numpy_lsq_fixed_radius(points, radius, centre, max_iter=50, tol=1e-10):

@@ -8,14 +8,8 @@ import pytest
 from scipy.stats import chi2
 
 from markerplan.errors import ConfigError, InputFileError
-from pipeline.network.adjustment import (
-    AdjustmentSettings,
-    ControlPoint,
-    Datum,
-    NetworkObservations,
-    NominalPoses,
-    adjust,
-)
+from pipeline.network.adjustment import AdjustmentSettings, adjust
+from pipeline.network.observations import ControlPoint, Datum, NetworkObservations, NominalPoses
 from pipeline.network.simulation import simulated_network
 
 NO_SNOOPING = AdjustmentSettings(snooping=False)
@@ -281,7 +275,8 @@ def test_datum_that_does_not_fix_the_network_names_the_free_defect():
 
 @pytest.mark.parametrize(("datum", "settings", "message"), [
     (Datum(reference_station="S99"), AdjustmentSettings(),
-     r"^reference station 'S99' is not in the network \(stations S01, S02, S03\)$"),
+     r"^`reference_station` 'S99' is not a station of the network; valid ids are S01, S02, "
+     r"S03$"),
     (Datum(kind="control", control=(ControlPoint("X7", [0, 0, 0], [1, 1, 1]),)),
      AdjustmentSettings(), r"^control points X7 are not markers of the network$"),
     (Datum(), AdjustmentSettings(heading_prior_sigma_rad=0.01), "needs nominal poses"),

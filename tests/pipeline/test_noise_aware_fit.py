@@ -1,12 +1,13 @@
-"""Issue 11: the fit and the quality gate follow the sensor's range noise."""
+"""The fit and the quality gate follow the sensor's range noise."""
 
 import numpy as np
 import pytest
 
+from pipeline.line_of_sight_fit import fit_line_of_sight, radius_standard_error
 from pipeline.quality import QualityConfig, marker_metrics, quality_gate
 from pipeline.range_study import marker_layout, measure_markers
 from pipeline.sensor_noise import RangeNoise
-from pipeline.sphere_fit import fit_line_of_sight, fit_sphere, radius_standard_error
+from pipeline.sphere_fit import fit_sphere
 from pipeline.stages import build_config, noise_widened
 from tests.pipeline.test_sphere_fit import noisy_cap
 from tests.pipeline.test_synthesis import synthetic_scan
@@ -34,7 +35,7 @@ def test_fixed_radius_bias_is_removed_with_the_noise():
     start = centre + 0.02
     plain = [fit_sphere(p, R, centre0_m=start) for p in caps]
     aware = [fit_sphere(p, R, centre0_m=start, noise=S45) for p in caps]
-    assert _los_bias(centre, plain) < -0.015  # the noise bias of issue 11: toward the sensor
+    assert _los_bias(centre, plain) < -0.015  # the noise bias: toward the sensor
     assert abs(_los_bias(centre, aware)) < 0.003
     assert np.median([np.linalg.norm(f.centre_m - centre) for f in aware]) < 0.01
 
@@ -42,7 +43,7 @@ def test_fixed_radius_bias_is_removed_with_the_noise():
 def test_without_noise_the_fit_is_todays():
     p = noisy_cap([5.0, 1.0, -0.9], 0.1, (0, 0, 0), 300, 0.045, np.random.default_rng(11))
     fit = fit_sphere(p, 0.1, centre0_m=[5.05, 1.0, -0.9], noise=None)
-    # the values of the fit before issue 11 (commit 66918a0)
+    # the values of the noise-free fit (commit 66918a0)
     np.testing.assert_array_equal(fit.centre_m, [4.973293163990261, 0.9999962695349859,
                                                  -0.8961060317820855])
     assert (fit.rms_m, fit.n_used, fit.iterations) == (0.025212409969729052, 107, 100)

@@ -6,7 +6,8 @@ import pytest
 from scipy.stats import norm
 
 from markerplan.errors import DataError
-from pipeline.network.adjustment import AdjustmentSettings, Datum, NetworkObservations, adjust
+from pipeline.network.adjustment import AdjustmentSettings, adjust
+from pipeline.network.observations import Datum, NetworkObservations
 from pipeline.network.reliability import critical_value, non_centrality
 from pipeline.network.simulation import simulated_network
 

@@ -114,20 +114,21 @@ def test_grid_limit_counts_the_sites_in_range(monkeypatch):
 def test_dropping_out_of_range_sites_leaves_the_plan_unchanged(monkeypatch):
     """The default site planned with a 12 m range: the same markers (by position) whether or not
     the sites out of every station's range were ray cast."""
-    import planner.problem.inputs as planning
+    import planner.run as run
     from error_model import default_model
+    from planner.problem.inputs import load_inputs
 
-    inputs = planning.load_inputs("default")
+    inputs = load_inputs("default")
     cfg = PlanConfig(max_range_m=12.0)
     model = default_model()
-    dropped = planning.make_plan(inputs, cfg, model, progress=False)
-    kept_all = planning.candidate_sites
+    dropped = run.make_plan(inputs, cfg, model, progress=False)
+    kept_all = run.candidate_sites
 
     def no_range_drop(dem, config, **kw):
         return kept_all(dem, config.replace(max_range_m=100.0), **kw)
 
-    monkeypatch.setattr(planning, "candidate_sites", no_range_drop)
-    full = planning.make_plan(inputs, cfg, model, progress=False)
+    monkeypatch.setattr(run, "candidate_sites", no_range_drop)
+    full = run.make_plan(inputs, cfg, model, progress=False)
     assert dropped.candidates.dropped["out of range"] > 0
     assert len(full.candidates) > len(dropped.candidates)
 

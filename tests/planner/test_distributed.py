@@ -224,10 +224,10 @@ def test_a_task_that_keeps_failing_is_reported_by_name(cluster, where):
 
 def test_unreachable_scheduler_is_one_line(monkeypatch):
     monkeypatch.setattr(distributed, "CONNECT_TIMEOUT_S", 1)
-    with pytest.raises(ConfigError, match=r"--scheduler tcp://127.0.0.1:9.*dask scheduler"):
+    with pytest.raises(ConfigError, match=r"`scheduler` tcp://127.0.0.1:9.*dask scheduler"):
         with executor("tcp://127.0.0.1:9", progress=False):
             pass
-    with pytest.raises(ConfigError, match="--workers 2 sizes the local cluster only"):
+    with pytest.raises(ConfigError, match="`workers` 2 sizes the local cluster only"):
         with executor("none", workers=2):
             pass
 
@@ -270,7 +270,7 @@ def test_cluster_files_equal_single_process_files(tmp_path, capsys, network):
 
 @pytest.mark.slow
 def test_range_study_replicates_on_a_cluster_equal_in_process(tmp_path, capsys):
-    quick = ["range-study", "--frames", "40", "--replicates", "3", "--max-distance", "4"]
+    quick = ["range-study", "--frames", "40", "--replicates", "3", "--max-distance-m", "4"]
     code_one, _, err = run_cli(capsys, quick + ["--scheduler", "none",
                                                 "--out", str(tmp_path / "one")])
     assert code_one == 0, err
@@ -373,7 +373,7 @@ def test_range_study_on_a_scheduler_and_workers_started_by_hand(tmp_path, capsys
     """``--scheduler tcp://...`` of a real (not Local) cluster: the same files as in process,
     and the replicates ran on its workers."""
     address, client = cluster_by_hand
-    quick = ["range-study", "--frames", "20", "--replicates", "2", "--max-distance", "3"]
+    quick = ["range-study", "--frames", "20", "--replicates", "2", "--max-distance-m", "3"]
     code, _, err = run_cli(capsys, quick + ["--scheduler", "none",
                                             "--out", str(tmp_path / "one")])
     assert code == 0, err

@@ -7,8 +7,8 @@ from hypothesis import strategies as st
 
 from markerplan.errors import ConfigError
 from planner.accuracy import known_control
+from planner.accuracy.growing import GrowingCovariance
 from planner.accuracy.network import (
-    GrowingCovariance,
     NetworkModel,
     network_model,
     pose_errors_from_covariance,

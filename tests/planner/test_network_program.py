@@ -73,12 +73,12 @@ def test_infeasible_network_names_the_station_and_why():
 
 
 def test_too_many_tying_sites_are_refused_with_the_grid_to_use(monkeypatch):
-    import planner.program as program
+    import planner.program.loop as loop
 
     p = _instance(2)
     cfg = PlanConfig(network=True, min_markers=3, min_sectors=2, max_range_m=16)
     n_tying = int(network_model(p, cfg).tying.sum())
-    monkeypatch.setattr(program, "MAX_NETWORK_TYING_SITES", n_tying - 1)
+    monkeypatch.setattr(loop, "MAX_NETWORK_TYING_SITES", n_tying - 1)
     spacing = f"{1.2 * np.sqrt(n_tying / (n_tying - 1)):.1f}".replace(".", r"\.")
     with pytest.raises(ConfigError, match=f"this site has {n_tying}: coarsen the candidate grid "
                        rf"\(grid_spacing_m .* 1 m now, try {spacing} m\)"):
@@ -86,12 +86,12 @@ def test_too_many_tying_sites_are_refused_with_the_grid_to_use(monkeypatch):
 
 
 def test_a_sparse_tangent_removes_no_layout_the_full_one_keeps():
-    from planner.program import _sparse_tangent
+    from planner.program.cuts_network import sparse_tangent
 
     rng = np.random.default_rng(0)
     coef = rng.exponential(1.0, 12) ** 3
     rhs = float(np.sort(coef)[-3:].sum() * 0.8)
-    sites, c, lo = _sparse_tangent(coef, rhs, upper_bound=3, max_terms=5)
+    sites, c, lo = sparse_tangent(coef, rhs, upper_bound=3, max_terms=5)
     assert 5 <= sites.size < 12
     for combo in itertools.chain.from_iterable(itertools.combinations(range(12), k)
                                                for k in range(4)):
@@ -102,7 +102,8 @@ def test_a_sparse_tangent_removes_no_layout_the_full_one_keeps():
 
 
 def test_time_limit_returns_the_incumbent_with_the_proven_bound():
-    from planner.program import RowKind, _cut_loop, build_model
+    from planner.program import RowKind, build_model
+    from planner.program.loop import _cut_loop
 
     p = _instance(2)
     cfg = PlanConfig(min_markers=3, min_sectors=2, max_range_m=16, time_limit_s=1.0)
@@ -120,7 +121,7 @@ def test_time_limit_returns_the_incumbent_with_the_proven_bound():
     assert r.solution.dual_bound == pytest.approx(plan_sites(p, cfg).selected.sum())
     assert r.solution.gap == pytest.approx((p.n_sites - r.solution.dual_bound) / p.n_sites)
     # without an incumbent the time limit is its own error type (not "proven infeasible")
-    with pytest.raises(PlanTimeLimitError, match="raise --time-limit"):
+    with pytest.raises(PlanTimeLimitError, match="raise `time_limit_s`"):
         _cut_loop(p, cfg, model, never_done, lambda sel: evaluate_layout(p, sel, cfg))
 
 
@@ -141,9 +142,9 @@ def test_large_problem_path_bound_never_exceeds_the_brute_force_optimum(seed, mo
     """The path for large problems (greedy incumbent, root relaxation, sparse rows), forced on
     a small instance: its proven lower bound is at most the true optimum, and the answer
     passes and is optimal or reports its gap honestly."""
-    import planner.program as program
+    import planner.program.loop as loop
 
-    monkeypatch.setattr(program, "_SPARSE_ABOVE_SITES", 0)
+    monkeypatch.setattr(loop, "_SPARSE_ABOVE_SITES", 0)
     p = _instance(seed)
     base = PlanConfig(network=True, min_markers=3, min_sectors=2, max_range_m=16,
                       working_radius_m=10, time_limit_s=60)
@@ -178,10 +179,10 @@ def test_a_greedy_that_takes_the_whole_time_limit_still_leaves_a_root_bound(monk
     at most the optimum and its gap."""
     import time
 
-    import planner.program as program
     import planner.program.baselines as baselines
+    import planner.program.loop as loop
 
-    monkeypatch.setattr(program, "_SPARSE_ABOVE_SITES", 0)
+    monkeypatch.setattr(loop, "_SPARSE_ABOVE_SITES", 0)
     p, cfg = _reachable_network_case(5)
     greedy = baselines.greedy_network
 
@@ -202,10 +203,10 @@ def test_a_stuck_greedy_leaves_the_large_problem_path_without_a_starting_layout(
     """When the greedy incumbent gets stuck, the plan goes on without it (no upper bound, no
     root relaxation) and still finds the optimum; the greedy is reported as not meeting the
     requirement, as it is when planning runs the greedy itself (small problems)."""
-    import planner.program as program
     import planner.program.baselines as baselines
+    import planner.program.loop as loop
 
-    monkeypatch.setattr(program, "_SPARSE_ABOVE_SITES", 0)
+    monkeypatch.setattr(loop, "_SPARSE_ABOVE_SITES", 0)
     p, cfg = _reachable_network_case(60)
     greedy = baselines.greedy_network
     monkeypatch.setattr(baselines, "greedy_network",
@@ -222,10 +223,10 @@ def test_a_stuck_greedy_leaves_the_large_problem_path_without_a_starting_layout(
 def test_the_greedy_incumbent_starts_no_step_after_its_share_of_the_time_limit(monkeypatch):
     """With no time share the greedy stops where its directions-only cover left it, says why,
     and the plan goes on without it to the optimum."""
-    import planner.program as program
+    import planner.program.loop as loop
 
-    monkeypatch.setattr(program, "_SPARSE_ABOVE_SITES", 0)
-    monkeypatch.setattr(program, "_GREEDY_TIME_FRACTION", 0.0)
+    monkeypatch.setattr(loop, "_SPARSE_ABOVE_SITES", 0)
+    monkeypatch.setattr(loop, "_GREEDY_TIME_FRACTION", 0.0)
     p, cfg = _reachable_network_case(60)
     r = plan_sites(p, cfg)
     assert not r.greedy.meets_requirement
@@ -237,11 +238,13 @@ def test_when_no_tangent_applies_and_rows_are_long_the_long_no_good_rows_are_cut
     """On large problems long combinatorial rows are left out; when no tangent applies either,
     the worst stations' long rows are cut instead of failing with 'no cut was found', and the
     plan still passes."""
-    import planner.program as program
+    import planner.program.cuts_network as cuts_network
+    import planner.program.loop as loop
     from planner.accuracy.network import NetworkModel
 
-    monkeypatch.setattr(program, "_SPARSE_ABOVE_SITES", 0)
-    monkeypatch.setattr(program, "_MAX_TERMS", 1)
+    monkeypatch.setattr(loop, "_SPARSE_ABOVE_SITES", 0)
+    monkeypatch.setattr(cuts_network, "MAX_TERMS", 1)
+    monkeypatch.setattr(loop, "MAX_TERMS", 1)
     monkeypatch.setattr(NetworkModel, "station_tangents", lambda *a, **k: [])
     monkeypatch.setattr(NetworkModel, "marker_tangents", lambda *a, **k: [])
     p, cfg = _reachable_network_case(60)

@@ -12,12 +12,8 @@ import numpy as np
 import pytest
 from scipy.stats import chi2
 
-from pipeline.network.adjustment import (
-    AdjustmentSettings,
-    Datum,
-    NetworkAdjustment,
-    NetworkObservations,
-)
+from pipeline.network.adjustment import AdjustmentSettings, NetworkAdjustment
+from pipeline.network.observations import Datum, NetworkObservations
 from pipeline.network.reliability import Rejection
 from planner.network import record as nr
 from planner.network.files import FILES, write_network_files

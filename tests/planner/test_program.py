@@ -1,5 +1,6 @@
 
 import itertools
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -27,6 +28,15 @@ def test_one_station_six_sectors_needs_exactly_three():
     assert r.selected.sum() == 3 and r.status == "optimal"
     assert r.solution.dual_bound == pytest.approx(3.0)
     assert r.check.sectors[0] == 3
+
+
+def test_success_means_a_proven_optimum():
+    p = make_problem([[0, 0]], ring([0, 0], 8.0, [30, 90, 150, 210, 270, 330]))
+    r = plan_sites(p, LOOSE)
+    assert r.success is True and r.solution.success is True
+    for status in ("gap_reached", "time_limit", "infeasible", "no_solution", "error"):
+        late = replace(r, solution=replace(r.solution, status=status))
+        assert late.success is False and late.solution.success is False, status
 
 
 def test_two_stations_sharing_a_lens_need_four():

@@ -7,10 +7,9 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 
-from planner import program
 from planner.config import PlanConfig
 from planner.outputs.report import report_markdown
-from planner.program import aggregate_columns, build_model, plan_sites, solve
+from planner.program import aggregate_columns, build_model, plan_sites, solve, solving
 from planner.program.highs import HighsOutcome, run_highs, solver_record
 from tests.planner.instances import brute_force_optimum, make_problem
 
@@ -122,7 +121,7 @@ def test_a_stopped_run_reports_its_bound_and_gap(monkeypatch):
         return HighsOutcome(status="time_limit", x=x, objective=5.0, dual_bound=3.2, gap=0.36,
                             solve_time_s=1.0, message="Time limit reached")
 
-    monkeypatch.setattr(program, "run_highs", stopped)
+    monkeypatch.setattr(solving, "run_highs", stopped)
     sol = solve(model)
     assert sol.status == "time_limit"
     assert sol.dual_bound == 4.0 and sol.gap == pytest.approx(0.2)

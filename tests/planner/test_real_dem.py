@@ -200,7 +200,7 @@ def test_reproject_maps_every_input_file_into_the_dem(tmp_path):
             [14.0001, 37.0001]]
     (tmp_path / "b.geojson").write_text(json.dumps(
         {"type": "Polygon", "coordinates": [ring]}))
-    with pytest.raises(InputFileError, match="--reproject"):
+    with pytest.raises(InputFileError, match="`reproject`"):
         load_inputs(dem_path=tmp_path / "geo.tif", stations_path=tmp_path / "st.csv")
     inputs = load_inputs(dem_path=tmp_path / "geo.tif", stations_path=tmp_path / "st.csv",
                          boundary_path=tmp_path / "b.geojson", reproject=True,

@@ -13,12 +13,8 @@ from markerplan.errors import ConfigError, InfeasiblePlanError
 from planner.accuracy.checks import evaluate_layout, station_infos
 from planner.config import PlanConfig
 from planner.program import plan_sites
-from planner.reduction.curve import (
-    drop_order,
-    failure_reason,
-    marker_losses,
-    tradeoff_curve,
-)
+from planner.reduction.curve import tradeoff_curve
+from planner.reduction.losses import drop_order, failure_reason, marker_losses
 from planner.reduction.study import run_study
 from tests.planner.instances import make_problem, ring
 
@@ -204,10 +200,11 @@ def test_an_unproven_point_is_repaired_from_a_better_smaller_subset(tiny):
     import time
     from dataclasses import replace
 
-    from planner.reduction.curve import _MinimaxModel, _monotone
+    from planner.reduction.curve import _monotone
+    from planner.reduction.minimax import MinimaxModel
 
     curve = tradeoff_curve(tiny, CONFIG)
-    mm = _MinimaxModel(tiny, CONFIG, time.perf_counter() + 10)
+    mm = MinimaxModel(tiny, CONFIG, time.perf_counter() + 10)
     # pretend the 6-marker search stopped early with the worst 6-subset meeting the directions
     worst6 = max((np.isin(np.arange(8), sub) for sub in itertools.combinations(range(8), 6)),
                  key=lambda sel: evaluate_layout(tiny, sel, CONFIG).error_m.max()

@@ -93,7 +93,7 @@ def test_a_station_off_its_true_pose_fails_with_the_reason(network):
 def test_the_reference_station_must_be_verified(network):
     inputs, truth = network
     without = {sid: t for sid, t in truth.items() if sid != inputs.station_ids[0]}
-    with pytest.raises(ConfigError, match="reference station .* include it in --station-ids"):
+    with pytest.raises(ConfigError, match="reference station .* include it in `station_ids`"):
         _compare(inputs, without)
 
 

@@ -1,5 +1,5 @@
 """Reading DEMs in any raster format GDAL reads, in Earth and lunar CRSs, reprojected on
-request, and by window (:func:`visibility.dem.read_dem`, issue 13)."""
+request, and by window (:func:`visibility.dem.read_dem`)."""
 
 from __future__ import annotations
 
@@ -172,7 +172,7 @@ def test_geographic_refused_with_the_fix_or_reprojected_on_the_moon(tmp_path):
     h = 300.0 * (lon - 10) - 500.0 * (lat - 45)  # a plane in degrees
     path = _geotiff(tmp_path / "moon.tif", h, from_origin(10, 45, deg, deg), _crs("IAU_2015:30100"),
                     dtype="float64")
-    with pytest.raises(InputFileError, match=r"geographic \(degrees\).*--reproject.*gdalwarp"):
+    with pytest.raises(InputFileError, match=r"geographic \(degrees\).*`reproject`.*gdalwarp"):
         read_dem(path)
     dem = read_dem(path, reproject=True)
     local = CRS.from_wkt(dem.crs).to_dict()
@@ -195,7 +195,7 @@ def test_non_metre_crs_refused_with_the_fix(tmp_path):
 
     path = _geotiff(tmp_path / "ft.tif", np.ones((4, 4)), from_origin(6e6, 2e6, 3, 3),
                     "EPSG:2229")
-    with pytest.raises(InputFileError, match="US survey foot, not metres.*--reproject"):
+    with pytest.raises(InputFileError, match="US survey foot, not metres.*`reproject`"):
         read_dem(path)
     dem = read_dem(path, reproject=True)
     assert dem.cell_size_m == pytest.approx(3 * 1200 / 3937, rel=1e-3)  # 3 US survey feet
@@ -211,7 +211,7 @@ def test_non_square_cells_refused_or_resampled_to_the_smaller_side(tmp_path):
     path = _geotiff(tmp_path / "ns.tif", h, from_origin(500000, 4000000, 2.0, 1.0), UTM,
                     dtype="float64")
     with pytest.raises(InputFileError, match=r"cells must be square, got 2 x 1; pass "
-                                             r"--reproject.*gdalwarp -tr"):
+                                             r"`reproject`.*gdalwarp -tr"):
         read_dem(path)
     dem = read_dem(path, reproject=True)
     assert dem.cell_size_m == 1.0 and dem.source_crs is None and dem.shape == (12, 20)
@@ -238,7 +238,7 @@ def test_real_geographic_dem_reprojected(tmp_path):
     assert deg == pytest.approx(3 / 3600) and h.shape == (344, 403)
     t = from_origin(west, north, deg, deg)
     path = _geotiff(tmp_path / "jacksboro.tif", h, t, "EPSG:4326", dtype="int16")
-    with pytest.raises(InputFileError, match="--reproject"):
+    with pytest.raises(InputFileError, match="`reproject`"):
         read_dem(path)
     dem = read_dem(path, reproject=True)
     assert CRS.from_wkt(dem.crs).to_dict()["proj"] == "tmerc"

@@ -1,6 +1,6 @@
 """Fuzzing :func:`visibility.dem.read_dem`: a damaged or odd DEM file either reads into a DEM
 with finite heights on square metric cells (nodata as a mask), or raises a one-line
-:class:`~markerplan.errors.MarkerPlanError`, never anything else (issue 9)."""
+:class:`~markerplan.errors.MarkerPlanError`, never anything else."""
 
 from __future__ import annotations
 

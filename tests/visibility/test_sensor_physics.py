@@ -1,4 +1,4 @@
-"""Sensor physics of the simulator (issue 11): each term switchable and checked against an
+"""Sensor physics of the simulator: each term switchable and checked against an
 analytic or Monte-Carlo expectation."""
 
 import json

@@ -1,6 +1,7 @@
 """From ``markers.csv`` tables to the observations of a network adjustment.
 
-Three steps, each a function, so ``markerplan adjust`` only strings them together:
+Three steps, each a function, which :func:`pipeline.network.run.adjust_tables` strings
+together:
 
 1. :func:`read_detections` — the accepted detections of every station in the marker tables of
    ``markerplan process`` (:func:`pipeline.marker_table.read_marker_table`), each with its
@@ -10,7 +11,8 @@ Three steps, each a function, so ``markerplan adjust`` only strings them togethe
 
    - ``plan``: gated association of each station's detections with the plan's markers from the
      station's nominal pose (the plan's, standing in for rover odometry, with its sigma):
-     :func:`identify_with_plan`;
+     :func:`identify_with_plan`, given the plan as :class:`PlanGeometry` (plain data, which
+     the planner reads from a ``plan.json``);
    - ``geometry``: consistent inter-marker distances across stations, no plan needed; markers are
      named ``M001``... (:func:`identify_by_geometry`);
    - ``table``: the table's ``marker_id`` column, i.e. ids assigned in the field (coded targets, a
@@ -18,13 +20,13 @@ Three steps, each a function, so ``markerplan adjust`` only strings them togethe
      simulated scans is the simulator's truth, so ``plan`` and ``geometry`` are the ones that
      test identification (:func:`identify_from_table`);
 3. :func:`network_observations` — the identified detections as
-   :class:`pipeline.network.adjustment.NetworkObservations` (stations in the order the tables
+   :class:`pipeline.network.observations.NetworkObservations` (stations in the order the tables
    give them, so the first station is the default datum).
 
 Frames: detections are in each station's levelled station frame (origin at the LiDAR centre, z
 up, x along the station's nominal heading); the plan's markers and stations are in the site
-frame. Every refusal is one :class:`~markerplan.errors.InputFileError` line naming the table,
-the station or the plan.
+frame. Control points for the datum come from a CSV (:func:`read_control`). Every refusal is
+one :class:`~markerplan.errors.InputFileError` line naming the table, the station or the plan.
 """
 
 from __future__ import annotations
@@ -36,7 +38,7 @@ from pathlib import Path
 import numpy as np
 
 from markerplan.errors import InputFileError
-from markerplan.reading import finite_number, read_csv, require_type, unique_ids
+from markerplan.reading import finite_number, read_csv, unique_ids
 
 #: Ways to establish marker identity across stations (``adjust --marker-ids``).
 IDENTITIES = ("plan", "geometry", "table")
@@ -213,77 +215,6 @@ class PlanGeometry:
     """The CRS (WKT) of the plan's site frame, or ``None`` for local metres."""
 
 
-def read_plan_geometry(path: Path) -> PlanGeometry:
-    """Markers, stations and requirement of a ``plan.json`` (checked by
-    :func:`planner.outputs.plan_file.read_plan`, typed by
-    :func:`planner.outputs.plan_file.plan_layout`; the terrain is not loaded).
-
-    Parameters
-    ----------
-    path : Path
-        The ``plan.json`` written by ``markerplan plan``.
-
-    Returns
-    -------
-    PlanGeometry
-
-    Raises
-    ------
-    InputFileError
-        As :func:`planner.outputs.plan_file.read_plan`, or an inclinometer or heading-prior sigma in
-        its configuration that is not a number in (0, 10] degrees.
-    """
-    from planner.outputs.plan_file import plan_dem_path, plan_layout, read_plan
-
-    doc = read_plan(path, "--plan", full=True)
-    cfg = doc["provenance"].get("config", {})
-    what = f"--plan {path}: provenance config"
-    incl, heading = (_plan_sigma_deg(cfg, k, what)
-                     for k in ("inclinometer_sigma_deg", "heading_prior_sigma_deg"))
-    reference = cfg.get("reference_station")
-    layout = plan_layout(doc)
-    return PlanGeometry(
-        Path(path), layout.marker_ids, layout.marker_xyz_m,
-        tuple(s.id for s in layout.stations),
-        np.array([s.position_m for s in layout.stations], dtype=float),
-        np.array([s.heading_rad for s in layout.stations]),
-        float(doc["requirement"]["working_radius_m"]), float(doc["requirement"]["requirement_m"]),
-        incl, heading, reference if isinstance(reference, str) else None,
-        plan_dem_path(doc["provenance"]), _plan_crs(doc["site"], path))
-
-
-def _plan_crs(site: dict, path: Path) -> str | None:
-    """The plan's ``site.crs_wkt`` (``None`` when absent or null), checked to be a CRS."""
-    wkt = site.get("crs_wkt")
-    if wkt is None:
-        return None
-    from rasterio.crs import CRS
-    from rasterio.errors import CRSError
-
-    try:
-        require_type(wkt, str, f"--plan {path}: site crs_wkt")
-        return CRS.from_user_input(wkt).to_wkt()
-    except CRSError as exc:
-        raise InputFileError(f"--plan {path}: site crs_wkt is not a CRS ({exc}); plan again "
-                             "or remove the member") from exc
-
-
-def _plan_sigma_deg(cfg: dict, key: str, what: str) -> float | None:
-    """The plan's angle sigma ``cfg[key]``, degrees, in (0, 10]; ``None`` when it records none.
-
-    A sigma of 0 would make the prior exact (an infinite weight), so it is refused rather than
-    read as "not set"."""
-    if cfg.get(key) is None:
-        return None
-    sigma = finite_number(cfg[key], f"{what} {key}", 10.0)
-    if sigma <= 0.0:
-        raise InputFileError(
-            f"{what} {key}: must be > 0 deg for an adjustment (0 would make the prior exact), "
-            f"got {sigma:g}; plan again with a --config setting {key} to the sensor's 1-sigma "
-            "(e.g. 0.01)")
-    return sigma
-
-
 def identify_with_plan(stations: list[StationDetections], plan: PlanGeometry,
                        odometry_sigma_m: float, odometry_heading_sigma_rad: float) -> Identified:
     """Marker ids by gated association with the plan's markers, from each station's nominal
@@ -299,9 +230,10 @@ def identify_with_plan(stations: list[StationDetections], plan: PlanGeometry,
     foreign = [s.station_id for s in stations if s.station_id not in plan.station_ids]
     if foreign:
         raise InputFileError(
-            f"station(s) {', '.join(foreign)} of the marker tables are not in --plan "
+            f"station(s) {', '.join(foreign)} of the marker tables are not in `plan_path` "
             f"{plan.path} (it holds {_id_range(plan.station_ids)}); are the tables from "
-            "another site? Give that site's plan, or leave out --plan to associate by geometry")
+            "another site? Give that site's plan, or leave out `plan_path` to associate by "
+            "geometry")
     from pipeline.network.association import associate_with_plan
 
     ids, reasons = [], []
@@ -314,9 +246,9 @@ def identify_with_plan(stations: list[StationDetections], plan: PlanGeometry,
         if not any(i is not None for i in found.ids):
             raise InputFileError(
                 f"none of the {len(found.ids)} detection(s) of station {s.station_id} "
-                f"({s.table}) matches a marker of --plan {plan.path} within the odometry's "
+                f"({s.table}) matches a marker of `plan_path` {plan.path} within the odometry's "
                 f"sigma ({odometry_sigma_m:g} m, {math.degrees(odometry_heading_sigma_rad):g} "
-                "deg); is the table from another site, or is --odometry-sigma-m too small?")
+                "deg); is the table from another site, or is `odometry_sigma_m` too small?")
         ids.append(list(found.ids))
         reasons.append(list(found.status))
     return Identified(stations, ids, "plan", reasons)
@@ -345,13 +277,13 @@ def identify_from_table(stations: list[StationDetections]) -> Identified:
     """
     ids = [[i or None for i in s.table_ids] for s in stations]
     if not any(i is not None for row in ids for i in row):
-        raise InputFileError("--marker-ids table: no accepted detection in the tables has a "
-                             "marker_id; give --plan, or use --marker-ids geometry")
+        raise InputFileError("`identity` table: no accepted detection in the tables has a "
+                             "marker_id; give `plan_path`, or use `identity` geometry")
     return Identified(stations, ids, "table")
 
 
 def network_observations(identified: Identified):
-    """The identified detections as :class:`pipeline.network.adjustment.NetworkObservations`.
+    """The identified detections as :class:`pipeline.network.observations.NetworkObservations`.
 
     Stations keep the order of ``identified.stations`` (those with no identified detection are
     left out); markers are numbered in order of first sight. Unidentified detections are left
@@ -363,10 +295,10 @@ def network_observations(identified: Identified):
 
     Returns
     -------
-    obs : pipeline.network.adjustment.NetworkObservations
+    obs : pipeline.network.observations.NetworkObservations
         Levelled station frames, m; ``sigma_m`` the error model's.
     """
-    from pipeline.network.adjustment import NetworkObservations
+    from pipeline.network.observations import NetworkObservations
 
     station_ids, marker_ids = [], {}
     st, mk, xyz, sig = [], [], [], []
@@ -391,7 +323,7 @@ def read_control(path: Path):
 
     Returns
     -------
-    control : tuple of pipeline.network.adjustment.ControlPoint
+    control : tuple of pipeline.network.observations.ControlPoint
 
     Raises
     ------
@@ -399,9 +331,9 @@ def read_control(path: Path):
         Missing file, missing columns, no rows, repeated or empty ids, non-finite numbers or a
         sigma that is not > 0.
     """
-    from pipeline.network.adjustment import ControlPoint
+    from pipeline.network.observations import ControlPoint
 
-    what = f"--control {path}"
+    what = f"`control_path` {path}"
     header, rows = read_csv(path, what, CONTROL_COLUMNS,
                             "give one row per control point: id,x_m,y_m,z_m,sigma_m")
     if not rows:
@@ -430,52 +362,23 @@ def _id_range(ids: tuple[str, ...]) -> str:
     return f"{', '.join(ids[:3])}, ..., {ids[-1]} ({len(ids)} stations)"
 
 
-def resolved_configuration(plan_geometry, **options) -> dict:
-    """The resolved configuration of an adjustment (``adjust``, ``verify --network``).
-
-    Parameters
-    ----------
-    plan_geometry : PlanGeometry or None
-        The plan's settings, when a plan is given.
-    **options
-        The command's options; ``inclinometer_sigma_deg``, ``working_radius_m``,
-        ``requirement_m`` and ``heading_prior_sigma_deg`` are required keys (``None``: not
-        given).
-
-    Returns
-    -------
-    config : dict
-        ``options`` with each of those four not given taken from the plan, else from
-        :class:`planner.config.PlanConfig`'s defaults.
-    """
-    from planner.config import PlanConfig
-
-    plan, defaults = plan_geometry, PlanConfig()
-    for key in ("inclinometer_sigma_deg", "working_radius_m", "requirement_m",
-                "heading_prior_sigma_deg"):
-        if options[key] is None:
-            from_plan = getattr(plan, key) if plan is not None else None
-            options[key] = from_plan if from_plan is not None else getattr(defaults, key)
-    return options
-
-
 def nominal_poses(plan, obs):
     """Planned poses of the network's stations, the adjustment's odometry.
 
     Parameters
     ----------
     plan : PlanGeometry or None
-    obs : pipeline.network.adjustment.NetworkObservations
+    obs : pipeline.network.observations.NetworkObservations
 
     Returns
     -------
-    nominal : pipeline.network.adjustment.NominalPoses or None
+    nominal : pipeline.network.observations.NominalPoses or None
         Positions (s, 3), site frame, m, and headings (s,), rad, in ``obs.station_ids``'
         order (the plan's order is not the tables'); ``None`` without a plan.
     """
     if plan is None:
         return None
-    from pipeline.network.adjustment import NominalPoses
+    from pipeline.network.observations import NominalPoses
 
     k = [plan.station_ids.index(s) for s in obs.station_ids]
     return NominalPoses(plan.station_xyz_m[k], plan.station_heading_rad[k])

@@ -1,0 +1,113 @@
+"""A ``plan.json`` as the network adjustment takes it: the plan's geometry and settings
+(:class:`pipeline.network.detections.PlanGeometry`), and an adjustment's configuration resolved
+against the plan and the planner's defaults (``adjust``, ``verify --network``)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from markerplan.errors import InputFileError
+from markerplan.reading import finite_number, require_type
+from pipeline.network.detections import PlanGeometry
+
+
+def read_plan_geometry(path: Path) -> PlanGeometry:
+    """Markers, stations and requirement of a ``plan.json`` (checked by
+    :func:`planner.outputs.plan_file.read_plan`, typed by
+    :func:`planner.outputs.plan_file.plan_layout`; the terrain is not loaded).
+
+    Parameters
+    ----------
+    path : Path
+        The ``plan.json`` written by ``markerplan plan``.
+
+    Returns
+    -------
+    PlanGeometry
+
+    Raises
+    ------
+    InputFileError
+        As :func:`planner.outputs.plan_file.read_plan`, or an inclinometer or heading-prior sigma in
+        its configuration that is not a number in (0, 10] degrees.
+    """
+    from planner.outputs.plan_file import plan_dem_path, plan_layout, read_plan
+
+    doc = read_plan(path, "`plan_path`", full=True)
+    cfg = doc["provenance"].get("config", {})
+    what = f"`plan_path` {path}: provenance config"
+    incl, heading = (_plan_sigma_deg(cfg, k, what)
+                     for k in ("inclinometer_sigma_deg", "heading_prior_sigma_deg"))
+    reference = cfg.get("reference_station")
+    layout = plan_layout(doc)
+    return PlanGeometry(
+        Path(path), layout.marker_ids, layout.marker_xyz_m,
+        tuple(s.id for s in layout.stations),
+        np.array([s.position_m for s in layout.stations], dtype=float),
+        np.array([s.heading_rad for s in layout.stations]),
+        float(doc["requirement"]["working_radius_m"]), float(doc["requirement"]["requirement_m"]),
+        incl, heading, reference if isinstance(reference, str) else None,
+        plan_dem_path(doc["provenance"]), _plan_crs(doc["site"], path))
+
+
+def _plan_crs(site: dict, path: Path) -> str | None:
+    """The plan's ``site.crs_wkt`` (``None`` when absent or null), checked to be a CRS."""
+    wkt = site.get("crs_wkt")
+    if wkt is None:
+        return None
+    from rasterio.crs import CRS
+    from rasterio.errors import CRSError
+
+    try:
+        require_type(wkt, str, f"`plan_path` {path}: site crs_wkt")
+        return CRS.from_user_input(wkt).to_wkt()
+    except CRSError as exc:
+        raise InputFileError(f"`plan_path` {path}: site crs_wkt is not a CRS ({exc}); plan again "
+                             "or remove the member") from exc
+
+
+def _plan_sigma_deg(cfg: dict, key: str, what: str) -> float | None:
+    """The plan's angle sigma ``cfg[key]``, degrees, in (0, 10]; ``None`` when it records none.
+
+    A sigma of 0 would make the prior exact (an infinite weight), so it is refused rather than
+    read as "not set"."""
+    if cfg.get(key) is None:
+        return None
+    sigma = finite_number(cfg[key], f"{what} {key}", 10.0)
+    if sigma <= 0.0:
+        raise InputFileError(
+            f"{what} {key}: must be > 0 deg for an adjustment (0 would make the prior exact), "
+            f"got {sigma:g}; plan again with a `config_path` setting {key} to the sensor's 1-sigma "
+            "(e.g. 0.01)")
+    return sigma
+
+
+def resolved_configuration(plan_geometry, **options) -> dict:
+    """The resolved configuration of an adjustment (``adjust``, ``verify --network``).
+
+    Parameters
+    ----------
+    plan_geometry : PlanGeometry or None
+        The plan's settings, when a plan is given.
+    **options
+        The command's options; ``inclinometer_sigma_deg``, ``working_radius_m``,
+        ``requirement_m`` and ``heading_prior_sigma_deg`` are required keys (``None``: not
+        given).
+
+    Returns
+    -------
+    config : dict
+        ``options`` with each of those four not given taken from the plan, else from
+        :class:`planner.config.PlanConfig`'s defaults.
+    """
+    from planner.config import PlanConfig
+
+    plan, defaults = plan_geometry, PlanConfig()
+    for key in ("inclinometer_sigma_deg", "working_radius_m", "requirement_m",
+                "heading_prior_sigma_deg"):
+        if options[key] is None:
+            from_plan = getattr(plan, key) if plan is not None else None
+            options[key] = from_plan if from_plan is not None else getattr(defaults, key)
+    return options

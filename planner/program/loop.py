@@ -1,0 +1,383 @@
+"""The accuracy-cut loop: solve, check every station exactly, cut the failing layout, re-solve.
+
+:func:`plan_sites` solves (:func:`planner.program.solving.solve`), checks every station's
+predicted accuracy exactly (:class:`planner.accuracy.checks.StationInfo`), adds valid cuts for
+stations that fail (:mod:`planner.program.cuts_known`, :mod:`planner.program.cuts_network`) and
+re-solves until all pass. In known-control mode the first solve is the directions-only
+relaxation (:func:`_combinatorial_first`); the full model is built only when its layout fails a
+station. Large network problems start from the greedy layout and a root relaxation
+(:func:`_root_relaxation`).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import replace
+
+import numpy as np
+import scipy.sparse as sp
+
+from markerplan.errors import ConfigError, InfeasiblePlanError, PlanTimeLimitError
+from planner.accuracy.checks import StationInfo, diagnose, evaluate_layout, station_infos
+from planner.accuracy.network import NetworkModel, network_model
+from planner.problem.usability import PlanProblem
+from planner.program.cuts_known import accuracy_cuts
+from planner.program.cuts_network import MAX_TERMS, network_cuts, network_preflight, sparse_tangent
+from planner.program.model import (
+    Model,
+    PlanResult,
+    RowKind,
+    Solution,
+    build_model,
+    with_tightening_rows,
+)
+from planner.program.solving import solve
+
+#: Network mode: problems with more tying sites than this get sparse cut rows, under the
+#: upper bound of the greedy layout's count.
+_SPARSE_ABOVE_SITES = 8000
+#: Network mode: most tying sites the integer program takes. Above it (``large`` at its 1 m grid
+#: has about 86,000) the tangent rows touch tens of thousands of sites and HiGHS did not return
+#: at its time limit in our runs; ``large`` at a 3 m grid (about 10,000) returns at the limit.
+MAX_NETWORK_TYING_SITES = 20_000
+#: Network mode, large problems: the greedy incumbent
+#: (:func:`~planner.program.baselines.greedy_network`) starts no step after this fraction of the
+#: time limit (it stops without a layout; the search goes on without an incumbent).
+_GREEDY_TIME_FRACTION = 0.5
+#: Network mode, large problems: the root relaxation (:func:`_root_relaxation`) spends at most
+#: this fraction of the time left after the greedy incumbent, at most this many LP solves, and
+#: stops when its bound rose less than this (relative) over 5 solves; its rows in the integer
+#: program give up at most this fraction of their right-hand side.
+_ROOT_TIME_FRACTION = 0.5
+#: ... and at least this fraction of the whole time limit, even when the greedy incumbent took
+#: the rest (a time-limited plan then still reports a proven bound; the run may exceed the
+#: time limit by up to this fraction).
+_ROOT_MIN_TIME_FRACTION = 0.1
+_ROOT_MAX_ROUNDS = 100
+_ROOT_STALL = 2e-3
+_ROOT_SPARSE_SLACK = 0.05
+#: Network mode, root relaxation: most moves of the in-point towards one LP solution.
+_ROOT_MAX_STEPS = 8
+
+
+def plan_sites(problem: PlanProblem, config, model: Model | None = None) -> PlanResult:
+    """The accuracy-cut loop: solve, check stations exactly, cut, re-solve until all pass.
+
+    Parameters
+    ----------
+    problem : PlanProblem
+    config : PlanConfig
+        Also uses ``time_limit_s`` (for the whole loop) and ``mip_gap``.
+    model : Model, optional
+        A model built (and possibly modified) by the caller; default ``build_model``.
+
+    Returns
+    -------
+    result : PlanResult
+
+    Raises
+    ------
+    InfeasiblePlanError
+        Naming each station that cannot be satisfied and why, or the budget;
+        :class:`~markerplan.errors.PlanTimeLimitError` (a subclass) when the time limit ended
+        the search before any layout passed.
+    """
+    infos = station_infos(problem, config)
+    if config.network:
+        return _plan_network(problem, config, model, infos)
+    t0 = time.perf_counter()
+    first = None
+    if model is None:
+        first, rows = _combinatorial_first(problem, config, infos)
+        if rows is None:
+            return first
+        model = with_tightening_rows(problem, build_model(problem, config), config)
+        if rows[0] is not None:
+            model = model.with_rows(rows[0], rows[1], np.full(len(rows[1]), np.inf), rows[2])
+    failing = diagnose(problem, config, infos)
+    if failing:
+        raise InfeasiblePlanError(
+            f"no layout meets the requirement ({config.requirement_m:g} m, "
+            f">= {config.min_markers} markers in >= {config.min_sectors} of {config.n_sectors} "
+            "sectors) at station(s): "
+            + "; ".join(f"{k}: {v}" for k, v in failing.items())
+            + "; relax the configuration or add candidate sites")
+
+    def cuts(selected):
+        return accuracy_cuts(problem, model, selected, config, infos, outer_approximation=True)
+
+    def check(selected):
+        return evaluate_layout(problem, selected, config, infos)
+
+    result = _cut_loop(problem, config, model, cuts, check, t0=t0)
+    if first is None:
+        return result
+    return replace(result, iterations=result.iterations + first.iterations,
+                   n_cuts=result.n_cuts + first.n_cuts,
+                   solve_time_s=result.solve_time_s + first.solve_time_s,
+                   history=first.history + result.history)
+
+
+def _combinatorial_first(problem: PlanProblem, config, infos: list[StationInfo]
+                         ) -> tuple[PlanResult | None, tuple | None]:
+    """Known control: solve the directions rows alone first; done if that passes.
+
+    :func:`~planner.program.model.build_model` without its information rows is the plain
+    cover-plus-sector model. It is a relaxation of the full program (every row left out —
+    information, tightening, accuracy cuts — holds for every passing layout), so its optimum
+    bounds the full one from below: a layout that is optimal here and passes every station's
+    exact check is optimal for the plan. In it many candidate sites have identical columns (same
+    stations, same sectors): the markers of such a group go to its members with the most
+    information (``sum 3 / sigma^2`` over their usable pairs).
+
+    Returns
+    -------
+    result : PlanResult or None
+        The plan when the layout passes (then ``rows`` is None), else the first solve's
+        record (iterations, cuts, solver time, history) for the loop that follows.
+    rows : tuple or None
+        ``(rows, lower, kinds)`` of :func:`~planner.program.cuts_known.accuracy_cuts` for the
+        failing layout (``rows`` None when there was no layout), to add to the full model.
+    """
+    relaxed = build_model(problem, config, information=False)
+    usable = np.flatnonzero(problem.pair_usable)
+    info = np.bincount(problem.pair_site[usable], 3.0 / problem.pair_sigma_m[usable] ** 2,
+                       minlength=problem.n_sites)
+    sol = solve(relaxed, config.time_limit_s, config.mip_gap, priority=info[relaxed.var_site])
+    history = [{"iteration": 1, "status": sol.status, "objective": sol.objective,
+                "dual_bound": sol.dual_bound, "solve_time_s": sol.solve_time_s,
+                "n_rows": int(relaxed.A.shape[0])}]
+    rows, check = (None, [], []), None
+    if sol.selected is not None:
+        # the exact check first: a layout it passes needs no cuts
+        check = evaluate_layout(problem, sol.selected, config, infos)
+        if not check.all_ok:
+            rows = accuracy_cuts(problem, relaxed, sol.selected, config, infos,
+                                 outer_approximation=True)
+    result = PlanResult(selected=sol.selected, check=check, solution=sol, iterations=1,
+                        n_cuts=0 if rows[0] is None else rows[0].shape[0],
+                        solve_time_s=sol.solve_time_s, model=relaxed, history=history)
+    if sol.selected is not None and rows[0] is None:
+        return result, None
+    return result, rows
+
+
+def _plan_network(problem: PlanProblem, config, model: Model | None,
+                  infos: list[StationInfo]) -> PlanResult:
+    """:func:`plan_sites` in network mode: the same build/solve/cut loop with the network's
+    accuracy checks and cuts (:func:`~planner.program.cuts_network.network_cuts`)."""
+    t0 = time.perf_counter()
+    net = network_model(problem, config)
+    n_tying = int(net.tying.sum())
+    if n_tying > MAX_NETWORK_TYING_SITES:
+        raise ConfigError(
+            f"network mode takes at most {MAX_NETWORK_TYING_SITES:,} candidate sites seen by two "
+            f"or more stations; this site has {n_tying:,}: coarsen the candidate grid "
+            f"(grid_spacing_m in `config_path`; {config.grid_spacing_m:g} m now, try "
+            f"{config.grid_spacing_m * math.sqrt(n_tying / MAX_NETWORK_TYING_SITES) * 1.2:.1f} m)")
+    hopeless = network_preflight(problem, config, net, infos)
+    if model is None:
+        model = with_tightening_rows(problem, build_model(problem, config), config)
+    ub = model.ub.copy()
+    var = model.site_var[np.flatnonzero(hopeless)]
+    ub[var[var >= 0]] = 0.0
+    model = replace(model, ub=ub)
+    forbidden = problem.site_mask(config.forbidden, "forbidden")
+    j_all = net.information(~forbidden & ~hopeless & (net.n_stations_seeing > 0))
+    upper_bound = greedy_selected = greedy = None
+    root_bound = -np.inf
+    existing = problem.site_mask(config.existing, "existing") | problem.site_existing
+    if int(net.tying.sum()) > _SPARSE_ABOVE_SITES and not config.redundant \
+            and np.all(problem.site_cost[~existing] == 1):
+        # every layout at least as good as the greedy one has at most its number of sites
+        from planner.program.baselines import network_baseline
+
+        # a stuck greedy gives no starting layout: the search goes on without one
+        greedy = network_baseline(problem, config.replace(
+            forbidden=config.forbidden + tuple(
+                problem.site_ids[j] for j in np.flatnonzero(hopeless & ~forbidden))), net,
+            deadline=t0 + _GREEDY_TIME_FRACTION * config.time_limit_s)
+    if greedy is not None and greedy.meets_requirement:
+        in_model = model.site_var >= 0
+        greedy_selected = greedy.selected
+        upper_bound = int((greedy.selected & in_model).sum())
+        nx = model.var_site.size
+        row = sp.csr_array((np.ones(nx), (np.zeros(nx, np.int64), np.arange(nx))),
+                           shape=(1, model.n_vars))
+        model = model.with_rows(row, [-np.inf], [float(upper_bound)],
+                                [RowKind("upper-bound")])
+        budget_s = max(_ROOT_TIME_FRACTION * (config.time_limit_s - (time.perf_counter() - t0)),
+                       _ROOT_MIN_TIME_FRACTION * config.time_limit_s)
+        model, root_bound = _root_relaxation(problem, model, config, net, upper_bound, budget_s)
+
+    def cuts(selected):
+        return network_cuts(problem, model, selected, config, net, j_all, upper_bound)
+
+    def check(selected):
+        return evaluate_layout(problem, selected, config, infos, net=net)
+
+    result = _cut_loop(problem, config, model, cuts, check, incumbent=greedy_selected, t0=t0,
+                       bound=root_bound)
+    return replace(result, greedy=greedy)
+
+
+def _root_relaxation(problem: PlanProblem, model: Model, config, net: NetworkModel,
+                     upper_bound: int, budget_s: float) -> tuple[Model, float]:
+    """Tighten a large network model at its LP relaxation before branching; a lower bound.
+
+    With ``x`` relaxed to ``[0, 1]``: first one tangent per station at the every-site
+    information scaled onto the requirement's boundary, ``J_t = J_prior + t (J_all - J_prior)``
+    with ``t = (e_all / requirement)^2``; then an in-out cutting-plane loop: linearise at
+    ``x_lin = (x_LP + x_in) / 2`` (``x_in`` the last point where every station passes, at
+    first every open site); where ``x_lin`` passes it becomes ``x_in``, otherwise its failing
+    stations' tangents (:meth:`~planner.accuracy.network.NetworkModel.station_tangents`, worst
+    rim point) are added and the LP is solved again. Linearising between the two points keeps
+    the tangents informative where the LP solution alone leaves stations untied. Every
+    tangent is valid for every layout (the error is convex in the information), so each LP
+    optimum bounds the fewest markers from below. Stops after ``budget_s``, ``_ROOT_MAX_ROUNDS``
+    solves, when the bound rose less than ``_ROOT_STALL`` (relative) over 5 solves, or when
+    the LP solution passes every station (to ``_ROOT_MAX_STEPS`` halvings).
+
+    The integer program gets the rows sparsified under ``upper_bound``
+    (:func:`~planner.program.cuts_network.sparse_tangent`, giving up at most
+    ``_ROOT_SPARSE_SLACK`` of each right-hand side); the returned bound is the LP's with the
+    full rows.
+
+    Returns
+    -------
+    model : Model
+        ``model`` with the rows (family ``"oa-root"``).
+    bound : float
+        Proven lower bound on the objective (``-inf`` when no LP solved).
+    """
+    t0 = time.perf_counter()
+    req = config.requirement_m
+    nx = model.var_site.size
+    in_model = model.site_var >= 0
+    x_in = np.zeros(problem.n_sites)
+    x_in[model.var_site] = model.ub[:nx]
+    x_in *= net.tying
+    sites_all = net.site_information(x_in)
+    prior = np.diag(net.prior)
+    e_all = net.station_errors_from(net.covariance(prior + sites_all))
+    cuts = []  # (station, coefficients (n,), rhs)
+    tied = np.flatnonzero(np.isfinite(e_all) & (np.arange(problem.n_stations) != net.reference))
+    try:  # every station determined: one decomposition for all the scaled informations
+        scaled = net.scaled_covariances(sites_all, (e_all[tied] / req) ** 2, tied)
+    except np.linalg.LinAlgError:
+        scaled = ((int(k), net.covariance(prior + (e_all[k] / req) ** 2 * sites_all))
+                  for k in tied)
+    for k, cov_t in scaled:
+        cuts += net.station_tangents(cov_t, [k], req)
+    lp = replace(model, integrality=np.zeros_like(model.integrality))
+    bound, history = -np.inf, []
+    added = 0
+    for _ in range(_ROOT_MAX_ROUNDS):
+        if cuts[added:]:
+            rows = sp.vstack([model.site_row(np.flatnonzero(in_model & (c > 0)),
+                                             c[in_model & (c > 0)] / rhs)
+                              for _, c, rhs in cuts[added:]])
+            n = len(cuts) - added
+            lp = lp.with_rows(rows, np.ones(n), np.full(n, np.inf), [RowKind("oa-root")] * n)
+            added = len(cuts)
+        remaining = budget_s - (time.perf_counter() - t0)
+        if remaining <= 0:
+            break
+        sol = solve(lp, remaining, 0.0)
+        if sol.status != "optimal" or sol.x is None:
+            break
+        bound = max(bound, sol.objective)
+        history.append(bound)
+        x_lp = np.zeros(problem.n_sites)
+        x_lp[model.var_site] = sol.x[:nx]
+        if len(history) > 5 and history[-1] - history[-6] < _ROOT_STALL * abs(history[-1]):
+            break
+        failing = np.zeros(0, np.int64)
+        for _ in range(_ROOT_MAX_STEPS):
+            x_lin = 0.5 * (x_lp + x_in)
+            cov = net.covariance(net.information(x_lin))
+            failing = np.flatnonzero(net.station_errors_from(cov) > req)
+            if failing.size:
+                break
+            x_in = x_lin
+        if failing.size == 0:  # the LP solution (nearly) passes: the relaxation is solved
+            break
+        cuts += net.station_tangents(cov, failing, req)
+    kept = []
+    for k, c, rhs in cuts:
+        sites, coef, lo = sparse_tangent(np.where(in_model, c, 0.0), rhs, upper_bound,
+                                          MAX_TERMS, _ROOT_SPARSE_SLACK)
+        kept.append((model.site_row(sites, coef), lo, RowKind("oa-root", int(k))))
+    if kept:
+        rows, lower, kinds = zip(*kept, strict=True)
+        model = model.with_rows(sp.vstack(rows), lower, np.full(len(lower), np.inf), kinds)
+    return model, bound
+
+
+def _cut_loop(problem: PlanProblem, config, model: Model, cuts, check,
+              incumbent: np.ndarray | None = None, t0: float | None = None,
+              bound: float = -np.inf) -> PlanResult:
+    """Solve, cut with ``cuts(selected) -> (rows, lower, kinds)`` (``rows`` None: passes),
+    re-solve until every check passes; ``check(selected) -> LayoutCheck``.
+
+    ``incumbent`` ((n,) bool, a layout known to pass): when the time limit stops the loop, or
+    when a proven lower bound reaches its cost (then with status ``"optimal"``), it is the
+    answer, with status ``"time_limit"``, the best lower bound proved (``bound``, proved before
+    the loop, and every solve's dual bound: every cut is valid) and their gap. ``t0``: when
+    the time limit started (default now).
+    """
+    t0 = time.perf_counter() if t0 is None else t0
+    solve_time = 0.0
+    n_cuts = 0
+    history = []
+    iteration = 0
+    while True:
+        iteration += 1
+        remaining = config.time_limit_s - (time.perf_counter() - t0)
+        proven = incumbent is not None and np.isfinite(bound) \
+            and math.ceil(bound - 1e-6) >= problem.site_cost[incumbent].sum() - 1e-9
+        if (remaining <= 0 or proven) and incumbent is not None:
+            obj = float(problem.site_cost[incumbent].sum())
+            gap = max(obj - bound, 0.0) / max(abs(obj), 1e-9) if np.isfinite(bound) \
+                else float("nan")
+            sol = Solution(status="optimal" if proven else "time_limit", selected=incumbent,
+                           objective=obj, dual_bound=float(bound), gap=0.0 if proven else gap,
+                           solve_time_s=0.0,
+                           message="the passing layout found first: proven optimal by the "
+                                   "lower bound" if proven else
+                                   "time limit: the passing layout found first, with the best "
+                                   "proven bound")
+            return PlanResult(selected=incumbent, check=check(incumbent), solution=sol,
+                              iterations=iteration - 1, n_cuts=n_cuts,
+                              solve_time_s=solve_time, model=model, history=history)
+        if remaining <= 0:
+            raise PlanTimeLimitError(
+                f"time limit {config.time_limit_s:g} s reached after {iteration - 1} "
+                "iteration(s) before every station met the accuracy requirement; "
+                "raise `time_limit_s`")
+        sol = solve(model, remaining, config.mip_gap)
+        solve_time += sol.solve_time_s
+        if np.isfinite(sol.dual_bound):
+            bound = max(bound, sol.dual_bound)
+        history.append({"iteration": iteration, "status": sol.status,
+                        "objective": sol.objective, "dual_bound": sol.dual_bound,
+                        "solve_time_s": sol.solve_time_s, "n_rows": int(model.A.shape[0])})
+        if sol.selected is None:
+            if sol.status == "infeasible":
+                why = (f"the marker budget ({config.budget}) is too small"
+                       if config.budget is not None else
+                       "the stations' direction and accuracy requirements conflict")
+                raise InfeasiblePlanError(f"no layout is feasible: {why}; "
+                                          "raise `budget` or relax the configuration")
+            if incumbent is not None:
+                continue  # time limit: the incumbent is the answer
+            raise PlanTimeLimitError(f"solver found no layout ({sol.status}: {sol.message}); "
+                                     "raise `time_limit_s`")
+        rows, lower, kinds = cuts(sol.selected)
+        if rows is None:
+            return PlanResult(selected=sol.selected, check=check(sol.selected), solution=sol,
+                              iterations=iteration, n_cuts=n_cuts, solve_time_s=solve_time,
+                              model=model, history=history)
+        n_cuts += rows.shape[0]
+        model = model.with_rows(rows, lower, np.full(len(lower), np.inf), kinds)

@@ -1,0 +1,95 @@
+"""The planner's predicted network covariance is the one the adjustment reports on that geometry.
+
+A noise-free simulated network without tilt is both a plan (stations at their true positions,
+candidate sites at the markers, every observation a usable pair with its sigma) and the
+adjustment's input; with the same sigmas, the same reference-station datum, the same
+inclinometer prior and the same heading prior, :class:`planner.accuracy.network.NetworkModel`
+(linearised at the nominal layout, markers eliminated analytically) and
+:func:`pipeline.network.adjustment.adjust` (Gauss-Newton to the exact solution, full normal
+matrix) must give the same station and marker covariances. The adjustment's roll and pitch are
+about each station's own axes, the planner's about the site axes, so the adjustment's tilt
+block is turned by the station's heading before comparing.
+"""
+
+import math
+
+import numpy as np
+import pytest
+
+from pipeline.network.adjustment import AdjustmentSettings, adjust
+from pipeline.network.observations import Datum, NominalPoses
+from pipeline.network.simulation import simulated_network
+from planner.accuracy.network import NetworkModel
+from planner.problem.usability import USABLE, PlanProblem
+
+INCL = math.radians(0.01)
+#: They agree to ~1e-14; a 0.1 % error in any design column or weight is far above this.
+RTOL = 1e-9
+
+
+def _sigma(distance_m):
+    """A sigma that grows with distance, so every pair has its own weight."""
+    return 0.004 + 0.0005 * distance_m
+
+
+def _network(seed):
+    """A noise-free, tilt-free network and the plan of the same geometry."""
+    obs, truth = simulated_network(n_stations=5, seed=seed, sigma_m=_sigma,
+                                   inclinometer_sigma_rad=0.0, noise_scale=0.0,
+                                   odometry_sigma_m=0.0, odometry_heading_sigma_rad=0.0)
+    station_xyz, site_xyz = truth.pose[:, :3], truth.marker_xyz_m
+    diff = site_xyz[obs.marker] - station_xyz[obs.station]
+    problem = PlanProblem(
+        station_ids=obs.station_ids, station_xyz=station_xyz, site_ids=obs.marker_ids,
+        site_xyz=site_xyz, site_existing=np.zeros(len(obs.marker_ids), bool),
+        site_cost=np.ones(len(obs.marker_ids)), pair_station=obs.station, pair_site=obs.marker,
+        pair_distance_m=np.linalg.norm(diff, axis=1),
+        pair_bearing_rad=np.arctan2(diff[:, 1], diff[:, 0]), pair_sigma_m=obs.sigma_m,
+        pair_reason=np.full(obs.n, USABLE, dtype=np.int8))
+    return obs, truth, problem
+
+
+def _tilts_to_site_axes(pose_cov, heading_rad):
+    """(6 s, 6 s) pose covariance with each station's (roll, pitch) about its own axes turned
+    to roll and pitch about the site axes (``theta_site = M(heading) theta_station``)."""
+    t = np.eye(pose_cov.shape[0])
+    for k, psi in enumerate(heading_rad):
+        c, s = math.cos(psi), math.sin(psi)
+        t[6 * k + 4:6 * k + 6, 6 * k + 4:6 * k + 6] = [[c, -s], [s, c]]
+    return t @ pose_cov @ t.T
+
+
+def _assert_same_covariance(predicted, adjusted):
+    """Equal diagonals to ``RTOL``; off-diagonals to ``RTOL`` of ``sqrt(c_ii c_jj)``."""
+    d = np.sqrt(np.diag(adjusted))
+    np.testing.assert_allclose(np.diag(predicted), np.diag(adjusted), rtol=RTOL, atol=0.0)
+    scale = np.outer(d, d)
+    scale[scale == 0] = 1.0
+    assert float(np.max(np.abs(predicted - adjusted) / scale)) < RTOL
+
+
+@pytest.mark.parametrize("seed, reference, heading_prior", [
+    (1, 0, None),
+    (3, 2, None),
+    (5, 1, math.radians(0.5)),
+])
+def test_planner_predicts_the_adjustments_covariance(seed, reference, heading_prior):
+    obs, truth, problem = _network(seed)
+    net = NetworkModel(problem, 10.0, INCL, reference=reference,
+                       heading_prior_sigma_rad=heading_prior)
+    cov = net.covariance(net.information(np.ones(problem.n_sites, bool)))
+    assert cov.determined.all()
+
+    result = adjust(obs, Datum(reference_station=obs.station_ids[reference]),
+                    AdjustmentSettings(inclinometer_sigma_rad=INCL,
+                                       heading_prior_sigma_rad=heading_prior, snooping=False),
+                    nominal=NominalPoses(truth.pose[:, :3], truth.pose[:, 3]))
+    assert np.abs(result.marker_xyz_m - truth.marker_xyz_m).max() < 1e-9
+    n6 = 6 * problem.n_stations
+    assert not cov.full[6 * reference:6 * reference + 4].any()
+    assert not result.covariance[6 * reference:6 * reference + 4, :n6].any()
+    _assert_same_covariance(cov.full, _tilts_to_site_axes(result.covariance[:n6, :n6],
+                                                          truth.pose[:, 3]))
+    predicted = net.marker_covariances(cov, np.arange(problem.n_sites))
+    for j in range(problem.n_sites):
+        _assert_same_covariance(predicted[j], result.marker_covariance(j))
