@@ -240,6 +240,14 @@ valid ids are S1, S2
                               f"network; valid ids are {shown}")
         return ids.index(reference)
 
+    def reference_id(self, station_ids) -> str:
+        """Id of the reference station among ``station_ids`` (:meth:`resolve`'s station).
+
+        >>> Datum(reference_station="S2").reference_id(("S1", "S2"))
+        'S2'
+        """
+        return station_ids[self.resolve(station_ids)]
+
     def describe(self, station_ids: tuple[str, ...]) -> str:
         """One line naming the datum, for reports, e.g. ``"reference station S1 (x, y, z,
         heading fixed)"``.
@@ -250,7 +258,7 @@ valid ids are S1, S2
         'reference station S1 (x, y, z, heading fixed)'
         """
         if self.kind == "station":
-            return (f"reference station {station_ids[self.resolve(station_ids)]} "
+            return (f"reference station {self.reference_id(station_ids)} "
                     "(x, y, z, heading fixed)")
         if self.kind == "control":
             return "control points " + ", ".join(c.marker_id for c in self.control)

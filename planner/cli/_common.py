@@ -41,7 +41,7 @@ option                      meaning (and the value the command receives)
 ==========================  =====================================================================
 
 Options whose value has a unit carry it in the name (``-m``, ``-s``, ``-deg``, ``-mm``); a
-renamed option keeps its old spelling for one release (:func:`deprecated_alias`).
+renamed option keeps its old spelling for one release (:func:`renamed_option`).
 
 Helpers: :func:`emit_summary` (JSON or human summary), :func:`report_timings` (step timings on
 stderr, never in files), :func:`given_paths` (the inputs an output folder must not contain).
@@ -167,6 +167,34 @@ def deprecated_alias(old: str, new: str, name: str, **attrs):
                         callback=warn, **attrs)
 
 
+#: The attributes of an option its :func:`deprecated_alias` shares (not its default or help).
+_ALIAS_ATTRS = ("type", "metavar", "multiple", "callback")
+
+
+def renamed_option(new: str, name: str, old: str, **attrs):
+    """``click.option(new, name, **attrs)`` with its former spelling ``old`` kept as a
+    :func:`deprecated_alias` of the same type, metavar and callback.
+
+    Parameters
+    ----------
+    new, old : str
+        The option's spelling and its former one, e.g. ``"--time-limit-s"``, ``"--time-limit"``.
+    name : str
+        The command's parameter, e.g. ``"time_limit_s"``.
+    **attrs
+        As :func:`click.option` (``type``, ``default``, ``help``, ...).
+
+    Returns
+    -------
+    decorator
+        Both options, the alias applied first (as when written as two decorators, ``new``
+        above).
+    """
+    option = click.option(new, name, **attrs)
+    alias = deprecated_alias(old, new, name, **{k: attrs[k] for k in _ALIAS_ATTRS if k in attrs})
+    return lambda f: option(alias(f))
+
+
 def emit_summary(summary: dict[str, Any], as_json: bool, human: str | None = None) -> None:
     """Print the command's summary: JSON on stdout with ``--json``, else ``human`` text."""
     if as_json:
@@ -256,12 +284,11 @@ def point_option(name: str, default: str, metavar: str, help_text: str,
                                      f"{metavar}, got {text!r}", ctx, param)
         return values
 
-    option = click.option(name, *([dest] if dest else []), default=default, show_default=True,
-                          metavar=metavar, callback=parse, help=help_text)
+    attrs = {"default": default, "show_default": True, "metavar": metavar, "callback": parse,
+             "help": help_text}
     if old is None:
-        return option
-    alias = deprecated_alias(old, name, dest, metavar=metavar, callback=parse)
-    return lambda f: option(alias(f))
+        return click.option(name, *([dest] if dest else []), **attrs)
+    return renamed_option(name, dest, old, **attrs)
 
 
 def site_option(default: str | None = "default"):
@@ -300,14 +327,11 @@ range_noise_option = click.option(
     help="1-sigma range noise at short range and normal incidence, mm; overrides the sensor "
          "profile's (datasheet: 15, +-3 cm read as 2 sigma).")
 
-def lidar_height_option(f):
-    """``--lidar-height-m M`` (old spelling ``--lidar-height``): the LiDAR centre above the
-    ground, metres."""
-    f = deprecated_alias("--lidar-height", "--lidar-height-m", "lidar_height_m",
-                         type=LIDAR_HEIGHT_M)(f)
-    return click.option(
-        "--lidar-height-m", "lidar_height_m", type=LIDAR_HEIGHT_M, default=1.0,
-        show_default=True, help="LiDAR centre above the ground, metres.")(f)
+#: ``--lidar-height-m M`` (old spelling ``--lidar-height``): the LiDAR centre above the ground,
+#: metres.
+lidar_height_option = renamed_option(
+    "--lidar-height-m", "lidar_height_m", "--lidar-height", type=LIDAR_HEIGHT_M, default=1.0,
+    show_default=True, help="LiDAR centre above the ground, metres.")
 
 dem_option = click.option(
     "--dem", "dem_path", type=FILE,
@@ -337,13 +361,10 @@ def marker_radius_option(required: bool = False, default_help: str = "",
     metres. ``required``: the command gets ``None`` when neither spelling is given and refuses
     it with :func:`require_option` (click's own check would refuse the old spelling)."""
     settings = {"default": default, "show_default": True} if default is not None else {}
-    option = click.option(
-        "--marker-radius-m", "marker_radius_m", type=SPHERE_RADIUS_M, **settings,
-        help="Marker (sphere) radius, metres (a 0.20 m sphere has 0.1)." + default_help
-             + ("  [required]" if required else ""))
-    alias = deprecated_alias("--marker-radius", "--marker-radius-m", "marker_radius_m",
-                             type=SPHERE_RADIUS_M)
-    return lambda f: option(alias(f))
+    return renamed_option(
+        "--marker-radius-m", "marker_radius_m", "--marker-radius", type=SPHERE_RADIUS_M,
+        **settings, help="Marker (sphere) radius, metres (a 0.20 m sphere has 0.1)."
+        + default_help + ("  [required]" if required else ""))
 
 
 def require_option(value, flag: str) -> None:
@@ -445,12 +466,10 @@ def network_settings(config, network: bool | None, reference_station: str | None
     return config
 
 
-def time_limit_option(f):
-    """``--time-limit-s S`` (old spelling ``--time-limit``): the solver time limit, seconds."""
-    f = deprecated_alias("--time-limit", "--time-limit-s", "time_limit_s", type=TIME_LIMIT_S)(f)
-    return click.option(
-        "--time-limit-s", "time_limit_s", type=TIME_LIMIT_S,
-        help="Solver time limit for the whole run, seconds (default 60).")(f)
+#: ``--time-limit-s S`` (old spelling ``--time-limit``): the solver time limit, seconds.
+time_limit_option = renamed_option(
+    "--time-limit-s", "time_limit_s", "--time-limit", type=TIME_LIMIT_S,
+    help="Solver time limit for the whole run, seconds (default 60).")
 
 
 def mounting_offset_options(command):

@@ -12,13 +12,13 @@ import click
 from planner.cli._common import (
     FILE,
     FiniteRange,
-    deprecated_alias,
     emit_summary,
     error_model_option,
     given_paths,
     json_option,
     out_option,
     overwrite_option,
+    renamed_option,
     report_timings,
     warn_deprecated,
 )
@@ -118,13 +118,11 @@ def _datum_choice(datum: tuple[str, str | None] | None, control_path: Path | Non
               help="Significance level of the w-test.")
 @click.option("--beta0", type=PROBABILITY, default=0.80, show_default=True,
               help="Power of the w-test (for the minimal detectable biases).")
-@click.option("--working-radius-m", "working_radius_m", type=RADIUS_M,
-              help="Radius around a station over which its station error is assessed, m "
-                   "(default: the plan's, else 10).")
-@deprecated_alias("--working-radius", "--working-radius-m", "working_radius_m", type=RADIUS_M)
-@click.option("--requirement-m", "requirement_m", type=REQUIREMENT_M,
-              help="Required 95 % station error, m (default: the plan's, else 0.1).")
-@deprecated_alias("--requirement", "--requirement-m", "requirement_m", type=REQUIREMENT_M)
+@renamed_option("--working-radius-m", "working_radius_m", "--working-radius", type=RADIUS_M,
+                help="Radius around a station over which its station error is assessed, m "
+                     "(default: the plan's, else 10).")
+@renamed_option("--requirement-m", "requirement_m", "--requirement", type=REQUIREMENT_M,
+                help="Required 95 % station error, m (default: the plan's, else 0.1).")
 @json_option
 def command(tables, out, overwrite, error_model, plan_path, identity, odometry_sigma_m,
             odometry_heading_sigma_deg, datum, reference_station, control_path,
@@ -197,7 +195,7 @@ def command(tables, out, overwrite, error_model, plan_path, identity, odometry_s
             result=result, observations=obs, config=config,
             working_radius_m=config["working_radius_m"], requirement_m=config["requirement_m"],
             identity=identity, frame=frame_note(
-                kind, obs.station_ids[result.datum.resolve(obs.station_ids)], plan is not None,
+                kind, result.datum.reference_id(obs.station_ids), plan is not None,
                 plan.dem if plan else None, plan.crs if plan else None),
             inputs=_input_files(tables, plan_path, control_path),
             error_model=error_model.name, unidentified=identified.unidentified,
@@ -217,7 +215,7 @@ def _reference(reference: str | None, kind: str, plan, stations) -> str | None:
 
     ids = [s.station_id for s in stations]
     if reference:
-        return ids[Datum(reference_station=reference).resolve(ids)]
+        return Datum(reference_station=reference).reference_id(ids)
     if kind == "station" and plan is not None and plan.reference_station in ids:
         return plan.reference_station
     return None

@@ -10,7 +10,6 @@ import click
 from planner.cli._common import (
     FILE,
     FiniteRange,
-    deprecated_alias,
     emit_summary,
     frames_option,
     given_paths,
@@ -18,6 +17,7 @@ from planner.cli._common import (
     marker_radius_option,
     out_option,
     overwrite_option,
+    renamed_option,
     rpm_option,
     seed_option,
 )
@@ -28,10 +28,9 @@ from planner.cli._common import (
 @click.option("--marker-table", "marker_table", type=FILE,
               help="Instead of SUMMARY: a markers.csv from `markerplan process` of real scans "
                    "(each station one position) ...")
-@click.option("--reference", "reference", type=FILE,
-              help="Reference coordinates: with --marker-table, the total-station CSV "
-                   "(id,x_m,y_m,z_m) the table was evaluated against.")
-@deprecated_alias("--reference-csv", "--reference", "reference", type=FILE)
+@renamed_option("--reference", "reference", "--reference-csv", type=FILE,
+                help="Reference coordinates: with --marker-table, the total-station CSV "
+                     "(id,x_m,y_m,z_m) the table was evaluated against.")
 @out_option(required=True)
 @overwrite_option
 @click.option("--base-profile", default="datasheet", show_default=True, metavar="NAME|FILE",

@@ -9,12 +9,12 @@ import click
 
 from planner.cli._common import (
     SEED,
-    deprecated_alias,
     emit_summary,
     estimator_option,
     json_option,
     out_option,
     overwrite_option,
+    renamed_option,
 )
 
 
@@ -24,10 +24,10 @@ from planner.cli._common import (
 @out_option(required=True)
 @click.option("--plot", is_flag=True,
               help="Also write model.png: errors against distance, sigma and the envelope.")
-@click.option("--resample-seed", "seed", type=SEED, default=0, show_default=True, metavar="N",
-              help="Seed of the cross-validation folds and the bootstrap resampling (there is "
-                   "no noise to seed).")
-@deprecated_alias("--seed", "--resample-seed", "seed", type=SEED, metavar="N")
+@renamed_option("--resample-seed", "seed", "--seed", type=SEED, default=0, show_default=True,
+                metavar="N",
+                help="Seed of the cross-validation folds and the bootstrap resampling (there is "
+                     "no noise to seed).")
 @click.option("--bootstrap", "n_bootstrap", type=click.IntRange(0, 10_000),
               help="Bootstrap replicates for the intervals (default 40; 0 disables; at most "
                    "10000).")

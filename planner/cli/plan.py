@@ -12,7 +12,6 @@ from planner.cli._common import (
     boundary_option,
     config_option,
     dem_option,
-    deprecated_alias,
     emit_summary,
     error_model_option,
     exclude_option,
@@ -24,6 +23,7 @@ from planner.cli._common import (
     out_option,
     overwrite_option,
     reference_station_option,
+    renamed_option,
     report_timings,
     reproject_option,
     scheduler_options,
@@ -63,10 +63,9 @@ CELL_M = click.FloatRange(min=0, min_open=True)
 @network_option
 @reference_station_option
 @time_limit_option
-@click.option("--stand-map-cell-m", "stand_map_cell_m", type=CELL_M,
-              help="Cell size (m, rounded to whole DEM cells) of usable_markers.tif and "
-                   "station_error.tif. Default: the finest with at most 40,000 cells.")
-@deprecated_alias("--stand-map-cell", "--stand-map-cell-m", "stand_map_cell_m", type=CELL_M)
+@renamed_option("--stand-map-cell-m", "stand_map_cell_m", "--stand-map-cell", type=CELL_M,
+                help="Cell size (m, rounded to whole DEM cells) of usable_markers.tif and "
+                     "station_error.tif. Default: the finest with at most 40,000 cells.")
 @scheduler_options
 @out_option(default="markerplan-out")
 @overwrite_option

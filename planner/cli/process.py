@@ -8,7 +8,6 @@ import click
 
 from planner.cli._common import (
     FiniteRange,
-    deprecated_alias,
     emit_summary,
     estimator_option,
     id_list,
@@ -17,6 +16,7 @@ from planner.cli._common import (
     mounting_offset_options,
     out_option,
     overwrite_option,
+    renamed_option,
     report_timings,
     sensor_profile_option,
 )
@@ -149,10 +149,9 @@ def _station_poses(truth_files: list[Path]) -> dict:
 @mounting_offset_options
 @click.option("--min-points", type=click.IntRange(1, 1_000_000),
               help="Quality gate: minimum points per marker.")
-@click.option("--max-rms-m", "max_rms_m", type=MAX_RMS_M,
-              help="Quality gate: maximum fit RMS, m (replaces the default of 3x the RMS the "
-                   "sensor's noise gives).")
-@deprecated_alias("--max-rms", "--max-rms-m", "max_rms_m", type=MAX_RMS_M)
+@renamed_option("--max-rms-m", "max_rms_m", "--max-rms", type=MAX_RMS_M,
+                help="Quality gate: maximum fit RMS, m (replaces the default of 3x the RMS the "
+                     "sensor's noise gives).")
 @click.option("--min-visible-fraction", type=FiniteRange(0.0, 1.0),
               help="Quality gate: minimum visible fraction.")
 @click.option("--set", "stage_options", multiple=True, metavar="STAGE.OPTION=VALUE",

@@ -8,7 +8,6 @@ import click
 
 from planner.cli._common import (
     FiniteRange,
-    deprecated_alias,
     emit_summary,
     frames_option,
     json_option,
@@ -17,6 +16,7 @@ from planner.cli._common import (
     out_option,
     overwrite_option,
     range_noise_option,
+    renamed_option,
     rpm_option,
     scheduler_options,
     seed_option,
@@ -42,10 +42,9 @@ MAX_DISTANCE_M = FiniteRange(1.0, 100.0)
 @rpm_option
 @range_noise_option
 @marker_radius_option(default=MARKER_RADIUS_M)
-@click.option("--max-distance-m", "max_distance_m", type=MAX_DISTANCE_M,
-              default=50.0, show_default=True,
-              help="Drop the published distances beyond this, metres.")
-@deprecated_alias("--max-distance", "--max-distance-m", "max_distance_m", type=MAX_DISTANCE_M)
+@renamed_option("--max-distance-m", "max_distance_m", "--max-distance", type=MAX_DISTANCE_M,
+                default=50.0, show_default=True,
+                help="Drop the published distances beyond this, metres.")
 @lidar_height_option
 @click.option("--slope-deg", type=SLOPE_DEG, default=0.0, show_default=True,
               help="Ground slope, degrees: a plane through the station's foot rising towards "

@@ -161,7 +161,7 @@ def _verify_network(plan_path, plan, ids, inputs, error_model, seed, offsets, pr
     named = planned.get("reference_station")
     named = named if isinstance(named, str) else None
     station_list = [s["id"] for s in doc["stations"]]
-    planned_datum = station_list[Datum(reference_station=named).resolve(station_list)]
+    planned_datum = Datum(reference_station=named).reference_id(station_list)
     if datum is not None and planned.get("network") and datum != planned_datum:
         raise ConfigError(f"--reference-station {datum}: the plan's predictions are relative to "
                           f"its datum {planned_datum}; verify against that datum, or "

@@ -14,14 +14,13 @@ from pathlib import Path
 import numpy as np
 
 from planner.outputs.plan_map import (
-    COLOUR_BAR_ASPECT,
-    MAX_LABELS,
     _nice_125,
     axis_frame,
     draw_stations,
     figure_size,
+    map_labels,
     place_labels,
-    station_labels,
+    station_colour_bar,
 )
 
 #: The largest ellipse is drawn at about this fraction of the map's width.
@@ -120,16 +119,11 @@ def draw_network_map(run, stations: list[dict], markers: list[dict], observation
         symbols.append(ax.scatter(s_xy[ref, 0], s_xy[ref, 1], marker="s", s=260,
                                   facecolors="none", edgecolors="black", linewidths=1.6,
                                   zorder=9))
-    labels = (station_labels(s_xy, [s["station_id"] for s in stations], err_mm)
-              if len(stations) <= MAX_LABELS else [])
-    if len(markers) <= MAX_LABELS:
-        labels += [(m["marker_id"], xy, MARKER_LABEL_STYLE)
-                   for m, xy in zip(markers, m_xy, strict=True)]
-    cb = fig.colorbar(sc, ax=ax, shrink=0.8, pad=0.01, location=bar_at,
-                      aspect=COLOUR_BAR_ASPECT[bar_at],
-                      extend="max" if failing.any() else "neither")
-    cb.set_label(f"station error, 95 % over {run.working_radius_m:g} m (mm); requirement "
-                 f"{req_mm:g} mm")
+    labels = map_labels(s_xy, [s["station_id"] for s in stations], err_mm,
+                        [m["marker_id"] for m in markers], m_xy, MARKER_LABEL_STYLE)
+    station_colour_bar(fig, ax, sc, bar_at, failing,
+                       f"station error, 95 % over {run.working_radius_m:g} m (mm); "
+                       f"requirement {req_mm:g} mm")
     ax.set_xlim(*xlim)
     ax.set_ylim(*ylim)
     ax.set_aspect("equal")

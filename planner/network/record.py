@@ -250,8 +250,7 @@ def _reference_station(result) -> str | None:
     datum = result.datum
     if datum.kind != "station":
         return None
-    ids = result.observations.station_ids
-    return ids[datum.resolve(ids)]
+    return datum.reference_id(result.observations.station_ids)
 
 
 def station_rows(run: AdjustmentRun) -> list[dict]:

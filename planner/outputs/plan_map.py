@@ -99,16 +99,10 @@ def draw_plan_map(outcome, path: Path, dpi: int = 150) -> Path:
     failing = ~res.check.ok
     sc, station_symbols = draw_stations(ax, prob.station_xyz[:, :2], err_mm, req_mm, failing)
     symbols += station_symbols
-    # ids and errors beside every symbol read well up to a few dozen; beyond that they hide the
-    # map, and the colour (stations) and markers.csv (ids) carry the same information
-    labels = (station_labels(prob.station_xyz[:, :2], prob.station_ids, err_mm)
-              if prob.n_stations <= MAX_LABELS else [])
-    if len(sel) <= MAX_LABELS:
-        labels += [(prob.site_ids[j], prob.site_xyz[j, :2], MARKER_LABEL_STYLE) for j in sel]
-    cb = fig.colorbar(sc, ax=ax, shrink=0.8, pad=0.01, location=bar_at,
-                      aspect=COLOUR_BAR_ASPECT[bar_at],
-                      extend="max" if failing.any() else "neither")
-    cb.set_label(f"predicted station error, 95 % (mm); requirement {req_mm:g} mm")
+    labels = map_labels(prob.station_xyz[:, :2], prob.station_ids, err_mm,
+                        [prob.site_ids[j] for j in sel], prob.site_xyz[sel, :2])
+    station_colour_bar(fig, ax, sc, bar_at, failing,
+                       f"predicted station error, 95 % (mm); requirement {req_mm:g} mm")
     ax.set_xlim(xmin, xmax)
     ax.set_ylim(ymin, ymax)
     ax.set_aspect("equal")
@@ -221,6 +215,51 @@ def station_labels(xy: np.ndarray, ids, error_mm: np.ndarray) -> list[tuple]:
     return [(f"{ids[s]} {error_mm[s]:.0f} mm" if np.isfinite(error_mm[s])
              else f"{ids[s]} unregistrable", xy[s], STATION_LABEL_STYLE)
             for s in range(len(ids))]
+
+
+def map_labels(station_xy: np.ndarray, station_ids, error_mm: np.ndarray, marker_ids,
+               marker_xy: np.ndarray, marker_style: dict = MARKER_LABEL_STYLE) -> list[tuple]:
+    """The :func:`place_labels` labels of a map: the stations' (:func:`station_labels`), then
+    the markers' ids in ``marker_style``; either group is left out above :data:`MAX_LABELS`
+    (ids beside every symbol read well up to a few dozen; beyond that they hide the map, and the
+    colour and the CSV tables carry the same information).
+
+    Parameters
+    ----------
+    station_xy : (s, 2) float
+    station_ids : sequence of str
+    error_mm : (s,) float
+        Each station's error, mm.
+    marker_ids : sequence of str
+    marker_xy : (k, 2) float
+        Site frame, m.
+    marker_style : dict
+        Text properties of the marker labels.
+
+    Returns
+    -------
+    labels : list of (text, (2,) float, dict)
+    """
+    labels = (station_labels(station_xy, station_ids, error_mm)
+              if len(station_ids) <= MAX_LABELS else [])
+    if len(marker_ids) <= MAX_LABELS:
+        labels += [(m, xy, marker_style) for m, xy in zip(marker_ids, marker_xy, strict=True)]
+    return labels
+
+
+def station_colour_bar(fig, ax, scatter, bar_at: str, failing: np.ndarray, label: str):
+    """The colour bar of the stations' error, at ``bar_at`` (:func:`figure_size`), extended
+    upwards when a station fails the requirement.
+
+    Returns
+    -------
+    colorbar : matplotlib.colorbar.Colorbar
+    """
+    cb = fig.colorbar(scatter, ax=ax, shrink=0.8, pad=0.01, location=bar_at,
+                      aspect=COLOUR_BAR_ASPECT[bar_at],
+                      extend="max" if failing.any() else "neither")
+    cb.set_label(label)
+    return cb
 
 
 def figure_size(width_m: float, height_m: float, extra_height_in: float = TITLE_LEGEND_IN

@@ -206,7 +206,7 @@ def reference_station(named: str | None, plan_stations, chosen) -> str:
     ...
     markerplan.errors.ConfigError: the plan's reference station S2 ... in `station_ids`
     """
-    reference = plan_stations[Datum(reference_station=named).resolve(plan_stations)]
+    reference = Datum(reference_station=named).reference_id(plan_stations)
     if reference not in chosen:
         raise ConfigError(f"the plan's reference station {reference} (the datum of network "
                           f"mode) is not among the stations verified ({', '.join(chosen)}); "
