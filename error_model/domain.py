@@ -103,14 +103,15 @@ class Domain:
     @classmethod
     def from_dict(cls, d: Any, what: str = "error-model domain") -> Domain:
         """Rebuild from :meth:`to_dict` output (the ``*_deg`` and ``distance_range_m`` copies
-        are informational).
+        are informational, and checked against what they copy when present).
 
         Raises
         ------
         InputFileError
             Missing keys, wrong types, non-finite numbers, fewer than two band edges, edges
             negative or decreasing, elevation ranges of the wrong length, inverted or beyond
-            +-90 deg, extra ranges that are not ``[lo, hi]`` with ``lo <= hi``.
+            +-90 deg, extra ranges that are not ``[lo, hi]`` with ``lo <= hi``, a copy that is
+            inverted or differs from what it copies (:func:`_check_copies`).
         """
         require_type(d, dict, what)
         require_keys(d, ["band_edges_m", "elevation_lo_rad", "elevation_hi_rad", "extras"],
@@ -130,6 +131,7 @@ class Domain:
             if not -np.pi / 2 - 1e-9 <= a <= b <= np.pi / 2 + 1e-9:
                 raise InputFileError(f"{what}: band {i} elevation range [{a:g}, {b:g}] rad must "
                                      f"satisfy -pi/2 <= lo <= hi <= pi/2; {_REFIT}")
+        _check_copies(d, edges, lo, hi, what)
         extras = {}
         require_type(d["extras"], dict, f"{what} extras")
         for name, pair in d["extras"].items():
@@ -146,6 +148,38 @@ class Domain:
 
 
 _REFIT = "regenerate the model with `markerplan fit-error-model`"
+
+#: How closely an informational copy must match (it is written rounded to 6 decimals).
+_COPY_TOLERANCE = 1e-5
+
+
+def _check_copies(d: Mapping[str, Any], edges: list[float], lo: list[float], hi: list[float],
+                  what: str) -> None:
+    """The copies :meth:`Domain.to_dict` writes, when present: ``distance_range_m`` (the first
+    and last band edge, m) and ``elevation_lo_deg`` / ``elevation_hi_deg`` (the elevation
+    ranges in degrees) must be ``[min, max]`` ranges (not inverted) equal to what they copy, so
+    that no reader of the file sees another domain than the one used."""
+    copies = {"distance_range_m": [edges[0], edges[-1]],
+              "elevation_lo_deg": np.rad2deg(lo).tolist(),
+              "elevation_hi_deg": np.rad2deg(hi).tolist()}
+    found = {key: json_numbers(d[key], f"{what} {key}") for key in copies if key in d}
+    ranges = {}
+    if "distance_range_m" in found:
+        ranges["distance_range_m"] = [found["distance_range_m"]]
+    if "elevation_lo_deg" in found and "elevation_hi_deg" in found:
+        ranges["elevation_lo_deg / elevation_hi_deg"] = list(
+            zip(found["elevation_lo_deg"], found["elevation_hi_deg"], strict=False))
+    for key, pairs in ranges.items():
+        for band, pair in enumerate(pairs):
+            if len(pair) == 2 and pair[0] > pair[1]:
+                where = "" if key == "distance_range_m" else f" band {band}"
+                raise InputFileError(f"{what} {key}{where}: range [{pair[0]:g}, {pair[1]:g}] is "
+                                     f"inverted (min > max); {_REFIT}")
+    for key, values in found.items():
+        if len(values) != len(copies[key]) or not np.allclose(
+                values, copies[key], rtol=_COPY_TOLERANCE, atol=_COPY_TOLERANCE):
+            raise InputFileError(f"{what} {key} {values} differs from the values it copies "
+                                 f"({np.round(copies[key], 6).tolist()}); {_REFIT}")
 
 
 def _fill_empty(values: np.ndarray) -> np.ndarray:

@@ -20,7 +20,7 @@ import numpy as np
 from markerplan.errors import DataError, InputFileError
 from markerplan.provenance import fingerprint_arrays
 from markerplan.reading import MAX_ABS_COORDINATE_M, finite_number, read_csv
-from pipeline.marker_table import COLUMNS
+from pipeline.marker_table import COLUMNS, accepted_flags, refuse_repeated_rows
 
 #: Columns a fit cannot do without.
 REQUIRED_COLUMNS = ("distance_m", "elevation_deg", "error_m", "accepted")
@@ -28,9 +28,6 @@ REQUIRED_COLUMNS = ("distance_m", "elevation_deg", "error_m", "accepted")
 TEXT_COLUMNS = ("station_id", "marker_id", "estimator", "reason")
 #: Optional predictor name -> table column it is read from.
 EXTRA_COLUMNS = {"visible_fraction": "visible_fraction", "expected_points": "n_points"}
-
-_TRUE = {"true", "1", "yes", "t", "y"}
-_FALSE = {"false", "0", "no", "f", "n", ""}
 
 
 @dataclass(frozen=True)
@@ -109,7 +106,8 @@ def read_marker_tables(paths: Iterable[str | Path] | str | Path) -> MarkerTable:
     paths : iterable of str or Path, or one str or Path
         CSV files with a header row; each must contain at least :data:`REQUIRED_COLUMNS`.
         Columns of :data:`pipeline.marker_table.COLUMNS` other than :data:`TEXT_COLUMNS` are
-        read as numbers (empty cell -> NaN), ``accepted`` as bool, any other column as text.
+        read as numbers (empty cell -> NaN), ``accepted`` as bool (``true`` / ``false``), any
+        other column as text.
 
     Returns
     -------
@@ -118,7 +116,8 @@ def read_marker_tables(paths: Iterable[str | Path] | str | Path) -> MarkerTable:
     Raises
     ------
     InputFileError
-        No file given; a missing or unreadable file, missing columns, unparsable cells.
+        No file given; a missing or unreadable file, missing columns, unparsable cells, a row
+        that repeats another exactly (:func:`pipeline.marker_table.refuse_repeated_rows`).
     """
     if isinstance(paths, str | Path):
         paths = [paths]
@@ -138,6 +137,7 @@ def _read_one(path: str | Path) -> MarkerTable:
         raise InputFileError(f"{what}: cannot be read (no such file); check the path")
     header, rows = read_csv(path, what, REQUIRED_COLUMNS,
                             fix="write it with `markerplan process` or `range-study`")
+    refuse_repeated_rows(header, rows, what)
     cells = list(zip(*rows, strict=True)) if rows else [()] * len(header)
     columns = {name: _parse_column(path, name, col) for name, col in zip(header, cells,
                                                                           strict=True)}
@@ -160,7 +160,7 @@ def as_marker_table(table: MarkerTable | Mapping[str, object]) -> MarkerTable:
         if arr.ndim != 1:
             raise DataError(f"table column {name!r} must be 1-D, got shape {arr.shape}")
         if name == "accepted":
-            arr = _parse_bool("<arrays>", arr.astype(str)) if arr.dtype != bool else arr
+            arr = arr if arr.dtype == bool else accepted_flags(arr.astype(str), "table")
         elif name not in TEXT_COLUMNS and arr.dtype.kind in "biuf":
             arr = arr.astype(float)
         columns[name] = arr
@@ -273,7 +273,7 @@ def _parse_column(path: Path, name: str, cells: tuple[str, ...]) -> np.ndarray:
     else must be a finite number of sane magnitude (``nan``, ``inf``, ``1e300`` refused).
     """
     if name == "accepted":
-        return _parse_bool(str(path), np.asarray(cells, dtype=str))
+        return accepted_flags(cells, f"marker table {path}")
     if name in TEXT_COLUMNS or name not in COLUMNS:
         return np.asarray(cells, dtype=str)
     max_abs = _MAX_ABS.get(name, MAX_ABS_COORDINATE_M)
@@ -295,14 +295,3 @@ def _parse_column(path: Path, name: str, cells: tuple[str, ...]) -> np.ndarray:
 
 #: Magnitude limits of numeric columns other than :data:`MAX_ABS_COORDINATE_M`.
 _MAX_ABS = {"seed": 2.0**64, "replicate": 2.0**64}
-
-
-def _parse_bool(where: str, cells: np.ndarray) -> np.ndarray:
-    low = np.char.lower(np.char.strip(cells))
-    is_true = np.isin(low, list(_TRUE))
-    bad = ~(is_true | np.isin(low, list(_FALSE)))
-    if bad.any():
-        i = int(np.flatnonzero(bad)[0])
-        raise InputFileError(f"marker table {where}: column 'accepted' must be true/false, got "
-                             f"{cells[i]!r} (row {i + 1}); fix or regenerate the file")
-    return is_true

@@ -10,14 +10,19 @@ written is left behind, whatever the signal or error. :func:`output_folder` keep
    in it with its SHA-256, and a folder holding anything else (or a changed file) is refused.
 2. **A lock** (``.<name>.lock`` beside the destination, ``flock``) held for the whole run: a
    second run on the same ``--out`` fails at once with a message.
-3. **A staging folder** (``.<name>.partial-XXXXXX`` beside the destination) receives the
-   files; at the end it gets its ``provenance.json`` and is moved into place. If the
-   destination appeared during the run (another program wrote it) and ``--overwrite`` was not
-   given, the run fails and keeps both: the staged result is moved to a visible sibling folder
-   the message names.
+3. **A staging folder** (``.<name>.partial-XXXXXXXX`` beside the destination) receives the
+   files; at the end it gets its ``provenance.json`` and is moved into place. Its marker
+   :data:`STAGE_MARKER` says markerplan made it and stays locked (``flock``) while its run
+   lives. If the destination appeared during the run (another program wrote it) and
+   ``--overwrite`` was not given, the run fails and keeps both: the staged result is moved to a
+   visible sibling folder the message names.
 4. **Cleanup**: any exception, SIGINT, SIGTERM and SIGHUP remove the staging folder, the lock
-   and any parent folder the run created. Write errors (a full disk) become one
-   :class:`~markerplan.errors.OutputError` line.
+   and any parent folder the run created. SIGKILL cannot be caught: the next run on the same
+   destination removes the staging folders such a run left (:func:`remove_stale_stages`: the
+   name, the marker and its free lock prove them ours and dead; anything else is left alone).
+   Write errors (a full disk, a folder where no file can be made) become one
+   :class:`~markerplan.errors.OutputError` line; a library that writes without telling why it
+   failed (GDAL) writes inside :func:`library_write`, which asks the disk.
 """
 
 from __future__ import annotations
@@ -28,10 +33,11 @@ import fcntl
 import hashlib
 import json
 import os
+import re
 import shutil
 import signal
 import tempfile
-from collections.abc import Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
 
 from markerplan import __version__
@@ -39,6 +45,12 @@ from markerplan.errors import MarkerPlanError, OutputError
 
 #: The file that marks a folder as written by markerplan (and lists what it wrote).
 PROVENANCE_FILE = "provenance.json"
+
+#: The file inside a staging folder that says markerplan made it; locked while its run lives.
+STAGE_MARKER = ".markerplan-stage"
+
+#: Bytes :func:`library_write`'s probe writes beyond the size of the file a library failed on.
+PROBE_MARGIN_BYTES = 1 << 20
 
 _HANDLED_SIGNALS = (signal.SIGTERM, signal.SIGHUP)
 
@@ -83,10 +95,11 @@ def _sha256(path: Path) -> str:
 
 
 def _listing(folder: Path) -> dict[str, str]:
-    """Relative path -> SHA-256 of every file under ``folder`` (sorted, provenance excluded)."""
+    """Relative path -> SHA-256 of every file under ``folder`` (sorted; provenance and the
+    stage marker excluded)."""
     return {str(p.relative_to(folder)): _sha256(p)
             for p in sorted(folder.rglob("*"))
-            if p.is_file() and p.relative_to(folder) != Path(PROVENANCE_FILE)}
+            if p.is_file() and str(p.relative_to(folder)) not in (PROVENANCE_FILE, STAGE_MARKER)}
 
 
 def _foreign_content(folder: Path) -> str | None:
@@ -199,6 +212,77 @@ def _lock(destination: Path, out: Path) -> Iterator[None]:
         os.close(fd)
 
 
+def _stage_pattern(destination: Path) -> re.Pattern:
+    """The names :func:`tempfile.mkdtemp` gives ``destination``'s staging folders."""
+    return re.compile(rf"\.{re.escape(destination.name)}\.partial-[a-z0-9_]{{8}}")
+
+
+@contextlib.contextmanager
+def _staging(destination: Path, command: str) -> Iterator[tuple[Path, Callable[[], None]]]:
+    """Make a staging folder beside ``destination`` holding a locked :data:`STAGE_MARKER`;
+    yield it and the function that removes the marker (before the folder is moved into place);
+    remove the folder on exit."""
+    stage = Path(tempfile.mkdtemp(prefix=f".{destination.name}.partial-", dir=destination.parent))
+    try:
+        fd = os.open(stage / STAGE_MARKER, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW,
+                     0o644)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX)
+            os.write(fd, json.dumps({"written_by": "markerplan", "command": command,
+                                     "pid": os.getpid()}).encode() + b"\n")
+            yield stage, lambda: (stage / STAGE_MARKER).unlink()
+        finally:
+            os.close(fd)
+    finally:
+        shutil.rmtree(stage, ignore_errors=True)
+
+
+def _is_dead_stage(folder: Path) -> bool:
+    """Whether ``folder`` holds a :data:`STAGE_MARKER` markerplan wrote whose run is gone (its
+    lock is free: ``flock`` locks die with their process)."""
+    try:
+        fd = os.open(folder / STAGE_MARKER, os.O_RDONLY | os.O_NOFOLLOW)
+    except OSError:
+        return False
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        with os.fdopen(os.dup(fd), encoding="utf-8") as fh:
+            return json.loads(fh.read()).get("written_by") == "markerplan"
+    except (OSError, ValueError, AttributeError):  # held by a live run, or not our marker
+        return False
+    finally:
+        os.close(fd)
+
+
+def remove_stale_stages(destination: Path) -> list[Path]:
+    """Remove the staging folders of ``destination`` that runs killed by SIGKILL left: named
+    like :func:`_staging`'s, not a symlink, with a :data:`STAGE_MARKER` markerplan wrote whose
+    lock no live run holds. Anything else (a look-alike, a live run's stage) is left alone.
+
+    Parameters
+    ----------
+    destination : Path
+        The resolved ``--out`` folder.
+
+    Returns
+    -------
+    removed : list of Path
+        The staging folders removed, sorted.
+    """
+    pattern = _stage_pattern(destination)
+    try:
+        names = sorted(os.listdir(destination.parent))
+    except OSError:  # a folder one may write into but not list: no stage can be found
+        return []
+    removed = []
+    for folder in (destination.parent / n for n in names):
+        if (pattern.fullmatch(folder.name) and not folder.is_symlink() and folder.is_dir()
+                and _is_dead_stage(folder)):
+            shutil.rmtree(folder)
+            removed.append(folder)
+    return removed
+
+
 def _make_parents(folder: Path) -> list[Path]:
     """``mkdir -p folder``; return the folders created, deepest first."""
     created = []
@@ -304,29 +388,101 @@ def output_folder(out: Path, overwrite: bool, command: str,
                               "writable folder") from exc
         try:
             with _lock(destination, out):
+                remove_stale_stages(destination)
                 existed_before = destination.is_dir() and any(destination.iterdir())
-                stage = Path(tempfile.mkdtemp(prefix=f".{destination.name}.partial-",
-                                              dir=destination.parent))
-                try:
+                with _staging(destination, command) as (stage, unmark):
                     yield stage
                     write_provenance(stage, command)
                     os.chmod(stage, 0o755)  # mkdtemp makes 0700; results are meant to be shared
+                    unmark()
                     _move_into_place(stage, destination, out, overwrite, existed_before)
-                except OSError as exc:
-                    if isinstance(exc, MarkerPlanError):
-                        raise
-                    raise OutputError(_write_error(out, exc)) from exc
-                finally:
-                    shutil.rmtree(stage, ignore_errors=True)
+        except OSError as exc:
+            _remove_empty(created)
+            if isinstance(exc, MarkerPlanError):
+                raise
+            raise OutputError(_write_error(out, destination, exc)) from exc
         except BaseException:
             _remove_empty(created)
             raise
 
 
-def _write_error(out: Path, exc: OSError) -> str:
-    where = f" ({exc.filename})" if exc.filename else ""
+def _write_error(out: Path, destination: Path, exc: OSError) -> str:
+    """The one line of a failed write into ``out`` (resolved: ``destination``): the file (in a
+    staging folder: as it would have been in ``out``), the system's reason, the fix."""
+    where = f" ({_shown_path(exc.filename, out, destination)})" if exc.filename else ""
     if exc.errno in (errno.ENOSPC, errno.EDQUOT):
         fix = "free some space or choose a folder on another disk"
+    elif exc.errno == errno.EFBIG:
+        fix = "raise the file-size limit (ulimit -f) or choose another folder"
     else:
-        fix = "check the folder and try again"
+        fix = "choose a writable folder on a disk (e.g. `out` results/)"
     return f"`out` {out}: writing failed{where}: {exc.strerror or exc}; nothing was written; {fix}"
+
+
+def _shown_path(filename: str | bytes | os.PathLike, out: Path, destination: Path) -> str:
+    """``filename``, but ``out/<file>`` for a file of one of ``destination``'s staging folders."""
+    path = Path(os.fsdecode(filename))
+    pattern = _stage_pattern(destination)
+    for folder in path.parents:
+        if folder.parent == destination.parent and pattern.fullmatch(folder.name):
+            return str(out / path.relative_to(folder))
+    return str(path)
+
+
+@contextlib.contextmanager
+def library_write(path: Path) -> Iterator[None]:
+    """Write ``path`` with a library that does not say why a write failed (GDAL through
+    pyogrio raises e.g. ``DataSourceError("Failed to commit transaction")`` or SQLite's
+    "no such table" on a full disk); on its failure, ask the disk.
+
+    The probe writes the failed file's size plus :data:`PROBE_MARGIN_BYTES` of zeros into a
+    temporary file beside ``path`` (and removes it): a full disk, a file-size limit, a read-only
+    or vanished folder refuse it as they refused the library.
+
+    Parameters
+    ----------
+    path : Path
+        The file the library writes.
+
+    Raises
+    ------
+    OSError
+        The disk's refusal (its errno and message), for ``path``; :func:`output_folder` makes
+        it the one-line :class:`~markerplan.errors.OutputError`.
+    Exception
+        The library's own error, unchanged, when the disk takes the probe (a bug, not the disk).
+    """
+    path = Path(path)
+    try:
+        yield
+    except Exception as exc:
+        if isinstance(exc, MarkerPlanError):
+            raise
+        refusal = _disk_refusal(path)
+        if refusal is None:
+            raise
+        raise OSError(refusal.errno, refusal.strerror, str(path)) from exc
+
+
+def _disk_refusal(path: Path) -> OSError | None:
+    """The OSError the folder of ``path`` gives a probe as big as ``path`` plus
+    :data:`PROBE_MARGIN_BYTES`, or ``None`` when it takes the probe."""
+    try:
+        size = path.stat().st_size + PROBE_MARGIN_BYTES
+    except OSError:
+        size = PROBE_MARGIN_BYTES
+    block = bytes(1 << 16)
+    probe = None
+    try:
+        fd, probe = tempfile.mkstemp(prefix=".markerplan-probe-", dir=path.parent)
+        with os.fdopen(fd, "wb", buffering=0) as fh:
+            while size > 0:
+                size -= fh.write(block[:size])
+            os.fsync(fh.fileno())
+    except OSError as refusal:
+        return refusal
+    finally:
+        if probe is not None:
+            with contextlib.suppress(OSError):
+                os.unlink(probe)
+    return None

@@ -17,18 +17,23 @@ Columns, in this order (station frame = origin at the nominal LiDAR centre, z up
 - ``fit_rms_m``: RMS of the fixed-radius residuals of the points used, metres.
 - ``radius_fit_m``: radius of a free-radius fit to the same points, metres.
 - ``estimator``: ``fixed-radius`` or ``hemisphere-icp``.
-- ``accepted``: ``true`` / ``false`` (quality gate).
+- ``accepted``: ``true`` / ``false`` (quality gate; the readers take either in any case and
+  refuse any other cell, :func:`accepted_flags`).
 - ``reason``: empty when accepted, else ``too_few_points``, ``high_rms``, ``radius_mismatch`` or
   ``incomplete_cloud``.
 - ``error_m``: ``|estimate - reference|``, metres; empty without a reference.
 - ``error_x_m, error_y_m, error_z_m``: the components (estimate - reference), station frame.
 - ``replicate``: replicate number (range study), 0 otherwise.
 - ``seed``: simulation seed when known, else empty.
+
+Every row is one detection: a row that repeats another exactly is one detection read twice,
+and the readers refuse it (:func:`refuse_repeated_rows`).
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import asdict, dataclass, fields
 from pathlib import Path
 
@@ -87,6 +92,12 @@ class MarkerRow:
 
 assert tuple(f.name for f in fields(MarkerRow)) == COLUMNS
 
+#: The cells of the ``accepted`` column and what they mean (case and blanks ignored).
+ACCEPTED_CELLS = {"true": True, "false": False}
+
+#: How many repeated rows a message lists.
+_SHOWN_REPEATS = 3
+
 
 def line_of_sight(centre_m: np.ndarray, sensor_m=(0.0, 0.0, 0.0)) -> tuple[float, float, float]:
     """Distance (m), elevation (deg, + up) and azimuth (deg, [0, 360)) of a centre.
@@ -124,8 +135,9 @@ def read_marker_table(path: str | Path) -> list[dict[str, str]]:
     Raises
     ------
     InputFileError
-        Missing, unreadable or non-UTF-8 file, a header other than :data:`COLUMNS`, or a row
-        with more or fewer cells than the header.
+        Missing, unreadable or non-UTF-8 file, a header other than :data:`COLUMNS`, a row
+        with more or fewer cells than the header, an ``accepted`` cell other than true/false
+        (:func:`accepted_flags`), or a row that repeats another (:func:`refuse_repeated_rows`).
     """
     path = Path(path)
     what = f"marker table {path}"
@@ -134,4 +146,99 @@ def read_marker_table(path: str | Path) -> list[dict[str, str]]:
         raise InputFileError(f"{what} has columns {list(header)}; missing "
                              f"{[c for c in COLUMNS if c not in header]} (expected exactly "
                              f"{list(COLUMNS)})")
+    accepted_flags([row[COLUMNS.index("accepted")] for row in rows], what)
+    refuse_repeated_rows(header, rows, what)
     return [dict(zip(COLUMNS, row, strict=True)) for row in rows]
+
+
+def accepted_flags(cells: Sequence[str], what: str) -> np.ndarray:
+    """The ``accepted`` column as (n,) bool: :data:`ACCEPTED_CELLS`, nothing else.
+
+    Parameters
+    ----------
+    cells : sequence of str
+        The column's cells, first data row first (row 2 of the file, as
+        :func:`markerplan.reading.read_csv` counts them).
+    what : str
+        How messages name the table, e.g. ``"marker table t.csv"``.
+
+    Returns
+    -------
+    accepted : (n,) bool
+
+    Raises
+    ------
+    InputFileError
+        A cell other than ``true`` or ``false`` (``yes``, ``1``, empty...), naming its row.
+
+    Examples
+    --------
+    >>> accepted_flags(["true", " FALSE"], "t.csv").tolist()
+    [True, False]
+    >>> accepted_flags(["true", "yes"], "t.csv")
+    Traceback (most recent call last):
+    ...
+    markerplan.errors.InputFileError: t.csv: column 'accepted' row 3 must be true/false, got \
+'yes'; write true or false (as markerplan process does)
+    """
+    flags = np.zeros(len(cells), dtype=bool)
+    for row, cell in enumerate(cells, start=2):
+        value = ACCEPTED_CELLS.get(str(cell).strip().lower())
+        if value is None:
+            raise InputFileError(f"{what}: column 'accepted' row {row} must be true/false, got "
+                                 f"{str(cell)[:20]!r}; write true or false (as markerplan "
+                                 "process does)")
+        flags[row - 2] = value
+    return flags
+
+
+def refuse_repeated_rows(header: Sequence[str], rows: Sequence[Sequence[str]],
+                         what: str) -> None:
+    """Refuse rows that repeat an earlier row cell for cell (one detection read twice).
+
+    Parameters
+    ----------
+    header : sequence of str
+        Column names (for naming the station and marker of a repeat).
+    rows : sequence of sequence of str
+        Data rows, first one row 2 of the file (:func:`markerplan.reading.read_csv`); cells
+        are compared with surrounding blanks stripped.
+    what : str
+        How messages name the table.
+
+    Raises
+    ------
+    InputFileError
+        Naming the repeated rows and the rows they repeat, and the first one's station and
+        marker when the table has those columns.
+
+    Examples
+    --------
+    >>> refuse_repeated_rows(["station_id", "x_m"], [["S1", "1"], ["S1", "2"]], "t.csv")
+    >>> refuse_repeated_rows(["station_id", "x_m"], [["S1", "1"], ["S1", " 1"]], "t.csv")
+    Traceback (most recent call last):
+    ...
+    markerplan.errors.InputFileError: t.csv: 1 row repeats an earlier row exactly: row 3 \
+repeats row 2 (station S1); each detection appears once: delete the repeats
+    """
+    first: dict[tuple[str, ...], int] = {}
+    repeats = []
+    for row, cells in enumerate(rows, start=2):
+        key = tuple(c.strip() for c in cells)
+        if key in first:
+            repeats.append((row, first[key], key))
+        else:
+            first[key] = row
+    if not repeats:
+        return
+    shown = ", ".join(f"row {row} repeats row {earlier}"
+                      for row, earlier, _ in repeats[:_SHOWN_REPEATS])
+    more = f" and {len(repeats) - _SHOWN_REPEATS} more" if len(repeats) > _SHOWN_REPEATS else ""
+    names = dict(zip(header, repeats[0][2], strict=True))
+    of = ", ".join(f"{label} {names[c]}" for c, label in (("station_id", "station"),
+                                                          ("marker_id", "marker"))
+                   if names.get(c))
+    count = f"{len(repeats)} rows repeat" if len(repeats) > 1 else "1 row repeats"
+    raise InputFileError(f"{what}: {count} an earlier row exactly: {shown}"
+                         f"{more}{f' ({of})' if of else ''}; each detection appears once: "
+                         "delete the repeats")

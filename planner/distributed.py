@@ -9,9 +9,11 @@ give the same results, and byte-identical files.
 Three ways to run, chosen by ``--scheduler`` (:func:`executor`):
 
 ``local`` (the default)
-    A ``distributed.LocalCluster`` sized to the machine: one worker process per core, one
-    thread each (or ``--workers N``), started for the command at its first map of more than
-    one task (a single task runs in this process, with no cluster to start) and closed after it.
+    A ``distributed.LocalCluster`` sized to the machine: one worker process per core this
+    process may use, one thread each (or ``--workers N``, at most :func:`local_worker_limit`),
+    started for the command at its first map of more than one task (a single task runs in this
+    process, with no cluster to start) and closed after it; a cluster that cannot start is
+    :class:`ClusterError`.
 ``none``
     No cluster: the same task functions in a loop in this process (the single-process baseline).
 ``tcp://HOST:8786``
@@ -58,9 +60,83 @@ LOCAL, IN_PROCESS = "local", "none"
 #: Seconds to wait for a scheduler at an address before giving up.
 CONNECT_TIMEOUT_S = 10
 
+#: Open files a local worker holds in this process (its nanny's pipes, its and the scheduler's
+#: sockets): about 9 measured with distributed 2026.8, doubled for connections under load.
+FILES_PER_WORKER = 20
+#: Open files kept for everything else this process opens (inputs, outputs, the scheduler).
+FILES_RESERVED = 100
+
 
 class TaskError(MarkerPlanError, RuntimeError):
     """A task still failed after its retries; the message names the task and the error."""
+
+
+class ClusterError(MarkerPlanError, RuntimeError):
+    """The local cluster could not start (no file handles, processes or memory left...)."""
+
+
+def available_cores() -> int:
+    """The cores this process may run on: its CPU affinity (a container's or ``taskset``'s
+    share of the machine), else every core."""
+    if hasattr(os, "sched_getaffinity"):
+        return len(os.sched_getaffinity(0))
+    return os.cpu_count() or 1
+
+
+def open_file_limit() -> int | None:
+    """This process's open-file limit (``ulimit -n``), None where it has none or it is
+    unknown."""
+    try:
+        import resource
+    except ImportError:  # Windows
+        return None
+    soft, _ = resource.getrlimit(resource.RLIMIT_NOFILE)
+    return None if soft == resource.RLIM_INFINITY else soft
+
+
+def local_worker_limit() -> int:
+    """The most worker processes a local cluster may have: one per core this process may use
+    (:func:`available_cores`; each worker runs one CPU-bound task at a time, so more only cost
+    memory), fewer when the open-file limit cannot hold that many (:data:`FILES_PER_WORKER`
+    each); at least 1."""
+    limit = available_cores()
+    files = open_file_limit()
+    if files is not None:
+        limit = min(limit, (files - FILES_RESERVED) // FILES_PER_WORKER)
+    return max(1, limit)
+
+
+def check_local_workers(workers: int) -> int:
+    """``workers``, refused when the local cluster cannot hold that many worker processes.
+
+    Parameters
+    ----------
+    workers : int
+        Worker processes asked for (``--workers``), >= 1.
+
+    Returns
+    -------
+    workers : int
+        As given.
+
+    Raises
+    ------
+    ConfigError
+        ``workers`` is above :func:`local_worker_limit`; the message names the limit (cores
+        or open files) and the fix.
+    """
+    limit = local_worker_limit()
+    if workers <= limit:
+        return workers
+    cores, files = available_cores(), open_file_limit()
+    if limit < cores:
+        why = (f"the open-file limit {files} (ulimit -n) holds {limit} "
+               f"({FILES_PER_WORKER} files each); raise it (ulimit -n), give")
+    else:
+        why = f"this process may use {cores} cores (one worker each); give"
+    raise ConfigError(f"`workers` {workers} is more worker processes than this machine runs: "
+                      f"{why} `workers` {limit} or fewer, or drop `workers` and run the tasks "
+                      "on a bigger cluster with `scheduler` ADDRESS (docs/distributed.md)")
 
 
 class Executor:
@@ -260,6 +336,22 @@ class Executor:
             client.cancel(list(held.values()))
 
 
+def _not_started(workers: int, exc: BaseException) -> ClusterError:
+    """The one-line report of a local cluster of ``workers`` processes that did not start,
+    naming the operating system's refusal when one is behind ``exc`` (distributed raises
+    ``Nanny failed to start`` from, or while handling, the ``OSError``)."""
+    chain = [exc]
+    while (behind := chain[-1].__cause__ or chain[-1].__context__) and behind not in chain:
+        chain.append(behind)
+    cause = next((e for e in chain if isinstance(e, OSError)), exc)
+    what = str(cause).splitlines()[0] if str(cause) else "no reason given"
+    processes = "process" if workers == 1 else "processes"
+    return ClusterError(f"the local dask cluster of {workers} worker {processes} did not start "
+                        f"({type(cause).__name__}: {what}); give fewer `workers`, raise the "
+                        "open-file limit (ulimit -n), or run in this process with `scheduler` "
+                        "none")
+
+
 def _failed(label: str, exc: BaseException, retries: int) -> TaskError:
     """The one-line report of a task that failed every try."""
     what = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
@@ -274,10 +366,12 @@ def executor(scheduler: str | None = LOCAL, workers: int | None = None,
     Parameters
     ----------
     scheduler : str or None
-        ``local`` (or None): a LocalCluster of ``workers`` processes (default: one per core);
+        ``local`` (or None): a LocalCluster of ``workers`` processes (default:
+        :func:`local_worker_limit`, one per core);
         ``none``: in this process; else a scheduler address such as ``tcp://host:8786``.
     workers : int, optional
-        Worker processes of the LocalCluster (refused with ``none`` or an address).
+        Worker processes of the LocalCluster, at most :func:`local_worker_limit` (its
+        default); refused with ``none`` or an address.
     progress : bool
         Progress bar on stderr.
     retries : int
@@ -290,8 +384,10 @@ def executor(scheduler: str | None = LOCAL, workers: int | None = None,
     Raises
     ------
     ConfigError
-        ``workers`` with a scheduler that is not ``local``, or no scheduler answers at the
-        address.
+        ``workers`` with a scheduler that is not ``local``, or more than the machine runs
+        (:func:`check_local_workers`), or no scheduler answers at the address.
+    ClusterError
+        The local cluster could not start (at the first map of more than one task).
 
     Examples
     --------
@@ -309,13 +405,18 @@ def executor(scheduler: str | None = LOCAL, workers: int | None = None,
     from distributed import Client, LocalCluster
 
     if scheduler == LOCAL:
-        n = workers or os.cpu_count() or 1
+        n = local_worker_limit() if workers is None else check_local_workers(workers)
         with ExitStack() as stack:
             def start():
-                cluster = stack.enter_context(LocalCluster(
-                    n_workers=n, threads_per_worker=1, processes=True, dashboard_address=":0",
-                    silence_logs=logging.ERROR))
-                return stack.enter_context(Client(cluster))
+                # CRITICAL: a worker that fails to start logs its traceback at ERROR; the
+                # failure is reported once, below (a failed task by TaskError)
+                try:
+                    cluster = stack.enter_context(LocalCluster(
+                        n_workers=n, threads_per_worker=1, processes=True,
+                        dashboard_address=":0", silence_logs=logging.CRITICAL))
+                    return stack.enter_context(Client(cluster))
+                except (OSError, RuntimeError, TimeoutError) as exc:
+                    raise _not_started(n, exc) from exc
 
             yield Executor(None, progress, retries, start=start)
         return

@@ -3,6 +3,7 @@
 import errno
 import json
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -13,7 +14,13 @@ from pathlib import Path
 import pytest
 
 from markerplan.errors import OutputError
-from markerplan.output_folder import PROVENANCE_FILE, Terminated, output_folder
+from markerplan.output_folder import (
+    PROVENANCE_FILE,
+    Terminated,
+    library_write,
+    output_folder,
+    remove_stale_stages,
+)
 
 
 def tree(root: Path) -> list[str]:
@@ -99,11 +106,20 @@ def test_an_error_removes_the_stage_and_the_parents_it_made(tmp_path):
 
 
 def test_a_full_disk_is_one_output_error_and_leaves_nothing(tmp_path):
-    with pytest.raises(OutputError, match="No space left on device.*nothing was written"):
+    shown = re.escape(f"writing failed ({tmp_path / 'out' / 'part.bin'}): No space left on device")
+    with pytest.raises(OutputError, match=f"{shown}; nothing was written; free some space"):
         with output_folder(tmp_path / "out", False, "test") as stage:
             (stage / "part.bin").write_bytes(b"x" * 100)
             raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), str(stage / "part.bin"))
     assert tree(tmp_path) == []
+
+
+def test_a_library_failure_the_disk_does_not_explain_is_raised_unchanged(tmp_path):
+    """The disk takes :func:`library_write`'s probe: the library's error is a bug, not the disk."""
+    with pytest.raises(RuntimeError, match="no such layer") as info:
+        with library_write(tmp_path / "x.gpkg"):
+            raise RuntimeError("no such layer")
+    assert type(info.value) is RuntimeError and os.listdir(tmp_path) == []
 
 
 def test_sigterm_in_process_raises_terminated_and_cleans_up(tmp_path):
@@ -116,9 +132,9 @@ def test_sigterm_in_process_raises_terminated_and_cleans_up(tmp_path):
     assert tree(tmp_path) == []
 
 
-@pytest.mark.parametrize("signum", [signal.SIGTERM, signal.SIGHUP, signal.SIGINT])
-def test_a_signal_to_a_running_command_leaves_nothing(tmp_path, signum):
-    """A real process, killed while it writes into its stage."""
+def start_a_run_that_waits(tmp_path: Path) -> subprocess.Popen:
+    """A real ``markerplan simulate --out out`` that waits (60 s) inside its stage, after
+    writing 1 MB into it: returns once the stage exists."""
     script = textwrap.dedent(f"""
         import sys, time
         from pathlib import Path
@@ -130,7 +146,7 @@ def test_a_signal_to_a_running_command_leaves_nothing(tmp_path, signum):
             print("writing", flush=True)
             time.sleep(60)
         of.write_provenance = slow
-        main(["range-study", "--frames", "4", "--replicates", "1", "--max-distance-m", "2",
+        main(["simulate", "--frames", "4", "--station-ids", "S1",
               "--out", {str(tmp_path / "out")!r}])
     """)
     # a shell without job control starts background jobs with SIGINT ignored, and Python keeps
@@ -139,9 +155,64 @@ def test_a_signal_to_a_running_command_leaves_nothing(tmp_path, signum):
                             stderr=subprocess.PIPE, text=True, cwd=tmp_path,
                             preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     assert proc.stdout.readline().strip() == "writing"
-    assert any(n.startswith(".out.partial-") for n in os.listdir(tmp_path))
+    return proc
+
+
+def stages(folder: Path) -> list[str]:
+    return sorted(n for n in os.listdir(folder) if n.startswith(".out.partial-"))
+
+
+@pytest.mark.parametrize("signum", [signal.SIGTERM, signal.SIGHUP, signal.SIGINT])
+def test_a_signal_to_a_running_command_leaves_nothing(tmp_path, signum):
+    """A real process, killed while it writes into its stage."""
+    proc = start_a_run_that_waits(tmp_path)
+    assert len(stages(tmp_path)) == 1
     proc.send_signal(signum)
     _, err = proc.communicate(timeout=60)
     assert proc.returncode == (130 if signum == signal.SIGINT else 128 + signum), err
     assert "Traceback" not in err
     assert os.listdir(tmp_path) == []
+
+
+def test_the_next_run_removes_the_stage_a_sigkill_left(tmp_path):
+    """SIGKILL runs no cleanup: the stage (and the lock file) stay until the next run on the
+    same ``--out``, which removes them and writes its result as usual."""
+    proc = start_a_run_that_waits(tmp_path)
+    proc.kill()
+    proc.communicate(timeout=60)
+    assert len(stages(tmp_path)) == 1 and (tmp_path / ".out.lock").exists()
+    write_result(tmp_path / "out", overwrite=False)
+    assert tree(tmp_path) == ["out", "out/a.txt", "out/provenance.json", "out/sub",
+                              "out/sub/b.txt"]
+
+
+def test_the_stage_of_a_live_run_is_left_alone(tmp_path):
+    """Its stage lock is held: neither a second run nor the stale-stage sweep touches it."""
+    proc = start_a_run_that_waits(tmp_path)
+    try:
+        stage = tmp_path / stages(tmp_path)[0]
+        before = tree(stage)
+        assert remove_stale_stages(tmp_path / "out") == []
+        with pytest.raises(OutputError, match="being written by another markerplan run"):
+            write_result(tmp_path / "out", overwrite=True)
+        assert tree(stage) == before and (stage / "big.bin").stat().st_size == 1_000_000
+    finally:
+        proc.kill()
+        proc.communicate(timeout=60)
+    assert remove_stale_stages(tmp_path / "out") == [stage]
+    assert stages(tmp_path) == []
+
+
+@pytest.mark.parametrize("content", [
+    {"notes.txt": "mine"},
+    {".markerplan-stage": '{"written_by": "someone else"}'},
+    {},
+], ids=["no-marker", "foreign-marker", "empty"])
+def test_a_look_alike_stage_markerplan_did_not_make_is_left_alone(tmp_path, content):
+    look_alike = tmp_path / ".out.partial-abcd1234"
+    look_alike.mkdir()
+    for name, text in content.items():
+        (look_alike / name).write_text(text)
+    write_result(tmp_path / "out", overwrite=False)
+    assert sorted(os.listdir(tmp_path)) == [".out.partial-abcd1234", "out"]
+    assert {p.name: p.read_text() for p in look_alike.iterdir()} == content

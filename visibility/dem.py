@@ -30,7 +30,7 @@ from visibility.dem_raster import (
 )
 
 __all__ = ["DEM", "FILL_POLICIES", "MAX_DEM_CELLS", "WINDOW_PAD_CELLS", "fill_nodata",
-           "read_dem", "to_dem_xy", "write_dem"]
+           "read_dem", "read_dem_by_window", "to_dem_xy", "write_dem"]
 
 FILL_POLICIES = ("nearest",)
 
@@ -195,10 +195,13 @@ class DEM:
         inside = self.contains(xy)
         if not inside.all():
             k = int(np.flatnonzero(~inside)[0])
-            xmin, xmax, ymin, ymax = self.extent()
+            need = ""
+            if len(xy) > 1:
+                (x0, y0), (x1, y1) = xy.min(axis=0), xy.max(axis=0)
+                need = (f"the {len(xy)} {label}s need [{x0:.1f}, {x1:.1f}] x [{y0:.1f}, "
+                        f"{y1:.1f}] m; ")
             raise DataError(f"{label} {ids[k]} at ({xy[k, 0]:.2f}, {xy[k, 1]:.2f}) m lies "
-                            f"outside the DEM [{xmin:.1f}, {xmax:.1f}] x [{ymin:.1f}, "
-                            f"{ymax:.1f}] m; {fix}")
+                            f"outside the DEM {self._size_text()}; {need}{fix}")
         on_data = self.valid_at(xy)
         if not on_data.all():
             k = int(np.flatnonzero(~on_data)[0])
@@ -206,6 +209,14 @@ class DEM:
                             f"DEM nodata (no measured terrain there); a {label} must stand on "
                             "data: move it onto the DEM's valid area or use a DEM with data "
                             "there")
+
+    def _size_text(self) -> str:
+        """The grid's size and extent for messages: ``(ny x nx cells of c m) [xmin, xmax] x
+        [ymin, ymax] m`` (cell centres, site frame)."""
+        ny, nx = self.shape
+        xmin, xmax, ymin, ymax = self.extent()
+        return (f"({ny} x {nx} cells of {self.cell_size_m:g} m) [{xmin:.1f}, {xmax:.1f}] x "
+                f"[{ymin:.1f}, {ymax:.1f}] m")
 
     def height_at(self, xy: np.ndarray) -> np.ndarray:
         """Bilinear height at site-frame points.
@@ -426,6 +437,42 @@ def read_dem(path: str | Path, fill: str | None = None, what: str | None = None,
     crs = None if raster.crs is None else raster.crs.to_wkt()
     return DEM(heights, origin, cell, crs, valid=None if fill == "nearest" else valid,
                source_crs=source_crs)
+
+
+def read_dem_by_window(path: str | Path, window: tuple[float, float, float, float] | None,
+                       fill: str | None = None, what: str | None = None, *,
+                       reproject: bool = False) -> tuple[DEM, tuple | None]:
+    """:func:`read_dem` by ``window`` when that part holds data, else whole: how a DEM too
+    large to read whole is read around the points that use it (stations and what they see).
+
+    A window that finds no data means those points stand off the DEM's data (or the file is
+    refused whatever part is read, e.g. for its CRS); the whole file is then read so that the
+    one-line error names the real cause (the point, the CRS) rather than the window.
+
+    Parameters
+    ----------
+    path, fill, what, reproject
+        As :func:`read_dem`.
+    window : (xmin, xmax, ymin, ymax) float or None
+        As :func:`read_dem`, file CRS units; ``None``: read whole.
+
+    Returns
+    -------
+    dem : DEM
+    window : (xmin, xmax, ymin, ymax) float or None
+        The window ``dem`` was read by; ``None``: the whole file.
+
+    Raises
+    ------
+    InputFileError, DataError, ConfigError
+        As :func:`read_dem` reading the whole file.
+    """
+    if window is not None:
+        try:
+            return read_dem(path, fill, what, reproject=reproject, window=window), window
+        except DataError:
+            pass
+    return read_dem(path, fill, what, reproject=reproject), None
 
 
 def to_dem_xy(dem: DEM, xy: np.ndarray) -> np.ndarray:

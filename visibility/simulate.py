@@ -80,7 +80,7 @@ from pathlib import Path
 import numpy as np
 
 from markerplan.constants import GOLDEN_ANGLE_RAD
-from markerplan.errors import ConfigError, DataError
+from markerplan.errors import ConfigError
 from markerplan.provenance import provenance
 from pipeline.rig import frame_poses, rot_x, rot_y, rot_z, station_to_site_matrix
 from pipeline.scan_format import POINT_FIELDS, StationScan, write_scan, write_truth
@@ -143,7 +143,7 @@ def simulate_scan(scene: RayScene, position_m: np.ndarray, heading_rad: float,
                   sensor: SensorConfig, rig: RigConfig, seed: int,
                   frames: Sequence[int] | None = None,
                   progress: Callable[[int], None] | None = None,
-                  threads: int | None = None) -> dict[str, np.ndarray]:
+                  threads: int | None = None, station_id: str = "S1") -> dict[str, np.ndarray]:
     """Cast one station's turntable scan into ``scene``.
 
     Parameters
@@ -164,6 +164,8 @@ def simulate_scan(scene: RayScene, position_m: np.ndarray, heading_rad: float,
         Called with the number of frames just finished.
     threads : int, optional
         Worker threads (default: all cores).
+    station_id : str
+        Names the station in messages.
 
     Returns
     -------
@@ -175,7 +177,7 @@ def simulate_scan(scene: RayScene, position_m: np.ndarray, heading_rad: float,
         simulated), ``angle_error_rad`` (F,) and ``wobble_rad`` (F, 2) (their turntable errors,
         see :func:`turntable_errors`).
     """
-    position, frame_ids = _simulate_iv(scene.dem, position_m, rig, frames)
+    position, frame_ids = _simulate_iv(scene.dem, position_m, rig, frames, station_id)
     angle_error, wobble = turntable_errors(rig, sensor.rpm, seed, frame_ids)
     rotation, translation = frame_poses(rig.turntable_angles_rad()[frame_ids] + angle_error,
                                         rig.offsets)
@@ -300,11 +302,12 @@ def footprint_offsets_rad(n: int) -> np.ndarray:
 
 
 def _simulate_iv(dem: DEM, position_m: np.ndarray, rig: RigConfig,
-                 frames: Sequence[int] | None) -> tuple[np.ndarray, np.ndarray]:
+                 frames: Sequence[int] | None, station_id: str
+                 ) -> tuple[np.ndarray, np.ndarray]:
     position = np.asarray(position_m, dtype=float).reshape(-1)
     if position.shape != (3,) or not np.all(np.isfinite(position)):
         raise ConfigError(f"position_m must be three finite numbers, got {position_m!r}")
-    _station_inside_iv(dem, position[:2], "station")
+    _station_on_dem_iv(dem, position[:2], station_id)
     if frames is None:
         return position, np.arange(rig.frames_per_turn)
     ids = np.asarray(frames, dtype=np.int64).reshape(-1)
@@ -315,12 +318,11 @@ def _simulate_iv(dem: DEM, position_m: np.ndarray, rig: RigConfig,
     return position, np.unique(ids)
 
 
-def _station_inside_iv(dem: DEM, xy: np.ndarray, label: str) -> None:
-    if not dem.valid_at(np.asarray(xy, dtype=float)[None, :2])[0]:
-        xmin, xmax, ymin, ymax = dem.extent()
-        raise DataError(f"{label} at ({xy[0]:.2f}, {xy[1]:.2f}) m lies outside the DEM "
-                        f"[{xmin:.1f}, {xmax:.1f}] x [{ymin:.1f}, {ymax:.1f}] m or on its "
-                        "nodata; move the station onto measured terrain or use a larger DEM")
+def _station_on_dem_iv(dem: DEM, xy: np.ndarray, station_id: str) -> None:
+    """Refuse a station at ``xy`` (site frame, m) off ``dem``'s grid (the message names the
+    DEM's size) or on its nodata (:meth:`visibility.dem.DEM.require_inside`)."""
+    dem.require_inside(np.asarray(xy, dtype=float)[None, :2], [station_id], "station",
+                       "move the station onto the DEM or use a DEM covering it")
 
 
 def _frame(setup: _Setup, frame: int, rotation: np.ndarray, origin: np.ndarray) -> dict:
@@ -558,12 +560,13 @@ def simulate_station(site: Site, station_index: int, sensor: SensorConfig | None
                           f"{station_index}")
     station_id = site.station_ids[station_index]
     xy = site.station_xy_m[station_index]
-    _station_inside_iv(site.dem, xy, f"station {station_id}")
+    _station_on_dem_iv(site.dem, xy, station_id)
     position = np.array([*xy, site.dem.height_at(xy[None])[0] + rig.lidar_height_m])
     heading = float(site.station_heading_rad[station_index])
     scene = scene or site_scene(site)
     sseed = _station_seed(seed, station_id)
-    points = simulate_scan(scene, position, heading, sensor, rig, sseed, frames, progress, threads)
+    points = simulate_scan(scene, position, heading, sensor, rig, sseed, frames, progress, threads,
+                           station_id)
     config = _config(sensor, rig, seed, sensor_profile, site=site.name, site_seed=site.seed,
                      station_id=station_id)
     scan = _scan_from_points(points, rig, sensor, station_id, config)
@@ -716,7 +719,7 @@ def simulate_markers(dem: DEM, station_position_m: np.ndarray, heading_rad: floa
     scene = RayScene(dem, centres, marker_radius_m, threads=threads)
     position = np.asarray(station_position_m, dtype=float)
     points = simulate_scan(scene, position, heading_rad, sensor, rig, seed, frames, progress,
-                           threads)
+                           threads, station_id)
     config = _config(sensor, rig, seed, sensor_profile, station_id=station_id,
                      marker_centres_m=centres.tolist(), station_position_m=position.tolist(),
                      heading_rad=float(heading_rad))

@@ -49,7 +49,13 @@ from scipy.stats import chi2
 
 from markerplan.errors import ConfigError, DataError, InputFileError
 from pipeline.network.design import axis_weight, pose_design_blocks, station_rotations
-from pipeline.network.observations import Datum, NetworkObservations, NominalPoses
+from pipeline.network.observations import (
+    SIGMA_RULE,
+    Datum,
+    NetworkObservations,
+    NominalPoses,
+    usable_sigma,
+)
 from pipeline.network.reliability import (
     Rejection,
     data_snooping,
@@ -61,10 +67,6 @@ from pipeline.rig import fit_heading_shift, rot_z
 
 #: chi-square 95 % quantile, 3 degrees of freedom: the 95 % ellipsoid's scale.
 ELLIPSOID_CHI2_95 = float(chi2.ppf(0.95, 3))
-
-#: Names of the datum defects (translation x, y, z; rotation about the vertical).
-_DEFECT_NAMES = ("translation x", "translation y", "translation z",
-                 "heading (rotation about the vertical)")
 
 #: Between data-snooping rounds the covariance is downdated while no station angle moved more
 #: than this since it was computed (the design changes by about that fraction; w by less).
@@ -82,10 +84,12 @@ class AdjustmentSettings:
     Attributes
     ----------
     inclinometer_sigma_rad : float
-        1-sigma of each station's roll and pitch prior (0), rad (> 0).
+        1-sigma of each station's roll and pitch prior (0), rad (at least
+        :data:`~pipeline.network.observations.MIN_SIGMA`).
     heading_prior_sigma_rad : float or None
-        1-sigma of a heading observation around the nominal heading (sun sensor), rad; None for
-        none. Needs nominal poses.
+        1-sigma of a heading observation around the nominal heading (sun sensor), rad (at
+        least :data:`~pipeline.network.observations.MIN_SIGMA`); None for none. Needs nominal
+        poses.
     alpha0, beta0 : float
         Significance level and power of the w-test (Baarda), in (0, 1).
     snooping : bool
@@ -105,13 +109,13 @@ class AdjustmentSettings:
     max_iterations: int = 20
 
     def __post_init__(self):
-        def positive(name, value):
-            if not (isinstance(value, int | float) and np.isfinite(value) and value > 0):
-                raise ConfigError(f"{name} must be a number > 0, got {value!r}")
+        def sigma(name, value):
+            if not (isinstance(value, int | float) and usable_sigma(value)):
+                raise ConfigError(f"{name} must be a number {SIGMA_RULE}, got {value!r}")
 
-        positive("inclinometer_sigma_rad", self.inclinometer_sigma_rad)
+        sigma("inclinometer_sigma_rad", self.inclinometer_sigma_rad)
         if self.heading_prior_sigma_rad is not None:
-            positive("heading_prior_sigma_rad", self.heading_prior_sigma_rad)
+            sigma("heading_prior_sigma_rad", self.heading_prior_sigma_rad)
         for name in ("alpha0", "beta0"):
             value = getattr(self, name)
             if not (isinstance(value, int | float) and 0 < value < 1):
@@ -355,21 +359,6 @@ def _defect_basis(pose: np.ndarray, markers: np.ndarray) -> np.ndarray:
     return g
 
 
-def _undetermined_defects(g: np.ndarray, prior_index: np.ndarray, prior_weight: np.ndarray
-                          ) -> list[int]:
-    """Defect directions (0-2 translation, 3 rotation) the pseudo-observations leave free."""
-    gp = g[prior_index]
-    m = gp.T @ (prior_weight[:, None] * gp)
-    free = [a for a in range(3) if m[a, a] <= 0.0]
-    fixed = [a for a in range(3) if m[a, a] > 0.0]
-    rot = m[3, 3]
-    if fixed:
-        rot -= m[3, fixed] @ np.linalg.solve(m[np.ix_(fixed, fixed)], m[fixed, 3])
-    if rot <= 1e-9 * max(m[3, 3], 1e-300):
-        free.append(3)
-    return free
-
-
 def _constraints(problem: _Problem, pose: np.ndarray, markers: np.ndarray) -> np.ndarray:
     """(d, u) minimal constraints ``B dx = 0`` of the free datum (d = 0 for the others): the
     defect directions restricted to the stations' x, y, z and heading."""
@@ -554,9 +543,9 @@ def _adjust_iv(obs, datum, settings, nominal) -> int:
 
 
 def _problem(obs: NetworkObservations, datum: Datum, settings: AdjustmentSettings,
-             nominal: NominalPoses | None, pose: np.ndarray, markers: np.ndarray,
-             reference: int) -> _Problem:
-    """Pseudo-observations and datum constraints; refuses a datum that leaves a defect free."""
+             nominal: NominalPoses | None, reference: int) -> _Problem:
+    """Pseudo-observations and datum constraints; refuses a datum that leaves a defect free
+    (:meth:`~pipeline.network.observations.Datum.constrained_defects`)."""
     s = len(obs.station_ids)
     stations = np.arange(s)
     index = [6 * stations + 4, 6 * stations + 5]
@@ -579,14 +568,8 @@ def _problem(obs: NetworkObservations, datum: Datum, settings: AdjustmentSetting
                        np.zeros(0, dtype=int))
     if datum.kind == "station":
         problem.fixed[6 * reference + np.arange(4)] = True
-        return problem
-    free = _undetermined_defects(_defect_basis(pose, markers), problem.prior_index,
-                                 problem.prior_weight)
-    if datum.kind == "control" and free:
-        raise ConfigError(f"the control points ({', '.join(c.marker_id for c in datum.control)})"
-                          f" leave {', '.join(_DEFECT_NAMES[a] for a in free)} free: give "
-                          "control points at >= 2 horizontal positions (or a heading prior)")
-    problem.free_defects = np.asarray(free, dtype=int)
+    problem.free_defects = np.asarray(
+        datum.constrained_defects(settings.heading_prior_sigma_rad is not None), dtype=int)
     return problem
 
 
@@ -670,8 +653,8 @@ def adjust(obs: NetworkObservations, datum: Datum = Datum(),  # noqa: B008 (froz
     """
     reference = _adjust_iv(obs, datum, settings, nominal)
     order = _check_tied(obs, np.ones(obs.n, dtype=bool), reference)
+    problem = _problem(obs, datum, settings, nominal, reference)
     pose0, markers0 = _initial(obs, datum, nominal, order)
-    problem = _problem(obs, datum, settings, nominal, pose0, markers0, reference)
     delta0 = non_centrality(settings.alpha0, settings.beta0)
     s, k = len(obs.station_ids), len(obs.marker_ids)
     position_columns = np.concatenate([6 * np.arange(s)[:, None], 6 * s + 3 * np.arange(k)[:, None]]

@@ -133,13 +133,15 @@ def read_detections(tables: list[Path], error_model) -> list[StationDetections]:
     Raises
     ------
     InputFileError
-        Missing or unreadable table, wrong columns (:func:`read_marker_table`), a table given
-        twice, a table without any accepted detection, a station in two tables, or a
-        non-finite or absurd number in an accepted row.
+        Missing or unreadable table, wrong columns, a repeated row or an ``accepted`` other
+        than true/false (:func:`read_marker_table`), a table given twice, a table without any
+        accepted detection, a station in two tables, accepted detections of more than one
+        centre estimator, or a non-finite or absurd number in an accepted row.
     """
-    from pipeline.marker_table import read_marker_table
+    from pipeline.marker_table import ACCEPTED_CELLS, read_marker_table
 
     seen: dict[Path, Path] = {}
+    estimator: dict[str, tuple[Path, int]] = {}
     per_station: dict[str, list[tuple[Path, dict[str, str], int]]] = {}
     source: dict[str, Path] = {}
     for table in tables:
@@ -151,7 +153,7 @@ def read_detections(tables: list[Path], error_model) -> list[StationDetections]:
         seen[key] = Path(table)
         rows = read_marker_table(table)
         accepted = [(row, line) for line, row in enumerate(rows, start=2)
-                    if row["accepted"].strip().lower() == "true"]
+                    if ACCEPTED_CELLS[row["accepted"].strip().lower()]]
         if not accepted:
             raise InputFileError(f"marker table {table} holds no accepted detection "
                                  f"({len(rows)} row(s), none with accepted=true); give the "
@@ -166,7 +168,23 @@ def read_detections(tables: list[Path], error_model) -> list[StationDetections]:
                 raise InputFileError(f"station {sid} is in marker tables {owner} and {table}; "
                                      "give each station's detections once")
             per_station.setdefault(sid, []).append((table, row, line))
+            estimator.setdefault(row["estimator"].strip(), (table, line))
+    _one_estimator(estimator)
     return [_station(sid, items, error_model) for sid, items in per_station.items()]
+
+
+def _one_estimator(first_row: dict[str, tuple[Path, int]]) -> None:
+    """Refuse detections of a second centre estimator (``first_row``: estimator -> the table
+    and row of its first accepted detection, in reading order)."""
+    if len(first_row) < 2:
+        return
+    (name_a, (table_a, line_a)), (name_b, (table_b, line_b)) = list(first_row.items())[:2]
+    raise InputFileError(
+        f"marker table {table_b} row {line_b}: estimator {name_b!r}, but the detections up to "
+        f"there (from {table_a} row {line_a}) are {name_a!r}; adjust the detections of one "
+        "centre estimator (the error model describes one, and each estimator sees every marker "
+        "again): keep one estimator's rows, or process every station with the same estimator "
+        "(markerplan process)")
 
 
 def _station(sid: str, items: list[tuple[Path, dict[str, str], int]],
@@ -258,13 +276,51 @@ def identify_by_geometry(stations: list[StationDetections],
                          inclinometer_sigma_rad: float) -> Identified:
     """Marker ids from consistent inter-marker distances across stations
     (:func:`pipeline.network.association.associate_by_geometry`, with each detection's sigma and
-    the inclinometer's residual tilt); a marker seen by one station gets an id of its own."""
+    the inclinometer's residual tilt); a marker seen by one station gets an id of its own.
+
+    Raises
+    ------
+    InputFileError
+        Stations matched with no other station (so they share no marker with the network),
+        naming why: the residual tilt blurring the detections beyond their centre error, or
+        too little overlap or a repeating layout.
+    """
     from pipeline.network.association import associate_by_geometry
 
     found = associate_by_geometry([(s.station_id, s.xyz_m) for s in stations],
                                   [s.sigma_m for s in stations],
                                   inclinometer_sigma_rad=inclinometer_sigma_rad)
+    _refuse_unmatched(stations, found.pairs, inclinometer_sigma_rad)
     return Identified(stations, [list(i) for i in found.ids], "geometry")
+
+
+def _refuse_unmatched(stations: list[StationDetections], pairs, inclinometer_sigma_rad: float
+                      ) -> None:
+    """Refuse the stations no pair of :func:`identify_by_geometry` matched (``pairs``:
+    :class:`~pipeline.network.association.StationPairMatch`), naming the likely cause."""
+    matched = {sid for p in pairs if p.status == "matched" for sid in (p.station_a, p.station_b)}
+    lone = [s for s in stations if s.station_id not in matched]
+    if len(stations) < 2 or not lone:
+        return
+    ids = {s.station_id for s in lone}
+    statuses = [p.status for p in pairs if {p.station_a, p.station_b} & ids]
+    counts = ", ".join(f"{statuses.count(k)} {k.replace('_', ' ')}"
+                       for k in ("ambiguous", "no_overlap") if k in statuses)
+    distance_m = float(np.median(np.concatenate([np.linalg.norm(s.xyz_m, axis=1) for s in lone])))
+    centre_m = float(np.median(np.concatenate([s.sigma_m for s in lone]))) / math.sqrt(3.0)
+    tilt_m = inclinometer_sigma_rad * distance_m
+    if tilt_m > centre_m:
+        cause = (f"at their median distance {distance_m:.3g} m the residual tilt "
+                 f"(`inclinometer_sigma_deg` {math.degrees(inclinometer_sigma_rad):g} deg) "
+                 f"blurs each detection by {tilt_m:.2g} m (1-sigma per axis, against "
+                 f"{centre_m:.2g} m of centre error), so inter-marker distances cannot tell the "
+                 "markers apart; give a smaller `inclinometer_sigma_deg`, `plan_path` or "
+                 "`identity` table")
+    else:
+        cause = ("they share too few markers with the others, or the layout repeats itself (a "
+                 "grid, a circle); give `plan_path` or `identity` table, or leave them out")
+    raise InputFileError(f"`identity` geometry: station(s) {_id_range(tuple(sorted(ids)))} "
+                         f"match no other station ({counts} station pairs): {cause}")
 
 
 def identify_from_table(stations: list[StationDetections]) -> Identified:
@@ -329,9 +385,9 @@ def read_control(path: Path):
     ------
     InputFileError
         Missing file, missing columns, no rows, repeated or empty ids, non-finite numbers or a
-        sigma that is not > 0.
+        sigma below :data:`pipeline.network.observations.MIN_SIGMA`.
     """
-    from pipeline.network.observations import ControlPoint
+    from pipeline.network.observations import SIGMA_RULE, ControlPoint, usable_sigma
 
     what = f"`control_path` {path}"
     header, rows = read_csv(path, what, CONTROL_COLUMNS,
@@ -345,8 +401,9 @@ def read_control(path: Path):
     for line, (cid, r) in enumerate(zip(ids, rows, strict=True), start=2):
         xyz = [finite_number(r[col[c]], f"{what} row {line} {c}") for c in ("x_m", "y_m", "z_m")]
         sigma = finite_number(r[col["sigma_m"]], f"{what} row {line} sigma_m")
-        if sigma <= 0.0:
-            raise InputFileError(f"{what} row {line} sigma_m: must be > 0, got {sigma:g}")
+        if not usable_sigma(sigma):
+            raise InputFileError(f"{what} row {line} sigma_m: must be {SIGMA_RULE}, got "
+                                 f"{sigma:g}")
         points.append(ControlPoint(cid, np.array(xyz), np.full(3, sigma)))
     return tuple(points)
 

@@ -16,8 +16,10 @@ vertical (gravity, through the inclinometers, fixes the tilt): a defect of 4.
     nominal pose, else the origin with heading 0); its roll and pitch keep their priors.
 ``"control"``
     markers with known coordinates and per-axis sigmas (a lander's fiducials) are weighted
-    observations; they must fix all four defects (two control points at different horizontal
-    positions, or one with a heading prior).
+    observations; they must fix all four defects: any point fixes the translation, and the
+    heading needs control points spread horizontally beyond their sigma (a heading 1-sigma of at
+    most :data:`MAX_CONTROL_HEADING_SIGMA_RAD` from them alone) or a heading prior
+    (:meth:`Datum.constrained_defects` refuses anything less).
 ``"free"``
     minimal constraints on the stations: their centroid and their mean rotation about the
     vertical stay at the initial values (inner constraints over the stations' x, y, z and
@@ -27,6 +29,8 @@ vertical (gravity, through the inclinometers, fixes the tilt): a defect of 4.
 
 from __future__ import annotations
 
+import math
+import sys
 from dataclasses import dataclass
 
 import numpy as np
@@ -38,6 +42,33 @@ POSE_PARAMETERS = ("x_m", "y_m", "z_m", "heading_rad", "roll_rad", "pitch_rad")
 
 #: The datum options of :class:`Datum`.
 DATUM_KINDS = ("station", "control", "free")
+
+#: The datum defects, in the order of :meth:`Datum.constrained_defects`' indices.
+DATUM_DEFECTS = ("translation x", "translation y", "translation z",
+                 "heading (rotation about the vertical)")
+
+#: Largest 1-sigma heading, rad, that control points alone may leave and still fix the heading.
+#: Beyond it their horizontal spread is within their sigma (two points at one x, y, or stacked
+#: vertically): the heading is unknown, and the linearised model means nothing.
+MAX_CONTROL_HEADING_SIGMA_RAD = 1.0
+
+#: Smallest 1-sigma, m or rad, of an observation or a prior (inclinometer, heading prior,
+#: control point): its weight 1/sigma^2 then stays below sqrt(float max), so the normal
+#: equations (sums of weights times squared lever arms) and products of weights cannot overflow.
+MIN_SIGMA = sys.float_info.max ** -0.25
+
+#: The rule :data:`MIN_SIGMA` sets, for messages.
+SIGMA_RULE = f"> 0 (at least {MIN_SIGMA:.2g}: a smaller sigma's weight 1/sigma^2 overflows)"
+
+
+def usable_sigma(sigma) -> np.ndarray:
+    """True where ``sigma`` (any shape) is finite and at least :data:`MIN_SIGMA`.
+
+    >>> usable_sigma([0.01, 0.0, 1e-300, np.inf]).tolist()
+    [True, False, False, False]
+    """
+    sigma = np.asarray(sigma, dtype=float)
+    return np.isfinite(sigma) & (sigma >= MIN_SIGMA)
 
 
 def _ids(values, name: str) -> tuple[str, ...]:
@@ -108,11 +139,11 @@ class NetworkObservations:
         if bad.any():
             raise InputFileError(f"`xyz_m` must be finite, got {self.xyz_m[bad][0].tolist()} "
                                  f"({self._name(int(np.flatnonzero(bad)[0]))})")
-        bad = ~(np.isfinite(self.sigma_m) & (self.sigma_m > 0))
+        bad = ~usable_sigma(self.sigma_m)
         if bad.any():
             i = int(np.flatnonzero(bad)[0])
-            raise InputFileError(f"`sigma_m` must be finite and > 0, got {self.sigma_m[i]} "
-                                 f"({self._name(i)})")
+            raise InputFileError(f"`sigma_m` must be finite and {SIGMA_RULE}, got "
+                                 f"{self.sigma_m[i]} ({self._name(i)})")
         unseen = np.setdiff1d(np.arange(len(self.marker_ids)), self.marker)
         if unseen.size:
             raise InputFileError("every marker needs an observation; none of "
@@ -143,7 +174,7 @@ class ControlPoint:
     xyz_m : (3,) float
         Site-frame coordinates, m.
     sigma_m : (3,) float
-        Per-axis 1-sigma of ``xyz_m``, m (> 0).
+        Per-axis 1-sigma of ``xyz_m``, m (at least :data:`MIN_SIGMA`).
     """
 
     marker_id: str
@@ -158,9 +189,9 @@ class ControlPoint:
                 raise ConfigError(f"control point {self.marker_id}: `{name}` must be 3 finite "
                                   f"numbers, got {value.tolist()}")
             object.__setattr__(self, name, value)
-        if (self.sigma_m <= 0).any():
-            raise ConfigError(f"control point {self.marker_id}: `sigma_m` must be > 0, got "
-                              f"{self.sigma_m.tolist()}")
+        if not usable_sigma(self.sigma_m).all():
+            raise ConfigError(f"control point {self.marker_id}: `sigma_m` must be {SIGMA_RULE}, "
+                              f"got {self.sigma_m.tolist()}")
 
 
 @dataclass(frozen=True)
@@ -247,6 +278,86 @@ valid ids are S1, S2
         'S2'
         """
         return station_ids[self.resolve(station_ids)]
+
+    def control_heading_sigma_rad(self) -> float:
+        """1-sigma of the heading the control points alone fix, rad (inf when they stand at one
+        horizontal position): ``1 / sqrt(sum_i w_i |r_i - r_w|^2)`` over their horizontal
+        positions ``r_i`` (m) with weights ``w_i = 2 / (sigma_x^2 + sigma_y^2)`` (1/m^2) about
+        their weighted centroid ``r_w``.
+
+        Examples
+        --------
+        >>> a = ControlPoint("A", [0.0, 0.0, 0.0], [0.01] * 3)
+        >>> b = ControlPoint("B", [2.0, 0.0, 0.0], [0.01] * 3)
+        >>> round(Datum("control", control=(a, b)).control_heading_sigma_rad(), 6)
+        0.007071
+        >>> Datum("control", control=(a, ControlPoint("B", [0.0, 0.0, 5.0], [0.01] * 3))
+        ...       ).control_heading_sigma_rad()
+        inf
+        """
+        xy = np.array([c.xyz_m[:2] for c in self.control]).reshape(-1, 2)
+        weight = np.array([2.0 / np.sum(c.sigma_m[:2] ** 2) for c in self.control])
+        if not weight.size:
+            return math.inf
+        centroid = weight @ xy / weight.sum()
+        information = float(weight @ np.sum((xy - centroid) ** 2, axis=1))
+        return 1.0 / math.sqrt(information) if information > 0.0 else math.inf
+
+    def constrained_defects(self, heading_observed: bool) -> tuple[int, ...]:
+        """The datum defects (indices into :data:`DATUM_DEFECTS`) that minimal constraints must
+        fix; the one check that a datum fixes position and heading.
+
+        ``"station"`` fixes all four by fixing the reference station's x, y, z and heading;
+        ``"control"`` by its points, which must fix the translation and, without a heading
+        prior, the heading too (see :meth:`control_heading_sigma_rad`); ``"free"`` leaves the
+        translation and, without a heading prior, the heading to minimal constraints.
+
+        Parameters
+        ----------
+        heading_observed : bool
+            Whether a heading prior (sun sensor) observes every station's heading.
+
+        Returns
+        -------
+        defects : tuple of int
+            Empty for ``"station"`` and ``"control"``.
+
+        Raises
+        ------
+        ConfigError
+            Control points that leave the heading free (named, with their heading sigma).
+
+        Examples
+        --------
+        >>> Datum("free").constrained_defects(heading_observed=False)
+        (0, 1, 2, 3)
+        >>> Datum("free").constrained_defects(heading_observed=True)
+        (0, 1, 2)
+        >>> one = Datum("control", control=(ControlPoint("A", [0, 0, 0], [0.01] * 3),))
+        >>> one.constrained_defects(heading_observed=True)
+        ()
+        >>> one.constrained_defects(heading_observed=False)
+        Traceback (most recent call last):
+        ...
+        markerplan.errors.ConfigError: the control points (A) leave heading (rotation about \
+the vertical) free: they stand at one horizontal position within their sigma (heading \
+1-sigma inf deg from them, above 57.3 deg); give control points at >= 2 horizontal positions \
+farther apart than their sigma (or a heading prior)
+        """
+        heading_free = not heading_observed
+        if self.kind == "station":
+            return ()
+        if self.kind == "free":
+            return (0, 1, 2, 3) if heading_free else (0, 1, 2)
+        heading_sigma = self.control_heading_sigma_rad()
+        if heading_free and not heading_sigma <= MAX_CONTROL_HEADING_SIGMA_RAD:
+            raise ConfigError(
+                f"the control points ({', '.join(c.marker_id for c in self.control)}) leave "
+                f"{DATUM_DEFECTS[3]} free: they stand at one horizontal position within their "
+                f"sigma (heading 1-sigma {math.degrees(heading_sigma):.3g} deg from them, above "
+                f"{math.degrees(MAX_CONTROL_HEADING_SIGMA_RAD):.3g} deg); give control points at "
+                ">= 2 horizontal positions farther apart than their sigma (or a heading prior)")
+        return ()
 
     def describe(self, station_ids: tuple[str, ...]) -> str:
         """One line naming the datum, for reports, e.g. ``"reference station S1 (x, y, z,

@@ -27,12 +27,14 @@ its linearised system.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 import scipy.sparse as sp
+from scipy.special import ndtri_exp
 from scipy.stats import norm
 
 #: Redundancy below which a component is uncontrolled (its own error never shows): w = 0 there.
@@ -40,14 +42,19 @@ _MIN_REDUNDANCY = 1e-10
 
 
 def critical_value(alpha0: float) -> float:
-    """Two-sided critical value of the w-test for significance level ``alpha0``.
+    """Two-sided critical value of the w-test for significance level ``alpha0`` in (0, 1):
+    ``Phi^-1(1 - alpha0 / 2)``, computed from ``log(alpha0 / 2)`` so that it stays finite and
+    exact for any ``alpha0`` down to the smallest float (``1 - alpha0 / 2`` rounds to 1, and
+    ``Phi^-1`` to inf, below about 1e-16).
 
     Examples
     --------
     >>> round(critical_value(0.001), 2)
     3.29
+    >>> round(critical_value(1e-300), 2), round(critical_value(5e-324), 2)
+    (37.07, 38.49)
     """
-    return float(norm.ppf(1.0 - alpha0 / 2.0))
+    return float(-ndtri_exp(math.log(alpha0) - math.log(2.0)))
 
 
 def non_centrality(alpha0: float, beta0: float) -> float:

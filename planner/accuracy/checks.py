@@ -6,7 +6,8 @@ and the reduction studies all ask of a station.
   (:func:`planner.accuracy.known_control.errors_from_information`), with the outer-approximation
   tangents (:func:`planner.accuracy.known_control.linearisation`) and failing-set growth the
   accuracy cuts use;
-- :func:`diagnose`: stations no layout can satisfy, and why;
+- :func:`diagnose`: stations no layout can satisfy, and why (:func:`nothing_in_range` for a
+  station with no site in range);
 - :func:`evaluate_layout`: count, directions (:func:`planner.problem.usability.direction_status`)
 and
   predicted error of a layout at every station -> :class:`LayoutCheck`.
@@ -179,7 +180,7 @@ def diagnose(problem: PlanProblem, config, infos: list[StationInfo] | None = Non
         pairs = np.flatnonzero(problem.pair_station == s)
         pairs = pairs[allowed[problem.pair_site[pairs]]]
         if pairs.size == 0:
-            out[sid] = f"no candidate site within {config.max_range_m:g} m (no site in range)"
+            out[sid] = nothing_in_range(problem, s, allowed, config.max_range_m)
             continue
         reason = problem.pair_reason[pairs]
         idx = pairs[reason == 0]
@@ -225,6 +226,59 @@ def diagnose(problem: PlanProblem, config, infos: list[StationInfo] | None = Non
                 out[sid] = (f"accuracy unreachable after losing one marker: {worst:.3f} m > "
                             f"{config.requirement_m:g} m")
     return out
+
+
+def nothing_in_range(problem: PlanProblem, s: int, allowed: np.ndarray, range_m: float) -> str:
+    """Why station ``s`` has no pair with an allowed candidate site: where the nearest lies.
+
+    A station whose every site within ``range_m`` across lies more than ``range_m`` above (or
+    below) its LiDAR centre stands in a pit or below the terrain (on a spike or above it).
+
+    Parameters
+    ----------
+    problem : PlanProblem
+    s : int
+        Station index.
+    allowed : (n,) bool
+        Candidate sites a marker may take.
+    range_m : float
+        LiDAR range, m (3D, as pairs are made).
+
+    Returns
+    -------
+    reason : str
+        One clause, e.g. ``"no candidate site within 30 m: ... the nearest, C00012, is 44.5 m
+        away"``.
+    """
+    head = f"no candidate site within {range_m:g} m"
+    sites = np.flatnonzero(allowed)
+    if not sites.size:
+        return f"{head}: none is allowed"
+    offset = problem.site_xyz[sites] - problem.station_xyz[s]
+    across = np.hypot(offset[:, 0], offset[:, 1])
+    rise = offset[:, 2]
+    near = across <= range_m
+    z = problem.station_xyz[s, 2]
+    if near.any() and np.all(np.abs(rise[near]) > range_m):
+        gap = float(np.min(np.abs(rise[near])))
+        if np.all(rise[near] > 0):
+            return (f"{head}: its LiDAR centre (z {z:.2f} m) lies at least {gap:.1f} m below "
+                    f"the {near.sum()} candidate sites within {range_m:g} m across, so it stands "
+                    "in a pit of the DEM or below the terrain; check the DEM there and the "
+                    "station's height")
+        if np.all(rise[near] < 0):
+            return (f"{head}: its LiDAR centre (z {z:.2f} m) lies at least {gap:.1f} m above "
+                    f"the {near.sum()} candidate sites within {range_m:g} m across, so it stands "
+                    "on a spike of the DEM or far above the terrain; check the DEM there and the "
+                    "station's height")
+    distance = np.hypot(across, rise)
+    if np.any(distance <= range_m):  # pairs from a visibility table that lists none for it
+        return (f"no pair with any of the {np.sum(distance <= range_m)} candidate sites within "
+                f"{range_m:g} m: the visibility lists none for this station; give its pairs")
+    k = int(np.argmin(distance))
+    return (f"{head}: the nearest, {problem.site_ids[sites[k]]}, is {distance[k]:.1f} m away "
+            f"({across[k]:.1f} m across, {rise[k]:+.1f} m up); move the station nearer the "
+            "candidate sites or let markers go nearer it")
 
 
 @dataclass(frozen=True)

@@ -15,7 +15,8 @@ option                      meaning (and the value the command receives)
 ``--dem FILE``              DEM instead of the preset's terrain (``Path``)
 ``--reproject``             resample a ``--dem`` in degrees (or on non-square cells) to a local
                             metric CRS; point and polygon files are then in the DEM file's CRS
-                            (``bool``; :func:`visibility.dem.read_dem`, ``to_dem_xy``)
+                            (``bool``; :func:`visibility.dem.read_dem`, ``to_dem_xy``);
+                            refused without a DEM to resample (:func:`require_dem`)
 ``--stations FILE``         stations CSV/GeoJSON (``Path``)
 ``--station-ids S1,S3``     which stations to work on (``tuple[str, ...]``)
 ``--marker-radius-m M``     marker (sphere) radius, metres (``float``)
@@ -37,7 +38,8 @@ option                      meaning (and the value the command receives)
 ``--scheduler ADDRESS``     where the per-station tasks run: ``local`` (a LocalCluster sized to
                             the machine), ``none`` (in process) or a dask scheduler address
                             (``str``; :func:`planner.distributed.executor`)
-``--workers N``             worker processes of the ``local`` cluster (default: one per core)
+``--workers N``             worker processes of the ``local`` cluster (default and most: one
+                            per core this process may use; :func:`_local_workers`)
 ==========================  =====================================================================
 
 Options whose value has a unit carry it in the name (``-m``, ``-s``, ``-deg``, ``-mm``); a
@@ -83,9 +85,27 @@ FILE = click.Path(dir_okay=False, path_type=Path)
 
 
 class FiniteRange(click.FloatRange):
-    """``click.FloatRange`` that also refuses ``nan`` and ``inf`` (which pass its comparisons)."""
+    """The type of every float option: a ``click.FloatRange`` with both bounds, that also
+    refuses ``nan`` (which passes its comparisons).
+
+    Both bounds are required: ``inf`` and ``1e308`` pass a one-sided range, and the work a
+    value like that sizes (a grid of cells, a square) overflows or explodes.
+
+    Parameters
+    ----------
+    min, max : float
+        The bounds, in the option's unit.
+    **kwargs
+        As :class:`click.FloatRange` (``min_open``, ``max_open``).
+    """
 
     name = "float"
+
+    def __init__(self, min: float, max: float, **kwargs):
+        if min is None or max is None:
+            raise TypeError("FiniteRange needs both bounds; an unbounded float option lets "
+                            "values through whose use overflows")
+        super().__init__(min, max, **kwargs)
 
     def convert(self, value, param, ctx):
         number = super().convert(value, param, ctx)
@@ -111,6 +131,10 @@ LIDAR_HEIGHT_M = FiniteRange(0.3, 3.0)
 TIME_LIMIT_S = FiniteRange(0.0, 86_400.0, min_open=True)
 #: Marker (sphere) radius, m.
 SPHERE_RADIUS_M = FiniteRange(0.01, 1.0)
+#: Largest mounting axis offset (each of dx, dy), mm: the VLP-16 (103 mm across) sits on an
+#: L-bracket a few centimetres off the turntable axis; 1 m off it is no longer a turntable
+#: rig (and the simulated scan of a LiDAR 1e6 m off its station is empty).
+AXIS_OFFSET_MM = 1000.0
 
 overwrite_option = click.option(
     "--overwrite", is_flag=True,
@@ -267,10 +291,11 @@ def id_list(ctx, param, text: str | None) -> tuple[str, ...] | None:
 
 
 def point_option(name: str, default: str, metavar: str, help_text: str,
-                 dest: str | None = None, old: str | None = None):
-    """An option of as many comma-separated finite numbers as ``default`` has, handed to the
-    command as a tuple of floats (parameter ``dest``, default from ``name``); ``old``: its former
-    spelling, kept as a :func:`deprecated_alias`."""
+                 dest: str | None = None, old: str | None = None, *, limit: float):
+    """An option of as many comma-separated numbers as ``default`` has, each finite and within
+    ``+-limit`` (the option's unit), handed to the command as a tuple of floats (parameter
+    ``dest``, default from ``name``); ``old``: its former spelling, kept as a
+    :func:`deprecated_alias`."""
     count = len(default.split(","))
 
     def parse(ctx, param, text: str) -> tuple[float, ...]:
@@ -278,10 +303,11 @@ def point_option(name: str, default: str, metavar: str, help_text: str,
             values = tuple(float(p) for p in text.split(","))
         except ValueError:
             values = ()
-        if len(values) != count or not all(math.isfinite(v) for v in values):
+        if len(values) != count or not all(abs(v) <= limit for v in values):  # NaN fails too
             words = {2: "two", 3: "three"}.get(count, str(count))
-            raise click.BadParameter(f"must be {words} comma-separated finite numbers like "
-                                     f"{metavar}, got {text!r}", ctx, param)
+            raise click.BadParameter(f"must be {words} comma-separated numbers, each between "
+                                     f"{-limit:g} and {limit:g}, like {metavar}; got {text!r}",
+                                     ctx, param)
         return values
 
     attrs = {"default": default, "show_default": True, "metavar": metavar, "callback": parse,
@@ -314,9 +340,15 @@ def seed_option(help_text: str = "Seed of the simulated noise; the same seed giv
                         help=help_text)
 
 
-frames_option = click.option(
-    "--frames", type=FRAMES, default=800, show_default=True,
-    help="Frames per turntable revolution (the rig takes about 800; fewer for a quick run).")
+def frames_option_at_least(fewest: int):
+    """``--frames N``: frames per turntable revolution, from ``fewest`` (a command whose
+    processing needs more than one frame says so) to :data:`FRAMES`' largest."""
+    return click.option(
+        "--frames", type=click.IntRange(fewest, FRAMES.max), default=800, show_default=True,
+        help="Frames per turntable revolution (the rig takes about 800; fewer for a quick run).")
+
+
+frames_option = frames_option_at_least(FRAMES.min)
 
 rpm_option = click.option(
     "--rpm", type=RPM, default=600, show_default=True,
@@ -344,6 +376,21 @@ reproject_option = click.option(
     help="Resample a --dem in a geographic CRS (degrees) or on non-square cells to a local "
          "metric CRS; --stations, --boundary, --exclude and --existing files are then in the "
          "DEM file's CRS.")
+
+
+def require_dem(reproject: bool, dem_path: Path | None) -> None:
+    """Refuse ``--reproject`` without ``--dem`` (one-line :class:`ConfigError`): it resamples
+    the DEM file, and a site preset's terrain is already metric.
+
+    >>> require_dem(False, None)
+    """
+    from markerplan.errors import ConfigError
+
+    if reproject and dem_path is None:
+        raise ConfigError("--reproject resamples the --dem FILE to a local metric CRS, and no "
+                          "--dem was given (a site preset's terrain is metric already); add "
+                          "--dem FILE or drop --reproject")
+
 
 stations_option = click.option(
     "--stations", "stations_path", type=FILE,
@@ -401,12 +448,25 @@ exclude_option = click.option(
     "--exclude", "exclude_paths", type=FILE, multiple=True,
     help="GeoJSON polygon(s) where no marker may go (repeatable).")
 
+
+def _local_workers(ctx, param, workers: int | None) -> int | None:
+    """Click callback: ``--workers``, refused beyond what this machine runs
+    (:func:`planner.distributed.check_local_workers`, before any work)."""
+    from planner.distributed import check_local_workers
+
+    return None if workers is None else check_local_workers(workers)
+
+
 def scheduler_options(f):
     """``--scheduler ADDRESS`` and ``--workers N``: where a command's independent tasks run
-    (:func:`planner.distributed.executor`); the command receives ``scheduler`` and ``workers``."""
+    (:func:`planner.distributed.executor`); the command receives ``scheduler`` and ``workers``.
+    ``--workers`` is bounded by the machine: the cores this process may use and its open-file
+    limit (:func:`planner.distributed.local_worker_limit`)."""
     f = click.option(
         "--workers", type=click.IntRange(min=1), default=None, metavar="N",
-        help="Worker processes of the local cluster (default: one per core).")(f)
+        callback=_local_workers,
+        help="Worker processes of the local cluster: at most one per core this process may "
+             "use (the default); for more, a bigger cluster with --scheduler ADDRESS.")(f)
     return click.option(
         "--scheduler", default="local", show_default=True, metavar="ADDRESS",
         help="Where the tasks run: local (a dask LocalCluster on this machine), none (in this "
@@ -496,7 +556,7 @@ def mounting_offset_options(command):
                      show_default=True, help="Mounting offset: L-frame tilt, degrees."),
         point_option("--axis-offset-mm", "0,0", "DX,DY",
                      "Mounting offset: horizontal offset of the LiDAR centre from the "
-                     "turntable axis, mm."),
+                     "turntable axis, mm.", limit=AXIS_OFFSET_MM),
     ]):
         with_offsets = option(with_offsets)
     return with_offsets

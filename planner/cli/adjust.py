@@ -9,6 +9,7 @@ from pathlib import Path
 
 import click
 
+from pipeline.network.observations import MIN_SIGMA
 from planner.cli._common import (
     FILE,
     FiniteRange,
@@ -24,12 +25,14 @@ from planner.cli._common import (
 )
 
 #: Bounds of the angle sigmas, degrees: above 10 deg an inclinometer or sun sensor measures
-#: nothing, and the small-angle tilt model stops holding.
-ANGLE_SIGMA_DEG = FiniteRange(0.0, 10.0, min_open=True)
-#: Rover odometry, 1-sigma position error, m (up to 50 m of drift between stations).
-ODOMETRY_SIGMA_M = FiniteRange(0.0, 50.0, min_open=True)
+#: nothing, and the small-angle tilt model stops holding; below the adjustment's smallest
+#: sigma a prior's weight 1/sigma^2 overflows.
+ANGLE_SIGMA_DEG = FiniteRange(math.degrees(MIN_SIGMA), 10.0)
+#: Rover odometry, 1-sigma position error, m (up to 50 m of drift between stations; at least
+#: the adjustment's smallest sigma, as for the angles).
+ODOMETRY_SIGMA_M = FiniteRange(MIN_SIGMA, 50.0)
 #: Odometry heading, 1-sigma, degrees.
-ODOMETRY_HEADING_SIGMA_DEG = FiniteRange(0.0, 90.0, min_open=True)
+ODOMETRY_HEADING_SIGMA_DEG = FiniteRange(math.degrees(MIN_SIGMA), 90.0)
 #: Working radius and requirement, m (the plan's bounds: planner.config.BOUNDS).
 RADIUS_M = FiniteRange(0.0, 100.0, min_open=True)
 REQUIREMENT_M = FiniteRange(0.0, 10.0, min_open=True)

@@ -11,7 +11,7 @@ from planner.cli._common import (
     FILE,
     FiniteRange,
     emit_summary,
-    frames_option,
+    frames_option_at_least,
     given_paths,
     json_option,
     marker_radius_option,
@@ -21,6 +21,12 @@ from planner.cli._common import (
     rpm_option,
     seed_option,
 )
+
+#: The fewest frames per turn of the simulated field positions: each is processed with
+#: self-calibration, which needs frames all round the turn, and the quality gate needs the far
+#: markers seen by enough of them (at 50 frames every marker of the field experiment's second
+#: position was rejected, at 100 all three positions gave residuals; the rig takes 800).
+FEWEST_FRAMES = 100
 
 
 @click.command("calibrate-sensor")
@@ -37,13 +43,14 @@ from planner.cli._common import (
               help="Profile whose other parameters stay fixed (calibrated, datasheet or a file).")
 @click.option("--fix", "fixed", multiple=True, metavar="NAME=VALUE",
               help="Fix a profile parameter (repeatable), e.g. reference.aim_sigma_m=0.003; "
-                   "default: the field priors of planner.studies.sensor_calibration.")
+                   "default: the field priors of planner.studies.sensor_calibration (but the "
+                   "--fit ones).")
 @click.option("--fit", "free", multiple=True, metavar="NAME=LOW:HIGH",
               help="A parameter to fit and its search range (one or two; repeatable). "
                    "Default: the one of planner.studies.sensor_calibration.DEFAULT_FREE.")
 @click.option("--name", default="calibrated", show_default=True,
               help="Name of the written profile.")
-@frames_option
+@frames_option_at_least(FEWEST_FRAMES)
 @click.option("--replicates", type=click.IntRange(1, 20), default=2, show_default=True,
               help="Simulations per design point and position.")
 @click.option("--check-replicates", type=click.IntRange(1, 50), default=6, show_default=True,
@@ -104,9 +111,12 @@ def command(summary, marker_table, reference, out, overwrite, base_profile, fixe
     if (marker_table is None) != (reference is None):
         raise ConfigError("--marker-table and --reference go together; give both")
     base = load_profile(base_profile)
-    settings_fixed = dict(FIELD_PRIORS) if not fixed else dict(parse_setting(t) for t in fixed)
     free_params = [FreeParameter.parse(t) for t in (free or DEFAULT_FREE)]
-    overlap = sorted(set(settings_fixed) & {f.name for f in free_params})
+    fitted = {f.name for f in free_params}
+    # the field priors fix what is not fitted; only an explicit --fix can clash with --fit
+    settings_fixed = ({k: v for k, v in FIELD_PRIORS.items() if k not in fitted} if not fixed
+                      else dict(parse_setting(t) for t in fixed))
+    overlap = sorted(set(settings_fixed) & fitted)
     if overlap:
         raise ConfigError(f"{overlap[0]} is both fixed (--fix) and fitted (--fit); give it once")
     settings = CalibrationSettings(frames=frames, replicates=replicates,

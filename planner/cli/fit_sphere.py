@@ -13,12 +13,16 @@ from planner.cli._common import (
     require_option,
 )
 
+#: Largest scanner coordinate, m (each of x, y, z): 100,000 km holds any geocentric or
+#: selenocentric frame, and squares of it stay far from overflow.
+SENSOR_LIMIT_M = 1e8
+
 
 @click.command("fit-sphere")
 @click.argument("file", type=click.Path(dir_okay=False, path_type=str))
 @marker_radius_option(required=True)
 @point_option("--sensor-m", "0,0,0", "X,Y,Z", "Scanner origin in the file's frame, metres.",
-              "sensor", old="--sensor")
+              "sensor", old="--sensor", limit=SENSOR_LIMIT_M)
 @estimator_option()
 @json_option
 def command(file: str, marker_radius_m: float | None, sensor: tuple[float, float, float],

@@ -52,8 +52,9 @@ def command(capture: Path, log_path: Path | None, station_id: str | None, keep_p
             out: Path, overwrite: bool, as_json: bool) -> None:
     """Import a real VLP-16 packet capture as a station scan for `markerplan process`.
 
-    Decodes CAPTURE (.pcap, VLP-16, single or strongest return) into its spin revolutions and
-    writes <station>.scan.npz into --out: one frame per revolution, its turntable angle from
+    Decodes CAPTURE (.pcap of Ethernet frames, VLP-16, strongest, last or dual return: of
+    dual, the last return of each firing is kept) into its spin revolutions and writes
+    <station>.scan.npz into --out: one frame per revolution, its turntable angle from
     --turntable-log (one row per frame, or timestamps interpolated at the middle of each
     revolution); without a log, all revolutions are one frame at angle 0. The revolution the
     end of the file cuts short is dropped unless --keep-partial. See docs/pipeline.md, "Real
@@ -80,14 +81,17 @@ def command(capture: Path, log_path: Path | None, station_id: str | None, keep_p
     with output_folder(out, overwrite, "import-pcap",
                        inputs=given_paths(capture, log_path)) as stage:
         log = None if log_path is None else read_turntable_log(log_path)
-        revolutions = decode_vlp16_pcap(capture)
+        decoded = decode_vlp16_pcap(capture)
+        revolutions = decoded.revolutions
         decoded_s = time.perf_counter() - started
         kept = [r for r in revolutions if r.complete or keep_partial]
         if not kept:
+            cut = ("" if decoded.cut_packet is None else
+                   f", and the file is cut short inside packet {decoded.cut_packet}")
             raise DataError(f"pcap file {capture} holds only a partial revolution (the file "
-                            f"ends mid-spin, {len(revolutions[0].points)} returns); pass "
+                            f"ends mid-spin, {len(revolutions[0].points)} returns{cut}); pass "
                             "--keep-partial to import it")
-        _note_capture(revolutions, kept, log_path)
+        _note_capture(decoded, kept, log_path)
         frame_time_s = np.array([r.time_s for r in kept])
         angles = None if log is None else log.frame_angles(frame_time_s)
         scan = scan_from_revolutions(kept, angles, station, capture.name)
@@ -101,6 +105,7 @@ def command(capture: Path, log_path: Path | None, station_id: str | None, keep_p
     summary = {
         "out": str(out), "scan": name, "station_id": station, "n_frames": scan.n_frames,
         "n_points": scan.n_points, "revolutions_decoded": len(revolutions),
+        "return_mode": decoded.return_mode, "cut_packet": decoded.cut_packet,
         "partial_dropped": len(revolutions) - len(kept),
         "capture_span_s": [kept[0].start_s, kept[-1].end_s],
         "frame_time_s": frame_time_s.tolist() if log is not None else None,
@@ -111,10 +116,19 @@ def command(capture: Path, log_path: Path | None, station_id: str | None, keep_p
                                    f"points -> {out / name}")
 
 
-def _note_capture(revolutions: list, kept: list, log_path: Path | None) -> None:
-    """Notes on stderr: a dropped partial revolution, revolutions with lost packets, no log.
+def _note_capture(decoded, kept: list, log_path: Path | None) -> None:
+    """Notes on stderr: a file cut short, a dual-return capture, a dropped partial revolution,
+    revolutions with lost packets, no log.
 
-    ``kept`` is ``revolutions`` without the partial last one when it was dropped."""
+    ``decoded`` is the :class:`pipeline.pcap.Capture`; ``kept`` its revolutions without the
+    partial last one when it was dropped."""
+    revolutions = decoded.revolutions
+    if decoded.cut_packet is not None:
+        click.echo(f"note: the file ends inside packet {decoded.cut_packet} (cut short while "
+                   "recording or copying); the whole packets before it were read", err=True)
+    if decoded.return_mode == "dual":
+        click.echo("note: a dual-return capture: kept the last return of each firing (what "
+                   "last-return mode records)", err=True)
     if len(kept) < len(revolutions):
         click.echo(f"note: dropped the capture's last revolution ({len(revolutions[-1].points)} "
                    "returns): the file ends mid-spin; --keep-partial keeps it", err=True)

@@ -9,6 +9,7 @@ import click
 
 from planner.cli._common import (
     FILE,
+    FiniteRange,
     boundary_option,
     config_option,
     dem_option,
@@ -26,6 +27,7 @@ from planner.cli._common import (
     renamed_option,
     report_timings,
     reproject_option,
+    require_dem,
     scheduler_options,
     site_option,
     site_seed_option,
@@ -35,8 +37,9 @@ from planner.cli._common import (
     with_options,
 )
 
-#: Cell size of the stand maps, m.
-CELL_M = click.FloatRange(min=0, min_open=True)
+#: Cell size of the stand maps, m: rounded to whole DEM cells (at least one), so any positive
+#: size up to 10 km (one cell over any site markerplan plans; a km site is 1 km across).
+CELL_M = FiniteRange(0.0, 10_000.0, min_open=True)
 
 
 @click.command("plan")
@@ -108,6 +111,7 @@ def command(site_name, site_seed, dem_path, reproject, stations_path, station_id
     from planner.outputs.report import plan_timings, summary, write_plan_files
     from planner.outputs.stand_map import stand_map
 
+    require_dem(reproject, dem_path)
     inputs_given = given_paths(dem_path, stations_path, boundary_path, error_model.path,
                                config_path, visibility_path, *exclude_paths,
                                None if existing == "as-built" else existing)

@@ -25,6 +25,7 @@ from planner.cli._common import (
     reference_station_option,
     report_timings,
     reproject_option,
+    require_dem,
     scheduler_options,
     seed_option,
     site_option,
@@ -78,10 +79,12 @@ def command(layout_spec, site_name, site_seed, dem_path, reproject, stations_pat
     """Trade-off between the number of markers and the worst station's predicted error.
 
     INPUT is a plan.json from `markerplan plan`, a markers CSV (id,x_m,y_m[,z_m], site frame)
-    or 'as-built' (the site preset's own layout). For every count k from the layout's size down,
-    an integer program finds the k markers minimising the worst station's predicted error
-    (proven optimal unless the time limit is hit, which is reported). Writes tradeoff.csv,
-    per_station.csv, drop_order.csv, marker_loss.csv, tradeoff.png, report.md and reduce.json.
+    or 'as-built' (the site preset's own layout); a plan is studied at its own stations
+    (--station-ids picks among them, --stations replaces them). For every count k from the
+    layout's size down, an integer program finds the k markers minimising the worst station's
+    predicted error (proven optimal unless the time limit is hit, which is reported). Writes
+    tradeoff.csv, per_station.csv, drop_order.csv, marker_loss.csv, tradeoff.png, report.md and
+    reduce.json.
 
     \b
     Examples:
@@ -104,8 +107,11 @@ def command(layout_spec, site_name, site_seed, dem_path, reproject, stations_pat
     from markerplan.output_folder import output_folder
     from planner.reduction.plot import plot_tradeoff
     from planner.reduction.report import reduce_timings, summary, write_reduce_files
+    from planner.reduction.study import is_plan
 
     _where_needs_verify(verify)
+    if not is_plan(layout_spec):  # a plan's --reproject applies to the DEM it records
+        require_dem(reproject, dem_path)
     inputs_given = given_paths(dem_path, stations_path, boundary_path, error_model.path,
                                config_path, *exclude_paths,
                                None if layout_spec == "as-built" else layout_spec)

@@ -23,6 +23,7 @@ from planner.cli._common import (
     overwrite_option,
     range_noise_option,
     reproject_option,
+    require_dem,
     rpm_option,
     seed_option,
     sensor_profile_option,
@@ -96,10 +97,11 @@ def command(site_name: str, site_seed: int | None, dem_path: Path | None, reproj
                                    beam_divergence=beam_divergence, dropout_prob=dropout_prob)
     rig = profile.rig_config(lidar_height_m=lidar_height_m, frames_per_turn=frames,
                              offsets=offsets)
+    require_dem(reproject, dem_path)
     with output_folder(out, overwrite, "simulate",
                        inputs=given_paths(dem_path, stations_path)) as stage:
         site = _site(site_name, site_seed, dem_path, dem_fill, stations_path, marker_radius_m,
-                     lidar_height_m, reproject)
+                     lidar_height_m, reproject, sensor.max_range_m)
         ids = select_stations(site.station_ids, station_ids)
         with tqdm(total=len(ids) * frames, unit="frame", file=sys.stderr, disable=None,
                   desc="simulate") as bar:
@@ -120,13 +122,15 @@ def _metres(mm: float | None) -> float | None:
 
 
 def _site(site_name, site_seed, dem_path, dem_fill, stations_path, marker_radius_m,
-          lidar_height_m, reproject=False):
+          lidar_height_m, reproject, sight_radius_m):
     """The site to scan: the preset, with the DEM (resampled with ``reproject``; the stations
-    are then in its file's CRS), stations and marker radius given."""
+    are then in its file's CRS), stations and marker radius given. A ``--dem`` is read only
+    as far as the stations and markers can be seen (``sight_radius_m``, m: the sensor's
+    maximum range), as ``plan`` reads it; with ``reproject``, whole."""
     import numpy as np
 
-    from planner.problem.inputs import read_stations
-    from visibility.dem import read_dem
+    from planner.config import MAX_STATIONS
+    from planner.problem.inputs import place_stations, read_points
     from visibility.sites import (
         load_site,
         site_with_dem,
@@ -135,11 +139,12 @@ def _site(site_name, site_seed, dem_path, dem_fill, stations_path, marker_radius
     )
 
     site = load_site(site_name, seed=site_seed)
-    dem = site.dem if dem_path is None else read_dem(dem_path, fill=dem_fill,
-                                                     what=f"--dem {dem_path}",
-                                                     reproject=reproject)
-    if stations_path is not None:  # before site_with_dem, which checks the stations it keeps
-        ids, xyz, heading = read_stations(stations_path, dem, lidar_height_m)
+    points = (None if stations_path is None
+              else read_points(stations_path, "`stations_path`", MAX_STATIONS))
+    dem = site.dem if dem_path is None else _site_dem(dem_path, dem_fill, reproject, site,
+                                                      points, sight_radius_m)
+    if points is not None:  # before site_with_dem, which checks the stations it keeps
+        ids, xyz, heading = place_stations(points, dem, lidar_height_m)
         if np.any(np.abs(xyz[:, 2] - dem.height_at(xyz[:, :2]) - lidar_height_m) > 1e-3):
             click.echo(f"note: the z_m of --stations {stations_path} are not used: the LiDAR "
                        "centre stands --lidar-height-m above the ground", err=True)
@@ -149,3 +154,23 @@ def _site(site_name, site_seed, dem_path, dem_fill, stations_path, marker_radius
     if marker_radius_m is not None:
         site = site_with_marker_radius(site, marker_radius_m)
     return site
+
+
+def _site_dem(dem_path, dem_fill, reproject, site, station_points, sight_radius_m):
+    """``--dem`` read by the window (:func:`planner.problem.inputs.sight_window`) around the
+    stations (``station_points`` from the file, else the preset's) and the preset's markers
+    it will carry, grown by ``sight_radius_m`` (m); whole with ``reproject`` (the points are
+    then in the DEM file's CRS, the markers in the DEM's)."""
+    import numpy as np
+
+    from planner.problem.inputs import sight_window
+    from visibility.dem import read_dem_by_window
+
+    window = None
+    if not reproject:
+        stations_xy = (site.station_xy_m if station_points is None
+                       else [[p["x_m"], p["y_m"]] for p in station_points])
+        window = sight_window(np.vstack([stations_xy, site.marker_centres_m[:, :2]]),
+                              sight_radius_m)
+    return read_dem_by_window(dem_path, window, dem_fill, f"--dem {dem_path}",
+                              reproject=reproject)[0]

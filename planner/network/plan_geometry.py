@@ -11,6 +11,7 @@ import numpy as np
 from markerplan.errors import InputFileError
 from markerplan.reading import finite_number, require_type
 from pipeline.network.detections import PlanGeometry
+from pipeline.network.observations import MIN_SIGMA
 
 
 def read_plan_geometry(path: Path) -> PlanGeometry:
@@ -69,16 +70,19 @@ def _plan_crs(site: dict, path: Path) -> str | None:
 
 
 def _plan_sigma_deg(cfg: dict, key: str, what: str) -> float | None:
-    """The plan's angle sigma ``cfg[key]``, degrees, in (0, 10]; ``None`` when it records none.
+    """The plan's angle sigma ``cfg[key]``, degrees, in [degrees(MIN_SIGMA), 10]; ``None``
+    when it records none.
 
     A sigma of 0 would make the prior exact (an infinite weight), so it is refused rather than
-    read as "not set"."""
+    read as "not set"; one below :data:`pipeline.network.observations.MIN_SIGMA` would
+    overflow its weight."""
     if cfg.get(key) is None:
         return None
     sigma = finite_number(cfg[key], f"{what} {key}", 10.0)
-    if sigma <= 0.0:
+    if sigma < np.degrees(MIN_SIGMA):
         raise InputFileError(
-            f"{what} {key}: must be > 0 deg for an adjustment (0 would make the prior exact), "
+            f"{what} {key}: must be at least {np.degrees(MIN_SIGMA):.2g} deg for an adjustment "
+            "(0 would make the prior exact, and a smaller sigma's weight 1/sigma^2 overflows), "
             f"got {sigma:g}; plan again with a `config_path` setting {key} to the sensor's 1-sigma "
             "(e.g. 0.01)")
     return sigma

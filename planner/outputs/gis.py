@@ -14,6 +14,11 @@ coordinates of the GeoJSON files.
 
 The same inputs give byte-identical files: GPKG's timestamps are fixed by GDAL's
 ``OGR_CURRENT_DATE``.
+
+A failed write raises the disk's own :class:`OSError` (its errno), which the output folder
+turns into its one line: the GeoTIFFs are made in memory and written by Python; GDAL writes the
+GeoPackage itself (a multi-layer GPKG cannot be made in memory through pyogrio) inside
+:func:`markerplan.output_folder.library_write`, which asks the disk why GDAL failed.
 """
 
 from __future__ import annotations
@@ -226,15 +231,22 @@ def write_gpkg_layers(path: Path, layers: dict, crs: str | None) -> Path:
     Returns
     -------
     path : Path
+
+    Raises
+    ------
+    OSError
+        The disk's refusal (full, a file-size limit, read-only...) when GDAL fails to write.
     """
     import pyogrio
     import shapely
     from pyogrio.raw import write
 
+    from markerplan.output_folder import library_write
+
     path = Path(path)
     pyogrio.set_gdal_config_options({"OGR_CURRENT_DATE": GPKG_DATE})
     try:
-        with warnings.catch_warnings():
+        with library_write(path), warnings.catch_warnings():
             # no CRS is deliberate (a synthetic site's local frame; docs/planner.md says so)
             warnings.filterwarnings("ignore", "'crs' was not provided", UserWarning)
             for name, (gtype, geoms, fields) in layers.items():
@@ -249,19 +261,25 @@ def write_gpkg_layers(path: Path, layers: dict, crs: str | None) -> Path:
 
 def write_stand_map(stand, folder: Path) -> list[Path]:
     """Write a :class:`planner.outputs.stand_map.StandMap` as ``usable_markers.tif`` and
-    ``station_error.tif`` (float32, one band, nodata NaN, DEM's CRS) into ``folder``."""
-    import rasterio
+    ``station_error.tif`` (float32, one band, nodata NaN, DEM's CRS) into ``folder``.
+
+    Each GeoTIFF is made in memory and written by Python, so a failing disk raises its own
+    :class:`OSError` (its errno) rather than GDAL's "Write failed" and libtiff's lines on
+    stderr."""
+    from rasterio.io import MemoryFile
     from rasterio.transform import Affine
 
     out = []
     for name, band in zip(STAND_MAP_FILES, (stand.usable, stand.error_m), strict=True):
         path = Path(folder) / name
         ny, nx = band.shape
-        with rasterio.open(path, "w", driver="GTiff", height=ny, width=nx, count=1,
-                           dtype="float32", crs=stand.crs, nodata=np.nan,
-                           transform=Affine(*stand.transform)) as dst:
-            dst.write(band.astype(np.float32), 1)
-            dst.set_band_description(1, "usable markers" if name.startswith("usable")
-                                     else "predicted 95 % station error (m)")
+        with MemoryFile() as memory:
+            with memory.open(driver="GTiff", height=ny, width=nx, count=1, dtype="float32",
+                             crs=stand.crs, nodata=np.nan,
+                             transform=Affine(*stand.transform)) as dst:
+                dst.write(band.astype(np.float32), 1)
+                dst.set_band_description(1, "usable markers" if name.startswith("usable")
+                                         else "predicted 95 % station error (m)")
+            path.write_bytes(memory.read())
         out.append(path)
     return out

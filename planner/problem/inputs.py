@@ -31,8 +31,8 @@ from planner.problem.candidates import (
     load_polygons,
     valid_area,
 )
-from visibility.dem import read_dem, to_dem_xy
-from visibility.sites import load_site, site_with_marker_radius
+from visibility.dem import read_dem_by_window, to_dem_xy
+from visibility.sites import PRESETS, load_site, site_with_marker_radius
 
 
 @dataclass
@@ -189,7 +189,8 @@ def load_inputs(site: str = "default", site_seed: int | None = None, dem_path=No
         ``dem_path`` without ``stations_path``, or an unknown preset.
     InputFileError, DataError
         A malformed input file (see :func:`read_stations`, :func:`read_markers`,
-        :func:`planner.problem.candidates.load_polygons`), or a point outside the DEM or on nodata.
+        :func:`planner.problem.candidates.load_polygons`), a point outside the DEM or on nodata
+        (off a preset's terrain, the message says so), or a given ``z_m`` below the ground.
     """
     if dem_path is not None and stations_path is None:
         raise ConfigError(f"`dem_path` {dem_path} needs `stations_path`: the preset's stations "
@@ -205,12 +206,13 @@ def load_inputs(site: str = "default", site_seed: int | None = None, dem_path=No
     boundary = np.asarray(preset.boundary_xy_m, float) if len(preset.boundary_xy_m) else None
     site_name, site_seed = site, preset.seed
     station_points = (None if stations_path is None
-                      else _read_points(stations_path, "`stations_path`", MAX_STATIONS))
+                      else read_points(stations_path, "`stations_path`", MAX_STATIONS))
     if dem_path is not None:
         window = None
         if sight_radius_m is not None and not reproject:
             window = sight_window([[p["x_m"], p["y_m"]] for p in station_points], sight_radius_m)
-        dem, window = _read_site_dem(dem_path, reproject, window)
+        dem, window = read_dem_by_window(dem_path, window, what=f"`dem_path` {dem_path}",
+                                             reproject=reproject)
         sources.update(dem=_absolute(dem_path), reproject=bool(reproject))
         if window is not None:
             sources["dem_window"] = list(window)
@@ -220,8 +222,12 @@ def load_inputs(site: str = "default", site_seed: int | None = None, dem_path=No
             dem, float(preset.marker_radius_m))
         as_built_ids, as_built_xyz = [], np.zeros((0, 3))
     lidar_h = float(preset.lidar_height_m)
+    off_site = OFF_DEM_FIX if dem_path is not None else (
+        f"the points are not on site preset {site!r}'s terrain (this DEM): choose the preset "
+        f"whose terrain holds them ({', '.join(PRESETS)}) or give the DEM they stand on with "
+        "`dem_path`")
     if station_points is not None:
-        ids, xyz, heading = place_stations(station_points, dem, lidar_h)
+        ids, xyz, heading = place_stations(station_points, dem, lidar_h, off_site)
         sources["stations"] = _absolute(stations_path)
         as_built_ids, as_built_xyz = [], np.zeros((0, 3))
     else:
@@ -247,7 +253,8 @@ def load_inputs(site: str = "default", site_seed: int | None = None, dem_path=No
                                  "instead")
         ex_ids, ex_xyz = list(as_built_ids), as_built_xyz.copy()
     elif existing is not None:
-        ex_ids, ex_xyz = read_markers(existing, dem, float(preset.marker_radius_m))
+        ex_ids, ex_xyz = read_markers(existing, dem, float(preset.marker_radius_m),
+                                      off_dem_fix=off_site)
     if existing is not None:
         sources["existing"] = existing if existing == "as-built" else _absolute(existing)
     inputs = PlanInputs(site_name=site_name, site_seed=site_seed, dem=dem, station_ids=ids,
@@ -292,23 +299,6 @@ def sight_window(station_xy, sight_radius_m: float) -> tuple[float, float, float
     r = sight_radius_m + WINDOW_MARGIN_M
     return (float(xy[:, 0].min() - r), float(xy[:, 0].max() + r),
             float(xy[:, 1].min() - r), float(xy[:, 1].max() + r))
-
-
-def _read_site_dem(path, reproject: bool, window) -> tuple[object, tuple | None]:
-    """``--dem`` read by ``window`` when it holds data, else whole; returns the DEM and the
-    window it was read by (``None``: whole).
-
-    A window that finds no data means the stations stand off the DEM's data (or the file is
-    refused whatever part is read, e.g. for its CRS); the whole file is then read so that the
-    one-line error names the real cause (the station, the CRS) rather than the window.
-    """
-    what = f"`dem_path` {path}"
-    if window is not None:
-        try:
-            return read_dem(path, what=what, reproject=reproject, window=window), window
-        except DataError:
-            pass
-    return read_dem(path, what=what, reproject=reproject), None
 
 
 def _polygons_on_dem(polygons: list, dem) -> list:
@@ -356,8 +346,12 @@ def _boundary_iv(polygons: list, path) -> np.ndarray:
     return np.asarray(polygons[0].exterior.coords, float)
 
 
-def _check_inside(dem, xy: np.ndarray, ids, label: str) -> None:
-    dem.require_inside(xy, ids, label, "move it inside or use a DEM covering it")
+#: The advice of a point off the DEM given with it (:meth:`visibility.dem.DEM.require_inside`).
+OFF_DEM_FIX = "move it inside or use a DEM covering it"
+
+
+def _check_inside(dem, xy: np.ndarray, ids, label: str, fix: str = OFF_DEM_FIX) -> None:
+    dem.require_inside(xy, ids, label, fix)
 
 
 #: Largest magnitude of a ``heading_deg``, degrees.
@@ -365,7 +359,7 @@ MAX_ABS_HEADING_DEG = 360.0
 _POINT_COLUMNS = "id, x_m, y_m[, z_m][, heading_deg]"
 
 
-def _read_points(path, option: str, max_points: int = MAX_MARKERS) -> list[dict]:
+def read_points(path, option: str, max_points: int = MAX_MARKERS) -> list[dict]:
     """Points of a CSV (``id, x_m, y_m[, z_m][, heading_deg]``) or a GeoJSON FeatureCollection
     of Points (``id`` and ``heading_deg`` properties, optional ``z`` coordinate).
 
@@ -463,7 +457,7 @@ def read_stations(path, dem, lidar_height_m: float) -> tuple[list[str], np.ndarr
     Parameters
     ----------
     path : str or Path
-        CSV ``id, x_m, y_m[, z_m][, heading_deg]`` or GeoJSON Points (see :func:`_read_points`);
+        CSV ``id, x_m, y_m[, z_m][, heading_deg]`` or GeoJSON Points (see :func:`read_points`);
         at most :data:`planner.config.MAX_STATIONS` stations.
     dem : visibility.dem.DEM
         Terrain; every station must stand on its measured terrain.
@@ -473,56 +467,96 @@ def read_stations(path, dem, lidar_height_m: float) -> tuple[list[str], np.ndarr
     Raises
     ------
     InputFileError, DataError
-        Unreadable or malformed file (see :func:`_read_points`), or a station outside the DEM
-        or on nodata.
+        Unreadable or malformed file (see :func:`read_points`), a station outside the DEM or
+        on nodata, or a ``z_m`` below the ground.
     """
-    return place_stations(_read_points(path, "`stations_path`", MAX_STATIONS), dem, lidar_height_m)
+    return place_stations(read_points(path, "`stations_path`", MAX_STATIONS), dem, lidar_height_m)
 
 
-def place_stations(points: list[dict], dem, lidar_height_m: float
+def place_stations(points: list[dict], dem, lidar_height_m: float, off_dem_fix: str = OFF_DEM_FIX
                    ) -> tuple[list[str], np.ndarray, np.ndarray]:
-    """Stations read by :func:`_read_points` -> ids, LiDAR centres (s, 3) m, headings (s,) rad
-    on ``dem`` (see :func:`read_stations`)."""
-    ids, xyz = _points_on_dem(points, dem, lidar_height_m, "station")
+    """Stations read by :func:`read_points` -> ids, LiDAR centres (s, 3) m, headings (s,) rad
+    on ``dem`` (see :func:`read_stations`; a ``z_m`` below the ground is refused);
+    ``off_dem_fix`` is the advice when one lies off the DEM."""
+    ids, xyz = _points_on_dem(points, dem, lidar_height_m, "station", off_dem_fix)
     heading = np.radians([p["heading_deg"] or 0.0 for p in points])
     return ids, xyz, heading
 
 
-def read_markers(path, dem, marker_radius_m: float, option: str = "`existing`"
-                 ) -> tuple[list[str], np.ndarray]:
+def read_markers(path, dem, marker_radius_m: float, option: str = "`existing`",
+                 off_dem_fix: str = OFF_DEM_FIX) -> tuple[list[str], np.ndarray]:
     """Markers CSV/GeoJSON (``id, x_m, y_m[, z_m]``) -> ids and centres (m, 3) m.
 
     Parameters
     ----------
     path : str or Path
-        See :func:`_read_points`; at most :data:`planner.config.MAX_MARKERS` markers.
+        See :func:`read_points`; at most :data:`planner.config.MAX_MARKERS` markers.
     dem : visibility.dem.DEM
         Terrain; every marker must stand on its measured terrain.
     marker_radius_m : float
         Default ``z``: ground + this radius, m.
     option : str
         Names the argument in error messages.
+    off_dem_fix : str
+        The advice when a marker lies off the DEM.
 
     Raises
     ------
     InputFileError, DataError
-        Unreadable or malformed file (see :func:`_read_points`), or a marker outside the DEM
-        or on nodata.
+        Unreadable or malformed file (see :func:`read_points`), a marker outside the DEM or on
+        nodata, or buried (``z_m`` more than ``marker_radius_m`` below the ground).
     """
-    return _points_on_dem(_read_points(path, option, MAX_MARKERS), dem, marker_radius_m,
-                          "marker")
+    return _points_on_dem(read_points(path, option, MAX_MARKERS), dem, marker_radius_m,
+                          "marker", off_dem_fix, sink_m=marker_radius_m)
 
 
-def _points_on_dem(points: list[dict], dem, height_m: float, label: str
+def _points_on_dem(points: list[dict], dem, height_m: float, label: str,
+                   off_dem_fix: str = OFF_DEM_FIX, sink_m: float = 0.0
                    ) -> tuple[list[str], np.ndarray]:
-    """Ids and (k, 3) positions of :func:`_read_points` rows that must stand on the DEM's
-    measured terrain (:meth:`~visibility.dem.DEM.valid_at`), m; they are given in the DEM
-    file's CRS (:func:`visibility.dem.to_dem_xy`); a missing ``z_m`` is the ground plus
-    ``height_m``."""
+    """Ids and (k, 3) positions of :func:`read_points` rows that must stand on the DEM's
+    measured terrain (:meth:`~visibility.dem.DEM.valid_at`; ``off_dem_fix`` advises one that
+    does not), m; they are given in the DEM file's CRS (:func:`visibility.dem.to_dem_xy`); a
+    missing ``z_m`` is the ground plus ``height_m``, a given one may lie at most ``sink_m``
+    below the ground (:func:`_above_ground_iv`)."""
     ids = [p["id"] for p in points]
     xy = to_dem_xy(dem, np.array([[p["x_m"], p["y_m"]] for p in points], float))
-    _check_inside(dem, xy, ids, label)
+    _check_inside(dem, xy, ids, label, off_dem_fix)
     ground = dem.height_at(xy)
-    z = np.array([g + height_m if p["z_m"] is None else p["z_m"]
-                  for p, g in zip(points, ground, strict=True)], float)
-    return ids, np.column_stack([xy, z])
+    given = np.array([np.nan if p["z_m"] is None else p["z_m"] for p in points], float)
+    _above_ground_iv(ids, xy, given, ground, label, height_m, sink_m)
+    return ids, np.column_stack([xy, np.where(np.isnan(given), ground + height_m, given)])
+
+
+def _above_ground_iv(ids, xy: np.ndarray, z_m: np.ndarray, ground_m: np.ndarray, label: str,
+                     height_m: float, sink_m: float) -> None:
+    """Refuse a given height more than ``sink_m`` below the ground: a LiDAR centre underground
+    (``sink_m`` 0) or a marker buried whole (``sink_m`` its radius) sees or shows nothing.
+
+    Parameters
+    ----------
+    ids : sequence of str, (k,)
+    xy : (k, 2) float
+        Positions, site frame, m.
+    z_m, ground_m : (k,) float
+        Given heights (nan: not given) and the ground under them, m.
+    label : str
+        ``"station"`` or ``"marker"``.
+    height_m : float
+        The default height above the ground, m (for the advice).
+    sink_m : float
+        How far below the ground a given height may lie, m.
+
+    Raises
+    ------
+    DataError
+        Names the first such point, its height, the ground's and the fix.
+    """
+    below = ground_m - z_m
+    bad = np.flatnonzero(below > sink_m)
+    if bad.size:
+        k = int(bad[0])
+        centre = "the LiDAR centre" if label == "station" else "the marker's centre"
+        raise DataError(f"{label} {ids[k]} at ({xy[k, 0]:.2f}, {xy[k, 1]:.2f}) m: z_m "
+                        f"{z_m[k]:.2f} m lies {below[k]:.2f} m below the ground there "
+                        f"({ground_m[k]:.2f} m); z_m is {centre}, above the ground: fix it, or "
+                        f"leave it empty for the ground + {height_m:g} m")

@@ -102,7 +102,7 @@ def plan_sites(problem: PlanProblem, config, model: Model | None = None) -> Plan
             f">= {config.min_markers} markers in >= {config.min_sectors} of {config.n_sectors} "
             "sectors) at station(s): "
             + "; ".join(f"{k}: {v}" for k, v in failing.items())
-            + "; relax the configuration or add candidate sites")
+            + "; fix the causes named, relax the configuration or add candidate sites")
 
     def cuts(selected):
         return accuracy_cuts(problem, model, selected, config, infos, outer_approximation=True)

@@ -20,7 +20,7 @@ import shapely
 from markerplan.errors import DataError, InputFileError
 from planner.config import PlanConfig, config_from_dict
 from planner.outputs import plan_file
-from planner.problem.inputs import load_inputs, read_markers
+from planner.problem.inputs import known_ids, load_inputs, read_markers
 from planner.problem.sight import sight_problem
 from planner.problem.usability import PlanProblem
 from planner.reduction.curve import Curve, tradeoff_curve
@@ -110,7 +110,7 @@ def read_layout(spec: str, inputs) -> Layout:
                                  "or a markers CSV")
         layout = Layout(tuple(inputs.as_built_ids), np.asarray(inputs.as_built_xyz, float),
                         AS_BUILT)
-    elif _is_plan(spec):
+    elif is_plan(spec):
         layout = _plan_layout(_read_plan(Path(spec)), spec)
     else:
         ids, xyz = read_markers(spec, inputs.dem, inputs.marker_radius_m, option="INPUT")
@@ -126,12 +126,14 @@ def resolve_inputs(spec: str, site_name: str | None = None, site_seed: int | Non
     """Site inputs, layout and plan configuration of a reduction study.
 
     A ``plan.json`` supplies its own site, terrain seed, DEM and stations files, stations,
-    marker radius and configuration unless they are given here. The plan-only settings
-    ``budget``, ``existing``, ``forbidden`` and ``redundant`` are reset: the study decides which
-    markers stay. A plan made in network mode (``plan --network``) is studied in network mode,
-    the mode its errors are for, even with another ``config``: its ``reference_station`` and
-    ``heading_prior_sigma_deg`` apply unless ``config`` sets them (as ``verify`` follows a
-    network plan's mode).
+    marker radius and configuration unless they are given here. Unless ``stations_path`` is
+    given, the study is of the plan's own stations (``station_ids`` picks among them), which
+    must stand on the site where the plan put them (:func:`_planned_stations`). The plan-only
+    settings ``budget``, ``existing``, ``forbidden`` and ``redundant`` are reset: the study
+    decides which markers stay. A plan made in network mode (``plan --network``) is studied in
+    network mode, the mode its errors are for, even with another ``config``: its
+    ``reference_station`` and ``heading_prior_sigma_deg`` apply unless ``config`` sets them (as
+    ``verify`` follows a network plan's mode).
 
     Parameters
     ----------
@@ -140,7 +142,8 @@ def resolve_inputs(spec: str, site_name: str | None = None, site_seed: int | Non
     site_name, site_seed, dem_path, stations_path, boundary_path, exclude_paths, marker_radius_m
         As for :func:`planner.problem.inputs.load_inputs` (``site``, ``site_seed``, ...).
     station_ids : sequence of str, optional
-        Only these stations (:func:`planner.problem.inputs.select_stations`).
+        Only these stations (:func:`planner.problem.inputs.select_stations`; of a plan's own
+        stations, those it lists).
     config : PlanConfig, optional
         Default: the plan's configuration, else ``PlanConfig()``.
     reproject : bool
@@ -153,7 +156,9 @@ def resolve_inputs(spec: str, site_name: str | None = None, site_seed: int | Non
     layout : Layout
     config : PlanConfig
     """
-    plan = _read_plan(Path(spec)) if _is_plan(spec) else None
+    plan = _read_plan(Path(spec)) if is_plan(spec) else None
+    own_stations = plan is not None and stations_path is None and "stations" in plan
+    given_site = site_name
     if plan is not None:
         recorded = plan.get("provenance", {}).get("inputs", {})
         # the preset that supplied the defaults (a plan on a DEM is named after the DEM file)
@@ -162,7 +167,6 @@ def resolve_inputs(spec: str, site_name: str | None = None, site_seed: int | Non
         if dem_path is None:
             dem_path, reproject = recorded.get("dem"), reproject or recorded.get("reproject")
         stations_path = stations_path or recorded.get("stations")
-        station_ids = station_ids or recorded.get("station_ids")
         if marker_radius_m is None:
             marker_radius_m = plan.get("site", {}).get("marker_radius_m")
         recorded = plan.get("provenance", {}).get("config", {})
@@ -178,16 +182,74 @@ def resolve_inputs(spec: str, site_name: str | None = None, site_seed: int | Non
     inputs = load_inputs(site_name or "default", site_seed, dem_path=dem_path,
                          stations_path=stations_path, boundary_path=boundary_path,
                          exclude_paths=exclude_paths, marker_radius_m=marker_radius_m,
-                         station_ids=station_ids, reproject=bool(reproject),
-                         sight_radius_m=config.max_range_m)
+                         station_ids=None if own_stations else station_ids,
+                         reproject=bool(reproject), sight_radius_m=config.max_range_m)
     if plan is None:
         return inputs, read_layout(spec, inputs), config
+    if own_stations:
+        inputs = _planned_stations(plan, spec, inputs, station_ids, given_site)
     layout = _plan_layout(plan, spec)
     _inside_site_iv(layout, inputs)
     return inputs, layout, config
 
 
-def _is_plan(spec: str) -> bool:
+#: How far a plan's station may stand from where its site puts it, m (a plan records them as
+#: read; this only absorbs rounding).
+STATION_MATCH_M = 1e-3
+
+
+def _planned_stations(plan: dict, spec, inputs, wanted, given_site: str | None):
+    """``inputs`` for the plan's own stations (``wanted`` of them; default all it lists).
+
+    Parameters
+    ----------
+    plan : dict
+        A checked ``plan.json`` with ``stations``.
+    spec : str
+        The plan's path (for messages).
+    inputs : PlanInputs
+        The site read for it, with all its stations.
+    wanted : sequence of str or None
+        ``station_ids`` (among the plan's stations).
+    given_site : str or None
+        The ``site_name`` given for the study, if any (for the advice).
+
+    Raises
+    ------
+    ConfigError
+        A ``wanted`` id the plan lacks.
+    DataError
+        A plan's station the site lacks, or that it puts more than :data:`STATION_MATCH_M`
+        (across) from where the plan has it: the plan was made on another site or stations.
+    """
+    planned = {s["id"]: (float(s["x_m"]), float(s["y_m"])) for s in plan["stations"]}
+    ids = list(known_ids(wanted, planned, "`station_ids`", "planned station") if wanted
+               else planned)
+    recorded = plan.get("provenance", {}).get("inputs", {})
+    planned_site = recorded.get("site") or plan.get("site", {}).get("name")
+    where = (f"stations file {inputs.sources['stations']}" if "stations" in inputs.sources
+             else f"site preset {inputs.site_name!r}")
+    if given_site is not None and planned_site is not None and given_site != planned_site:
+        fix = (f"the plan was made on site preset {planned_site!r}: drop `site_name` or set it "
+               f"to {planned_site!r}")
+    else:
+        fix = ("the plan was made with other stations: re-plan, or give the stations to study "
+               "with `stations_path`")
+    for sid in ids:
+        if sid not in inputs.station_ids:
+            raise DataError(f"station {sid} of INPUT {spec} is not among the stations of "
+                            f"{where}; {fix}")
+        got = inputs.station_xyz[inputs.station_ids.index(sid), :2]
+        x, y = planned[sid]
+        if np.hypot(got[0] - x, got[1] - y) > STATION_MATCH_M:
+            raise DataError(f"station {sid} of INPUT {spec} is planned at ({x:.2f}, {y:.2f}) m "
+                            f"but {where} puts it at ({got[0]:.2f}, {got[1]:.2f}) m; {fix}")
+    return inputs.with_stations(ids)
+
+
+def is_plan(spec: str) -> bool:
+    """Whether a layout ``spec`` (``INPUT`` of ``reduce``) names a ``plan.json`` (which brings
+    its own site, DEM and stations) rather than ``"as-built"`` or a markers CSV."""
     return spec != AS_BUILT and Path(spec).suffix.lower() == ".json"
 
 

@@ -353,7 +353,8 @@ def _fit_emulator(pos: FieldPosition, k: int, free: list[FreeParameter], design:
     if len(means) < len(free) + 1:
         raise DataError(f"position {pos.name!r}: the simulated field gave an edge residual at "
                         f"only {len(means)} design point(s); no markers were accepted — narrow "
-                        "the free parameters' ranges")
+                        "the free parameters' ranges, or simulate more `frames` (the rig "
+                        "takes 800: markers far out need them)")
     a_matrix, target = np.array(rows), np.array(means) ** 2
     coef, _ = nnls(a_matrix, target)
     emulated = np.sqrt(a_matrix @ coef)

@@ -8,6 +8,7 @@ from __future__ import annotations
 import csv
 import hashlib
 import json
+import math
 
 import numpy as np
 import pytest
@@ -135,6 +136,23 @@ def test_control_and_free_datum(network, tmp_path, capsys, monkeypatch):
     doc = json.loads((tmp_path / "f" / "adjustment.json").read_text())
     assert doc["datum"]["kind"] == "free"
     assert doc["provenance"]["config"]["heading_prior_sigma_deg"] == 2.0
+
+
+def test_smallest_documented_bounds_adjust(network, tmp_path, capsys, monkeypatch):
+    """``--alpha0 1e-300`` (critical value 37.07, no longer inf) and the smallest
+    ``--inclinometer-sigma-deg`` and ``--heading-prior-sigma-deg`` the bounds allow give a
+    network and a report, not a traceback."""
+    from pipeline.network.observations import MIN_SIGMA
+
+    monkeypatch.chdir(tmp_path)
+    smallest = repr(math.degrees(MIN_SIGMA))
+    code, out, err = run_cli(capsys, [
+        "adjust", *_tables(network), "--plan", str(network.plan), "--alpha0", "1e-300",
+        "--inclinometer-sigma-deg", smallest, "--heading-prior-sigma-deg", smallest, "--out", "o"])
+    assert code == 0, err
+    doc = json.loads((tmp_path / "o" / "adjustment.json").read_text())
+    assert doc["data_snooping"]["critical_value"] == pytest.approx(37.066, abs=1e-3)
+    assert "alpha0 = 1e-300" in (tmp_path / "o" / "report.md").read_text()
 
 
 def test_help_has_an_example(capsys):

@@ -84,6 +84,22 @@ def _station_s01(rows):
     return rows
 
 
+def _first_row_twice(rows):
+    return [rows[0], *rows]
+
+
+def _second_estimator(rows):
+    """Each accepted detection again, as the other estimator found it (range-study style)."""
+    return rows + [{**r, "estimator": "hemisphere-icp", "x_m": f"{float(r['x_m']) + 0.002:f}"}
+                   for r in rows if r["accepted"] == "true"]
+
+
+def _control(*points):
+    """A control CSV of ``(id, x, y, z)`` points, 0.01 m sigma."""
+    return "id,x_m,y_m,z_m,sigma_m\n" + "".join(f"{p[0]},{p[1]},{p[2]},{p[3]},0.01\n"
+                                                for p in points)
+
+
 def _cases() -> list[Case]:
     a = ["adjust", *TABLES, "--out", "o"]
     return [
@@ -119,7 +135,7 @@ def _cases() -> list[Case]:
              "sigma_m: must be > 0", files={"c.csv": "id,x_m,y_m,z_m,sigma_m\nM001,0,0,0,0\n"},
              setup=net),
         *(Case(f"adjust-plan-inclinometer-sigma-{name}", a + ["--plan", PLAN],
-               "inclinometer_sigma_deg: must be > 0 deg",
+               "inclinometer_sigma_deg: must be at least",
                setup=with_net(edit_plan=_inclinometer_sigma(value)))
           for name, value in (("zero", 0), ("negative", -0.01))),
         Case("adjust-plan-inclinometer-sigma-nan", a + ["--plan", PLAN],
@@ -128,6 +144,29 @@ def _cases() -> list[Case]:
         Case("adjust-heading-prior-without-plan", a + ["--heading-prior-sigma-deg", "1"],
              "needs --plan"),
         Case("adjust-bad-alpha0", a + ["--alpha0", "0"], "--alpha0", code=2),
+        Case("adjust-control-two-identical-points", a + ["--marker-ids", "table", "--control",
+                                                         "two.csv"], "leave heading",
+             files={"two.csv": _control(("M005", 1, 2, 3), ("M006", 1, 2, 3))}, setup=net),
+        Case("adjust-control-points-stacked-vertically",
+             a + ["--marker-ids", "table", "--control", "two.csv"], "leave heading",
+             files={"two.csv": _control(("M005", 1, 2, 3), ("M006", 1, 2, 8))}, setup=net),
+        Case("adjust-control-tiny-sigma", a + ["--marker-ids", "table", "--control", "c.csv"],
+             "sigma_m: must be > 0 (at least", setup=net, files={
+                 "c.csv": "id,x_m,y_m,z_m,sigma_m\nM005,1,2,3,1e-300\nM006,9,2,3,1e-300\n"}),
+        Case("adjust-duplicated-detection-row", a + ["--marker-ids", "table"],
+             "table_2.csv: 1 row repeats an earlier row exactly: row 3 repeats row 2",
+             setup=with_net(_first_row_twice)),
+        Case("adjust-mixed-estimators", a + ["--marker-ids", "table"],
+             "estimator 'hemisphere-icp'", setup=with_net(_second_estimator)),
+        Case("adjust-geometry-with-inclinometer-sigma-10", a + ["--inclinometer-sigma-deg", "10"],
+             "--inclinometer-sigma-deg 10 deg", setup=net),
+        *(Case(f"adjust-{option}-tiny", a + ["--plan", PLAN, f"--{option}", "1e-300"],
+               f"--{option}", code=2, setup=net)
+          for option in ("inclinometer-sigma-deg", "heading-prior-sigma-deg", "odometry-sigma-m",
+                         "odometry-heading-sigma-deg")),
+        Case("adjust-plan-inclinometer-sigma-tiny", a + ["--plan", PLAN],
+             "inclinometer_sigma", setup=with_net(
+                 edit_plan=_inclinometer_sigma(1e-300))),
         Case("adjust-out-holds-the-table", ["adjust", "{inputs}/markers.csv", "--out",
                                             "{inputs}", "--overwrite"], "holds the input"),
     ]

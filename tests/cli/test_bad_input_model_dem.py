@@ -261,6 +261,12 @@ DEM_CASES = [
          setup=_npz(crs=np.array("EPSG:4326"))),
     Case("simulate-npz-bad-crs", SIM_NPZ, "not a CRS", setup=_npz(crs=np.array("nonsense"))),
     Case("simulate-npz-tiny", SIM_NPZ, "2 x 2", setup=_npz(heights_m=np.zeros((1, 5)))),
+    Case("simulate-npz-2x2-preset", SIM_NPZ, "outside the DEM (2 x 2 cells of 1 m) [0.0, 1.0] x "
+         "[0.0, 1.0] m; the 7 stations need [-12.0, 12.0] x [-10.4, 10.4] m",
+         setup=_npz(heights_m=np.zeros((2, 2)))),
+    Case("simulate-npz-2x2-stations", [*SIM_NPZ, "--stations", "st.csv"],
+         "outside the DEM (2 x 2 cells of 1 m) [0.0, 1.0] x [0.0, 1.0] m; the 11 markers need",
+         files={"st.csv": "id,x_m,y_m\nA,0.5,0.5\n"}, setup=_npz(heights_m=np.zeros((2, 2)))),
     Case("simulate-npz-is-npy", SIM_NPZ, "single .npy",
          setup=lambda cwd, inputs: np.save(cwd / "x.npy", np.zeros((3, 3))) or
          (cwd / "x.npy").rename(cwd / "bad.npz")),

@@ -1,5 +1,9 @@
 """Options outside their documented bounds, and inputs given twice: refused before any work."""
 
+import importlib
+import math
+
+import click
 import pytest
 
 from tests.cli.bad_input import Case, check_refused
@@ -8,13 +12,18 @@ SIM = ["simulate", "--station-ids", "S1", "--frames", "4", "--out", "out"]
 RANGE = ["range-study", "--frames", "4", "--replicates", "1", "--out", "out"]
 SCAN = "{inputs}/scan/station_S1.scan.npz"
 PROCESS = ["process", SCAN, "--out", "out"]
+PLAN = ["plan", "--out", "out"]
+#: Points of a 0.1 m sphere's near half, 5 m along +x (a valid fit-sphere input).
+SPHERE_POINTS = "".join(f"{5 - 0.1 * math.cos(a) * math.cos(b):.6f} "
+                        f"{0.1 * math.sin(a) * math.cos(b):.6f} {0.1 * math.sin(b):.6f}\n"
+                        for a in (-1.0, -0.5, 0.0, 0.5, 1.0) for b in (-1.0, -0.5, 0.0, 0.5, 1.0))
 #: A sensor profile file with one block filled in by ``%``.
 PROFILE = '{"format": "markerplan-sensor-profile", "format_version": 1, "name": "bad", %s}'
 
 
-def usage(name, args, option):
-    """A click usage error (exit code 2) that names ``option``."""
-    return Case(name, args, option, code=2)
+def usage(name, args, option, **files):
+    """A click usage error (exit code 2) that names ``option`` (``files``: as :class:`Case`)."""
+    return Case(name, args, option, code=2, **files)
 
 
 CASES = [
@@ -124,16 +133,81 @@ CASES = [
          "--scheduler set where --verify's station tasks run, and nothing else in reduce runs "
          "there; add --verify or drop it"),
     Case("reduce-scheduler-and-workers-without-verify", ["reduce", "as-built", "--scheduler",
-                                                         "local", "--workers", "2", "--out",
+                                                         "local", "--workers", "1", "--out",
                                                          "out"],
          "--scheduler and --workers set where --verify's station tasks run, and nothing else "
          "in reduce runs there; add --verify or drop them"),
     usage("fit-error-model-estimator-unknown", ["fit-error-model", "{inputs}/markers.csv",
                                                 "--estimator", "magic", "--out", "out"],
           "--estimator"),
+    # every float option is bounded and refuses NaN (FiniteRange); the bound keeps its use
+    # from overflowing
+    usage("plan-stand-map-cell-nan", PLAN + ["--stand-map-cell-m", "nan"], "--stand-map-cell-m"),
+    usage("plan-stand-map-cell-old-spelling-nan", PLAN + ["--stand-map-cell", "nan"],
+          "--stand-map-cell"),
+    usage("plan-stand-map-cell-1e308", PLAN + ["--stand-map-cell-m", "1e308"],
+          "--stand-map-cell-m"),
+    usage("fit-sphere-sensor-1e300", ["fit-sphere", "p.xyz", "--marker-radius-m", "0.1",
+                                      "--sensor-m", "1e300,0,0"], "--sensor-m",
+          files={"p.xyz": SPHERE_POINTS}),
+    # worker processes: at most one per core this process may use
+    Case("range-study-workers-beyond-the-machine", RANGE + ["--workers", "100000"],
+         "--workers 100000 is more worker processes than this machine runs"),
+    # calibrate-sensor simulates full turns: too few frames is its own option's bound
+    usage("calibrate-sensor-one-frame", ["calibrate-sensor", "--frames", "1", "--out", "out"],
+          "--frames"),
+    # three --fit parameters, one of them a field prior: too many, not "fixed and fitted"
+    Case("calibrate-sensor-three-fits-one-a-prior",
+         ["calibrate-sensor", "--frames", "100", "--fit", "sensor.range_noise_m=0:0.05",
+          "--fit", "sensor.incidence_noise_m=0:0.01", "--fit",
+          "turntable.periodic_error_rad=0:0.003", "--out", "out"],
+         "give one or two free parameters (--fit), got 3"),
+    # --reproject resamples a --dem; without one it was ignored
+    Case("plan-reproject-without-dem", PLAN + ["--reproject"],
+         "no --dem was given (a site preset's terrain is metric already); add --dem FILE or "
+         "drop --reproject"),
+    Case("simulate-reproject-without-dem", SIM + ["--reproject"], "no --dem was given"),
+    Case("reduce-reproject-without-dem", ["reduce", "as-built", "--reproject", "--out", "out"],
+         "no --dem was given"),
+    # mounting offsets: a rig, not a LiDAR a million km off its turntable
+    usage("simulate-axis-offset-1e9", SIM + ["--axis-offset-mm", "1e9,0"], "--axis-offset-mm"),
+    usage("process-axis-offset-2000", PROCESS + ["--axis-offset-mm", "0,2000"],
+          "between -1000 and 1000"),
+    usage("verify-axis-offset-1e300", ["verify", "{inputs}/plan/plan.json", "--axis-offset-mm",
+                                       "1e300,0", "--out", "out"], "--axis-offset-mm"),
 ]
 
 
 @pytest.mark.parametrize("case", CASES, ids=str)
 def test_refused(case, capsys, monkeypatch, tmp_path, valid_inputs):
     check_refused(case, capsys, monkeypatch, tmp_path, valid_inputs)
+
+
+#: Numeric options bounded elsewhere than in their type, and where.
+BOUNDED_ELSEWHERE = {"--workers": "by the machine: planner.distributed.check_local_workers"}
+
+
+def test_every_numeric_option_is_bounded_and_refuses_nan():
+    """Every float option of every command is a FiniteRange (both bounds, no NaN) and every
+    integer option an IntRange with both bounds: a one-sided range lets 1e308 or 10**9
+    through, and the work the value sizes overflows or runs away."""
+    from planner.cli import COMMANDS
+    from planner.cli._common import FiniteRange
+
+    loose = []
+    for name, module in COMMANDS.items():
+        for param in importlib.import_module(f"planner.cli.{module}").command.params:
+            kind = param.type
+            if param.opts[0] in BOUNDED_ELSEWHERE:
+                continue
+            if isinstance(kind, click.types.FloatParamType):
+                bounded = isinstance(kind, FiniteRange) and None not in (kind.min, kind.max)
+            elif isinstance(kind, click.types.IntParamType):
+                bounded = isinstance(kind, click.IntRange) and None not in (kind.min, kind.max)
+            else:
+                continue
+            if not bounded:
+                loose.append(f"{name} {param.opts[0]}")
+    assert loose == []
+    with pytest.raises(TypeError, match="both bounds"):
+        FiniteRange(0.0, None)

@@ -2,7 +2,8 @@
 
 The cases are the data-safety rules of :mod:`markerplan.output_folder`: never the current
 folder, one of its ancestors, ``/``, a home folder or a folder holding an input; replace only
-what markerplan wrote.
+what markerplan wrote; a folder where no file can be made (a pseudo-file system such as
+``/proc``, where even root cannot create the lock) is one line naming it.
 """
 
 import os
@@ -55,6 +56,8 @@ def _cases_for(name, base):
              "data.csv was not written by markerplan",
              files={"mine/provenance.json": '{"written_by": "markerplan", "files": {}}',
                     "mine/data.csv": "a\n"}),
+        Case(f"{name}-out-in-procfs", base + ["--out", "/proc/markerplan-out"],
+             "--out /proc/markerplan-out"),
     ]
 
 
@@ -79,6 +82,8 @@ def _input_folder_cases():
         Case("simulate-out-holds-the-dem", ["simulate", "--dem", "in/dem.npz", "--out", "in",
                                             "--overwrite"], "holds the input",
              files={"in/dem.npz": b"not read"}),
+        Case("plan-out-in-sysfs", ["plan", "--out", "/sys/markerplan-out"],
+             "--out /sys/markerplan-out"),
     ]
 
 

@@ -1,5 +1,10 @@
-"""Bad input to ``markerplan process`` and ``markerplan fit-sphere``: the pipeline's readers
-(scan, truth, reference CSV, point set) and the sphere fit refuse it in one line.
+"""Bad input to ``markerplan process``, ``markerplan fit-sphere`` and ``markerplan
+import-pcap``: the pipeline's readers (scan, truth, reference CSV, point set, packet capture,
+turntable log) and the sphere fit refuse it in one line.
+
+Packet captures are synthetic VLP-16 captures (:mod:`tests.pcap_builder`), bad in one way each
+(link type, file format, snap length, order, sensor, return mode, duplicates, a file cut
+inside its first packet); the real capture's cases are in tests/cli/test_import_pcap.py.
 
 Scan files are corrupted in ``setup`` callables: the valid scan is read, one array or the
 metadata is changed, and the result is written into the case's working folder with
@@ -17,6 +22,7 @@ import numpy as np
 import pytest
 
 from pipeline.scan_format import SCAN_FORMAT, _write_npz, read_scan
+from tests import pcap_builder as pb
 from tests.cli.bad_input import Case, check_refused
 
 SCAN = "{inputs}/scan/station_S1.scan.npz"
@@ -296,12 +302,66 @@ FIT_CASES = [
 ]
 
 
-@pytest.mark.parametrize("case", PROCESS_CASES + FIT_CASES, ids=str)
+def import_pcap(*extra: str) -> list[str]:
+    """``import-pcap c.pcap``; --keep-partial, so that a small capture would be imported."""
+    return ["import-pcap", "c.pcap", "--keep-partial", *extra, "--out", "out"]
+
+
+FRAMES = pb.vlp16_frames(8)
+CAPTURE = pb.pcap_file(FRAMES)
+
+
+def capture_case(name: str, needle: str, data: bytes) -> Case:
+    return Case(name, import_pcap(), needle, files={"c.pcap": data})
+
+
+def timed_log_case(name: str, needle: str, angles_deg: list[float]) -> Case:
+    rows = "".join(f"{pb.START_S + k},{a}\n" for k, a in enumerate(angles_deg))
+    return Case(name, import_pcap("--turntable-log", "tt.csv"), needle,
+                files={"c.pcap": CAPTURE, "tt.csv": "time_s,turntable_angle_deg\n" + rows})
+
+
+PCAP_CASES = [
+    # --- the file and its link type
+    capture_case("pcap-pcapng", "editcap -F pcap", pb.pcapng_header() + bytes(64)),
+    capture_case("pcap-link-raw-ip", "link type 101 (raw IP)",
+                 pb.pcap_file([(t, pb.raw_ip_frame(f)) for t, f in FRAMES], link_type=101)),
+    capture_case("pcap-link-linux-sll", "link type 113 (Linux cooked",
+                 pb.pcap_file([(t, pb.linux_sll_frame(f)) for t, f in FRAMES], link_type=113)),
+    capture_case("pcap-link-802.11", "link type 105 (802.11",
+                 pb.pcap_file(FRAMES, link_type=105)),
+    # --- the records
+    capture_case("pcap-cut-inside-first-packet", "ends inside its first packet",
+                 CAPTURE[:24 + 16 + 500]),
+    capture_case("pcap-cut-inside-first-header", "ends inside its first packet",
+                 CAPTURE[:24 + 8]),
+    capture_case("pcap-snaplen-96", "tcpdump -s 0", pb.pcap_file(FRAMES, snaplen=96)),
+    capture_case("pcap-reversed", "reordercap", pb.pcap_file(FRAMES[::-1])),
+    capture_case("pcap-two-swapped", "out of time order",
+                 pb.pcap_file(FRAMES[:3] + FRAMES[4:5] + FRAMES[3:4] + FRAMES[5:])),
+    # --- the data packets
+    capture_case("pcap-every-packet-twice", "8 of its 16 data packets are recorded twice",
+                 pb.pcap_file([r for r in FRAMES for _ in range(2)])),
+    capture_case("pcap-product-hdl32e", "product id 0x21 (HDL-32E)",
+                 pb.vlp16_capture(product_id=0x21)),
+    capture_case("pcap-return-mode-changes", "data packet 5 has return mode 0x38 (last)",
+                 pb.pcap_file(FRAMES[:4] + pb.vlp16_frames(8, return_mode=pb.LAST)[4:])),
+    capture_case("pcap-return-mode-unknown", "return mode 0x00 (unknown)",
+                 pb.vlp16_capture(return_mode=0)),
+    # --- the timed turntable log
+    timed_log_case("log-jump-270", "steps +270 deg from line 2 (0) to line 3 (270)", [0, 270]),
+    timed_log_case("log-jump-back-200", "steps -200 deg from line 3", [0, 10, -190]),
+    timed_log_case("log-jump-over-a-turn", "a turn of +400 deg or of -320 deg", [0, 400]),
+]
+
+
+@pytest.mark.parametrize("case", PROCESS_CASES + FIT_CASES + PCAP_CASES, ids=str)
 def test_refused(case, capsys, monkeypatch, tmp_path, valid_inputs):
     check_refused(case, capsys, monkeypatch, tmp_path, valid_inputs)
 
 
 def test_table_size():
-    assert len(PROCESS_CASES) >= 45 and len(FIT_CASES) >= 20
-    assert len({c.name for c in PROCESS_CASES + FIT_CASES}) == len(PROCESS_CASES + FIT_CASES)
+    cases = PROCESS_CASES + FIT_CASES + PCAP_CASES
+    assert len(PROCESS_CASES) >= 45 and len(FIT_CASES) >= 20 and len(PCAP_CASES) >= 16
+    assert len({c.name for c in cases}) == len(cases)
     assert SCAN_FORMAT.endswith("/1")

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import json
 
+import numpy as np
 import pytest
 
 from tests.cli.bad_input import Case, check_refused
@@ -119,8 +120,41 @@ STATIONS_CASES = [
              "geometry": {"type": "Point", "coordinates": [0, 0]}}]}), "'id'"),
     Case("plan-stations-missing", ["plan", "--stations", "nope.csv", "--out", "out"],
          "file not found"),
+    Case("plan-stations-of-another-site", ["plan", "--stations", "s.csv", "--out", "out"],
+         "site preset 'default'", files={"s.csv": "id,x_m,y_m\nS1,-132.66,-134.66\n"}),
     Case("plan-dem-without-stations", ["plan", "--dem", "{inputs}/model.json", "--out", "out"],
          "--stations"),
+]
+
+def _terrain(cell_height_m: float | None = None):
+    """``setup`` writing ``d.npz``: a flat 41 m x 41 m DEM at 1 m cells centred on the origin,
+    its centre cell raised to ``cell_height_m`` (a spike, or a pit when negative)."""
+    def setup(cwd, inputs):
+        from visibility.dem import DEM, write_dem
+
+        heights = np.zeros((41, 41))
+        if cell_height_m is not None:
+            heights[20, 20] = cell_height_m
+        write_dem(cwd / "d.npz", DEM(heights, (-20.0, -20.0), 1.0))
+    return setup
+
+
+def _on_terrain(name, stations, needle, cell_height_m=None) -> Case:
+    """``plan --dem d.npz --stations s.csv`` on :func:`_terrain`."""
+    return Case(f"plan-{name}", ["plan", "--dem", "d.npz", "--stations", "s.csv", "--out", "out"],
+                needle, files={"s.csv": stations}, setup=_terrain(cell_height_m))
+
+
+TERRAIN_CASES = [
+    _on_terrain("station-underground", "id,x_m,y_m,z_m\nS1,0,0,-500\n",
+                "500.00 m below the ground"),
+    _on_terrain("station-on-spike", "id,x_m,y_m\nS1,0,0\n", "spike", cell_height_m=2000.0),
+    _on_terrain("station-in-pit", "id,x_m,y_m\nS1,0,0\n", "pit", cell_height_m=-500.0),
+    Case("plan-station-far-from-boundary", ["plan", "--dem", "d.npz", "--stations", "s.csv",
+                                            "--boundary", "b.geojson", "--out", "out"],
+         "S1: no candidate site within 30 m: the nearest, C", setup=_terrain(),
+         files={"s.csv": "id,x_m,y_m\nS1,-19,-19\nS2,15,15\n",
+                "b.geojson": _poly([[[12, 12], [19, 12], [19, 19], [12, 19], [12, 12]]])}),
 ]
 
 POLYGON_CASES = [
@@ -159,6 +193,8 @@ EXISTING_CASES = [
           "more than once"),
     _plan("existing-nan", "--existing", "e.csv", "id,x_m,y_m,z_m\nE1,1,1,nan\n", "z_m of 'E1'"),
     _plan("existing-outside", "--existing", "e.csv", "id,x_m,y_m\nE1,500,1\n", "outside the DEM"),
+    _plan("existing-buried", "--existing", "e.csv", "id,x_m,y_m,z_m\nE1,1,1,-5\n",
+          "below the ground"),
     _plan("existing-not-utf8", "--existing", "e.csv", NOT_UTF8, "not UTF-8"),
     Case("plan-existing-missing", ["plan", "--existing", "nope.csv", "--out", "out"],
          "file not found"),
@@ -237,6 +273,10 @@ def _dup_marker(doc):
     doc["markers"].append(dict(doc["markers"][0]))
 
 
+def _keep_first_station(doc):
+    doc["stations"] = doc["stations"][:1]
+
+
 def _verify(name, needle, edit=None, raw=None, text=None) -> Case:
     return Case(f"verify-{name}", ["verify", "p.json", "--out", "out"], needle,
                 setup=_edit_plan(edit, raw, text))
@@ -284,6 +324,8 @@ VERIFY_CASES = [
     _verify("station-markers-text", "markers", _set("stations", 0, "markers", value="C1")),
     _verify("station-unknown-marker", "not among", _set("stations", 0, "markers",
                                                         value=["nope"])),
+    _verify("marker-off-dem", "at (500.00, ", _set("markers", 0, "x_m", value=500.0)),
+    _verify("station-off-dem", "station S3 at (500.00, ", _set("stations", 2, "x_m", value=500.0)),
     _verify("site-seed-text", "seed", _set("site", "seed", value="0")),
     _verify("site-radius-zero", "marker_radius_m", _set("site", "marker_radius_m", value=0)),
     _verify("provenance-no-sha", "config_sha256", _drop("provenance", "config_sha256")),
@@ -309,6 +351,13 @@ REDUCE_CASES = [
                                                      value=1e6)),
     _reduce("plan-site-name-number", "name", _set("site", "name", value=1)),
     _reduce("plan-site-list", "site", _set("site", value=["default"])),
+    _reduce("plan-station-moved", "planned at (3.00, 0.00) m",
+            _set("stations", 0, "x_m", value=3.0)),
+    Case("reduce-plan-on-another-site", ["reduce", "{inputs}/plan/plan.json", "--site", "large",
+                                         "--out", "out"], "site preset 'large'"),
+    Case("reduce-station-ids-not-in-plan", ["reduce", "p.json", "--station-ids", "S2", "--out",
+                                            "out"], "unknown planned station id(s) S2",
+         setup=_edit_plan(_keep_first_station)),
     Case("reduce-csv-ragged", ["reduce", "m.csv", "--out", "out"], "row 3 has 2",
          files={"m.csv": "id,x_m,y_m\nM1,1,1\nM2,1\n"}),
     Case("reduce-csv-nan", ["reduce", "m.csv", "--out", "out"], "finite",
@@ -324,8 +373,8 @@ REDUCE_CASES = [
     Case("reduce-missing", ["reduce", "nope.json", "--out", "out"], "file not found"),
 ]
 
-CASES = (CONFIG_CASES + STATIONS_CASES + POLYGON_CASES + EXISTING_CASES + VISIBILITY_CASES
-         + VERIFY_CASES + REDUCE_CASES)
+CASES = (CONFIG_CASES + STATIONS_CASES + TERRAIN_CASES + POLYGON_CASES + EXISTING_CASES
+         + VISIBILITY_CASES + VERIFY_CASES + REDUCE_CASES)
 
 
 def test_case_names_are_unique():

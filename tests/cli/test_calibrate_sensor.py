@@ -8,7 +8,8 @@ import pytest
 from tests.cli.bad_input import Case, check_refused
 from tests.cli.invoke import run_cli
 
-CAL = ["calibrate-sensor", "--frames", "4", "--out", "out"]
+#: The fewest frames calibrate-sensor takes: these cases are refused before any simulation.
+CAL = ["calibrate-sensor", "--frames", "100", "--out", "out"]
 HEADER = "position,distances_m,mean_abs_edge_residual_m\n"
 
 
@@ -81,3 +82,25 @@ def test_small_calibration_is_seeded_reproducible_and_usable(tmp_path, capsys, m
     code, _, err = run_cli(capsys, ["simulate", "--station-ids", "S1", "--frames", "8",
                                     "--sensor-profile", "a/sensor_profile.json", "--out", "sim"])
     assert code == 0, err
+
+
+def test_a_fitted_field_prior_is_fitted_not_refused(tmp_path, capsys, monkeypatch):
+    """The field priors fix what --fit does not name: fitting one of them (no --fix given) is
+    not "fixed (--fix) and fitted"; the calibration starts from the other priors."""
+    from planner.studies import sensor_calibration
+
+    started = {}
+
+    class Stop(Exception):
+        pass
+
+    def calibrate(positions, start, free, settings, progress=None):
+        started.update(start=start, free=[f.name for f in free])
+        raise Stop
+
+    monkeypatch.setattr(sensor_calibration, "calibrate", calibrate)
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(Stop):
+        run_cli(capsys, CAL + ["--fit", "sensor.incidence_noise_m=0:0.01"])
+    assert started["free"] == ["sensor.incidence_noise_m"]
+    assert started["start"].turntable.encoder_noise_rad == pytest.approx(1e-4)  # a prior

@@ -3,7 +3,9 @@
 ``markerplan process`` on the imported scan.
 
 my.pcap decodes into a complete revolution (13440 returns) and the partial remainder the end
-of the file leaves (2304 returns); see tests/pipeline/test_pcap.py.
+of the file leaves (2304 returns); the file ends inside its 79th packet (a position packet);
+see tests/pipeline/test_pcap.py. Bad synthetic captures are cases of
+tests/cli/test_bad_input_pipeline.py.
 """
 
 import json
@@ -38,6 +40,7 @@ def _import(capsys, *args):
 def test_without_log_one_frame_at_angle_zero(capture, capsys, tmp_path):
     summary, err = _import(capsys, "--out", "a")
     assert "dropped the capture's last revolution (2304 returns)" in err
+    assert "the file ends inside packet 79 (cut short while recording or copying)" in err
     assert "no --turntable-log" in err and "--no-calibrate" in err
     assert "revolution 0 has returns over 28% of the spin" in err
     scan = read_scan(tmp_path / "a" / "my.scan.npz")
@@ -47,6 +50,7 @@ def test_without_log_one_frame_at_angle_zero(capture, capsys, tmp_path):
     assert scan.metadata["source"] == "pcap"
     assert scan.metadata["provenance"]["inputs"][0]["file"] == "my.pcap"
     assert summary["revolutions_decoded"] == 2 and summary["partial_dropped"] == 1
+    assert (summary["return_mode"], summary["cut_packet"]) == ("strongest", 79)
     assert (summary["n_frames"], summary["n_points"]) == (1, 13440)
     # the same capture gives the same bytes
     _import(capsys, "--out", "b")
@@ -125,6 +129,20 @@ def test_self_calibration_refused_on_a_single_angle(capture, capsys, tmp_path):
     assert not (tmp_path / "tables").exists()
 
 
+def test_dual_return_capture_keeps_the_last_returns(capsys, tmp_path, monkeypatch):
+    """A synthetic dual-return capture (last returns at 3 m, strongest at 2 m): one point per
+    firing, the last return, and a note saying so."""
+    from tests import pcap_builder as pb
+
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "my.pcap").write_bytes(pb.vlp16_capture(20, return_mode=pb.DUAL))
+    summary, err = _import(capsys, "--keep-partial", "--out", "scans")
+    assert "dual-return capture: kept the last return of each firing" in err
+    assert summary["return_mode"] == "dual" and summary["n_points"] == 20 * 6 * 32
+    scan = read_scan(tmp_path / "scans" / "my.scan.npz")
+    np.testing.assert_allclose(scan.range_m, 3.0, atol=5e-3)
+
+
 def _first_records(n: int):
     """Setup: ``part.pcap``, the capture's global header and first ``n`` records."""
     def setup(cwd, inputs):
@@ -169,8 +187,8 @@ CASES = [
          files={"e.pcap": b""}),
     Case("pcap-garbage", ["import-pcap", "g.pcap", "--out", "out"],
          "not a readable packet capture", files={"g.pcap": b"GIF89a" + bytes(range(200))}),
-    Case("pcap-truncated", ["import-pcap", "part.pcap", "--out", "out"], "truncated",
-         setup=lambda cwd, inputs: (cwd / "part.pcap").write_bytes(
+    Case("pcap-cut-mid-file", ["import-pcap", "part.pcap", "--out", "out"],
+         "cut short inside packet 5", setup=lambda cwd, inputs: (cwd / "part.pcap").write_bytes(
              (inputs / "my.pcap").read_bytes()[:3000])),
     Case("pcap-no-vlp16-returns", ["import-pcap", "part.pcap", "--out", "out"],
          "no VLP-16 returns", setup=_first_records(0)),

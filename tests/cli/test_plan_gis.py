@@ -6,8 +6,13 @@ exactly on stand-map cell centres (``--stand-map-cell-m 0.6``: 3 DEM cells), so 
 their cells must repeat what plan.json says of them.
 """
 
+import errno
 import hashlib
 import json
+import os
+import subprocess
+import sys
+import textwrap
 
 import numpy as np
 import pytest
@@ -237,3 +242,51 @@ def test_the_plans_crs_reaches_the_network_geojson(planned):
         assert [lon, lat] == pytest.approx(planned_lonlat[marker_id][:2], abs=1e-8)
         assert z == pytest.approx(planned_lonlat[marker_id][2], abs=1e-4)
     assert "WGS84" in gj["coordinate_frame"] and "EPSG:32633" in gj["source_crs"]
+
+
+def run_with_file_size_limit(code: str, limit_bytes: int, cwd) -> subprocess.CompletedProcess:
+    """Run Python ``code`` in a child whose files cannot grow past ``limit_bytes``: every write
+    beyond fails with EFBIG (SIGXFSZ ignored), a genuine write failure inside GDAL as a full
+    disk's ENOSPC is, without root or a small disk."""
+    prelude = textwrap.dedent(f"""
+        import resource, signal
+        signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+        resource.setrlimit(resource.RLIMIT_FSIZE, ({limit_bytes}, {limit_bytes}))
+    """)
+    return subprocess.run([sys.executable, "-c", prelude + textwrap.dedent(code)], cwd=cwd,
+                          capture_output=True, text=True, timeout=120)
+
+
+def test_a_geopackage_that_cannot_be_written_is_one_line_and_leaves_nothing(tmp_path):
+    """plan.gpkg (156 kB for the default site) is the first file over 100 kB: GDAL fails inside
+    SQLite with a message that does not say why; the user reads the disk's own reason."""
+    done = run_with_file_size_limit("""
+        from planner.cli import main
+        main(["plan", "--out", "out"])
+    """, 100_000, tmp_path)
+    assert done.returncode == 1, done.stderr
+    assert "Traceback" not in done.stderr
+    assert done.stderr.splitlines() == [
+        "error: --out out: writing failed (out/plan.gpkg): File too large; "
+        "nothing was written; raise the file-size limit (ulimit -f) or choose another folder"], \
+        done.stderr
+    assert os.listdir(tmp_path) == []
+
+
+def test_a_stand_map_that_cannot_be_written_raises_the_disks_error(tmp_path):
+    """GDAL's GeoTIFF writer on a failing disk: the OSError with the disk's errno, not
+    GDAL's "Write failed. See previous exception" and libtiff's lines on stderr."""
+    done = run_with_file_size_limit("""
+        import numpy as np
+        from types import SimpleNamespace
+        from planner.outputs.gis import write_stand_map
+        band = np.ones((200, 200))
+        stand = SimpleNamespace(usable=band, error_m=band, crs=None, transform=(2, 0, 0, 0, -2, 0))
+        try:
+            write_stand_map(stand, ".")
+        except OSError as exc:
+            print(type(exc).__name__, exc.errno)
+    """, 50_000, tmp_path)
+    assert done.stdout.split() == ["OSError", str(errno.EFBIG)], \
+        done.stdout + done.stderr
+    assert done.stderr == ""

@@ -70,6 +70,21 @@ def test_plan_json_input_uses_its_site_and_configuration(tmp_path, capsys):
     assert doc["provenance"]["config"]["plan"]["budget"] is None
 
 
+def test_plan_json_input_studies_the_plans_own_stations(tmp_path, capsys, valid_inputs):
+    """A plan of one of the preset's seven stations is studied at that station only, whether
+    or not its provenance lists the station ids."""
+    plan = json.loads((valid_inputs / "plan" / "plan.json").read_text())
+    plan["stations"] = [s for s in plan["stations"] if s["id"] == "S4"]
+    plan["provenance"]["inputs"].pop("station_ids", None)
+    path = tmp_path / "one.json"
+    path.write_text(json.dumps(plan))
+    out = tmp_path / "o"
+    code, _, err = run_cli(capsys, ["reduce", str(path), "--out", str(out), "--json"])
+    assert code == 0, err
+    with (out / "per_station.csv").open() as fh:
+        assert {r["station"] for r in csv.DictReader(fh)} == {"S4"}
+
+
 def _layout_csv(path, rows):
     with path.open("w", newline="") as fh:
         w = csv.writer(fh)

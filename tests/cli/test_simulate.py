@@ -145,3 +145,34 @@ def test_stations_file_and_marker_radius(tmp_path, capsys):
     code, _, err = run_cli(capsys, ["simulate", "--stations", str(stations), "--station-ids",
                                     "B", "--frames", "2", "--out", str(tmp_path / "p")])
     assert code == 1 and "valid ids are A" in err
+
+
+def test_sparse_dem_too_big_to_read_whole_is_read_by_window(tmp_path, capsys):
+    """A 20000 x 20000 GeoTIFF (4e8 cells, more than read_dem reads whole; tiled and sparse on
+    disk, data only around the default site) is read only as far as the stations and markers
+    are seen (the sensor's maximum range), as ``plan`` reads it."""
+    import rasterio
+    from rasterio.transform import from_origin
+    from rasterio.windows import Window
+
+    from visibility.dem import MAX_DEM_CELLS
+    from visibility.sensor import MAX_RANGE_M
+
+    n, data = 20000, 512
+    assert n * n > MAX_DEM_CELLS
+    with rasterio.open(tmp_path / "big.tif", "w", driver="GTiff", height=n, width=n, count=1,
+                       dtype="float32", crs="EPSG:32633",
+                       transform=from_origin(-n / 2, n / 2, 1, 1), tiled=True, blockxsize=256,
+                       blockysize=256, compress="deflate", sparse_ok=True,
+                       nodata=-9999) as dst:  # data over -256..256 m
+        dst.write(np.zeros((data, data), "float32"), 1,
+                  window=Window((n - data) // 2, (n - data) // 2, data, data))
+    out = tmp_path / "o"
+    code, _, err = run_cli(capsys, ["simulate", "--dem", str(tmp_path / "big.tif"),
+                                    "--station-ids", "S1", "--frames", "2", "--out", str(out)])
+    assert code == 0, err
+    dem = json.loads((out / "site.json").read_text())["dem"]
+    # the site's stations and markers lie within +-18 m; the window adds the range, 5 m
+    # and a 2-cell pad
+    reach = 2 * (MAX_RANGE_M + 18 + 5 + 2) + 1
+    assert dem["shape"][0] < reach and dem["shape"][1] < reach, dem

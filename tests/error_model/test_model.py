@@ -82,3 +82,30 @@ def test_structurally_broken_model_is_rejected(fitted_model, tmp_path, mutate):
 def test_missing_model_file(tmp_path):
     with pytest.raises(InputFileError, match="no such file"):
         ErrorModel.load(tmp_path / "absent.json")
+
+
+@pytest.mark.parametrize(("mutate", "match"), [
+    (lambda d: d["distance_range_m"].reverse(), r"domain distance_range_m: range \[.*\] is "
+                                                r"inverted \(min > max\)"),
+    (lambda d: d.update(elevation_lo_deg=d["elevation_hi_deg"],
+                        elevation_hi_deg=d["elevation_lo_deg"]),
+     r"domain elevation_lo_deg / elevation_hi_deg band 0: range .* is inverted"),
+    (lambda d: d["distance_range_m"].__setitem__(1, 99.0), "domain distance_range_m .* differs "
+                                                           "from the values it copies"),
+    (lambda d: d["elevation_hi_deg"].pop(), "domain elevation_hi_deg .* differs"),
+])
+def test_domain_copies_must_match_what_they_copy(fitted_model, tmp_path, mutate, match):
+    """The informational ``distance_range_m`` and ``*_deg`` copies of the domain are ranges that
+    are not inverted and equal the band edges and elevation ranges they copy; a model without
+    them still loads."""
+    j = fitted_model.to_json()
+    mutate(j["domain"])
+    path = tmp_path / "m.json"
+    path.write_text(json.dumps(j))
+    with pytest.raises(InputFileError, match=match):
+        ErrorModel.load(path)
+    j = fitted_model.to_json()
+    for key in ("distance_range_m", "elevation_lo_deg", "elevation_hi_deg"):
+        del j["domain"][key]
+    path.write_text(json.dumps(j))
+    assert ErrorModel.load(path).domain == fitted_model.domain

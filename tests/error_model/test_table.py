@@ -89,3 +89,22 @@ def test_all_nan_column_and_out_of_range_values_are_data_errors(tmp_path):
 
     with pytest.raises(DataError, match="distance_m must be > 0"):
         fit_data(as_marker_table(table), 10)
+
+
+def _accepted_yes(lines: list[str]) -> list[str]:
+    cells = lines[1].split(",")
+    cells[lines[0].split(",").index("accepted")] = "yes"
+    return [lines[0], ",".join(cells), *lines[2:]]
+
+
+@pytest.mark.parametrize(("edit", "match"), [
+    (lambda lines: lines + lines[1:], r"t.csv: 50 rows repeat an earlier row exactly: row 52 "
+                                      r"repeats row 2, .* and 47 more \(station "),
+    (_accepted_yes, r"column 'accepted' row 2 must be true/false, got 'yes'"),
+])
+def test_repeated_rows_and_accepted_other_than_true_false_are_refused(tmp_path, edit, match):
+    path = tmp_path / "t.csv"
+    write_csv(path, synthetic_table(50, seed=1))
+    path.write_text("\n".join(edit(path.read_text().splitlines())) + "\n")
+    with pytest.raises(InputFileError, match=match):
+        read_marker_tables(path)

@@ -273,6 +273,53 @@ def test_datum_that_does_not_fix_the_network_names_the_free_defect():
         Datum(kind="lander")
 
 
+@pytest.mark.parametrize("offset", [[0.0, 0.0, 0.0], [0.0, 0.0, 5.0], [0.004, 0.0, 0.0]],
+                         ids=["identical", "stacked", "within-sigma"])
+def test_control_points_at_one_horizontal_position_leave_the_heading_free(offset):
+    """Two control points at one x, y (identical, stacked vertically, or closer than their
+    sigma) fix no heading, whatever the markers' estimated positions: refused like one point;
+    points farther apart than their sigma fix it."""
+    obs, truth = simulated_network(n_stations=5, seed=3)
+    xyz = truth.marker_xyz_m[0]
+    two = (ControlPoint(obs.marker_ids[0], xyz, [0.01] * 3),
+           ControlPoint(obs.marker_ids[1], xyz + offset, [0.01] * 3))
+    with pytest.raises(ConfigError, match=r"leave heading \(rotation about the vertical\) free: "
+                       r"they stand at one horizontal position within their sigma"):
+        adjust(obs, Datum(kind="control", control=two), NO_SNOOPING, truth.nominal)
+    apart = (two[0], ControlPoint(obs.marker_ids[1], truth.marker_xyz_m[1], [0.01] * 3))
+    assert Datum(kind="control", control=apart).control_heading_sigma_rad() < 0.01
+    assert adjust(obs, Datum(kind="control", control=apart), NO_SNOOPING, truth.nominal).dof > 0
+
+
+@pytest.mark.parametrize(("settings", "message"), [
+    (dict(inclinometer_sigma_rad=1e-300), r"^inclinometer_sigma_rad must be a number > 0 \(at "
+                                          r"least 8.6e-78"),
+    (dict(heading_prior_sigma_rad=1e-200), "^heading_prior_sigma_rad must be a number > 0"),
+    (dict(inclinometer_sigma_rad=0.0), "^inclinometer_sigma_rad must be a number > 0"),
+])
+def test_prior_sigmas_whose_weight_overflows_are_refused(settings, message):
+    with pytest.raises(ConfigError, match=message):
+        AdjustmentSettings(**settings)
+    with pytest.raises(ConfigError, match=r"`sigma_m` must be > 0 \(at least"):
+        ControlPoint("C", [0, 0, 0], [1e-300] * 3)
+
+
+def test_smallest_sigmas_and_significance_level_still_adjust():
+    """At the smallest accepted prior sigma the weights stay finite, and ``alpha0`` down to
+    the smallest float has a finite critical value: the adjustment runs, and the exact tilt
+    prior only adds information (no variance grows)."""
+    from pipeline.network.observations import MIN_SIGMA
+    from pipeline.network.reliability import critical_value
+
+    obs, truth = simulated_network(n_stations=4, seed=1)
+    settings = AdjustmentSettings(inclinometer_sigma_rad=MIN_SIGMA, alpha0=5e-324)
+    result = adjust(obs, settings=settings, nominal=truth.nominal)
+    plain = adjust(obs, settings=AdjustmentSettings(alpha0=5e-324), nominal=truth.nominal)
+    assert np.isfinite(result.covariance).all() and np.isfinite(result.w_test).all()
+    assert critical_value(5e-324) == pytest.approx(38.485, abs=1e-3)
+    assert np.all(np.diag(result.covariance) <= np.diag(plain.covariance) * (1 + 1e-9))
+
+
 @pytest.mark.parametrize(("datum", "settings", "message"), [
     (Datum(reference_station="S99"), AdjustmentSettings(),
      r"^`reference_station` 'S99' is not a station of the network; valid ids are S01, S02, "
@@ -288,8 +335,11 @@ def test_bad_datum_or_settings_give_one_line_errors(datum, settings, message):
 
 
 @pytest.mark.parametrize(("field", "value", "message"), [
-    ("sigma_m", -0.01, r"^`sigma_m` must be finite and > 0, got -0.01 \(station S01, marker "),
-    ("sigma_m", np.nan, "`sigma_m` must be finite and > 0, got nan"),
+    ("sigma_m", -0.01, r"^`sigma_m` must be finite and > 0 \(at least 8.6e-78: .*\), got -0.01 "
+                       r"\(station S01, marker "),
+    ("sigma_m", np.nan, r"`sigma_m` must be finite and > 0 \(.*\), got nan"),
+    ("sigma_m", 1e-300, r"`sigma_m` must be finite and > 0 \(at least 8.6e-78: a smaller "
+                        r"sigma's weight 1/sigma\^2 overflows\), got 1e-300"),
     ("xyz_m", np.nan, r"^`xyz_m` must be finite, got \[nan, nan, nan\] \(station S01"),
     ("marker", 999, r"^`marker` indices must lie in \[0, "),
 ])

@@ -35,6 +35,14 @@ def _always_fails(x):
     raise DataError(f"the tile of {x} misses the DEM\nsecond line")
 
 
+@pytest.fixture
+def two_cores(monkeypatch):
+    """At least two cores for ``--workers 2`` (the bound is one worker per core), whatever
+    the machine running the tests has."""
+    cores = distributed.available_cores()
+    monkeypatch.setattr(distributed, "available_cores", lambda: max(2, cores))
+
+
 @pytest.fixture(scope="module")
 def cluster():
     """A LocalCluster of two worker processes, one thread each (as ``--workers 2``)."""
@@ -252,7 +260,7 @@ def test_cli_reports_a_failing_station_without_traceback(tmp_path, capsys, monke
 
 @pytest.mark.slow
 @pytest.mark.parametrize("network", [False, True])
-def test_cluster_files_equal_single_process_files(tmp_path, capsys, network):
+def test_cluster_files_equal_single_process_files(tmp_path, capsys, network, two_cores):
     """One station in known-control mode, two (the fewest) in network mode: ~20 s a station."""
     plan = tmp_path / "plan"
     assert run_cli(capsys, ["plan", "--out", str(plan)])[0] == 0
@@ -269,7 +277,7 @@ def test_cluster_files_equal_single_process_files(tmp_path, capsys, network):
 
 
 @pytest.mark.slow
-def test_range_study_replicates_on_a_cluster_equal_in_process(tmp_path, capsys):
+def test_range_study_replicates_on_a_cluster_equal_in_process(tmp_path, capsys, two_cores):
     quick = ["range-study", "--frames", "40", "--replicates", "3", "--max-distance-m", "4"]
     code_one, _, err = run_cli(capsys, quick + ["--scheduler", "none",
                                                 "--out", str(tmp_path / "one")])
@@ -282,7 +290,7 @@ def test_range_study_replicates_on_a_cluster_equal_in_process(tmp_path, capsys):
     assert sorted({r["replicate"] for r in rows}) == ["0", "1", "2"]  # none dropped
 
 
-def test_local_cluster_starts_only_for_more_than_one_task():
+def test_local_cluster_starts_only_for_more_than_one_task(two_cores):
     """``--scheduler local``: one task runs here (no cluster to start), two start the cluster."""
     with executor("local", workers=2, progress=False) as ex:
         assert ex.threads(1) is None and ex.threads(2) == 1
@@ -424,3 +432,110 @@ def test_several_plans_are_one_map_under_one_bar(monkeypatch):
                                         r"no markers seen from S0$"):
         map_plan_stations([plan, fewer], [_station_id, _refuses], names=["k=3", "k=2"],
                           progress=False)
+
+
+# --- the local cluster's size is bounded by the machine ---------------------------------
+
+RANGE_QUICK = ["range-study", "--frames", "4", "--replicates", "2", "--max-distance-m", "2"]
+
+
+def _no_cluster(*args, **kwargs):
+    raise AssertionError("a LocalCluster was started")
+
+
+def _one_error_line(err: str) -> str:
+    assert "Traceback" not in err, err
+    lines = [ln for ln in err.splitlines() if ln.startswith("error:")]
+    assert len(lines) == 1, err
+    return lines[0]
+
+
+def test_workers_beyond_the_cores_are_refused_before_any_cluster_starts(tmp_path, capsys,
+                                                                        monkeypatch):
+    """``--workers`` above the cores this process may use is refused at the option, with the
+    limit and the fix, and no worker is started (10000 once spawned workers until the
+    machine ran out of file handles)."""
+    import distributed as dask_distributed
+
+    monkeypatch.setattr(distributed, "available_cores", lambda: 2)
+    monkeypatch.setattr(distributed, "open_file_limit", lambda: None)
+    monkeypatch.setattr(dask_distributed, "LocalCluster", _no_cluster)
+    code, _, err = run_cli(capsys, RANGE_QUICK + ["--workers", "3", "--out", str(tmp_path / "o")])
+    assert code == 1 and not (tmp_path / "o").exists()
+    assert _one_error_line(err) == (
+        "error: --workers 3 is more worker processes than this machine runs: this process may "
+        "use 2 cores (one worker each); give --workers 2 or fewer, or drop --workers and run "
+        "the tasks on a bigger cluster with --scheduler ADDRESS (docs/distributed.md)")
+    with pytest.raises(ConfigError, match=r"^`workers` 3 is more worker processes"):
+        with executor("local", workers=3, progress=False):
+            pass
+
+
+def test_the_open_file_limit_bounds_the_workers_too(monkeypatch):
+    """Each worker holds about :data:`FILES_PER_WORKER` files in this process: 64 cores under
+    ``ulimit -n 300`` run (300 - 100) / 20 = 10 workers, the default too."""
+    monkeypatch.setattr(distributed, "available_cores", lambda: 64)
+    monkeypatch.setattr(distributed, "open_file_limit", lambda: 300)
+    assert distributed.local_worker_limit() == 10 and distributed.check_local_workers(10) == 10
+    with pytest.raises(ConfigError, match=r"`workers` 11 .*: the open-file limit 300 \(ulimit "
+                                          r"-n\) holds 10 \(20 files each\); raise it"):
+        distributed.check_local_workers(11)
+    monkeypatch.setattr(distributed, "open_file_limit", lambda: 50)
+    assert distributed.local_worker_limit() == 1  # always one
+
+
+@pytest.mark.parametrize("failure", [
+    OSError(24, "Too many open files"),
+    RuntimeError("Nanny failed to start."),
+])
+def test_a_cluster_that_cannot_start_is_one_line(tmp_path, capsys, monkeypatch, two_cores,
+                                                 failure):
+    import distributed as dask_distributed
+
+    if isinstance(failure, RuntimeError):  # as distributed raises it: the OSError behind it
+        failure.__context__ = AssertionError("Status.starting")
+        failure.__context__.__context__ = OSError(24, "Too many open files")
+
+    def cannot_start(*args, **kwargs):
+        raise failure
+
+    monkeypatch.setattr(dask_distributed, "LocalCluster", cannot_start)
+    code, _, err = run_cli(capsys, RANGE_QUICK + ["--workers", "2", "--out", str(tmp_path / "o")])
+    assert code == 1 and not (tmp_path / "o").exists()
+    assert _one_error_line(err) == (
+        "error: the local dask cluster of 2 worker processes did not start (OSError: [Errno 24] "
+        "Too many open files); give fewer --workers, raise the open-file limit (ulimit -n), or "
+        "run in this process with --scheduler none")
+
+
+def test_the_runaway_worker_count_ends_in_seconds_with_no_process_left(tmp_path):
+    """The command line that once ran away: one error line within seconds, exit 1, and no
+    process of its session left behind."""
+    import time
+
+    import psutil
+
+    started = time.perf_counter()
+    markerplan = [sys.executable, "-c", "from planner.cli import main; main()"]
+    proc = subprocess.Popen(markerplan + RANGE_QUICK + ["--workers", "10000", "--out",
+                                                        str(tmp_path / "o")],
+                            cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True, start_new_session=True)
+    try:
+        _, err = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:  # the runaway: stop it and everything it started
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait()
+    elapsed = time.perf_counter() - started
+
+    def in_session(p):
+        try:
+            return os.getsid(p.pid) == proc.pid
+        except (ProcessLookupError, PermissionError):
+            return False
+
+    left = [p.pid for p in psutil.process_iter() if in_session(p)]
+    assert proc.returncode == 1 and elapsed < 20 and left == []
+    assert _one_error_line(err).startswith("error: --workers 10000 is more worker processes")
+    assert not (tmp_path / "o").exists()

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from markerplan.errors import ConfigError, InfeasiblePlanError
-from planner.accuracy.checks import evaluate_layout
+from planner.accuracy.checks import diagnose, evaluate_layout
 from planner.config import PlanConfig
 from planner.problem.usability import sector_index
 from planner.program import (
@@ -123,6 +123,23 @@ def test_infeasible_requirement_names_each_station_and_why():
     assert "S1:" not in msg  # S1 is satisfiable
     with pytest.raises(InfeasiblePlanError, match="accuracy unreachable"):
         plan_sites(make_problem([[0, 0]], sites[:6]), LOOSE.replace(requirement_m=0.001))
+
+
+@pytest.mark.parametrize("z_m, reason", [
+    (None, "no candidate site within 30 m: the nearest, C000, is 93.2 m away"),
+    (500.0, "lies at least 499.9 m above the 6 candidate sites within 30 m across, so it stands "
+            "on a spike"),
+    (-500.0, "lies at least 500.1 m below the 6 candidate sites within 30 m across, so it "
+             "stands in a pit"),
+    (1.0, "no pair with any of the 6 candidate sites within 30 m: the visibility lists none"),
+])
+def test_a_station_with_no_site_in_range_is_told_why(z_m, reason):
+    """S2 has no pair: far from every site, or (moved onto S1, its pairs left out) far above
+    or below them, or paired by a table that lists none for it."""
+    p = make_problem([[0, 0], [100, 0]], ring([0, 0], 8.0, [30, 90, 150, 210, 270, 330]))
+    if z_m is not None:
+        p = replace(p, station_xyz=np.array([[0, 0, 1.0], [0, 0, z_m]]))
+    assert reason in diagnose(p, LOOSE)["S2"]
 
 
 def test_budget_existing_and_forbidden():

@@ -158,3 +158,18 @@ def test_station_outside_dem_refused():
         simulate_markers(_flat(half=2.0), [5.0, 0, 1.0], 0.0, [[1.0, 0, 0.1]], frames=[0])
     with pytest.raises(ConfigError, match="frames"):
         simulate_markers(_flat(), [0, 0, 1.0], 0.0, [[1.0, 0, 0.1]], frames=[800])
+
+
+def test_station_outside_a_2x2_dem_names_the_dem_size():
+    """The station itself is named, with the DEM's size and what the stations need, not a
+    point on an internal grid; off the DEM and on nodata are told apart."""
+    tiny = DEM(np.zeros((2, 2)), (0.0, 0.0), 1.0)
+    with pytest.raises(DataError, match=r"station S7 at \(5.00, 0.00\) m lies outside the DEM "
+                                        r"\(2 x 2 cells of 1 m\) \[0.0, 1.0\] x \[0.0, 1.0\] m"):
+        simulate_markers(tiny, [5.0, 0, 1.0], 0.0, [[0.5, 0.5, 0.1]], station_id="S7",
+                         frames=[0])
+    valid = np.ones((3, 3), bool)
+    valid[1, 1] = False
+    holed = DEM(np.zeros((3, 3)), (0.0, 0.0), 1.0, valid=valid)
+    with pytest.raises(DataError, match="station S1 at .* stands on DEM nodata"):
+        simulate_markers(holed, [1.0, 1.0, 1.0], 0.0, [[0.5, 0.5, 0.1]], frames=[0])
