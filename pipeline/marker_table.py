@@ -130,7 +130,8 @@ def read_marker_table(path: str | Path) -> list[dict[str, str]]:
     Returns
     -------
     rows : list of dict
-        Column name -> cell text, one dict per data row.
+        Column name -> cell text, one dict per data row; ``accepted`` as read by
+        :func:`accepted_flags`, written ``"true"`` or ``"false"``.
 
     Raises
     ------
@@ -146,9 +147,10 @@ def read_marker_table(path: str | Path) -> list[dict[str, str]]:
         raise InputFileError(f"{what} has columns {list(header)}; missing "
                              f"{[c for c in COLUMNS if c not in header]} (expected exactly "
                              f"{list(COLUMNS)})")
-    accepted_flags([row[COLUMNS.index("accepted")] for row in rows], what)
+    accepted = accepted_flags([row[COLUMNS.index("accepted")] for row in rows], what)
     refuse_repeated_rows(header, rows, what)
-    return [dict(zip(COLUMNS, row, strict=True)) for row in rows]
+    return [{**dict(zip(COLUMNS, row, strict=True)), "accepted": "true" if flag else "false"}
+            for row, flag in zip(rows, accepted, strict=True)]
 
 
 def accepted_flags(cells: Sequence[str], what: str) -> np.ndarray:

@@ -138,7 +138,7 @@ def read_detections(tables: list[Path], error_model) -> list[StationDetections]:
         accepted detection, a station in two tables, accepted detections of more than one
         centre estimator, or a non-finite or absurd number in an accepted row.
     """
-    from pipeline.marker_table import ACCEPTED_CELLS, read_marker_table
+    from pipeline.marker_table import read_marker_table
 
     seen: dict[Path, Path] = {}
     estimator: dict[str, tuple[Path, int]] = {}
@@ -153,7 +153,7 @@ def read_detections(tables: list[Path], error_model) -> list[StationDetections]:
         seen[key] = Path(table)
         rows = read_marker_table(table)
         accepted = [(row, line) for line, row in enumerate(rows, start=2)
-                    if ACCEPTED_CELLS[row["accepted"].strip().lower()]]
+                    if row["accepted"] == "true"]
         if not accepted:
             raise InputFileError(f"marker table {table} holds no accepted detection "
                                  f"({len(rows)} row(s), none with accepted=true); give the "

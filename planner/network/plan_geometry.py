@@ -11,7 +11,7 @@ import numpy as np
 from markerplan.errors import InputFileError
 from markerplan.reading import finite_number, require_type
 from pipeline.network.detections import PlanGeometry
-from pipeline.network.observations import MIN_SIGMA
+from pipeline.network.observations import MIN_SIGMA, usable_sigma
 
 
 def read_plan_geometry(path: Path) -> PlanGeometry:
@@ -79,7 +79,7 @@ def _plan_sigma_deg(cfg: dict, key: str, what: str) -> float | None:
     if cfg.get(key) is None:
         return None
     sigma = finite_number(cfg[key], f"{what} {key}", 10.0)
-    if sigma < np.degrees(MIN_SIGMA):
+    if not usable_sigma(np.radians(sigma)):
         raise InputFileError(
             f"{what} {key}: must be at least {np.degrees(MIN_SIGMA):.2g} deg for an adjustment "
             "(0 would make the prior exact, and a smaller sigma's weight 1/sigma^2 overflows), "

@@ -145,12 +145,15 @@ def write_plan(doc: dict, path: Path) -> None:
 
 
 def load_plan(path: str | Path) -> SurveyPlan:
-    """Read, check (:func:`read_plan`) and type a whole ``plan.json``, with its terrain.
+    """Read, check (:func:`read_plan`) and type a whole ``plan.json``, with its terrain, on
+    which its stations and markers must stand (:func:`_require_on_terrain`).
 
     Raises
     ------
     InputFileError
         As :func:`read_plan`, or the DEM the plan names cannot be read.
+    DataError
+        A station or marker off the plan's terrain.
     """
     doc = read_plan(path, "PLAN", full=True)
     site = doc["site"]
@@ -158,13 +161,40 @@ def load_plan(path: str | Path) -> SurveyPlan:
     if dem is None:
         dem = load_site(site["name"], site.get("seed")).dem
     layout = plan_layout(doc)
-    return SurveyPlan(
+    plan = SurveyPlan(
         dem=dem, stations=layout.stations, marker_ids=layout.marker_ids,
         marker_xyz_m=layout.marker_xyz_m,
         marker_radius_m=float(site.get("marker_radius_m", MARKER_RADIUS_M)),
         requirement_m=float(doc["requirement"]["requirement_m"]),
         working_radius_m=float(doc["requirement"]["working_radius_m"]),
         provenance=doc["provenance"])
+    _require_on_terrain(plan, f"PLAN {path}")
+    return plan
+
+
+def _require_on_terrain(plan: SurveyPlan, what: str) -> None:
+    """Refuse a plan whose stations or markers lie off its terrain (outside the DEM or on
+    nodata, :meth:`visibility.dem.DEM.require_inside`): a scan there cannot be simulated.
+
+    Parameters
+    ----------
+    plan : SurveyPlan
+    what : str
+        How messages name the plan (``"PLAN plan.json"``).
+
+    Raises
+    ------
+    DataError
+        Names the first such station (else marker), its position and the DEM's extent.
+    """
+    site = plan.provenance.get("inputs", {}).get("site")
+    terrain = (f"DEM {plan.dem_path}" if plan.dem_path else
+               f"site preset {site!r}" if site else "its site preset")
+    fix = (f"{what} puts it off the terrain it was planned on ({terrain}); correct its "
+           "coordinates in the plan or re-plan with `markerplan plan`")
+    plan.dem.require_inside(np.array([st.position_m[:2] for st in plan.stations]),
+                            [st.id for st in plan.stations], "station", fix)
+    plan.dem.require_inside(np.asarray(plan.marker_xyz_m)[:, :2], plan.marker_ids, "marker", fix)
 
 
 def read_plan(path: str | Path, option: str = "PLAN", full: bool = True) -> dict:

@@ -285,31 +285,6 @@ def station_task(dem: DEM, job: StationJob):
     return job.process(st, scan, truth)
 
 
-def require_on_terrain(plan: SurveyPlan, what: str) -> None:
-    """Refuse a plan whose stations or markers lie off its terrain (outside the DEM or on
-    nodata, :meth:`visibility.dem.DEM.require_inside`): a scan there cannot be simulated.
-
-    Parameters
-    ----------
-    plan : SurveyPlan
-    what : str
-        How messages name the plan (``"`plan_path` plan.json"``).
-
-    Raises
-    ------
-    DataError
-        Names the first such station (else marker), its position and the DEM's extent.
-    """
-    site = plan.provenance.get("inputs", {}).get("site")
-    terrain = (f"DEM {plan.dem_path}" if plan.dem_path else
-               f"site preset {site!r}" if site else "its site preset")
-    fix = (f"{what} puts it off the terrain it was planned on ({terrain}); correct its "
-           "coordinates in the plan or re-plan with `markerplan plan`")
-    plan.dem.require_inside(np.array([st.position_m[:2] for st in plan.stations]),
-                            [st.id for st in plan.stations], "station", fix)
-    plan.dem.require_inside(np.asarray(plan.marker_xyz_m)[:, :2], plan.marker_ids, "marker", fix)
-
-
 def map_stations(plan: SurveyPlan, process: Callable, seed: int = 0, progress: bool = True,
                  offsets: MountingOffsets | None = None, station_ids: list[str] | None = None,
                  profile: SensorProfile | None = None, executor: Executor | None = None) -> list:

@@ -45,3 +45,16 @@ def test_wrong_header_rejected(tmp_path):
     f.write_text("station_id,x_m\nS1,1\n")
     with pytest.raises(InputFileError, match="missing"):
         read_marker_table(f)
+
+
+def test_accepted_is_read_once_in_any_case(tmp_path):
+    """``accepted`` is true/false in any case (:func:`accepted_flags`), and every caller of
+    :func:`read_marker_table` sees it written one way."""
+    rows = [MarkerRow("S1", f"M{k}", 3.0, 4.0, -1.0, *line_of_sight([3.0, 4.0, -1.0]), 120,
+                      3819.7, 0.95, 0.011, 0.098, "fixed-radius", True, "") for k in range(2)]
+    path = write_marker_table(tmp_path / "m.csv", rows)
+    lines = path.read_text().splitlines()
+    lines[1] = lines[1].replace(",true,", ",TRUE,")
+    lines[2] = lines[2].replace(",true,", ", False ,")
+    path.write_text("\n".join(lines) + "\n")
+    assert [r["accepted"] for r in read_marker_table(path)] == ["true", "false"]
