@@ -66,14 +66,14 @@ def _worker(scan_path: Path, inner: int) -> None:
     offsets = MountingOffsets(angles.vertical_axis_error_rad, angles.lframe_tilt_rad,
                               (0.015, 0.0))
     cloud = timed("synthesis", synthesize, scan, offsets)
-    clusters = timed("ground+cluster+gate", detect_candidates, cloud, cfg)
+    detection = timed("ground+cluster+gate", detect_candidates, cloud, cfg)
     digest = hashlib.sha256()
     for arr in (cloud.xyz_m, cloud.range_m):
         digest.update(np.ascontiguousarray(arr).tobytes())
     print(json.dumps({"code": str(Path(pipeline.__file__).parents[1]), "times_s": times,
                       "angles": [angles.vertical_axis_error_rad, angles.lframe_tilt_rad],
                       "cloud_sha256": digest.hexdigest(),
-                      "clusters": [m.tolist() for m in clusters]}))
+                      "clusters": [m.tolist() for m in detection.clusters]}))
 
 
 def main() -> None:

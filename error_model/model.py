@@ -193,22 +193,7 @@ class ErrorModel:
 
     def save(self, path: str | Path) -> Path:
         """Write the JSON atomically (temporary file in the same folder, then rename)."""
-        path = Path(path)
-        text = json.dumps(self.to_json(), indent=1, sort_keys=True) + "\n"
-        try:
-            fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.partial-", dir=path.parent or ".")
-        except OSError as exc:
-            raise OutputError(f"error model {path}: cannot write in {path.parent} "
-                              f"({exc.strerror}); choose a writable location") from None
-        try:
-            with os.fdopen(fd, "w") as fh:
-                fh.write(text)
-            os.chmod(tmp, 0o666 & ~_umask())
-            os.replace(tmp, path)
-        except BaseException:
-            Path(tmp).unlink(missing_ok=True)
-            raise
-        return path
+        return save_json(path, self.to_json(), "error model")
 
     @classmethod
     def load(cls, path: str | Path) -> ErrorModel:
@@ -228,6 +213,27 @@ class ErrorModel:
         # any top-level type: from_json says "not a markerplan error model" for a list
         d = load_json(path, what, expect=object)
         return cls.from_json(d, source=what)
+
+
+def save_json(path: str | Path, doc: dict[str, Any], what: str) -> Path:
+    """Write ``doc`` as JSON atomically: a temporary file in the same folder, then a rename,
+    so a reader never sees half a model. ``what`` names the file in errors."""
+    path = Path(path)
+    text = json.dumps(doc, indent=1, sort_keys=True) + "\n"
+    try:
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.partial-", dir=path.parent or ".")
+    except OSError as exc:
+        raise OutputError(f"{what} {path}: cannot write in {path.parent} "
+                          f"({exc.strerror}); choose a writable location") from None
+    try:
+        with os.fdopen(fd, "w") as fh:
+            fh.write(text)
+        os.chmod(tmp, 0o666 & ~_umask())
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    return path
 
 
 def _umask() -> int:

@@ -25,6 +25,9 @@ A survey's stations and what comes out:
 - :mod:`pipeline.survey`: the processing config of a survey's settings, and every scan file
   of a survey through the chain;
 - :mod:`pipeline.marker_table`: the marker table (one row per candidate);
+- :mod:`pipeline.fates`: where the chain lost each known marker (the stage and its reason);
+- :mod:`pipeline.fate_table`: the fate table (one row per known marker in range of a scan, its
+  fate and the planner's covariates: the detection model's input);
 - :mod:`pipeline.results`: the tables and summary of ``markerplan process``;
 - :mod:`pipeline.point_cloud_io`: classified clouds as LAS and PLY;
 - :mod:`pipeline.range_study`: centre error and point density against distance.

@@ -21,6 +21,15 @@ between the faces whose unknowns are the two angles themselves (not a generic 6-
 and (:func:`estimate_axis_offset`) ``d`` by making the per-face fixed-radius sphere centres
 agree. Both are Gauss-Newton least squares with numeric Jacobians of the exact rig model
 (:mod:`pipeline.rig`); uncertainties are the formal ``s^2 (J^T J)^-1`` of the final step.
+
+An axis-offset estimate is applied only when the spheres resolve it
+(:func:`resolved_axis_offset`): a few spheres at 10-20 m give per-face centre differences of
+3-7 mm and an estimate whose own sigma is 1-3 mm, so with no offset at all the estimate
+scatters by millimetres around zero. It is tested against the start value with its covariance
+(a Wald chi-square, 2 degrees of freedom); below ``axis_offset_chi2`` the data cannot tell it
+from the start value, which is kept (the estimate and its chi-square are still reported).
+:func:`largest_shift_m` bounds how far two sets of offsets move a return, which decides
+whether the chain must detect the candidates again.
 """
 
 from __future__ import annotations
@@ -32,7 +41,7 @@ from scipy.spatial import cKDTree
 
 from markerplan.errors import ConfigError, DataError
 from pipeline.geometric_sphere_fit import lsq_fixed_radius
-from pipeline.rig import MountingOffsets, sensor_to_station
+from pipeline.rig import MountingOffsets, sensor_to_station, sensor_to_turntable_rotation
 from pipeline.scan_format import StationScan
 
 
@@ -59,6 +68,10 @@ class CalibrationConfig:
         (2 degrees of freedom; default 13.8 = the 99.9 % quantile), after scaling by the robust
         reduced chi-square when that exceeds 1, is dropped from the axis-offset fit and the fit
         repeated (a rock or a clipped marker that passed the quality gate on a smeared cloud).
+    axis_offset_chi2 : float
+        An axis-offset estimate is applied only when its chi-square against the start value
+        (2 degrees of freedom, its own covariance) exceeds this (default 9.21 = the 99 %
+        quantile; 0 applies every estimate). :func:`resolved_axis_offset`.
     seed : int
         Seed of the point subsampling.
     """
@@ -71,6 +84,7 @@ class CalibrationConfig:
     iterations: int = 10
     min_face_points: int = 8
     sphere_outlier_chi2: float = 13.8
+    axis_offset_chi2: float = 9.21
     seed: int = 0
 
     def validate(self) -> CalibrationConfig:
@@ -86,6 +100,9 @@ class CalibrationConfig:
         if not self.sphere_outlier_chi2 > 0:
             raise ConfigError("calibration `sphere_outlier_chi2` must be > 0, got "
                               f"{self.sphere_outlier_chi2}")
+        if not self.axis_offset_chi2 >= 0:
+            raise ConfigError("calibration `axis_offset_chi2` must be >= 0, got "
+                              f"{self.axis_offset_chi2}")
         return self
 
 
@@ -498,3 +515,81 @@ def _gauss_newton_2d(residuals, d0: np.ndarray, iterations: int
         if np.max(np.abs(step)) < 1e-6:
             break
     return d, cov
+
+
+def resolved_axis_offset(start: MountingOffsets, estimate: MountingOffsets,
+                         covariance: np.ndarray, chi2_limit: float
+                         ) -> tuple[MountingOffsets, float]:
+    """The estimate when the data resolve it from the start value, else the start value.
+
+    Parameters
+    ----------
+    start : MountingOffsets
+        The prior axis offset (the calibrate stage's start value: a known offset, or zero).
+    estimate : MountingOffsets
+        From :func:`estimate_axis_offset` (its angles are kept either way).
+    covariance : (2, 2) float
+        Of the estimate's ``axis_offset_m``, m^2 (NaN: no sphere qualified).
+    chi2_limit : float
+        ``CalibrationConfig.axis_offset_chi2``.
+
+    Returns
+    -------
+    offsets : MountingOffsets
+        ``estimate``, or ``estimate`` with the start's axis offset.
+    chi2 : float
+        ``(d - d0)^T C^-1 (d - d0)``; NaN when the covariance is unknown (then the start is
+        kept) and infinite when it is singular and ``d != d0``.
+
+    Examples
+    --------
+    >>> start = MountingOffsets()
+    >>> est = MountingOffsets(axis_offset_m=(0.003, 0.0))
+    >>> off, chi2 = resolved_axis_offset(start, est, np.diag([0.002, 0.001]) ** 2, 9.21)
+    >>> off.axis_offset_m, round(chi2, 2)
+    ((0.0, 0.0), 2.25)
+    >>> resolved_axis_offset(start, est, np.diag([0.0005, 0.001]) ** 2, 9.21)[0].axis_offset_m
+    (0.003, 0.0)
+    """
+    diff = np.subtract(estimate.axis_offset_m, start.axis_offset_m)
+    cov = np.asarray(covariance, dtype=float)
+    if not np.all(np.isfinite(cov)):
+        return replace(estimate, axis_offset_m=start.axis_offset_m), float("nan")
+    try:
+        chi2 = float(diff @ np.linalg.solve(cov, diff))
+    except np.linalg.LinAlgError:
+        chi2 = float("inf") if np.any(diff) else 0.0
+    if chi2 > chi2_limit:
+        return estimate, chi2
+    return replace(estimate, axis_offset_m=start.axis_offset_m), chi2
+
+
+def largest_shift_m(a: MountingOffsets, b: MountingOffsets, range_m: float) -> float:
+    """Bound on how far a return moves between the clouds synthesised with ``a`` and ``b``.
+
+    A return at sensor-frame ``p`` (``|p| <= range_m``) lands at
+    ``Rz(theta) (R(a) p + d(a))`` (:func:`pipeline.rig.frame_poses`), so it moves by at most
+    ``||R(b) - R(a)||_2 range_m + |d(b) - d(a)|``.
+
+    Parameters
+    ----------
+    a, b : MountingOffsets
+    range_m : float
+        Largest range of the returns considered, metres.
+
+    Returns
+    -------
+    shift_m : float
+        Metres.
+
+    Examples
+    --------
+    >>> a = MountingOffsets()
+    >>> round(largest_shift_m(a, MountingOffsets(axis_offset_m=(0.003, 0.004)), 60.0), 6)
+    0.005
+    >>> round(largest_shift_m(a, MountingOffsets(lframe_tilt_rad=1e-4), 60.0), 6)
+    0.006
+    """
+    rotation = np.linalg.norm(sensor_to_turntable_rotation(b) - sensor_to_turntable_rotation(a),
+                              2)
+    return float(rotation * range_m + np.hypot(*np.subtract(b.axis_offset_m, a.axis_offset_m)))

@@ -1,10 +1,11 @@
 """The two-box gate and the re-search around each candidate.
 
-Two-box gate: a cluster is a marker candidate when its axis-aligned bounding box fits inside
-the large cube (default 0.30 m: a 0.20 m sphere with noise) but not inside the small one
-(default 0.05 m: noise specks). Re-search: ground removal and clustering may cut marker points
-away, so all points of the full cloud (ground included) within ``radius_m`` of each candidate's
-centroid are taken again.
+Two-box gate: a cluster is a marker candidate when the large cube (default 0.30 m: a 0.20 m
+sphere with noise) holds all but a few of its points (:data:`GATE_SPILL_FRACTION`: the
+mixed-return tail a near sphere trails behind it) and those points do not fit inside the small
+one (default 0.05 m: noise specks). Re-search: ground removal and clustering may cut marker
+points away, so all points of the full cloud (ground included) within ``radius_m`` of each
+candidate's centroid are taken again.
 """
 
 from __future__ import annotations
@@ -14,10 +15,107 @@ import numpy as np
 from markerplan.errors import ConfigError
 from pipeline.kernels import in_wanted_bins
 
+#: The gate's verdict on a cluster: a marker candidate, or why not.
+GATE_VERDICTS = ("passed", "too_large", "too_small")
+
+#: The share of a cluster's points that may spill out of the large cube: the mixed returns at a
+#: near sphere's silhouette (the footprint straddles the sphere and the ground behind it, within
+#: one pulse length) leave a tail of up to ~5 % of its points, up to 0.45 m behind it; a
+#: boulder or a crater wall spills far more of its points out of a 0.30 m cube.
+GATE_SPILL_FRACTION = 0.1
+
+
+def gate_verdicts(xyz_m: np.ndarray, labels: np.ndarray, max_box_m: float = 0.30,
+                  min_box_m: float = 0.05, spill_fraction: float = GATE_SPILL_FRACTION
+                  ) -> np.ndarray:
+    """The two-box gate's verdict on every cluster.
+
+    The large cube is placed where it holds the most points of the cluster (per axis, the
+    ``max_box_m`` window holding the most coordinates; the cube is the three windows): a
+    cluster passes when the cube holds all but ``spill_fraction`` of its points, and those
+    points do not fit the small cube. A cluster whose bounding box fits the large cube
+    spills nothing, so it is judged as by its bounding box.
+
+    Parameters
+    ----------
+    xyz_m : (N, 3) float
+        Clustered points, metres.
+    labels : (N,) int
+        Cluster labels ``0..L-1`` from :func:`pipeline.clustering.euclidean_clusters`
+        (-1 = noise).
+    max_box_m, min_box_m : float
+        Edge of the large and the small cube, metres.
+    spill_fraction : float
+        Share of a cluster's points that may lie outside the large cube, in ``[0, 0.5)``
+        (:data:`GATE_SPILL_FRACTION`; 0: the bounding box must fit).
+
+    Returns
+    -------
+    verdicts : (L,) str
+        One of :data:`GATE_VERDICTS` per label: ``"passed"``, ``"too_large"`` (more than
+        ``spill_fraction`` of the points spill out of the large cube) or
+        ``"too_small"`` (the points the large cube holds fit the small one).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> pts = np.array([[0, 0, 0], [0.1, 0.1, 0], [3, 0, 0], [3.01, 0, 0], [6, 0, 0], [7, 0, 0.]])
+    >>> gate_verdicts(pts, np.array([0, 0, 1, 1, 2, 2])).tolist()
+    ['passed', 'too_small', 'too_large']
+
+    A compact cluster with a thin tail passes; the tail can be 10 % of the points.
+
+    >>> cap = np.column_stack([np.linspace(0, 0.2, 18), np.zeros(18), np.zeros(18)])
+    >>> tail = np.array([[0.6, 0, 0], [0.8, 0, 0]])
+    >>> gate_verdicts(np.vstack([cap, tail]), np.zeros(20, dtype=int)).tolist()
+    ['passed']
+    """
+    if not 0 < min_box_m < max_box_m:
+        raise ConfigError(f"gate boxes must satisfy 0 < min_box_m < max_box_m, got "
+                          f"{min_box_m}, {max_box_m}")
+    if not 0 <= spill_fraction < 0.5:
+        raise ConfigError(f"gate `spill_fraction` must be in [0, 0.5) (a share of a cluster's "
+                          f"points), got {spill_fraction}")
+    ok = labels >= 0
+    k = int(labels[ok].max()) + 1 if ok.any() else 0
+    lab = labels[ok]
+    p = xyz_m[ok]
+    lo = _densest_windows(p, lab, k, max_box_m)
+    held = np.all((p >= lo[lab]) & (p <= lo[lab] + max_box_m), axis=1)
+    n_points = np.bincount(lab, minlength=k)
+    n_held = np.bincount(lab[held], minlength=k)
+    low = np.full((k, 3), np.inf)
+    high = np.full((k, 3), -np.inf)
+    np.minimum.at(low, lab[held], p[held])
+    np.maximum.at(high, lab[held], p[held])
+    extent = (high - low).max(axis=1)  # -inf for a cluster the cube holds nothing of
+    spills = n_held < (1.0 - spill_fraction) * n_points
+    return np.where(spills, "too_large",
+                    np.where(extent > min_box_m, "passed", "too_small")).astype("<U9")
+
+
+def _densest_windows(xyz_m: np.ndarray, labels: np.ndarray, k: int, width_m: float
+                     ) -> np.ndarray:
+    """(k, 3) per cluster and axis, the start of the ``width_m`` window that holds the most
+    of its coordinates (the lowest such start on ties)."""
+    lo = np.zeros((k, 3))
+    if not labels.size:
+        return lo
+    span = float(np.ptp(xyz_m, axis=0).max()) + 2 * width_m + 1.0  # keys of clusters apart
+    for axis in range(3):
+        v = xyz_m[:, axis] - xyz_m[:, axis].min()
+        order = np.lexsort((v, labels))
+        key = labels[order] * span + v[order]
+        count = np.searchsorted(key, key + width_m, side="right") - np.arange(key.size)
+        best = np.lexsort((-count, labels[order]))
+        first = best[np.r_[True, np.diff(labels[order][best]) != 0]]
+        lo[labels[order][first], axis] = xyz_m[order[first], axis]
+    return lo
+
 
 def two_box_gate(xyz_m: np.ndarray, labels: np.ndarray, max_box_m: float = 0.30,
                  min_box_m: float = 0.05) -> tuple[np.ndarray, np.ndarray]:
-    """Clusters passing the two-box gate.
+    """Clusters passing the two-box gate (:func:`gate_verdicts`).
 
     Parameters
     ----------
@@ -43,26 +141,14 @@ def two_box_gate(xyz_m: np.ndarray, labels: np.ndarray, max_box_m: float = 0.30,
     >>> ids.tolist()
     [0]
     """
-    if not 0 < min_box_m < max_box_m:
-        raise ConfigError(f"gate boxes must satisfy 0 < min_box_m < max_box_m, got "
-                          f"{min_box_m}, {max_box_m}")
+    ids = np.flatnonzero(gate_verdicts(xyz_m, labels, max_box_m, min_box_m) == "passed")
+    if not ids.size:
+        return ids.astype(np.int64), np.zeros((0, 3))
     ok = labels >= 0
-    if not ok.any():
-        return np.zeros(0, dtype=np.int64), np.zeros((0, 3))
-    lab = labels[ok]
-    p = xyz_m[ok]
-    k = int(lab.max()) + 1
-    lo = np.full((k, 3), np.inf)
-    hi = np.full((k, 3), -np.inf)
-    np.minimum.at(lo, lab, p)
-    np.maximum.at(hi, lab, p)
-    counts = np.bincount(lab, minlength=k)
-    sums = np.zeros((k, 3))
-    np.add.at(sums, lab, p)
-    extent = (hi - lo).max(axis=1)
-    passing = (counts > 0) & (extent <= max_box_m) & (extent > min_box_m)
-    ids = np.flatnonzero(passing)
-    return ids, sums[ids] / counts[ids, None]
+    counts = np.bincount(labels[ok], minlength=int(ids.max()) + 1)
+    sums = np.zeros((counts.size, 3))
+    np.add.at(sums, labels[ok], xyz_m[ok])
+    return ids.astype(np.int64), sums[ids] / counts[ids, None]
 
 
 class RangeIndex:

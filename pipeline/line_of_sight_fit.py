@@ -32,7 +32,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from pipeline.geometric_sphere_fit import ASTM_CONE_DEG, cap_start
+from pipeline.geometric_sphere_fit import ASTM_CONE_DEG, bounded_radius_step, cap_start
 from pipeline.sensor_noise import MAX_TAN_INCIDENCE, RangeNoise
 
 #: Line-of-sight fits: beams are treated as meeting the sphere at no more than this incidence
@@ -58,7 +58,8 @@ class LineOfSightFit:
 
 def fit_line_of_sight(points_m: np.ndarray, radius_m: float, noise: RangeNoise,
                       sensor_m=(0.0, 0.0, 0.0), centre0_m: np.ndarray | None = None,
-                      free_radius: bool = False) -> LineOfSightFit:
+                      free_radius: bool = False,
+                      radius_bounds_m: tuple[float, float] | None = None) -> LineOfSightFit:
     """Weighted least-squares sphere on line-of-sight range residuals (Gauss-Newton).
 
     Minimises ``sum ((rho_i - t_i(c, R)) / sigma_i)^2``: ``rho_i = |p_i - sensor|`` is the
@@ -80,6 +81,11 @@ def fit_line_of_sight(points_m: np.ndarray, radius_m: float, noise: RangeNoise,
         Start centre (default: :func:`cap_start`).
     free_radius : bool
         Fit the radius too.
+    radius_bounds_m : (float, float), optional
+        ``free_radius`` only: ``(low, high)``, metres, ``0 < low <= radius_m <= high``; the
+        radius is held in this bracket
+        (:func:`~pipeline.geometric_sphere_fit.bounded_radius_step`), so a flat-looking cap
+        ends on ``high`` instead of running away. ``None``: unbounded.
 
     Returns
     -------
@@ -99,7 +105,7 @@ def fit_line_of_sight(points_m: np.ndarray, radius_m: float, noise: RangeNoise,
     rng, beam = _beams(np.asarray(points_m, dtype=float), sensor)
     start = cap_start(points_m, radius_m, sensor) if centre0_m is None else centre0_m
     c, r, _ = _los_solve(rng, beam, np.asarray(start, float) - sensor, float(radius_m), noise,
-                         free_radius)
+                         free_radius, radius_bounds_m=radius_bounds_m)
     return LineOfSightFit(c + sensor, r)
 
 
@@ -184,7 +190,8 @@ def beam_cap(points_m: np.ndarray, centre_m: np.ndarray, radius_m: float,
                           radius_m * np.sin(np.radians(ASTM_CONE_DEG / 2)))
 
 
-def astm_beam_steps(p: np.ndarray, radius: float, sensor: np.ndarray, noise: RangeNoise):
+def astm_beam_steps(p: np.ndarray, radius: float, sensor: np.ndarray, noise: RangeNoise,
+                    hold=None):
     """The ASTM steps on the beams: the cylinder tested on each beam, and the line-of-sight fit
     with its normalised range residuals ``(rho - t) / sigma``.
 
@@ -200,6 +207,9 @@ def astm_beam_steps(p: np.ndarray, radius: float, sensor: np.ndarray, noise: Ran
     sensor : (3,) float
         Scanner origin, metres.
     noise : RangeNoise
+    hold : callable, optional
+        ``hold(centre) -> centre``, applied to each fitted centre (the loop's bound on how far
+        the centre may move, :func:`pipeline.sphere_fit.fit_sphere`); default: none.
 
     Returns
     -------
@@ -208,7 +218,8 @@ def astm_beam_steps(p: np.ndarray, radius: float, sensor: np.ndarray, noise: Ran
         ``R sin 60 deg``.
     solve : callable
         ``solve(sel, start) -> (centre, z)``: the fixed-radius line-of-sight fit of the points
-        ``sel`` from ``start``, and their normalised range residuals ``z`` at that centre.
+        ``sel`` from ``start`` (through ``hold``), and their normalised range residuals ``z``
+        at that centre.
     """
     rng, beam = _beams(p, sensor)
     max_miss = radius * np.sin(np.radians(ASTM_CONE_DEG / 2))
@@ -217,8 +228,10 @@ def astm_beam_steps(p: np.ndarray, radius: float, sensor: np.ndarray, noise: Ran
         return _beam_cylinder(beam, centre - sensor, max_miss)
 
     def solve(sel, start):
-        c = _los_solve(rng[sel], beam[sel], start - sensor, radius, noise)[0]
-        return c + sensor, _los_z(rng[sel], beam[sel], c, radius, noise)
+        c = _los_solve(rng[sel], beam[sel], start - sensor, radius, noise)[0] + sensor
+        if hold is not None:
+            c = hold(c)
+        return c, _los_z(rng[sel], beam[sel], c - sensor, radius, noise)
 
     return select, solve
 
@@ -269,8 +282,8 @@ def _los_system(rng, beam, x, noise, free_radius
     return jac, 1.0 / _los_sigma(rng, h, x[3], noise) ** 2, rng - t
 
 
-def _los_solve(rng, beam, centre, radius, noise, free_radius=False, max_iter=50, tol_m=1e-10
-               ) -> tuple[np.ndarray, float, np.ndarray]:
+def _los_solve(rng, beam, centre, radius, noise, free_radius=False, max_iter=50, tol_m=1e-10,
+               radius_bounds_m=None) -> tuple[np.ndarray, float, np.ndarray]:
     """Gauss-Newton of :func:`fit_line_of_sight`, sensor at the origin.
 
     A fixed radius runs the compiled loop :func:`pipeline.kernels.los_gauss_newton_fixed` (the
@@ -278,7 +291,8 @@ def _los_solve(rng, beam, centre, radius, noise, free_radius=False, max_iter=50,
     :func:`_los_system` in numpy with its invariants hoisted out of the iterations (the range
     part of each point's variance) and ``J^T W J`` and ``J^T W r`` from one product
     (``V^T diag(w / h^2) [V, h r]`` with ``V = [t beam - c, R]``); a singular matrix ends the
-    iterations. Each step is capped at half the radius.
+    iterations. Each step is capped at half the radius; a free radius is held in
+    ``radius_bounds_m`` (:func:`~pipeline.geometric_sphere_fit.bounded_radius_step`).
 
     Returns the centre (3,), the radius and the covariance ((3, 3) or (4, 4) with the radius)
     of the estimate under the noise model.
@@ -312,9 +326,10 @@ def _los_solve(rng, beam, centre, radius, noise, free_radius=False, max_iter=50,
         m = (v[:, :4] * (1.0 / (var * h2))[:, None]).T @ v  # [J^T W J, J^T W r]
         try:
             cov = np.linalg.inv(m[:, :4])
+            step = (-cov @ m[:, 4] if radius_bounds_m is None
+                    else bounded_radius_step(m[:, :4], m[:, 4], x[3], radius_bounds_m))
         except np.linalg.LinAlgError:
             break
-        step = -cov @ m[:, 4]
         length = float(np.sqrt(step @ step))
         damp = min(1.0, 0.5 * x[3] / max(length, 1e-300))
         x += step * damp

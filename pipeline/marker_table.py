@@ -19,8 +19,9 @@ Columns, in this order (station frame = origin at the nominal LiDAR centre, z up
 - ``estimator``: ``fixed-radius`` or ``hemisphere-icp``.
 - ``accepted``: ``true`` / ``false`` (quality gate; the readers take either in any case and
   refuse any other cell, :func:`accepted_flags`).
-- ``reason``: empty when accepted, else ``too_few_points``, ``high_rms``, ``radius_mismatch`` or
-  ``incomplete_cloud``.
+- ``reason``: empty when accepted, else ``too_few_points``, ``high_rms``, ``radius_mismatch``,
+  ``partly_buried``, ``incomplete_cloud`` or, in ``range-study`` tables, ``not_detected`` (a
+  laid-out marker no detection of the chain matched: its true centre, no points, no error).
 - ``error_m``: ``|estimate - reference|``, metres; empty without a reference.
 - ``error_x_m, error_y_m, error_z_m``: the components (estimate - reference), station frame.
 - ``replicate``: replicate number (range study), 0 otherwise.

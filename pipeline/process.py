@@ -3,8 +3,11 @@ evaluation.
 
 The chain runs the stages of :mod:`pipeline.stages` in order (calibrate, ground, cluster, gate,
 research, fit, quality, evaluate). The synthesis (:mod:`.synthesis`) runs after the angle
-calibration; once the axis offset has been estimated from the accepted spheres, only the
-candidates' neighbourhoods are synthesised again and re-fitted. Detection (ground, cluster,
+calibration; once the axis offset has been estimated from the accepted spheres (and applied
+only if they resolve it, :func:`pipeline.calibration.resolved_axis_offset`), the candidates
+are detected again when the new offsets move any return by more than the calibrate stage's
+``redetect_shift_m`` (:func:`pipeline.calibration.largest_shift_m`), else only their
+neighbourhoods are synthesised again and re-fitted. Detection (ground, cluster,
 gate) runs on a range-thinned copy of the cloud (:func:`detection_subset`); re-search and
 fitting use every point (indexed only within the candidates' range bands,
 :func:`pipeline.gate.within_range_bands`); :func:`pipeline.evaluation.evaluate_rows` evaluates
@@ -24,10 +27,15 @@ from typing import Any
 import numpy as np
 
 from markerplan.errors import DataError
-from pipeline.calibration import estimate_axis_offset, estimate_rotation_offsets
+from pipeline.calibration import (
+    estimate_axis_offset,
+    estimate_rotation_offsets,
+    largest_shift_m,
+    resolved_axis_offset,
+)
 from pipeline.clustering import euclidean_clusters
 from pipeline.evaluation import Reference, evaluate_rows
-from pipeline.gate import RangeIndex, research, two_box_gate, within_range_bands
+from pipeline.gate import RangeIndex, gate_verdicts, research, within_range_bands
 from pipeline.geometric_sphere_fit import cap_start
 from pipeline.ground import remove_ground
 from pipeline.kernels import range_thinned
@@ -54,8 +62,38 @@ class Candidate:
 
 
 @dataclass
+class Detection:
+    """What the detection stages (ground, cluster, gate) made of one synthesised cloud.
+
+    Attributes
+    ----------
+    above : (n,) int
+        Cloud indices of the detection subset's points in the ground stage's range band that
+        stand at least ``min_height_m`` above the local ground.
+    above_xyz_m : (n, 3) float
+        Their station-frame coordinates, metres.
+    labels : (n,) int
+        Their cluster labels ``0..L-1`` (-1: in no cluster of ``min_points``).
+    verdicts : (L,) str
+        The gate's verdict per cluster (:data:`pipeline.gate.GATE_VERDICTS`).
+    clusters : list of (n_k,) int arrays
+        Cloud indices of each passing cluster, by ascending label.
+    """
+
+    above: np.ndarray
+    above_xyz_m: np.ndarray
+    labels: np.ndarray
+    verdicts: np.ndarray
+    clusters: list[np.ndarray]
+
+
+@dataclass
 class StationResult:
-    """Everything the chain produced for one station."""
+    """Everything the chain produced for one station.
+
+    ``detection`` is the last detection the chain ran (after a re-detection, the second), on
+    the cloud synthesised with the offsets it then had; :mod:`pipeline.fates` reads it.
+    """
 
     station_id: str
     offsets: MountingOffsets
@@ -65,6 +103,7 @@ class StationResult:
     edges: list[dict]
     summary: dict[str, Any]
     timings_s: dict[str, float]
+    detection: Detection
 
 
 class _Timer:
@@ -106,28 +145,31 @@ def detection_subset(range_m: np.ndarray, full_density_range_m: float = 4.0,
     return range_thinned(np.ascontiguousarray(range_m), limits)
 
 
-def detect_candidates(cloud: StationCloud, cfg: ProcessConfig) -> list[np.ndarray]:
+def detect_candidates(cloud: StationCloud, cfg: ProcessConfig) -> Detection:
     """Ground removal, clustering and the two-box gate on the range-thinned cloud.
 
     Returns
     -------
-    clusters : list of (n_k,) int arrays
-        Cloud indices of each candidate cluster (above-ground points only).
+    Detection
+        Its ``clusters`` are the candidates (above-ground points only).
     """
     g = cfg.ground
     sub = detection_subset(cloud.range_m)
     rng = cloud.range_m[sub]
     pts = np.take(cloud.xyz_m, sub, axis=0)  # same rows as xyz_m[sub], in half the time
     band = (rng >= g.min_range_m) & (rng <= g.max_range_m)
-    keep = np.flatnonzero(remove_ground(pts, g.cell_m, g.min_height_m) & band)
+    keep = np.flatnonzero(remove_ground(pts, g.cell_m, g.min_height_m, g.max_slope,
+                                        g.steepness_tolerance_m, g.support_radius_m) & band)
     above = pts[keep]
     labels = euclidean_clusters(above, cfg.cluster.tolerance_m, cfg.cluster.min_points)
-    ids, _ = two_box_gate(above, labels, cfg.gate.max_box_m, cfg.gate.min_box_m)
-    sel = np.isin(labels, ids)
+    verdicts = gate_verdicts(above, labels, cfg.gate.max_box_m, cfg.gate.min_box_m,
+                             cfg.gate.spill_fraction)
+    sel = np.isin(labels, np.flatnonzero(verdicts == "passed"))
     order = np.argsort(labels[sel], kind="stable")
     members = sub[keep[sel][order]]
     split = np.flatnonzero(np.diff(labels[sel][order])) + 1
-    return np.split(members, split) if members.size else []
+    clusters = np.split(members, split) if members.size else []
+    return Detection(sub[keep], above, labels, verdicts, clusters)
 
 
 def measure_candidates(xyz_m: np.ndarray, index: RangeIndex, starts_m: np.ndarray,
@@ -218,22 +260,28 @@ def process_station(scan: StationScan, config: ProcessConfig | None = None,
                      sigma_lframe_tilt_rad=float(np.sqrt(cov[1, 1])), n_plane_pairs=n_pairs,
                      icp_rms_m=icp_rms)
         timer.lap("calibrate_angles")
-    cands = _detect_and_measure(scan, offsets, cfg, noise, timer)
+    cands, detection = _detect_and_measure(scan, offsets, cfg, noise, timer)
+    detected_with = offsets
     if cal.enabled:
         # The sphere inlier sets depend on the offsets and the angle ICP is biased by an
-        # unknown axis offset: estimate d, re-estimate the angles with it (first round only),
-        # re-fit the markers; repeat.
+        # unknown axis offset: estimate d (kept at its start value unless the spheres resolve
+        # it), re-estimate the angles with it (first round only), re-fit the markers; repeat.
         for round_ in range(cal.axis_offset_rounds):
             good = [c for c in cands if c.accepted]
-            offsets, cov_d, n_sph, sph_rms = estimate_axis_offset(
+            estimate, cov_d, n_sph, sph_rms = estimate_axis_offset(
                 scan, offsets, [c.members[c.fit.used] for c in good], cfg.fit.radius_m,
                 np.array([c.fit.centre_m for c in good]).reshape(-1, 3), cal.calibration())
-            calib.update(sigma_axis_offset_m=[float(np.sqrt(cov_d[0, 0])),
+            previous = offsets
+            offsets, chi2 = resolved_axis_offset(cal.offsets(), estimate, cov_d,
+                                                 cal.axis_offset_chi2)
+            calib.update(axis_offset_estimate_m=[float(v) for v in estimate.axis_offset_m],
+                         sigma_axis_offset_m=[float(np.sqrt(cov_d[0, 0])),
                                               float(np.sqrt(cov_d[1, 1]))],
+                         axis_offset_chi2=chi2, axis_offset_resolved=offsets is estimate,
                          n_spheres=n_sph, sphere_rms_m=sph_rms)
             timer.lap("calibrate_axis_offset")
-            if not (n_sph and cands):
-                break
+            if not (n_sph and cands) or offsets == previous:
+                break  # nothing moved: the candidates already stand on these offsets
             if round_ == 0:
                 offsets, cov, n_pairs, icp_rms = estimate_rotation_offsets(
                     scan, offsets, cal.calibration())
@@ -241,8 +289,10 @@ def process_station(scan: StationScan, config: ProcessConfig | None = None,
                              sigma_lframe_tilt_rad=float(np.sqrt(cov[1, 1])),
                              n_plane_pairs=n_pairs, icp_rms_m=icp_rms)
                 timer.lap("calibrate_angles")
-                if np.hypot(*offsets.axis_offset_m) > cal.redetect_axis_offset_m:
-                    cands = _detect_and_measure(scan, offsets, cfg, noise, timer)
+                if (largest_shift_m(detected_with, offsets, cfg.ground.max_range_m)
+                        > cal.redetect_shift_m):
+                    cands, detection = _detect_and_measure(scan, offsets, cfg, noise, timer)
+                    detected_with = offsets
                     calib["redetected"] = True
                     continue
             cands = _remeasure(scan, offsets, cands, cfg, noise)
@@ -256,17 +306,19 @@ def process_station(scan: StationScan, config: ProcessConfig | None = None,
                "n_accepted": sum(r.accepted for r in rows), **evaluation,
                "calibration": calib}
     return StationResult(scan.station_id, offsets, calib, cands, rows, edges, summary,
-                         timer.times)
+                         timer.times, detection)
 
 
 def _detect_and_measure(scan: StationScan, offsets: MountingOffsets, cfg: ProcessConfig,
-                        noise: RangeNoise | None, timer: _Timer) -> list[Candidate]:
+                        noise: RangeNoise | None, timer: _Timer
+                        ) -> tuple[list[Candidate], Detection]:
     """Synthesise the cloud with ``offsets``, detect candidates, re-search and fit them."""
     cloud = synthesize(scan, offsets)
     timer.lap("synthesis")
-    clusters = detect_candidates(cloud, cfg)
+    detection = detect_candidates(cloud, cfg)
     timer.lap("ground+cluster+gate")
-    starts = np.array([cap_start(cloud.xyz_m[m], cfg.fit.radius_m) for m in clusters])
+    starts = np.array([cap_start(cloud.xyz_m[m], cfg.fit.radius_m)
+                       for m in detection.clusters])
     starts = starts.reshape(-1, 3)
     near = within_range_bands(cloud.range_m, starts, cfg.research.radius_m)
     xyz = cloud.xyz_m[near]
@@ -276,7 +328,7 @@ def _detect_and_measure(scan: StationScan, offsets: MountingOffsets, cfg: Proces
     for c in cands:
         c.members = near[c.members]
     timer.lap("research+fit+quality")
-    return cands
+    return cands, detection
 
 
 def _remeasure(scan: StationScan, offsets: MountingOffsets, cands: list[Candidate],

@@ -6,10 +6,21 @@ The published experiment places 0.20 m markers from 1 m to 50 m from the LiDAR (
 frames. The scans themselves come from the simulator (``visibility``); this module lays the
 markers out, extracts and fits each one, and aggregates the marker tables of the replicates.
 
-Extraction: each marker's points are re-searched within ``research_radius_m`` of its known
-position (as a total station would guide it); the start of the fit is computed from the points
-above the marker's equator only (:func:`pipeline.geometric_sphere_fit.cap_start`), so the
-estimators see the same input as in :mod:`pipeline.process` and do not start from the truth.
+Two extractions (:data:`EXTRACTIONS`):
+
+- ``full-chain`` (the default, :func:`chain_markers`): the station chain of ``markerplan
+  process`` and ``verify`` (:func:`pipeline.process.process_station` configured by
+  :func:`pipeline.survey.processing_config`: self-calibration, ground removal, clustering,
+  two-box gate, re-search, fit, quality gate), once per estimator; its detections are matched
+  to the laid-out markers by their station-frame centres (:func:`pipeline.evaluation.
+  evaluate_rows`). A marker no detection matched is still a row, rejected as
+  :data:`NOT_DETECTED`, so the table's acceptance rate is the chain's.
+- ``truth-seeded`` (a diagnostic, :func:`measure_markers`): each marker's points are
+  re-searched within ``research_radius_m`` of its true position (as a total station would guide
+  it), skipping ground removal, clustering and the gate; the fit starts from the points above
+  the marker's equator (:func:`pipeline.geometric_sphere_fit.cap_start`). It shows what the
+  fit and quality gate alone make of a marker, not what the chain delivers.
+
 Given the sensor's range noise, the fit and the quality gate take their scales from it, as in
 :mod:`pipeline.process`.
 """
@@ -20,21 +31,29 @@ import numpy as np
 
 from markerplan.constants import GOLDEN_ANGLE_RAD
 from markerplan.errors import ConfigError, DataError
+from pipeline.evaluation import reference_from_truth
 from pipeline.gate import RangeIndex
 from pipeline.geometric_sphere_fit import cap_start
 from pipeline.marker_table import MarkerRow, line_of_sight
+from pipeline.process import process_station
 from pipeline.quality import QualityConfig, marker_metrics, quality_gate
 from pipeline.rig import MountingOffsets
 from pipeline.scan_format import StationScan
 from pipeline.sensor_noise import RangeNoise
 from pipeline.sphere_fit import METHODS, fit_sphere
+from pipeline.survey import ProcessingSettings, processing_config
 from pipeline.synthesis import synthesize
 
 #: Horizontal LiDAR-to-marker distances of the published range experiment, metres.
 RANGE_STUDY_DISTANCES_M = np.r_[np.arange(1.0, 16.0, 1.0), np.arange(17.0, 26.0, 2.0),
                                 np.arange(30.0, 51.0, 5.0)]
 
-SUMMARY_COLUMNS = ("estimator", "distance_m", "n_rows", "n_fitted", "n_accepted",
+#: How the markers are extracted: the station chain (default) or the truth-seeded diagnostic.
+EXTRACTIONS = ("full-chain", "truth-seeded")
+#: ``reason`` of a laid-out marker that no detection of the chain matched.
+NOT_DETECTED = "not_detected"
+
+SUMMARY_COLUMNS = ("estimator", "distance_m", "n_rows", "n_detected", "n_fitted", "n_accepted",
                    "median_n_points", "median_point_density_per_m2", "median_error_m",
                    "p95_error_m", "median_error_accepted_m")
 
@@ -105,7 +124,8 @@ def measure_markers(scan: StationScan, centres_m: np.ndarray, ids: list[str],
                     quality: QualityConfig | None = None, replicate: int = 0,
                     seed: int | None = None, noise: RangeNoise | None = None
                     ) -> list[MarkerRow]:
-    """Fit every known marker of a scan with each estimator.
+    """The ``truth-seeded`` diagnostic: fit every known marker at its true position with each
+    estimator, skipping ground removal, clustering and the gate (see the module docstring).
 
     Parameters
     ----------
@@ -133,9 +153,7 @@ def measure_markers(scan: StationScan, centres_m: np.ndarray, ids: list[str],
         ``n_points = 0``, ``accepted = false``, ``reason = too_few_points`` and no error.
     """
     quality = (quality or QualityConfig()).validate()
-    bad = [m for m in methods if m not in METHODS]
-    if bad or not methods:
-        raise ConfigError(f"`methods` must be a non-empty subset of {METHODS}, got {methods}")
+    _check_methods(methods)
     cloud = synthesize(scan, offsets)
     index = RangeIndex(cloud.xyz_m, cloud.range_m)
     rows = []
@@ -152,10 +170,8 @@ def measure_markers(scan: StationScan, centres_m: np.ndarray, ids: list[str],
                 except DataError:  # degenerate points or none used: no fit
                     fit = None
             if fit is None:
-                dist, elev, az = line_of_sight(truth)
-                rows.append(MarkerRow(scan.station_id, mid, *truth, dist, elev, az, 0, 0.0, 0.0,
-                                      float("nan"), float("nan"), method, False,
-                                      "too_few_points", replicate=replicate, seed=seed))
+                rows.append(lost_marker_row(scan.station_id, mid, truth, method,
+                                            "too_few_points", replicate, seed))
                 continue
             metrics = marker_metrics(pts, fit, noise=noise)
             ok, reason = quality_gate(fit, metrics, quality)
@@ -169,31 +185,99 @@ def measure_markers(scan: StationScan, centres_m: np.ndarray, ids: list[str],
     return rows
 
 
+def chain_markers(scan: StationScan, truth: dict, radius_m: float = 0.1,
+                  methods: tuple[str, ...] = METHODS, replicate: int = 0,
+                  seed: int | None = None, noise: RangeNoise | None = None
+                  ) -> list[MarkerRow]:
+    """The ``full-chain`` extraction: run the station chain of ``process`` / ``verify`` on the
+    scan once per estimator and give every laid-out marker its row.
+
+    Parameters
+    ----------
+    scan : StationScan
+        A simulated scan of the layout.
+    truth : dict
+        Its simulator truth (marker ids and station-frame centres,
+        :func:`visibility.simulate.simulate_markers`).
+    radius_m : float
+        Marker radius, metres (the fit's radius; the radius-scaled stage lengths follow it).
+    methods : tuple of str
+        Estimators; the chain runs once with each as its ``fit.method``.
+    replicate, seed : int
+        Written into the rows.
+    noise : RangeNoise, optional
+        The sensor's range noise (default: the one the scan records).
+
+    Returns
+    -------
+    rows : list of MarkerRow
+        Per estimator: one row per laid-out marker in truth order — the chain's detection
+        matched to it (accepted or rejected with the quality gate's reason, its error against
+        the truth), or, if none matched, a rejected :data:`NOT_DETECTED` row at the true centre
+        with no points and no error — then the detections that matched no marker (empty
+        ``marker_id``, no error).
+    """
+    _check_methods(methods)
+    reference = reference_from_truth(truth, "range-study layout")
+    rows = []
+    for method in methods:
+        cfg = processing_config(ProcessingSettings(marker_radius_m=radius_m, estimator=method))
+        result = process_station(scan, cfg, reference, noise=noise, replicate=replicate,
+                                 seed=seed)
+        matched = {r.marker_id: r for r in result.rows if r.marker_id}
+        rows += [matched.get(mid) or lost_marker_row(scan.station_id, mid, centre, method,
+                                                     NOT_DETECTED, replicate, seed)
+                 for mid, centre in zip(reference.ids, reference.centres_m, strict=True)]
+        rows += [r for r in result.rows if not r.marker_id]
+    return rows
+
+
+def lost_marker_row(station_id: str, marker_id: str, centre_m: np.ndarray, estimator: str,
+                    reason: str, replicate: int, seed: int | None) -> MarkerRow:
+    """The rejected row of a marker that was not fitted: placed at its true centre
+    ``centre_m`` ((3,) float, station frame, m), no points, no fit, no error."""
+    dist, elev, az = line_of_sight(centre_m)
+    return MarkerRow(station_id, marker_id, *(float(v) for v in centre_m), dist, elev, az, 0,
+                     0.0, 0.0, float("nan"), float("nan"), estimator, False, reason,
+                     replicate=replicate, seed=seed)
+
+
+def _check_methods(methods: tuple[str, ...]) -> None:
+    """Refuse an empty or unknown set of estimators."""
+    bad = [m for m in methods if m not in METHODS]
+    if bad or not methods:
+        raise ConfigError(f"`methods` must be a non-empty subset of {METHODS}, got {methods}")
+
+
 def summarise(rows: list[MarkerRow], distances_m: dict[str, float]) -> list[dict]:
     """Per estimator and distance: counts, median density, median / 95th-percentile error.
 
     Parameters
     ----------
     rows : list of MarkerRow
-        All replicates.
+        All replicates; rows of no laid-out marker (detections the chain matched to none) are
+        left out (:func:`unmatched_counts` counts them).
     distances_m : dict
         Nominal horizontal distance of each marker id.
 
     Returns
     -------
     summary : list of dict
-        Keys :data:`SUMMARY_COLUMNS`, sorted by estimator then distance; errors are NaN where
-        no marker could be fitted.
+        Keys :data:`SUMMARY_COLUMNS`, sorted by estimator then distance; ``n_detected``
+        counts the rows that are not :data:`NOT_DETECTED`; errors are NaN where no marker
+        could be fitted.
     """
     out = []
     for method in sorted({r.estimator for r in rows}):
         for d in sorted(set(distances_m.values())):
-            sel = [r for r in rows if r.estimator == method and distances_m[r.marker_id] == d]
+            sel = [r for r in rows
+                   if r.estimator == method and distances_m.get(r.marker_id) == d]
             fitted = [r for r in sel if r.error_m is not None]
             err = np.array([r.error_m for r in fitted])
             acc = np.array([r.error_m for r in fitted if r.accepted])
             out.append({
                 "estimator": method, "distance_m": d, "n_rows": len(sel),
+                "n_detected": sum(r.reason != NOT_DETECTED for r in sel),
                 "n_fitted": len(fitted), "n_accepted": int(sum(r.accepted for r in sel)),
                 "median_n_points": float(np.median([r.n_points for r in sel])) if sel else 0.0,
                 "median_point_density_per_m2": float(np.median(
@@ -202,6 +286,22 @@ def summarise(rows: list[MarkerRow], distances_m: dict[str, float]) -> list[dict
                 "p95_error_m": float(np.percentile(err, 95)) if err.size else float("nan"),
                 "median_error_accepted_m": float(np.median(acc)) if acc.size else float("nan"),
             })
+    return out
+
+
+def unmatched_counts(rows: list[MarkerRow], distances_m: dict[str, float]) -> dict[str, dict]:
+    """Per estimator, the detections that matched no laid-out marker (clutter the chain
+    kept; none on the planar ground unless something is wrong) and how many it accepted.
+
+    Returns
+    -------
+    counts : dict
+        ``{estimator: {"n_rows": int, "n_accepted": int}}``, every estimator of ``rows``.
+    """
+    out = {}
+    for method in sorted({r.estimator for r in rows}):
+        sel = [r for r in rows if r.estimator == method and r.marker_id not in distances_m]
+        out[method] = {"n_rows": len(sel), "n_accepted": sum(r.accepted for r in sel)}
     return out
 
 
@@ -220,7 +320,8 @@ def plot(summary: list[dict], rows: list[MarkerRow], distances_m: dict[str, floa
         s = [x for x in summary if x["estimator"] == method]
         d = np.array([x["distance_m"] for x in s])
         c = colours.get(method, None)
-        pts = [r for r in rows if r.estimator == method and r.error_m is not None]
+        pts = [r for r in rows if r.estimator == method and r.error_m is not None
+               and r.marker_id in distances_m]
         ax2.scatter([distances_m[r.marker_id] for r in pts], [r.error_m * 1e3 for r in pts],
                     s=6, alpha=0.3, color=c)
         ax2.plot(d, [x["median_error_m"] * 1e3 for x in s], "-o", ms=3, color=c,

@@ -20,7 +20,8 @@ STATION_COLUMNS = ("station_id", "n_points", "n_frames", "n_candidates", "n_acce
                    "vertical_axis_error_deg", "sigma_vertical_axis_error_deg",
                    "lframe_tilt_deg", "sigma_lframe_tilt_deg", "axis_offset_x_m",
                    "axis_offset_y_m", "sigma_axis_offset_x_m", "sigma_axis_offset_y_m",
-                   "n_spheres")
+                   "n_spheres", "axis_offset_estimate_x_m", "axis_offset_estimate_y_m",
+                   "axis_offset_chi2", "axis_offset_resolved")
 EDGE_COLUMNS = ("station_id", "marker_a", "marker_b", "reference_length_m",
                 "estimated_length_m", "residual_m")
 
@@ -29,6 +30,7 @@ def station_record(result: StationResult) -> dict[str, Any]:
     """One ``stations.csv`` row (degrees at this edge only)."""
     s, c = result.summary, result.calibration
     sig_ax = c.get("sigma_axis_offset_m", [None, None])
+    est = c.get("axis_offset_estimate_m", [None, None])
     deg = (lambda v: None if v is None else float(np.degrees(v)))  # noqa: E731
     return {
         **{k: s.get(k) for k in STATION_COLUMNS[:12]},
@@ -41,6 +43,9 @@ def station_record(result: StationResult) -> dict[str, Any]:
         "axis_offset_y_m": result.offsets.axis_offset_m[1],
         "sigma_axis_offset_x_m": sig_ax[0], "sigma_axis_offset_y_m": sig_ax[1],
         "n_spheres": c.get("n_spheres"),
+        "axis_offset_estimate_x_m": est[0], "axis_offset_estimate_y_m": est[1],
+        "axis_offset_chi2": c.get("axis_offset_chi2"),
+        "axis_offset_resolved": c.get("axis_offset_resolved"),
     }
 
 

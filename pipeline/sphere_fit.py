@@ -14,7 +14,10 @@ position of the scanner in that same frame, and return a :class:`SphereFit`.
     whose residual exceeds 3 standard deviations, fit again; repeat (2)-(3) from the new centre
     until the centre moves less than ``tol_m`` (or ``max_iter`` times: a loop that does not
     converge cycles through a few point sets, and is stopped where ``max_iter`` would leave it
-    once the cycle has been seen twice).
+    once the cycle has been seen twice). The centre is held within ``max_shift_m`` (default one
+    diameter) of the initial estimate: a fit of a handful of trimmed points can otherwise jump
+    metres (4.7 m from a start 2 cm off, 8 points at 24 m), and a fit held on that bound is
+    reported not converged.
 
     *With the sensor's range noise given* (``noise``, a :class:`~pipeline.sensor_noise.RangeNoise`)
     the same procedure runs on line-of-sight residuals instead
@@ -98,7 +101,7 @@ def fit_sphere(points_m: np.ndarray, radius_m: float, sensor_m=(0.0, 0.0, 0.0),
                method: str = DEFAULT_METHOD, *, tol_m: float = 1e-7, max_iter: int = 100,
                max_correspondence_m: float | None = None,
                centre0_m: np.ndarray | None = None,
-               noise: RangeNoise | None = None) -> SphereFit:
+               noise: RangeNoise | None = None, max_shift_m: float | None = None) -> SphereFit:
     """Estimate the centre of a sphere of known radius seen from ``sensor_m``.
 
     Parameters
@@ -124,6 +127,10 @@ def fit_sphere(points_m: np.ndarray, radius_m: float, sensor_m=(0.0, 0.0, 0.0),
         The scanner's range noise. ``fixed-radius`` then fits line-of-sight residuals, which
         removes the noise bias (:mod:`pipeline.line_of_sight_fit`); ``None`` (default): the
         ASTM fit of ``|p - c| - R``. ``hemisphere-icp`` does not use it.
+    max_shift_m : float, optional
+        ``fixed-radius`` only: the centre stays within this distance of the initial centre
+        (the start or the closest-point estimate), metres; default ``2 radius_m`` (the
+        closest-point estimate can be a radius off when a mount stands in front).
 
     Returns
     -------
@@ -138,7 +145,7 @@ def fit_sphere(points_m: np.ndarray, radius_m: float, sensor_m=(0.0, 0.0, 0.0),
         or no sphere of the radius fits (no point used, or the fit diverged).
     ConfigError
         ``radius_m`` not a positive finite number, bad ``sensor_m``, ``method``, ``tol_m``,
-        ``max_iter``, ``max_correspondence_m`` or ``centre0_m``.
+        ``max_iter``, ``max_correspondence_m``, ``centre0_m`` or ``max_shift_m``.
 
     Examples
     --------
@@ -159,9 +166,13 @@ def fit_sphere(points_m: np.ndarray, radius_m: float, sensor_m=(0.0, 0.0, 0.0),
             raise ConfigError(f"`centre0_m` must be three finite numbers, got {centre0_m!r}")
     if noise is not None and not isinstance(noise, RangeNoise):
         raise ConfigError(f"`noise` must be a RangeNoise or None, got {type(noise).__name__}")
+    shift = 2.0 * float(radius_m) if max_shift_m is None else _number(max_shift_m, "max_shift_m")
+    if not (shift > 0 and np.isfinite(shift)):
+        raise ConfigError(f"`max_shift_m` must be a positive number of metres, got "
+                          f"{max_shift_m!r}")
     if method == "fixed-radius":
         return _result_iv(_astm_e3125(p, float(radius_m), sensor, centre0, tol_m,
-                                      int(max_iter), noise))
+                                      int(max_iter), noise, shift))
     corr = radius_m / 2 if max_correspondence_m is None else float(max_correspondence_m)
     return _result_iv(_hemisphere_icp(p, float(radius_m), sensor, centre0, corr, tol_m,
                                       int(max_iter)))
@@ -281,8 +292,12 @@ def _residuals(p: np.ndarray, centre: np.ndarray, radius: float) -> np.ndarray:
     return np.linalg.norm(p - centre, axis=1) - radius
 
 
-def _astm_e3125(p, radius, sensor, centre, tol_m, max_iter, noise=None) -> SphereFit:
+def _astm_e3125(p, radius, sensor, centre, tol_m, max_iter, noise=None,
+                max_shift_m=np.inf) -> SphereFit:
     """The ASTM E3125 loop; with ``noise`` on line-of-sight residuals (module docstring).
+
+    Every fitted centre is held within ``max_shift_m`` of the initial ``centre``
+    (:func:`_held_near`); a fit that ends on that bound is not converged.
 
     A loop that does not converge falls into a cycle: the points selected and kept repeat with
     a short period (2 to 12 iterations on the simulated stations) while the centre alternates
@@ -291,8 +306,13 @@ def _astm_e3125(p, radius, sensor, centre, tol_m, max_iter, noise=None) -> Spher
     cycle that iteration ``max_iter`` would reach (:func:`_cycle_period`): the same sets and,
     up to the Gauss-Newton stopping tolerance, the same centre, at a fraction of the cost.
     """
-    select, solve = (_geometric_steps(p, radius, sensor) if noise is None
-                     else astm_beam_steps(p, radius, sensor, noise))
+    start = centre
+
+    def hold(c):
+        return _held_near(c, start, max_shift_m)
+
+    select, solve = (_geometric_steps(p, radius, sensor, hold) if noise is None
+                     else astm_beam_steps(p, radius, sensor, noise, hold))
     used = np.ones(p.shape[0], dtype=bool)
     converged = False
     it = 0
@@ -320,8 +340,22 @@ def _astm_e3125(p, radius, sensor, centre, tol_m, max_iter, noise=None) -> Spher
             it = max_iter
             break
     res = _residuals(p[used], centre, radius)
+    held = np.linalg.norm(centre - start) >= max_shift_m * (1 - 1e-9)
     return SphereFit(centre, radius, float(np.sqrt(np.mean(res ** 2))), p.shape[0],
-                     int(used.sum()), used, "fixed-radius", it, converged)
+                     int(used.sum()), used, "fixed-radius", it, converged and not held)
+
+
+def _held_near(centre: np.ndarray, start: np.ndarray, max_shift_m: float) -> np.ndarray:
+    """``centre``, or its projection onto the ball of radius ``max_shift_m`` about ``start``.
+
+    Examples
+    --------
+    >>> _held_near(np.array([3.0, 4.0, 0.0]), np.zeros(3), 1.0).tolist()
+    [0.6000000000000001, 0.8, 0.0]
+    """
+    shift = centre - start
+    length = float(np.linalg.norm(shift))
+    return centre if length <= max_shift_m else start + shift * (max_shift_m / length)
 
 
 def _cycle_period(states: list) -> int:
@@ -338,16 +372,17 @@ def _cycle_period(states: list) -> int:
     return 0
 
 
-def _geometric_steps(p, radius, sensor):
+def _geometric_steps(p, radius, sensor, hold):
     """The ASTM steps on the points: the 60 deg cone/cylinder about the centre, and the
-    geometric fixed-radius fit with its ``|p - c| - R`` residuals."""
+    geometric fixed-radius fit, its centre passed through ``hold``, with its ``|p - c| - R``
+    residuals."""
     half = np.radians(ASTM_CONE_DEG / 2)
 
     def select(centre):
         return _cone_cylinder(p, radius, sensor, centre, half)
 
     def solve(sel, start):
-        c = lsq_fixed_radius(p[sel], radius, start)
+        c = hold(lsq_fixed_radius(p[sel], radius, start))
         return c, _residuals(p[sel], c, radius)
 
     return select, solve

@@ -41,6 +41,7 @@ research ``radius_m``    ``max(radius_m, 2 R + radius_sigma * sigma)``: every no
 fit                      fixed-radius fit on line-of-sight residuals (:mod:`.sphere_fit`)
 quality ``high_rms``     ``max_rms_sigma`` times the marker's expected RMS (:mod:`.quality`)
 quality radius check     tolerance plus ``radius_sigma`` standard errors of the free radius
+                         (held in [R/4, 4R]; one-sided beyond the footprint limit)
 =======================  ======================================================================
 
 The cluster ``tolerance_m`` (2 R) is not widened: range noise moves points along the line of
@@ -58,6 +59,8 @@ import numpy as np
 
 from markerplan.errors import ConfigError
 from pipeline.calibration import CalibrationConfig
+from pipeline.gate import GATE_SPILL_FRACTION
+from pipeline.ground import GROUND_MAX_SLOPE, STEEPNESS_TOLERANCE_M, SUPPORT_RADIUS_M
 from pipeline.quality import QualityConfig
 from pipeline.rig import MountingOffsets
 from pipeline.sensor_noise import RangeNoise
@@ -71,15 +74,18 @@ class CalibrateStage(CalibrationConfig):
     With ``enabled = False`` the given offsets are applied as known values.
     ``axis_offset_rounds``: estimate the axis offset, (first round) re-estimate the angles with
     it, re-fit the spheres (new inlier sets); repeat this many times.
-    ``redetect_axis_offset_m``: the first detection runs before the axis offset is known, on a
-    cloud whose direct and reverse faces are ``2 |d|`` apart; when the first estimate of ``|d|``
-    exceeds this, the candidates are detected again on the corrected cloud (a marker on a crater
-    rim, smeared into the rim's ground points, can fail the two-box gate on the first pass).
+    ``redetect_shift_m``: the first detection runs before the axis offset is known, on a
+    cloud whose direct and reverse faces are ``2 |d|`` apart; when the first round's offsets
+    move any return within the ground stage's ``max_range_m`` by more than this (metres,
+    :func:`pipeline.calibration.largest_shift_m`), the candidates are detected again on the
+    corrected cloud (a marker on a crater rim, smeared into the rim's ground points, can fail
+    the two-box gate on the first pass; so can one whose gate verdict was borderline). The
+    default, 1 mm, is half the range resolution: any offset the spheres resolve re-detects.
     """
 
     enabled: bool = True
     axis_offset_rounds: int = 2
-    redetect_axis_offset_m: float = 0.005
+    redetect_shift_m: float = 0.001
     vertical_axis_error_rad: float = 0.0
     lframe_tilt_rad: float = 0.0
     axis_offset_x_m: float = 0.0
@@ -90,9 +96,9 @@ class CalibrateStage(CalibrationConfig):
         if int(self.axis_offset_rounds) < 1:
             raise ConfigError(f"calibrate `axis_offset_rounds` must be >= 1, got "
                               f"{self.axis_offset_rounds}")
-        if not self.redetect_axis_offset_m >= 0:
-            raise ConfigError(f"calibrate `redetect_axis_offset_m` must be >= 0 metres, got "
-                              f"{self.redetect_axis_offset_m}")
+        if not self.redetect_shift_m >= 0:
+            raise ConfigError(f"calibrate `redetect_shift_m` must be >= 0 metres, got "
+                              f"{self.redetect_shift_m}")
         return self
 
     def offsets(self) -> MountingOffsets:
@@ -110,17 +116,28 @@ class GroundStage:
 
     ``min_height_m`` defaults to 0.10 m, not the published 0.2 m: our markers sit on the ground
     (centre = ground + 0.10 m), so nothing of a 0.20 m sphere is 0.2 m above the ground.
+    ``max_slope``, ``steepness_tolerance_m``, ``support_radius_m``: the steepness test
+    (:func:`pipeline.ground.remove_ground`): terrain up to ``max_slope`` (rise over run) is
+    ground, so crater walls and rims do not chain a nearby marker into a rim cluster.
     """
 
     cell_m: float = 0.5
     min_height_m: float = 0.1
     min_range_m: float = 0.5
     max_range_m: float = 60.0
+    max_slope: float = GROUND_MAX_SLOPE
+    steepness_tolerance_m: float = STEEPNESS_TOLERANCE_M
+    support_radius_m: float = SUPPORT_RADIUS_M
 
     def validate(self) -> GroundStage:
         if not self.cell_m > 0 or not self.min_height_m >= 0:
             raise ConfigError(f"ground stage needs cell_m > 0 and min_height_m >= 0, got "
                               f"{self.cell_m}, {self.min_height_m}")
+        if not (self.max_slope >= 0 and self.steepness_tolerance_m >= 0
+                and self.support_radius_m > 0):
+            raise ConfigError(f"ground stage needs max_slope >= 0, steepness_tolerance_m >= 0 "
+                              f"and support_radius_m > 0, got {self.max_slope}, "
+                              f"{self.steepness_tolerance_m}, {self.support_radius_m}")
         if not 0 <= self.min_range_m < self.max_range_m:
             raise ConfigError(f"ground stage needs 0 <= min_range_m < max_range_m, got "
                               f"{self.min_range_m}, {self.max_range_m}")
@@ -144,11 +161,14 @@ class ClusterStage:
 @dataclass(frozen=True)
 class GateStage:
     """``gate``: edges of the large and the small cube, metres; widening of the large cube in
-    range-noise sigmas (module docstring)."""
+    range-noise sigmas (module docstring); the share of a cluster's points that may spill out
+    of the large cube (a near sphere's mixed-return tail, :func:`pipeline.gate.gate_verdicts`).
+    """
 
     max_box_m: float = 0.30
     min_box_m: float = 0.05
     max_box_sigma: float = 6.0
+    spill_fraction: float = GATE_SPILL_FRACTION
 
     def validate(self) -> GateStage:
         if not 0 < self.min_box_m < self.max_box_m:
@@ -156,6 +176,9 @@ class GateStage:
                               f"{self.min_box_m}, {self.max_box_m}")
         if not self.max_box_sigma >= 0:
             raise ConfigError(f"gate stage needs max_box_sigma >= 0, got {self.max_box_sigma}")
+        if not 0 <= self.spill_fraction < 0.5:
+            raise ConfigError(f"gate stage needs 0 <= spill_fraction < 0.5, got "
+                              f"{self.spill_fraction}")
         return self
 
 
@@ -234,9 +257,16 @@ class ProcessConfig:
 
 
 #: (stage, option) -> its value as a multiple of the marker radius (see the module docstring).
-RADIUS_SCALED = {("ground", "min_height_m"): 1.0, ("cluster", "tolerance_m"): 2.0,
+RADIUS_SCALED = {("ground", "min_height_m"): 1.0, ("ground", "support_radius_m"): 3.0,
+                 ("cluster", "tolerance_m"): 2.0,
                  ("gate", "max_box_m"): 3.0, ("gate", "min_box_m"): 0.5,
                  ("research", "radius_m"): 3.0}
+
+
+#: (stage, old option) -> what replaced it, for options whose meaning changed (no alias).
+REPLACED_OPTIONS = {("calibrate", "redetect_axis_offset_m"):
+                    "'redetect_shift_m' (re-detect when the calibration moves any return by "
+                    "more than this, metres; default 0.001)"}
 
 
 def build_config(options: dict[str, dict[str, Any]] | None = None) -> ProcessConfig:
@@ -259,7 +289,8 @@ def build_config(options: dict[str, dict[str, Any]] | None = None) -> ProcessCon
     ...     build_config({"gate": {"max_box": 0.3}})
     ... except ConfigError as exc:
     ...     print(exc)
-    stage 'gate' has no option 'max_box'; its options are max_box_m, min_box_m, max_box_sigma
+    stage 'gate' has no option 'max_box'; its options are max_box_m, min_box_m, max_box_sigma, \
+spill_fraction
     """
     options = options or {}
     radius = options.get("fit", {}).get("radius_m")
@@ -277,6 +308,9 @@ def build_config(options: dict[str, dict[str, Any]] | None = None) -> ProcessCon
         known = {f.name: f for f in fields(cls)}
         kwargs = {}
         for key, value in (values or {}).items():
+            if (name, key) in REPLACED_OPTIONS:
+                raise ConfigError(f"stage {name!r} option {key!r} was replaced by "
+                                  f"{REPLACED_OPTIONS[name, key]}; rename it")
             if key not in known:
                 raise ConfigError(f"stage {name!r} has no option {key!r}; its options are "
                                   f"{', '.join(known)}")

@@ -24,6 +24,7 @@ COMMANDS: dict[str, str] = {
     "fit-sphere": "fit_sphere",
     "range-study": "range_study",
     "fit-error-model": "fit_error_model",
+    "fit-detection-model": "fit_detection_model",
     "plan": "plan",
     "verify": "verify",
     "reduce": "reduce",

@@ -5,5 +5,7 @@
 - :mod:`planner.studies.sensor_calibration`: a sensor profile's free parameters fitted to a field
   experiment by simulation;
 - :mod:`planner.studies.calibration_report`: the files of ``markerplan calibrate-sensor``;
-- :mod:`planner.studies.network`: what planning a network instead of known control changes.
+- :mod:`planner.studies.network`: what planning a network instead of known control changes;
+- :mod:`planner.studies.loss_study`: where the station chain loses markers, against the
+  planner's covariates of each pair (the fate tables of the detection model).
 """

@@ -4,7 +4,9 @@ variants, the same markers resting on a planar slope with the LiDAR 0.8-1.5 m up
 
 The simulator (:func:`visibility.simulate.simulate_markers`) scans the markers laid out by
 :func:`pipeline.range_study.marker_layout` once per replicate (replicate ``r`` with seed
-``seed + r``); :func:`pipeline.range_study.measure_markers` fits each marker and
+``seed + r``); the station chain of ``process`` and ``verify`` extracts and fits the markers
+(:func:`pipeline.range_study.chain_markers`; the ``truth-seeded`` diagnostic,
+:func:`pipeline.range_study.measure_markers`, re-searches each at its true position instead) and
 :func:`pipeline.range_study.summarise` aggregates the marker tables. :func:`write_range_study`
 writes the files of ``markerplan range-study``.
 """
@@ -19,16 +21,20 @@ from pathlib import Path
 
 import numpy as np
 
+from markerplan.errors import ConfigError
 from markerplan.provenance import provenance
 from markerplan.writing import write_csv
 from pipeline.marker_table import MarkerRow, write_marker_table
 from pipeline.range_study import (
+    EXTRACTIONS,
     RANGE_STUDY_DISTANCES_M,
     SUMMARY_COLUMNS,
+    chain_markers,
     marker_layout,
     measure_markers,
     plot,
     summarise,
+    unmatched_counts,
 )
 from pipeline.stages import RADIUS_SCALED
 from visibility.dem import DEM
@@ -61,8 +67,8 @@ def run_range_study(max_distance_m: float = 50.0, frames: int = 800, replicates:
                     progress: Callable[[int], object] | None = None, *, rpm: int = 600,
                     range_noise_m: float | None = None, lidar_height_m: float = 1.0,
                     slope_deg: float = 0.0,
-                    map_tasks: Callable[[Callable, Iterable], Iterable] | None = None
-                    ) -> RangeStudy:
+                    map_tasks: Callable[[Callable, Iterable], Iterable] | None = None,
+                    extraction: str = "full-chain") -> RangeStudy:
     """Simulate and measure the range experiment, on level ground or on a slope.
 
     Parameters
@@ -96,11 +102,22 @@ def run_range_study(max_distance_m: float = 50.0, frames: int = 800, replicates:
         ``map_tasks(fn, items)`` -> iterable of ``fn(item)`` in the items' order, running the
         replicates (one task each, e.g. a :class:`planner.distributed.Executor`); default the
         built-in ``map`` (one after another in this process).
+    extraction : str
+        ``full-chain`` (the station chain of ``process`` and ``verify``, once per estimator)
+        or ``truth-seeded`` (the diagnostic re-search at each marker's true position), see
+        :mod:`pipeline.range_study`; recorded in ``config``.
 
     Returns
     -------
     study : RangeStudy
+
+    Raises
+    ------
+    ConfigError
+        An ``extraction`` not in :data:`pipeline.range_study.EXTRACTIONS`.
     """
+    if extraction not in EXTRACTIONS:
+        raise ConfigError(f"`extraction` must be one of {EXTRACTIONS}, got {extraction!r}")
     profile = profile or default_profile()
     sensor = profile.sensor_config(rpm, range_noise_m=range_noise_m)
     distances = RANGE_STUDY_DISTANCES_M[RANGE_STUDY_DISTANCES_M <= max_distance_m]
@@ -112,7 +129,7 @@ def run_range_study(max_distance_m: float = 50.0, frames: int = 800, replicates:
     station = [0.0, 0.0, lidar_height_m]
     research_radius_m = RADIUS_SCALED[("research", "radius_m")] * marker_radius_m
     task = functools.partial(replicate_rows, dem, station, centres, ids, sensor, rig, seed,
-                             marker_radius_m, research_radius_m)
+                             marker_radius_m, research_radius_m, extraction)
     rows = []
     for reps in (map_tasks or map)(task, range(replicates)):
         rows += reps
@@ -123,14 +140,14 @@ def run_range_study(max_distance_m: float = 50.0, frames: int = 800, replicates:
               "turntable": asdict(profile.turntable),
               "terrain": {"lidar_height_m": lidar_height_m, "slope_deg": slope_deg,
                           "ground": "plane through the station's foot rising towards +x"},
-              "marker_radius_m": marker_radius_m}
+              "marker_radius_m": marker_radius_m, "extraction": extraction}
     distance_of = dict(zip(ids, distances.tolist(), strict=True))
     return RangeStudy(distance_of, rows, summarise(rows, distance_of), config)
 
 
 def replicate_rows(dem: DEM, station: list[float], centres: np.ndarray, ids: list[str], sensor,
                    rig, seed: int, marker_radius_m: float, research_radius_m: float,
-                   rep: int) -> list[MarkerRow]:
+                   extraction: str, rep: int) -> list[MarkerRow]:
     """One replicate of the range experiment (a task of :func:`run_range_study`): simulate a
     scan with sensor unit and noise seed ``seed + rep`` and measure every marker in it.
 
@@ -148,7 +165,9 @@ def replicate_rows(dem: DEM, station: list[float], centres: np.ndarray, ids: lis
     seed : int
         Seed of the first replicate.
     marker_radius_m, research_radius_m : float
-        Marker radius and the re-search radius, m.
+        Marker radius and the re-search radius of the ``truth-seeded`` extraction, m.
+    extraction : str
+        ``full-chain`` or ``truth-seeded`` (:func:`run_range_study`).
     rep : int
         Replicate index.
 
@@ -157,9 +176,12 @@ def replicate_rows(dem: DEM, station: list[float], centres: np.ndarray, ids: lis
     rows : list of MarkerRow
     """
     unit = replace(sensor, unit_seed=seed + rep)  # each replicate another sensor unit
-    scan, _ = simulate_markers(dem, station, 0.0, centres + station, unit, rig, seed=seed + rep,
-                               marker_radius_m=marker_radius_m, marker_ids=ids,
-                               station_id="RANGE")
+    scan, truth = simulate_markers(dem, station, 0.0, centres + station, unit, rig,
+                                   seed=seed + rep, marker_radius_m=marker_radius_m,
+                                   marker_ids=ids, station_id="RANGE")
+    if extraction == "full-chain":
+        return chain_markers(scan, truth, marker_radius_m, replicate=rep, seed=seed + rep,
+                             noise=sensor.expected_scatter())
     return measure_markers(scan, centres, ids, radius_m=marker_radius_m,
                            research_radius_m=research_radius_m, replicate=rep, seed=seed + rep,
                            noise=sensor.expected_scatter())
@@ -200,7 +222,8 @@ def write_range_study(study: RangeStudy, folder: Path) -> dict:
     write_csv(folder / "summary.csv", SUMMARY_COLUMNS, study.summary)
     plot(study.summary, study.rows, study.distance_of, folder / "range_study.png",
          study.config["marker_radius_m"])
-    record = {"summary": study.summary,
+    record = {"extraction": study.config["extraction"], "summary": study.summary,
+              "unmatched_candidates": unmatched_counts(study.rows, study.distance_of),
               "files": ["markers.csv", "summary.csv", "range_study.png", "summary.json"],
               "provenance": provenance(study.config, command="range-study")}
     (folder / "summary.json").write_text(json.dumps(record, indent=1, sort_keys=True) + "\n")

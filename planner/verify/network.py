@@ -9,7 +9,9 @@ The closed loop of ``markerplan verify --network``, in two steps:
    mis-mounted rig of known-control ``verify``) and processed by the published chain
    (:func:`pipeline.process.process_station`) *without* a reference, so the marker table's
    ``marker_id`` column stays empty. The truth of every station (its pose and the markers' true
-   centres) is kept apart, for the comparison only.
+   centres) is kept apart, for the comparison only, and so are the fates of its planned markers
+   (:func:`planner.verify.known_control.station_fates`: the stage that lost each, against the
+   true centres; ``fates.csv`` names them by their true ids).
 2. :func:`adjust_and_compare` — the marker table goes through the steps of ``markerplan adjust``
    (:func:`pipeline.network.run.adjust_tables`): detections weighted by the error model;
    identified by gated association with the plan's markers from each station's planned pose
@@ -22,6 +24,9 @@ The closed loop of ``markerplan verify --network``, in two steps:
      into the site frame, all six pose parameters
      (:func:`planner.accuracy.known_control.pose_difference_m`);
    - achieved marker error: the adjusted minus the true centre, its length.
+
+   - identification: the association's id of every accepted planned marker's detection
+     against its true id (:func:`misidentified`), when the fates are given.
 
    Each is set beside the plan's prediction (the station's ``predicted_error_m``; a marker's
    ``predicted_error_m`` where the plan gives one, as a network plan may) and beside the
@@ -51,7 +56,7 @@ import numpy as np
 
 from markerplan.errors import ConfigError, InputFileError
 from markerplan.provenance import provenance
-from pipeline.marker_table import MarkerRow
+from pipeline.marker_table import MarkerRow, read_marker_table
 from pipeline.network.detections import Identified, StationDetections
 from pipeline.network.observations import Datum
 from pipeline.rig import MountingOffsets
@@ -59,7 +64,16 @@ from pipeline.stages import ProcessConfig
 from planner.accuracy import known_control
 from planner.distributed import Executor
 from planner.outputs.plan_file import SurveyPlan
-from planner.verify.known_control import VERIFY_SCHEMA, VERIFY_SCHEMA_VERSION
+from planner.verify.known_control import (
+    VERIFY_SCHEMA,
+    VERIFY_SCHEMA_VERSION,
+    StationFates,
+    fates_record,
+    losses_markdown,
+    losses_text,
+    stage_counts,
+    unmatched_text,
+)
 from visibility.sensor_profile import SensorProfile
 
 
@@ -172,6 +186,11 @@ class NetworkVerification:
     """Accepted detections the association left without an id."""
     sigma0_squared: float | None = None
     dof: int = 0
+    fates: dict[str, StationFates] | None = None
+    """Per station, its planned markers' fates (the simulator's truth), when known."""
+    misidentified: list[dict] = field(default_factory=list)
+    """Accepted planned markers of adjusted stations whose detection the association named
+    otherwise: station, true marker id, ``identified_as`` (``None``: left unidentified)."""
 
     @property
     def passed(self) -> bool:
@@ -217,7 +236,7 @@ def reference_station(named: str | None, plan_stations, chosen) -> str:
 def scan_plan(plan: SurveyPlan, seed: int = 0, progress: bool = True,
               offsets: MountingOffsets | None = None, station_ids: list[str] | None = None,
               profile: SensorProfile | None = None, executor: Executor | None = None
-              ) -> tuple[list[MarkerRow], dict[str, TrueStation]]:
+              ) -> tuple[list[MarkerRow], dict[str, TrueStation], dict[str, StationFates]]:
     """Simulate and process the chosen stations of a plan (step 1 of the module docstring).
 
     Parameters are those of :func:`planner.verify.known_control.verify_plan`.
@@ -229,6 +248,9 @@ def scan_plan(plan: SurveyPlan, seed: int = 0, progress: bool = True,
         station order: a ``markers.csv`` as ``markerplan process`` writes it.
     truth : dict of str to TrueStation
         Per station id.
+    fates : dict of str to StationFates
+        Per station id, its planned markers' fates (``candidate``: the row among the
+        station's ``rows``).
     """
     from pipeline.survey import ProcessingSettings, processing_config
     from planner.verify.known_control import map_stations
@@ -236,18 +258,23 @@ def scan_plan(plan: SurveyPlan, seed: int = 0, progress: bool = True,
     cfg = processing_config(ProcessingSettings(marker_radius_m=plan.marker_radius_m))
     done = map_stations(plan, functools.partial(station_rows, cfg, seed), seed, progress,
                         offsets, station_ids, profile, executor)
-    rows = [r for station, _ in done for r in station]
-    return rows, {true.station_id: true for _, true in done}
+    rows = [r for station, _, _ in done for r in station]
+    return (rows, {true.station_id: true for _, true, _ in done},
+            {true.station_id: fates for _, true, fates in done})
 
 
 def station_rows(cfg: ProcessConfig, seed: int, st, scan, truth: dict
-                 ) -> tuple[list[MarkerRow], TrueStation]:
-    """One simulated station's marker-table rows (no reference: identification comes later)
-    and its truth; ``cfg`` (:func:`pipeline.survey.processing_config`) and ``seed`` are the
-    pipeline's (a :func:`planner.verify.known_control.station_task` ``process``)."""
+                 ) -> tuple[list[MarkerRow], TrueStation, StationFates]:
+    """One simulated station's marker-table rows (no reference: identification comes later),
+    its truth and its planned markers' fates; ``cfg``
+    (:func:`pipeline.survey.processing_config`) and ``seed`` are the pipeline's (a
+    :func:`planner.verify.known_control.station_task` ``process``)."""
     from pipeline.process import process_station
+    from planner.verify.known_control import station_fates
 
-    return process_station(scan, cfg, None, seed=seed).rows, TrueStation.from_truth(truth)
+    result = process_station(scan, cfg, None, seed=seed)
+    return (result.rows, TrueStation.from_truth(truth),
+            station_fates(result, truth, st.marker_ids, cfg))
 
 
 def adjust_and_compare(tables: list[Path], plan_path: Path, error_model,
@@ -256,7 +283,8 @@ def adjust_and_compare(tables: list[Path], plan_path: Path, error_model,
                        settings: NetworkVerifySettings = NetworkVerifySettings(),
                        error_model_name: str = "",
                        planned_markers: dict[str, tuple[str, ...]] | None = None,
-                       reference: str | None = None) -> NetworkVerification:
+                       reference: str | None = None,
+                       fates: dict[str, StationFates] | None = None) -> NetworkVerification:
     """Identify, adjust and compare (step 2 of the module docstring).
 
     Parameters
@@ -280,6 +308,9 @@ def adjust_and_compare(tables: list[Path], plan_path: Path, error_model,
         named in its ``reason``.
     reference : str, optional
         The datum station (``verify --reference-station``); default the plan's.
+    fates : dict of str to StationFates, optional
+        :func:`scan_plan`'s: each station's reason names its losses, and the association's
+        ids are checked against the true ones (:func:`misidentified`).
 
     Returns
     -------
@@ -342,16 +373,20 @@ def adjust_and_compare(tables: list[Path], plan_path: Path, error_model,
         pred = predicted_station.get(sid)
         if sid not in s_ids:
             why = left_out.get(sid, "no accepted detection")
+            lost = losses_text(fates[sid].rows) if fates and sid in fates else ""
             outcomes.append(StationOutcome(sid, pred, None, None, accepted.get(sid, 0),
                                            named_count.get(sid, 0), 0, False,
-                                           f"not in the adjustment: {why}"))
+                                           f"not in the adjustment: {why}"
+                                           + (f"; {lost}" if lost else "")))
             continue
         i = s_ids.index(sid)
         achieved = known_control.pose_difference_m(result.pose[i], truth[sid].pose, radius)
         ok = achieved <= requirement
         reason = "ok" if ok else f"achieved {achieved:.3f} m > requirement {requirement:g} m"
         missing = sorted(set((planned_markers or {}).get(sid, ())) - named[sid])
-        if missing:
+        if missing and fates and sid in fates:
+            reason += f" ({unmatched_text(fates[sid], named[sid], 'identified')})"
+        elif missing:
             reason += f" (planned markers not identified: {', '.join(missing)})"
         outcomes.append(StationOutcome(sid, pred, float(stated[i]), achieved, accepted[sid],
                                        len(named[sid]), int(np.sum(kept.station == i)), ok,
@@ -361,8 +396,51 @@ def adjust_and_compare(tables: list[Path], plan_path: Path, error_model,
     rejected = [{"station_id": r.station_id, "marker_id": r.marker_id, "w": float(r.w)}
                 for r in result.rejected]
     sigma0 = None if not np.isfinite(result.sigma0_squared) else float(result.sigma0_squared)
+    wrong = misidentified(tables, identified, fates) if fates else []
     return NetworkVerification(outcomes, markers, reference, config, rejected,
-                               len(identified.unidentified), sigma0, int(result.dof))
+                               len(identified.unidentified), sigma0, int(result.dof), fates,
+                               wrong)
+
+
+def misidentified(tables: list[Path], identified: Identified,
+                  fates: dict[str, StationFates]) -> list[dict]:
+    """The accepted planned markers whose detection the association did not give their true id.
+
+    Parameters
+    ----------
+    tables : list of Path
+        The marker tables the association read (a station's accepted rows, in order, are its
+        detections).
+    identified : Identified
+        The association's ids of the adjusted stations.
+    fates : dict of str to StationFates
+        Per station, the fates of its planned markers (``candidate``: the row among the
+        station's rows of the tables).
+
+    Returns
+    -------
+    wrong : list of dict
+        ``station_id``, ``marker_id`` (the true id), ``identified_as`` (the association's id,
+        ``None`` when it left the detection unidentified), in the stations' order.
+    """
+    accepted_rows: dict[str, list[int]] = {}
+    for table in tables:
+        count: dict[str, int] = {}
+        for row in read_marker_table(table):
+            sid = row["station_id"]
+            count[sid] = count.get(sid, 0) + 1
+            if row["accepted"] == "true":
+                accepted_rows.setdefault(sid, []).append(count[sid] - 1)
+    wrong = []
+    for s, ids in zip(identified.stations, identified.ids, strict=True):
+        position = {row: j for j, row in enumerate(accepted_rows.get(s.station_id, ()))}
+        station = fates.get(s.station_id)
+        for fate in station.rows if station else ():
+            named = ids[position[fate.candidate]] if fate.accepted else fate.marker_id
+            if named != fate.marker_id:
+                wrong.append({"station_id": s.station_id, "marker_id": fate.marker_id,
+                              "identified_as": named})
+    return wrong
 
 
 def _datum_station(reference: str, stations: list) -> str:
@@ -471,11 +549,15 @@ def network_record(plan: SurveyPlan, check: NetworkVerification, seed: int, mode
     """The ``verify.json`` document of network mode (``mode: "network"``; configuration,
     version, sensor profile and the rig's true mounting offsets in the provenance)."""
     cfg = {key: value for key, value in check.config.items() if key != "tables"}
+    fates = check.fates or {}
     stations = [{"id": s.station_id, "predicted_error_m": s.predicted_error_m,
                  "adjustment_error_95_m": s.stated_error_m,
                  "achieved_error_m": s.achieved_error_m, "n_detected_markers": s.n_accepted,
                  "n_identified": s.n_identified, "n_used": s.n_used, "passed": s.passed,
-                 "reason": s.reason} for s in check.stations]
+                 "reason": s.reason, **fates_record(fates.get(s.station_id))}
+                for s in check.stations]
+    identification = ({"losses": stage_counts(fates.values()),
+                       "misidentified": check.misidentified} if check.fates else {})
     markers = [{"id": m.marker_id, "predicted_error_m": m.predicted_error_m,
                 "adjustment_error_95_m": m.stated_error_m, "achieved_error_m": m.achieved_error_m,
                 "achieved_xyz_m": list(m.achieved_xyz_m), "stations": list(m.stations)}
@@ -500,6 +582,7 @@ def network_record(plan: SurveyPlan, check: NetworkVerification, seed: int, mode
                   "marker_achieved_error_m": _worst(m.achieved_error_m for m in check.markers),
                   "marker_predicted_error_m": _worst(m.predicted_error_m
                                                      for m in check.markers)},
+        **identification,
         "adjustment": {"sigma0_squared": check.sigma0_squared, "dof": check.dof,
                        "rejected": check.rejected,
                        "unidentified_detections": check.unidentified},
@@ -559,10 +642,15 @@ def network_markdown(rec: dict) -> str:
                         for r in adj["rejected"]) or "none"
     s0 = "n/a" if adj["sigma0_squared"] is None else f"{adj['sigma0_squared']:.3f}"
     lines += ["", f"Adjustment: sigma0² {s0}, dof {adj['dof']}; removed by data snooping: "
-              f"{removed}; detections left unidentified: {adj['unidentified_detections']}.",
-              "", "`markers.csv` holds every station's detections: with every station tied, "
+              f"{removed}; detections left unidentified: {adj['unidentified_detections']}."]
+    if "losses" in rec:
+        wrong = ", ".join(f"{w['station_id']}: {w['marker_id']} as {w['identified_as'] or '—'}"
+                          for w in rec["misidentified"]) or "none"
+        lines += ["", losses_markdown(rec["losses"]),
+                  f"Accepted planned markers not identified with their true id: {wrong}."]
+    lines += ["", "`markers.csv` holds every station's detections: with every station tied, "
               "`markerplan adjust markers.csv --plan PLAN --out DIR` repeats the adjustment "
-              "with its full report."]
+              "with its full report; `fates.csv` every planned marker's fate, by its true id."]
     return "\n".join(lines) + "\n"
 
 

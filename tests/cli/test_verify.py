@@ -58,6 +58,50 @@ def test_verify_passes_and_fails_with_the_reason(tmp_path, capsys, valid_inputs)
     [s] = rec["stations"]
     assert s["id"] == "S1" and s["achieved_error_m"] is not None
     assert s["achieved_error_m"] <= requirement_m
+    # every planned marker's fate, its losses in the record and the reason
+    fates = (tmp_path / "v2" / "fates.csv").read_text().splitlines()
+    assert fates[0].startswith("trial,station_id,marker_id,distance_m,elevation_deg,")
+    assert [line.split(",")[2] for line in fates[1:]] == doc["stations"][0]["markers"]
+    assert s["n_false_accepts"] == 0 and "losses" in rec
+    for lost in s["lost"]:
+        assert f"{lost['marker_id']} " in s["reason"]
+
+
+def _files(folder):
+    return {p.name: p.read_bytes() for p in sorted(folder.iterdir())}
+
+
+@pytest.mark.slow
+def test_trials_repeat_with_their_seeds_and_one_trial_is_the_plain_verify(tmp_path, capsys,
+                                                                         valid_inputs):
+    doc = json.loads((valid_inputs / "plan" / "plan.json").read_text())
+    doc["stations"] = doc["stations"][:1]
+    one = tmp_path / "one.json"
+    one.write_text(json.dumps(doc))
+    base = ["verify", str(one), "--scheduler", "none", "--seed", "4"]
+    runs = {}
+    for name, extra in (("plain", []), ("t1", ["--trials", "1"]), ("t3", ["--trials", "3"]),
+                        ("t3-again", ["--trials", "3"])):
+        code, _, err = run_cli(capsys, base + extra + ["--out", str(tmp_path / name)])
+        assert code in (0, 1), err
+        runs[name] = _files(tmp_path / name)
+    assert runs["t1"] == runs["plain"]  # --trials 1 is verify as it was
+    assert set(runs["plain"]) == {"fates.csv", "fates.csvt", "provenance.json", "verify.json",
+                                  "verify.md"}
+    assert runs["t3"] == runs["t3-again"]  # the same seed, the same files
+    assert {"trials.csv", "trials.csvt"} <= set(runs["t3"])
+    rows = [line.split(",") for line in runs["t3"]["trials.csv"].decode().splitlines()[1:]]
+    assert [r[0] for r in rows] == ["0", "1", "2"] and rows[0][1] == "4"
+    # trial 0 is the plain verification (seed 4); the others draw other noise
+    plain = json.loads(runs["plain"]["verify.json"])["stations"][0]
+    assert float(rows[0][5]) == pytest.approx(plain["achieved_error_m"], abs=1e-6)
+    assert len({r[5] for r in rows}) == 3
+    rec = json.loads(runs["t3"]["verify.json"])
+    n = rec["pass_rate"]["n_passed"]
+    assert rec["mode"] == "trials" and n == sum(r[3] == "true" for r in rows)
+    assert rec["provenance"]["config"]["trial_seeds"][0] == 4
+    fates = runs["t3"]["fates.csv"].decode().splitlines()
+    assert len(fates) == 1 + 3 * len(doc["stations"][0]["markers"])
 
 
 @pytest.mark.slow

@@ -1,10 +1,12 @@
 """``markerplan verify --network``: the closed loop on three stations of the default plan, and
 plans it refuses in one line before simulating anything."""
 
+import csv
 import json
 
 import pytest
 
+from pipeline.fate_table import FATE_STAGES
 from tests.cli.invoke import run_cli
 from tests.cli.network_inputs import plan_document
 
@@ -66,3 +68,17 @@ def test_network_verify_of_three_default_stations(tmp_path, capsys, valid_inputs
     assert all(line.split(",")[1] == "" for line in table[1:])  # ids never from the truth
     md = (out / "verify.md").read_text()
     assert "Worst station: predicted" in md and "achieved" in md
+    # every planned station-marker pair's fate, by its true id (kept from the adjustment)
+    planned = {s["id"]: s["markers"] for s in json.loads(
+        (plan_dir / "plan.json").read_text())["stations"]}
+    fates = list(csv.DictReader((out / "fates.csv").open()))
+    assert [(f["station_id"], f["marker_id"]) for f in fates] == [
+        (sid, m) for sid in ("S1", "S2", "S3") for m in planned[sid]]
+    assert {f["stage"] for f in fates} <= set(FATE_STAGES) and (out / "fates.csvt").exists()
+    for s in rec["stations"]:
+        lost = [f for f in fates if f["station_id"] == s["id"] and f["accepted"] == "false"]
+        assert [(f["marker_id"], f["stage"]) for f in lost] == [
+            (x["marker_id"], x["stage"]) for x in s["lost"]]
+    accepted = [f for f in fates if f["accepted"] == "true"]
+    assert accepted and all(float(f["error_m"]) < 0.05 for f in accepted)
+    assert rec["misidentified"] == [] and "Planned markers lost:" in md

@@ -19,6 +19,8 @@ CONTEXTUAL = {
     "--reference": {"calibrate-sensor"},
     # adjust is always a network and takes its default from the plan or the tables
     "--reference-station": {"adjust"},
+    # each fitting command draws its own figure
+    "--plot": {"fit-detection-model"},
 }
 #: Options that reach commands under another parameter name, and why.
 PLURAL = {"--reference": "process takes several (repeatable), calibrate-sensor one"}

@@ -107,9 +107,13 @@ def test_marker_half_hidden_by_a_ridge_is_rejected_as_incomplete():
 @pytest.mark.slow
 def test_marker_on_a_crater_rim_is_found_again_once_the_axis_offset_is_known(site_and_scene):
     """A marker on the rim of the 6 m crater, 15 m from S3, rig mis-mounted (0.3 deg, 0.3 deg,
-    15 mm). The first detection runs before the axis offset is known: the smeared rim swallows
-    the marker's cluster and the two-box gate drops it. Detecting again on the corrected cloud
-    finds it."""
+    15 mm). The first detection runs before the axis offset is known; the resolved offset moves
+    the cloud, so the candidates are detected again on the corrected cloud and the rim marker
+    is found and accurate. (Before the rim-aware ground stage and the robust gate the smeared
+    rim swallowed the marker's cluster on the first pass; it no longer does, so the loss that
+    re-detection repairs is shown by
+    ``tests/pipeline/test_calibration_bias.py::test_a_marker_lost_next_to_a_rock_is_found_by_re_detection``.)
+    """
     site, _ = site_and_scene
     station, heading = site.station_position_m[2], float(site.station_heading_rad[2])
     centres = np.array([[-8.5, 14.5, 0.0], [4.5, -10.5, 0.0], [8.5, 9.5, 0.0]])
@@ -122,6 +126,3 @@ def test_marker_on_a_crater_rim_is_found_again_once_the_axis_offset_is_known(sit
     assert res.calibration["redetected"]
     rim = [r for r in res.rows if r.marker_id == "rim"]
     assert rim and rim[0].accepted and rim[0].error_m < 0.01
-    once = process_station(scan, build_config({"calibrate": {"redetect_axis_offset_m": 1.0}}),
-                           ref)
-    assert "rim" not in {r.marker_id for r in once.rows if r.accepted}

@@ -271,7 +271,7 @@ def test_cluster_files_equal_single_process_files(tmp_path, capsys, network, two
     code_two, out_two, _ = run_cli(capsys, common + ["--workers", "2",
                                                      "--out", str(tmp_path / "two")])
     assert code_one == code_two and out_one.replace("one", "two") == out_two
-    names = ["verify.json", "verify.md"] + (["markers.csv"] if network else [])
+    names = ["verify.json", "verify.md", "fates.csv"] + (["markers.csv"] if network else [])
     for name in names:
         assert (tmp_path / "one" / name).read_bytes() == (tmp_path / "two" / name).read_bytes()
 
