@@ -24,13 +24,10 @@ steepness
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
-from numba import njit
 
 from markerplan.errors import ConfigError
-from pipeline.kernels import lowest_in_cells
+from pipeline.kernels import lowest_in_cells, rise_over_cone
 
 #: Steepest terrain the ground stage takes for ground: tan 50 deg (fresh crater walls reach
 #: 38 deg, and the range noise on a wall facing the sensor steepens it between neighbouring
@@ -88,8 +85,9 @@ def rise_over_slope(xyz_m: np.ndarray, queries: np.ndarray, max_slope: float = G
     The rise of point ``p`` is ``max_q (z_p - z_q - max_slope * d_xy(p, q))`` over the lowest
     return ``q`` of every ``support_cell_m`` cell within ``support_radius_m`` of ``p``
     (horizontal distance): positive when ``p`` stands on something steeper than
-    ``max_slope`` (one compiled pass over the cloud, one over the queries; the grid covers
-    only the ``support_radius_m`` tiles around the queries).
+    ``max_slope`` (:func:`pipeline.kernels.rise_over_cone`: one compiled pass over the cloud,
+    one over the queries; the grid covers only the ``support_radius_m`` tiles around the
+    queries).
 
     Parameters
     ----------
@@ -121,8 +119,8 @@ def rise_over_slope(xyz_m: np.ndarray, queries: np.ndarray, max_slope: float = G
     queries = np.asarray(queries, dtype=np.int64)
     if not queries.size:
         return np.zeros(0)
-    return _rise_over_slope(np.ascontiguousarray(xyz_m, dtype=float), queries,
-                            float(max_slope), float(support_radius_m), float(support_cell_m))
+    return rise_over_cone(np.ascontiguousarray(xyz_m, dtype=float), queries,
+                          float(max_slope), float(support_radius_m), float(support_cell_m))
 
 
 def remove_ground(xyz_m: np.ndarray, cell_m: float = 0.5, min_height_m: float = 0.1,
@@ -168,76 +166,6 @@ def remove_ground(xyz_m: np.ndarray, cell_m: float = 0.5, min_height_m: float = 
     rise = rise_over_slope(xyz_m, high, max_slope, support_radius_m)
     above[high] = rise > steepness_tolerance_m
     return above
-
-
-@njit(cache=True, nogil=True)
-def _rise_over_slope(xyz_m, queries, max_slope, reach_m, cell_m):
-    """Compiled body of :func:`rise_over_slope`: support grid on tiles of ``reach_m``."""
-    n_q = queries.size
-    out = np.full(n_q, -np.inf)
-    per_tile = max(1, int(math.ceil(reach_m / cell_m)))  # support cells per tile edge
-    tile_m = per_tile * cell_m
-    ti0 = tj0 = ti1 = tj1 = 0
-    seen = False
-    for k in range(n_q):
-        x, y = xyz_m[queries[k], 0], xyz_m[queries[k], 1]
-        if not (math.isfinite(x) and math.isfinite(y)):
-            continue
-        ti, tj = int(math.floor(x / tile_m)), int(math.floor(y / tile_m))
-        if seen:
-            ti0, ti1, tj0, tj1 = min(ti0, ti), max(ti1, ti), min(tj0, tj), max(tj1, tj)
-        else:
-            ti0, ti1, tj0, tj1, seen = ti, ti, tj, tj, True
-    if not seen:
-        return out
-    ti0, tj0, ti1, tj1 = ti0 - 1, tj0 - 1, ti1 + 1, tj1 + 1  # the tiles a query can reach
-    nti, ntj = ti1 - ti0 + 1, tj1 - tj0 + 1
-    slot = np.full(nti * ntj, -1, dtype=np.int64)
-    n_slots = 0
-    for k in range(n_q):
-        x, y = xyz_m[queries[k], 0], xyz_m[queries[k], 1]
-        if not (math.isfinite(x) and math.isfinite(y)):
-            continue
-        ti, tj = int(math.floor(x / tile_m)), int(math.floor(y / tile_m))
-        for a in range(ti - 1, ti + 2):
-            for b in range(tj - 1, tj + 2):
-                t = (a - ti0) * ntj + b - tj0
-                if slot[t] < 0:
-                    slot[t] = n_slots
-                    n_slots += 1
-    cells = per_tile * per_tile
-    low = np.full((n_slots * cells, 3), np.inf)  # lowest return of each support cell
-    for i in range(xyz_m.shape[0]):
-        x, y = xyz_m[i, 0], xyz_m[i, 1]
-        if not (math.isfinite(x) and math.isfinite(y)):
-            continue
-        ci, cj = int(math.floor(x / cell_m)), int(math.floor(y / cell_m))
-        ti, tj = ci // per_tile, cj // per_tile
-        if ti < ti0 or ti > ti1 or tj < tj0 or tj > tj1:
-            continue
-        s = slot[(ti - ti0) * ntj + tj - tj0]
-        if s < 0:
-            continue
-        c = s * cells + (ci - ti * per_tile) * per_tile + cj - tj * per_tile
-        if xyz_m[i, 2] < low[c, 2]:
-            low[c, 0], low[c, 1], low[c, 2] = x, y, xyz_m[i, 2]
-    for k in range(n_q):
-        p = queries[k]
-        x, y, z = xyz_m[p, 0], xyz_m[p, 1], xyz_m[p, 2]
-        if not (math.isfinite(x) and math.isfinite(y)):
-            continue
-        ci, cj = int(math.floor(x / cell_m)), int(math.floor(y / cell_m))
-        best = -np.inf
-        for a in range(ci - per_tile, ci + per_tile + 1):  # per_tile cells >= the reach
-            for b in range(cj - per_tile, cj + per_tile + 1):
-                ta, tb = a // per_tile, b // per_tile
-                c = slot[(ta - ti0) * ntj + tb - tj0] * cells + (a - ta * per_tile) * per_tile \
-                    + b - tb * per_tile
-                d = math.hypot(low[c, 0] - x, low[c, 1] - y)  # inf for an empty cell
-                if d <= reach_m:
-                    best = max(best, z - low[c, 2] - max_slope * d)
-        out[k] = best
-    return out
 
 
 def _ground_iv(xyz_m, cell_m, min_height_m) -> None:

@@ -69,7 +69,7 @@ class Detection:
     ----------
     above : (n,) int
         Cloud indices of the detection subset's points in the ground stage's range band that
-        stand at least ``min_height_m`` above the local ground.
+        stand above the ground (:func:`pipeline.ground.remove_ground`: both its tests).
     above_xyz_m : (n, 3) float
         Their station-frame coordinates, metres.
     labels : (n,) int

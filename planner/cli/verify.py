@@ -115,12 +115,8 @@ def command(plan_path, error_model, seed, station_ids, offsets, profile, network
     from planner.distributed import executor
     from planner.outputs.plan_file import load_plan
     from planner.problem.inputs import select_stations
-    from planner.verify.known_control import (
-        verify_markdown,
-        verify_plan,
-        verify_record,
-        write_fates,
-    )
+    from planner.verify.fates import write_fates
+    from planner.verify.known_control import verify_markdown, verify_plan, verify_record
 
     plan = load_plan(plan_path)
     ids = select_stations([s.id for s in plan.stations], station_ids)
@@ -179,7 +175,7 @@ def _verify_network(plan_path, plan, ids, inputs, error_model, seed, offsets, pr
     from pipeline.network.observations import Datum
     from planner.distributed import executor
     from planner.outputs.plan_file import read_plan
-    from planner.verify.known_control import write_fates
+    from planner.verify.fates import write_fates
     from planner.verify.network import (
         adjust_and_compare,
         network_markdown,
@@ -243,7 +239,7 @@ def _verify_trials(plan, ids, inputs, error_model, seed, offsets, profile, n_tri
     from markerplan.errors import VerificationFailedError
     from markerplan.output_folder import output_folder
     from planner.distributed import executor
-    from planner.verify.known_control import write_fates
+    from planner.verify.fates import write_fates
     from planner.verify.trials import (
         trial_seeds,
         trials_markdown,

@@ -5,7 +5,7 @@ each station is scanned with them by the simulator (:func:`visibility.simulate.s
 the sensor and turntable errors of a sensor profile, as ``verify`` scans a plan), the scan runs
 through the full chain (:func:`pipeline.process.process_station`, configured as ``verify``
 configures it), and every marker within the sensor's range gets its fate
-(:func:`pipeline.fates.marker_fates`: the stage that lost it, or ``accepted``) beside the
+(:func:`planner.verify.fates.station_fates`: the stage that lost it, or ``accepted``) beside the
 covariates a planner has for the pair before any scan (a row of the fate table,
 :mod:`pipeline.fate_table`):
 
@@ -35,10 +35,10 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from pipeline.fate_table import FATE_COLUMNS, FATE_STAGES
-from pipeline.fates import false_accepts, marker_fates
 from pipeline.process import process_station
 from pipeline.range_study import RANGE_STUDY_DISTANCES_M, marker_layout
 from pipeline.survey import ProcessingSettings, processing_config
+from planner.verify.fates import station_fates
 from visibility.dem import DEM
 from visibility.sensor_profile import SensorProfile, default_profile
 from visibility.terrain import Crater
@@ -248,17 +248,15 @@ def station_losses(layout: LossLayout, job: LossJob) -> ScanLosses:
                                    sensor_profile=job.profile.name)
     cfg = processing_config(ProcessingSettings(marker_radius_m=layout.marker_radius_m))
     result = process_station(scan, cfg, seed=job.seed)
-    centres = [m["centre_station_m"] for m in truth["markers"]]
-    fates = marker_fates(result, centres, ids, layout.marker_radius_m, cfg.cluster.min_points,
-                         [m["n_points"] for m in truth["markers"]])
+    fates = station_fates(result, truth, ids, cfg)
     rows = []
-    for k, (fate, m) in enumerate(zip(fates, truth["markers"], strict=True)):
+    for k, fate in enumerate(fates.rows):
         row = {"layout": layout.name, "seed": job.seed, "station_id": sid,
                "marker_id": fate.marker_id}
         row.update({c: float(cov[c][k]) for c in FATE_COLUMNS[4:11]})
-        row.update(n_points=int(m["n_points"]), stage=fate.stage, reason=fate.reason)
+        row.update(n_points=fate.n_points, stage=fate.stage, reason=fate.reason)
         rows.append(row)
-    return ScanLosses(rows, len(false_accepts(result, centres, layout.marker_radius_m)))
+    return ScanLosses(rows, fates.n_false_accepts)
 
 
 def loss_jobs(layout: LossLayout, seeds: Sequence[int], groups: int = 1,

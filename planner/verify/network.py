@@ -10,7 +10,7 @@ The closed loop of ``markerplan verify --network``, in two steps:
    (:func:`pipeline.process.process_station`) *without* a reference, so the marker table's
    ``marker_id`` column stays empty. The truth of every station (its pose and the markers' true
    centres) is kept apart, for the comparison only, and so are the fates of its planned markers
-   (:func:`planner.verify.known_control.station_fates`: the stage that lost each, against the
+   (:func:`planner.verify.fates.station_fates`: the stage that lost each, against the
    true centres; ``fates.csv`` names them by their true ids).
 2. :func:`adjust_and_compare` — the marker table goes through the steps of ``markerplan adjust``
    (:func:`pipeline.network.run.adjust_tables`): detections weighted by the error model;
@@ -64,9 +64,7 @@ from pipeline.stages import ProcessConfig
 from planner.accuracy import known_control
 from planner.distributed import Executor
 from planner.outputs.plan_file import SurveyPlan
-from planner.verify.known_control import (
-    VERIFY_SCHEMA,
-    VERIFY_SCHEMA_VERSION,
+from planner.verify.fates import (
     StationFates,
     fates_record,
     losses_markdown,
@@ -74,6 +72,7 @@ from planner.verify.known_control import (
     stage_counts,
     unmatched_text,
 )
+from planner.verify.known_control import VERIFY_SCHEMA, VERIFY_SCHEMA_VERSION
 from visibility.sensor_profile import SensorProfile
 
 
@@ -270,7 +269,7 @@ def station_rows(cfg: ProcessConfig, seed: int, st, scan, truth: dict
     (:func:`pipeline.survey.processing_config`) and ``seed`` are the pipeline's (a
     :func:`planner.verify.known_control.station_task` ``process``)."""
     from pipeline.process import process_station
-    from planner.verify.known_control import station_fates
+    from planner.verify.fates import station_fates
 
     result = process_station(scan, cfg, None, seed=seed)
     return (result.rows, TrueStation.from_truth(truth),

@@ -27,13 +27,11 @@ from markerplan.writing import write_csv, write_gis_sidecars
 from pipeline.rig import MountingOffsets
 from planner.distributed import Executor
 from planner.outputs.plan_file import SurveyPlan
+from planner.verify.fates import losses_markdown, lost_by_stage, stage_counts
 from planner.verify.known_control import (
-    LOST_AT,
     VERIFY_SCHEMA,
     VERIFY_SCHEMA_VERSION,
     StationCheck,
-    losses_markdown,
-    stage_counts,
     verify_plans,
 )
 from visibility.sensor_profile import SensorProfile, default_profile
@@ -160,13 +158,12 @@ def _pair_summaries(trials: list[list[StationCheck]]) -> list[dict]:
         for j, row in enumerate(first.fates.rows):
             fates = [checks[k].fates.rows[j] for checks in trials]
             n_ok = sum(f.accepted for f in fates)
-            lost = [f.stage for f in fates if not f.accepted]
             out.append({"station_id": first.station_id, "marker_id": row.marker_id,
                         "distance_m": row.distance_m, "n_trials": len(fates),
                         "n_accepted": n_ok,
                         "accepted_rate": n_ok / len(fates),
                         "wilson_95": list(wilson_interval(n_ok, len(fates))),
-                        "lost": {s: lost.count(s) for s in LOST_AT if s in lost}})
+                        "lost": lost_by_stage(fates)})
     return out
 
 

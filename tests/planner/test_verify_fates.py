@@ -8,13 +8,8 @@ import pytest
 from error_model import default_model
 from pipeline.stages import build_config
 from planner.outputs.plan_file import PlannedStation
-from planner.verify.known_control import (
-    FATES_COLUMNS,
-    FATES_TYPES,
-    check_station,
-    stage_counts,
-    write_fates,
-)
+from planner.verify.fates import FATES_COLUMNS, FATES_TYPES, stage_counts, write_fates
+from planner.verify.known_control import check_station
 
 simulate = pytest.importorskip("visibility.simulate")
 dem_mod = pytest.importorskip("visibility.dem")

@@ -6,7 +6,8 @@ import pytest
 
 import planner.verify.known_control as kc
 from planner.outputs.plan_file import PlannedStation, SurveyPlan
-from planner.verify.known_control import FateRow, StationCheck, StationFates
+from planner.verify.fates import FateRow, StationFates
+from planner.verify.known_control import StationCheck
 from planner.verify.trials import (
     TRIALS_COLUMNS,
     trial_seeds,
