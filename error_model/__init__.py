@@ -14,12 +14,12 @@ use.
 """
 
 from error_model.config import FitConfig
-from error_model.default import default_model
+from error_model.default import default_detection_model, default_model
 from error_model.model import ErrorModel, Prediction
 from error_model.table import MarkerTable, read_marker_tables
 
-__all__ = ["ErrorModel", "FitConfig", "MarkerTable", "Prediction", "default_model",
-           "fit_error_model", "read_marker_tables"]
+__all__ = ["ErrorModel", "FitConfig", "MarkerTable", "Prediction", "default_detection_model",
+           "default_model", "fit_error_model", "read_marker_tables"]
 
 
 def __getattr__(name: str):

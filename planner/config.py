@@ -90,6 +90,14 @@ class PlanConfig:
     heading_prior_sigma_deg : float or None
         Network mode: a heading prior on every station (e.g. a sun sensor), 1-sigma degrees;
         ``None``: none; in (0, 10].
+    chance_epsilon : float or None
+        Largest probability that the plan fails because planned markers are not detected and
+        accepted (each station-marker pair with its detection model probability, independent
+        outcomes); ``None``: plan as if every planned marker is detected (the naive plan);
+        in (0, 0.5].
+    max_bias_effect_m : float or None
+        Network mode: largest shift of any station that a bias of one observation at its
+        minimal detectable size may cause, m; ``None``: not bounded; in (0, 10].
     """
 
     requirement_m: float = 0.10
@@ -115,6 +123,8 @@ class PlanConfig:
     network: bool = False
     reference_station: str | None = None
     heading_prior_sigma_deg: float | None = None
+    chance_epsilon: float | None = 0.05
+    max_bias_effect_m: float | None = None
 
     def __post_init__(self) -> None:
         _plan_config_iv(self)
@@ -179,11 +189,13 @@ BOUNDS: dict[str, tuple[float, bool, float, str]] = {
     "time_limit_s": (0.0, False, 86_400.0, " s"),
     "mip_gap": (0.0, True, 1.0, ""),
     "heading_prior_sigma_deg": (0.0, False, 10.0, " deg"),
+    "chance_epsilon": (0.0, False, 0.5, ""),
+    "max_bias_effect_m": (0.0, False, 10.0, " m"),
 }
 _INTEGERS = ("n_sectors", "min_sectors", "min_markers", "rays_per_marker", "budget")
 _FLAGS = ("exclude_crater_interiors", "allow_out_of_domain", "redundant", "network")
 #: Settings that may be ``None`` (not set).
-_OPTIONAL = ("budget", "heading_prior_sigma_deg")
+_OPTIONAL = ("budget", "heading_prior_sigma_deg", "chance_epsilon", "max_bias_effect_m")
 #: Most ids accepted in ``existing`` / ``forbidden``.
 MAX_IDS = 100_000
 
@@ -250,7 +262,9 @@ def config_from_dict(values: dict[str, Any], base: PlanConfig | None = None,
     Parameters
     ----------
     values : dict
-        Field name -> value. Lists for ``existing`` / ``forbidden`` are accepted.
+        Field name -> value. Lists for ``existing`` / ``forbidden`` are accepted, and the
+        string ``"none"`` for a setting that may be unset (``chance_epsilon = "none"``: the
+        naive plan).
     base : PlanConfig, optional
         Defaults for fields not given (default: ``PlanConfig()``).
     where : str
@@ -265,6 +279,9 @@ def config_from_dict(values: dict[str, Any], base: PlanConfig | None = None,
         raise ConfigError(f"{where}: expected a table of settings, got {type(values).__name__}")
     _reject_unknown(values, where)
     v = dict(values)
+    for name in _OPTIONAL:  # TOML has no null: "none" unsets an optional setting
+        if isinstance(v.get(name), str) and v[name].strip().lower() == "none":
+            v[name] = None
     for name in ("existing", "forbidden"):
         if name in v and isinstance(v[name], list):
             v[name] = tuple(v[name])

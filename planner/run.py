@@ -15,7 +15,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from markerplan.errors import InputFileError
-from planner.accuracy.checks import LayoutCheck, evaluate_layout
+from planner.accuracy.chance import PlanChance, plan_chance, station_odds
+from planner.accuracy.checks import LayoutCheck, evaluate_layout, station_infos
+from planner.accuracy.sampled_chance import SampledChance, sampled_chance
 from planner.problem.candidates import Candidates, candidate_sites
 from planner.problem.inputs import PlanInputs
 from planner.problem.sight import sight_problem
@@ -27,7 +29,15 @@ from planner.program.baselines import Baseline, greedy_cover, network_baseline, 
 @dataclass
 class PlanOutcome:
     """A finished planning run (inputs, intermediate products, the plan and the baselines;
-    ``candidates`` and ``visibility`` are ``None`` for a plan from a visibility table)."""
+    ``candidates`` and ``visibility`` are ``None`` for a plan from a visibility table).
+
+    ``detection`` records the detection model the pairs' chances came from
+    (:func:`planner.problem.detection_odds.detection_record`; ``None``: none, every planned
+    marker counted as detected); then ``chance`` holds the plan's exact per-station figures
+    (:func:`planner.accuracy.chance.plan_chance`; count and directions only in network mode)
+    and ``sampled`` its pass rate over sampled detection outcomes
+    (:func:`planner.accuracy.sampled_chance.sampled_chance`).
+    """
 
     inputs: PlanInputs
     config: object
@@ -39,6 +49,9 @@ class PlanOutcome:
     baselines: list[Baseline]
     as_built: LayoutCheck | None
     timings_s: dict
+    detection: dict | None = None
+    chance: PlanChance | None = None
+    sampled: SampledChance | None = None
 
     @property
     def selected_ids(self) -> list[str]:
@@ -46,12 +59,14 @@ class PlanOutcome:
 
 
 def build_problem(inputs: PlanInputs, config, error_model, progress: bool = True,
-                  map_groups=map) -> tuple[PlanProblem, Candidates, object, dict]:
+                  map_groups=map, detection_model=None
+                  ) -> tuple[PlanProblem, Candidates, object, dict]:
     """Candidates + visibility matrix + usability (:func:`planner.problem.sight.sight_problem`, its
     station groups mapped over by ``map_groups``) -> the program's input.
 
     Returns ``(problem, candidates, visibility, timings_s)``; existing markers are appended to
-    the candidate sites (ids as given) and fixed.
+    the candidate sites (ids as given) and fixed. With ``detection_model`` every pair gets its
+    chance of being detected and accepted.
     """
     timings = {}
     t = time.perf_counter()
@@ -66,14 +81,20 @@ def build_problem(inputs: PlanInputs, config, error_model, progress: bool = True
     site_xyz = np.vstack([cand.centre_m, inputs.existing_xyz])
     existing = np.r_[np.zeros(len(cand), bool), np.ones(len(inputs.existing_ids), bool)]
     sight = sight_problem(inputs, site_ids, site_xyz, config, error_model,
-                          site_existing=existing, progress=progress, map_groups=map_groups)
+                          site_existing=existing, progress=progress, map_groups=map_groups,
+                          detection_model=detection_model)
     timings.update(sight.timings_s)
     return sight.problem, cand, sight.visibility, timings
 
 
+#: Sampled detection outcomes a plan's pass rate is estimated from.
+PLAN_SAMPLES = 2000
+
+
 def make_plan(inputs: PlanInputs, config, error_model, model_name: str = "default",
               problem: PlanProblem | None = None, progress: bool = True,
-              map_groups=map) -> PlanOutcome:
+              map_groups=map, detection_model=None, detection_name: str = "default",
+              samples: int = PLAN_SAMPLES) -> PlanOutcome:
     """Run the whole plan: candidates, visibility, integer program, baselines, as-built check.
 
     Parameters
@@ -91,15 +112,34 @@ def make_plan(inputs: PlanInputs, config, error_model, model_name: str = "defaul
     map_groups : callable
         How the ray casting's station groups are mapped over (built-in ``map``: one at a time
         here), see :func:`planner.problem.sight.sight_problem`.
+    detection_model : error_model.detection.DetectionModel, optional
+        Gives each pair its chance of detection (ignored with ``problem``, which carries its
+        own or none); with ``config.chance_epsilon`` the plan holds with that chance.
+    detection_name : str
+        How the detection model is named in the outputs.
+    samples : int
+        Sampled detection outcomes for the plan's pass rate (0: none).
     """
     timings: dict = {}
     cand = vis = None
     if problem is None:
         problem, cand, vis, timings = build_problem(inputs, config, error_model, progress,
-                                                    map_groups)
+                                                    map_groups, detection_model)
     t = time.perf_counter()
     result = plan_sites(problem, config)
     timings["program"] = time.perf_counter() - t
+    detection = chance = sampled = None
+    if problem.pair_detection_p is not None:
+        from planner.problem.detection_odds import detection_record
+
+        t = time.perf_counter()
+        detection = detection_record(detection_model, detection_name) \
+            if detection_model is not None else {"name": "given with the problem"}
+        odds = station_odds(problem, station_infos(problem, config), config)
+        chance = plan_chance(problem, result.selected, config, odds)
+        if samples:
+            sampled = sampled_chance(problem, result.selected, config, samples)
+        timings["chance"] = time.perf_counter() - t
     t = time.perf_counter()
     if config.network:
         baselines = [result.greedy or network_baseline(problem, config)]
@@ -116,7 +156,8 @@ def make_plan(inputs: PlanInputs, config, error_model, model_name: str = "defaul
                                    config.replace(existing=(), forbidden=()))
     return PlanOutcome(inputs=inputs, config=config, model_name=model_name, problem=problem,
                        candidates=cand, visibility=vis, result=result, baselines=baselines,
-                       as_built=as_built, timings_s=timings)
+                       as_built=as_built, timings_s=timings, detection=detection,
+                       chance=chance, sampled=sampled)
 
 
 def plan_bounds(inputs: PlanInputs, problem: PlanProblem) -> tuple[float, float, float, float]:

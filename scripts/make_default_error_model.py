@@ -2,15 +2,18 @@
 
 Data: our own simulation of the rig with the ``calibrated`` sensor profile — the published
 range experiment (0.20 m markers every 1 m from 1-15 m, every 2 m from 15-25 m, every 5 m from
-25-50 m, 800 frames) run by ``markerplan range-study`` on six relief variants (:data:`VARIANTS`):
-the LiDAR centre 0.8 m and 1.5 m above the ground (the tripod's lowest and highest setting)
-times ground slopes of -15, 0 and +15 deg (markers resting on a plane through the station's
-foot). On a slope the markers uphill are seen up to ~15 deg higher than on level ground and the
-markers downhill up to ~15 deg lower, so at every distance the data span the elevations crater
-terrain gives (from -59 deg at 1 m to +14 deg beyond 10 m). The error model's predictors are
-distance and elevation, not height or slope: the two extreme heights span the elevations of
-every height in between, the two signs of the slope put each marker of the layout once uphill
-and once downhill, and the level variants fill the middle with markers at every azimuth. One
+25-50 m, 800 frames) run by ``markerplan range-study --extraction full-chain`` (the station chain
+of ``process`` and ``verify``: ground removal, clustering, gate, re-search, fit, quality; a
+marker the chain loses is a rejected row, so the model's domain is where the chain delivers)
+on six relief variants (:data:`VARIANTS`): the LiDAR centre 0.8 m and 1.5 m above the ground
+(the tripod's lowest and highest setting) times ground slopes of -15, 0 and +15 deg (markers
+resting on a plane through the station's foot). On a slope the markers uphill are seen up to
+~15 deg higher than on level ground and the markers downhill up to ~15 deg lower, so at every
+distance the data span the elevations crater terrain gives (from -59 deg at 1 m to +14 deg
+beyond 10 m). The error model's predictors are distance and elevation, not height or slope:
+the two extreme heights span the elevations of every height in between, the two signs of the
+slope put each marker of the layout once uphill and once downhill, and the level variants fill
+the middle with markers at every azimuth. One
 replicate per variant (variant ``k``, replicate ``r`` simulated with seed ``seed + k *
 replicates + r``) keeps the scan count of the former level-ground design (6 replicates).
 
@@ -31,12 +34,13 @@ Usage, from the project root:
     .venv/bin/python scripts/make_default_error_model.py --check    # compare, exit 1 if stale
     .venv/bin/python scripts/make_default_error_model.py --keep range/   # keep the studies
     .venv/bin/python scripts/make_default_error_model.py --frames 100 --output /tmp/m.json
-                                                                    # smoke run, ~1 min
+                                                                    # smoke run, ~1.5 min
 
 Runtime: one variant is a full 800-frame station simulation with the beam footprint and its
-processing. The six variants and the fit took 531 s of CPU time and 18 min 20 s wall on
-2026-12-01 on two cores shared with other jobs (load average ~5); on two idle cores expect
-well under 10 min (an estimate, not measured), on a loaded machine half an hour.
+processing by the full chain. The six variants and the fit took 22 min 50 s wall (8 min 9 s
+user and 20 s system CPU) on 2026-12-03 on two cores shared with four other sessions (load
+average 9-15); the smoke run (``--frames 100``) took 87 s. On two idle cores expect well under
+10 min (an estimate, not measured).
 """
 
 from __future__ import annotations
@@ -65,6 +69,9 @@ FRAMES = 800
 STUDY_SEED = 0
 FIT_SEED = 0
 ESTIMATOR = "fixed-radius"
+#: The station chain of ``process`` and ``verify`` (ground removal, clustering, gate,
+#: re-search, fit, quality); ``truth-seeded`` is a diagnostic and never feeds the model.
+EXTRACTION = "full-chain"
 EXTRA_CANDIDATES = ("visible_fraction",)
 
 
@@ -78,7 +85,7 @@ def run_variants(folder: Path, profile: str, replicates: int, frames: int,
         cli.main(args=["range-study", "--out", str(out), "--sensor-profile", profile,
                        "--replicates", str(replicates), "--frames", str(frames),
                        "--seed", str(seed + k * replicates), "--lidar-height-m", str(height),
-                       "--slope-deg", str(slope)],
+                       "--slope-deg", str(slope), "--extraction", EXTRACTION],
                  prog_name="markerplan", standalone_mode=False)
         tables.append(out / "markers.csv")
     return tables
@@ -89,7 +96,8 @@ def build_model(tables: list[Path], profile: str, replicates: int, frames: int, 
     variants = ", ".join(f"{h} m / {s:+.0f} deg" for h, s in VARIANTS)
     description = (f"simulation of the rig with sensor profile {profile}: `markerplan "
                    f"range-study --sensor-profile {profile} --replicates {replicates} --frames "
-                   f"{frames} --lidar-height H --slope-deg S` for (H, S) in {variants}, seeds "
+                   f"{frames} --lidar-height H --slope-deg S --extraction {EXTRACTION}` for "
+                   f"(H, S) in {variants}, seeds "
                    f"from {seed}; estimator {ESTIMATOR}, optional predictors offered "
                    f"{list(EXTRA_CANDIDATES)}; regenerated by "
                    "scripts/make_default_error_model.py")

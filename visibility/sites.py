@@ -23,6 +23,18 @@
 
 The layouts are fixed; only the terrain randomness depends on ``seed`` (default 0), and random
 craters and rocks keep out of stations and markers.
+
+Orbital planning DEM
+--------------------
+Beside its fine truth terrain (what ``verify`` simulates), ``default`` and ``large`` have an
+orbital-grade planning DEM, :func:`planning_dem` (``kind="orbital"``,
+:func:`visibility.orbital.orbital_dem`): the truth block-averaged onto the 2 m posts of an LROC
+NAC stereo DTM (the finest orbital product of the Moon; a LOLA site product is 5 m) plus a
+Gaussian height error of 0.3 m RMS correlated over 10 m (:data:`ORBITAL_GRADES`). 0.3 m is the
+low end of LOLA's 0.3-0.5 m median error and about NAC DTMs' expected vertical precision; 10 m
+is five NAC posts, the scale of the stereo matching window. Rocks (0.15-2 m) and the small
+craters vanish into the 2 m means. The error field's seed is the site's seed, so
+``--site-seed`` gives another terrain and another orbital product of it.
 """
 
 from __future__ import annotations
@@ -34,6 +46,7 @@ import numpy as np
 
 from markerplan.errors import ConfigError
 from visibility.dem import DEM
+from visibility.orbital import HeightError, orbital_dem
 from visibility.terrain import Crater, CraterSpec, RockSpec, TerrainSpec, generate_terrain
 
 MARKER_RADIUS_M = 0.10
@@ -268,6 +281,63 @@ def _seated(centres_m: np.ndarray, dem: DEM, radius_m: float) -> np.ndarray:
     """(m, 3) marker centres at the same x, y resting on ``dem``: z = ground + radius (m)."""
     xy = centres_m[:, :2]
     return np.column_stack([xy, dem.height_at(xy) + radius_m])
+
+
+@dataclass(frozen=True)
+class OrbitalGrade:
+    """How a preset's orbital planning DEM is made (:func:`planning_dem`).
+
+    Attributes
+    ----------
+    cell_m : float
+        Orbital post spacing, m.
+    height_error : HeightError
+    """
+
+    cell_m: float
+    height_error: HeightError
+
+
+#: The orbital planning DEM of each preset that has one (module docstring): NAC-grade 2 m posts,
+#: 0.3 m RMS height error correlated over 10 m. ``km`` (32 M cells of truth) has none.
+ORBITAL_GRADES = {"default": OrbitalGrade(2.0, HeightError(0.3, 10.0)),
+                  "large": OrbitalGrade(2.0, HeightError(0.3, 10.0))}
+
+#: The terrains a plan can be made on: the preset's fine truth, or its orbital planning DEM.
+TERRAIN_KINDS = ("truth", "orbital")
+
+
+def planning_dem(site: Site, kind: str = "truth") -> DEM:
+    """The terrain a plan of ``site`` is made on.
+
+    Parameters
+    ----------
+    site : Site
+        A preset (:func:`load_site`).
+    kind : {"truth", "orbital"}
+        ``"truth"``: the site's own fine terrain; ``"orbital"``: its orbital-grade DEM
+        (:data:`ORBITAL_GRADES`, error field seeded by ``site.seed``).
+
+    Raises
+    ------
+    ConfigError
+        An unknown kind, or a preset without an orbital DEM.
+    """
+    if kind not in TERRAIN_KINDS:
+        raise ConfigError(f"unknown terrain {kind!r}; choose one of {', '.join(TERRAIN_KINDS)}")
+    if kind == "truth":
+        return site.dem
+    grade = orbital_grade(site.name)
+    return orbital_dem(site.dem, grade.cell_m, grade.height_error, seed=site.seed)
+
+
+def orbital_grade(name: str) -> OrbitalGrade:
+    """The orbital grade of preset ``name`` (:data:`ORBITAL_GRADES`); ConfigError when it has
+    none."""
+    if name not in ORBITAL_GRADES:
+        raise ConfigError(f"site preset {name!r} has no orbital planning DEM; use terrain "
+                          f"'truth' or one of the presets {', '.join(ORBITAL_GRADES)}")
+    return ORBITAL_GRADES[name]
 
 
 PRESETS = {"default": _default_site, "large": _large_site, "km": _km_site}

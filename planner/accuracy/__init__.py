@@ -6,5 +6,11 @@
   network's information and covariance, with the adjustment's observation model);
 - :mod:`planner.accuracy.growing`: the covariance the network greedy grows one site at a time;
 - :mod:`planner.accuracy.checks`: the exact per-station checks of a layout that the planner, the
-  baselines and the reduction studies all ask.
+  baselines and the reduction studies all ask;
+- :mod:`planner.accuracy.chance`: a station's chance of passing when planned markers may be
+  lost, exactly or with certified bounds (loss sets enumerated by size);
+- :mod:`planner.accuracy.sampled_chance`: a layout's pass rate over sampled detection outcomes
+  (both modes, the network's accuracy included);
+- :mod:`planner.accuracy.reliability`: network mode's per-observation reliability (redundancy,
+  minimal detectable bias and its largest station shift).
 """

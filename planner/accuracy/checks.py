@@ -301,6 +301,11 @@ class LayoutCheck:
         (nan where no marker is selected), m.
     markers_ok : bool
         Network mode: every selected marker meets the requirement (always True otherwise).
+    bias_effect_m : (s,) float or None
+        Network mode with ``max_bias_effect_m``: each station's largest position shift by an
+        undetected bias of one observation of minimal detectable size
+        (:func:`planner.accuracy.reliability.layout_reliability`), m; ``ok`` requires it
+        ``<= max_bias_effect_m``.
     """
 
     count: np.ndarray
@@ -311,6 +316,7 @@ class LayoutCheck:
     ok: np.ndarray
     marker_error_m: np.ndarray | None = None
     markers_ok: bool = True
+    bias_effect_m: np.ndarray | None = None
 
     @property
     def all_ok(self) -> bool:
@@ -329,7 +335,8 @@ def evaluate_layout(problem: PlanProblem, selected: np.ndarray, config,
     config : PlanConfig
         In redundant mode the layout must also survive the loss of any one marker; in network
         mode (``config.network``) the accuracy of every station and selected marker is the
-        network's (:mod:`planner.accuracy.network`).
+        network's (:mod:`planner.accuracy.network`), and with ``max_bias_effect_m`` every
+        station's largest MDB effect must stay within it.
     infos : list of StationInfo, optional
         Cache from :func:`station_infos`.
     net : planner.accuracy.network.NetworkModel, optional
@@ -386,7 +393,8 @@ def _survives_loss(count: np.ndarray, worst_sectors: np.ndarray, worst_error_m: 
 def _evaluate_network(problem: PlanProblem, selected: np.ndarray, config, net) -> LayoutCheck:
     """:func:`evaluate_layout` in network mode (directions as always, accuracy of the whole
     network: every station and every selected marker relative to the datum; redundant mode:
-    every station also after losing any one marker)."""
+    every station also after losing any one marker; ``max_bias_effect_m``: every station's
+    largest MDB effect)."""
     from planner.accuracy.network import network_model
 
     net = net or network_model(problem, config)
@@ -405,6 +413,13 @@ def _evaluate_network(problem: PlanProblem, selected: np.ndarray, config, net) -
         worst_err = np.max(np.vstack([err[None], loss]), axis=0)
         worst_sec = _worst_loss_sectors(problem, selected, config, sectors)
         ok &= _survives_loss(count, worst_sec, worst_err, config)
+    bias = None
+    if config.max_bias_effect_m is not None:
+        from planner.accuracy.reliability import layout_reliability
+
+        bias = layout_reliability(net, selected).station_effect_m
+        ok &= bias <= config.max_bias_effect_m
     return LayoutCheck(count=count, sectors=sectors, error_m=err, worst_loss_error_m=worst_err,
                        worst_loss_sectors=worst_sec, ok=ok, marker_error_m=merr,
-                       markers_ok=bool(np.all(merr[markers] <= config.requirement_m)))
+                       markers_ok=bool(np.all(merr[markers] <= config.requirement_m)),
+                       bias_effect_m=bias)

@@ -371,6 +371,47 @@ dem_option = click.option(
          ".vrt, ISIS3/PDS cubes) or .npz, in a metric CRS (UTM, lunar) or none; nodata is a "
          "mask.")
 
+def _height_error(ctx, param, text: str | None):
+    """Click callback: ``RMS_M[,CORRELATION_M]`` -> :class:`visibility.orbital.HeightError`
+    (``None`` if absent); a bad value is a usage error naming the option."""
+    from markerplan.errors import ConfigError
+    from visibility.orbital import HeightError
+
+    if text is None:
+        return None
+    try:
+        return HeightError.parse(text)
+    except ConfigError as exc:
+        raise click.BadParameter(str(exc), ctx, param) from None
+
+
+terrain_option = click.option(
+    "--terrain", type=click.Choice(["truth", "orbital"]), default="truth", show_default=True,
+    help="The preset's terrain to plan on: its fine truth, or its orbital-grade planning DEM "
+         "(2 m posts, 0.3 m RMS height error correlated over 10 m, no sub-cell rocks; "
+         "default and large). verify always simulates on the truth.")
+
+dem_height_error_option = click.option(
+    "--dem-height-error", "dem_height_error", metavar="RMS_M[,CORRELATION_M]",
+    callback=_height_error,
+    help="The planning DEM's height error: 1-sigma RMS and correlation length (default 10), "
+         "metres, of a --dem FILE, or replacing --terrain orbital's.")
+
+
+def require_truth_terrain(terrain: str, dem_path: Path | None) -> None:
+    """Refuse ``--terrain orbital`` with ``--dem`` (one-line :class:`ConfigError`): the orbital
+    DEM is a preset's, and ``--dem`` replaces the preset's terrain.
+
+    >>> require_truth_terrain("truth", Path("a.tif"))
+    """
+    from markerplan.errors import ConfigError
+
+    if terrain != "truth" and dem_path is not None:
+        raise ConfigError(f"--terrain {terrain} is a site preset's planning DEM and --dem "
+                          f"{dem_path} replaces the preset's terrain; drop --terrain (declare the "
+                          "file's error with --dem-height-error)")
+
+
 reproject_option = click.option(
     "--reproject", is_flag=True,
     help="Resample a --dem in a geographic CRS (degrees) or on non-square cells to a local "

@@ -147,10 +147,19 @@ def command(summary, marker_table, reference, out, overwrite, base_profile, fixe
         click.echo(f"warning: {warning}", err=True)
     lines = [f"{f.name} = {result.values[f.name]:.6g} +- {result.sigmas[f.name]:.2g}"
              for f in free_params]
+    if len(free_params) > 1:
+        lines.append(f"correlation {result.correlation[0][1]:+.3f}, Jacobian condition "
+                     f"{result.jacobian_condition:.3g}")
+    lines += [f"position {p['position']}: fitted {p['emulated_m'] * 1e3:.1f} mm, 95 % interval "
+              f"{p['interval95_m'][0] * 1e3:.1f}-{p['interval95_m'][1] * 1e3:.1f} mm"
+              for p in result.predictions]
     lines += [f"position {c['position']}: measured {c['measured_m'] * 1e3:.1f} mm, predicted "
               + ("none" if c["predicted_m"] is None else
                  f"{c['predicted_m'] * 1e3:.1f} mm (ratio {c['ratio']:.2f})")
               for c in result.confirmation]
     emit_summary({"out": str(out), "values": result.values, "standard_errors": result.sigmas,
+                  "correlation": result.correlation,
+                  "jacobian_condition": result.jacobian_condition,
+                  "predictions": result.predictions,
                   "confirmation": result.confirmation, "holdout": result.holdout},
                  as_json, "\n".join(lines + [f"wrote {out}"]))

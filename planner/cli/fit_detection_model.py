@@ -30,7 +30,7 @@ def command(tables: tuple[Path, ...], out: Path, folds: int, plot: bool,
     covariates of the pair; `benchmarks/loss_study.py --csv` writes them from simulated scans
     run through the full chain).
 
-    A logistic model in log distance (with hinges at 3 m and 15 m), log expected points,
+    A logistic model in log distance (with hinges at 3, 15 and 30 m), log expected points,
     visible fraction, terrain slope and crater-rim distance. Its calibration is measured on
     held-out scans (each scan's rows kept in one fold) and recorded in detection_model.json:
     Brier scores (in sample, held out, and of the constant base rate) and the reliability table.

@@ -12,6 +12,7 @@ from planner.cli._common import (
     FiniteRange,
     boundary_option,
     config_option,
+    dem_height_error_option,
     dem_option,
     emit_summary,
     error_model_option,
@@ -28,11 +29,13 @@ from planner.cli._common import (
     report_timings,
     reproject_option,
     require_dem,
+    require_truth_terrain,
     scheduler_options,
     site_option,
     site_seed_option,
     station_ids_option,
     stations_option,
+    terrain_option,
     time_limit_option,
     with_options,
 )
@@ -42,11 +45,48 @@ from planner.cli._common import (
 CELL_M = FiniteRange(0.0, 10_000.0, min_open=True)
 
 
+class ChanceEpsilon(click.ParamType):
+    """``--chance-epsilon``: a number in (0, 0.5] or ``none`` (the naive plan, :data:`NAIVE`)."""
+
+    name = "EPSILON|none"
+
+    def convert(self, value, param, ctx):
+        if isinstance(value, float) or value is NAIVE:
+            return value
+        if str(value).strip().lower() == "none":
+            return NAIVE
+        try:
+            eps = float(value)
+        except ValueError:
+            eps = math.nan
+        if not (math.isfinite(eps) and 0.0 < eps <= 0.5):
+            self.fail(f"{value!r} is not a chance in (0, 0.5] or 'none'; give e.g. 0.05 (the "
+                      "plan fails with chance at most 5 %) or none (every planned marker "
+                      "counted as detected)", param, ctx)
+        return eps
+
+
+#: ``--chance-epsilon none``: plan as if every planned marker is detected.
+NAIVE = object()
+
+
+def _load_detection_model(ctx, param, path):
+    """Click callback: ``--detection-model FILE`` -> ``(model, name)`` (default: shipped)."""
+    from error_model.default import default_detection_model
+    from error_model.detection import DetectionModel
+
+    if path is None:
+        return default_detection_model(), "default (shipped with markerplan)"
+    return DetectionModel.load(path), str(path)
+
+
 @click.command("plan")
 @site_option()
 @site_seed_option
 @dem_option
 @reproject_option
+@terrain_option
+@dem_height_error_option
 @stations_option
 @station_ids_option
 @boundary_option
@@ -59,6 +99,14 @@ CELL_M = FiniteRange(0.0, 10_000.0, min_open=True)
                    "site_x_m,site_y_m,site_z_m) instead of ray casting.")
 @click.option("--redundant", is_flag=True, default=None,
               help="Every station must survive the loss of any one marker.")
+@click.option("--chance-epsilon", "chance_epsilon", type=ChanceEpsilon(),
+              help="Largest chance that the plan fails through markers the field loses "
+                   "(default 0.05, or the config's chance_epsilon); none: count every "
+                   "planned marker as detected (the naive plan).")
+@click.option("--detection-model", "detection_model", type=FILE,
+              callback=_load_detection_model,
+              help="Detection-model JSON from fit-detection-model: each pair's chance of "
+                   "being detected and accepted (default: the shipped model).")
 @click.option("--existing",
               help="Markers already in the field, fixed: 'as-built' or a CSV (id,x_m,y_m[,z_m]).")
 @click.option("--budget", type=click.IntRange(1, 100_000),
@@ -73,10 +121,12 @@ CELL_M = FiniteRange(0.0, 10_000.0, min_open=True)
 @out_option(default="markerplan-out")
 @overwrite_option
 @json_option
-def command(site_name, site_seed, dem_path, reproject, stations_path, station_ids,
+def command(site_name, site_seed, dem_path, reproject, terrain, dem_height_error,
+            stations_path, station_ids,
             boundary_path, exclude_paths, marker_radius_m, error_model, config_path,
-            visibility_path, redundant, existing, budget, network, reference_station,
-            time_limit_s, stand_map_cell_m, scheduler, workers, out, overwrite, as_json):
+            visibility_path, redundant, chance_epsilon, detection_model, existing, budget,
+            network, reference_station, time_limit_s, stand_map_cell_m, scheduler, workers,
+            out, overwrite, as_json):
     """Plan the fewest marker sites so that every station meets the accuracy requirement.
 
     Writes under --out: plan.json, markers.csv, report.md, map.png; markers.geojson (WGS84
@@ -102,6 +152,8 @@ def command(site_name, site_seed, dem_path, reproject, stations_path, station_id
       markerplan plan --dem site.tif --stations stations.csv --exclude paths.geojson --out p/
       markerplan plan --dem site.tif --stations stations.csv --stand-map-cell-m 2 --out p/
       markerplan plan --dem lonlat.tif --reproject --stations lonlat.csv --out p/
+      markerplan plan --terrain orbital --out plan-orbital/
+      markerplan plan --dem nac.tif --dem-height-error 0.3,10 --stations s.csv --out p/
       markerplan plan --site km --scheduler tcp://10.0.0.5:8786 --out plan-km/
     """
     from markerplan.output_folder import output_folder
@@ -112,8 +164,11 @@ def command(site_name, site_seed, dem_path, reproject, stations_path, station_id
     from planner.outputs.stand_map import stand_map
 
     require_dem(reproject, dem_path)
+    require_truth_terrain(terrain, dem_path)
     inputs_given = given_paths(dem_path, stations_path, boundary_path, error_model.path,
                                config_path, visibility_path, *exclude_paths,
+                               None if detection_model[1].startswith("default") else
+                               detection_model[1],
                                None if existing == "as-built" else existing)
     progress = not as_json or sys.stderr.isatty()
     with output_folder(out, overwrite, "plan", inputs=inputs_given) as stage, \
@@ -122,7 +177,9 @@ def command(site_name, site_seed, dem_path, reproject, stations_path, station_id
                                 boundary_path, exclude_paths, marker_radius_m, error_model,
                                 config_path, visibility_path, redundant, existing, budget,
                                 time_limit_s, as_json, network, reference_station,
-                                reproject, map_groups=tasks)
+                                reproject, map_groups=tasks, terrain=terrain,
+                                dem_height_error=dem_height_error, chance_epsilon=chance_epsilon,
+                                detection_model=detection_model)
         doc = write_plan_files(outcome, stage)
         draw_plan_map(outcome, stage / "map.png")
         stand_s = {}
@@ -140,12 +197,25 @@ def command(site_name, site_seed, dem_path, reproject, stations_path, station_id
     info = {**summary(doc, out), "timings_s": timings}
     human = (f"{doc['n_markers']} markers ({solver_status_text(doc['solver'])}); worst station "
              f"{info['worst_station_error_m']:.3f} m <= {config.requirement_m:g} m; "
+             + chance_text(doc)
              + "; ".join(f"{k.replace('_', ' ')}: {v['n_markers']}"
                          for k, v in doc["baselines"].items())
              + (f"; network mode, datum {info['reference_station']}, worst marker "
                 f"{info['worst_marker_error_m']:.3f} m" if "mode" in info else "")
              + f" -> {out}/")
     emit_summary(info, as_json, human)
+
+
+def chance_text(doc: dict) -> str:
+    """The summary line's chance clause, e.g. ``"P(pass) >= 96.1 % (epsilon 0.05); "``
+    (empty without a detection model)."""
+    if "chance" not in doc:
+        return ""
+    ch = doc["chance"]
+    eps = ch["epsilon"]
+    return (f"P(pass) >= {100 * ch['plan_pass_probability']:.1f} %"
+            + (f" (epsilon {eps:g})" if eps is not None else " (no chance constraint)")
+            + "; ")
 
 
 def solver_status_text(solver: dict) -> str:
@@ -168,10 +238,13 @@ def solver_status_text(solver: dict) -> str:
 def _plan(site_name, site_seed, dem_path, stations_path, station_ids, boundary_path,
           exclude_paths, marker_radius_m, error_model, config_path, visibility_path, redundant,
           existing, budget, time_limit_s, as_json, network=None, reference_station=None,
-          reproject=False, map_groups=map):
+          reproject=False, map_groups=map, chance_epsilon=None, detection_model=None,
+          terrain="truth", dem_height_error=None):
     """Read the inputs and make the plan; return ``(outcome, config)``. A ``--dem`` is read
     only as far as the stations see (``config.max_range_m``); ``map_groups`` maps the ray
-    casting's station blocks (:func:`visibility.visibility_matrix.tiled_visibility`)."""
+    casting's station blocks (:func:`visibility.visibility_matrix.tiled_visibility`).
+    ``chance_epsilon``: ``--chance-epsilon`` (``None``: not given, :data:`NAIVE`: none);
+    ``detection_model``: ``(model, name)``, or ``None`` for none."""
     from markerplan.errors import ConfigError
     from planner.config import PlanConfig, load_config
     from planner.problem.inputs import load_inputs
@@ -181,11 +254,16 @@ def _plan(site_name, site_seed, dem_path, stations_path, station_ids, boundary_p
                           redundant=True if redundant else None, budget=budget,
                           time_limit_s=time_limit_s)
     config = network_settings(config, network, reference_station)
+    if chance_epsilon is NAIVE:
+        config = config.replace(chance_epsilon=None)
+    elif chance_epsilon is not None:
+        config = with_options(config, chance_epsilon=chance_epsilon)
     inputs = load_inputs(site_name, site_seed, dem_path=dem_path, stations_path=stations_path,
                          boundary_path=boundary_path, exclude_paths=exclude_paths,
                          existing=existing, marker_radius_m=marker_radius_m,
                          station_ids=station_ids, reproject=reproject,
-                         sight_radius_m=config.max_range_m)
+                         sight_radius_m=config.max_range_m, terrain=terrain,
+                         dem_height_error=dem_height_error)
     if inputs.existing_ids:
         config = config.replace(existing=tuple(inputs.existing_ids))
     problem = None
@@ -199,6 +277,8 @@ def _plan(site_name, site_seed, dem_path, stations_path, station_ids, boundary_p
         model, model_name = None, f"from visibility table {visibility_path}"
     else:
         model, model_name = error_model.model, error_model.name
+    dmodel, dname = detection_model if detection_model is not None else (None, "none")
     outcome = make_plan(inputs, config, model, model_name, problem=problem,
-                        progress=not as_json or sys.stderr.isatty(), map_groups=map_groups)
+                        progress=not as_json or sys.stderr.isatty(), map_groups=map_groups,
+                        detection_model=dmodel, detection_name=dname)
     return outcome, config

@@ -8,6 +8,7 @@ from pathlib import Path
 import click
 
 from planner.cli._common import (
+    FILE,
     emit_summary,
     error_model_option,
     given_paths,
@@ -24,6 +25,7 @@ from planner.cli._common import (
     station_ids_option,
 )
 from planner.cli.adjust import command as _adjust
+from planner.cli.verify_options import offset_tolerance_options
 
 #: Most trials one ``verify --trials`` runs (each is a full verification of the plan).
 MAX_TRIALS = 1000
@@ -47,6 +49,7 @@ def _adjust_options(*names: str):
 @seed_option()
 @station_ids_option
 @mounting_offset_options
+@offset_tolerance_options
 @sensor_profile_option
 @network_option
 @reference_station_option
@@ -56,13 +59,18 @@ def _adjust_options(*names: str):
               help="Verify the plan N times with independent noise and turntable-error seeds "
                    "(spawned from --seed; the first trial is --seed's) and report its pass rate "
                    "with a Wilson 95 % interval, per station and per station-marker pair.")
+@click.option("--truth-dem", "truth_dem_path", type=FILE,
+              help="Simulate on this terrain (the field's, in the plan's site frame; any DEM "
+                   "--dem reads) instead of the plan's: the preset's truth terrain, or the "
+                   "plan's --dem. Stations and markers keep their planned x, y and height "
+                   "above the ground.")
 @scheduler_options
 @out_option(required=True)
 @overwrite_option
 @json_option
-def command(plan_path, error_model, seed, station_ids, offsets, profile, network,
-            reference_station, odometry_sigma_m, odometry_heading_sigma_deg, trials, scheduler,
-            workers, out, overwrite, as_json):
+def command(plan_path, error_model, seed, station_ids, offsets, tolerance, profile, network,
+            reference_station, odometry_sigma_m, odometry_heading_sigma_deg, trials,
+            truth_dem_path, scheduler, workers, out, overwrite, as_json):
     """Check a plan by simulation: scan each station with the planned markers, process the
     scans, register each station to its detected markers, and compare achieved with predicted
     error. Exit code 1 when any station's achieved error exceeds the requirement. The plan's
@@ -83,16 +91,24 @@ def command(plan_path, error_model, seed, station_ids, offsets, profile, network
     left out of the adjustment. --reference-station names the datum: a network plan's
     predictions are relative to its own datum, so for such a plan it may only repeat it.
 
+    The scans are simulated on the truth terrain, never on a planning DEM: a plan made with
+    `plan --terrain orbital` on the preset's fine terrain, any plan with --truth-dem FILE on
+    that file; each station and marker keeps its planned x, y and height above the ground,
+    re-seated on the truth ground.
+
     Every planned marker's fate is in fates.csv: the stage of the chain that lost it
     (not_in_view, ground, cluster, gate, fit, quality) and why, or accepted, against the
     simulator's truth (its marker_id is the true id, in network mode too, where the
     adjustment never sees it); each station's reason names its losses.
 
-    With --trials N (known control), the plan is verified N times with independent seeds
-    (the first is --seed's, the others spawned from it): verify.json / verify.md give the
-    plan's pass rate with its Wilson 95 % interval, each station's and each station-marker
-    pair's rates and losses, trials.csv one row per trial and station, fates.csv a trial
-    column; exit code 1 when any trial fails.
+    With --trials N (both modes), the plan is verified N times with independent seeds (the
+    first is --seed's, the others spawned from it), each trial drawing the rig's mounting
+    offsets from N(the offsets given, the --*-tolerance-* given): verify.json / verify.md
+    give the plan's pass rate with its Wilson 95 % interval beside the plan's predicted pass
+    probability, each station's and each station-marker pair's rates and losses beside the
+    plan's predicted detection probabilities (and their calibration), trials.csv one row per
+    trial and station (with the trial's offsets), fates.csv a trial column; in network mode
+    markers/trial_NNN.csv each trial's detections. Exit code 1 when any trial fails.
 
     Each station is a task (simulated on its terrain tile, then processed) run on a dask
     cluster: --scheduler local (the default) starts one on this machine, --scheduler ADDRESS
@@ -106,6 +122,7 @@ def command(plan_path, error_model, seed, station_ids, offsets, profile, network
           --axis-offset-mm 15,0 --out verify-offsets/
       markerplan verify plan/plan.json --trials 40 --out verify-40/
       markerplan verify plan/plan.json --network --out verify-network/
+      markerplan verify plan/plan.json --truth-dem field.tif --out verify-field/
       markerplan verify plan/plan.json --scheduler tcp://10.0.0.5:8786 --out verify/
     """
     import json
@@ -116,28 +133,39 @@ def command(plan_path, error_model, seed, station_ids, offsets, profile, network
     from planner.outputs.plan_file import load_plan
     from planner.problem.inputs import select_stations
     from planner.verify.fates import write_fates
-    from planner.verify.known_control import verify_markdown, verify_plan, verify_record
+    from planner.verify.known_control import (
+        on_truth_terrain,
+        verify_markdown,
+        verify_plan,
+        verify_record,
+    )
+    from visibility.dem import read_dem
 
     plan = load_plan(plan_path)
+    truth = None if truth_dem_path is None else read_dem(
+        truth_dem_path, what=f"--truth-dem {truth_dem_path}")
+    plan = on_truth_terrain(plan, truth, f"--truth-dem {truth_dem_path}")
     ids = select_stations([s.id for s in plan.stations], station_ids)
-    inputs = given_paths(plan_path, plan.dem_path, error_model.path)
+    inputs = given_paths(plan_path, plan.dem_path, error_model.path, truth_dem_path)
     planned_network = bool(plan.provenance.get("config", {}).get("network"))
     network = network or planned_network
     require_network(reference_station, network)
-    if network and trials > 1:
-        raise ConfigError(f"--trials {trials}: repeated trials are of known-control "
-                          "verification only; run `verify --network` once per --seed")
-    if trials > 1:
-        _verify_trials(plan, ids, inputs, error_model, seed, offsets, profile, trials, out,
-                       overwrite, as_json, (scheduler, workers))
-        return
+    if tolerance is not None and trials == 1:
+        raise ConfigError("the mounting-offset tolerances are drawn once per trial; give "
+                          "--trials N (N > 1) with them, or drop them")
     if network:
         from planner.verify.network import NetworkVerifySettings
 
         settings = NetworkVerifySettings(odometry_sigma_m, odometry_heading_sigma_deg)
-        _verify_network(plan_path, plan, ids, inputs, error_model, seed, offsets, profile,
-                        settings, out, overwrite, as_json, reference_station,
-                        (scheduler, workers))
+        doc, datum = _network_datum(plan_path, ids, reference_station)
+    if trials > 1:
+        _verify_trials(plan_path, plan, ids, inputs, error_model, seed, offsets, tolerance,
+                       profile, trials, out, overwrite, as_json, (scheduler, workers),
+                       (settings, doc, datum) if network else None)
+        return
+    if network:
+        _verify_network(plan_path, plan, doc, ids, inputs, error_model, seed, offsets, profile,
+                        settings, out, overwrite, as_json, datum, (scheduler, workers))
         return
     progress = not as_json or sys.stderr.isatty()
     with executor(scheduler, workers, progress) as ex, \
@@ -161,30 +189,13 @@ def command(plan_path, error_model, seed, station_ids, offsets, profile, network
         raise VerificationFailedError("verification failed at " + "; ".join(failing))
 
 
-def _verify_network(plan_path, plan, ids, inputs, error_model, seed, offsets, profile, settings,
-                    out, overwrite, as_json, datum, where):
-    """``verify --network``: scan, write the marker table, adjust and compare
-    (:mod:`planner.verify.network`); exit code 1 when a station fails. ``datum``: the
-    ``--reference-station`` given (a network plan's own datum only); ``where``: ``(scheduler,
-    workers)`` of the station tasks."""
-    import json
-
-    from markerplan.errors import ConfigError, VerificationFailedError
-    from markerplan.output_folder import output_folder
-    from pipeline.marker_table import write_marker_table
+def _network_datum(plan_path, ids, datum):
+    """The plan document and the ``--reference-station`` given (a network plan's own datum
+    only), checked to be a station verified."""
+    from markerplan.errors import ConfigError
     from pipeline.network.observations import Datum
-    from planner.distributed import executor
     from planner.outputs.plan_file import read_plan
-    from planner.verify.fates import write_fates
-    from planner.verify.network import (
-        adjust_and_compare,
-        network_markdown,
-        network_record,
-        network_summary_line,
-        reference_station,
-        scan_plan,
-    )
-    from visibility.sensor_profile import default_profile
+    from planner.verify.network import reference_station
 
     doc = read_plan(plan_path, "PLAN", full=True)
     planned = doc["provenance"].get("config", {})
@@ -197,20 +208,37 @@ def _verify_network(plan_path, plan, ids, inputs, error_model, seed, offsets, pr
                           f"its datum {planned_datum}; verify against that datum, or "
                           f"re-plan with `markerplan plan --network --reference-station {datum}`")
     reference_station(datum or named, station_list, ids)
+    return doc, datum
+
+
+def _verify_network(plan_path, plan, doc, ids, inputs, error_model, seed, offsets, profile,
+                    settings, out, overwrite, as_json, datum, where):
+    """``verify --network``: scan, write the marker table, adjust and compare
+    (:mod:`planner.verify.network`); exit code 1 when a station fails. ``doc``, ``datum``:
+    :func:`_network_datum`'s; ``where``: ``(scheduler, workers)`` of the station tasks."""
+    import json
+
+    from markerplan.errors import VerificationFailedError
+    from markerplan.output_folder import output_folder
+    from planner.distributed import executor
+    from planner.verify.fates import write_fates
+    from planner.verify.network import scan_plan, verify_scan
+    from planner.verify.network_report import (
+        network_markdown,
+        network_record,
+        network_summary_line,
+    )
+    from visibility.sensor_profile import default_profile
+
     profile = profile or default_profile()
     progress = not as_json or sys.stderr.isatty()
     with executor(*where, progress) as ex, \
             output_folder(out, overwrite, "verify", inputs=inputs) as stage:
-        rows, truth, fates = scan_plan(plan, seed, offsets=offsets, station_ids=ids,
-                                       profile=profile, executor=ex)
-        table = write_marker_table(stage / "markers.csv", rows)
-        write_fates(stage / "fates.csv", [list(fates.values())])
-        check = adjust_and_compare(
-            [table], plan_path, error_model.model, truth,
-            {s["id"]: s.get("predicted_error_m") for s in doc["stations"]},
-            {m["id"]: m.get("predicted_error_m") for m in doc["markers"]}, settings,
-            error_model.name, {s["id"]: tuple(s.get("markers", ())) for s in doc["stations"]},
-            reference=datum, fates=fates)
+        scanned = scan_plan(plan, seed, offsets=offsets, station_ids=ids, profile=profile,
+                            executor=ex)
+        write_fates(stage / "fates.csv", [list(scanned[2].values())])
+        check = verify_scan(scanned, stage / "markers.csv", plan_path, doc, error_model.model,
+                            error_model.name, settings, datum)
         rec = network_record(plan, check, seed, error_model.name, offsets, profile)
         (stage / "verify.json").write_text(json.dumps(rec, indent=2) + "\n")
         (stage / "verify.md").write_text(network_markdown(rec))
@@ -230,10 +258,12 @@ def _verify_network(plan_path, plan, ids, inputs, error_model, seed, offsets, pr
         raise VerificationFailedError("verification failed at " + "; ".join(failing))
 
 
-def _verify_trials(plan, ids, inputs, error_model, seed, offsets, profile, n_trials, out,
-                   overwrite, as_json, where):
-    """``verify --trials N`` (known control, ``N`` > 1; :mod:`planner.verify.trials`): exit
-    code 1 when any trial fails. ``where``: ``(scheduler, workers)`` of the tasks."""
+def _verify_trials(plan_path, plan, ids, inputs, error_model, seed, offsets, tolerance,
+                   profile, n_trials, out, overwrite, as_json, where, network):
+    """``verify --trials N`` (``N`` > 1; :mod:`planner.verify.trials`): exit code 1 when any
+    trial fails. ``where``: ``(scheduler, workers)`` of the tasks; ``network``: ``(settings,
+    doc, datum)`` in network mode, else ``None``."""
+    import dataclasses
     import json
 
     from markerplan.errors import VerificationFailedError
@@ -241,27 +271,42 @@ def _verify_trials(plan, ids, inputs, error_model, seed, offsets, profile, n_tri
     from planner.distributed import executor
     from planner.verify.fates import write_fates
     from planner.verify.trials import (
+        read_predictions,
+        trial_offsets,
         trial_seeds,
         trials_markdown,
         trials_record,
+        verify_network_trials,
         verify_trials,
         write_trials,
     )
 
     seeds = trial_seeds(seed, n_trials)
+    rigs = trial_offsets(offsets, tolerance, seeds)
+    predictions = read_predictions(plan_path)
     progress = not as_json or sys.stderr.isatty()
     with executor(*where, progress) as ex, \
             output_folder(out, overwrite, "verify", inputs=inputs) as stage:
-        trials = verify_trials(plan, error_model.model, seeds, offsets, ids, profile, ex)
-        rec = trials_record(plan, trials, seed, seeds, error_model.name, offsets, profile)
+        if network is None:
+            trials = verify_trials(plan, error_model.model, seeds, rigs, ids, profile, ex)
+        else:
+            settings, doc, datum = network
+            (stage / "markers").mkdir()
+            trials = verify_network_trials(plan, plan_path, doc, error_model.model,
+                                           error_model.name, seeds, stage / "markers",
+                                           settings, rigs, ids, profile, ex, datum)
+        rec = trials_record(plan, trials, seed, seeds, error_model.name, rigs, profile,
+                            network=None if network is None else
+                            {**dataclasses.asdict(network[0]), "reference_station": datum},
+                            nominal=offsets, tolerance=tolerance, predictions=predictions)
         (stage / "verify.json").write_text(json.dumps(rec, indent=2) + "\n")
         (stage / "verify.md").write_text(trials_markdown(rec))
-        write_trials(stage / "trials.csv", trials, seeds)
+        write_trials(stage / "trials.csv", trials, seeds, rigs)
         write_fates(stage / "fates.csv", [[c.fates for c in checks] for checks in trials])
     pr = rec["pass_rate"]
     low, high = pr["wilson_95"]
-    summary = {"out": str(out), "passed": rec["passed"], "requirement_m": rec["requirement_m"],
-               "pass_rate": pr, "losses": rec["losses"],
+    summary = {"out": str(out), "mode": rec["mode"], "passed": rec["passed"],
+               "requirement_m": rec["requirement_m"], "pass_rate": pr, "losses": rec["losses"],
                "stations": {s["id"]: {k: s[k] for k in ("predicted_error_m", "n_passed",
                                                          "rate", "wilson_95")}
                             for s in rec["stations"]}}

@@ -4,6 +4,8 @@
   plan that ``verify`` works on;
 - :mod:`planner.outputs.report`: ``markers.csv``, ``markers.geojson``, ``report.md`` and the JSON
   summary;
+- :mod:`planner.outputs.chance_report`: the plan's ``detection`` and ``chance`` sections and the
+  report's "Chance to work";
 - :mod:`planner.outputs.plan_map`: the placement map ``map.png``;
 - :mod:`planner.outputs.stand_map`: where the rover can stand, cell by cell over the DEM;
 - :mod:`planner.outputs.gis`: ``plan.gpkg``, the stand-map GeoTIFFs and GeoJSON coordinates, in

@@ -41,6 +41,7 @@ import numpy as np
 
 from markerplan.provenance import provenance
 from markerplan.writing import write_gis_sidecars
+from planner.outputs.chance_report import chance_markdown, chance_sections
 from planner.outputs.gis import crs_name, geojson_crs_members, geojson_positions, write_plan_gpkg
 from planner.outputs.plan_file import SCHEMA, SCHEMA_VERSION, write_plan
 from planner.problem.usability import sector_index
@@ -125,6 +126,7 @@ def plan_record(outcome) -> dict:
     doc = {
         "schema": SCHEMA, "schema_version": SCHEMA_VERSION,
         "provenance": provenance(cfg.to_dict(), error_model=outcome.model_name,
+                                 detection_model=(outcome.detection or {}).get("name"),
                                  solver={"name": solver["name"], "status": sol.status},
                                  inputs=inp.sources),
         "frame": frame_note(inp.dem.crs),
@@ -150,23 +152,32 @@ def plan_record(outcome) -> dict:
     }
     if network is not None:
         doc["network"] = network
+    doc.update(chance_sections(outcome))
+    for rec in doc["stations"] if "chance" in doc else ():
+        rec["pass_probability"] = doc["chance"]["stations"][rec["id"]]["pass_probability"]
     return doc
 
 
 def _network_record(outcome, stations: list[dict], markers: list[dict]) -> dict:
-    """Network mode: the datum, per-station ties and per-marker errors (added in place to
-    ``stations`` and ``markers``), and the weakest stations."""
+    """Network mode: the datum, per-station ties, largest MDB effects and per-marker errors
+    (added in place to ``stations`` and ``markers``), and the weakest stations."""
     from pipeline.network.observations import POSE_PARAMETERS
     from planner.accuracy.network import network_model
+    from planner.accuracy.reliability import layout_reliability, station_bias_record
 
     cfg, prob, res = outcome.config, outcome.problem, outcome.result
     net = network_model(prob, cfg)
     ties = net.ties(res.selected)
+    bias = station_bias_record(net, layout_reliability(net, res.selected))
     for k, rec in enumerate(stations):
         rec["tied_to"] = {prob.station_ids[o]: int(ties[k, o]) for o in np.flatnonzero(ties[k])}
+        rec.update(bias[rec["id"]])
     for rec, j in zip(markers, np.flatnonzero(res.selected), strict=True):
         rec["predicted_error_m"] = _num(res.check.marker_error_m[j])
     order = np.argsort(-np.nan_to_num(res.check.error_m, posinf=1e300), kind="stable")
+    effect = np.array([math.inf if s["bias_effect_m"] is None else s["bias_effect_m"]
+                       for s in stations])
+    worst_bias = stations[int(np.argmax(effect))] if stations else None
     return {"datum": {"kind": "station", "reference_station": prob.station_ids[net.reference],
                       "fixed": list(POSE_PARAMETERS[:4]),
                       "inclinometer_sigma_deg": cfg.inclinometer_sigma_deg,
@@ -176,7 +187,12 @@ def _network_record(outcome, stations: list[dict], markers: list[dict]) -> dict:
                                  for k in order[:5]],
             "worst_marker_error_m": _num(np.nanmax(res.check.marker_error_m))
             if res.selected.any() else None,
-            "n_station_ties": int((np.triu(ties) > 0).sum())}
+            "n_station_ties": int((np.triu(ties) > 0).sum()),
+            "reliability": {"max_bias_effect_m": cfg.max_bias_effect_m,
+                            "worst_bias_effect": None if worst_bias is None else {
+                                "station": worst_bias["id"],
+                                "bias_effect_m": worst_bias["bias_effect_m"],
+                                "caused_by": worst_bias["bias_effect_caused_by"]}}}
 
 
 def plan_timings(outcome) -> dict[str, float]:
@@ -199,6 +215,7 @@ def write_plan_files(outcome, folder: Path) -> dict:
     _write_markers_csv(doc, folder / "markers.csv")
     if "network" in doc:
         _write_stations_csv(doc, folder / "stations.csv")
+        _write_reliability_csv(outcome, folder / "reliability.csv")
     _write_geojson(doc, outcome.inputs.dem.crs, folder / "markers.geojson")
     write_plan_gpkg(outcome, doc, folder / "plan.gpkg")
     (folder / "report.md").write_text(report_markdown(doc))
@@ -240,6 +257,35 @@ def _write_stations_csv(doc: dict, path: Path) -> None:
                         s["n_markers"], " ".join(f"{k}:{v}" for k, v in s["tied_to"].items()),
                         datum])
     write_gis_sidecars(path, STATION_TYPES, doc["site"]["crs_wkt"])
+
+
+def _write_reliability_csv(outcome, path: Path) -> None:
+    """Network mode's ``reliability.csv`` (header first): one row per planned observation,
+    :data:`planner.accuracy.reliability.RELIABILITY_COLUMNS` (``inf`` for an infinite MDB or
+    effect, an empty ``effect_station`` when no station moves)."""
+    from planner.accuracy.network import network_model
+    from planner.accuracy.reliability import (
+        RELIABILITY_COLUMNS,
+        layout_reliability,
+        reliability_rows,
+    )
+
+    net = network_model(outcome.problem, outcome.config)
+    rows = reliability_rows(net, layout_reliability(net, outcome.result.selected))
+
+    def cell(v):
+        if v is None:
+            return "inf"
+        if isinstance(v, bool):
+            return int(v)
+        return f"{v:.6f}" if isinstance(v, float) else v
+
+    with path.open("w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(RELIABILITY_COLUMNS)
+        for r in rows:
+            w.writerow([("" if r[c] is None else r[c]) if c == "effect_station" else cell(r[c])
+                        for c in RELIABILITY_COLUMNS])
 
 
 def _write_geojson(doc: dict, crs: str | None, path: Path) -> None:
@@ -308,16 +354,21 @@ def report_markdown(doc: dict) -> str:
                   f"marker {_fmt(net['worst_marker_error_m'])}.", "",
                   "Weakest stations: " + ", ".join(f"{w['id']} ({_fmt(w['predicted_error_m'])})"
                                                    for w in net["weakest_stations"]) + ".", "",
+                  _bias_sentence(net["reliability"]), "",
                   "| station | tied to (shared markers) |", "|---|---|"]
         for s in doc["stations"]:
             lines.append(f"| {s['id']} | " + (", ".join(f"{k} ({v})" for k, v in
                                                          s["tied_to"].items()) or "—") + " |")
+    lines += chance_markdown(doc)
+    bias = "network" in doc
     lines += ["", "## Stations", "",
-              "| station | predicted error | markers | sectors | markers used |",
-              "|---|---:|---:|---:|---|"]
+              "| station | predicted error | markers | sectors | markers used |"
+              + (" largest MDB effect (observation) |" if bias else ""),
+              "|---|---:|---:|---:|---|" + ("---|" if bias else "")]
     for s in doc["stations"]:
         lines.append(f"| {s['id']} | {_fmt(s['predicted_error_m'])} | {s['n_markers']} | "
-                     f"{s['n_sectors']} | {', '.join(s['markers'])} |")
+                     f"{s['n_sectors']} | {', '.join(s['markers'])} |"
+                     + (f" {_bias_cell(s)} |" if bias else ""))
     lines += ["", "## Markers (" + doc["frame"] + ")", "", "| id | x | y | z | used by |",
               "|---|---:|---:|---:|---|"]
     for m in doc["markers"]:
@@ -327,10 +378,37 @@ def report_markdown(doc: dict) -> str:
     lines += ["", "## Inputs", "",
               f"- {doc['candidates']['n_sites']} candidate sites; "
               f"{vis['n_pairs']} station-site pairs in range, {vis['n_usable']} usable",
-              f"- error model: {doc['provenance']['error_model']}; markerplan "
+              f"- error model: {doc['provenance']['error_model']}; detection model: "
+              f"{doc['provenance'].get('detection_model') or 'none'}; markerplan "
               f"{doc['provenance']['markerplan_version']}; config sha256 "
               f"`{doc['provenance']['config_sha256'][:12]}`", ""]
     return "\n".join(lines)
+
+
+def _bias_cell(station: dict) -> str:
+    """A station's largest MDB effect and the observation causing it."""
+    cause = station["bias_effect_caused_by"]
+    if station["bias_effect_m"] is None:
+        return "inf (undetermined)" if cause is None else \
+            f"inf ({cause['station']}→{cause['site']} uncontrolled)"
+    return "0 (datum or no observation moves it)" if cause is None else \
+        f"{station['bias_effect_m']:.3f} m ({cause['station']}→{cause['site']})"
+
+
+def _bias_sentence(rel: dict) -> str:
+    """The network's worst MDB effect (and the bound, when one is set)."""
+    worst = rel["worst_bias_effect"]
+    bound = ("" if rel["max_bias_effect_m"] is None
+             else f" (bound `max_bias_effect_m` {rel['max_bias_effect_m']:g} m)")
+    if worst is None:
+        return "Reliability: no station."
+    cause = worst["caused_by"]
+    value = "inf" if worst["bias_effect_m"] is None else f"{worst['bias_effect_m']:.3f} m"
+    return (f"Reliability: an undetected bias of minimal detectable size (alpha0 0.1 %, power "
+            f"80 %, per component) in one observation moves a station by at most {value}, "
+            f"station {worst['station']}"
+            + (f" by {cause['station']}→{cause['site']}" if cause else "") + bound
+            + "; every observation in reliability.csv.")
 
 
 def summary(doc: dict, out: Path) -> dict:

@@ -32,7 +32,15 @@ from planner.problem.candidates import (
     valid_area,
 )
 from visibility.dem import read_dem_by_window, to_dem_xy
-from visibility.sites import PRESETS, load_site, site_with_marker_radius
+from visibility.orbital import HeightError, orbital_dem
+from visibility.sites import (
+    PRESETS,
+    TERRAIN_KINDS,
+    load_site,
+    orbital_grade,
+    site_with_dem,
+    site_with_marker_radius,
+)
 
 
 @dataclass
@@ -65,7 +73,11 @@ class PlanInputs:
     marker_radius_m : float
     sources : dict
         Where each input came from (for provenance): the preset, and input files as absolute
-        paths.
+        paths; ``"terrain"`` (when the plan is made on an orbital DEM or one with a declared
+        height error, :func:`terrain_record`) its kind, cell, error and seed.
+    height_error : visibility.orbital.HeightError or None
+        The planning DEM's declared height error (the orbital preset's, or a ``--dem``'s
+        ``dem_height_error``); ``None``: the terrain is taken as exact.
     """
 
     site_name: str
@@ -84,6 +96,7 @@ class PlanInputs:
     marker_radius_m: float = 0.10
     lidar_height_m: float = 1.0
     sources: dict = field(default_factory=dict)
+    height_error: HeightError | None = None
 
     def with_stations(self, ids: list[str]) -> PlanInputs:
         """These inputs for the stations ``ids`` only (ids of :attr:`station_ids`, as
@@ -143,7 +156,8 @@ def load_inputs(site: str = "default", site_seed: int | None = None, dem_path=No
                 stations_path=None, boundary_path=None, exclude_paths=(),
                 existing: str | None = None, marker_radius_m: float | None = None,
                 station_ids=None, reproject: bool = False,
-                sight_radius_m: float | None = None) -> PlanInputs:
+                sight_radius_m: float | None = None, terrain: str = "truth",
+                dem_height_error: HeightError | None = None) -> PlanInputs:
     """Assemble the inputs of a plan from a site preset and optional files.
 
     Parameters
@@ -182,11 +196,20 @@ def load_inputs(site: str = "default", site_seed: int | None = None, dem_path=No
         Read only the part of the DEM within this distance of the stations
         (:func:`sight_window`; e.g. ``config.max_range_m``, beyond which no pair counts);
         default, and with ``reproject``, the whole DEM.
+    terrain : {"truth", "orbital"}
+        The preset's terrain to plan on: its fine truth, or its orbital-grade planning DEM
+        (:func:`visibility.sites.planning_dem`; preset craters smaller than two orbital cells
+        are not known from orbit and dropped; the as-built layout is re-seated on it).
+    dem_height_error : HeightError, optional
+        The planning DEM's height error: a ``dem_path``'s, or, with ``terrain="orbital"``, one
+        replacing the preset's grade (the orbital DEM is then drawn with it).
 
     Raises
     ------
     ConfigError
-        ``dem_path`` without ``stations_path``, or an unknown preset.
+        ``dem_path`` without ``stations_path``, an unknown preset, ``terrain="orbital"`` with
+        ``dem_path`` or on a preset without an orbital DEM, or ``dem_height_error`` on the
+        preset's truth terrain.
     InputFileError, DataError
         A malformed input file (see :func:`read_stations`, :func:`read_markers`,
         :func:`planner.problem.candidates.load_polygons`), a point outside the DEM or on nodata
@@ -196,7 +219,13 @@ def load_inputs(site: str = "default", site_seed: int | None = None, dem_path=No
         raise ConfigError(f"`dem_path` {dem_path} needs `stations_path`: the preset's stations "
                           "belong to its own terrain, not to this DEM; give `stations_path` with "
                           "the stations on this DEM")
+    _terrain_iv(terrain, dem_path, dem_height_error)
+    if terrain == "orbital":
+        orbital_grade(site)  # refused before the preset's terrain is made
     preset = load_site(site, site_seed)
+    if terrain == "orbital":
+        preset = _on_orbital_dem(preset, dem_height_error)
+        dem_height_error = dem_height_error or orbital_grade(site).height_error
     if marker_radius_m is not None:
         preset = site_with_marker_radius(preset, marker_radius_m)
     sources = {"site": site, "seed": preset.seed}
@@ -221,6 +250,10 @@ def load_inputs(site: str = "default", site_seed: int | None = None, dem_path=No
         boundary = None if boundary_path is not None else default_boundary(
             dem, float(preset.marker_radius_m))
         as_built_ids, as_built_xyz = [], np.zeros((0, 3))
+    if terrain == "orbital" or dem_height_error is not None:
+        on_file = dem_path is not None
+        sources["terrain"] = terrain_record("file" if on_file else terrain, dem,
+                                            dem_height_error, None if on_file else preset.seed)
     lidar_h = float(preset.lidar_height_m)
     off_site = OFF_DEM_FIX if dem_path is not None else (
         f"the points are not on site preset {site!r}'s terrain (this DEM): choose the preset "
@@ -262,10 +295,56 @@ def load_inputs(site: str = "default", site_seed: int | None = None, dem_path=No
                         exclusions=exclusions, craters=craters, as_built_ids=as_built_ids,
                         as_built_xyz=as_built_xyz, existing_ids=ex_ids, existing_xyz=ex_xyz,
                         marker_radius_m=float(preset.marker_radius_m), lidar_height_m=lidar_h,
-                        sources=sources)
+                        sources=sources, height_error=dem_height_error)
     if station_ids is None:
         return inputs
     return inputs.with_stations(select_stations(inputs.station_ids, station_ids))
+
+
+def _terrain_iv(terrain: str, dem_path, dem_height_error) -> None:
+    """Refuse a terrain choice that names no planning DEM (one-line :class:`ConfigError`)."""
+    if terrain not in TERRAIN_KINDS:
+        raise ConfigError(f"`terrain` {terrain!r}: choose one of {', '.join(TERRAIN_KINDS)}")
+    if terrain == "orbital" and dem_path is not None:
+        raise ConfigError(f"`terrain` orbital is a site preset's orbital DEM and `dem_path` "
+                          f"{dem_path} replaces the preset's terrain; drop `terrain` and declare "
+                          "the file's error with `dem_height_error`")
+    if dem_height_error is not None and not isinstance(dem_height_error, HeightError):
+        raise ConfigError(f"`dem_height_error` must be a HeightError, got "
+                          f"{type(dem_height_error).__name__}")
+    if dem_height_error is not None and terrain == "truth" and dem_path is None:
+        raise ConfigError("`dem_height_error` declares the error of a `dem_path` FILE or of "
+                          "`terrain` orbital, and the preset's truth terrain is exact; add "
+                          "`dem_path` or `terrain` orbital, or drop `dem_height_error`")
+
+
+def _on_orbital_dem(preset, height_error: HeightError | None):
+    """The preset on its orbital planning DEM (:func:`visibility.sites.planning_dem`, drawn
+    with ``height_error`` when given): the as-built markers re-seated on it, craters smaller
+    than two orbital cells (unresolved from orbit) and all rocks dropped."""
+    grade = orbital_grade(preset.name)
+    dem = orbital_dem(preset.dem, grade.cell_m, height_error or grade.height_error,
+                      seed=preset.seed)
+    resolved = [c for c in preset.craters if c.diameter_m >= 2.0 * grade.cell_m]
+    return replace(site_with_dem(preset, dem), craters=resolved)
+
+
+def terrain_record(kind: str, dem, height_error: HeightError | None, seed) -> dict:
+    """Provenance of the planning terrain: ``{"kind", "cell_m", "height_error", "seed"}``.
+
+    Parameters
+    ----------
+    kind : {"truth", "orbital", "file"}
+    dem : visibility.dem.DEM
+        The planning DEM.
+    height_error : HeightError or None
+        Its declared error (``rms_m``, ``correlation_m``).
+    seed : int or None
+        Seed of an orbital DEM's error field.
+    """
+    return {"kind": kind, "cell_m": float(dem.cell_size_m),
+            "height_error": None if height_error is None else height_error.record(),
+            "seed": seed}
 
 
 #: Room kept beyond the stations' sight radius when a DEM is read by window, m: the edge

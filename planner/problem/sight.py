@@ -49,7 +49,7 @@ def angular_sampling() -> AngularSampling:
 
 def sight_problem(inputs, site_ids, site_xyz: np.ndarray, config, error_model,
                   site_existing: np.ndarray | None = None, progress: bool = True,
-                  map_groups=map, desc: str = "visibility") -> Sight:
+                  map_groups=map, desc: str = "visibility", detection_model=None) -> Sight:
     """Ray-cast the stations against some sites and judge every pair.
 
     Parameters
@@ -73,6 +73,11 @@ def sight_problem(inputs, site_ids, site_xyz: np.ndarray, config, error_model,
     desc : str
         The progress bar's label (the stand map's is ``"stand map"``: each bar of a run has
         its own).
+    detection_model : error_model.detection.DetectionModel, optional
+        Gives every pair its chance of being detected and accepted
+        (:func:`planner.problem.detection_odds.pair_detection_probability`), times the chance
+        that the terrain shows it when the DEM declares a height error
+        (``inputs.height_error``, :func:`planner.problem.terrain_uncertainty.visible_probability`).
 
     Returns
     -------
@@ -90,7 +95,25 @@ def sight_problem(inputs, site_ids, site_xyz: np.ndarray, config, error_model,
                                       site_existing=site_existing)
     if inputs.dem.valid is not None:
         problem = _unknown_terrain_occludes(problem, inputs.dem)
+    if detection_model is not None:
+        problem = replace(problem, pair_detection_p=_detection_p(
+            inputs, vis, site_xyz, config, detection_model, map_groups))
     return Sight(problem=problem, visibility=vis, timings_s=timings)
+
+
+def _detection_p(inputs, vis: VisibilityMatrix, site_xyz: np.ndarray, config, model,
+                 map_groups) -> np.ndarray:
+    """(p,) each pair's chance of being detected and accepted (the terrain's chance of showing
+    it included when the DEM declares a height error)."""
+    from planner.problem.detection_odds import pair_covariates, pair_detection_probability
+
+    visible = None
+    if getattr(inputs, "height_error", None) is not None:
+        from planner.problem.terrain_uncertainty import visible_probability
+
+        visible = visible_probability(inputs, vis, site_xyz, config, map_groups=map_groups)
+    covariates = pair_covariates(inputs.dem, inputs.craters, inputs.station_xyz, site_xyz, vis)
+    return pair_detection_probability(model, covariates, visible)
 
 
 def _unknown_terrain_occludes(problem: PlanProblem, dem) -> PlanProblem:

@@ -45,6 +45,10 @@ class PlanProblem:
         +x), error-model 1-sigma 3D centre error.
     pair_reason : (p,) int
         Index into :data:`REASONS`; 0 means usable.
+    pair_detection_p : (p,) float or None
+        Probability that each pair's marker is detected and accepted when it is there (the
+        detection model's, times the chance that the terrain lets the station see it); ``None``:
+        not known, every planned marker counted as detected (:attr:`detection_p` gives ones).
     """
 
     station_ids: tuple[str, ...]
@@ -59,6 +63,7 @@ class PlanProblem:
     pair_bearing_rad: np.ndarray
     pair_sigma_m: np.ndarray
     pair_reason: np.ndarray
+    pair_detection_p: np.ndarray | None = None
     meta: dict = field(default_factory=dict)
 
     def __post_init__(self) -> None:
@@ -75,6 +80,13 @@ class PlanProblem:
     @property
     def pair_usable(self) -> np.ndarray:
         return self.pair_reason == USABLE
+
+    @property
+    def detection_p(self) -> np.ndarray:
+        """(p,) float: :attr:`pair_detection_p`, or ones when it is not known."""
+        if self.pair_detection_p is None:
+            return np.ones(len(self.pair_station))
+        return self.pair_detection_p
 
     def usable_pairs(self, station: int) -> np.ndarray:
         """Indices of the usable pairs of station ``station`` (ordered by site index)."""
@@ -149,7 +161,9 @@ class PlanProblem:
                        pair_distance_m=self.pair_distance_m[pairs],
                        pair_bearing_rad=self.pair_bearing_rad[pairs],
                        pair_sigma_m=self.pair_sigma_m[pairs],
-                       pair_reason=self.pair_reason[pairs])
+                       pair_reason=self.pair_reason[pairs],
+                       pair_detection_p=None if self.pair_detection_p is None
+                       else self.pair_detection_p[pairs])
 
 
 def _problem_iv(p: PlanProblem) -> None:
@@ -160,9 +174,14 @@ def _problem_iv(p: PlanProblem) -> None:
     for name in ("pair_site", "pair_distance_m", "pair_bearing_rad", "pair_sigma_m",
                  "pair_reason"):
         checks.append((name, getattr(p, name), npair))
+    if p.pair_detection_p is not None:
+        checks.append(("pair_detection_p", p.pair_detection_p, npair))
     for name, arr, shape in checks:
         if np.shape(arr) != shape:
             raise ConfigError(f"PlanProblem `{name}` must have shape {shape}, got {np.shape(arr)}")
+    if p.pair_detection_p is not None and not np.all((p.pair_detection_p >= 0)
+                                                     & (p.pair_detection_p <= 1)):
+        raise ConfigError("PlanProblem `pair_detection_p` must hold probabilities in [0, 1]")
     if len(set(p.station_ids)) != s:
         raise ConfigError("PlanProblem `station_ids` must be unique")
     if len(set(p.site_ids)) != n:

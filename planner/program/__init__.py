@@ -8,6 +8,10 @@
 - :mod:`planner.program.highs`: the HiGHS call itself (options, statuses, solver record);
 - :mod:`planner.program.cuts_known`: known-control accuracy cuts for a failing layout;
 - :mod:`planner.program.cuts_network`: network-mode preflight and accuracy cuts;
+- :mod:`planner.program.cuts_chance`: chance-constrained planning's valid rows, cuts and
+  preflight;
+- :mod:`planner.program.chance_start`: a layout repaired until it meets every chance target
+  (the chance-constrained search's incumbent);
 - :mod:`planner.program.loop`: :func:`~planner.program.loop.plan_sites`, the accuracy-cut loop
   (solve, check every station exactly, cut, re-solve until all pass);
 - :mod:`planner.program.baselines`: greedy and regular-grid layouts to compare against.

@@ -135,6 +135,8 @@ def network_cuts(problem: PlanProblem, model: Model, selected: np.ndarray, confi
     leaves a station undetermined; any positive definite point gives a valid tangent). Per
     failing selected marker ``m``: ``"cut-marker"`` ``sum_{j tying, not in T} x_j - x_m >= 0``
     and ``"oa-marker"`` ``sum_j c_j x_j - rhs x_m >= 0`` (enforced only when ``x_m = 1``).
+    A layout whose stations and markers all pass (and, in redundant mode, every loss) is
+    judged by ``max_bias_effect_m`` (:func:`bias_cuts`).
 
     On large problems (``upper_bound`` given: no layout of interest has more sites, e.g. a
     feasible layout's count) tangent rows keep their ``MAX_TERMS`` largest coefficients and
@@ -169,9 +171,11 @@ def network_cuts(problem: PlanProblem, model: Model, selected: np.ndarray, confi
     bad_markers = markers[merr > req]
     if failing.size == 0 and bad_markers.size == 0:
         if config.redundant:
-            return _network_loss_cuts(model, selected, j_sel, config, net, tying, in_model,
+            loss = _network_loss_cuts(model, selected, j_sel, config, net, tying, in_model,
                                       upper_bound)
-        return None, [], []
+            if loss[0] is not None:
+                return loss
+        return bias_cuts(model, selected, config, net, tying & in_model)
     rows, lower, kinds = [], [], []
 
     def add(row, lo, kind):
@@ -240,6 +244,46 @@ def network_cuts(problem: PlanProblem, model: Model, selected: np.ndarray, confi
     if not rows:  # pragma: no cover - a failing station or marker always yields a no-good cut
         raise InfeasiblePlanError("network mode: the layout fails but no cut was found")
     return sp.csr_array(sp.vstack(rows)), lower, kinds
+
+
+def bias_cuts(model: Model, selected: np.ndarray, config, net: NetworkModel,
+              variables: np.ndarray) -> tuple[sp.csr_array | None, list[float], list[RowKind]]:
+    """``max_bias_effect_m``: the no-good cut of a layout some station of which an undetected
+    bias of MDB size moves too far.
+
+    The effect is a function of the selected tying sites ``T`` alone (a site seen by one
+    station changes no pose's information, and its marker absorbs any bias of its observation:
+    effect 0), but not a monotone one: a site added raises the redundancy of every
+    observation already there, yet brings observations of its own, and even an existing
+    observation's effect ``delta0 sqrt(w) |E_k N_0^-1 a| / sqrt(1 + w a^T N_0^-1 a)``
+    (``N_0`` the normal matrix without it) can grow or shrink with ``N_0``. So neither the
+    subsets nor the supersets of a failing ``T`` are known to fail, and the only valid cut is
+    ``T``'s own no-good over the tying variables: ``sum_{j not in T} x_j - sum_{j in T} x_j >=
+    1 - |T|`` (family ``"cut-bias"``; weak: it removes the one tying set).
+
+    Parameters
+    ----------
+    variables : (n,) bool
+        The open tying sites that are variables of ``model`` (fixed sites are constants).
+
+    Returns
+    -------
+    rows, lower, kinds
+        As :func:`network_cuts`; ``(None, [], [])`` when the constraint is off or holds.
+    """
+    if config.max_bias_effect_m is None:
+        return None, [], []
+    from planner.accuracy.reliability import layout_reliability
+
+    effect = layout_reliability(net, selected).station_effect_m
+    worst = int(np.argmax(np.nan_to_num(effect, posinf=1e300)))
+    if effect[worst] <= config.max_bias_effect_m:
+        return None, [], []
+    inside = np.flatnonzero(variables & selected)
+    outside = np.flatnonzero(variables & ~selected)
+    row = model.site_row(np.r_[inside, outside], np.r_[-np.ones(inside.size),
+                                                      np.ones(outside.size)])
+    return sp.csr_array(row), [1.0 - inside.size], [RowKind("cut-bias", worst)]
 
 
 def _network_loss_cuts(model: Model, selected: np.ndarray, j_sel: np.ndarray, config,

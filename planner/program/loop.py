@@ -22,6 +22,7 @@ from markerplan.errors import ConfigError, InfeasiblePlanError, PlanTimeLimitErr
 from planner.accuracy.checks import StationInfo, diagnose, evaluate_layout, station_infos
 from planner.accuracy.network import NetworkModel, network_model
 from planner.problem.usability import PlanProblem
+from planner.program.cuts_chance import ChanceRule, chance_preflight, chance_rule
 from planner.program.cuts_known import accuracy_cuts
 from planner.program.cuts_network import MAX_TERMS, network_cuts, network_preflight, sparse_tangent
 from planner.program.model import (
@@ -84,33 +85,34 @@ def plan_sites(problem: PlanProblem, config, model: Model | None = None) -> Plan
         the search before any layout passed.
     """
     infos = station_infos(problem, config)
+    chance = chance_rule(problem, config, infos)
     if config.network:
-        return _plan_network(problem, config, model, infos)
+        return _plan_network(problem, config, model, infos, chance)
     t0 = time.perf_counter()
     first = None
+    if chance is not None:  # before the first solve: its cuts assume some site can help
+        _refuse_hopeless(problem, config, diagnose(problem, config, infos), chance)
     if model is None:
-        first, rows = _combinatorial_first(problem, config, infos)
+        first, rows = _combinatorial_first(problem, config, infos, chance)
         if rows is None:
             return first
-        model = with_tightening_rows(problem, build_model(problem, config), config)
+        model = _with_chance_counts(
+            with_tightening_rows(problem, build_model(problem, config), config), problem, chance)
         if rows[0] is not None:
             model = model.with_rows(rows[0], rows[1], np.full(len(rows[1]), np.inf), rows[2])
-    failing = diagnose(problem, config, infos)
-    if failing:
-        raise InfeasiblePlanError(
-            f"no layout meets the requirement ({config.requirement_m:g} m, "
-            f">= {config.min_markers} markers in >= {config.min_sectors} of {config.n_sectors} "
-            "sectors) at station(s): "
-            + "; ".join(f"{k}: {v}" for k, v in failing.items())
-            + "; fix the causes named, relax the configuration or add candidate sites")
+    _refuse_hopeless(problem, config, diagnose(problem, config, infos), None)
 
     def cuts(selected):
-        return accuracy_cuts(problem, model, selected, config, infos, outer_approximation=True)
+        return _stacked(accuracy_cuts(problem, model, selected, config, infos,
+                                      outer_approximation=True),
+                        chance.cuts(problem, model, selected) if chance else (None, [], []))
 
     def check(selected):
         return evaluate_layout(problem, selected, config, infos)
 
-    result = _cut_loop(problem, config, model, cuts, check, t0=t0)
+    repair = _repair(problem, config, chance, check)
+    result = _cut_loop(problem, config, model, cuts, check, t0=t0, repair=repair,
+                       incumbent=_redundant_start(problem, config, chance, repair, t0))
     if first is None:
         return result
     return replace(result, iterations=result.iterations + first.iterations,
@@ -119,7 +121,84 @@ def plan_sites(problem: PlanProblem, config, model: Model | None = None) -> Plan
                    history=first.history + result.history)
 
 
-def _combinatorial_first(problem: PlanProblem, config, infos: list[StationInfo]
+def _refuse_hopeless(problem: PlanProblem, config, failing: dict[str, str],
+                     chance: ChanceRule | None) -> None:
+    """Raise :class:`InfeasiblePlanError` naming every station no layout can satisfy
+    (``failing``, and those that provably miss the chance target) and why."""
+    by_chance = chance is not None and not failing
+    if by_chance:
+        failing = chance_preflight(problem, config, chance)
+    if failing:
+        raise InfeasiblePlanError(
+            f"no layout meets the requirement ({config.requirement_m:g} m, "
+            f">= {config.min_markers} markers in >= {config.min_sectors} of {config.n_sectors} "
+            "sectors"
+            + (f", failing with chance <= {config.chance_epsilon:g}" if by_chance else "")
+            + ") at station(s): "
+            + "; ".join(f"{k}: {v}" for k, v in failing.items())
+            + "; fix the causes named, relax the configuration"
+            + (", raise chance_epsilon (or set it to none: the naive plan)"
+               if by_chance else "") + " or add candidate sites")
+
+
+#: Chance-constrained planning, known control: most of the time limit the redundant plan (a
+#: starting layout) may take.
+_REDUNDANT_START_FRACTION = 0.3
+
+
+def _redundant_start(problem: PlanProblem, config, chance: ChanceRule | None, repair,
+                     t0: float) -> np.ndarray | None:
+    """Known control: the redundant plan (every station survives any one loss), repaired
+    until it meets the chance targets, as the chance-constrained search's first incumbent;
+    ``None`` without a chance rule, in redundant mode, or when it fails or runs out of its
+    share of the time limit. A redundant layout fails a station only when two or more of its
+    markers are lost, so it is often near the chance-constrained optimum."""
+    if chance is None or config.redundant:
+        return None
+    budget = min(_REDUNDANT_START_FRACTION * config.time_limit_s,
+                 config.time_limit_s - (time.perf_counter() - t0))
+    if budget <= 0:
+        return None
+    try:
+        layout = plan_sites(problem, config.replace(redundant=True, chance_epsilon=None,
+                                                    time_limit_s=budget)).selected
+    except InfeasiblePlanError:  # also its time limit
+        return None
+    return layout if chance.layout_ok(layout) else repair(layout)
+
+
+def _repair(problem: PlanProblem, config, chance: ChanceRule | None, check):
+    """The cut loop's ``repair``: a failing layout grown until it meets every chance target
+    (:func:`~planner.program.chance_start.repair_layout`), or ``None`` without a chance rule."""
+    if chance is None:
+        return None
+    from planner.program.chance_start import repair_layout
+
+    allowed = ~problem.site_mask(config.forbidden, "forbidden")
+    return lambda selected: repair_layout(selected, chance, allowed,
+                                          lambda sel: check(sel).all_ok)
+
+
+def _stacked(*blocks) -> tuple[sp.csr_array | None, list[float], list[RowKind]]:
+    """Several ``(rows, lower, kinds)`` blocks of cuts as one (``rows`` None: no cut)."""
+    rows = [b[0] for b in blocks if b[0] is not None]
+    lower = [v for b in blocks if b[0] is not None for v in b[1]]
+    kinds = [k for b in blocks if b[0] is not None for k in b[2]]
+    return (sp.csr_array(sp.vstack(rows)) if rows else None), lower, kinds
+
+
+def _with_chance_counts(model: Model, problem: PlanProblem, chance: ChanceRule | None) -> Model:
+    """``model`` with the chance rule's count rows (valid from the start), if any."""
+    if chance is None:
+        return model
+    rows, lower, upper, kinds = chance.count_rows(problem, model)
+    if rows is None:
+        return model
+    return model.with_rows(rows, lower, upper, kinds)
+
+
+def _combinatorial_first(problem: PlanProblem, config, infos: list[StationInfo],
+                         chance: ChanceRule | None = None
                          ) -> tuple[PlanResult | None, tuple | None]:
     """Known control: solve the directions rows alone first; done if that passes.
 
@@ -140,7 +219,8 @@ def _combinatorial_first(problem: PlanProblem, config, infos: list[StationInfo]
         ``(rows, lower, kinds)`` of :func:`~planner.program.cuts_known.accuracy_cuts` for the
         failing layout (``rows`` None when there was no layout), to add to the full model.
     """
-    relaxed = build_model(problem, config, information=False)
+    relaxed = _with_chance_counts(build_model(problem, config, information=False), problem,
+                                  chance)
     usable = np.flatnonzero(problem.pair_usable)
     info = np.bincount(problem.pair_site[usable], 3.0 / problem.pair_sigma_m[usable] ** 2,
                        minlength=problem.n_sites)
@@ -155,6 +235,8 @@ def _combinatorial_first(problem: PlanProblem, config, infos: list[StationInfo]
         if not check.all_ok:
             rows = accuracy_cuts(problem, relaxed, sol.selected, config, infos,
                                  outer_approximation=True)
+        if chance is not None:
+            rows = _stacked(rows, chance.cuts(problem, relaxed, sol.selected))
     result = PlanResult(selected=sol.selected, check=check, solution=sol, iterations=1,
                         n_cuts=0 if rows[0] is None else rows[0].shape[0],
                         solve_time_s=sol.solve_time_s, model=relaxed, history=history)
@@ -164,9 +246,11 @@ def _combinatorial_first(problem: PlanProblem, config, infos: list[StationInfo]
 
 
 def _plan_network(problem: PlanProblem, config, model: Model | None,
-                  infos: list[StationInfo]) -> PlanResult:
+                  infos: list[StationInfo], chance: ChanceRule | None = None) -> PlanResult:
     """:func:`plan_sites` in network mode: the same build/solve/cut loop with the network's
-    accuracy checks and cuts (:func:`~planner.program.cuts_network.network_cuts`)."""
+    accuracy checks and cuts (:func:`~planner.program.cuts_network.network_cuts`); the chance
+    rule judges each station's count and directions (its odds ignore accuracy: a network
+    station's accuracy depends on every station's detections)."""
     t0 = time.perf_counter()
     net = network_model(problem, config)
     n_tying = int(net.tying.sum())
@@ -177,8 +261,11 @@ def _plan_network(problem: PlanProblem, config, model: Model | None,
             f"(grid_spacing_m in `config_path`; {config.grid_spacing_m:g} m now, try "
             f"{config.grid_spacing_m * math.sqrt(n_tying / MAX_NETWORK_TYING_SITES) * 1.2:.1f} m)")
     hopeless = network_preflight(problem, config, net, infos)
+    if chance is not None:
+        _refuse_hopeless(problem, config, {}, chance)
     if model is None:
-        model = with_tightening_rows(problem, build_model(problem, config), config)
+        model = _with_chance_counts(
+            with_tightening_rows(problem, build_model(problem, config), config), problem, chance)
     ub = model.ub.copy()
     var = model.site_var[np.flatnonzero(hopeless)]
     ub[var[var >= 0]] = 0.0
@@ -198,7 +285,10 @@ def _plan_network(problem: PlanProblem, config, model: Model | None,
             forbidden=config.forbidden + tuple(
                 problem.site_ids[j] for j in np.flatnonzero(hopeless & ~forbidden))), net,
             deadline=t0 + _GREEDY_TIME_FRACTION * config.time_limit_s)
-    if greedy is not None and greedy.meets_requirement:
+    if greedy is not None and greedy.meets_requirement \
+            and (chance is None or chance.layout_ok(greedy.selected)) \
+            and (config.max_bias_effect_m is None  # the greedy ignores the bias bound
+                 or evaluate_layout(problem, greedy.selected, config, infos, net=net).all_ok):
         in_model = model.site_var >= 0
         greedy_selected = greedy.selected
         upper_bound = int((greedy.selected & in_model).sum())
@@ -212,13 +302,14 @@ def _plan_network(problem: PlanProblem, config, model: Model | None,
         model, root_bound = _root_relaxation(problem, model, config, net, upper_bound, budget_s)
 
     def cuts(selected):
-        return network_cuts(problem, model, selected, config, net, j_all, upper_bound)
+        return _stacked(network_cuts(problem, model, selected, config, net, j_all, upper_bound),
+                        chance.cuts(problem, model, selected) if chance else (None, [], []))
 
     def check(selected):
         return evaluate_layout(problem, selected, config, infos, net=net)
 
     result = _cut_loop(problem, config, model, cuts, check, incumbent=greedy_selected, t0=t0,
-                       bound=root_bound)
+                       bound=root_bound, repair=_repair(problem, config, chance, check))
     return replace(result, greedy=greedy)
 
 
@@ -317,9 +408,12 @@ def _root_relaxation(problem: PlanProblem, model: Model, config, net: NetworkMod
 
 def _cut_loop(problem: PlanProblem, config, model: Model, cuts, check,
               incumbent: np.ndarray | None = None, t0: float | None = None,
-              bound: float = -np.inf) -> PlanResult:
+              bound: float = -np.inf, repair=None) -> PlanResult:
     """Solve, cut with ``cuts(selected) -> (rows, lower, kinds)`` (``rows`` None: passes),
     re-solve until every check passes; ``check(selected) -> LayoutCheck``.
+
+    ``repair(selected) -> (n,) bool or None``: a passing layout grown from the first failing
+    one, which becomes the incumbent (see below) when none was given.
 
     ``incumbent`` ((n,) bool, a layout known to pass): when the time limit stops the loop, or
     when a proven lower bound reaches its cost (then with status ``"optimal"``), it is the
@@ -332,25 +426,30 @@ def _cut_loop(problem: PlanProblem, config, model: Model, cuts, check,
     n_cuts = 0
     history = []
     iteration = 0
+
+    def incumbent_result(proven: bool) -> PlanResult:
+        obj = float(problem.site_cost[incumbent].sum())
+        gap = max(obj - bound, 0.0) / max(abs(obj), 1e-9) if np.isfinite(bound) \
+            else float("nan")
+        sol = Solution(status="optimal" if proven else "time_limit", selected=incumbent,
+                       objective=obj, dual_bound=obj if proven else float(bound),
+                       gap=0.0 if proven else gap, solve_time_s=0.0,
+                       message="the passing layout found first: proven optimal by the "
+                               "lower bound" if proven else
+                               "time limit: the passing layout found first, with the best "
+                               "proven bound")
+        return PlanResult(selected=incumbent, check=check(incumbent), solution=sol,
+                          iterations=iteration - 1, n_cuts=n_cuts,
+                          solve_time_s=solve_time, model=model, history=history)
+
+    improving = False  # the model asks for a layout cheaper than the incumbent
     while True:
         iteration += 1
         remaining = config.time_limit_s - (time.perf_counter() - t0)
         proven = incumbent is not None and np.isfinite(bound) \
             and math.ceil(bound - 1e-6) >= problem.site_cost[incumbent].sum() - 1e-9
         if (remaining <= 0 or proven) and incumbent is not None:
-            obj = float(problem.site_cost[incumbent].sum())
-            gap = max(obj - bound, 0.0) / max(abs(obj), 1e-9) if np.isfinite(bound) \
-                else float("nan")
-            sol = Solution(status="optimal" if proven else "time_limit", selected=incumbent,
-                           objective=obj, dual_bound=float(bound), gap=0.0 if proven else gap,
-                           solve_time_s=0.0,
-                           message="the passing layout found first: proven optimal by the "
-                                   "lower bound" if proven else
-                                   "time limit: the passing layout found first, with the best "
-                                   "proven bound")
-            return PlanResult(selected=incumbent, check=check(incumbent), solution=sol,
-                              iterations=iteration - 1, n_cuts=n_cuts,
-                              solve_time_s=solve_time, model=model, history=history)
+            return incumbent_result(proven)
         if remaining <= 0:
             raise PlanTimeLimitError(
                 f"time limit {config.time_limit_s:g} s reached after {iteration - 1} "
@@ -364,10 +463,15 @@ def _cut_loop(problem: PlanProblem, config, model: Model, cuts, check,
                         "objective": sol.objective, "dual_bound": sol.dual_bound,
                         "solve_time_s": sol.solve_time_s, "n_rows": int(model.A.shape[0])})
         if sol.selected is None:
+            if sol.status == "infeasible" and improving:
+                iteration += 1  # no cheaper layout exists: the incumbent is optimal
+                return incumbent_result(True)
             if sol.status == "infeasible":
                 why = (f"the marker budget ({config.budget}) is too small"
                        if config.budget is not None else
-                       "the stations' direction and accuracy requirements conflict")
+                       "the stations' direction and accuracy requirements conflict"
+                       + ("" if config.max_bias_effect_m is None else
+                          f" with `max_bias_effect_m` {config.max_bias_effect_m:g} m"))
                 raise InfeasiblePlanError(f"no layout is feasible: {why}; "
                                           "raise `budget` or relax the configuration")
             if incumbent is not None:
@@ -375,9 +479,29 @@ def _cut_loop(problem: PlanProblem, config, model: Model, cuts, check,
             raise PlanTimeLimitError(f"solver found no layout ({sol.status}: {sol.message}); "
                                      "raise `time_limit_s`")
         rows, lower, kinds = cuts(sol.selected)
+        if rows is not None and incumbent is None and repair is not None:
+            incumbent, repair = repair(sol.selected), None
+            model, improving = _improving(problem, model, incumbent)
         if rows is None:
+            if incumbent is not None and problem.site_cost[incumbent].sum() \
+                    < problem.site_cost[sol.selected].sum() - 1e-9:
+                iteration += 1  # a time-limited solve's layout, dearer than the incumbent
+                return incumbent_result(False)
             return PlanResult(selected=sol.selected, check=check(sol.selected), solution=sol,
                               iterations=iteration, n_cuts=n_cuts, solve_time_s=solve_time,
                               model=model, history=history)
         n_cuts += rows.shape[0]
         model = model.with_rows(rows, lower, np.full(len(lower), np.inf), kinds)
+
+
+def _improving(problem: PlanProblem, model: Model, incumbent: np.ndarray | None
+               ) -> tuple[Model, bool]:
+    """``model`` asking for a layout cheaper than ``incumbent`` by at least one (a row
+    ``"improve"``, when every site's cost is a whole number), and whether it does: then an
+    infeasible model proves the incumbent optimal."""
+    costs = problem.site_cost[model.var_site]
+    if incumbent is None or not np.all(costs == np.round(costs)):
+        return model, False
+    row = model.site_row(model.var_site, costs)
+    cap = float(problem.site_cost[incumbent].sum()) - 1.0
+    return model.with_rows(row, [-np.inf], [cap], [RowKind("improve")]), True

@@ -72,7 +72,10 @@ class RowKind:
         (:func:`~planner.program.cuts_known.accuracy_cuts`);
         network mode: "upper-bound", "cut", "connect", "oa", "cut-marker", "oa-marker"
         (:func:`~planner.program.cuts_network.network_cuts`), redundant: "cut-loss", "oa-loss"
-        (:func:`~planner.program.cuts_network._network_loss_cuts`).
+        (:func:`~planner.program.cuts_network._network_loss_cuts`), "cut-bias"
+        (:func:`~planner.program.cuts_network.bias_cuts`); chance-constrained:
+        "chance-count", "chance-critical", "chance", "chance-undecided"
+        (:mod:`planner.program.cuts_chance`).
     station : int
         Index of the station the row belongs to, -1 for rows of no station (budget).
     """

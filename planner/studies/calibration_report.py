@@ -23,6 +23,8 @@ def calibration_record(result: CalibrationResult) -> dict:
         "free": [asdict(f) for f in result.free],
         "values": result.values, "standard_errors": result.sigmas,
         "at_bound": result.at_bound, "chi2": result.chi2, "dof": result.dof,
+        "correlation": result.correlation, "jacobian_condition": result.jacobian_condition,
+        "predictions": result.predictions,
         "measured_m": result.measured,
         "confirmation": result.confirmation, "holdout": result.holdout,
         "emulator": result.emulator, "settings": asdict(result.settings),
@@ -72,7 +74,18 @@ def report_markdown(result: CalibrationResult, config: dict) -> str:
         flag = " (at the bound: widen the range)" if f.name in result.at_bound else ""
         lines.append(f"| {f.name} | {result.values[f.name]:.6g}{flag} | "
                      f"{result.sigmas[f.name]:.2g} | {f.low:g}-{f.high:g} |")
-    lines += ["", f"chi^2 = {result.chi2:.2f} on {result.dof} degree(s) of freedom.", "",
+    lines += ["", f"chi^2 = {result.chi2:.2f} on {result.dof} degree(s) of freedom.", ""]
+    if len(result.free) > 1:
+        lines += [f"Correlation of the fitted parameters {result.correlation[0][1]:+.3f}; "
+                  f"condition number of the Jacobian (unit-norm columns) "
+                  f"{result.jacobian_condition:.3g}.", ""]
+    lines += ["## Fitted statistic with its 95 % interval for one field measurement", "",
+              "| position | measured mm | fitted mm | 95 % interval mm |", "|---|---|---|---|"]
+    for p in result.predictions:
+        lo, hi = p["interval95_m"]
+        lines.append(f"| {p['position']} | {p['measured_m'] * 1e3:.2f} | "
+                     f"{p['emulated_m'] * 1e3:.2f} | {lo * 1e3:.2f}-{hi * 1e3:.2f} |")
+    lines += ["",
               "## Predicted against measured (fresh seeds)", "",
               "| position | measured mm | predicted mm | ratio | accepted markers |",
               "|---|---|---|---|---|"]

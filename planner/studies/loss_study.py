@@ -38,6 +38,7 @@ from pipeline.fate_table import FATE_COLUMNS, FATE_STAGES
 from pipeline.process import process_station
 from pipeline.range_study import RANGE_STUDY_DISTANCES_M, marker_layout
 from pipeline.survey import ProcessingSettings, processing_config
+from planner.problem.detection_odds import rim_distance, terrain_normal
 from planner.verify.fates import station_fates
 from visibility.dem import DEM
 from visibility.sensor_profile import SensorProfile, default_profile
@@ -167,32 +168,13 @@ def pair_covariates(layout: LossLayout, station: int, max_range_m: float,
     j = vis.site
     los = centres[j] - origin
     los /= np.linalg.norm(los, axis=1)[:, None]
-    normal = _terrain_normal(layout.dem, centres[j, :2])
+    normal = terrain_normal(layout.dem, centres[j, :2])
     incidence = np.degrees(np.arccos(np.clip(np.abs((los * normal).sum(axis=1)), 0.0, 1.0)))
     slope = np.degrees(np.arccos(np.clip(normal[:, 2], 0.0, 1.0)))
     return {"marker": j, "distance_m": vis.distance_m,
             "elevation_deg": np.degrees(vis.elevation_rad), "incidence_deg": incidence,
-            "slope_deg": slope, "rim_distance_m": _rim_distance(layout.craters, centres[j, :2]),
+            "slope_deg": slope, "rim_distance_m": rim_distance(layout.craters, centres[j, :2]),
             "visible_fraction": vis.visible_fraction, "expected_points": vis.expected_points}
-
-
-def _terrain_normal(dem: DEM, xy: np.ndarray, step_m: float | None = None) -> np.ndarray:
-    """(n, 3) upward unit normals of the terrain at ``xy`` (central differences over one
-    cell, or ``step_m``)."""
-    h = step_m or dem.cell_size_m
-    dx = (dem.height_at(xy + [h, 0]) - dem.height_at(xy - [h, 0])) / (2 * h)
-    dy = (dem.height_at(xy + [0, h]) - dem.height_at(xy - [0, h])) / (2 * h)
-    n = np.column_stack([-dx, -dy, np.ones(len(xy))])
-    return n / np.linalg.norm(n, axis=1)[:, None]
-
-
-def _rim_distance(craters: Sequence[Crater], xy: np.ndarray) -> np.ndarray:
-    """(n,) distance of each point to the nearest crater's rim crest, metres (inf: none)."""
-    if not craters:
-        return np.full(len(xy), np.inf)
-    c = np.array([cr.centre_xy_m for cr in craters])
-    r = np.array([cr.diameter_m / 2 for cr in craters])
-    return np.abs(np.linalg.norm(xy[:, None] - c[None], axis=2) - r[None]).min(axis=1)
 
 
 @dataclass(frozen=True)

@@ -25,8 +25,12 @@ Method
    parameters. The weight of a position is the uncertainty of one field measurement of its
    statistic: the pooled relative spread of the replicates (a field position is one draw),
    with the rounding of the published figures (uniform over their last digit) added in
-   quadrature. The parameters' standard errors come from the Jacobian, scaled up by
-   ``chi^2 / dof`` when that exceeds one.
+   quadrature. The parameters' standard errors and correlation come from the Jacobian, scaled
+   up by ``chi^2 / dof`` when that exceeds one; the condition number of the Jacobian with
+   unit-norm columns says whether the positions tell two parameters apart (near 1: yes; large:
+   their effects on the positions are nearly proportional). Each position's fitted statistic
+   gets a 95 % interval for one field measurement: the fit's uncertainty through the emulator
+   and one field draw's spread, in quadrature.
 4. **Confirmation.** The fitted profile is simulated again with fresh seeds; the
    predicted/measured ratio per position is reported (what a calibration must reproduce), and a
    hold-out: for each position, fit on the others and predict it by simulation.
@@ -199,6 +203,14 @@ class CalibrationResult:
     profile: SensorProfile
     settings: CalibrationSettings
     measured: dict[str, float] = field(default_factory=dict)
+    #: Correlation matrix of the free parameters (in ``free`` order).
+    correlation: list[list[float]] = field(default_factory=list)
+    #: Condition number of the fit's Jacobian with unit-norm columns (1: the positions tell the
+    #: parameters apart perfectly; large: their effects are nearly proportional).
+    jacobian_condition: float = float("nan")
+    #: Per position: the fitted (emulated) statistic with its 95 % interval for one field
+    #: measurement (``emulated_m``, ``fit_sd_m``, ``draw_sd_m``, ``interval95_m``).
+    predictions: list[dict] = field(default_factory=list)
 
     @property
     def warnings(self) -> list[str]:
@@ -318,7 +330,8 @@ def calibrate(positions: Sequence[FieldPosition], base: SensorProfile,
     measured = {p.name: p.mean_abs_edge_residual_m for p in positions}
     return CalibrationResult(free, fit["values"], fit["sigmas"], fit["at_bound"], fit["chi2"],
                              fit["dof"], emulator, runs, confirmation, holdout, fitted, settings,
-                             measured)
+                             measured, fit["correlation"], fit["jacobian_condition"],
+                             fit["predictions"])
 
 
 def _calibrate_iv(positions, free, settings) -> None:
@@ -395,17 +408,65 @@ def _fit_parameters(positions: Sequence[FieldPosition], free: list[FreeParameter
                key=lambda r: r.cost)
     chi2 = float(2 * best.cost)
     dof = len(positions) - len(free)
-    jac = best.jac
-    try:
-        cov = np.linalg.inv(jac.T @ jac) * max(1.0, chi2 / dof if dof else 1.0)
-        sig = np.sqrt(np.diag(cov))
-    except np.linalg.LinAlgError:
-        sig = np.full(len(free), np.inf)
+    values = dict(zip(names, map(float, best.x), strict=True))
+    cov = _covariance(best.jac, max(1.0, chi2 / dof if dof else 1.0))
+    sig = np.sqrt(np.diag(cov))
     at_bound = [n for n, x, a, b in zip(names, best.x, lo, hi, strict=True)
                 if min(x - a, b - x) < 1e-3 * (b - a)]
-    return {"values": {n: float(x) for n, x in zip(names, best.x, strict=True)},
+    return {"values": values,
             "sigmas": {n: float(s) for n, s in zip(names, sig, strict=True)},
-            "chi2": chi2, "dof": dof, "at_bound": at_bound}
+            "chi2": chi2, "dof": dof, "at_bound": at_bound,
+            "correlation": _correlation(cov).tolist(),
+            "jacobian_condition": _equilibrated_condition(best.jac),
+            "predictions": [_prediction(p, e, values, cov, uncertainty)
+                            for p, e in zip(positions, emulator, strict=True)]}
+
+
+def _covariance(jac: np.ndarray, scale: float) -> np.ndarray:
+    """``scale * (J^T J)^-1``, all ``inf`` when ``J`` has lost rank (the data cannot fix the
+    parameters)."""
+    try:
+        return np.linalg.inv(jac.T @ jac) * scale
+    except np.linalg.LinAlgError:
+        return np.full((jac.shape[1],) * 2, np.inf)
+
+
+def _correlation(cov: np.ndarray) -> np.ndarray:
+    """Correlation matrix of ``cov`` (NaN where a standard error is infinite or zero)."""
+    sd = np.sqrt(np.diag(cov))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return cov / np.outer(sd, sd)
+
+
+def _equilibrated_condition(jac: np.ndarray) -> float:
+    """Condition number of the Jacobian with unit-norm columns: independent of the parameters'
+    units, 1 for orthogonal effects, growing without bound as two parameters' effects on the
+    positions become proportional (infinite when a column is zero)."""
+    norms = np.linalg.norm(jac, axis=0)
+    if np.any(norms == 0):
+        return float("inf")
+    return float(np.linalg.cond(jac / norms))
+
+
+#: Two-sided 95 % normal quantile of the prediction intervals.
+Z95 = 1.959963984540054
+
+
+def _prediction(position: FieldPosition, emulator: dict, values: dict[str, float],
+                cov: np.ndarray, uncertainty: Callable[[np.ndarray], np.ndarray]) -> dict:
+    """The fitted statistic of one position with its 95 % interval for one field measurement:
+    the fit's uncertainty (the emulator's gradient through the parameters' covariance) and one
+    field draw's spread plus the rounding (``uncertainty``), in quadrature."""
+    pred = emulate(emulator, values)
+    # d s / d p_i = b_i p_i / s for s^2 = a + sum b_i p_i^2
+    grad = np.array([emulator["b"][n] * v / pred if pred > 0 else 0.0
+                     for n, v in values.items()])
+    fit_sd = float(np.sqrt(grad @ cov @ grad)) if np.all(np.isfinite(cov)) else float("inf")
+    draw_sd = float(uncertainty(np.array([pred]))[0])
+    half = Z95 * float(np.hypot(fit_sd, draw_sd))
+    return {"position": position.name, "measured_m": position.mean_abs_edge_residual_m,
+            "emulated_m": pred, "fit_sd_m": fit_sd, "draw_sd_m": draw_sd,
+            "interval95_m": [max(pred - half, 0.0), pred + half]}
 
 
 def _predict(profile: SensorProfile, pos: FieldPosition, k: int, settings: CalibrationSettings,

@@ -6,6 +6,10 @@ predicted error.
   it, against the simulator's truth; ``fates.csv``, both modes);
 - :mod:`planner.verify.network`: markers identified without the simulator's truth and the whole
   network adjusted;
-- :mod:`planner.verify.trials`: ``verify --trials N``, the plan verified with independent
-  seeds: its pass rate with a Wilson 95 % interval, per station and per station-marker pair.
+- :mod:`planner.verify.network_report`: a network verification's ``verify.json``,
+  ``verify.md`` and summary line;
+- :mod:`planner.verify.trials`: ``verify --trials N`` (both modes), the plan verified with
+  independent seeds and rig offsets drawn from the user's tolerances: its pass rate with a
+  Wilson 95 % interval beside its predicted pass probability, per station and per
+  station-marker pair beside the predicted detection probabilities.
 """

@@ -24,6 +24,13 @@ truth (:mod:`planner.verify.fates`): the stage of the chain that lost it and why
 
 The plan passes only if every station's achieved error is within the requirement.
 
+Verification simulates on the **truth** terrain, never on a planning DEM
+(:func:`on_truth_terrain`): a plan made on a preset's orbital DEM (``plan --terrain orbital``)
+is simulated on the preset's fine terrain, a plan checked against ``--truth-dem FILE`` on that
+file; the stations and markers keep their planned x, y and their height above the ground, re-seated
+on the truth ground (a marker rests on it, the rover stands on it). A plan made on the terrain
+it is verified on is simulated as planned.
+
 Each station is one task (:func:`station_task`: simulate, then process, returning only the small
 result), mapped by :mod:`planner.distributed` in process or over a dask cluster, with the same
 results either way.
@@ -32,6 +39,7 @@ results either way.
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import functools
 import itertools
 from collections.abc import Callable, Sequence
@@ -39,6 +47,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from markerplan.errors import DataError
 from markerplan.provenance import provenance
 from pipeline.evaluation import Reference
 from pipeline.process import process_station
@@ -59,6 +68,7 @@ from planner.verify.fates import (
     unmatched_text,
 )
 from visibility.dem import DEM
+from visibility.orbital import reseated
 from visibility.sensor_profile import SensorProfile, default_profile
 from visibility.simulate import simulate_markers
 
@@ -125,7 +135,8 @@ def verify_plan(plan: SurveyPlan, error_model, seed: int = 0, progress: bool = T
 
 
 def verify_plans(plans: Sequence[SurveyPlan], error_model, seed: int | Sequence[int] = 0,
-                 progress: bool = True, offsets: MountingOffsets | None = None,
+                 progress: bool = True,
+                 offsets: MountingOffsets | Sequence[MountingOffsets] | None = None,
                  station_ids: list[str] | None = None, profile: SensorProfile | None = None,
                  executor: Executor | None = None, names: Sequence[str] | None = None
                  ) -> list[list[StationCheck]]:
@@ -139,7 +150,9 @@ def verify_plans(plans: Sequence[SurveyPlan], error_model, seed: int | Sequence[
     seed : int or sequence of int
         As :func:`verify_plan`, or one per plan (a plan may come more than once: the trials
         of :mod:`planner.verify.trials`).
-    error_model, progress, offsets, station_ids, profile, executor
+    offsets : MountingOffsets or sequence of MountingOffsets, optional
+        As :func:`verify_plan`, or one per plan (:func:`map_plan_stations`).
+    error_model, progress, station_ids, profile, executor
         As :func:`verify_plan`.
     names : sequence of str, optional
         A name per plan for the task errors (e.g. ``k=11``).
@@ -336,7 +349,7 @@ def map_stations(plan: SurveyPlan, process: Callable, seed: int = 0, progress: b
 
 def map_plan_stations(plans: Sequence[SurveyPlan], processes: Sequence[Callable],
                       seed: int | Sequence[int] = 0, progress: bool = True,
-                      offsets: MountingOffsets | None = None,
+                      offsets: MountingOffsets | Sequence[MountingOffsets] | None = None,
                       station_ids: list[str] | None = None,
                       profile: SensorProfile | None = None, executor: Executor | None = None,
                       names: Sequence[str] | None = None) -> list[list]:
@@ -351,7 +364,10 @@ def map_plan_stations(plans: Sequence[SurveyPlan], processes: Sequence[Callable]
     seed : int or sequence of int
         As :func:`verify_plan`, or one per plan (a plan may come more than once: the trials
         of ``verify --trials``).
-    progress, offsets, station_ids, profile, executor
+    offsets : MountingOffsets or sequence of MountingOffsets, optional
+        As :func:`verify_plan`, or one per plan (the rig offsets of each trial of
+        ``verify --trials`` drawn from the user's tolerances).
+    progress, station_ids, profile, executor
         As :func:`verify_plan`.
     names : sequence of str, optional
         A name per plan for the task errors (``station S2 (k=11)``); default none.
@@ -364,7 +380,10 @@ def map_plan_stations(plans: Sequence[SurveyPlan], processes: Sequence[Callable]
     if any(plan.dem is not plans[0].dem for plan in plans):
         raise ValueError("map_plan_stations: the plans must share one DEM object")
     profile = profile or default_profile()
-    offsets = offsets or MountingOffsets()
+    rigs = (list(offsets) if isinstance(offsets, Sequence)
+            else [offsets or MountingOffsets()] * len(plans))
+    if len(rigs) != len(plans):
+        raise ValueError(f"{len(rigs)} mounting offsets for {len(plans)} plans")
     chosen = [[(k, st) for k, st in enumerate(plan.stations)
                if station_ids is None or st.id in station_ids] for plan in plans]
     n_tasks = sum(len(c) for c in chosen)
@@ -375,16 +394,86 @@ def map_plan_stations(plans: Sequence[SurveyPlan], processes: Sequence[Callable]
             executor = stack.enter_context(distributed.executor(distributed.IN_PROCESS,
                                                                 progress=progress))
         jobs = [StationJob(st, int(s) + k, tuple(plan.marker_ids), plan.marker_xyz_m,
-                           plan.marker_radius_m, profile, offsets, process,
+                           plan.marker_radius_m, profile, rig, process,
                            executor.threads(n_tasks))
-                for plan, process, stations, s in zip(plans, processes, chosen, seeds,
-                                                      strict=True)
+                for plan, process, stations, s, rig in zip(plans, processes, chosen, seeds,
+                                                           rigs, strict=True)
                 for k, st in stations]
         labels = [f"station {st.id}{end}" for stations, end in zip(chosen, suffix, strict=True)
                   for _, st in stations]
         results = iter(executor.map(station_task, jobs, shared=plans[0].dem, labels=labels,
                                     desc="verify"))
     return [list(itertools.islice(results, len(stations))) for stations in chosen]
+
+
+def on_truth_terrain(plan: SurveyPlan, truth: DEM | None = None,
+                     what: str = "`truth_dem`") -> SurveyPlan:
+    """The plan as verification simulates it: on the truth terrain (module docstring).
+
+    Parameters
+    ----------
+    plan : SurveyPlan
+        As :func:`planner.outputs.plan_file.load_plan` reads it: ``dem`` is a preset's truth
+        terrain or the plan's ``--dem`` file.
+    truth : DEM, optional
+        The terrain to simulate on instead (``verify --truth-dem``), in the plan's site frame.
+    what : str
+        How messages name ``truth``.
+
+    Returns
+    -------
+    plan : SurveyPlan
+        ``plan`` itself when it was made on the terrain it is verified on; else on ``truth``
+        (or the preset's truth), every station and marker at its planned x, y and planned
+        height above the planning ground, on the truth ground.
+
+    Raises
+    ------
+    DataError
+        ``truth`` does not cover every station and marker (or they stand on its nodata):
+        names them all and the fix.
+    """
+    planning = planning_terrain(plan)
+    if truth is None:
+        truth = plan.dem
+    if planning is truth:
+        return plan
+    _require_covers(truth, plan, what)
+    stations = tuple(dataclasses.replace(st, position_m=reseated(st.position_m[None], planning,
+                                                                  truth)[0])
+                     for st in plan.stations)
+    return dataclasses.replace(plan, dem=truth, stations=stations,
+                               marker_xyz_m=reseated(plan.marker_xyz_m, planning, truth))
+
+
+def planning_terrain(plan: SurveyPlan) -> DEM:
+    """The DEM a plan was made on: its orbital planning DEM when its provenance says so
+    (rebuilt from the recorded cell, height error and seed, :func:`visibility.orbital.orbital_dem`),
+    else ``plan.dem``."""
+    from visibility.orbital import HeightError, orbital_dem
+
+    inputs = plan.provenance.get("inputs", {})
+    terrain = inputs.get("terrain") or {}
+    if terrain.get("kind") != "orbital":
+        return plan.dem
+    error = HeightError(**terrain["height_error"])
+    return orbital_dem(plan.dem, terrain["cell_m"], error, seed=terrain["seed"])
+
+
+def _require_covers(truth: DEM, plan: SurveyPlan, what: str) -> None:
+    """Refuse a truth DEM that leaves a station or marker off its measured terrain, naming
+    every such id (one-line :class:`DataError`)."""
+    ids = [st.id for st in plan.stations] + list(plan.marker_ids)
+    xy = np.vstack([[st.position_m[:2] for st in plan.stations],
+                    np.asarray(plan.marker_xyz_m)[:, :2]])
+    on = truth.valid_at(xy)
+    if not on.all():
+        off = [i for i, ok in zip(ids, on, strict=True) if not ok]
+        shown = ", ".join(off[:20]) + (f" and {len(off) - 20} more" if len(off) > 20 else "")
+        xmin, xmax, ymin, ymax = truth.extent()
+        raise DataError(f"{what} does not cover {shown} of the plan (it spans [{xmin:.1f}, "
+                        f"{xmax:.1f}] x [{ymin:.1f}, {ymax:.1f}] m, site frame); give a truth "
+                        "DEM covering every station and marker, in the plan's site frame")
 
 
 def verify_record(plan: SurveyPlan, checks: list[StationCheck], seed: int, model_name: str,

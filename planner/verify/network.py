@@ -8,7 +8,8 @@ The closed loop of ``markerplan verify --network``, in two steps:
    planned markers (:func:`planner.verify.known_control.map_stations`: the sensor profile and the
    mis-mounted rig of known-control ``verify``) and processed by the published chain
    (:func:`pipeline.process.process_station`) *without* a reference, so the marker table's
-   ``marker_id`` column stays empty. The truth of every station (its pose and the markers' true
+   ``marker_id`` column is empty until the association of step 2 fills it
+   (:func:`identified_rows`). The truth of every station (its pose and the markers' true
    centres) is kept apart, for the comparison only, and so are the fates of its planned markers
    (:func:`planner.verify.fates.station_fates`: the stage that lost each, against the
    true centres; ``fates.csv`` names them by their true ids).
@@ -47,6 +48,7 @@ adjustment (:func:`tied_network`); the others are still adjusted and compared.
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import math
 from dataclasses import dataclass, field
@@ -55,7 +57,6 @@ from pathlib import Path
 import numpy as np
 
 from markerplan.errors import ConfigError, InputFileError
-from markerplan.provenance import provenance
 from pipeline.marker_table import MarkerRow, read_marker_table
 from pipeline.network.detections import Identified, StationDetections
 from pipeline.network.observations import Datum
@@ -66,13 +67,9 @@ from planner.distributed import Executor
 from planner.outputs.plan_file import SurveyPlan
 from planner.verify.fates import (
     StationFates,
-    fates_record,
-    losses_markdown,
     losses_text,
-    stage_counts,
     unmatched_text,
 )
-from planner.verify.known_control import VERIFY_SCHEMA, VERIFY_SCHEMA_VERSION
 from visibility.sensor_profile import SensorProfile
 
 
@@ -190,6 +187,9 @@ class NetworkVerification:
     misidentified: list[dict] = field(default_factory=list)
     """Accepted planned markers of adjusted stations whose detection the association named
     otherwise: station, true marker id, ``identified_as`` (``None``: left unidentified)."""
+    detection_ids: dict[str, tuple[str | None, ...]] = field(default_factory=dict)
+    """Per station the association reached, the id it gave each accepted detection (in the
+    table's order; ``None``: left unidentified), whether or not the station was adjusted."""
 
     @property
     def passed(self) -> bool:
@@ -232,10 +232,14 @@ def reference_station(named: str | None, plan_stations, chosen) -> str:
     return reference
 
 
+#: :func:`scan_plan`'s result: the marker-table rows, the truth and the fates of one scan.
+Scanned = tuple[list[MarkerRow], dict[str, TrueStation], dict[str, StationFates]]
+
+
 def scan_plan(plan: SurveyPlan, seed: int = 0, progress: bool = True,
               offsets: MountingOffsets | None = None, station_ids: list[str] | None = None,
               profile: SensorProfile | None = None, executor: Executor | None = None
-              ) -> tuple[list[MarkerRow], dict[str, TrueStation], dict[str, StationFates]]:
+              ) -> Scanned:
     """Simulate and process the chosen stations of a plan (step 1 of the module docstring).
 
     Parameters are those of :func:`planner.verify.known_control.verify_plan`.
@@ -251,15 +255,45 @@ def scan_plan(plan: SurveyPlan, seed: int = 0, progress: bool = True,
         Per station id, its planned markers' fates (``candidate``: the row among the
         station's ``rows``).
     """
+    return scan_plans(plan, [seed], progress, offsets, station_ids, profile, executor)[0]
+
+
+def scan_plans(plan: SurveyPlan, seeds: list[int], progress: bool = True,
+               offsets: MountingOffsets | list[MountingOffsets] | None = None,
+               station_ids: list[str] | None = None, profile: SensorProfile | None = None,
+               executor: Executor | None = None, names: list[str] | None = None
+               ) -> list[Scanned]:
+    """:func:`scan_plan` once per seed (the trials of ``verify --network --trials N``), every
+    scan x station one task of one map
+    (:func:`planner.verify.known_control.map_plan_stations`).
+
+    Parameters
+    ----------
+    plan : SurveyPlan
+    seeds : list of int
+        One simulation seed per scan.
+    offsets : MountingOffsets or list of MountingOffsets, optional
+        The rig's true mounting offsets, for all scans or one per scan.
+    progress, station_ids, profile, executor
+        As :func:`planner.verify.known_control.verify_plan`.
+    names : list of str, optional
+        A name per scan for the task errors (``trial 3``).
+
+    Returns
+    -------
+    scans : list of Scanned
+        Per seed, :func:`scan_plan`'s three values.
+    """
     from pipeline.survey import ProcessingSettings, processing_config
-    from planner.verify.known_control import map_stations
+    from planner.verify.known_control import map_plan_stations
 
     cfg = processing_config(ProcessingSettings(marker_radius_m=plan.marker_radius_m))
-    done = map_stations(plan, functools.partial(station_rows, cfg, seed), seed, progress,
-                        offsets, station_ids, profile, executor)
-    rows = [r for station, _, _ in done for r in station]
-    return (rows, {true.station_id: true for _, true, _ in done},
-            {true.station_id: fates for _, true, fates in done})
+    done = map_plan_stations([plan] * len(seeds),
+                             [functools.partial(station_rows, cfg, s) for s in seeds], seeds,
+                             progress, offsets, station_ids, profile, executor, names)
+    return [([r for station, _, _ in scan for r in station],
+             {true.station_id: true for _, true, _ in scan},
+             {true.station_id: fates for _, true, fates in scan}) for scan in done]
 
 
 def station_rows(cfg: ProcessConfig, seed: int, st, scan, truth: dict
@@ -346,12 +380,12 @@ def adjust_and_compare(tables: list[Path], plan_path: Path, error_model,
         heading_prior_sigma_rad=None if heading_prior is None else math.radians(heading_prior),
         alpha0=settings.alpha0, beta0=settings.beta0, snooping=settings.snooping)
     left_out: dict[str, str] = {}
-    n_named: dict[str, int] = {}
+    detection_ids: dict[str, tuple[str | None, ...]] = {}
 
     def identify(stations: list[StationDetections]) -> Identified:
-        identified, out, counts = tied_network(stations, plan, reference, settings)
+        identified, out, ids = tied_network(stations, plan, reference, settings)
         left_out.update(out)
-        n_named.update(counts)
+        detection_ids.update(ids)
         return identified
 
     adjusted = adjust_tables(tables, error_model, functools.partial(_datum_station, reference),
@@ -366,7 +400,9 @@ def adjust_and_compare(tables: list[Path], plan_path: Path, error_model,
     accepted = {s.station_id: len(s.xyz_m) for s in stations}
     named = {s.station_id: {i for i in ids if i is not None}
              for s, ids in zip(identified.stations, identified.ids, strict=True)}
-    named_count = {**n_named, **{sid: len(ids) for sid, ids in named.items()}}
+    named_count = {**{sid: sum(i is not None for i in ids)
+                      for sid, ids in detection_ids.items()},
+                   **{sid: len(ids) for sid, ids in named.items()}}
     outcomes = []
     for sid in truth:
         pred = predicted_station.get(sid)
@@ -398,7 +434,73 @@ def adjust_and_compare(tables: list[Path], plan_path: Path, error_model,
     wrong = misidentified(tables, identified, fates) if fates else []
     return NetworkVerification(outcomes, markers, reference, config, rejected,
                                len(identified.unidentified), sigma0, int(result.dof), fates,
-                               wrong)
+                               wrong, detection_ids)
+
+
+def verify_scan(scanned: Scanned, table: Path, plan_path: Path, doc: dict, error_model,
+                error_model_name: str, settings: NetworkVerifySettings,
+                reference: str | None = None) -> NetworkVerification:
+    """Step 2 of the module docstring for one scan of a plan: its marker table written to
+    ``table`` (``marker_id`` filled by the association, :func:`identified_rows`), identified,
+    adjusted and compared with the plan's predictions.
+
+    Parameters
+    ----------
+    scanned : Scanned
+        :func:`scan_plan`'s rows, truth and fates.
+    table : Path
+        The ``markers.csv`` to write.
+    plan_path : Path
+    doc : dict
+        The ``plan.json`` (:func:`planner.outputs.plan_file.read_plan`, full): the stations'
+        and markers' predicted errors and each station's planned markers.
+    error_model, error_model_name, settings, reference
+        As :func:`adjust_and_compare`.
+
+    Returns
+    -------
+    NetworkVerification
+    """
+    from pipeline.marker_table import write_marker_table
+
+    rows, truth, fates = scanned
+    write_marker_table(table, rows)
+    check = adjust_and_compare(
+        [table], plan_path, error_model, truth,
+        {s["id"]: s.get("predicted_error_m") for s in doc["stations"]},
+        {m["id"]: m.get("predicted_error_m") for m in doc["markers"]}, settings,
+        error_model_name, {s["id"]: tuple(s.get("markers", ())) for s in doc["stations"]},
+        reference=reference, fates=fates)
+    write_marker_table(table, identified_rows(rows, check))
+    return check
+
+
+def identified_rows(rows: list[MarkerRow], check: NetworkVerification) -> list[MarkerRow]:
+    """The marker-table rows with ``marker_id`` filled: each accepted detection gets the id the
+    association gave it (``check.detection_ids``), the rest stay empty.
+
+    Parameters
+    ----------
+    rows : list of MarkerRow
+        :func:`scan_plan`'s rows (every candidate of every station, in table order).
+    check : NetworkVerification
+        :func:`adjust_and_compare`'s result on those rows.
+
+    Returns
+    -------
+    rows : list of MarkerRow
+        Copies, in the same order.
+    """
+    seen: dict[str, int] = {}
+    out = []
+    for row in rows:
+        name = ""
+        if row.accepted:
+            k = seen[row.station_id] = seen.get(row.station_id, -1) + 1
+            ids = check.detection_ids.get(row.station_id, ())
+            name = (ids[k] if k < len(ids) else None) or ""
+        out.append(dataclasses.replace(row, marker_id=name))
+    return out
 
 
 def misidentified(tables: list[Path], identified: Identified,
@@ -493,8 +595,9 @@ def tied_network(stations: list, plan, reference: str, settings: NetworkVerifySe
         markers, as :func:`pipeline.network.adjustment.adjust` requires) and their ids.
     left_out : dict of str to str
         Why each other station was left out.
-    n_identified : dict of str to int
-        Identified detections of every station, kept or not.
+    detection_ids : dict of str to tuple of (str or None)
+        The association's id of each accepted detection of every station it matched, kept or
+        not (``None``: left unidentified).
 
     Raises
     ------
@@ -505,7 +608,7 @@ def tied_network(stations: list, plan, reference: str, settings: NetworkVerifySe
     from pipeline.network.adjustment import tie_order
 
     left_out: dict[str, str] = {}
-    n_identified: dict[str, int] = {}
+    detection_ids: dict[str, tuple[str | None, ...]] = {}
     kept, ids, reasons = [], [], []
     for s in stations:
         try:
@@ -515,8 +618,8 @@ def tied_network(stations: list, plan, reference: str, settings: NetworkVerifySe
             left_out[s.station_id] = ("none of its detections matches a planned marker within "
                                       "the odometry's sigma")
             continue
-        n_identified[s.station_id] = sum(i is not None for i in one.ids[0])
-        if n_identified[s.station_id]:
+        detection_ids[s.station_id] = tuple(one.ids[0])
+        if any(i is not None for i in one.ids[0]):
             kept.append(s)
             ids += one.ids
             reasons += one.reasons
@@ -540,141 +643,4 @@ def tied_network(stations: list, plan, reference: str, settings: NetworkVerifySe
         keep = [k for k, s in enumerate(kept) if s.station_id not in names]
         identified = no.Identified([kept[k] for k in keep], [ids[k] for k in keep], "plan",
                                    [reasons[k] for k in keep])
-    return identified, left_out, n_identified
-
-
-def network_record(plan: SurveyPlan, check: NetworkVerification, seed: int, model_name: str,
-                   offsets: MountingOffsets | None, profile: SensorProfile) -> dict:
-    """The ``verify.json`` document of network mode (``mode: "network"``; configuration,
-    version, sensor profile and the rig's true mounting offsets in the provenance)."""
-    cfg = {key: value for key, value in check.config.items() if key != "tables"}
-    fates = check.fates or {}
-    stations = [{"id": s.station_id, "predicted_error_m": s.predicted_error_m,
-                 "adjustment_error_95_m": s.stated_error_m,
-                 "achieved_error_m": s.achieved_error_m, "n_detected_markers": s.n_accepted,
-                 "n_identified": s.n_identified, "n_used": s.n_used, "passed": s.passed,
-                 "reason": s.reason, **fates_record(fates.get(s.station_id))}
-                for s in check.stations]
-    identification = ({"losses": stage_counts(fates.values()),
-                       "misidentified": check.misidentified} if check.fates else {})
-    markers = [{"id": m.marker_id, "predicted_error_m": m.predicted_error_m,
-                "adjustment_error_95_m": m.stated_error_m, "achieved_error_m": m.achieved_error_m,
-                "achieved_xyz_m": list(m.achieved_xyz_m), "stations": list(m.stations)}
-               for m in check.markers]
-    return {
-        "schema": VERIFY_SCHEMA, "schema_version": VERIFY_SCHEMA_VERSION, "mode": "network",
-        "provenance": provenance({"seed": seed, "error_model": model_name,
-                                  "mounting_offsets": (offsets or MountingOffsets()).to_dict(),
-                                  "sensor_profile": profile.to_dict(),
-                                  "plan_config_sha256": plan.provenance.get("config_sha256"),
-                                  "network": cfg}, plan=plan.provenance),
-        "requirement_m": check.config["requirement_m"],
-        "working_radius_m": check.config["working_radius_m"],
-        "datum": f"station {check.reference_station} (x, y, z, heading at its planned pose)",
-        "passed": check.passed,
-        "worst": {"predicted_error_m": _worst(s.predicted_error_m for s in check.stations),
-                  "adjustment_error_95_m": _worst(s.stated_error_m for s in check.stations),
-                  "achieved_error_m": _worst(s.achieved_error_m for s in check.stations),
-                  "achieved_station": _worst_id(check.stations),
-                  "not_adjusted": [s.station_id for s in check.stations
-                                   if s.achieved_error_m is None],
-                  "marker_achieved_error_m": _worst(m.achieved_error_m for m in check.markers),
-                  "marker_predicted_error_m": _worst(m.predicted_error_m
-                                                     for m in check.markers)},
-        **identification,
-        "adjustment": {"sigma0_squared": check.sigma0_squared, "dof": check.dof,
-                       "rejected": check.rejected,
-                       "unidentified_detections": check.unidentified},
-        "stations": stations,
-        "markers": markers,
-    }
-
-
-def _worst(values) -> float | None:
-    """Largest of the values that are not ``None`` (``None`` if there are none).
-
-    >>> _worst([0.1, None, 0.3]), _worst([None])
-    (0.3, None)
-    """
-    given = [v for v in values if v is not None]
-    return max(given) if given else None
-
-
-def _worst_id(stations: list[StationOutcome]) -> str | None:
-    """The adjusted station with the largest achieved error (``None`` if none was adjusted)."""
-    done = [s for s in stations if s.achieved_error_m is not None]
-    return max(done, key=lambda s: s.achieved_error_m).station_id if done else None
-
-
-def network_markdown(rec: dict) -> str:
-    """Human report of a network-mode verification: predicted against achieved, per station
-    and worst, then per marker."""
-    def mm(v):
-        return "—" if v is None else f"{1e3 * v:.1f} mm"
-
-    w = rec["worst"]
-    lines = [f"# Plan verification, network mode — {'PASSED' if rec['passed'] else 'FAILED'}",
-             "", f"Datum: {rec['datum']}. Requirement: achieved station error ≤ "
-             f"{rec['requirement_m']:g} m over a {rec['working_radius_m']:g} m working radius at "
-             "every station (simulated scans processed by the pipeline; markers identified by "
-             "gated association with the plan from the planned poses; network adjustment).", "",
-             f"Worst station: predicted {mm(w['predicted_error_m'])}, adjustment's 95 % "
-             f"{mm(w['adjustment_error_95_m'])}, achieved {mm(w['achieved_error_m'])} "
-             f"({w['achieved_station']})"
-             + (f"; not in the adjustment: {', '.join(w['not_adjusted'])}."
-                if w["not_adjusted"] else "."), "",
-             "| station | predicted | adjustment 95 % | achieved | detected / identified / used "
-             "| result |", "|---|---:|---:|---:|---:|---|"]
-    for s in rec["stations"]:
-        lines.append(f"| {s['id']} | {mm(s['predicted_error_m'])} | "
-                     f"{mm(s['adjustment_error_95_m'])} | {mm(s['achieved_error_m'])} | "
-                     f"{s['n_detected_markers']} / {s['n_identified']} / {s['n_used']} | "
-                     f"{s['reason']} |")
-    lines += ["", "| marker | predicted | adjustment 95 % | achieved | stations |",
-              "|---|---:|---:|---:|---|"]
-    for m in rec["markers"]:
-        lines.append(f"| {m['id']} | {mm(m['predicted_error_m'])} | "
-                     f"{mm(m['adjustment_error_95_m'])} | {mm(m['achieved_error_m'])} | "
-                     f"{', '.join(m['stations'])} |")
-    adj = rec["adjustment"]
-    removed = ", ".join(f"{r['station_id']}->{r['marker_id']} (w {r['w']:.1f})"
-                        for r in adj["rejected"]) or "none"
-    s0 = "n/a" if adj["sigma0_squared"] is None else f"{adj['sigma0_squared']:.3f}"
-    lines += ["", f"Adjustment: sigma0² {s0}, dof {adj['dof']}; removed by data snooping: "
-              f"{removed}; detections left unidentified: {adj['unidentified_detections']}."]
-    if "losses" in rec:
-        wrong = ", ".join(f"{w['station_id']}: {w['marker_id']} as {w['identified_as'] or '—'}"
-                          for w in rec["misidentified"]) or "none"
-        lines += ["", losses_markdown(rec["losses"]),
-                  f"Accepted planned markers not identified with their true id: {wrong}."]
-    lines += ["", "`markers.csv` holds every station's detections: with every station tied, "
-              "`markerplan adjust markers.csv --plan PLAN --out DIR` repeats the adjustment "
-              "with its full report; `fates.csv` every planned marker's fate, by its true id."]
-    return "\n".join(lines) + "\n"
-
-
-def network_summary_line(rec: dict, out) -> str:
-    """The command's human summary: worst achieved against predicted station error.
-
-    >>> rec = {"passed": True, "requirement_m": 0.1, "datum": "station S1 (...)",
-    ...        "worst": {"achieved_error_m": 0.012, "achieved_station": "S5",
-    ...                  "predicted_error_m": 0.03, "adjustment_error_95_m": 0.02,
-    ...                  "marker_achieved_error_m": 0.004, "not_adjusted": []}}
-    >>> print(network_summary_line(rec, "v"))  # doctest: +NORMALIZE_WHITESPACE
-    PASSED (network mode, datum station S1): worst station error achieved 0.0120 m (S5),
-    predicted 0.0300 m, adjustment's 95 % 0.0200 m (requirement 0.1 m); worst marker achieved
-    0.0040 m -> v/
-    """
-    w = rec["worst"]
-
-    def m(v):
-        return "—" if v is None else f"{v:.4f} m"
-
-    return (f"{'PASSED' if rec['passed'] else 'FAILED'} (network mode, datum "
-            f"{rec['datum'].split(' (')[0]}): worst station error achieved "
-            f"{m(w['achieved_error_m'])} ({w['achieved_station']}), predicted "
-            f"{m(w['predicted_error_m'])}, adjustment's 95 % {m(w['adjustment_error_95_m'])} "
-            f"(requirement {rec['requirement_m']:g} m); worst marker achieved "
-            f"{m(w['marker_achieved_error_m'])}"
-            + (f"; not adjusted: {', '.join(w['not_adjusted'])}" if w["not_adjusted"] else "")
-            + f" -> {out}/")
+    return identified, left_out, detection_ids

@@ -59,6 +59,35 @@ def test_default_plan_meets_the_requirement_with_fewer_markers(default_plan):
     assert (out / "map.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
+def test_default_plan_holds_with_its_stated_chance(default_plan, tmp_path, capsys):
+    """The default plan is chance-constrained: it records the detection model and every
+    planned pair's chance, each station's certified chance of passing and the plan's; the
+    naive plan (``--chance-epsilon none``) has fewer markers and a far lower chance."""
+    out, summary = default_plan
+    doc = json.loads((out / "plan.json").read_text())
+    ch = doc["chance"]
+    assert ch["epsilon"] == 0.05 and ch["station_target"] == pytest.approx(0.05 / 7)
+    assert ch["plan_pass_probability"] >= 0.95
+    for s in doc["stations"]:
+        assert s["pass_probability"] >= 1 - ch["station_target"]
+        assert ch["stations"][s["id"]]["pass_probability"] == s["pass_probability"]
+    pairs = doc["detection"]["pairs"]
+    assert len(pairs) == sum(s["n_markers"] for s in doc["stations"])
+    assert all(0.0 < p["probability"] <= 1.0 for p in pairs)
+    assert doc["detection"]["model"]["name"].startswith("default")
+    assert doc["provenance"]["detection_model"].startswith("default")
+    low, high = ch["sampled"]["wilson_95"]
+    assert low <= ch["plan_pass_probability"] <= high or ch["sampled"]["pass_rate"] >= 0.95
+    assert "Chance to work" in (out / "report.md").read_text()
+    code, stdout, _ = run_cli(capsys, ["plan", "--chance-epsilon", "none", "--json",
+                                       "--out", str(tmp_path / "naive")])
+    assert code == 0
+    naive = json.loads((tmp_path / "naive" / "plan.json").read_text())
+    assert naive["chance"]["epsilon"] is None
+    assert naive["n_markers"] < doc["n_markers"]
+    assert naive["chance"]["plan_pass_probability"] < 0.9 < ch["plan_pass_probability"]
+
+
 def test_existing_output_is_refused(default_plan, capsys, monkeypatch):
     out, _ = default_plan
     monkeypatch.chdir(out.parent)

@@ -65,8 +65,20 @@ def test_regeneration_script_fits_only_the_fixed_radius_rows(tmp_path):
     assert model.info["data"]["counts"]["dropped_other_estimator"] == 100
     description = model.info["data"]["description"]
     assert "range-study --sensor-profile calibrated --replicates 1 --frames 800" in description
-    assert "--slope-deg S" in description
+    assert "--slope-deg S --extraction full-chain" in description
     assert model.info["provenance"]["config"]["estimator"] == "fixed-radius"
+
+
+def test_regeneration_script_runs_the_full_station_chain(tmp_path, monkeypatch):
+    """Every variant's range study is asked for the full chain explicitly (ground removal,
+    clustering, gate, re-search, fit, quality), never the truth-seeded diagnostic."""
+    script = _regeneration_script()
+    calls = []
+    monkeypatch.setattr(script.cli, "main", lambda args, **kw: calls.append(args))
+    tables = script.run_variants(tmp_path, "calibrated", replicates=1, frames=100, seed=0)
+    assert len(calls) == len(tables) == len(script.VARIANTS)
+    for args in calls:
+        assert args[args.index("--extraction") + 1] == "full-chain"
 
 
 def test_check_tolerates_solver_last_digits_but_not_real_changes():

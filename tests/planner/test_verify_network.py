@@ -9,13 +9,8 @@ import pytest
 from error_model import default_model
 from markerplan.errors import ConfigError
 from planner.accuracy.known_control import pose_difference_m
-from planner.verify.network import (
-    NetworkVerifySettings,
-    TrueStation,
-    adjust_and_compare,
-    network_markdown,
-    network_record,
-)
+from planner.verify.network import NetworkVerifySettings, TrueStation, adjust_and_compare
+from planner.verify.network_report import network_markdown, network_record
 from tests.cli.network_inputs import write_network_inputs
 
 

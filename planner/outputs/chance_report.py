@@ -1,0 +1,95 @@
+"""What a plan says of its chance to work: the ``detection`` and ``chance`` sections of
+``plan.json`` and their lines in ``report.md``.
+
+A plan made with a detection model (:mod:`planner.problem.detection_odds`) records the model
+and every planned station-marker pair's chance of being detected and accepted; its chance
+section gives each station's certified chance of passing (:mod:`planner.accuracy.chance`), the
+plan's (their product: stations use their own pairs in known control; network mode judges
+count and directions this way, the network's accuracy only by sampling), and the pass rate
+over sampled detection outcomes (:mod:`planner.accuracy.sampled_chance`), beside the
+constraint the plan was made for.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from planner.accuracy.chance import plan_chance, station_odds
+from planner.accuracy.checks import station_infos
+
+
+def chance_sections(outcome) -> dict:
+    """``{"detection": ..., "chance": ...}`` of a :class:`~planner.run.PlanOutcome` (empty
+    when the plan knew no detection chances)."""
+    if outcome.chance is None:
+        return {}
+    prob, res, cfg = outcome.problem, outcome.result, outcome.config
+    q = prob.detection_p
+    pairs = [{"station": prob.station_ids[s], "site": prob.site_ids[j],
+              "probability": round(float(q[p]), 6)}
+             for s in range(prob.n_stations) for p, j in
+             zip(prob.selected_pairs(s, res.selected),
+                 prob.pair_site[prob.selected_pairs(s, res.selected)], strict=True)]
+    chance = outcome.chance
+    kinds = [k.family for k in res.model.row_kind]
+    section = {
+        "epsilon": chance.epsilon, "station_target": chance.station_target,
+        "plan_pass_probability": chance.pass_low,
+        "union_bound_pass_probability": chance.union_pass_low,
+        "accuracy_in_probability": not cfg.network,
+        "stations": {prob.station_ids[s]: {"pass_probability": c.pass_low,
+                                           "fail_low": c.fail_low, "fail_high": c.fail_high,
+                                           "exact": c.exact, "n_markers": c.n_markers}
+                     for s, c in enumerate(chance.stations)},
+        "cuts": {"chance": kinds.count("chance"),
+                 "chance_undecided": kinds.count("chance-undecided"),
+                 "chance_count": kinds.count("chance-count"),
+                 "chance_critical": kinds.count("chance-critical")},
+        "baselines": _baseline_chances(outcome),
+    }
+    if outcome.sampled is not None:
+        section["sampled"] = outcome.sampled.to_json()
+    return {"detection": {"model": outcome.detection, "pairs": pairs}, "chance": section}
+
+
+def _baseline_chances(outcome) -> dict:
+    """Each baseline layout's certified chance of passing (known-control figures)."""
+    prob, cfg = outcome.problem, outcome.config
+    odds = station_odds(prob, station_infos(prob, cfg), cfg)
+    return {b.name.replace(" ", "_"): plan_chance(prob, np.asarray(b.selected, bool), cfg,
+                                                  odds).pass_low
+            for b in outcome.baselines if b.selected is not None}
+
+
+def chance_markdown(doc: dict) -> list[str]:
+    """The report's lines on the plan's chance to work (none without a detection model)."""
+    if "chance" not in doc:
+        return ["", "## Chance to work", "",
+                "No detection model: every planned marker is counted as detected."]
+    ch, model = doc["chance"], doc["detection"]["model"]
+    eps = ch["epsilon"]
+    head = (f"Made to fail with chance at most **{eps:g}** (each station at most "
+            f"{ch['station_target']:.4g}, a union bound)" if eps is not None else
+            "Made without a chance constraint (`--chance-epsilon none`)")
+    lines = ["", "## Chance to work", "",
+             f"{head}, each planned marker detected and accepted with the chance the "
+             f"detection model `{model.get('name')}` gives it, independently.", "",
+             f"- certified chance that every station passes: "
+             f"**{100 * ch['plan_pass_probability']:.2f} %**"
+             + ("" if ch["accuracy_in_probability"] else
+                " (count and directions; the network's accuracy is in the sampled figure)")]
+    if "sampled" in ch:
+        s = ch["sampled"]
+        lines.append(f"- in {s['n_samples']} sampled detection outcomes: "
+                     f"{100 * s['pass_rate']:.2f} % passed (Wilson 95 % "
+                     f"{100 * s['wilson_95'][0]:.1f}–{100 * s['wilson_95'][1]:.1f} %)")
+    for name, p in ch["baselines"].items():
+        lines.append(f"- {name.replace('_', ' ')} baseline: {100 * p:.2f} %")
+    if ch["cuts"]["chance_undecided"]:
+        lines.append(f"- {ch['cuts']['chance_undecided']} chance cut(s) the bounds could not "
+                     "prove: the marker count is not proven the fewest")
+    lines += ["", "| station | chance of passing | markers |", "|---|---:|---:|"]
+    for sid, st in ch["stations"].items():
+        lines.append(f"| {sid} | {100 * st['pass_probability']:.2f} %"
+                     f"{'' if st['exact'] else ' (bound)'} | {st['n_markers']} |")
+    return lines
