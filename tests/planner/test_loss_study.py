@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 
 from pipeline.fate_table import FATE_COLUMNS
+from planner.problem.detection_odds import rim_distance
 from planner.studies.loss_study import (
-    _rim_distance,
     level_layout,
     loss_jobs,
     loss_table,
@@ -35,7 +35,7 @@ def test_level_layout_covariates_are_those_of_a_plane():
 def test_rim_distance_is_to_the_nearest_crest():
     craters = [Crater((0.0, 0.0), 8.0, 1.0, "fresh"), Crater((20.0, 0.0), 2.0, 0.2, "fresh")]
     xy = np.array([[4.45, 0.0], [0.0, 0.0], [18.5, 0.0]])
-    np.testing.assert_allclose(_rim_distance(craters, xy), [0.45, 4.0, 0.5])
+    np.testing.assert_allclose(rim_distance(craters, xy), [0.45, 4.0, 0.5])
 
 
 def test_relief_layout_keeps_markers_off_stations_and_rocks():
