@@ -270,9 +270,9 @@ def _verify_trials(plan_path, plan, ids, inputs, error_model, seed, offsets, tol
     from markerplan.output_folder import output_folder
     from planner.distributed import executor
     from planner.verify.fates import write_fates
+    from planner.verify.rig_draws import trial_offsets
     from planner.verify.trials import (
         read_predictions,
-        trial_offsets,
         trial_seeds,
         trials_markdown,
         trials_record,

@@ -1,5 +1,5 @@
 """Options of ``markerplan verify --trials N`` that only ``verify`` takes: the tolerances of the
-rig's mounting offsets (:class:`planner.verify.trials.OffsetTolerance`), each trial drawing its
+rig's mounting offsets (:class:`planner.verify.rig_draws.OffsetTolerance`), each trial drawing its
 rig from N(given offsets, tolerance) with its seed.
 
 Each is named after the mounting offset it widens
@@ -16,13 +16,17 @@ import math
 import click
 
 from planner.cli._common import FiniteRange
-from planner.verify.trials import MAX_ANGLE_TOLERANCE_DEG, MAX_AXIS_TOLERANCE_MM, OffsetTolerance
+from planner.verify.rig_draws import (
+    MAX_ANGLE_TOLERANCE_DEG,
+    MAX_AXIS_TOLERANCE_MM,
+    OffsetTolerance,
+)
 
 
 def offset_tolerance_options(command):
     """Add ``--vertical-axis-error-tolerance-deg``, ``--lframe-tilt-tolerance-deg`` and
     ``--axis-offset-tolerance-mm`` to a command, which receives them as one ``tolerance``
-    argument (:class:`~planner.verify.trials.OffsetTolerance`, SI; ``None`` when none is
+    argument (:class:`~planner.verify.rig_draws.OffsetTolerance`, SI; ``None`` when none is
     given)."""
     @functools.wraps(command)
     def with_tolerance(*args, vertical_axis_error_tolerance_deg, lframe_tilt_tolerance_deg,

@@ -8,6 +8,8 @@ predicted error.
   network adjusted;
 - :mod:`planner.verify.network_report`: a network verification's ``verify.json``,
   ``verify.md`` and summary line;
+- :mod:`planner.verify.rig_draws`: each trial's rig, drawn from the mounting offsets'
+  tolerances;
 - :mod:`planner.verify.trials`: ``verify --trials N`` (both modes), the plan verified with
   independent seeds and rig offsets drawn from the user's tolerances: its pass rate with a
   Wilson 95 % interval beside its predicted pass probability, per station and per

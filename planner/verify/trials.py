@@ -23,10 +23,9 @@ In network mode (:func:`verify_network_trials`) each trial is a whole network ve
 filled by the association) identified, adjusted and compared; a trial whose datum station
 identified nothing fails at every station instead of stopping the run.
 
-The rig's mounting offsets of a trial are the given ones or, with tolerances
-(:class:`OffsetTolerance`), drawn from N(given, tolerance) with the trial's seed
-(:func:`draw_offsets`, a stream of its own: the offsets do not share random numbers with the
-noise).
+The rig's mounting offsets of a trial are the given ones or, with tolerances, drawn from
+N(given, tolerance) with the trial's seed (:mod:`planner.verify.rig_draws`, a stream of its
+own: the offsets do not share random numbers with the noise).
 """
 
 from __future__ import annotations
@@ -34,13 +33,13 @@ from __future__ import annotations
 import json
 import math
 from collections.abc import Sequence
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from error_model.detection import wilson_interval
-from markerplan.errors import ConfigError, DataError, InputFileError
+from markerplan.errors import DataError, InputFileError
 from markerplan.provenance import provenance
 from markerplan.writing import write_csv, write_gis_sidecars
 from pipeline.rig import MountingOffsets
@@ -53,6 +52,7 @@ from planner.verify.known_control import (
     StationCheck,
     verify_plans,
 )
+from planner.verify.rig_draws import OffsetTolerance
 from visibility.sensor_profile import SensorProfile, default_profile
 
 #: ``trials.csv``: header and ``.csvt`` column types (the last four: the trial's rig offsets).
@@ -62,15 +62,6 @@ TRIALS_COLUMNS = ("trial", "seed", "station_id", "passed", "predicted_error_m",
                   "axis_offset_y_mm")
 TRIALS_TYPES = ("Integer", "Integer", "String", "String", "Real", "Real", "Integer", "Integer",
                 "Integer", "Integer", "String", "Real", "Real", "Real", "Real")
-
-#: The :class:`numpy.random.SeedSequence` key that keeps a trial's rig-offset draw apart from
-#: its simulation seed's streams.
-OFFSET_STREAM = 0x0FF5E7
-
-#: Largest tolerances (1 sigma): an angle of 5 degrees, an axis offset of 100 mm; beyond them
-#: the rig is not the one planned for.
-MAX_ANGLE_TOLERANCE_DEG = 5.0
-MAX_AXIS_TOLERANCE_MM = 100.0
 
 #: Upper edges of the predicted-probability bins of :func:`calibration` (the first from 0).
 CALIBRATION_BINS = (0.5, 0.8, 0.9, 0.95, 0.99, 1.0)
@@ -89,72 +80,6 @@ def trial_seeds(seed: int, n_trials: int) -> list[int]:
     """
     children = np.random.SeedSequence(seed).spawn(n_trials - 1)
     return [int(seed)] + [int(c.generate_state(1)[0]) for c in children]
-
-
-@dataclass(frozen=True)
-class OffsetTolerance:
-    """1-sigma tolerances of the rig's mounting offsets (:class:`pipeline.rig.MountingOffsets`).
-
-    Attributes
-    ----------
-    vertical_axis_error_rad, lframe_tilt_rad : float
-        Of the two angles, radians (at most :data:`MAX_ANGLE_TOLERANCE_DEG`).
-    axis_offset_m : float
-        Of each of the axis offset's ``dx`` and ``dy``, metres (at most
-        :data:`MAX_AXIS_TOLERANCE_MM`).
-
-    Raises
-    ------
-    ConfigError
-        A tolerance negative, not finite or above its bound.
-    """
-
-    vertical_axis_error_rad: float = 0.0
-    lframe_tilt_rad: float = 0.0
-    axis_offset_m: float = 0.0
-
-    def __post_init__(self):
-        angle = math.radians(MAX_ANGLE_TOLERANCE_DEG)
-        for name, high, unit in (("vertical_axis_error_rad", angle, "rad"),
-                                 ("lframe_tilt_rad", angle, "rad"),
-                                 ("axis_offset_m", MAX_AXIS_TOLERANCE_MM / 1e3, "m")):
-            v = getattr(self, name)
-            if not (isinstance(v, int | float) and 0.0 <= v <= high):  # NaN fails too
-                raise ConfigError(f"the tolerance `{name}` must be in [0, {high:.4g}] {unit}, "
-                                  f"got {v!r:.40}")
-
-    def to_dict(self) -> dict:
-        return asdict(self)
-
-
-def draw_offsets(nominal: MountingOffsets, tolerance: OffsetTolerance, seed: int
-                 ) -> MountingOffsets:
-    """One trial's rig: each mounting offset drawn from N(``nominal``, ``tolerance``), the
-    four independently, with ``seed``'s own stream (:data:`OFFSET_STREAM`).
-
-    >>> t = OffsetTolerance(axis_offset_m=0.002)
-    >>> a = draw_offsets(MountingOffsets(), t, 7); a == draw_offsets(MountingOffsets(), t, 7)
-    True
-    >>> a.vertical_axis_error_rad, a.axis_offset_m == draw_offsets(MountingOffsets(), t, 8)
-    (0.0, False)
-    """
-    z = np.random.default_rng(np.random.SeedSequence([int(seed), OFFSET_STREAM])
-                              ).standard_normal(4)
-    dx, dy = nominal.axis_offset_m
-    return MountingOffsets(
-        float(nominal.vertical_axis_error_rad + tolerance.vertical_axis_error_rad * z[0]),
-        float(nominal.lframe_tilt_rad + tolerance.lframe_tilt_rad * z[1]),
-        (float(dx + tolerance.axis_offset_m * z[2]), float(dy + tolerance.axis_offset_m * z[3])))
-
-
-def trial_offsets(nominal: MountingOffsets | None, tolerance: OffsetTolerance | None,
-                  seeds: Sequence[int]) -> list[MountingOffsets]:
-    """Every trial's rig: ``nominal`` (default none), or drawn (:func:`draw_offsets`) with
-    each trial's seed when a ``tolerance`` is given."""
-    nominal = nominal or MountingOffsets()
-    if tolerance is None:
-        return [nominal] * len(seeds)
-    return [draw_offsets(nominal, tolerance, s) for s in seeds]
 
 
 @dataclass(frozen=True)
@@ -188,7 +113,7 @@ def verify_trials(plan: SurveyPlan, error_model, seeds: Sequence[int],
         One simulation seed per trial (:func:`trial_seeds`).
     offsets : MountingOffsets or sequence of MountingOffsets, optional
         The rig's true mounting offsets, for every trial or one per trial
-        (:func:`trial_offsets`).
+        (:func:`~planner.verify.rig_draws.trial_offsets`).
     station_ids, profile, executor, progress
         As :func:`planner.verify.known_control.verify_plan`.
 

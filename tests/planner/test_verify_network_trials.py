@@ -14,9 +14,8 @@ import planner.verify.known_control as kc
 from error_model import default_model
 from planner.outputs.plan_file import PlannedStation, SurveyPlan
 from planner.verify.network import NetworkVerifySettings
+from planner.verify.rig_draws import OffsetTolerance, trial_offsets
 from planner.verify.trials import (
-    OffsetTolerance,
-    trial_offsets,
     trial_seeds,
     trials_record,
     verify_network_trials,

@@ -17,11 +17,10 @@ from planner.outputs.plan_file import PlannedStation, SurveyPlan
 from planner.verify.fates import FateRow, StationFates
 from planner.verify.known_control import StationCheck
 from planner.verify.network import NetworkVerification, StationOutcome
+from planner.verify.rig_draws import OffsetTolerance, trial_offsets
 from planner.verify.trials import (
     TRIALS_COLUMNS,
-    OffsetTolerance,
     read_predictions,
-    trial_offsets,
     trial_seeds,
     trials_markdown,
     trials_record,
