@@ -36,7 +36,8 @@ class PlanOutcome:
     marker counted as detected); then ``chance`` holds the plan's exact per-station figures
     (:func:`planner.accuracy.chance.plan_chance`; count and directions only in network mode)
     and ``sampled`` its pass rate over sampled detection outcomes
-    (:func:`planner.accuracy.sampled_chance.sampled_chance`).
+    (:func:`planner.accuracy.sampled_chance.sampled_chance`); ``baseline_chances`` each
+    baseline's certified chance of passing, by its name.
     """
 
     inputs: PlanInputs
@@ -52,6 +53,7 @@ class PlanOutcome:
     detection: dict | None = None
     chance: PlanChance | None = None
     sampled: SampledChance | None = None
+    baseline_chances: dict | None = None
 
     @property
     def selected_ids(self) -> list[str]:
@@ -128,18 +130,6 @@ def make_plan(inputs: PlanInputs, config, error_model, model_name: str = "defaul
     t = time.perf_counter()
     result = plan_sites(problem, config)
     timings["program"] = time.perf_counter() - t
-    detection = chance = sampled = None
-    if problem.pair_detection_p is not None:
-        from planner.problem.detection_odds import detection_record
-
-        t = time.perf_counter()
-        detection = detection_record(detection_model, detection_name) \
-            if detection_model is not None else {"name": "given with the problem"}
-        odds = station_odds(problem, station_infos(problem, config), config)
-        chance = plan_chance(problem, result.selected, config, odds)
-        if samples:
-            sampled = sampled_chance(problem, result.selected, config, samples)
-        timings["chance"] = time.perf_counter() - t
     t = time.perf_counter()
     if config.network:
         baselines = [result.greedy or network_baseline(problem, config)]
@@ -148,6 +138,21 @@ def make_plan(inputs: PlanInputs, config, error_model, model_name: str = "defaul
         x0, y0, x1, y1 = plan_bounds(inputs, problem)
         baselines.append(regular_grid(problem, config, (x0, y0, x1, y1)))
     timings["baselines"] = time.perf_counter() - t
+    detection = chance = sampled = baseline_chances = None
+    if problem.pair_detection_p is not None:
+        from planner.problem.detection_odds import detection_record
+
+        t = time.perf_counter()
+        detection = detection_record(detection_model, detection_name) \
+            if detection_model is not None else {"name": "given with the problem"}
+        odds = station_odds(problem, station_infos(problem, config), config)
+        chance = plan_chance(problem, result.selected, config, odds)
+        baseline_chances = {b.name: plan_chance(problem, np.asarray(b.selected, bool), config,
+                                                odds).pass_low
+                            for b in baselines if b.selected is not None}
+        if samples:
+            sampled = sampled_chance(problem, result.selected, config, samples)
+        timings["chance"] = time.perf_counter() - t
     as_built = None
     if vis is not None and len(inputs.as_built_ids):
         pab = sight_problem(inputs, inputs.as_built_ids, inputs.as_built_xyz, config,
@@ -157,7 +162,7 @@ def make_plan(inputs: PlanInputs, config, error_model, model_name: str = "defaul
     return PlanOutcome(inputs=inputs, config=config, model_name=model_name, problem=problem,
                        candidates=cand, visibility=vis, result=result, baselines=baselines,
                        as_built=as_built, timings_s=timings, detection=detection,
-                       chance=chance, sampled=sampled)
+                       chance=chance, sampled=sampled, baseline_chances=baseline_chances)
 
 
 def plan_bounds(inputs: PlanInputs, problem: PlanProblem) -> tuple[float, float, float, float]:

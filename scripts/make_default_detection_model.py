@@ -43,7 +43,6 @@ process on a lighter load, so two idle cores should need well under 15 min (an e
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import tempfile
 from dataclasses import dataclass, replace
@@ -66,7 +65,7 @@ from planner.studies.loss_study import (  # noqa: E402
 from visibility.sensor_profile import DEFAULT_PROFILE, load_profile  # noqa: E402
 
 sys.path.insert(0, str(ROOT / "scripts"))
-from make_default_error_model import _differences  # noqa: E402
+from make_default_error_model import check_shipped  # noqa: E402
 
 FULL_FRAMES = 800
 FOLDS = 5
@@ -219,12 +218,7 @@ def main(argv: list[str] | None = None) -> int:
         model = build_model(tables, args.sensor_profile, args.seeds, args.frames)
         print(summary(model))
         if args.check:
-            fresh = json.loads(model.save(Path(tmp) / "fresh.json").read_text())
-            shipped = json.loads(args.output.read_text()) if args.output.exists() else None
-            problems = list(_differences(shipped, fresh, "")) if shipped else ["missing"]
-            verdict = "up to date" if not problems else "STALE: " + "; ".join(problems[:5])
-            print(f"{args.output}: {verdict}")
-            return 0 if not problems else 1
+            return check_shipped(model, args.output, Path(tmp))
     model.save(args.output)
     print(f"wrote {args.output}: coefficients {np.round(model.coef, 4).tolist()}")
     return 0

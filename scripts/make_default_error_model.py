@@ -135,6 +135,18 @@ def _differences(shipped, fresh, where: str):
         yield f"{where}: {shipped!r} vs {fresh!r}"
 
 
+def check_shipped(model, output: Path, scratch: Path) -> int:
+    """``--check``: compare a freshly built model (anything with ``save(path)``) with the
+    shipped JSON ``output`` (:func:`_differences`), print the verdict; 0 when up to date, 1
+    when stale or missing. ``scratch``: a folder for the fresh JSON."""
+    fresh = json.loads(model.save(scratch / "fresh.json").read_text())
+    shipped = json.loads(output.read_text()) if output.exists() else None
+    problems = list(_differences(shipped, fresh, "")) if shipped else ["missing"]
+    verdict = "up to date" if not problems else "STALE: " + "; ".join(problems[:5])
+    print(f"{output}: {verdict}")
+    return 0 if not problems else 1
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--sensor-profile", default=DEFAULT_PROFILE,
@@ -159,12 +171,7 @@ def main() -> int:
         model = build_model(tables, args.sensor_profile, args.replicates, args.frames,
                             args.seed)
         if args.check:
-            fresh = json.loads(model.save(Path(tmp) / "fresh.json").read_text())
-            shipped = json.loads(args.output.read_text()) if args.output.exists() else None
-            problems = list(_differences(shipped, fresh, "")) if shipped else ["missing"]
-            verdict = "up to date" if not problems else "STALE: " + "; ".join(problems[:5])
-            print(f"{args.output}: {verdict}")
-            return 0 if not problems else 1
+            return check_shipped(model, args.output, Path(tmp))
     model.save(args.output)
     data = model.info["data"]
     print(f"wrote {args.output}: {data['rows_used']} rows, predictors {model.predictors}, "

@@ -230,13 +230,6 @@ class PlanChance:
         """``1 - sum of the stations' P(fail)`` bounds: valid without independence."""
         return max(0.0, 1.0 - float(sum(c.fail_high for c in self.stations)))
 
-    @property
-    def ok(self) -> np.ndarray:
-        """(s,) bool: each station meets its target (all True when not constrained)."""
-        if self.station_target is None:
-            return np.ones(len(self.stations), bool)
-        return np.array([c.fail_high <= self.station_target for c in self.stations])
-
 
 def plan_chance(problem: PlanProblem, selected: np.ndarray, config, odds: list[StationOdds]
                 ) -> PlanChance:

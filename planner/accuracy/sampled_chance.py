@@ -79,12 +79,11 @@ def sampled_chance(problem: PlanProblem, selected: np.ndarray, config, n_samples
     rng = np.random.default_rng(seed)
     n_passed = 0
     station_passed = np.zeros(sub.n_stations, np.int64)
-    reason = sub.pair_reason.copy()
     for _ in range(int(n_samples)):
         lost = rng.random(usable.size) >= q
-        reason[:] = sub.pair_reason
+        reason = sub.pair_reason.copy()
         reason[usable[lost]] = OCCLUDED
-        ok = evaluate_layout(replace(sub, pair_reason=reason.copy()), all_sites, config).ok
+        ok = evaluate_layout(replace(sub, pair_reason=reason), all_sites, config).ok
         station_passed += ok
         n_passed += bool(ok.all())
     return SampledChance(n_samples=int(n_samples), seed=int(seed), n_passed=n_passed,

@@ -12,11 +12,6 @@ constraint the plan was made for.
 
 from __future__ import annotations
 
-import numpy as np
-
-from planner.accuracy.chance import plan_chance, station_odds
-from planner.accuracy.checks import station_infos
-
 
 def chance_sections(outcome) -> dict:
     """``{"detection": ..., "chance": ...}`` of a :class:`~planner.run.PlanOutcome` (empty
@@ -25,11 +20,9 @@ def chance_sections(outcome) -> dict:
         return {}
     prob, res, cfg = outcome.problem, outcome.result, outcome.config
     q = prob.detection_p
-    pairs = [{"station": prob.station_ids[s], "site": prob.site_ids[j],
+    pairs = [{"station": prob.station_ids[s], "site": prob.site_ids[prob.pair_site[p]],
               "probability": round(float(q[p]), 6)}
-             for s in range(prob.n_stations) for p, j in
-             zip(prob.selected_pairs(s, res.selected),
-                 prob.pair_site[prob.selected_pairs(s, res.selected)], strict=True)]
+             for s in range(prob.n_stations) for p in prob.selected_pairs(s, res.selected)]
     chance = outcome.chance
     kinds = [k.family for k in res.model.row_kind]
     section = {
@@ -45,20 +38,12 @@ def chance_sections(outcome) -> dict:
                  "chance_undecided": kinds.count("chance-undecided"),
                  "chance_count": kinds.count("chance-count"),
                  "chance_critical": kinds.count("chance-critical")},
-        "baselines": _baseline_chances(outcome),
+        "baselines": {name.replace(" ", "_"): p
+                      for name, p in outcome.baseline_chances.items()},
     }
     if outcome.sampled is not None:
         section["sampled"] = outcome.sampled.to_json()
     return {"detection": {"model": outcome.detection, "pairs": pairs}, "chance": section}
-
-
-def _baseline_chances(outcome) -> dict:
-    """Each baseline layout's certified chance of passing (known-control figures)."""
-    prob, cfg = outcome.problem, outcome.config
-    odds = station_odds(prob, station_infos(prob, cfg), cfg)
-    return {b.name.replace(" ", "_"): plan_chance(prob, np.asarray(b.selected, bool), cfg,
-                                                  odds).pass_low
-            for b in outcome.baselines if b.selected is not None}
 
 
 def chance_markdown(doc: dict) -> list[str]:

@@ -153,7 +153,7 @@ def grow_failing_chance(odds: StationOdds, failing: np.ndarray, target: float) -
     def fails(extra: np.ndarray) -> bool:
         nonlocal evaluations
         evaluations += 1
-        sites = info.sites[in_set | np.isin(np.arange(info.sites.size), extra)]
+        sites = np.sort(np.r_[info.sites[in_set], info.sites[extra]])
         return odds.chance(sites, target, GROWTH_LOSS_SETS, stop_above=target).fail_low > target
 
     pos = 0

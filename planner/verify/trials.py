@@ -45,7 +45,7 @@ from markerplan.writing import write_csv, write_gis_sidecars
 from pipeline.rig import MountingOffsets
 from planner.distributed import Executor
 from planner.outputs.plan_file import SurveyPlan
-from planner.verify.fates import StationFates, losses_markdown, lost_by_stage, stage_counts
+from planner.verify.fates import losses_markdown, lost_by_stage, stage_counts
 from planner.verify.known_control import (
     VERIFY_SCHEMA,
     VERIFY_SCHEMA_VERSION,
@@ -82,22 +82,6 @@ def trial_seeds(seed: int, n_trials: int) -> list[int]:
     return [int(seed)] + [int(c.generate_state(1)[0]) for c in children]
 
 
-@dataclass(frozen=True)
-class TrialStation:
-    """One station in one trial, as the summaries read it (a known-control
-    :class:`~planner.verify.known_control.StationCheck` has the same attributes)."""
-
-    station_id: str
-    predicted_error_m: float | None
-    achieved_error_m: float | None
-    n_planned: int
-    n_detected: int
-    """Accepted detections (network mode: in the station's marker table)."""
-    passed: bool
-    reason: str
-    fates: StationFates | None
-
-
 def verify_trials(plan: SurveyPlan, error_model, seeds: Sequence[int],
                   offsets: MountingOffsets | Sequence[MountingOffsets] | None = None,
                   station_ids: list[str] | None = None, profile: SensorProfile | None = None,
@@ -132,7 +116,7 @@ def verify_network_trials(plan: SurveyPlan, plan_path: Path, doc: dict, error_mo
                           None = None, station_ids: list[str] | None = None,
                           profile: SensorProfile | None = None,
                           executor: Executor | None = None, reference: str | None = None,
-                          progress: bool = True) -> list[list[TrialStation]]:
+                          progress: bool = True) -> list[list[StationCheck]]:
     """Verify a plan once per seed in network mode: every trial x station's scan one task of
     one map (:func:`planner.verify.network.scan_plans`), then each trial's network identified,
     adjusted and compared in this process (:func:`planner.verify.network.verify_scan`).
@@ -158,8 +142,9 @@ def verify_network_trials(plan: SurveyPlan, plan_path: Path, doc: dict, error_mo
 
     Returns
     -------
-    trials : list of list of TrialStation
-        Per trial, the chosen stations in the plan's order.
+    trials : list of list of StationCheck
+        Per trial, the chosen stations in the plan's order (no per-marker errors: the
+        network's are its markers', not a station's).
     """
     from planner.verify.network import scan_plans, verify_scan
 
@@ -174,13 +159,13 @@ def verify_network_trials(plan: SurveyPlan, plan_path: Path, doc: dict, error_mo
             check = verify_scan(scanned, tables / f"trial_{t:03d}.csv", plan_path, doc,
                                 error_model, error_model_name, settings, reference)
         except InputFileError as exc:  # no datum in this trial: every station fails
-            out.append([TrialStation(sid, _predicted(doc, sid), None, planned[sid],
+            out.append([StationCheck(sid, _predicted(doc, sid), None, planned[sid],
                                      sum(r.accepted for r in f.rows), False,
-                                     f"not verified: {exc}", f)
+                                     f"not verified: {exc}", {}, f)
                         for sid, f in fates.items()])
             continue
-        out.append([TrialStation(s.station_id, s.predicted_error_m, s.achieved_error_m,
-                                 planned[s.station_id], s.n_accepted, s.passed, s.reason,
+        out.append([StationCheck(s.station_id, s.predicted_error_m, s.achieved_error_m,
+                                 planned[s.station_id], s.n_accepted, s.passed, s.reason, {},
                                  fates.get(s.station_id)) for s in check.stations])
     return out
 
@@ -267,7 +252,7 @@ def trials_record(plan: SurveyPlan, trials: list[list], seed: int, seeds: Sequen
     Parameters
     ----------
     plan : SurveyPlan
-    trials : list of list of StationCheck or TrialStation
+    trials : list of list of StationCheck
         :func:`verify_trials`' or :func:`verify_network_trials`' stations, per trial.
     seed : int
         The ``--seed`` the trial seeds were spawned from.
