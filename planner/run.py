@@ -17,6 +17,7 @@ import numpy as np
 from markerplan.errors import InputFileError
 from planner.accuracy.chance import PlanChance, plan_chance, station_odds
 from planner.accuracy.checks import LayoutCheck, evaluate_layout, station_infos
+from planner.accuracy.network_chance import NetworkChance, network_chance
 from planner.accuracy.sampled_chance import SampledChance, sampled_chance
 from planner.problem.candidates import Candidates, candidate_sites
 from planner.problem.inputs import PlanInputs
@@ -36,8 +37,10 @@ class PlanOutcome:
     marker counted as detected); then ``chance`` holds the plan's exact per-station figures
     (:func:`planner.accuracy.chance.plan_chance`; count and directions only in network mode)
     and ``sampled`` its pass rate over sampled detection outcomes
-    (:func:`planner.accuracy.sampled_chance.sampled_chance`); ``baseline_chances`` each
-    baseline's certified chance of passing, by its name.
+    (:func:`planner.accuracy.sampled_chance.sampled_chance`); in network mode
+    ``network_chance`` the whole network's certified chance with its accuracy
+    (:func:`planner.accuracy.network_chance.network_chance`); ``baseline_chances`` each
+    baseline's certified chance of passing (network mode: the whole network's), by its name.
     """
 
     inputs: PlanInputs
@@ -54,6 +57,7 @@ class PlanOutcome:
     chance: PlanChance | None = None
     sampled: SampledChance | None = None
     baseline_chances: dict | None = None
+    network_chance: NetworkChance | None = None
 
     @property
     def selected_ids(self) -> list[str]:
@@ -138,7 +142,7 @@ def make_plan(inputs: PlanInputs, config, error_model, model_name: str = "defaul
         x0, y0, x1, y1 = plan_bounds(inputs, problem)
         baselines.append(regular_grid(problem, config, (x0, y0, x1, y1)))
     timings["baselines"] = time.perf_counter() - t
-    detection = chance = sampled = baseline_chances = None
+    detection = chance = sampled = baseline_chances = whole = None
     if problem.pair_detection_p is not None:
         from planner.problem.detection_odds import detection_record
 
@@ -147,8 +151,15 @@ def make_plan(inputs: PlanInputs, config, error_model, model_name: str = "defaul
             if detection_model is not None else {"name": "given with the problem"}
         odds = station_odds(problem, station_infos(problem, config), config)
         chance = plan_chance(problem, result.selected, config, odds)
-        baseline_chances = {b.name: plan_chance(problem, np.asarray(b.selected, bool), config,
-                                                odds).pass_low
+
+        def certified(selected: np.ndarray) -> float:
+            if config.network:
+                return network_chance(problem, selected, config).pass_low
+            return plan_chance(problem, selected, config, odds).pass_low
+
+        if config.network:
+            whole = network_chance(problem, result.selected, config)
+        baseline_chances = {b.name: certified(np.asarray(b.selected, bool))
                             for b in baselines if b.selected is not None}
         if samples:
             sampled = sampled_chance(problem, result.selected, config, samples)
@@ -162,7 +173,8 @@ def make_plan(inputs: PlanInputs, config, error_model, model_name: str = "defaul
     return PlanOutcome(inputs=inputs, config=config, model_name=model_name, problem=problem,
                        candidates=cand, visibility=vis, result=result, baselines=baselines,
                        as_built=as_built, timings_s=timings, detection=detection,
-                       chance=chance, sampled=sampled, baseline_chances=baseline_chances)
+                       chance=chance, sampled=sampled, baseline_chances=baseline_chances,
+                       network_chance=whole)
 
 
 def plan_bounds(inputs: PlanInputs, problem: PlanProblem) -> tuple[float, float, float, float]:

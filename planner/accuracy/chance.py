@@ -138,14 +138,42 @@ class StationOdds:
 def _enumerate(odds: StationOdds, rows: np.ndarray, tail_tolerance: float,
                budget: int = MAX_LOSS_SETS, stop_above: float | None = None
                ) -> StationChance:
-    """Loss sets by size, smallest first, each judged unless a subset already failed."""
-    m = rows.size
-    q = odds.q[rows]
-    if not odds.passes(rows, np.ones((1, m), bool))[0]:
+    """:func:`enumerate_losses` of one station's markers ``rows``."""
+    return enumerate_losses(odds.q[rows], lambda kept: odds.passes(rows, kept),
+                            tail_tolerance, budget, stop_above)
+
+
+def enumerate_losses(q: np.ndarray, passes, tail_tolerance: float,
+                     budget: int = MAX_LOSS_SETS, stop_above: float | None = None,
+                     stop_below: float | None = None) -> StationChance:
+    """Certified bounds on ``P(fail)`` when each of ``m`` items is kept with its chance ``q``.
+
+    Loss sets are enumerated by size, smallest first; a set is judged only when none of its
+    subsets already fails (failing is closed upwards), until the chance of losing more items
+    than enumerated is at most ``tail_tolerance``, the next size would pass ``budget`` sets,
+    failure is proven above ``stop_above`` or below ``stop_below`` (a decision, not figures).
+
+    Parameters
+    ----------
+    q : (m,) float
+        Each item's chance of being kept (detected and accepted).
+    passes : callable
+        ``passes(kept) -> (k,) bool`` for ``kept``, (k, m) bool: whether each outcome passes;
+        it must be monotone (keeping more never fails).
+    tail_tolerance, budget, stop_above, stop_below
+        As above.
+
+    Returns
+    -------
+    StationChance
+        ``n_markers`` is ``m``.
+    """
+    m = q.size
+    if not passes(np.ones((1, m), bool))[0]:
         return StationChance(1.0, 1.0, m, m)
-    tail = more_losses_than(q)  # tail[k] = P(more than k markers lost)
+    tail = more_losses_than(q)  # tail[k] = P(more than k items lost)
     low = 0.0
-    failed = np.zeros(0, np.int64)  # bit masks of the failing loss sets of the last size
+    failed = np.zeros(0, np.int64)  # colex ranks of the failing loss sets of the last size
     used = 0
     k = 0
     while k < m:
@@ -157,24 +185,36 @@ def _enumerate(odds: StationOdds, rows: np.ndarray, tail_tolerance: float,
         used += size
         k += 1
         lost = np.array(list(itertools.combinations(range(m), k)), np.int64)  # (c, k)
-        masks = (np.int64(1) << lost).sum(axis=1)
         fails = np.zeros(len(lost), bool)
         if failed.size:
-            fails = np.isin(masks[:, None] ^ (np.int64(1) << lost), failed).any(axis=1)
+            for drop in range(k):  # a subset one smaller failed
+                fails |= np.isin(_colex_rank(np.delete(lost, drop, axis=1)), failed)
         judge = np.flatnonzero(~fails)
         if judge.size:
             kept = np.ones((judge.size, m), bool)
             kept[np.arange(judge.size)[:, None], lost[judge]] = False
-            fails[judge] = ~odds.passes(rows, kept)
+            fails[judge] = ~passes(kept)
         if fails.all():  # every larger loss set holds one of these: all fail
             low += float(_exactly_lost(q, lost[fails]).sum()) + float(tail[k])
             return StationChance(min(low, 1.0), min(low, 1.0), m, m)
         low += float(_exactly_lost(q, lost[fails]).sum())
-        failed = masks[fails]
-        if stop_above is not None and low > stop_above:
+        failed = _colex_rank(lost[fails])
+        if (stop_above is not None and low > stop_above) \
+                or (stop_below is not None and low + float(tail[k]) <= stop_below):
             return StationChance(min(low, 1.0), min(low + float(tail[k]), 1.0), m, k)
     high = low + (float(tail[k]) if k < m else 0.0)
     return StationChance(min(low, 1.0), min(high, 1.0), m, k if k < m else m)
+
+
+def _colex_rank(sets: np.ndarray) -> np.ndarray:
+    """(c,) int: the colex rank ``sum_i C(s_i, i + 1)`` of each row of ``sets`` ((c, k) int,
+    ascending), distinct for distinct sets of one size; below ``C(m, k)`` for items < m."""
+    if sets.shape[1] == 0:
+        return np.zeros(len(sets), np.int64)
+    top = int(sets.max(initial=0)) + 1
+    table = np.array([[math.comb(n, i + 1) for i in range(sets.shape[1])] for n in range(top)],
+                     np.int64)
+    return table[sets, np.arange(sets.shape[1])].sum(axis=1)
 
 
 def _exactly_lost(q: np.ndarray, lost: np.ndarray) -> np.ndarray:

@@ -152,6 +152,8 @@ class NetworkModel:
         Diagonal prior information of the free parameters.
     pair_station, pair_site : (p,) int
         Usable pairs, sorted by site then station.
+    pair_index : (p,) int
+        Each of them as an index into the problem's pairs.
     weight : (p,) float
         ``3 / sigma^2`` per axis, 1/m^2.
     design : (p, 3, 6) float
@@ -190,6 +192,7 @@ class NetworkModel:
         self.prior = prior.ravel()[self.free]
         idx = np.flatnonzero(problem.pair_usable)
         idx = idx[np.lexsort((problem.pair_station[idx], problem.pair_site[idx]))]
+        self.pair_index = idx
         self.pair_station = problem.pair_station[idx]
         self.pair_site = problem.pair_site[idx]
         self.weight = axis_weight(problem.pair_sigma_m[idx])
@@ -212,9 +215,16 @@ class NetworkModel:
         self.tie_site = site
         self.tie_a = self.site_start[site] + off // kk
         self.tie_b = self.site_start[site] + off % kk
-        wa, wb = self.weight[self.tie_a], self.weight[self.tie_b]
-        self.tie_coef = np.where(self.tie_a == self.tie_b, wa, 0.0) - wa * wb \
-            / self.site_weight[site]
+        self.tie_coef = self._tie_coefficients(self.weight)
+
+    def _tie_coefficients(self, weight: np.ndarray) -> np.ndarray:
+        """Each tie's ``delta_ab w_a - w_a w_b / W_j`` for the pairs' weights ``weight`` ((p,),
+        0 for a lost pair; 0 where a site keeps no pair)."""
+        site_weight = np.bincount(self.pair_site, weight, minlength=self.problem.n_sites)
+        wa, wb = weight[self.tie_a], weight[self.tie_b]
+        total = site_weight[self.tie_site]
+        return np.where(self.tie_a == self.tie_b, wa, 0.0) \
+            - wa * wb / np.where(total > 0, total, 1.0)
 
     # -- information and covariance ------------------------------------------------------------
     @property
@@ -226,33 +236,38 @@ class NetworkModel:
         """(n,) bool: sites whose contribution ``J^(j)`` is not zero (seen by >= 2 stations)."""
         return self.n_stations_seeing >= 2
 
-    def information(self, x) -> np.ndarray:
+    def information(self, x, kept: np.ndarray | None = None) -> np.ndarray:
         """Pose information ``J(x) = J_prior + sum_j x_j J^(j)`` of the free parameters.
 
         Parameters
         ----------
         x : (n,) bool or float
             Selection (or non-negative weights) of the candidate sites.
+        kept : (p,) bool, optional
+            Which usable pairs (in this model's pair order) are observed; the others are
+            lost, and each ``J^(j)`` is built from its site's kept pairs (default: all kept).
 
         Returns
         -------
         J : (P, P) float
         """
-        j = self.site_information(x)
+        j = self.site_information(x, kept)
         j[np.diag_indices_from(j)] += self.prior
         return j
 
-    def site_information(self, x) -> np.ndarray:
+    def site_information(self, x, kept: np.ndarray | None = None) -> np.ndarray:
         """The sites' share of the information, ``sum_j x_j J^(j)`` (no prior), (P, P); ``x``
-        as in :meth:`information`."""
+        and ``kept`` as in :meth:`information`."""
         x = np.asarray(x, dtype=float)
+        coef = self.tie_coef if kept is None \
+            else self._tie_coefficients(np.where(kept, self.weight, 0.0))
         n6 = 6 * self.problem.n_stations
         acc = np.zeros(n6 * n6)
         take = np.flatnonzero(x[self.tie_site] != 0)
         for lo in range(0, take.size, _CHUNK):
             t = take[lo:lo + _CHUNK]
             a, b = self.tie_a[t], self.tie_b[t]
-            c = self.tie_coef[t] * x[self.tie_site[t]]
+            c = coef[t] * x[self.tie_site[t]]
             blocks = np.einsum("q,qia,qib->qab", c, self.design[a], self.design[b])
             ra = 6 * self.pair_station[a][:, None] + np.arange(6)
             rb = 6 * self.pair_station[b][:, None] + np.arange(6)

@@ -4,10 +4,10 @@
 A plan made with a detection model (:mod:`planner.problem.detection_odds`) records the model
 and every planned station-marker pair's chance of being detected and accepted; its chance
 section gives each station's certified chance of passing (:mod:`planner.accuracy.chance`), the
-plan's (their product: stations use their own pairs in known control; network mode judges
-count and directions this way, the network's accuracy only by sampling), and the pass rate
-over sampled detection outcomes (:mod:`planner.accuracy.sampled_chance`), beside the
-constraint the plan was made for.
+plan's (known control: their product, stations using their own pairs; network mode, where
+the stations' figures judge count and directions: the whole network's with its accuracy,
+:mod:`planner.accuracy.network_chance`), and the pass rate over sampled detection outcomes
+(:mod:`planner.accuracy.sampled_chance`), beside the constraint the plan was made for.
 """
 
 from __future__ import annotations
@@ -18,18 +18,18 @@ def chance_sections(outcome) -> dict:
     when the plan knew no detection chances)."""
     if outcome.chance is None:
         return {}
-    prob, res, cfg = outcome.problem, outcome.result, outcome.config
+    prob, res = outcome.problem, outcome.result
     q = prob.detection_p
     pairs = [{"station": prob.station_ids[s], "site": prob.site_ids[prob.pair_site[p]],
               "probability": round(float(q[p]), 6)}
              for s in range(prob.n_stations) for p in prob.selected_pairs(s, res.selected)]
     chance = outcome.chance
     kinds = [k.family for k in res.model.row_kind]
+    whole = outcome.network_chance
     section = {
         "epsilon": chance.epsilon, "station_target": chance.station_target,
-        "plan_pass_probability": chance.pass_low,
+        "plan_pass_probability": chance.pass_low if whole is None else whole.pass_low,
         "union_bound_pass_probability": chance.union_pass_low,
-        "accuracy_in_probability": not cfg.network,
         "stations": {prob.station_ids[s]: {"pass_probability": c.pass_low,
                                            "fail_low": c.fail_low, "fail_high": c.fail_high,
                                            "exact": c.exact, "n_markers": c.n_markers}
@@ -37,10 +37,13 @@ def chance_sections(outcome) -> dict:
         "cuts": {"chance": kinds.count("chance"),
                  "chance_undecided": kinds.count("chance-undecided"),
                  "chance_count": kinds.count("chance-count"),
-                 "chance_critical": kinds.count("chance-critical")},
+                 "chance_critical": kinds.count("chance-critical"),
+                 "chance_network": kinds.count("chance-network")},
         "baselines": {name.replace(" ", "_"): p
                       for name, p in outcome.baseline_chances.items()},
     }
+    if whole is not None:
+        section["network"] = whole.to_json()
     if outcome.sampled is not None:
         section["sampled"] = outcome.sampled.to_json()
     return {"detection": {"model": outcome.detection, "pairs": pairs}, "chance": section}
@@ -53,16 +56,21 @@ def chance_markdown(doc: dict) -> list[str]:
                 "No detection model: every planned marker is counted as detected."]
     ch, model = doc["chance"], doc["detection"]["model"]
     eps = ch["epsilon"]
-    head = (f"Made to fail with chance at most **{eps:g}** (each station at most "
-            f"{ch['station_target']:.4g}, a union bound)" if eps is not None else
-            "Made without a chance constraint (`--chance-epsilon none`)")
+    whole = ch.get("network")
+    head = ("Made without a chance constraint (`--chance-epsilon none`)" if eps is None else
+            f"Made to fail with chance at most **{eps:g}** (each station at most "
+            f"{ch['station_target']:.4g}, a union bound)" if whole is None else
+            f"Made to fail with chance at most **{eps:g}** as a whole network, each station's "
+            f"count and directions with chance at most {ch['station_target']:.4g}")
     lines = ["", "## Chance to work", "",
              f"{head}, each planned marker detected and accepted with the chance the "
              f"detection model `{model.get('name')}` gives it, independently.", "",
              f"- certified chance that every station passes: "
              f"**{100 * ch['plan_pass_probability']:.2f} %**"
-             + ("" if ch["accuracy_in_probability"] else
-                " (count and directions; the network's accuracy is in the sampled figure)")]
+             + ("" if whole is None else
+                f" (the whole network with its accuracy: losses of up to "
+                f"{whole['max_losses']} of its {whole['n_pairs']} pairs judged, the rest "
+                "bounded)")]
     if "sampled" in ch:
         s = ch["sampled"]
         lines.append(f"- in {s['n_samples']} sampled detection outcomes: "
@@ -73,7 +81,9 @@ def chance_markdown(doc: dict) -> list[str]:
     if ch["cuts"]["chance_undecided"]:
         lines.append(f"- {ch['cuts']['chance_undecided']} chance cut(s) the bounds could not "
                      "prove: the marker count is not proven the fewest")
-    lines += ["", "| station | chance of passing | markers |", "|---|---:|---:|"]
+    lines += ["", "| station | chance of passing"
+              + (" (count and directions)" if whole is not None else "") + " | markers |",
+              "|---|---:|---:|"]
     for sid, st in ch["stations"].items():
         lines.append(f"| {sid} | {100 * st['pass_probability']:.2f} %"
                      f"{'' if st['exact'] else ' (bound)'} | {st['n_markers']} |")

@@ -8,12 +8,17 @@ sites while the failure stays proven (a stronger row), as the accuracy cuts do. 
 bounds cannot decide (enumeration budget spent) gets the plain row on ``C`` as an
 ``"chance-undecided"`` row, counted in the plan, since it is not proven valid.
 
+In network mode the stations' rule judges count and directions; a layout that meets it is then
+judged as a whole, with the network's accuracy (:mod:`planner.accuracy.network_chance`), and
+a layout that fails gets a no-good row (:meth:`ChanceRule.whole_cuts`).
+
 :func:`chance_count_rows` are valid from the start: a station needs at least ``k`` markers
 when even its ``k - 1`` likeliest usable markers detect ``min_markers`` too rarely.
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -22,6 +27,7 @@ import scipy.sparse as sp
 from markerplan.errors import InfeasiblePlanError
 from planner.accuracy.chance import StationOdds, more_losses_than, station_odds, station_target
 from planner.accuracy.checks import StationInfo
+from planner.accuracy.network_chance import NetworkChance, NetworkOdds
 from planner.problem.usability import PlanProblem
 from planner.program.model import Model, RowKind
 
@@ -40,10 +46,19 @@ class ChanceRule:
     odds : list of StationOdds, (s,)
     target : float
         Each station's allowed chance of failing (:func:`~planner.accuracy.chance.station_target`).
+    whole : callable or None
+        Network mode: ``whole(selected) -> NetworkChance``, the whole network's certified
+        chance of failing with its accuracy (:mod:`planner.accuracy.network_chance`), decided
+        against ``epsilon``; ``None`` in known control, where the stations' targets are the
+        whole rule.
+    epsilon : float or None
+        The plan's allowed chance of failing (with ``whole``).
     """
 
     odds: list[StationOdds]
     target: float
+    whole: Callable[[np.ndarray], NetworkChance] | None = None
+    epsilon: float | None = None
 
     def cuts(self, problem: PlanProblem, model: Model, selected: np.ndarray):
         """:func:`chance_cuts` of a layout."""
@@ -54,18 +69,50 @@ class ChanceRule:
         return chance_count_rows(problem, model, self.odds, self.target)
 
     def layout_ok(self, selected: np.ndarray) -> bool:
-        """Whether every station meets its target with ``selected`` ((n,) bool)."""
+        """Whether every station meets its target with ``selected`` ((n,) bool), and the
+        whole network its ``epsilon``."""
         return all(o.chance(o.info.sites[selected[o.info.sites]], self.target).fail_high
-                   <= self.target for o in self.odds)
+                   <= self.target for o in self.odds) and self.whole_ok(selected)
+
+    def whole_ok(self, selected: np.ndarray) -> bool:
+        """Whether the whole network provably fails with chance at most ``epsilon`` (always
+        true without ``whole``)."""
+        return self.whole is None or self.whole(selected).fail_high <= self.epsilon
+
+    def whole_cuts(self, problem: PlanProblem, model: Model, selected: np.ndarray
+                   ) -> tuple[sp.csr_array | None, list[float], list[RowKind]]:
+        """A no-good row for a layout whose whole network fails ``epsilon``: some site outside
+        it, ``sum_{j not in C} x_j >= 1`` (valid: a subset of a failing layout fails too),
+        ``"chance-network"`` when proven, ``"chance-undecided"`` when the bounds cannot
+        decide; ``(None, [], [])`` when it passes or without ``whole``."""
+        if self.whole_ok(selected):
+            return None, [], []
+        proven = self.whole(selected).fail_low > self.epsilon
+        rest = np.flatnonzero(~np.asarray(selected, bool) & (model.site_var >= 0))
+        return (sp.csr_array(model.site_row(rest)), [1.0],
+                [RowKind("chance-network" if proven else "chance-undecided")])
 
 
 def chance_rule(problem: PlanProblem, config, infos: list[StationInfo]) -> ChanceRule | None:
     """The plan's :class:`ChanceRule`, or ``None`` when it has none: ``chance_epsilon`` is
-    ``None`` (the naive plan) or the problem knows no detection chances."""
+    ``None`` (the naive plan) or the problem knows no detection chances. In network mode it
+    also judges the whole network (each layout once)."""
     if config.chance_epsilon is None or problem.pair_detection_p is None:
         return None
-    return ChanceRule(station_odds(problem, infos, config),
-                      station_target(config.chance_epsilon, problem.n_stations))
+    target = station_target(config.chance_epsilon, problem.n_stations)
+    if not config.network:
+        return ChanceRule(station_odds(problem, infos, config), target)
+    judged: dict[bytes, NetworkChance] = {}
+
+    def whole(selected: np.ndarray) -> NetworkChance:
+        key = np.packbits(np.asarray(selected, bool)).tobytes()
+        if key not in judged:
+            judged[key] = NetworkOdds(problem, selected, config).chance(
+                config.chance_epsilon, decide=True)
+        return judged[key]
+
+    return ChanceRule(station_odds(problem, infos, config), target, whole,
+                      config.chance_epsilon)
 
 
 def chance_preflight(problem: PlanProblem, config, rule: ChanceRule) -> dict[str, str]:

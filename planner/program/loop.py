@@ -176,7 +176,8 @@ def _repair(problem: PlanProblem, config, chance: ChanceRule | None, check):
 
     allowed = ~problem.site_mask(config.forbidden, "forbidden")
     return lambda selected: repair_layout(selected, chance, allowed,
-                                          lambda sel: check(sel).all_ok)
+                                          lambda sel: check(sel).all_ok
+                                          and chance.whole_ok(sel))
 
 
 def _stacked(*blocks) -> tuple[sp.csr_array | None, list[float], list[RowKind]]:
@@ -250,7 +251,8 @@ def _plan_network(problem: PlanProblem, config, model: Model | None,
     """:func:`plan_sites` in network mode: the same build/solve/cut loop with the network's
     accuracy checks and cuts (:func:`~planner.program.cuts_network.network_cuts`); the chance
     rule judges each station's count and directions (its odds ignore accuracy: a network
-    station's accuracy depends on every station's detections)."""
+    station's accuracy depends on every station's detections), then a layout that meets
+    every other rule as a whole network (:meth:`ChanceRule.whole_cuts`)."""
     t0 = time.perf_counter()
     net = network_model(problem, config)
     n_tying = int(net.tying.sum())
@@ -302,8 +304,11 @@ def _plan_network(problem: PlanProblem, config, model: Model | None,
         model, root_bound = _root_relaxation(problem, model, config, net, upper_bound, budget_s)
 
     def cuts(selected):
-        return _stacked(network_cuts(problem, model, selected, config, net, j_all, upper_bound),
+        rows = _stacked(network_cuts(problem, model, selected, config, net, j_all, upper_bound),
                         chance.cuts(problem, model, selected) if chance else (None, [], []))
+        if rows[0] is None and chance is not None:  # then the whole network, the costly part
+            rows = chance.whole_cuts(problem, model, selected)
+        return rows
 
     def check(selected):
         return evaluate_layout(problem, selected, config, infos, net=net)

@@ -47,7 +47,11 @@ def test_network_plan_records_the_mode_datum_ties_and_errors(network_plan):
     assert doc["baselines"]["greedy"]["meets_requirement"]
     # the sampled outcomes (the network's accuracy included) keep the promise here
     assert doc["chance"]["sampled"]["wilson_95"][0] >= 0.95
-    assert doc["chance"]["accuracy_in_probability"] is False
+    # the certified figure is the whole network's, with its accuracy, and the samples agree
+    whole = doc["chance"]["network"]
+    assert doc["chance"]["plan_pass_probability"] == whole["pass_low"] >= 0.95
+    assert whole["fail_low"] <= 1 - doc["chance"]["sampled"]["wilson_95"][0] + 0.01
+    assert whole["fail_high"] >= 1 - doc["chance"]["sampled"]["wilson_95"][1] - 0.01
     rows = list(csv.reader((out / "stations.csv").read_text().splitlines()))
     assert rows[0][:5] == ["id", "x_m", "y_m", "z_m", "network_error_m"]
     assert rows[0][-1] == "error_relative_to" and {r[-1] for r in rows[1:]} == {"station S1"}

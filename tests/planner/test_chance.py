@@ -234,3 +234,15 @@ def test_a_station_no_layout_can_make_likely_enough_is_named():
 
 def test_station_target_is_a_union_bound():
     assert station_target(0.05, 7) == pytest.approx(0.05 / 7)
+
+
+def test_enumeration_of_more_than_62_items_prunes_by_the_right_sets():
+    from planner.accuracy.chance import enumerate_losses
+
+    q = np.linspace(0.95, 0.995, 70)
+    # fails exactly when item 65 is lost (a 64-bit mask would alias it with item 1)
+    c = enumerate_losses(q, lambda kept: kept[:, 65], tail_tolerance=0.0)
+    assert c.max_losses == 2
+    assert c.fail_low <= 1 - q[65] + 1e-12 <= c.fail_high + 2e-12
+    assert c.fail_low == pytest.approx(1 - q[65] - (1 - q[65]) * more_losses_than(
+        np.delete(q, 65))[1], abs=1e-12)
