@@ -4,11 +4,15 @@
   squares, and its predicted 95 % error;
 - :mod:`planner.accuracy.network`: network mode, stations and markers estimated together (the
   network's information and covariance, with the adjustment's observation model);
+- :mod:`planner.accuracy.network_diagnosis`: why a network cannot meet its requirement, station
+  by station;
 - :mod:`planner.accuracy.growing`: the covariance the network greedy grows one site at a time;
 - :mod:`planner.accuracy.checks`: the exact per-station checks of a layout that the planner, the
   baselines and the reduction studies all ask;
 - :mod:`planner.accuracy.chance`: a station's chance of passing when planned markers may be
   lost, exactly or with certified bounds (loss sets enumerated by size);
+- :mod:`planner.accuracy.network_chance`: a network layout's chance of passing as a whole (its
+  accuracy included), with certified bounds over loss sets of its pairs;
 - :mod:`planner.accuracy.sampled_chance`: a layout's pass rate over sampled detection outcomes
   (both modes, the network's accuracy included);
 - :mod:`planner.accuracy.reliability`: network mode's per-observation reliability (redundancy,

@@ -644,52 +644,6 @@ class NetworkModel:
         _, comp = connected_components(csr_array(t > 0), directed=False)
         return comp == comp[self.reference]
 
-    def diagnose(self, available, requirement_m: float) -> dict[str, str]:
-        """Stations no layout within ``available`` can tie to the reference well enough.
-
-        Parameters
-        ----------
-        available : (n,) bool
-            Sites a layout may use (every allowed site; by monotonicity the best case).
-        requirement_m : float
-
-        Returns
-        -------
-        reasons : dict of station id -> reason
-            "disconnected" (no chain of shared usable sites reaches the reference), "heading
-            undetermined" (tied through markers at one place only), "too far from the
-            reference" (the error at the station itself already exceeds the requirement) or
-            "heading too weak" (the lever arm to the working-radius rim does).
-        """
-        p = self.problem
-        ids = p.station_ids
-        ref = ids[self.reference]
-        linked = self.connected_to_reference(available)
-        out = {}
-        for k in np.flatnonzero(~linked):
-            out[ids[k]] = (f"disconnected: shares no usable marker site with the part of the "
-                           f"network holding the reference {ref}")
-        if out:
-            return out
-        cov = self.covariance(self.information(available))
-        err = self.station_errors_from(cov)
-        blocks = cov.station(np.arange(p.n_stations))
-        at_station = np.sqrt(CHI2_3_95 * np.maximum(lambda_max_sym3(blocks[:, :3, :3]), 0.0))
-        dist = np.linalg.norm(p.station_xyz[:, :2] - p.station_xyz[self.reference, :2], axis=1)
-        for k in range(p.n_stations):
-            if not cov.determined[k]:
-                out[ids[k]] = ("heading undetermined: tied to the network only through markers "
-                               "at one place; it needs two shared sites apart")
-            elif err[k] > requirement_m and at_station[k] > requirement_m:
-                out[ids[k]] = (f"too far from the reference: {at_station[k]:.3f} m at the station "
-                               f"itself with every usable site ({dist[k]:.0f} m from {ref}), "
-                               f"above {requirement_m:g} m")
-            elif err[k] > requirement_m:
-                out[ids[k]] = (f"heading too weak: {err[k]:.3f} m at the {self.radius:g} m "
-                               f"working-radius rim ({at_station[k]:.3f} m at the station "
-                               f"itself) with every usable site, above {requirement_m:g} m")
-        return out
-
 
 def network_model(problem: PlanProblem, config) -> NetworkModel:
     """The :class:`NetworkModel` of a problem for a :class:`~planner.config.PlanConfig`

@@ -9,6 +9,7 @@ import scipy.sparse as sp
 from markerplan.errors import InfeasiblePlanError
 from planner.accuracy.checks import StationInfo, diagnose, station_infos
 from planner.accuracy.network import NetworkModel
+from planner.accuracy.network_diagnosis import diagnose_network
 from planner.problem.usability import PlanProblem
 from planner.program.model import Model, RowKind
 
@@ -60,7 +61,7 @@ def network_preflight(problem: PlanProblem, config, net: NetworkModel,
     infos = infos or station_infos(problem, config)
     _raise_network_infeasible(problem, config, net, diagnose(problem, config, infos,
                                                               accuracy_check=False)
-                              or net.diagnose(allowed, req))
+                              or diagnose_network(net, allowed, req))
     cov = net.covariance(net.information(allowed))
     sites = np.flatnonzero(allowed)
     err = net.marker_errors(cov, sites)
@@ -76,7 +77,7 @@ def network_preflight(problem: PlanProblem, config, net: NetworkModel,
         extra = tuple(problem.site_ids[j] for j in np.flatnonzero(hopeless & ~forbidden))
         _raise_network_infeasible(problem, config, net, diagnose(
             problem, config.replace(forbidden=config.forbidden + extra), infos,
-            accuracy_check=False) or net.diagnose(allowed & ~hopeless, req))
+            accuracy_check=False) or diagnose_network(net, allowed & ~hopeless, req))
     return hopeless
 
 

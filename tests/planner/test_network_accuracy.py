@@ -13,6 +13,7 @@ from planner.accuracy.network import (
     network_model,
     pose_errors_from_covariance,
 )
+from planner.accuracy.network_diagnosis import diagnose_network
 from planner.config import PlanConfig
 from tests.planner.instances import make_problem, ring
 
@@ -108,12 +109,12 @@ def test_diagnose_names_disconnected_weak_and_far_stations():
                        ring([200, 0], 8.0, [0, 120, 240])])
     p = make_problem([[0, 0], [15, 0], [200, 0]], sites, max_range_m=12)
     model = NetworkModel(p, 10.0, INCL)
-    why = model.diagnose(np.ones(p.n_sites, bool), 0.10)
+    why = diagnose_network(model, np.ones(p.n_sites, bool), 0.10)
     assert list(why) == ["S3"] and why["S3"].startswith("disconnected") and "S1" in why["S3"]
     p2 = make_problem([[0, 0], [15, 0]], sites[:5], max_range_m=12)
     m2 = NetworkModel(p2, 10.0, INCL)
-    assert m2.diagnose(np.ones(5, bool), 1.0) == {}
-    weak = m2.diagnose(np.ones(5, bool), 0.10)
+    assert diagnose_network(m2, np.ones(5, bool), 1.0) == {}
+    weak = diagnose_network(m2, np.ones(5, bool), 0.10)
     assert list(weak) == ["S2"] and weak["S2"].split(":")[0] in ("heading too weak",
                                                           "too far from the reference")
     with pytest.raises(ConfigError, match="reference_station"):

@@ -1,0 +1,57 @@
+"""Why a network cannot meet its requirement: the stations no layout can tie to the reference
+well enough, with the reason (:func:`diagnose_network`), for the planner's one-line refusals."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from planner.accuracy.known_control import CHI2_3_95, lambda_max_sym3
+from planner.accuracy.network import NetworkModel
+
+
+def diagnose_network(net: NetworkModel, available, requirement_m: float) -> dict[str, str]:
+    """Stations no layout within ``available`` can tie to the reference well enough.
+
+    Parameters
+    ----------
+    net : NetworkModel
+    available : (n,) bool
+        Sites a layout may use (every allowed site; by monotonicity the best case).
+    requirement_m : float
+
+    Returns
+    -------
+    reasons : dict of station id -> reason
+        "disconnected" (no chain of shared usable sites reaches the reference), "heading
+        undetermined" (tied through markers at one place only), "too far from the
+        reference" (the error at the station itself already exceeds the requirement) or
+        "heading too weak" (the lever arm to the working-radius rim does).
+    """
+    p = net.problem
+    ids = p.station_ids
+    ref = ids[net.reference]
+    linked = net.connected_to_reference(available)
+    out = {}
+    for k in np.flatnonzero(~linked):
+        out[ids[k]] = (f"disconnected: shares no usable marker site with the part of the "
+                       f"network holding the reference {ref}")
+    if out:
+        return out
+    cov = net.covariance(net.information(available))
+    err = net.station_errors_from(cov)
+    blocks = cov.station(np.arange(p.n_stations))
+    at_station = np.sqrt(CHI2_3_95 * np.maximum(lambda_max_sym3(blocks[:, :3, :3]), 0.0))
+    dist = np.linalg.norm(p.station_xyz[:, :2] - p.station_xyz[net.reference, :2], axis=1)
+    for k in range(p.n_stations):
+        if not cov.determined[k]:
+            out[ids[k]] = ("heading undetermined: tied to the network only through markers "
+                           "at one place; it needs two shared sites apart")
+        elif err[k] > requirement_m and at_station[k] > requirement_m:
+            out[ids[k]] = (f"too far from the reference: {at_station[k]:.3f} m at the station "
+                           f"itself with every usable site ({dist[k]:.0f} m from {ref}), "
+                           f"above {requirement_m:g} m")
+        elif err[k] > requirement_m:
+            out[ids[k]] = (f"heading too weak: {err[k]:.3f} m at the {net.radius:g} m "
+                           f"working-radius rim ({at_station[k]:.3f} m at the station "
+                           f"itself) with every usable site, above {requirement_m:g} m")
+    return out
