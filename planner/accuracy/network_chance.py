@@ -15,15 +15,28 @@ sizes enumerated added to the upper bound. Adding a site to a layout never lower
 either (its pairs are extra, independent observations), so a layout proven to fail proves every
 layout with a subset of its sites fails: the chance-constrained planner's no-good rows
 (:mod:`planner.program.cuts_chance`).
+
+A large network has thousands of pairs and expects many losses: no enumeration within its
+budget can bound the tail below the plan's epsilon. :meth:`NetworkOdds.decide` then judges
+``SAMPLES_TO_DECIDE`` sampled outcomes with the same judge, and a layout meets the rule when
+the Wilson 95 % lower bound of its pass rate does (a statistical decision, recorded as such, not
+a certificate).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import math
+from dataclasses import dataclass, replace
 
 import numpy as np
 
-from planner.accuracy.chance import MAX_LOSS_SETS, TAIL_FRACTION, enumerate_losses
+from error_model.detection import wilson_interval
+from planner.accuracy.chance import (
+    MAX_LOSS_SETS,
+    TAIL_FRACTION,
+    enumerate_losses,
+    more_losses_than,
+)
 from planner.accuracy.network import network_model
 from planner.problem.usability import PlanProblem, sector_index
 
@@ -39,13 +52,18 @@ class NetworkChance:
     n_pairs : int
         The layout's usable pairs (each detected with its own chance).
     max_losses : int
-        Loss sets of up to this many pairs were judged (``n_pairs``: all, exact).
+        Loss sets of up to this many pairs were judged (``n_pairs``: all, exact; 0: the
+        enumeration could not help and was skipped).
+    n_samples, n_passed : int
+        Sampled outcomes judged, and passed, when the bounds could not decide (else 0).
     """
 
     fail_low: float
     fail_high: float
     n_pairs: int
     max_losses: int
+    n_samples: int = 0
+    n_passed: int = 0
 
     @property
     def exact(self) -> bool:
@@ -56,10 +74,25 @@ class NetworkChance:
         """Certified lower bound on the plan's ``P(pass)``."""
         return 1.0 - self.fail_high
 
+    def meets(self, epsilon: float) -> bool:
+        """Whether the layout fails with chance at most ``epsilon``: proven by the bounds, or
+        (when sampled) by the Wilson 95 % lower bound of the sampled pass rate."""
+        if self.fail_high <= epsilon:
+            return True
+        return bool(self.n_samples) and self.fail_low <= epsilon \
+            and wilson_interval(self.n_passed, self.n_samples)[0] >= 1.0 - epsilon
+
     def to_json(self) -> dict:
-        return {"fail_low": self.fail_low, "fail_high": self.fail_high,
-                "pass_low": self.pass_low, "n_pairs": self.n_pairs,
-                "max_losses": self.max_losses, "exact": self.exact}
+        out = {"fail_low": self.fail_low, "fail_high": self.fail_high,
+               "pass_low": self.pass_low, "n_pairs": self.n_pairs,
+               "max_losses": self.max_losses, "exact": self.exact}
+        if self.n_samples:
+            out["decided_by_samples"] = {"n_samples": self.n_samples, "n_passed": self.n_passed}
+        return out
+
+
+#: Sampled outcomes that decide a layout the bounds cannot.
+SAMPLES_TO_DECIDE = 400
 
 
 class NetworkOdds:
@@ -118,11 +151,42 @@ class NetworkOdds:
         c = enumerate_losses(self.q, self.passes, TAIL_FRACTION * epsilon, budget, stop, stop)
         return NetworkChance(c.fail_low, c.fail_high, c.n_markers, c.max_losses)
 
+    def can_bound(self, epsilon: float, budget: int = MAX_LOSS_SETS) -> bool:
+        """Whether the loss sets ``budget`` allows can leave a tail (the chance of losing more
+        pairs) at most ``epsilon``: else no enumeration can prove the layout meets it."""
+        m = self.q.size
+        sizes, used = 0, 0
+        while sizes < m and used + math.comb(m, sizes + 1) <= budget:
+            sizes += 1
+            used += math.comb(m, sizes)
+        return bool(more_losses_than(self.q)[sizes] <= epsilon)
+
+    def decide(self, epsilon: float, seed: int = 0, budget: int = MAX_LOSS_SETS
+               ) -> NetworkChance:
+        """Whether the layout fails with chance at most ``epsilon``, as a
+        :class:`NetworkChance` whose :meth:`~NetworkChance.meets` answers: by the bounds
+        (stopping once they decide) when the enumeration can reach a tail below ``epsilon``
+        within ``budget`` loss sets, else (or when they still cannot decide) by
+        ``SAMPLES_TO_DECIDE`` sampled outcomes (seeded by ``seed``)."""
+        m = self.q.size
+        if self.can_bound(epsilon, budget):
+            c = self.chance(epsilon, budget, decide=True)
+            if c.fail_high <= epsilon or c.fail_low > epsilon:
+                return c
+        else:
+            c = NetworkChance(0.0, 1.0, m, 0)
+        kept = np.random.default_rng(seed).random((SAMPLES_TO_DECIDE, m)) < self.q
+        return replace(c, n_samples=SAMPLES_TO_DECIDE, n_passed=int(self.passes(kept).sum()))
+
 
 def network_chance(problem: PlanProblem, selected: np.ndarray, config,
                    epsilon: float | None = None, budget: int = MAX_LOSS_SETS) -> NetworkChance:
     """:class:`NetworkChance` of the layout ``selected`` ((n,) bool); ``epsilon`` (default
     ``config.chance_epsilon``, or 0.05 for a plan not made for one) sets where the enumeration
-    may stop."""
+    may stop. A layout with too many pairs for the budget to bound its tail below ``epsilon``
+    gets the empty bounds [0, 1] with ``max_losses`` 0 (its sampled pass rate is the figure)."""
     eps = epsilon if epsilon is not None else (config.chance_epsilon or 0.05)
-    return NetworkOdds(problem, selected, config).chance(eps, budget)
+    odds = NetworkOdds(problem, selected, config)
+    if not odds.can_bound(eps, budget):  # the bounds could not say more than [0, 1]
+        return NetworkChance(0.0, 1.0, odds.q.size, 0)
+    return odds.chance(eps, budget)

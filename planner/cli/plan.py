@@ -213,6 +213,12 @@ def chance_text(doc: dict) -> str:
         return ""
     ch = doc["chance"]
     eps = ch["epsilon"]
+    whole = ch.get("network")
+    if whole is not None and whole["max_losses"] == 0 and "sampled" in ch:
+        return (f"P(pass) {100 * ch['sampled']['pass_rate']:.1f} % sampled (no certified "
+                f"bound: {whole['n_pairs']:,} pairs)"
+                + (f" (epsilon {eps:g})" if eps is not None else " (no chance constraint)")
+                + "; ")
     return (f"P(pass) >= {100 * ch['plan_pass_probability']:.1f} %"
             + (f" (epsilon {eps:g})" if eps is not None else " (no chance constraint)")
             + "; ")

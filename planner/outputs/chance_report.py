@@ -70,7 +70,9 @@ def chance_markdown(doc: dict) -> list[str]:
              + ("" if whole is None else
                 f" (the whole network with its accuracy: losses of up to "
                 f"{whole['max_losses']} of its {whole['n_pairs']} pairs judged, the rest "
-                "bounded)")]
+                "bounded)" if whole["max_losses"] else
+                f" (no certified bound: {whole['n_pairs']:,} pairs are too many to enumerate; "
+                "the sampled figure below is the plan's)")]
     if "sampled" in ch:
         s = ch["sampled"]
         lines.append(f"- in {s['n_samples']} sampled detection outcomes: "

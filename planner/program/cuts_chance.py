@@ -75,16 +75,17 @@ class ChanceRule:
                    <= self.target for o in self.odds) and self.whole_ok(selected)
 
     def whole_ok(self, selected: np.ndarray) -> bool:
-        """Whether the whole network provably fails with chance at most ``epsilon`` (always
-        true without ``whole``)."""
-        return self.whole is None or self.whole(selected).fail_high <= self.epsilon
+        """Whether the whole network fails with chance at most ``epsilon``, by its bounds or
+        its sampled outcomes (:meth:`~planner.accuracy.network_chance.NetworkChance.meets`;
+        always true without ``whole``)."""
+        return self.whole is None or self.whole(selected).meets(self.epsilon)
 
     def whole_cuts(self, problem: PlanProblem, model: Model, selected: np.ndarray
                    ) -> tuple[sp.csr_array | None, list[float], list[RowKind]]:
         """A no-good row for a layout whose whole network fails ``epsilon``: some site outside
         it, ``sum_{j not in C} x_j >= 1`` (valid: a subset of a failing layout fails too),
-        ``"chance-network"`` when proven, ``"chance-undecided"`` when the bounds cannot
-        decide; ``(None, [], [])`` when it passes or without ``whole``."""
+        ``"chance-network"`` when proven, ``"chance-undecided"`` when only sampled outcomes
+        decided it; ``(None, [], [])`` when it passes or without ``whole``."""
         if self.whole_ok(selected):
             return None, [], []
         proven = self.whole(selected).fail_low > self.epsilon
@@ -107,8 +108,7 @@ def chance_rule(problem: PlanProblem, config, infos: list[StationInfo]) -> Chanc
     def whole(selected: np.ndarray) -> NetworkChance:
         key = np.packbits(np.asarray(selected, bool)).tobytes()
         if key not in judged:
-            judged[key] = NetworkOdds(problem, selected, config).chance(
-                config.chance_epsilon, decide=True)
+            judged[key] = NetworkOdds(problem, selected, config).decide(config.chance_epsilon)
         return judged[key]
 
     return ChanceRule(station_odds(problem, infos, config), target, whole,

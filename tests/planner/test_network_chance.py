@@ -151,3 +151,21 @@ def test_network_chance_plan_is_the_fewest_markers_by_brute_force():
     assert any(evaluate_layout(problem, sel, config, net=net).all_ok and plain.layout_ok(sel)
                for combo in itertools.combinations(range(problem.n_sites), fewest - 1)
                for sel in [np.isin(np.arange(problem.n_sites), combo)])
+
+
+def test_a_layout_the_bounds_cannot_reach_is_decided_by_samples():
+    import planner.accuracy.network_chance as nc
+
+    problem, config = _two_stations(6, q_low=0.9)
+    every = np.ones(problem.n_sites, bool)
+    brute = _brute_fail(problem, config)
+    odds = NetworkOdds(problem, every, config)
+    assert not odds.can_bound(0.05, budget=5)  # not even every single loss
+    assert network_chance(problem, every, config, 0.05, budget=5).max_losses == 0
+    loose, tight = 1.5 * brute + 0.05, 0.5 * brute
+    for eps, expected in [(loose, True), (tight, False)]:
+        c = odds.decide(eps, budget=5)
+        assert c.max_losses == 0 and c.n_samples == nc.SAMPLES_TO_DECIDE
+        rate = c.n_passed / c.n_samples  # the samples see the true chance (3.3 sigma)
+        assert abs(rate - (1 - brute)) <= 3.3 * np.sqrt(brute * (1 - brute) / c.n_samples)
+        assert c.meets(eps) is expected
