@@ -3,8 +3,9 @@
 For each site seed: the naive plan (``chance_epsilon`` None) made on the preset's fine truth
 terrain and on its orbital planning DEM (:func:`visibility.sites.planning_dem`), and — when a
 detection model is shipped (or with ``--chance``) — the chance-constrained plan on the orbital
-DEM, whose detection probabilities then include P(visible)
-(:func:`planner.problem.terrain_uncertainty.visible_probability`); each verified (known
+DEM twice: without the terrain handling (the DEM taken as exact: the detection model's chances
+only) and with it (the chances times P(visible),
+:func:`planner.problem.terrain_uncertainty.visible_probability`); each verified (known
 control) on the truth terrain (:func:`planner.verify.known_control.on_truth_terrain`) with
 ``--verify-seeds`` noise seeds.
 Prints one line per verification and, per variant, its markers and pass rate with the Wilson
@@ -94,7 +95,10 @@ def visibility_calibration(site: str, site_seed: int, realisations: int, model) 
 
 def plan_and_verify(site: str, site_seed: int, terrain: str, epsilon, verify_seeds, out: Path,
                     model, detection_model=None) -> dict:
-    """Make one plan (``make_plan``) into ``out`` and verify it on the truth for each seed."""
+    """Make one plan (``make_plan``) into ``out`` and verify it on the truth for each seed;
+    ``terrain`` ``"orbital-exact"``: on the orbital DEM with its height error ignored."""
+    from dataclasses import replace
+
     from planner.config import PlanConfig
     from planner.outputs.plan_file import load_plan
     from planner.outputs.report import write_plan_files
@@ -103,7 +107,10 @@ def plan_and_verify(site: str, site_seed: int, terrain: str, epsilon, verify_see
     from planner.verify.known_control import on_truth_terrain, verify_plan
 
     config = PlanConfig(chance_epsilon=epsilon)
-    inputs = load_inputs(site, site_seed, terrain=terrain, sight_radius_m=config.max_range_m)
+    inputs = load_inputs(site, site_seed, terrain=terrain.removesuffix("-exact"),
+                         sight_radius_m=config.max_range_m)
+    if terrain.endswith("-exact"):
+        inputs = replace(inputs, height_error=None)
     t = time.perf_counter()
     outcome = make_plan(inputs, config, model, "default", progress=False,
                         detection_model=None if epsilon is None else detection_model)
@@ -118,7 +125,7 @@ def plan_and_verify(site: str, site_seed: int, terrain: str, epsilon, verify_see
         ok = all(c.passed for c in checks)
         passed.append(ok)
         lost = "; ".join(f"{c.station_id}: {c.reason}" for c in checks if not c.passed)
-        print(f"{site} seed {site_seed} {terrain:7s} eps={epsilon} markers {doc['n_markers']} "
+        print(f"{site} seed {site_seed} {terrain:13s} eps={epsilon} markers {doc['n_markers']} "
               f"verify seed {seed}: {'PASS' if ok else 'FAIL'} ({time.perf_counter() - t:.0f} s)"
               + (f" [{lost}]" if lost else ""), flush=True)
     return {"site_seed": site_seed, "terrain": terrain, "epsilon": epsilon,
@@ -146,7 +153,7 @@ def main() -> None:
     variants = [("truth", None), ("orbital", None)]
     detection_model = shipped_detection_model()
     if args.chance or detection_model is not None:
-        variants.append(("orbital", 0.05))
+        variants += [("orbital-exact", 0.05), ("orbital", 0.05)]
     model = default_model()
     calibration = visibility_calibration(args.site, site_seeds[0], args.realisations, model)
     if args.calibration_only:
@@ -163,6 +170,8 @@ def main() -> None:
         n = sum(len(r["passed"]) for r in mine)
         low, high = wilson_interval(k, n)
         name = f"{terrain} plan, " + ("naive" if eps is None else f"chance eps={eps}")
+        if eps is not None and terrain == "orbital":
+            name += " with P(visible)"
         summary[name] = {"markers": [r["n_markers"] for r in mine], "n_passed": k, "n": n,
                          "wilson_95": [round(low, 3), round(high, 3)]}
         print(f"{name:32s} markers {summary[name]['markers']}: passed {k} of {n} on the truth "

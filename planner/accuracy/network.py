@@ -215,14 +215,15 @@ class NetworkModel:
         self.tie_site = site
         self.tie_a = self.site_start[site] + off // kk
         self.tie_b = self.site_start[site] + off % kk
-        self.tie_coef = self._tie_coefficients(self.weight)
+        self.tie_coef = self.tie_coefficients(self.weight)
 
-    def _tie_coefficients(self, weight: np.ndarray) -> np.ndarray:
-        """Each tie's ``delta_ab w_a - w_a w_b / W_j`` for the pairs' weights ``weight`` ((p,),
-        0 for a lost pair; 0 where a site keeps no pair)."""
-        site_weight = np.bincount(self.pair_site, weight, minlength=self.problem.n_sites)
-        wa, wb = weight[self.tie_a], weight[self.tie_b]
-        total = site_weight[self.tie_site]
+    def tie_coefficients(self, weight: np.ndarray) -> np.ndarray:
+        """Each tie's ``delta_ab w_a - w_a w_b / W_j`` for the pairs' weights ``weight`` ((p,)
+        or (k, p), 0 for a lost pair; 0 where a site keeps no pair): (t,) or (k, t)."""
+        site_weight = (self._site_sum @ np.atleast_2d(weight).T).T.reshape(
+            weight.shape[:-1] + (self.problem.n_sites,))
+        wa, wb = weight[..., self.tie_a], weight[..., self.tie_b]
+        total = site_weight[..., self.tie_site]
         return np.where(self.tie_a == self.tie_b, wa, 0.0) \
             - wa * wb / np.where(total > 0, total, 1.0)
 
@@ -260,7 +261,7 @@ class NetworkModel:
         and ``kept`` as in :meth:`information`."""
         x = np.asarray(x, dtype=float)
         coef = self.tie_coef if kept is None \
-            else self._tie_coefficients(np.where(kept, self.weight, 0.0))
+            else self.tie_coefficients(np.where(kept, self.weight, 0.0))
         n6 = 6 * self.problem.n_stations
         acc = np.zeros(n6 * n6)
         take = np.flatnonzero(x[self.tie_site] != 0)

@@ -29,6 +29,7 @@ import math
 from dataclasses import dataclass, replace
 
 import numpy as np
+from scipy.sparse import csr_array
 
 from error_model.detection import wilson_interval
 from planner.accuracy.chance import (
@@ -37,7 +38,7 @@ from planner.accuracy.chance import (
     enumerate_losses,
     more_losses_than,
 )
-from planner.accuracy.network import network_model
+from planner.accuracy.network import network_model, pose_errors_from_covariance
 from planner.problem.usability import PlanProblem, sector_index
 
 
@@ -91,6 +92,9 @@ class NetworkChance:
         return out
 
 
+#: Most matrix entries one batch of :meth:`NetworkOdds.station_errors` holds (8 bytes each).
+_BATCH_VALUES = 4_000_000
+
 #: Sampled outcomes that decide a layout the bounds cannot.
 SAMPLES_TO_DECIDE = 400
 
@@ -126,6 +130,16 @@ class NetworkOdds:
         self.min_sectors = config.min_sectors
         self.requirement_m = config.requirement_m
         self._all_sites = np.ones(sub.n_sites)
+        net = self.net
+        n6 = 6 * s
+        # each tie's 6 x 6 block H_a^T H_b, scattered into the (6 s)^2 pose matrix: (t, 36 s^2)
+        blocks = np.einsum("qia,qib->qab", net.design[net.tie_a], net.design[net.tie_b])
+        ra = 6 * net.pair_station[net.tie_a][:, None] + np.arange(6)
+        rb = 6 * net.pair_station[net.tie_b][:, None] + np.arange(6)
+        flat = (ra[:, :, None] * n6 + rb[:, None, :]).reshape(len(blocks), 36)
+        self._scatter = csr_array((blocks.reshape(-1, 36).ravel(),
+                                   (np.repeat(np.arange(len(blocks)), 36), flat.ravel())),
+                                  shape=(len(blocks), n6 * n6))
 
     def passes(self, kept: np.ndarray) -> np.ndarray:
         """(k,) bool: whether every station passes with each row of ``kept`` ((k, p) bool over
@@ -134,12 +148,45 @@ class NetworkOdds:
         count = k @ self._station
         sectors = ((k @ self._sector) > 0).reshape(len(k), -1, self.n_sectors).sum(axis=2)
         ok = np.all((count >= self.min_markers) & (sectors >= self.min_sectors), axis=1)
-        with np.errstate(over="ignore", invalid="ignore"):  # untied stations: inf
-            for row in np.flatnonzero(ok):
-                j = self.net.information(self._all_sites, kept[row])
-                err = self.net.station_errors_from(self.net.covariance(j))
-                ok[row] = bool(np.all(err <= self.requirement_m))
+        n6 = 6 * self.net.problem.n_stations
+        rows = np.flatnonzero(ok)
+        step = max(1, _BATCH_VALUES // (n6 * n6))
+        for lo in range(0, rows.size, step):
+            at = rows[lo:lo + step]
+            ok[at] = np.all(self.station_errors(kept[at]) <= self.requirement_m, axis=1)
         return ok
+
+    def station_errors(self, kept: np.ndarray) -> np.ndarray:
+        """(k, s) 95 % network error of every station with each row of ``kept`` ((k, p) bool),
+        m (``inf`` where a station is left undetermined): the information of the kept pairs
+        (:meth:`~planner.accuracy.network.NetworkModel.information` with ``kept``) for all
+        rows at once, inverted in one batch; a row whose information is (nearly) singular
+        goes through :meth:`~planner.accuracy.network.NetworkModel.covariance`."""
+        net = self.net
+        s, n6 = net.problem.n_stations, 6 * net.problem.n_stations
+        coef = net.tie_coefficients(np.where(kept, net.weight, 0.0))  # (k, t)
+        full = (self._scatter.T @ coef.T).T.reshape(-1, n6, n6)
+        j = full[:, net.free[:, None], net.free[None, :]]
+        j = 0.5 * (j + np.swapaxes(j, 1, 2))
+        j[:, np.arange(net.free.size), np.arange(net.free.size)] += net.prior
+        err = np.empty((len(kept), s))
+        diag = np.diagonal(j, axis1=1, axis2=2)
+        good = np.zeros(len(kept), bool)
+        with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+            try:
+                chol = np.linalg.cholesky(j)
+                good = np.min(np.diagonal(chol, axis1=1, axis2=2) ** 2 / diag, axis=1) > 1e-10
+            except np.linalg.LinAlgError:  # some row not positive definite: one by one
+                pass
+            if good.any():
+                cov = np.zeros((int(good.sum()), n6, n6))
+                cov[:, net.free[:, None], net.free[None, :]] = np.linalg.inv(j[good])
+                blocks = cov.reshape(-1, s, 6, s, 6)[:, np.arange(s), :, np.arange(s), :]
+                err[good] = pose_errors_from_covariance(
+                    np.swapaxes(blocks, 0, 1).reshape(-1, 6, 6), net.radius).reshape(-1, s)
+            for row in np.flatnonzero(~good):
+                err[row] = net.station_errors_from(net.covariance(j[row]))
+        return err
 
     def chance(self, epsilon: float, budget: int = MAX_LOSS_SETS,
                decide: bool = False) -> NetworkChance:
