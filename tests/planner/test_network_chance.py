@@ -169,3 +169,24 @@ def test_a_layout_the_bounds_cannot_reach_is_decided_by_samples():
         rate = c.n_passed / c.n_samples  # the samples see the true chance (3.3 sigma)
         assert abs(rate - (1 - brute)) <= 3.3 * np.sqrt(brute * (1 - brute) / c.n_samples)
         assert c.meets(eps) is expected
+
+
+def test_the_summary_and_report_say_when_a_network_has_no_certified_bound():
+    from planner.cli.plan import chance_text
+    from planner.outputs.chance_report import chance_markdown
+
+    doc = {"detection": {"model": {"name": "default"}}, "chance": {
+        "epsilon": 0.05, "station_target": 0.0005, "plan_pass_probability": 0.0,
+        "network": {"fail_low": 0.0, "fail_high": 1.0, "pass_low": 0.0, "n_pairs": 3605,
+                    "max_losses": 0, "exact": False},
+        "sampled": {"n_samples": 2000, "seed": 0, "n_passed": 1962, "pass_rate": 0.981,
+                    "wilson_95": [0.974, 0.986]},
+        "baselines": {}, "cuts": {"chance_undecided": 0}, "stations": {}}}
+    assert chance_text(doc) == ("P(pass) 98.1 % sampled (no certified bound: 3,605 pairs) "
+                                "(epsilon 0.05); ")
+    text = "\n".join(chance_markdown(doc))
+    assert "no certified bound: 3,605 pairs" in text and "98.10 % passed" in text
+    doc["chance"]["network"].update(max_losses=3, fail_high=0.0135, pass_low=0.9865)
+    doc["chance"]["plan_pass_probability"] = 0.9865
+    assert chance_text(doc).startswith("P(pass) >= 98.7 %")
+    assert "losses of up to 3 of its 3605 pairs judged" in "\n".join(chance_markdown(doc))
