@@ -5,8 +5,8 @@ predicted accuracy exactly (:class:`planner.accuracy.checks.StationInfo`), adds 
 stations that fail (:mod:`planner.program.cuts_known`, :mod:`planner.program.cuts_network`) and
 re-solves until all pass. In known-control mode the first solve is the directions-only
 relaxation (:func:`_combinatorial_first`); the full model is built only when its layout fails a
-station. Large network problems start from the greedy layout and a root relaxation
-(:func:`_root_relaxation`).
+station. Large network problems start from the greedy layout (repaired until it meets the
+chance targets, in a chance-constrained plan) and a root relaxation (:func:`_root_relaxation`).
 """
 
 from __future__ import annotations
@@ -274,7 +274,7 @@ def _plan_network(problem: PlanProblem, config, model: Model | None,
     model = replace(model, ub=ub)
     forbidden = problem.site_mask(config.forbidden, "forbidden")
     j_all = net.information(~forbidden & ~hopeless & (net.n_stations_seeing > 0))
-    upper_bound = greedy_selected = greedy = None
+    upper_bound = greedy = None
     root_bound = -np.inf
     existing = problem.site_mask(config.existing, "existing") | problem.site_existing
     if int(net.tying.sum()) > _SPARSE_ABOVE_SITES and not config.redundant \
@@ -287,13 +287,20 @@ def _plan_network(problem: PlanProblem, config, model: Model | None,
             forbidden=config.forbidden + tuple(
                 problem.site_ids[j] for j in np.flatnonzero(hopeless & ~forbidden))), net,
             deadline=t0 + _GREEDY_TIME_FRACTION * config.time_limit_s)
+
+    def check(selected):
+        return evaluate_layout(problem, selected, config, infos, net=net)
+
+    start = None
     if greedy is not None and greedy.meets_requirement \
-            and (chance is None or chance.layout_ok(greedy.selected)) \
             and (config.max_bias_effect_m is None  # the greedy ignores the bias bound
-                 or evaluate_layout(problem, greedy.selected, config, infos, net=net).all_ok):
+                 or check(greedy.selected).all_ok):
+        start = greedy.selected
+        if chance is not None and not chance.layout_ok(start):
+            start = _repair(problem, config, chance, check)(start)  # None: it cannot
+    if start is not None:
         in_model = model.site_var >= 0
-        greedy_selected = greedy.selected
-        upper_bound = int((greedy.selected & in_model).sum())
+        upper_bound = int((start & in_model).sum())
         nx = model.var_site.size
         row = sp.csr_array((np.ones(nx), (np.zeros(nx, np.int64), np.arange(nx))),
                            shape=(1, model.n_vars))
@@ -310,10 +317,7 @@ def _plan_network(problem: PlanProblem, config, model: Model | None,
             rows = chance.whole_cuts(problem, model, selected)
         return rows
 
-    def check(selected):
-        return evaluate_layout(problem, selected, config, infos, net=net)
-
-    result = _cut_loop(problem, config, model, cuts, check, incumbent=greedy_selected, t0=t0,
+    result = _cut_loop(problem, config, model, cuts, check, incumbent=start, t0=t0,
                        bound=root_bound, repair=_repair(problem, config, chance, check))
     return replace(result, greedy=greedy)
 

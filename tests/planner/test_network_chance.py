@@ -190,3 +190,19 @@ def test_the_summary_and_report_say_when_a_network_has_no_certified_bound():
     doc["chance"]["plan_pass_probability"] = 0.9865
     assert chance_text(doc).startswith("P(pass) >= 98.7 %")
     assert "losses of up to 3 of its 3605 pairs judged" in "\n".join(chance_markdown(doc))
+
+
+def test_a_large_network_starts_from_the_greedy_layout_repaired_for_the_chances(monkeypatch):
+    import planner.program.loop as loop
+    from planner.program.baselines import network_baseline
+
+    problem, config = _three_stations(7)
+    rule = chance_rule(problem, config, station_infos(problem, config))
+    greedy = network_baseline(problem, config)
+    assert greedy.meets_requirement and not rule.layout_ok(greedy.selected)
+    fewest = int(plan_sites(problem, config).selected.sum())
+    monkeypatch.setattr(loop, "_SPARSE_ABOVE_SITES", 0)  # take the large networks' path
+    result = plan_sites(problem, config)
+    assert result.check.all_ok and rule.layout_ok(result.selected)
+    assert result.status == "optimal" and int(result.selected.sum()) == fewest
+    assert "upper-bound" in [k.family for k in result.model.row_kind]  # the repaired start
