@@ -73,8 +73,11 @@ def command(plan_path, error_model, seed, station_ids, offsets, tolerance, profi
             truth_dem_path, scheduler, workers, out, overwrite, as_json):
     """Check a plan by simulation: scan each station with the planned markers, process the
     scans, register each station to its detected markers, and compare achieved with predicted
-    error. Exit code 1 when any station's achieved error exceeds the requirement. The plan's
-    marker radius is simulated and fitted; --station-ids verifies some stations only.
+    error. A station passes when the markers it detected and accepted meet the plan's rule
+    (at least min_markers of them in at least min_sectors of n_sectors directions, as planned)
+    and its achieved error the requirement: the promise the plan's P(pass) is about. Exit code
+    1 when any station fails. The plan's marker radius is simulated and fitted; --station-ids
+    verifies some stations only.
 
     With mounting offsets the simulated rig is mis-mounted and the pipeline self-calibrates
     each station's scan before detecting the markers, as in the field. The simulated sensor

@@ -34,6 +34,7 @@ from markerplan.reading import (
     unique_ids,
 )
 from planner.config import BOUNDS, MAX_MARKERS, MAX_STATIONS
+from planner.verify.station_rule import StationRule
 from visibility.dem import DEM, read_dem
 from visibility.sites import MARKER_RADIUS_M, load_site
 
@@ -82,6 +83,8 @@ class SurveyPlan:
     working_radius_m: float
     provenance: dict = field(default_factory=dict)
     """The plan's provenance record (empty for a plan made in memory)."""
+    rule: StationRule = field(default_factory=StationRule)
+    """How many markers in how many directions every station must detect."""
 
     @property
     def dem_path(self) -> str | None:
@@ -167,7 +170,7 @@ def load_plan(path: str | Path) -> SurveyPlan:
         marker_radius_m=float(site.get("marker_radius_m", MARKER_RADIUS_M)),
         requirement_m=float(doc["requirement"]["requirement_m"]),
         working_radius_m=float(doc["requirement"]["working_radius_m"]),
-        provenance=doc["provenance"])
+        provenance=doc["provenance"], rule=StationRule.of(doc["requirement"]))
     _require_on_terrain(plan, f"PLAN {path}")
     return plan
 
@@ -301,6 +304,13 @@ def _requirement_iv(req: Any, what: str) -> None:
     require_keys(req, ["requirement_m", "working_radius_m"], what, _FIX)
     _number(req, "requirement_m", what, *REQUIREMENT_BOUNDS_M)
     _number(req, "working_radius_m", what, *WORKING_RADIUS_BOUNDS_M)
+    for key in ("n_sectors", "min_sectors", "min_markers"):
+        if key in req:
+            low, _, high, _ = BOUNDS[key]
+            if not isinstance(req[key], int) or isinstance(req[key], bool) \
+                    or not low <= req[key] <= high:
+                raise InputFileError(f"{what} {key} must be a whole number in [{low}, {high}], "
+                                     f"got {req[key]!r}; {_FIX}")
 
 
 def _provenance_iv(prov: Any, what: str, full: bool) -> None:

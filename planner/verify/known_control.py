@@ -67,6 +67,7 @@ from planner.verify.fates import (
     station_fates,
     unmatched_text,
 )
+from planner.verify.station_rule import StationRule
 from visibility.dem import DEM
 from visibility.orbital import reseated
 from visibility.sensor_profile import SensorProfile, default_profile
@@ -166,7 +167,8 @@ def verify_plans(plans: Sequence[SurveyPlan], error_model, seed: int | Sequence[
     checks = [functools.partial(check_station, tuple(plan.marker_ids), plan.marker_xyz_m,
                                 processing_config(ProcessingSettings(
                                     marker_radius_m=plan.marker_radius_m)),
-                                error_model, plan.requirement_m, plan.working_radius_m, s)
+                                error_model, plan.requirement_m, plan.working_radius_m, s,
+                                rule=plan.rule)
               for plan, s in zip(plans, seeds, strict=True)]
     return map_plan_stations(plans, checks, seeds, progress, offsets, station_ids, profile,
                              executor, names)
@@ -182,7 +184,8 @@ def _per_plan(seed: int | Sequence[int], n_plans: int) -> list[int]:
 
 def check_station(ids: tuple[str, ...], centres: np.ndarray, cfg: ProcessConfig, error_model,
                   requirement_m: float, working_radius_m: float, seed: int,
-                  st: PlannedStation, scan: StationScan, truth: dict) -> StationCheck:
+                  st: PlannedStation, scan: StationScan, truth: dict,
+                  rule: StationRule | None = None) -> StationCheck:
     """Steps 2-4 of the module docstring for one simulated station.
 
     Parameters
@@ -202,6 +205,9 @@ def check_station(ids: tuple[str, ...], centres: np.ndarray, cfg: ProcessConfig,
     scan : StationScan
     truth : dict
         The simulator's truth (:func:`visibility.simulate.simulate_markers`).
+    rule : StationRule, optional
+        The markers and directions the station must detect (default: the planner's default
+        rule); the station passes when it does and meets the requirement.
 
     Returns
     -------
@@ -232,8 +238,13 @@ def check_station(ids: tuple[str, ...], centres: np.ndarray, cfg: ProcessConfig,
     true_pose = truth["station_pose"]
     achieved = known_control.registration_error(t, psi, true_pose["position_m"],
                                            true_pose["heading_rad"], working_radius_m)
-    ok = achieved <= requirement_m
-    reason = "ok" if ok else f"achieved {achieved:.3f} m > requirement {requirement_m:g} m"
+    rule = rule or StationRule()
+    count, sectors, rule_ok = rule.judge(st.position_m, site_xyz)
+    ok = achieved <= requirement_m and rule_ok
+    why = ([] if rule_ok else [rule.broken(count, sectors)]) \
+        + ([] if achieved <= requirement_m else
+           [f"achieved {achieved:.3f} m > requirement {requirement_m:g} m"])
+    reason = "ok" if ok else "; ".join(why)
     if lost:
         reason += f" ({lost})"
     return StationCheck(st.id, st.predicted_error_m, achieved, n_planned, len(rows), ok, reason,
@@ -491,6 +502,7 @@ def verify_record(plan: SurveyPlan, checks: list[StationCheck], seed: int, model
                                   "plan_config_sha256": plan.provenance["config_sha256"]},
                                  plan=plan.provenance),
         "requirement_m": plan.requirement_m,
+        "station_rule": dataclasses.asdict(plan.rule),
         "passed": all(c.passed for c in checks),
         "losses": stage_counts(c.fates for c in checks),
         "stations": [{"id": c.station_id, "predicted_error_m": c.predicted_error_m,
@@ -506,7 +518,10 @@ def verify_markdown(rec: dict) -> str:
     """Human report of a verification."""
     lines = [f"# Plan verification — {'PASSED' if rec['passed'] else 'FAILED'}", "",
              f"Requirement: achieved registration error ≤ {rec['requirement_m']:g} m at every "
-             "station (simulated scans, processed by the pipeline, 4-DoF WLS registration).", "",
+             "station (simulated scans, processed by the pipeline, 4-DoF WLS registration)"
+             + (f", with at least {rule['min_markers']} planned markers detected and accepted "
+                f"in at least {rule['min_sectors']} of {rule['n_sectors']} directions"
+                if (rule := rec.get("station_rule")) else "") + ".", "",
              "| station | predicted | achieved | markers detected / planned | result |",
              "|---|---:|---:|---:|---|"]
     for s in rec["stations"]:

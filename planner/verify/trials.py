@@ -33,7 +33,7 @@ from __future__ import annotations
 import json
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
@@ -299,6 +299,7 @@ def trials_record(plan: SurveyPlan, trials: list[list], seed: int, seeds: Sequen
         "mode": "trials" if network is None else "network_trials",
         "provenance": provenance(config, plan=plan.provenance),
         "requirement_m": plan.requirement_m,
+        "station_rule": asdict(plan.rule),
         "passed": all(passed),
         "pass_rate": {**_rate(sum(passed), n), "predicted_probability":
                       None if predictions is None else predictions.plan_pass_probability},
@@ -453,13 +454,17 @@ def trials_markdown(rec: dict) -> str:
     """Human report of ``verify --trials N``: the plan's pass rate beside its predicted
     probability, per station, per pair, and the calibration of the pairs' predictions."""
     pr = rec["pass_rate"]
+    rule = rec["station_rule"]
     mode = "network mode, " if rec["mode"] == "network_trials" else ""
     predicted = pr["predicted_probability"]
     lines = [f"# Plan verification, {mode}{pr['n_trials']} trials — passed {_percent(pr)}", "",
              "Predicted P(pass): " + ("not in the plan (made without a detection model)"
                                       if predicted is None else f"{predicted:.3f}") + ".", "",
-             f"Requirement: achieved error ≤ {rec['requirement_m']:g} m at every station; a "
-             "trial passes when every station does. Each trial simulates every station with "
+             f"Requirement: at every station, at least {rule['min_markers']} planned "
+             f"markers detected and accepted in at least {rule['min_sectors']} of "
+             f"{rule['n_sectors']} directions, and an achieved error ≤ "
+             f"{rec['requirement_m']:g} m; a trial passes when every station does (the event "
+             "the predicted P(pass) is about). Each trial simulates every station with "
              "its own noise and turntable-error seed"
              + (" and its own draw of the rig's mounting offsets"
                 if rec["provenance"]["config"].get("offset_tolerance") else "")

@@ -10,6 +10,7 @@ from pipeline.stages import build_config
 from planner.outputs.plan_file import PlannedStation
 from planner.verify.fates import FATES_COLUMNS, FATES_TYPES, stage_counts, write_fates
 from planner.verify.known_control import check_station
+from planner.verify.station_rule import StationRule
 
 simulate = pytest.importorskip("visibility.simulate")
 dem_mod = pytest.importorskip("visibility.dem")
@@ -32,7 +33,7 @@ def simulated():
 def check(simulated):
     scan, truth = simulated
     return check_station(IDS, CENTRES, build_config(), default_model(), 0.1, 10.0, 0, STATION,
-                         scan, truth)
+                         scan, truth, rule=StationRule(min_markers=2, min_sectors=2))
 
 
 def test_a_buried_marker_is_lost_out_of_view_and_named_in_the_reason(check):
@@ -49,6 +50,18 @@ def test_a_buried_marker_is_lost_out_of_view_and_named_in_the_reason(check):
     assert check.passed and check.n_detected == 2
     assert check.reason == "ok (lost HIDDEN out of view (no return on the marker))"
     assert stage_counts([check.fates, None]) == {"not_in_view": 1, "false_accepts": 0}
+
+
+def test_two_markers_registering_well_still_break_the_plans_three_direction_rule(simulated):
+    """The same detections judged by the planner's default rule (3 markers in 3 of 6
+    sectors): the registration meets the requirement, the station fails the promise."""
+    scan, truth = simulated
+    check = check_station(IDS, CENTRES, build_config(), default_model(), 0.1, 10.0, 0, STATION,
+                          scan, truth)
+    assert not check.passed and check.achieved_error_m < 0.1 and check.n_detected == 2
+    assert check.reason == ("2 marker(s) in 2 of 6 sectors detected and accepted, the plan's "
+                            "rule asks >= 3 in >= 3 (lost HIDDEN out of view (no return on "
+                            "the marker))")
 
 
 def test_a_station_short_of_markers_says_which_stage_lost_them(simulated):
