@@ -140,3 +140,24 @@ def test_stations_not_tied_to_the_reference_fail_without_stopping_the_rest(netwo
     assert rec["worst"]["not_adjusted"] == [far, last] and rec["worst"]["achieved_station"] \
         in inputs.station_ids[:-2]
     assert f"not in the adjustment: {far}, {last}." in network_markdown(rec)
+
+
+def test_a_station_left_with_two_identified_markers_breaks_the_plans_rule(network, tmp_path):
+    """Two detections tie the station into the adjustment and it registers, but the plan asked
+    for three markers in three directions: it fails, saying so."""
+    from markerplan.reading import read_csv
+
+    inputs, truth = network
+    header, rows = read_csv(inputs.tables[0], "table", ())
+    col = header.index("station_id")
+    last = inputs.station_ids[-1]
+    kept = [r for r in rows if r[col] != last] + [r for r in rows if r[col] == last][:2]
+    table = tmp_path / "markers.csv"
+    table.write_text("\n".join([",".join(header)] + [",".join(r) for r in kept]) + "\n")
+    out = {s.station_id: s for s in adjust_and_compare([table], inputs.plan, default_model(),
+                                                        truth, {}).stations}
+    assert out[last].n_identified == 2 and out[last].achieved_error_m is not None
+    assert not out[last].passed
+    assert out[last].reason.startswith("2 marker(s) in ") and "the plan's rule asks >= 3" \
+        in out[last].reason
+    assert all(out[sid].passed for sid in inputs.station_ids[:-1])

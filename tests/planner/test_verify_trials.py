@@ -84,7 +84,8 @@ def test_every_trial_and_station_is_a_task_with_its_own_seed(monkeypatch):
     def fake_simulate(dem, position, heading, centres, sensor, rig, seed, **kw):
         return None, {"seed": seed}
 
-    def fake_check(ids, centres, cfg, model, requirement, radius, seed, st, scan, truth):
+    def fake_check(ids, centres, cfg, model, requirement, radius, seed, st, scan, truth,
+                   rule=None):
         seen.append((st.id, seed, truth["seed"]))
         ok = truth["seed"] % 2 == 0
         return StationCheck(st.id, 0.02, 0.01, 2, 2, ok, "ok" if ok else "lost", {},
@@ -172,7 +173,8 @@ def _fake_chain(monkeypatch, seen):
     def fake_simulate(dem, position, heading, centres, sensor, rig, seed, **kw):
         return None, {"seed": seed, "offsets": rig.offsets}
 
-    def fake_check(ids, centres, cfg, model, requirement, radius, seed, st, scan, truth):
+    def fake_check(ids, centres, cfg, model, requirement, radius, seed, st, scan, truth,
+                   rule=None):
         seen.append((st.id, truth["seed"], truth["offsets"]))
         ok = truth["seed"] % 2 == 0
         return StationCheck(st.id, 0.02, 0.01, 2, 2, ok, "ok" if ok else "lost", {},
