@@ -168,7 +168,7 @@ def diagnose(problem: PlanProblem, config, infos: list[StationInfo] | None = Non
     unoccluded, enough usable sites, enough sectors, accuracy reachable (and, in redundant mode,
     reachable after losing any one site). ``accuracy_check=False`` leaves out the two accuracy
     checks (network mode judges accuracy with
-    :meth:`planner.accuracy.network.NetworkModel.diagnose`).
+    :func:`planner.accuracy.network_diagnosis.diagnose_network`).
     """
     infos = infos or station_infos(problem, config)
     forbidden = problem.site_mask(config.forbidden, "forbidden")
