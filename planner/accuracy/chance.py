@@ -174,15 +174,11 @@ def enumerate_losses(q: np.ndarray, passes, tail_tolerance: float,
     tail = more_losses_than(q)  # tail[k] = P(more than k items lost)
     low = 0.0
     failed = np.zeros(0, np.int64)  # colex ranks of the failing loss sets of the last size
-    used = 0
+    sizes = sizes_within(m, budget)
     k = 0
-    while k < m:
+    while k < sizes:
         if tail[k] <= tail_tolerance:
             break
-        size = math.comb(m, k + 1)
-        if used + size > budget:
-            break
-        used += size
         k += 1
         lost = np.array(list(itertools.combinations(range(m), k)), np.int64)  # (c, k)
         fails = np.zeros(len(lost), bool)
@@ -204,6 +200,22 @@ def enumerate_losses(q: np.ndarray, passes, tail_tolerance: float,
             return StationChance(min(low, 1.0), min(low + float(tail[k]), 1.0), m, k)
     high = low + (float(tail[k]) if k < m else 0.0)
     return StationChance(min(low, 1.0), min(high, 1.0), m, k if k < m else m)
+
+
+def sizes_within(m: int, budget: int) -> int:
+    """The largest ``k`` such that every loss set of up to ``k`` of ``m`` items fits in
+    ``budget`` judged sets (``sum_{i <= k} C(m, i) <= budget``).
+
+    Examples
+    --------
+    >>> sizes_within(5, 15), sizes_within(5, 14)
+    (2, 1)
+    """
+    k, used = 0, 0
+    while k < m and used + math.comb(m, k + 1) <= budget:
+        k += 1
+        used += math.comb(m, k)
+    return k
 
 
 def _colex_rank(sets: np.ndarray) -> np.ndarray:

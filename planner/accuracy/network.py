@@ -67,6 +67,9 @@ from planner.accuracy.known_control import CHI2_3_95, lambda_max_sym3
 from planner.problem.usability import PlanProblem
 
 _CHUNK = 100_000
+#: A Cholesky pivot below this fraction of its diagonal entry marks the information singular
+#: (a station not tied to the datum).
+SINGULAR_PIVOT = 1e-10
 
 
 def pose_errors_from_covariance(cov, working_radius_m: float) -> np.ndarray:
@@ -267,16 +270,23 @@ class NetworkModel:
         take = np.flatnonzero(x[self.tie_site] != 0)
         for lo in range(0, take.size, _CHUNK):
             t = take[lo:lo + _CHUNK]
-            a, b = self.tie_a[t], self.tie_b[t]
+            blocks, flat = self.tie_blocks(t)
             c = coef[t] * x[self.tie_site[t]]
-            blocks = np.einsum("q,qia,qib->qab", c, self.design[a], self.design[b])
-            ra = 6 * self.pair_station[a][:, None] + np.arange(6)
-            rb = 6 * self.pair_station[b][:, None] + np.arange(6)
-            flat = ra[:, :, None] * n6 + rb[:, None, :]
-            acc += np.bincount(flat.ravel(), blocks.ravel(), minlength=n6 * n6)
+            acc += np.bincount(flat.ravel(), (c[:, None, None] * blocks).ravel(),
+                               minlength=n6 * n6)
         full = acc.reshape(n6, n6)
         j = full[np.ix_(self.free, self.free)]
         return 0.5 * (j + j.T)
+
+    def tie_blocks(self, ties: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Each tie's 6 x 6 block ``H_a^T H_b`` ((t, 6, 6)) and where its entries go in the
+        flattened ``(6 s)^2`` pose matrix ((t, 6, 6) int), for tie indices ``ties``."""
+        a, b = self.tie_a[ties], self.tie_b[ties]
+        n6 = 6 * self.problem.n_stations
+        blocks = np.einsum("qia,qib->qab", self.design[a], self.design[b])
+        ra = 6 * self.pair_station[a][:, None] + np.arange(6)
+        rb = 6 * self.pair_station[b][:, None] + np.arange(6)
+        return blocks, ra[:, :, None] * n6 + rb[:, None, :]
 
     def covariance(self, j: np.ndarray) -> NetworkCovariance:
         """Covariance of the free parameters from the information ``j``, with undetermined
@@ -288,7 +298,7 @@ class NetworkModel:
         try:
             factor = scipy.linalg.cho_factor(j)
             # a pivot that is a vanishing fraction of its diagonal: numerically singular
-            if np.min(np.diag(factor[0]) ** 2 / np.diag(j)) > 1e-10:
+            if np.min(np.diag(factor[0]) ** 2 / np.diag(j)) > SINGULAR_PIVOT:
                 c = scipy.linalg.cho_solve(factor, np.eye(j.shape[0]))
         except np.linalg.LinAlgError:
             pass

@@ -25,7 +25,6 @@ a certificate).
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -37,8 +36,13 @@ from planner.accuracy.chance import (
     TAIL_FRACTION,
     enumerate_losses,
     more_losses_than,
+    sizes_within,
 )
-from planner.accuracy.network import network_model, pose_errors_from_covariance
+from planner.accuracy.network import (
+    SINGULAR_PIVOT,
+    network_model,
+    pose_errors_from_covariance,
+)
 from planner.problem.usability import PlanProblem, sector_index
 
 
@@ -129,17 +133,11 @@ class NetworkOdds:
         self.min_markers = config.min_markers
         self.min_sectors = config.min_sectors
         self.requirement_m = config.requirement_m
-        self._all_sites = np.ones(sub.n_sites)
-        net = self.net
-        n6 = 6 * s
-        # each tie's 6 x 6 block H_a^T H_b, scattered into the (6 s)^2 pose matrix: (t, 36 s^2)
-        blocks = np.einsum("qia,qib->qab", net.design[net.tie_a], net.design[net.tie_b])
-        ra = 6 * net.pair_station[net.tie_a][:, None] + np.arange(6)
-        rb = 6 * net.pair_station[net.tie_b][:, None] + np.arange(6)
-        flat = (ra[:, :, None] * n6 + rb[:, None, :]).reshape(len(blocks), 36)
-        self._scatter = csr_array((blocks.reshape(-1, 36).ravel(),
-                                   (np.repeat(np.arange(len(blocks)), 36), flat.ravel())),
-                                  shape=(len(blocks), n6 * n6))
+        # each tie's block H_a^T H_b scattered into the flattened (6 s)^2 pose matrix
+        blocks, flat = self.net.tie_blocks(np.arange(self.net.tie_a.size))
+        self._scatter = csr_array((blocks.ravel(), (np.repeat(np.arange(len(blocks)), 36),
+                                                    flat.ravel())),
+                                  shape=(len(blocks), (6 * s) ** 2))
 
     def passes(self, kept: np.ndarray) -> np.ndarray:
         """(k,) bool: whether every station passes with each row of ``kept`` ((k, p) bool over
@@ -175,7 +173,8 @@ class NetworkOdds:
         with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
             try:
                 chol = np.linalg.cholesky(j)
-                good = np.min(np.diagonal(chol, axis1=1, axis2=2) ** 2 / diag, axis=1) > 1e-10
+                good = np.min(np.diagonal(chol, axis1=1, axis2=2) ** 2 / diag, axis=1) \
+                    > SINGULAR_PIVOT
             except np.linalg.LinAlgError:  # some row not positive definite: one by one
                 pass
             if good.any():
@@ -201,12 +200,7 @@ class NetworkOdds:
     def can_bound(self, epsilon: float, budget: int = MAX_LOSS_SETS) -> bool:
         """Whether the loss sets ``budget`` allows can leave a tail (the chance of losing more
         pairs) at most ``epsilon``: else no enumeration can prove the layout meets it."""
-        m = self.q.size
-        sizes, used = 0, 0
-        while sizes < m and used + math.comb(m, sizes + 1) <= budget:
-            sizes += 1
-            used += math.comb(m, sizes)
-        return bool(more_losses_than(self.q)[sizes] <= epsilon)
+        return bool(more_losses_than(self.q)[sizes_within(self.q.size, budget)] <= epsilon)
 
     def decide(self, epsilon: float, seed: int = 0, budget: int = MAX_LOSS_SETS
                ) -> NetworkChance:

@@ -34,9 +34,16 @@ def read_plan_geometry(path: Path) -> PlanGeometry:
         As :func:`planner.outputs.plan_file.read_plan`, or an inclinometer or heading-prior sigma in
         its configuration that is not a number in (0, 10] degrees.
     """
-    from planner.outputs.plan_file import plan_dem_path, plan_layout, read_plan
+    from planner.outputs.plan_file import read_plan
 
-    doc = read_plan(path, "`plan_path`", full=True)
+    return plan_geometry(read_plan(path, "`plan_path`", full=True), path)
+
+
+def plan_geometry(doc: dict, path: Path) -> PlanGeometry:
+    """:func:`read_plan_geometry` of a plan document already read (``full=True``) from
+    ``path``."""
+    from planner.outputs.plan_file import plan_dem_path, plan_layout
+
     cfg = doc["provenance"].get("config", {})
     what = f"`plan_path` {path}: provenance config"
     incl, heading = (_plan_sigma_deg(cfg, k, what)

@@ -291,13 +291,14 @@ def _plan_network(problem: PlanProblem, config, model: Model | None,
     def check(selected):
         return evaluate_layout(problem, selected, config, infos, net=net)
 
+    repair = _repair(problem, config, chance, check)
     start = None
     if greedy is not None and greedy.meets_requirement \
             and (config.max_bias_effect_m is None  # the greedy ignores the bias bound
                  or check(greedy.selected).all_ok):
         start = greedy.selected
         if chance is not None and not chance.layout_ok(start):
-            start = _repair(problem, config, chance, check)(start)  # None: it cannot
+            start = repair(start)  # None: it cannot
     if start is not None:
         in_model = model.site_var >= 0
         upper_bound = int((start & in_model).sum())
@@ -318,7 +319,7 @@ def _plan_network(problem: PlanProblem, config, model: Model | None,
         return rows
 
     result = _cut_loop(problem, config, model, cuts, check, incumbent=start, t0=t0,
-                       bound=root_bound, repair=_repair(problem, config, chance, check))
+                       bound=root_bound, repair=repair)
     return replace(result, greedy=greedy)
 
 

@@ -238,13 +238,8 @@ def check_station(ids: tuple[str, ...], centres: np.ndarray, cfg: ProcessConfig,
     true_pose = truth["station_pose"]
     achieved = known_control.registration_error(t, psi, true_pose["position_m"],
                                            true_pose["heading_rad"], working_radius_m)
-    rule = rule or StationRule()
-    count, sectors, rule_ok = rule.judge(st.position_m, site_xyz)
-    ok = achieved <= requirement_m and rule_ok
-    why = ([] if rule_ok else [rule.broken(count, sectors)]) \
-        + ([] if achieved <= requirement_m else
-           [f"achieved {achieved:.3f} m > requirement {requirement_m:g} m"])
-    reason = "ok" if ok else "; ".join(why)
+    ok, reason = (rule or StationRule()).verdict(st.position_m, site_xyz, achieved,
+                                                 requirement_m)
     if lost:
         reason += f" ({lost})"
     return StationCheck(st.id, st.predicted_error_m, achieved, n_planned, len(rows), ok, reason,

@@ -361,13 +361,13 @@ def adjust_and_compare(tables: list[Path], plan_path: Path, error_model,
     """
     from pipeline.network.adjustment import AdjustmentSettings
     from pipeline.network.run import adjust_tables
-    from planner.network.plan_geometry import read_plan_geometry, resolved_configuration
+    from planner.network.plan_geometry import plan_geometry, resolved_configuration
     from planner.network.record import station_errors
     from planner.outputs.plan_file import read_plan
     from planner.verify.station_rule import StationRule
 
-    plan = read_plan_geometry(plan_path)
-    rule = StationRule.of(read_plan(plan_path, "`plan_path`", full=True)["requirement"])
+    doc = read_plan(plan_path, "`plan_path`", full=True)
+    plan, rule = plan_geometry(doc, plan_path), StationRule.of(doc["requirement"])
     reference = reference_station(reference or plan.reference_station, plan.station_ids,
                                   list(truth))
     config = resolved_configuration(
@@ -421,15 +421,10 @@ def adjust_and_compare(tables: list[Path], plan_path: Path, error_model,
             continue
         i = s_ids.index(sid)
         achieved = known_control.pose_difference_m(result.pose[i], truth[sid].pose, radius)
-        count, sectors, rule_ok = rule.judge(
+        ok, reason = rule.verdict(
             plan.station_xyz_m[plan.station_ids.index(sid)],
             plan.marker_xyz_m[[plan.marker_ids.index(m) for m in sorted(named[sid])
-                               if m in plan.marker_ids]])
-        ok = achieved <= requirement and rule_ok
-        why = ([] if rule_ok else [rule.broken(count, sectors)]) \
-            + ([] if achieved <= requirement else
-               [f"achieved {achieved:.3f} m > requirement {requirement:g} m"])
-        reason = "ok" if ok else "; ".join(why)
+                               if m in plan.marker_ids]], achieved, requirement)
         missing = sorted(set((planned_markers or {}).get(sid, ())) - named[sid])
         if missing and fates and sid in fates:
             reason += f" ({unmatched_text(fates[sid], named[sid], 'identified')})"

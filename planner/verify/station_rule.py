@@ -57,3 +57,14 @@ class StationRule:
         return (f"{count} marker(s) in {sectors} of {self.n_sectors} sectors detected and "
                 f"accepted, the plan's rule asks >= {self.min_markers} in >= "
                 f"{self.min_sectors}")
+
+    def verdict(self, station_xyz: np.ndarray, marker_xyz: np.ndarray, achieved_m: float,
+                requirement_m: float) -> tuple[bool, str]:
+        """``(passed, reason)`` of a station whose detected markers are at ``marker_xyz`` (as
+        :meth:`judge`) and whose achieved error is ``achieved_m`` against ``requirement_m``
+        (m): ``"ok"``, or what failed, the rule first."""
+        count, sectors, rule_ok = self.judge(station_xyz, marker_xyz)
+        why = ([] if rule_ok else [self.broken(count, sectors)]) \
+            + ([] if achieved_m <= requirement_m else
+               [f"achieved {achieved_m:.3f} m > requirement {requirement_m:g} m"])
+        return not why, "; ".join(why) or "ok"
