@@ -21,6 +21,12 @@ from markerplan.reading import read_text
 MAX_STATIONS = 1_000
 #: Most markers a layout may hold: a markers file (``--existing``, ``reduce INPUT``) or a plan.
 MAX_MARKERS = 100_000
+#: The 95 % figures a requirement may be judged by (:mod:`planner.accuracy.figure`).
+ERROR_FIGURES = ("quantile", "ellipsoid")
+#: The default figure: the ellipsoid, until the integer program has cuts as tight for the
+#: quantile (with only its one-direction cut a 3-station network plan spends 90 x the solver
+#: time; :mod:`planner.accuracy.figure`).
+DEFAULT_ERROR_FIGURE = "ellipsoid"
 
 
 @dataclass(frozen=True)
@@ -34,8 +40,12 @@ class PlanConfig:
     Attributes
     ----------
     requirement_m : float
-        Required 95 % bound of a station's registered position error over its working radius, m;
-        finite, > 0.
+        Required 95 % figure of a station's registered position error over its working radius
+        (and of a network's marker), m; finite, > 0.
+    error_figure : {"ellipsoid", "quantile"}
+        How the 95 % figure is computed (:mod:`planner.accuracy.figure`): the semi-major axis of
+        the 3-D 95 % error ellipsoid at the worst point (default; usually, not always,
+        conservative), or the computed 95 % quantile of the worst error over the working disc.
     n_sectors : int
         Number of equal bearing sectors around each station (site frame), default 6 x 60 deg;
         integer in [1, 36].
@@ -125,6 +135,7 @@ class PlanConfig:
     heading_prior_sigma_deg: float | None = None
     chance_epsilon: float | None = 0.05
     max_bias_effect_m: float | None = None
+    error_figure: str = DEFAULT_ERROR_FIGURE
 
     def __post_init__(self) -> None:
         _plan_config_iv(self)
@@ -249,6 +260,9 @@ def _plan_config_iv(c: PlanConfig) -> None:
     for name in _FLAGS:
         if not isinstance(getattr(c, name), bool):
             raise ConfigError(f"`{name}` must be true or false, got {getattr(c, name)!r:.40}")
+    if c.error_figure not in ERROR_FIGURES:
+        raise ConfigError(f"`error_figure` must be one of {', '.join(map(repr, ERROR_FIGURES))}, "
+                          f"got {c.error_figure!r:.40}")
     if c.reference_station is not None and not (isinstance(c.reference_station, str)
                                                 and c.reference_station):
         raise ConfigError(f"`reference_station` must be a station id (a non-empty string), "

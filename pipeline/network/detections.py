@@ -231,6 +231,9 @@ class PlanGeometry:
     """The ``--dem`` the plan was made on, or ``None`` for a preset's terrain."""
     crs: str | None = None
     """The CRS (WKT) of the plan's site frame, or ``None`` for local metres."""
+    error_figure: str = "ellipsoid"
+    """The 95 % figure the plan judged its requirement by (``"quantile"`` or ``"ellipsoid"``;
+    a plan that records none used the ellipsoid)."""
 
 
 def identify_with_plan(stations: list[StationDetections], plan: PlanGeometry,

@@ -2,6 +2,9 @@
 
 - :mod:`planner.accuracy.known_control`: a station registered to known markers by weighted least
   squares, and its predicted 95 % error;
+- :mod:`planner.accuracy.figure`: the 95 % figure of a station's error over its working disc
+  (the computed quantile of the worst error, or the conservative ellipsoid figure) and of a
+  marker's;
 - :mod:`planner.accuracy.network`: network mode, stations and markers estimated together (the
   network's information and covariance, with the adjustment's observation model);
 - :mod:`planner.accuracy.network_diagnosis`: why a network cannot meet its requirement, station

@@ -32,7 +32,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from planner.accuracy.checks import StationInfo
-from planner.accuracy.known_control import errors_from_information
 from planner.problem.usability import PlanProblem, sector_index
 
 #: Most loss sets one station's enumeration evaluates.
@@ -130,8 +129,7 @@ class StationOdds:
         if self.accuracy and ok.any():
             parts = self.info.info[rows].reshape(rows.size, 16)
             j = (kept[ok].astype(float) @ parts).reshape(-1, 4, 4)
-            err = errors_from_information(j, self.info.radius, self.info.incl)
-            ok[np.flatnonzero(ok)] = err <= self.requirement_m
+            ok[np.flatnonzero(ok)] = self.info.within(j, self.requirement_m)
         return ok
 
 

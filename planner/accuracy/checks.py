@@ -21,6 +21,7 @@ from functools import cached_property
 import numpy as np
 
 from planner.accuracy import known_control
+from planner.accuracy.figure import error_figure
 from planner.problem.usability import (
     OCCLUDED,
     OUT_OF_DOMAIN,
@@ -40,7 +41,7 @@ class StationInfo:
     s : int
         Station index.
     config : PlanConfig
-        Uses ``working_radius_m`` and ``inclinometer_sigma_rad``.
+        Uses ``working_radius_m``, ``inclinometer_sigma_rad`` and ``error_figure``.
 
     Attributes
     ----------
@@ -58,6 +59,8 @@ class StationInfo:
         Working radius, m.
     incl : float
         Inclinometer 1-sigma, rad.
+    figure : planner.accuracy.figure.ErrorFigure
+        The 95 % figure the station is judged by.
     """
 
     def __init__(self, problem: PlanProblem, s: int, config) -> None:
@@ -69,6 +72,7 @@ class StationInfo:
         self.site_xyz = problem.site_xyz[self.sites]
         self.radius = config.working_radius_m
         self.incl = config.inclinometer_sigma_rad
+        self.figure = error_figure(config)
 
     @cached_property
     def info(self) -> np.ndarray:
@@ -93,7 +97,18 @@ class StationInfo:
         if not k.size:
             return float("inf")
         j = self._information(k).sum(axis=0)
-        return float(known_control.errors_from_information(j[None], self.radius, self.incl)[0])
+        return float(self.errors(j[None])[0])
+
+    def errors(self, j: np.ndarray) -> np.ndarray:
+        """(k,) predicted error of the station for pose information matrices ``j`` (k, 4, 4),
+        m (:func:`planner.accuracy.known_control.errors_from_information`)."""
+        return known_control.errors_from_information(j, self.radius, self.incl, self.figure)
+
+    def within(self, j: np.ndarray, requirement_m: float) -> np.ndarray:
+        """(k,) bool: the station meets ``requirement_m`` with each information matrix ``j``
+        (k, 4, 4) (:func:`planner.accuracy.known_control.within_from_information`)."""
+        return known_control.within_from_information(j, self.radius, self.incl, self.figure,
+                                                     requirement_m)
 
     def oa_cuts(self, sites, requirement_m: float, exclude: int | None = None,
                 scale: float = 1.0, rim: str = "worst") -> list:
@@ -109,7 +124,7 @@ class StationInfo:
             keep[self.rows(exclude)] = False
         out = []
         for v, rhs in known_control.linearisation(scale * self.info[k].sum(axis=0), self.radius,
-                                             self.incl, requirement_m, rim):
+                                                  self.incl, requirement_m, self.figure, rim):
             if rhs > 0:
                 coef = np.einsum("a,kab,b->k", v, self.info[keep], v)
                 out.append((self.sites[keep], coef / rhs, 1.0))
@@ -136,8 +151,7 @@ class StationInfo:
 
         def fails(a: int, b: int) -> bool:
             trial = total + cum[b] - cum[a]
-            e = known_control.errors_from_information(trial[None], self.radius, self.incl)[0]
-            return bool(e > requirement_m)
+            return not self.within(trial[None], requirement_m)[0]
 
         pos, skips = 0, 0
         while pos < order.size and skips <= max_skips:
@@ -324,7 +338,8 @@ class LayoutCheck:
 
 
 def evaluate_layout(problem: PlanProblem, selected: np.ndarray, config,
-                    infos: list[StationInfo] | None = None, net=None) -> LayoutCheck:
+                    infos: list[StationInfo] | None = None, net=None,
+                    verdict_only: bool = False) -> LayoutCheck:
     """Check directions and predicted accuracy of a layout at every station.
 
     Parameters
@@ -341,16 +356,29 @@ def evaluate_layout(problem: PlanProblem, selected: np.ndarray, config,
         Cache from :func:`station_infos`.
     net : planner.accuracy.network.NetworkModel, optional
         Network mode: cache from :func:`planner.accuracy.network.network_model`.
+    verdict_only : bool
+        Decide ``ok`` without computing the stations' figures where their bracket decides it
+        (:meth:`~planner.accuracy.figure.ErrorFigure.station_within`); ``error_m`` (and
+        ``marker_error_m``) is then NaN. Not with the redundant rule.
     """
     selected = np.asarray(selected, dtype=bool)
+    if verdict_only and config.redundant:
+        raise ValueError("verdict_only does not apply to the redundant rule")
     if config.network:
-        return _evaluate_network(problem, selected, config, net)
+        return _evaluate_network(problem, selected, config, net, verdict_only)
     infos = infos or station_infos(problem, config)
     count, sectors = direction_status(problem, selected, config.n_sectors)
+    ok = (count >= config.min_markers) & (sectors >= config.min_sectors)
+    if verdict_only:
+        err = np.full(problem.n_stations, np.nan)
+        for s in np.flatnonzero(ok):
+            j = infos[s].info[selected[infos[s].sites]].sum(axis=0)
+            ok[s] = infos[s].within(j[None], config.requirement_m)[0]
+        return LayoutCheck(count=count, sectors=sectors, error_m=err, worst_loss_error_m=None,
+                           worst_loss_sectors=None, ok=ok)
     err = np.array([infos[s].error(infos[s].sites[selected[infos[s].sites]])
                     for s in range(problem.n_stations)])
-    ok = (count >= config.min_markers) & (sectors >= config.min_sectors) \
-        & (err <= config.requirement_m)
+    ok &= err <= config.requirement_m
     worst_err = worst_sec = None
     if config.redundant:
         worst_err = err.copy()
@@ -360,8 +388,7 @@ def evaluate_layout(problem: PlanProblem, selected: np.ndarray, config,
             if chosen.size:
                 parts = info.info[selected[info.sites]]
                 without = parts.sum(axis=0)[None] - parts  # J after losing each marker
-                worst_err[s] = max(worst_err[s], float(known_control.errors_from_information(
-                    without, info.radius, info.incl).max()))
+                worst_err[s] = max(worst_err[s], float(info.errors(without).max()))
         worst_sec = _worst_loss_sectors(problem, selected, config, sectors)
         ok &= _survives_loss(count, worst_sec, worst_err, config)
     return LayoutCheck(count=count, sectors=sectors, error_m=err, worst_loss_error_m=worst_err,
@@ -390,7 +417,8 @@ def _survives_loss(count: np.ndarray, worst_sectors: np.ndarray, worst_error_m: 
         & (worst_error_m <= config.requirement_m)
 
 
-def _evaluate_network(problem: PlanProblem, selected: np.ndarray, config, net) -> LayoutCheck:
+def _evaluate_network(problem: PlanProblem, selected: np.ndarray, config, net,
+                      verdict_only: bool = False) -> LayoutCheck:
     """:func:`evaluate_layout` in network mode (directions as always, accuracy of the whole
     network: every station and every selected marker relative to the datum; redundant mode:
     every station also after losing any one marker; ``max_bias_effect_m``: every station's
@@ -401,12 +429,19 @@ def _evaluate_network(problem: PlanProblem, selected: np.ndarray, config, net) -
     count, sectors = direction_status(problem, selected, config.n_sectors)
     j = net.information(selected)
     cov = net.covariance(j)
-    err = net.station_errors_from(cov)
     markers = np.flatnonzero(selected)
     merr = np.full(problem.n_sites, np.nan)
-    merr[markers] = net.marker_errors(cov, markers)
-    ok = (count >= config.min_markers) & (sectors >= config.min_sectors) \
-        & (err <= config.requirement_m)
+    if verdict_only:
+        err = np.full(problem.n_stations, np.nan)
+        within = net.stations_within(cov, config.requirement_m)
+        markers_ok = bool(np.all(net.figure.point_within(net.marker_covariances(cov, markers),
+                                                         config.requirement_m)))
+    else:
+        err = net.station_errors_from(cov)
+        within = err <= config.requirement_m
+        merr[markers] = net.marker_errors(cov, markers)
+        markers_ok = bool(np.all(merr[markers] <= config.requirement_m))
+    ok = (count >= config.min_markers) & (sectors >= config.min_sectors) & within
     worst_err = worst_sec = None
     if config.redundant:
         _, loss, _ = net.loss_station_errors(selected, j)
@@ -421,5 +456,4 @@ def _evaluate_network(problem: PlanProblem, selected: np.ndarray, config, net) -
         ok &= bias <= config.max_bias_effect_m
     return LayoutCheck(count=count, sectors=sectors, error_m=err, worst_loss_error_m=worst_err,
                        worst_loss_sectors=worst_sec, ok=ok, marker_error_m=merr,
-                       markers_ok=bool(np.all(merr[markers] <= config.requirement_m)),
-                       bias_effect_m=bias)
+                       markers_ok=markers_ok, bias_effect_m=bias)

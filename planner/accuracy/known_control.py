@@ -19,10 +19,12 @@ Predicted station error
 -----------------------
 A point of the station's cloud at horizontal offset ``q`` (``|q| <= R``, the working radius) is
 registered with error ``e = dt + dpsi * (-q_y, q_x, 0)`` plus the inclinometer's vertical error
-``|q| * inclinometer_sigma`` — so its covariance is ``Sigma(q) = G(q) C G(q)^T + diag(0, 0,
-|q|^2 s_incl^2)``. The reported figure is the conservative 95 % bound
-``sqrt(chi2_3(0.95) * lambda_max(Sigma(q)))`` maximised over the working disc. ``lambda_max`` of
-``Sigma(q)`` is convex in ``q``, so the maximum lies on the rim; it is evaluated at 72 bearings.
+``q_y droll - q_x dpitch`` — so its covariance is ``Sigma(q) = G(q) C G(q)^T + diag(0, 0,
+|q|^2 s_incl^2)``: the 6-parameter pose covariance :func:`pose_covariance` (roll and pitch
+independent of the rest). The reported figure over the working disc is the configured
+:class:`~planner.accuracy.figure.ErrorFigure`: the 95 % quantile of the worst error (default) or
+the ellipsoid figure ``sqrt(chi2_3(0.95) * lambda_max(Sigma(q)))`` maximised over the disc.
+Both take their maximum on the rim (convex in ``q``), evaluated at 72 bearings.
 
 Adding a marker adds a positive semi-definite term to ``J``, so the predicted error never grows
 when a marker is added (monotone in the marker set) — the integer program's cuts rely on this.
@@ -81,7 +83,7 @@ def _rim_blocks(working_radius_m: float) -> np.ndarray:
 
 
 def errors_from_information(j: np.ndarray, working_radius_m: float,
-                            inclinometer_sigma_rad: float = 0.0) -> np.ndarray:
+                            inclinometer_sigma_rad: float, figure) -> np.ndarray:
     """Predicted 95 % error (see module doc) for a batch of information matrices, m.
 
     Parameters
@@ -89,6 +91,8 @@ def errors_from_information(j: np.ndarray, working_radius_m: float,
     j : (k, 4, 4) float
         Information matrices of the 4-DoF pose.
     working_radius_m, inclinometer_sigma_rad : float
+    figure : planner.accuracy.figure.ErrorFigure
+        Which 95 % figure.
 
     Returns
     -------
@@ -96,24 +100,51 @@ def errors_from_information(j: np.ndarray, working_radius_m: float,
         ``inf`` where the pose is not determined (singular information).
     """
     j = np.asarray(j, dtype=float).reshape(-1, 4, 4)
-    w = np.linalg.eigvalsh(j)
-    ok = w[:, 0] > 1e-9 * np.maximum(w[:, -1], 1e-300)
+    ok = _determined(j)
     out = np.full(j.shape[0], np.inf)
     if not ok.any():
         return out
-    out[ok] = np.sqrt(CHI2_3_95 * _worst_variance(np.linalg.inv(j[ok]), working_radius_m,
-                                                  inclinometer_sigma_rad))
+    out[ok] = figure.station_errors(np.linalg.inv(j[ok]), working_radius_m,
+                                    inclinometer_sigma_rad)
     return out
 
 
-def _worst_variance(cov: np.ndarray, working_radius_m: float,
-                    inclinometer_sigma_rad: float) -> np.ndarray:
-    """max over the station and the rim of lambda_max(Sigma(q)), for (k, 4, 4) covariances."""
-    sig = rim_covariances(cov, working_radius_m)
-    radius = np.full(sig.shape[1], working_radius_m)
-    radius[0] = 0.0
-    sig[..., 2, 2] += (radius * inclinometer_sigma_rad) ** 2
-    return lambda_max_sym3(sig).max(axis=1)
+def within_from_information(j: np.ndarray, working_radius_m: float,
+                            inclinometer_sigma_rad: float, figure, allowed_m) -> np.ndarray:
+    """(k,) bool: the predicted error of each information matrix ``j`` (k, 4, 4) is at most
+    ``allowed_m`` (m; scalar or (k,)), as :func:`errors_from_information` would say, deciding
+    most without computing a quantile
+    (:meth:`~planner.accuracy.figure.ErrorFigure.station_within`)."""
+    j = np.asarray(j, dtype=float).reshape(-1, 4, 4)
+    allowed = np.broadcast_to(np.asarray(allowed_m, dtype=float), j.shape[:1])
+    ok = _determined(j)
+    out = np.zeros(j.shape[0], bool)
+    if ok.any():
+        out[ok] = figure.station_within(np.linalg.inv(j[ok]), working_radius_m, allowed[ok],
+                                        inclinometer_sigma_rad)
+    return out
+
+
+def _determined(j: np.ndarray) -> np.ndarray:
+    """(k,) bool: information matrices (k, 4, 4) that determine the pose (not singular)."""
+    w = np.linalg.eigvalsh(j)
+    return w[:, 0] > 1e-9 * np.maximum(w[:, -1], 1e-300)
+
+
+def pose_covariance(cov4: np.ndarray, inclinometer_sigma_rad: float) -> np.ndarray:
+    """(k, 6, 6) covariance of (x, y, z, heading, roll, pitch): the (k, 4, 4) ``cov4`` of the
+    registered parameters with independent roll and pitch of 1-sigma ``inclinometer_sigma_rad``.
+
+    Examples
+    --------
+    >>> pose_covariance(np.eye(4)[None] * 1e-4, 1e-3)[0].diagonal().tolist()
+    [0.0001, 0.0001, 0.0001, 0.0001, 1e-06, 1e-06]
+    """
+    cov4 = np.asarray(cov4, dtype=float)
+    out = np.zeros(cov4.shape[:-2] + (6, 6))
+    out[..., :4, :4] = cov4
+    out[..., 4, 4] = out[..., 5, 5] = inclinometer_sigma_rad**2
+    return out
 
 
 def rim_covariances(cov: np.ndarray, working_radius_m: float) -> np.ndarray:
@@ -193,7 +224,8 @@ def lambda_max_sym3(a: np.ndarray) -> np.ndarray:
 
 
 def linearisation(j: np.ndarray, working_radius_m: float, inclinometer_sigma_rad: float,
-                  requirement_m: float, rim: str = "worst") -> list[tuple[np.ndarray, float]]:
+                  requirement_m: float, figure,
+                  rim: str = "worst") -> list[tuple[np.ndarray, float]]:
     """Outer-approximation cuts of the accuracy requirement at the information matrix ``j``.
 
     The worst-case variance ``h(J) = max_{u, q} u^T G(q) J^-1 G(q)^T u`` is convex in ``J``
@@ -201,13 +233,16 @@ def linearisation(j: np.ndarray, working_radius_m: float, inclinometer_sigma_rad
     ``J0`` (direction ``u``, rim point ``q``, ``v = J0^-1 G(q)^T u``) is a valid lower bound:
     ``h(J) >= 2 h0 - v^T J v``. With ``J = sum_j x_j J_j`` the requirement ``h(J) + c <= b``
     (``b = requirement^2 / chi2_3(0.95)``, ``c`` the inclinometer term at ``q``) therefore
-    implies the linear cut ``sum_j (v^T J_j v) x_j >= 2 h0 - (b - c)``.
+    implies the linear cut ``sum_j (v^T J_j v) x_j >= 2 h0 - (b - c)``. For the quantile
+    figure ``b = requirement^2 / chi2_1(0.95)``, a necessary condition
+    (:attr:`~planner.accuracy.figure.ErrorFigure.cut_chi2`).
 
     Parameters
     ----------
     j : (4, 4) float
         Information matrix to linearise at.
     working_radius_m, inclinometer_sigma_rad, requirement_m : float
+    figure : planner.accuracy.figure.ErrorFigure
     rim : {"worst", "spread"}
         Tangent at the worst rim point only, or at the station and 8 rim points spread around
         the circle (each with its own worst direction ``u``).
@@ -235,7 +270,7 @@ def linearisation(j: np.ndarray, working_radius_m: float, inclinometer_sigma_rad
         points = [int(np.argmax(lam[:, -1]))]
     else:
         points = [0, *range(1, g.shape[0], max(1, (g.shape[0] - 1) // 8))]
-    b = requirement_m**2 / CHI2_3_95
+    b = requirement_m**2 / figure.cut_chi2
     cuts = []
     for r in points:
         u = vec[r, :, -1]
@@ -275,7 +310,7 @@ def pair_information(station_xy, marker_xy, sigma_m) -> np.ndarray:
 
 
 def station_error(station_xy, marker_xy, sigma_m, working_radius_m: float,
-                  inclinometer_sigma_rad: float = 0.0) -> float:
+                  inclinometer_sigma_rad: float = 0.0, figure=None) -> float:
     """Predicted 95 % registered-position error of a station over its working radius, m.
 
     Parameters
@@ -290,6 +325,8 @@ def station_error(station_xy, marker_xy, sigma_m, working_radius_m: float,
         Radius of the station's working disc, m.
     inclinometer_sigma_rad : float
         1-sigma roll/pitch error, rad.
+    figure : planner.accuracy.figure.ErrorFigure, optional
+        Which 95 % figure (default: the planner's default).
 
     Returns
     -------
@@ -311,31 +348,39 @@ def station_error(station_xy, marker_xy, sigma_m, working_radius_m: float,
                           f"got {working_radius_m!r}, {inclinometer_sigma_rad!r}")
     if marker_xy.shape[0] == 0:
         return float("inf")
+    if figure is None:
+        from planner.accuracy.figure import ErrorFigure
+
+        figure = ErrorFigure()
     j = _information(marker_xy - station_xy, 3.0 / sigma_m**2)
-    return float(errors_from_information(j[None], working_radius_m, inclinometer_sigma_rad)[0])
+    return float(errors_from_information(j[None], working_radius_m, inclinometer_sigma_rad,
+                                         figure)[0])
 
 
-def information_lower_bound(requirement_m: float) -> float:
+def information_lower_bound(requirement_m: float, figure) -> float:
     """Least translation information ``sum_i 3 / sigma_i**2`` any passing station needs, 1/m^2.
 
     The translation block of ``C`` is at least ``(J_tt)^-1 = I / sum_i (3 / sigma_i**2)`` (Schur
-    complement), and the error at the station itself is ``sqrt(chi2_3(0.95) * lambda_max(C_tt))``,
-    so meeting ``requirement_m`` needs ``sum_i 3 / sigma_i**2 >= chi2_3(0.95) / requirement_m**2``.
-    A necessary (valid) linear cut for the integer program.
+    complement), and a passing station has ``k lambda_max(C_tt) <= requirement_m**2`` at the
+    station itself (``k`` = ``figure.cut_chi2``: chi2_3(0.95) for the ellipsoid figure,
+    chi2_1(0.95) for the quantile, one direction), so it needs ``sum_i 3 / sigma_i**2 >= k /
+    requirement_m**2``. A necessary (valid) linear cut for the integer program.
     """
-    return CHI2_3_95 / requirement_m**2
+    return figure.cut_chi2 / requirement_m**2
 
 
-def heading_information_lower_bound(requirement_m: float, working_radius_m: float) -> float:
+def heading_information_lower_bound(requirement_m: float, working_radius_m: float,
+                                    figure) -> float:
     """Least heading information ``sum_i 3 |d_i|^2 / sigma_i**2`` a passing station needs.
 
     ``d_i`` is marker ``i``'s horizontal offset from the station (m). For rim points ``q`` and
     ``-q`` the lever-arm term flips sign, so ``Var(u.dt + R dpsi) + Var(u.dt - R dpsi) =
     2 Var(u.dt) + 2 R^2 C_psipsi``: the larger of the two is at least ``R^2 C_psipsi >= R^2 /
     J_psipsi``. Meeting ``requirement_m`` therefore needs
-    ``J_psipsi >= chi2_3(0.95) R^2 / requirement_m**2`` — a second valid linear cut.
+    ``J_psipsi >= k R^2 / requirement_m**2`` (``k`` as in :func:`information_lower_bound`) — a
+    second valid linear cut.
     """
-    return CHI2_3_95 * working_radius_m**2 / requirement_m**2
+    return figure.cut_chi2 * working_radius_m**2 / requirement_m**2
 
 
 def fit_pose(station_frame_xyz: np.ndarray, site_xyz: np.ndarray, sigma_m: np.ndarray,

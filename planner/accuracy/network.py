@@ -29,12 +29,12 @@ that tie stations together.
 
 Errors
 ------
-Station ``k``'s error is known-control mode's 95 % bound ``sqrt(chi2_3(0.95) max_q
-lambda_max(G(q) C_k G(q)^T))`` over the station and its working-radius rim
-(:func:`pose_errors_from_covariance`, :func:`planner.accuracy.known_control.rim_covariances`), with
-the 6 x 6 block ``C_k`` of ``C = J^-1`` (zero rows for the datum's fixed parameters). A selected
-marker at ``j`` is estimated as the weighted mean of its stations' registered measurements:
-covariance ``I / W_j + M_j C M_j^T`` with ``M_j = (1 / W_j) sum_s w_s H_s``
+Station ``k``'s error is known-control mode's 95 % figure over the station's working disc
+(:class:`planner.accuracy.figure.ErrorFigure`: the quantile of the worst error, or the
+ellipsoid figure ``sqrt(chi2_3(0.95) max_q lambda_max(G(q) C_k G(q)^T))``), with the 6 x 6
+block ``C_k`` of ``C = J^-1`` (zero rows for the datum's fixed parameters). A selected marker at
+``j`` is estimated as the weighted mean of its stations' registered measurements: covariance
+``I / W_j + M_j C M_j^T`` with ``M_j = (1 / W_j) sum_s w_s H_s``
 (:meth:`NetworkModel.marker_errors`).
 
 Convexity and monotonicity
@@ -42,12 +42,14 @@ Convexity and monotonicity
 ``h(J) = g^T J^-1 g`` is convex in ``J`` for every fixed ``g`` (``J -> J^-1`` is operator
 convex), and a station's worst-case variance is the maximum of such functions over rim points
 and directions (``g = G(q)^T u``), so its tangent at any ``J0`` (``v = J0^-1 g``,
-``h0 = g^T v``) bounds it from below: ``h(J) >= 2 h0 - v^T J v``. The requirement
-``h(J) <= b = requirement^2 / chi2_3(0.95)`` therefore implies the linear cut
+``h0 = g^T v``) bounds it from below: ``h(J) >= 2 h0 - v^T J v``. The requirement implies
+``h(J) <= b = requirement^2 / k`` (``k`` = :attr:`~planner.accuracy.figure.ErrorFigure.cut_chi2`:
+exact for the ellipsoid figure, a necessary condition for the quantile), hence the linear cut
 ``sum_j (v^T J^(j) v) x_j >= 2 h0 - b - v^T J_prior v`` (:meth:`NetworkModel.tangent_cuts`),
 valid for every layout. Adding a site adds the PSD ``J^(j)``, so ``J`` grows in the Loewner
 order, ``C`` shrinks, and no station's (or selected marker's) error ever grows: every subset of a
-failing layout fails too, which makes the no-good cuts of :mod:`planner.program` valid.
+failing layout fails too, which makes the no-good cuts of :mod:`planner.program` valid (for
+the quantile figure by Anderson's theorem, to the precision of its draws).
 """
 
 from __future__ import annotations
@@ -63,50 +65,13 @@ from markerplan.errors import ConfigError
 from pipeline.network.design import axis_weight, pose_design_blocks
 from pipeline.network.observations import Datum
 from planner.accuracy import known_control
-from planner.accuracy.known_control import CHI2_3_95, lambda_max_sym3
+from planner.accuracy.figure import ErrorFigure, error_figure
 from planner.problem.usability import PlanProblem
 
 _CHUNK = 100_000
 #: A Cholesky pivot below this fraction of its diagonal entry marks the information singular
 #: (a station not tied to the datum).
 SINGULAR_PIVOT = 1e-10
-
-
-def pose_errors_from_covariance(cov, working_radius_m: float) -> np.ndarray:
-    """95 % station error from 6 x 6 pose covariances, over the station and its rim, m.
-
-    Parameters
-    ----------
-    cov : (k, 6, 6) float
-        Covariance of ``POSE_PARAMETERS`` (m^2, m rad, rad^2), relative to the datum.
-    working_radius_m : float
-        Radius of the station's working disc, m (> 0).
-
-    Returns
-    -------
-    error_m : (k,) float
-        ``sqrt(chi2_3(0.95) * max_q lambda_max(G(q) C G(q)^T))`` over the station itself and
-        72 rim points at its height; ``inf`` where ``cov`` is not finite.
-
-    Examples
-    --------
-    >>> c = np.zeros((2, 6, 6)); c[0, :3, :3] = np.eye(3) * 1e-4; c[1, 3, 3] = 1e-6
-    >>> np.round(pose_errors_from_covariance(c, 10.0), 4).tolist()
-    [0.028, 0.028]
-    >>> pose_errors_from_covariance(np.zeros((0, 6, 6)), 10.0).shape
-    (0,)
-    """
-    cov = np.asarray(cov, dtype=float)
-    if cov.ndim != 3 or cov.shape[1:] != (6, 6):
-        raise ConfigError(f"`cov` must have shape (k, 6, 6), got {cov.shape}")
-    if not (np.isfinite(working_radius_m) and working_radius_m > 0):
-        raise ConfigError(f"`working_radius_m` must be finite and > 0, got {working_radius_m!r}")
-    out = np.full(cov.shape[0], np.inf)
-    ok = np.isfinite(cov).all(axis=(1, 2))
-    if ok.any():
-        sig = known_control.rim_covariances(cov[ok], working_radius_m)
-        out[ok] = np.sqrt(CHI2_3_95 * np.maximum(lambda_max_sym3(sig).max(axis=1), 0.0))
-    return out
 
 
 @dataclass(frozen=True)
@@ -146,6 +111,8 @@ class NetworkModel:
         Index of the datum station (x, y, z, heading fixed).
     heading_prior_sigma_rad : float, optional
         A heading prior on every non-reference station (e.g. a sun sensor), rad.
+    figure : ErrorFigure, optional
+        The 95 % figure of station and marker errors (default: the planner's default).
 
     Attributes
     ----------
@@ -169,11 +136,13 @@ class NetworkModel:
 
     def __init__(self, problem: PlanProblem, working_radius_m: float,
                  inclinometer_sigma_rad: float, reference: int = 0,
-                 heading_prior_sigma_rad: float | None = None) -> None:
+                 heading_prior_sigma_rad: float | None = None,
+                 figure: ErrorFigure | None = None) -> None:
         if not 0 <= reference < problem.n_stations:
             raise ConfigError(f"`reference` must index one of the {problem.n_stations} "
                               f"stations, got {reference!r}")
         self.problem = problem
+        self.figure = figure or ErrorFigure()
         self.radius = float(working_radius_m)
         self.incl = float(inclinometer_sigma_rad)
         self.reference = int(reference)
@@ -384,9 +353,16 @@ class NetworkModel:
 
     def station_errors_from(self, cov: NetworkCovariance) -> np.ndarray:
         """(s,) 95 % station errors of a covariance, m (``inf`` where undetermined)."""
-        err = pose_errors_from_covariance(cov.station(np.arange(self.problem.n_stations)),
-                                          self.radius)
+        err = self.figure.station_errors(cov.station(np.arange(self.problem.n_stations)),
+                                         self.radius)
         return np.where(cov.determined, err, np.inf)
+
+    def stations_within(self, cov: NetworkCovariance, allowed_m) -> np.ndarray:
+        """(s,) bool: each station's 95 % error of a covariance is ``<= allowed_m`` (m),
+        decided from its bracket where it can be
+        (:meth:`~planner.accuracy.figure.ErrorFigure.station_within`)."""
+        blocks = cov.station(np.arange(self.problem.n_stations))
+        return cov.determined & self.figure.station_within(blocks, self.radius, allowed_m)
 
     def station_errors(self, selected) -> np.ndarray:
         """(s,) predicted 95 % error of every station with the layout ``selected``, m."""
@@ -469,11 +445,7 @@ class NetworkModel:
 
     def marker_errors(self, cov: NetworkCovariance, sites) -> np.ndarray:
         """(m,) 95 % error of the markers at ``sites``, relative to the datum, m."""
-        c = self.marker_covariances(cov, sites)
-        out = np.full(c.shape[0], np.inf)
-        ok = np.isfinite(c).all(axis=(1, 2))
-        out[ok] = np.sqrt(CHI2_3_95 * np.maximum(lambda_max_sym3(c[ok]), 0.0))
-        return out
+        return self.figure.point_errors(self.marker_covariances(cov, sites))
 
     # -- cuts ----------------------------------------------------------------------------------
     def site_coefficients(self, v: np.ndarray) -> np.ndarray:
@@ -522,7 +494,8 @@ class NetworkModel:
             ``sum_j coef_j x_j >= rhs``; only cuts with ``rhs > 0``.
         """
         gs, owners = self._station_gradients(cov, stations, rim)
-        return self._tangents(cov, gs, owners, requirement_m**2 / CHI2_3_95, np.zeros(len(gs)))
+        return self._tangents(cov, gs, owners, requirement_m**2 / self.figure.cut_chi2,
+                              np.zeros(len(gs)))
 
     def scaled_covariances(self, sites_information: np.ndarray, scales, stations):
         """Station blocks of the covariances of ``J(t) = J_prior + t S`` for many ``t``.
@@ -604,7 +577,7 @@ class NetworkModel:
         if sites.size == 0:
             return []
         c = self.marker_covariances(cov, sites)
-        b = requirement_m**2 / CHI2_3_95
+        b = requirement_m**2 / self.figure.cut_chi2
         gs, owners, const = [], [], []
         for i, j in enumerate(sites):
             if not np.isfinite(c[i]).all():
@@ -659,7 +632,7 @@ class NetworkModel:
 def network_model(problem: PlanProblem, config) -> NetworkModel:
     """The :class:`NetworkModel` of a problem for a :class:`~planner.config.PlanConfig`
     (``working_radius_m``, ``inclinometer_sigma_rad``, ``reference_station``,
-    ``heading_prior_sigma_rad``).
+    ``heading_prior_sigma_rad``, ``error_figure``).
 
     Raises
     ------
@@ -668,4 +641,5 @@ def network_model(problem: PlanProblem, config) -> NetworkModel:
     """
     ref = Datum(reference_station=config.reference_station).resolve(problem.station_ids)
     return NetworkModel(problem, config.working_radius_m, config.inclinometer_sigma_rad,
-                        reference=ref, heading_prior_sigma_rad=config.heading_prior_sigma_rad)
+                        reference=ref, heading_prior_sigma_rad=config.heading_prior_sigma_rad,
+                        figure=error_figure(config))

@@ -38,11 +38,7 @@ from planner.accuracy.chance import (
     more_losses_than,
     sizes_within,
 )
-from planner.accuracy.network import (
-    SINGULAR_PIVOT,
-    network_model,
-    pose_errors_from_covariance,
-)
+from planner.accuracy.network import SINGULAR_PIVOT, network_model
 from planner.problem.usability import PlanProblem, sector_index
 
 
@@ -151,12 +147,22 @@ class NetworkOdds:
         step = max(1, _BATCH_VALUES // (n6 * n6))
         for lo in range(0, rows.size, step):
             at = rows[lo:lo + step]
-            ok[at] = np.all(self.station_errors(kept[at]) <= self.requirement_m, axis=1)
+            blocks = self.station_covariances(kept[at])
+            ok[at] = self.net.figure.station_within(
+                blocks.reshape(-1, 6, 6), self.net.radius,
+                self.requirement_m).reshape(at.size, -1).all(axis=1)
         return ok
 
     def station_errors(self, kept: np.ndarray) -> np.ndarray:
         """(k, s) 95 % network error of every station with each row of ``kept`` ((k, p) bool),
-        m (``inf`` where a station is left undetermined): the information of the kept pairs
+        m (``inf`` where a station is left undetermined; :meth:`station_covariances`)."""
+        blocks = self.station_covariances(kept)
+        return self.net.figure.station_errors(blocks.reshape(-1, 6, 6),
+                                              self.net.radius).reshape(len(kept), -1)
+
+    def station_covariances(self, kept: np.ndarray) -> np.ndarray:
+        """(k, s, 6, 6) pose covariance of every station with each row of ``kept`` ((k, p)
+        bool), ``inf`` where a station is left undetermined: the information of the kept pairs
         (:meth:`~planner.accuracy.network.NetworkModel.information` with ``kept``) for all
         rows at once, inverted in one batch; a row whose information is (nearly) singular
         goes through :meth:`~planner.accuracy.network.NetworkModel.covariance`."""
@@ -167,7 +173,7 @@ class NetworkOdds:
         j = full[:, net.free[:, None], net.free[None, :]]
         j = 0.5 * (j + np.swapaxes(j, 1, 2))
         j[:, np.arange(net.free.size), np.arange(net.free.size)] += net.prior
-        err = np.empty((len(kept), s))
+        out = np.empty((len(kept), s, 6, 6))
         diag = np.diagonal(j, axis1=1, axis2=2)
         good = np.zeros(len(kept), bool)
         with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
@@ -181,11 +187,12 @@ class NetworkOdds:
                 cov = np.zeros((int(good.sum()), n6, n6))
                 cov[:, net.free[:, None], net.free[None, :]] = np.linalg.inv(j[good])
                 blocks = cov.reshape(-1, s, 6, s, 6)[:, np.arange(s), :, np.arange(s), :]
-                err[good] = pose_errors_from_covariance(
-                    np.swapaxes(blocks, 0, 1).reshape(-1, 6, 6), net.radius).reshape(-1, s)
+                out[good] = np.swapaxes(blocks, 0, 1)
             for row in np.flatnonzero(~good):
-                err[row] = net.station_errors_from(net.covariance(j[row]))
-        return err
+                cov = net.covariance(j[row])
+                out[row] = cov.station(np.arange(s))
+                out[row, ~cov.determined] = np.inf
+        return out
 
     def chance(self, epsilon: float, budget: int = MAX_LOSS_SETS,
                decide: bool = False) -> NetworkChance:

@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from planner.accuracy.known_control import CHI2_3_95, lambda_max_sym3
 from planner.accuracy.network import NetworkModel
 
 
@@ -40,7 +39,7 @@ def diagnose_network(net: NetworkModel, available, requirement_m: float) -> dict
     cov = net.covariance(net.information(available))
     err = net.station_errors_from(cov)
     blocks = cov.station(np.arange(p.n_stations))
-    at_station = np.sqrt(CHI2_3_95 * np.maximum(lambda_max_sym3(blocks[:, :3, :3]), 0.0))
+    at_station = net.figure.point_errors(blocks[:, :3, :3])
     dist = np.linalg.norm(p.station_xyz[:, :2] - p.station_xyz[net.reference, :2], axis=1)
     for k in range(p.n_stations):
         if not cov.determined[k]:

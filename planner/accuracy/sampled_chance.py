@@ -83,7 +83,8 @@ def sampled_chance(problem: PlanProblem, selected: np.ndarray, config, n_samples
         lost = rng.random(usable.size) >= q
         reason = sub.pair_reason.copy()
         reason[usable[lost]] = OCCLUDED
-        ok = evaluate_layout(replace(sub, pair_reason=reason), all_sites, config).ok
+        ok = evaluate_layout(replace(sub, pair_reason=reason), all_sites, config,
+                             verdict_only=True).ok
         station_passed += ok
         n_passed += bool(ok.all())
     return SampledChance(n_samples=int(n_samples), seed=int(seed), n_passed=n_passed,

@@ -35,6 +35,9 @@ option                      meaning (and the value the command receives)
                             the reference station (:mod:`planner.accuracy.network`)
 ``--reference-station ID``  the datum station of network mode (default the first station);
                             refused outside network mode (:func:`network_settings`)
+``--error-figure NAME``     how a 95 % error is computed: ``quantile`` of the worst error over
+                            the working disc, or the ``ellipsoid`` figure (default)
+                            (:mod:`planner.accuracy.figure`; ``str``)
 ``--scheduler ADDRESS``     where the per-station tasks run: ``local`` (a LocalCluster sized to
                             the machine), ``none`` (in process) or a dask scheduler address
                             (``str``; :func:`planner.distributed.executor`)
@@ -565,6 +568,19 @@ def network_settings(config, network: bool | None, reference_station: str | None
                           reference_station=reference_station)
     require_network(reference_station, config.network)
     return config
+
+
+def error_figure_option(f):
+    """``--error-figure quantile|ellipsoid`` (``None`` when not given: the config's or the
+    plan's, else :data:`planner.config.DEFAULT_ERROR_FIGURE`)."""
+    from planner.config import DEFAULT_ERROR_FIGURE, ERROR_FIGURES
+
+    return click.option(
+        "--error-figure", "error_figure", type=click.Choice(ERROR_FIGURES), default=None,
+        help="How a 95 % error is computed: quantile = the 95 % quantile of the worst error over "
+             "the working disc; ellipsoid = the semi-major axis of the 3-D 95 % error ellipsoid "
+             f"at the worst point, usually the larger (default: the config's or the plan's, "
+             f"else {DEFAULT_ERROR_FIGURE}).")(f)
 
 
 #: ``--time-limit-s S`` (old spelling ``--time-limit``): the solver time limit, seconds.

@@ -14,6 +14,7 @@ from planner.cli._common import (
     FILE,
     FiniteRange,
     emit_summary,
+    error_figure_option,
     error_model_option,
     given_paths,
     json_option,
@@ -126,11 +127,12 @@ def _datum_choice(datum: tuple[str, str | None] | None, control_path: Path | Non
                      "(default: the plan's, else 10).")
 @renamed_option("--requirement-m", "requirement_m", "--requirement", type=REQUIREMENT_M,
                 help="Required 95 % station error, m (default: the plan's, else 0.1).")
+@error_figure_option
 @json_option
 def command(tables, out, overwrite, error_model, plan_path, identity, odometry_sigma_m,
             odometry_heading_sigma_deg, datum, reference_station, control_path,
             heading_prior_sigma_deg, inclinometer_sigma_deg, snooping, alpha0, beta0,
-            working_radius_m, requirement_m, as_json):
+            working_radius_m, requirement_m, error_figure, as_json):
     """Adjust a network: estimate every station's pose and every marker's centre together
     from the marker tables (markers.csv of `markerplan process`, accepted detections only) of
     several stations, relative to a datum; test the fit and remove blunders (data snooping).
@@ -174,8 +176,8 @@ def command(tables, out, overwrite, error_model, plan_path, identity, odometry_s
             odometry_heading_sigma_deg=odometry_heading_sigma_deg,
             heading_prior_sigma_deg=heading_prior_sigma_deg,
             inclinometer_sigma_deg=inclinometer_sigma_deg, working_radius_m=working_radius_m,
-            requirement_m=requirement_m, snooping=snooping, alpha0=alpha0, beta0=beta0,
-            plan_geometry=plan)
+            requirement_m=requirement_m, error_figure=error_figure, snooping=snooping,
+            alpha0=alpha0, beta0=beta0, plan_geometry=plan)
         settings = AdjustmentSettings(
             inclinometer_sigma_rad=math.radians(config["inclinometer_sigma_deg"]),
             heading_prior_sigma_rad=_radians(config["heading_prior_sigma_deg"]),
@@ -197,6 +199,7 @@ def command(tables, out, overwrite, error_model, plan_path, identity, odometry_s
         run = AdjustmentRun(
             result=result, observations=obs, config=config,
             working_radius_m=config["working_radius_m"], requirement_m=config["requirement_m"],
+            error_figure=config["error_figure"],
             identity=identity, frame=frame_note(
                 kind, result.datum.reference_id(obs.station_ids), plan is not None,
                 plan.dem if plan else None, plan.crs if plan else None),

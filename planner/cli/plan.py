@@ -15,6 +15,7 @@ from planner.cli._common import (
     dem_height_error_option,
     dem_option,
     emit_summary,
+    error_figure_option,
     error_model_option,
     exclude_option,
     given_paths,
@@ -111,6 +112,7 @@ def _load_detection_model(ctx, param, path):
               help="Markers already in the field, fixed: 'as-built' or a CSV (id,x_m,y_m[,z_m]).")
 @click.option("--budget", type=click.IntRange(1, 100_000),
               help="Largest number of markers allowed.")
+@error_figure_option
 @network_option
 @reference_station_option
 @time_limit_option
@@ -125,8 +127,8 @@ def command(site_name, site_seed, dem_path, reproject, terrain, dem_height_error
             stations_path, station_ids,
             boundary_path, exclude_paths, marker_radius_m, error_model, config_path,
             visibility_path, redundant, chance_epsilon, detection_model, existing, budget,
-            network, reference_station, time_limit_s, stand_map_cell_m, scheduler, workers,
-            out, overwrite, as_json):
+            error_figure, network, reference_station, time_limit_s, stand_map_cell_m,
+            scheduler, workers, out, overwrite, as_json):
     """Plan the fewest marker sites so that every station meets the accuracy requirement.
 
     Writes under --out: plan.json, markers.csv, report.md, map.png; markers.geojson (WGS84
@@ -179,7 +181,7 @@ def command(site_name, site_seed, dem_path, reproject, terrain, dem_height_error
                                 time_limit_s, as_json, network, reference_station,
                                 reproject, map_groups=tasks, terrain=terrain,
                                 dem_height_error=dem_height_error, chance_epsilon=chance_epsilon,
-                                detection_model=detection_model)
+                                detection_model=detection_model, error_figure=error_figure)
         doc = write_plan_files(outcome, stage)
         draw_plan_map(outcome, stage / "map.png")
         stand_s = {}
@@ -245,12 +247,13 @@ def _plan(site_name, site_seed, dem_path, stations_path, station_ids, boundary_p
           exclude_paths, marker_radius_m, error_model, config_path, visibility_path, redundant,
           existing, budget, time_limit_s, as_json, network=None, reference_station=None,
           reproject=False, map_groups=map, chance_epsilon=None, detection_model=None,
-          terrain="truth", dem_height_error=None):
+          terrain="truth", dem_height_error=None, error_figure=None):
     """Read the inputs and make the plan; return ``(outcome, config)``. A ``--dem`` is read
     only as far as the stations see (``config.max_range_m``); ``map_groups`` maps the ray
     casting's station blocks (:func:`visibility.visibility_matrix.tiled_visibility`).
     ``chance_epsilon``: ``--chance-epsilon`` (``None``: not given, :data:`NAIVE`: none);
-    ``detection_model``: ``(model, name)``, or ``None`` for none."""
+    ``detection_model``: ``(model, name)``, or ``None`` for none; ``error_figure``:
+    ``--error-figure`` (``None``: not given)."""
     from markerplan.errors import ConfigError
     from planner.config import PlanConfig, load_config
     from planner.problem.inputs import load_inputs
@@ -258,7 +261,7 @@ def _plan(site_name, site_seed, dem_path, stations_path, station_ids, boundary_p
 
     config = with_options(load_config(config_path) if config_path else PlanConfig(),
                           redundant=True if redundant else None, budget=budget,
-                          time_limit_s=time_limit_s)
+                          time_limit_s=time_limit_s, error_figure=error_figure)
     config = network_settings(config, network, reference_station)
     if chance_epsilon is NAIVE:
         config = config.replace(chance_epsilon=None)

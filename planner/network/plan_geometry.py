@@ -49,6 +49,13 @@ def plan_geometry(doc: dict, path: Path) -> PlanGeometry:
     incl, heading = (_plan_sigma_deg(cfg, k, what)
                      for k in ("inclinometer_sigma_deg", "heading_prior_sigma_deg"))
     reference = cfg.get("reference_station")
+    figure = cfg.get("error_figure", "ellipsoid")
+    from planner.config import ERROR_FIGURES
+
+    if figure not in ERROR_FIGURES:
+        raise InputFileError(f"{what} error_figure: must be one of "
+                             f"{', '.join(map(repr, ERROR_FIGURES))}, got {figure!r:.40}; plan "
+                             "again or correct the member")
     layout = plan_layout(doc)
     return PlanGeometry(
         Path(path), layout.marker_ids, layout.marker_xyz_m,
@@ -57,7 +64,7 @@ def plan_geometry(doc: dict, path: Path) -> PlanGeometry:
         np.array([s.heading_rad for s in layout.stations]),
         float(doc["requirement"]["working_radius_m"]), float(doc["requirement"]["requirement_m"]),
         incl, heading, reference if isinstance(reference, str) else None,
-        plan_dem_path(doc["provenance"]), _plan_crs(doc["site"], path))
+        plan_dem_path(doc["provenance"]), _plan_crs(doc["site"], path), figure)
 
 
 def _plan_crs(site: dict, path: Path) -> str | None:
@@ -104,20 +111,20 @@ def resolved_configuration(plan_geometry, **options) -> dict:
         The plan's settings, when a plan is given.
     **options
         The command's options; ``inclinometer_sigma_deg``, ``working_radius_m``,
-        ``requirement_m`` and ``heading_prior_sigma_deg`` are required keys (``None``: not
-        given).
+        ``requirement_m``, ``heading_prior_sigma_deg`` and ``error_figure`` are required keys
+        (``None``: not given).
 
     Returns
     -------
     config : dict
-        ``options`` with each of those four not given taken from the plan, else from
+        ``options`` with each of those five not given taken from the plan, else from
         :class:`planner.config.PlanConfig`'s defaults.
     """
     from planner.config import PlanConfig
 
     plan, defaults = plan_geometry, PlanConfig()
     for key in ("inclinometer_sigma_deg", "working_radius_m", "requirement_m",
-                "heading_prior_sigma_deg"):
+                "heading_prior_sigma_deg", "error_figure"):
         if options[key] is None:
             from_plan = getattr(plan, key) if plan is not None else None
             options[key] = from_plan if from_plan is not None else getattr(defaults, key)

@@ -77,6 +77,8 @@ class AdjustmentRun:
         Radius over which a station's registered cloud is assessed, m.
     requirement_m : float
         Required 95 % station error, m.
+    error_figure : {"quantile", "ellipsoid"}
+        How the 95 % station error is computed (:mod:`planner.accuracy.figure`).
     identity : str
         How markers were identified across stations (``plan``, ``geometry``, ``table``).
     frame : str
@@ -100,6 +102,7 @@ class AdjustmentRun:
     config: dict
     working_radius_m: float
     requirement_m: float
+    error_figure: str
     identity: str
     frame: str
     inputs: list = field(default_factory=list)
@@ -150,12 +153,11 @@ def horizontal_ellipse(cov3: np.ndarray) -> tuple[float, float, float]:
 
 
 def station_errors(pose_cov: np.ndarray, heading_rad: np.ndarray,
-                   working_radius_m: float) -> np.ndarray:
-    """95 % station error: the largest 95 % bound of a registered point's error over the
-    station itself and its working-radius rim
-    (:func:`planner.accuracy.network.pose_errors_from_covariance`).
+                   working_radius_m: float, figure: str) -> np.ndarray:
+    """95 % station error over the station's working disc
+    (:meth:`planner.accuracy.figure.ErrorFigure.station_errors`).
 
-    That function takes the rim points' offsets ``q`` in the site frame for both the heading
+    That figure takes the rim points' offsets ``q`` in the site frame for both the heading
     and the tilt lever arms; the tilt's lever arm is the offset in the station frame. Turning
     the translation block into the station frame (``Rz(heading)^T``) makes the two frames one,
     so the figure is exact at any heading (the eigenvalues do not change under the rotation).
@@ -167,6 +169,8 @@ def station_errors(pose_cov: np.ndarray, heading_rad: np.ndarray,
     heading_rad : (k,) float
         Adjusted headings.
     working_radius_m : float
+    figure : {"quantile", "ellipsoid"}
+        Which 95 % figure (:mod:`planner.accuracy.figure`).
 
     Returns
     -------
@@ -177,16 +181,17 @@ def station_errors(pose_cov: np.ndarray, heading_rad: np.ndarray,
     A station known to 1 cm per axis and exactly in angle: the error is the translation's.
 
     >>> cov = np.zeros((1, 6, 6)); cov[0, :3, :3] = np.eye(3) * 1e-4
-    >>> np.round(station_errors(cov, np.zeros(1), 10.0), 4).tolist()
+    >>> np.round(station_errors(cov, np.zeros(1), 10.0, "ellipsoid"), 4).tolist()
     [0.028]
     """
     from pipeline.rig import rot_z
-    from planner.accuracy.network import pose_errors_from_covariance
+    from planner.accuracy.figure import ErrorFigure
 
     cov = np.asarray(pose_cov, dtype=float).reshape(-1, 6, 6)
     turn = np.tile(np.eye(6), (cov.shape[0], 1, 1))
     turn[:, :3, :3] = np.swapaxes(rot_z(np.asarray(heading_rad, dtype=float)), 1, 2)
-    return pose_errors_from_covariance(turn @ cov @ np.swapaxes(turn, 1, 2), working_radius_m)
+    return ErrorFigure(figure).station_errors(turn @ cov @ np.swapaxes(turn, 1, 2),
+                                              working_radius_m)
 
 
 def global_test(sigma0_squared: float, dof: int, alpha: float = GLOBAL_TEST_ALPHA) -> dict:
@@ -271,7 +276,7 @@ def station_rows(run: AdjustmentRun) -> list[dict]:
     cov = _pose_covariances(res)
     sig = np.sqrt(np.clip(np.diagonal(cov, axis1=1, axis2=2), 0.0, None))
     axes = ellipsoid_axes(cov[:, :3, :3])
-    err = station_errors(cov, res.pose[:, 3], run.working_radius_m)
+    err = station_errors(cov, res.pose[:, 3], run.working_radius_m, run.error_figure)
     ref = _reference_station(res)
     removed = [r.station_id for r in res.rejected]
     rows = []
@@ -464,6 +469,7 @@ def adjustment_record(run: AdjustmentRun, stations: list[dict], markers: list[di
         "reliability": reliability_summary(kept),
         "requirement": {"requirement_m": run.requirement_m,
                         "working_radius_m": run.working_radius_m,
+                        "error_figure": run.error_figure,
                         "n_stations_meeting": sum(s["meets_requirement"] for s in stations),
                         "worst_station": worst["station_id"],
                         "worst_station_error_95_m": worst["station_error_95_m"]},

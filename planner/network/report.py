@@ -9,6 +9,8 @@ markers were identified; inputs and provenance. The numbers are those of the oth
 
 from __future__ import annotations
 
+from planner.accuracy.figure import ErrorFigure
+
 #: Rows of the weakest-first tables shown in full (the CSV files hold every one).
 MAX_ROWS = 15
 
@@ -136,9 +138,10 @@ def _snooping(doc: dict) -> list[str]:
 def _stations(stations: list[dict], req: dict) -> list[str]:
     ordered = sorted(stations, key=lambda s: (-s["station_error_95_m"], s["station_id"]))
     lines = ["## Stations, weakest first", "",
-             f"Station error: the largest 95 % error of a point registered with the station's "
-             f"pose, over the station and its {req['working_radius_m']:g} m working radius "
-             f"(requirement {req['requirement_m']:g} m).", "",
+             f"Station error: the 95 % figure of the error of points registered with the "
+             f"station's pose, over the station and its {req['working_radius_m']:g} m working "
+             f"radius (requirement {req['requirement_m']:g} m): "
+             f"{ErrorFigure(req['error_figure']).describe()}.", "",
              "| station | station error | ellipsoid (95 %) a / b / c | sigma heading | "
              "observations | meets |", "|---|---:|---:|---:|---:|---|"]
     for s in ordered[:MAX_ROWS]:

@@ -41,6 +41,7 @@ import numpy as np
 
 from markerplan.provenance import provenance
 from markerplan.writing import write_gis_sidecars
+from planner.accuracy.figure import error_figure
 from planner.outputs.chance_report import chance_markdown, chance_sections
 from planner.outputs.gis import crs_name, geojson_crs_members, geojson_positions, write_plan_gpkg
 from planner.outputs.plan_file import SCHEMA, SCHEMA_VERSION, write_plan
@@ -137,7 +138,9 @@ def plan_record(outcome) -> dict:
                  else np.asarray(inp.boundary_xy).tolist()},
         "requirement": {"requirement_m": cfg.requirement_m, "n_sectors": cfg.n_sectors,
                         "min_sectors": cfg.min_sectors, "min_markers": cfg.min_markers,
-                        "working_radius_m": cfg.working_radius_m, "redundant": cfg.redundant},
+                        "working_radius_m": cfg.working_radius_m, "redundant": cfg.redundant,
+                        "error_figure": cfg.error_figure,
+                        "error_figure_text": error_figure(cfg).describe()},
         "solver": solver,
         "n_markers": n_plan,
         "meets_requirement": bool(res.check.all_ok),
@@ -320,7 +323,7 @@ def report_markdown(doc: dict) -> str:
              f"≤ {req['requirement_m']:g} m over a {req['working_radius_m']:g} m working radius, "
              f"≥ {req['min_markers']} markers in ≥ {req['min_sectors']} of {req['n_sectors']} "
              f"sectors" + (", surviving the loss of any one marker" if req["redundant"] else "")
-             + ".", "",
+             + ".", "", f"95 % figure: {req['error_figure_text']}.", "",
              "## Solver", "",
              f"- {sol['name']}" + (f" {sol['version']}" if "version" in sol else "")
              + f" status **{sol['status']}**"

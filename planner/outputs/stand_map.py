@@ -21,6 +21,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from planner.accuracy import known_control
+from planner.accuracy.figure import MAP_DIRECTIONS, ErrorFigure
 from planner.problem.sight import sight_problem
 from planner.problem.usability import direction_status
 
@@ -156,8 +157,10 @@ def stand_map(outcome, error_model, cell_m: float | None = None, progress: bool 
                             cfg, error_model, progress=progress, map_groups=map_groups,
                             desc="stand map").problem
     count, sectors = direction_status(problem, np.ones(sel.size, bool), cfg.n_sectors)
-    err = _known_control_errors(problem, cfg)
-    err[(count < cfg.min_markers) | (sectors < cfg.min_sectors) | ~np.isfinite(err)] = np.nan
+    err = np.full(problem.n_stations, np.nan)
+    ruled = (count >= cfg.min_markers) & (sectors >= cfg.min_sectors)
+    err[ruled] = _known_control_errors(problem, cfg, ruled)
+    err[~np.isfinite(err)] = np.nan
     usable = np.full(flat.shape[0], np.nan, np.float32)
     error = np.full(flat.shape[0], np.nan, np.float32)
     usable[stand] = count
@@ -167,11 +170,13 @@ def stand_map(outcome, error_model, cell_m: float | None = None, progress: bool 
                     elapsed_s=time.perf_counter() - t0)
 
 
-def _known_control_errors(problem, config) -> np.ndarray:
-    """(s,) predicted 95 % error of each station with all its usable sites as known control
+def _known_control_errors(problem, config, stations: np.ndarray) -> np.ndarray:
+    """(k,) predicted 95 % error of the ``stations`` ((s,) bool) with all their usable sites as
+    known control
     (:func:`planner.accuracy.known_control.errors_from_information` of the summed
     :func:`planner.accuracy.known_control.pair_information`), m; inf where the pose is not
-    determined."""
+    determined. The quantile figure is integrated over
+    :data:`~planner.accuracy.figure.MAP_DIRECTIONS` directions (within 2 % of the plan's)."""
     use = np.flatnonzero(problem.pair_usable)
     use = use[np.argsort(problem.pair_station[use], kind="stable")]
     st = problem.pair_station[use]
@@ -181,5 +186,6 @@ def _known_control_errors(problem, config) -> np.ndarray:
     if use.size:
         starts = np.flatnonzero(np.r_[True, st[1:] != st[:-1]])
         j[st[starts]] = np.add.reduceat(info, starts, axis=0)
-    return known_control.errors_from_information(j, config.working_radius_m,
-                                            config.inclinometer_sigma_rad)
+    figure = ErrorFigure(config.error_figure, n_directions=MAP_DIRECTIONS)
+    return known_control.errors_from_information(j[stations], config.working_radius_m,
+                                                 config.inclinometer_sigma_rad, figure)

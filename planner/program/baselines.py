@@ -19,7 +19,6 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from markerplan.errors import InfeasiblePlanError
-from planner.accuracy import known_control
 from planner.accuracy.checks import StationInfo, evaluate_layout, station_infos
 from planner.problem.usability import PlanProblem, direction_status, sector_index
 
@@ -112,8 +111,7 @@ def greedy_cover(problem: PlanProblem, config) -> Baseline:
                 gain += per[sec[s][free]] == 1
             if check.count[s] >= min_count and check.sectors[s] >= config.min_sectors:
                 base = info.info[selected[info.sites]].sum(axis=0)
-                err = known_control.errors_from_information(base[None] + info.info[free],
-                                                       info.radius, info.incl)
+                err = info.errors(base[None] + info.info[free])
                 before = max(check.error_m[s], check.worst_loss_error_m[s]
                              if config.redundant else 0.0)
                 rel = np.where(np.isfinite(before), (before - err) / before, 1.0)

@@ -53,6 +53,7 @@ from markerplan.errors import ConfigError
 from pipeline.network.observations import Datum
 from planner.accuracy import known_control
 from planner.accuracy.checks import LayoutCheck, StationInfo
+from planner.accuracy.figure import error_figure
 from planner.problem.usability import PlanProblem, sector_index
 
 if TYPE_CHECKING:
@@ -430,9 +431,10 @@ def info_weights(problem: PlanProblem, pairs: np.ndarray, config
         w = w * (1.0 - w / total[problem.pair_site[pairs]])
     d = problem.site_xyz[problem.pair_site[pairs], :2] \
         - problem.station_xyz[problem.pair_station[pairs], :2]
-    w_t = w / known_control.information_lower_bound(config.requirement_m)
+    figure = error_figure(config)
+    w_t = w / known_control.information_lower_bound(config.requirement_m, figure)
     w_h = w * np.sum(d**2, axis=1) / known_control.heading_information_lower_bound(
-        config.requirement_m, config.working_radius_m)
+        config.requirement_m, config.working_radius_m, figure)
     return w_t, w_h
 
 

@@ -34,6 +34,7 @@ import numpy as np
 
 from markerplan.provenance import provenance
 from markerplan.writing import write_csv
+from planner.accuracy.figure import error_figure
 from planner.reduction.losses import check_worst, failure_reason
 
 SCHEMA = "markerplan-reduce"
@@ -81,7 +82,7 @@ def _network(prob, cfg) -> dict:
                       "fixed": list(POSE_PARAMETERS[:4]),
                       "inclinometer_sigma_deg": cfg.inclinometer_sigma_deg,
                       "heading_prior_sigma_deg": cfg.heading_prior_sigma_deg},
-            "errors": "95 % bounds relative to the datum, from the whole network's information "
+            "errors": "95 % figures relative to the datum, from the whole network's information "
                       "(markers are unknowns); a point's worst error is the worst of its "
                       "stations and kept markers"}
 
@@ -143,7 +144,9 @@ def reduce_record(study, layout, inputs, model_name: str, options: dict,
                    "n_markers": study.n_layout, "markers": _ids(prob, study.layout)},
         "requirement": {"requirement_m": cfg.requirement_m, "n_sectors": cfg.n_sectors,
                         "min_sectors": cfg.min_sectors, "min_markers": cfg.min_markers,
-                        "working_radius_m": cfg.working_radius_m},
+                        "working_radius_m": cfg.working_radius_m,
+                        "error_figure": cfg.error_figure,
+                        "error_figure_text": error_figure(cfg).describe()},
         "solver": solver,
         "k_directions": curve.k_directions, "k_feasible": curve.k_feasible,
         "k_feasible_minimal": curve.k_feasible_minimal,
@@ -226,7 +229,8 @@ def report_markdown(doc: dict) -> str:
              "Mode: " + ("free (any candidate site)" if lay["mode"] == "free"
                          else "subsets of the layout")
              + f"; error: 95 % registered-position error over a {req['working_radius_m']:g} m "
-             "working radius, predicted from the error model and the station geometry.", ""]
+             "working radius, predicted from the error model and the station geometry ("
+             + req["error_figure_text"] + ").", ""]
     net = doc.get("network")
     if net is not None:
         d = net["datum"]

@@ -6,6 +6,8 @@
   experiment by simulation;
 - :mod:`planner.studies.calibration_report`: the files of ``markerplan calibrate-sensor``;
 - :mod:`planner.studies.network`: what planning a network instead of known control changes;
+- :mod:`planner.studies.figure_calibration`: how often the 95 % figures are exceeded, by
+  Monte-Carlo through the adjustment;
 - :mod:`planner.studies.loss_study`: where the station chain loses markers, against the
   planner's covariates of each pair (the fate tables of the detection model).
 """

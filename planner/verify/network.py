@@ -377,7 +377,7 @@ def adjust_and_compare(tables: list[Path], plan_path: Path, error_model,
         odometry_sigma_m=settings.odometry_sigma_m,
         odometry_heading_sigma_deg=settings.odometry_heading_sigma_deg,
         heading_prior_sigma_deg=None, inclinometer_sigma_deg=None, working_radius_m=None,
-        requirement_m=None, snooping=settings.snooping, alpha0=settings.alpha0,
+        requirement_m=None, error_figure=None, snooping=settings.snooping, alpha0=settings.alpha0,
         beta0=settings.beta0, plan_geometry=plan)
     heading_prior = config["heading_prior_sigma_deg"]
     adjustment = AdjustmentSettings(
@@ -401,7 +401,7 @@ def adjust_and_compare(tables: list[Path], plan_path: Path, error_model,
     kept = result.observations
     s_ids = kept.station_ids
     stated = station_errors(np.stack([result.station_covariance(i) for i in range(len(s_ids))]),
-                            result.pose[:, 3], radius)
+                            result.pose[:, 3], radius, config["error_figure"])
     accepted = {s.station_id: len(s.xyz_m) for s in stations}
     named = {s.station_id: {i for i in ids if i is not None}
              for s, ids in zip(identified.stations, identified.ids, strict=True)}

@@ -67,6 +67,10 @@ def _inclinometer_sigma(value):
     return edit
 
 
+def _error_figure(doc):
+    doc["provenance"]["config"]["error_figure"] = "worst-case"
+
+
 def _nan(rows):
     rows[0]["x_m"] = "nan"
     return rows
@@ -141,6 +145,9 @@ def _cases() -> list[Case]:
         Case("adjust-plan-inclinometer-sigma-nan", a + ["--plan", PLAN],
              "inclinometer_sigma_deg: must be a finite number", setup=with_net(
                  edit_plan=_inclinometer_sigma("nan"))),
+        Case("adjust-plan-error-figure-unknown", a + ["--plan", PLAN],
+             "error_figure: must be one of 'quantile', 'ellipsoid', got 'worst-case'",
+             setup=with_net(edit_plan=_error_figure)),
         Case("adjust-heading-prior-without-plan", a + ["--heading-prior-sigma-deg", "1"],
              "needs --plan"),
         Case("adjust-bad-alpha0", a + ["--alpha0", "0"], "--alpha0", code=2),

@@ -174,6 +174,38 @@ def test_plan_from_a_visibility_table(tmp_path, capsys):
     assert not any(m.endswith("-0") for m in summary["markers"])  # unusable sites unused
 
 
+def test_the_error_figure_is_chosen_recorded_and_named(tmp_path, capsys):
+    """``--error-figure quantile`` against the default ellipsoid on one visibility table: the
+    same layout (the rule decides it), each station's figure 0.70-1.0 x the ellipsoid's,
+    recorded in plan.json and named in the report."""
+    from visibility.sites import load_site
+
+    site = load_site("default")
+    rows = ["station,site,usable,bearing_deg,sigma_m,site_x_m,site_y_m,site_z_m"]
+    for sid, (x, y) in zip(site.station_ids, site.station_xy_m, strict=True):
+        for k, b in enumerate(range(30, 360, 60)):
+            sx, sy = x + 8 * np.cos(np.radians(b)), y + 8 * np.sin(np.radians(b))
+            rows.append(f"{sid},{sid}-{k},1,{b},0.01,{sx:.3f},{sy:.3f},0.1")
+    vis = _write(tmp_path / "vis.csv", "\n".join(rows) + "\n")
+    docs = {}
+    for figure in ("quantile", "ellipsoid"):
+        out = tmp_path / figure
+        code, _, _ = run_cli(capsys, ["plan", "--visibility", str(vis), "--out", str(out),
+                                      "--chance-epsilon", "none", "--error-figure", figure])
+        assert code == 0
+        docs[figure] = json.loads((out / "plan.json").read_text())
+        assert docs[figure]["requirement"]["error_figure"] == figure
+        assert docs[figure]["provenance"]["config"]["error_figure"] == figure
+    assert "95 % figure: 95 % quantile of the worst error" in (
+        tmp_path / "quantile" / "report.md").read_text()
+    q, e = ({s["id"]: s["predicted_error_m"] for s in docs[f]["stations"]}
+            for f in ("quantile", "ellipsoid"))
+    assert [m["id"] for m in docs["quantile"]["markers"]] == \
+        [m["id"] for m in docs["ellipsoid"]["markers"]]
+    ratio = np.array([q[k] / e[k] for k in q])
+    assert np.all((ratio >= 0.70) & (ratio < 1.0))
+
+
 def test_station_ids_select_and_travel_to_reduce(tmp_path, capsys):
     """plan --station-ids plans for those stations only; reduce of that plan keeps them."""
     code, _, err = run_cli(capsys, ["plan", "--station-ids", "S3,S1", "--out",

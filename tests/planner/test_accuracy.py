@@ -4,7 +4,10 @@ from hypothesis import strategies as st
 
 from pipeline.rig import rot_z
 from planner.accuracy import known_control
+from planner.accuracy.figure import MONOTONE_TOLERANCE, ErrorFigure
 from planner.accuracy.known_control import CHI2_3_95, fit_pose, registration_error, station_error
+
+ELLIPSOID, QUANTILE = ErrorFigure("ellipsoid"), ErrorFigure("quantile")
 
 
 def test_symmetric_layout_matches_closed_form():
@@ -14,7 +17,8 @@ def test_symmetric_layout_matches_closed_form():
     s2 = sigma**2 / 3.0
     lam = s2 / 4 + r**2 * s2 / (4 * d**2)
     expected = np.sqrt(CHI2_3_95 * lam)
-    assert np.isclose(station_error([0, 0], xy, [sigma] * 4, r), expected, rtol=1e-9)
+    assert np.isclose(station_error([0, 0], xy, [sigma] * 4, r, figure=ELLIPSOID), expected,
+                      rtol=1e-9)
 
 
 def test_inclinometer_adds_vertical_error():
@@ -35,9 +39,12 @@ def test_degenerate_layouts_are_infinite():
        st.tuples(st.floats(-20, 20), st.floats(-20, 20), st.floats(0.002, 0.05)))
 def test_adding_a_marker_never_worsens_a_station(markers, extra):
     m = np.array(markers)
-    e = station_error([0, 0], m[:, :2], m[:, 2], 10.0)
+    e = station_error([0, 0], m[:, :2], m[:, 2], 10.0, figure=QUANTILE)
     m2 = np.vstack([m, extra])
-    e2 = station_error([0, 0], m2[:, :2], m2[:, 2], 10.0)
+    e2 = station_error([0, 0], m2[:, :2], m2[:, 2], 10.0, figure=QUANTILE)
+    assert e2 <= e * (1 + MONOTONE_TOLERANCE) or not np.isfinite(e)
+    e = station_error([0, 0], m[:, :2], m[:, 2], 10.0, figure=ELLIPSOID)
+    e2 = station_error([0, 0], m2[:, :2], m2[:, 2], 10.0, figure=ELLIPSOID)
     assert e2 <= e * (1 + 1e-9) or not np.isfinite(e)
 
 
@@ -46,7 +53,8 @@ def test_batch_errors_agree_with_single():
     xy = rng.uniform(-15, 15, (5, 2))
     sig = rng.uniform(0.005, 0.02, 5)
     j = known_control.pair_information([0, 0], xy, sig)
-    batch = known_control.errors_from_information(np.stack([j[:3].sum(0), j.sum(0)]), 10.0)
+    batch = known_control.errors_from_information(np.stack([j[:3].sum(0), j.sum(0)]), 10.0,
+                                                  0.0, ErrorFigure())
     assert np.isclose(batch[0], station_error([0, 0], xy[:3], sig[:3], 10.0))
     assert np.isclose(batch[1], station_error([0, 0], xy, sig, 10.0))
 

@@ -57,7 +57,8 @@ def hand_built(snooping: bool = True) -> nr.AdjustmentRun:
         settings=AdjustmentSettings(snooping=snooping))
     return nr.AdjustmentRun(
         result=result, observations=given, config={"datum": "station"}, working_radius_m=10.0,
-        requirement_m=0.1, identity="table", frame=nr.frame_note("station", "S1", False),
+        requirement_m=0.1, error_figure="ellipsoid", identity="table",
+        frame=nr.frame_note("station", "S1", False),
         inputs=[{"kind": "marker table", "path": "t.csv", "sha256": "0" * 64}],
         error_model="test", unidentified=[("S2", np.array([1.0, 2.0, 3.0]), "outside_gate")],
         plan_markers={"M1": np.array([5.0, 0.0, -0.9])})
@@ -80,7 +81,7 @@ def test_station_rows_ellipsoid_and_error():
 def test_station_error_of_a_tilt_is_vertical_at_the_rim():
     cov = np.zeros((1, 6, 6))
     cov[0, 4, 4] = 1e-6  # roll only, 1 mrad
-    err = nr.station_errors(cov, np.array([1.0]), 20.0)
+    err = nr.station_errors(cov, np.array([1.0]), 20.0, "ellipsoid")
     assert err[0] == pytest.approx(math.sqrt(CHI2_3) * 20.0 * 1e-3, rel=1e-3)
 
 
@@ -100,7 +101,7 @@ def test_station_error_matches_the_design_block_at_any_heading():
         g[:, 3] = [-(s * qx + c * qy), c * qx - s * qy, 0.0]
         g[2, 4], g[2, 5] = qy, -qx
         worst = max(worst, np.linalg.eigvalsh(g @ cov @ g.T)[-1])
-    err = nr.station_errors(cov[None], np.array([heading]), radius)
+    err = nr.station_errors(cov[None], np.array([heading]), radius, "ellipsoid")
     assert err[0] == pytest.approx(math.sqrt(CHI2_3 * worst), rel=1e-9)
 
 

@@ -127,7 +127,8 @@ def test_a_stopped_run_reports_its_bound_and_gap(monkeypatch):
     assert sol.dual_bound == 4.0 and sol.gap == pytest.approx(0.2)
     doc = {"site": {"name": "t"}, "n_markers": 5, "stations": [],
            "requirement": {"requirement_m": 0.1, "working_radius_m": 10, "min_markers": 3,
-                           "min_sectors": 3, "n_sectors": 6, "redundant": False},
+                           "min_sectors": 3, "n_sectors": 6, "redundant": False,
+                           "error_figure": "ellipsoid", "error_figure_text": "the ellipsoid"},
            "solver": {**solver_record(60.0, 0.0), "status": sol.status,
                       "objective": sol.objective, "dual_bound": sol.dual_bound, "gap": sol.gap,
                       "iterations": 1, "accuracy_cuts": 0, "proven_optimal": False},
@@ -190,7 +191,8 @@ def test_station_error_from_its_markers_matches_the_cached_information():
             continue
         picked = info.sites[::2]
         j = info.info[::2].sum(axis=0)  # all sites' information, computed on first use
-        expected = known_control.errors_from_information(j[None], info.radius, info.incl)[0]
+        expected = known_control.errors_from_information(j[None], info.radius, info.incl,
+                                                         info.figure)[0]
         assert info.error(picked) == expected  # bit for bit
         assert info.error(np.r_[picked, -1]) == expected  # not a usable site: ignored
         assert np.array_equal(info.rows(np.r_[info.sites[1], 10**6]), [1])
