@@ -154,11 +154,13 @@ def test_adding_a_site_never_worsens_any_station_or_marker(seed, n_stations, fig
     assert np.all((m1 <= m0 * (1 + tol) + 1e-12) | np.isinf(m0))
 
 
-def test_tangent_cuts_never_remove_a_passing_layout():
+@pytest.mark.parametrize("figure", ["ellipsoid", "quantile"])
+def test_tangent_cuts_never_remove_a_passing_layout(figure):
     """Brute force on a tiny network: every layout whose stations and markers pass satisfies
-    every tangent cut taken at any failing layout (marker cuts when the marker is selected)."""
+    every tangent cut taken at any failing layout (marker cuts when the marker is selected);
+    for the quantile the cuts are its one-direction necessary condition."""
     p = _line(3, seed=5, n_sites=10)
-    model = NetworkModel(p, 10.0, INCL)
+    model = NetworkModel(p, 10.0, INCL, figure=ErrorFigure(figure))
     layouts = [np.array(b, bool) for b in itertools.product([0, 1], repeat=p.n_sites)]
     best = model.covariance(model.information(np.ones(p.n_sites, bool)))
     req = 1.3 * max(model.station_errors_from(best).max(),

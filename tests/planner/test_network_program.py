@@ -19,11 +19,11 @@ def _instance(seed):
     return make_problem(stations, sites, max_range_m=16)
 
 
-@pytest.mark.parametrize("seed", [2, 5])
-def test_network_plan_matches_the_brute_force_optimum(seed):
+@pytest.mark.parametrize("seed,figure", [(2, "ellipsoid"), (5, "ellipsoid"), (2, "quantile")])
+def test_network_plan_matches_the_brute_force_optimum(seed, figure):
     p = _instance(seed)
     base = PlanConfig(network=True, min_markers=3, min_sectors=2, max_range_m=16,
-                      working_radius_m=10, time_limit_s=60)
+                      working_radius_m=10, time_limit_s=60, error_figure=figure)
     net = network_model(p, base)
     best = net.station_errors(np.ones(p.n_sites, bool)).max()
     cfg = base.replace(requirement_m=float(1.15 * best))  # some markers cannot meet it
