@@ -121,7 +121,7 @@ def _curve(problem, config, net, fractions: list[float]) -> list[dict]:
     """Station errors of the directions-only cover plus random shares of the tying sites."""
     from planner.program.baselines import greedy_cover
 
-    cover = greedy_cover(problem, config.replace(network=False, requirement_m=1e9)).selected
+    cover = greedy_cover(problem, config.as_known_control(requirement_m=1e9)).selected
     tying = np.flatnonzero(net.tying)
     rng = np.random.default_rng(0)
     rows = []
@@ -200,7 +200,7 @@ def main() -> None:
         greedy = f"no passing layout after at most {args.greedy_steps} steps ({str(exc)[:60]}...)"
     greedy_s = time.perf_counter() - t
     print(f"greedy_network: {greedy} in {greedy_s:.1f} s")
-    start = greedy_cover(problem, config.replace(network=False, requirement_m=1e9)).selected
+    start = greedy_cover(problem, config.as_known_control(requirement_m=1e9)).selected
     j_all = net.information(net.tying)
     out = {"site": args.site, "n_params": net.n_params, "greedy": greedy, "greedy_s": greedy_s}
     # the same sites both ways: every k-th tying site outside the cover, then every tying site

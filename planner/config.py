@@ -41,11 +41,35 @@ class PlanConfig:
     ----------
     requirement_m : float
         Required 95 % figure of a station's registered position error over its working radius
-        (and of a network's marker), m; finite, > 0.
+        (and of a network's marker), m; finite, > 0. In network mode the constant part of
+        the allowance ``requirement_m + requirement_ppm * 1e-6 * d``.
+    requirement_ppm : float
+        Network mode: parts per million of a station's (or marker's) horizontal distance ``d``
+        from the datum (the reference station) added to ``requirement_m``
+        (:class:`planner.accuracy.requirement.NetworkRequirement`, e.g. 10 cm + 200 ppm);
+        0 (default): a constant requirement; in [0, 1e6]. Known control has no distance datum
+        and refuses a ppm term.
     error_figure : {"ellipsoid", "quantile"}
         How the 95 % figure is computed (:mod:`planner.accuracy.figure`): the semi-major axis of
         the 3-D 95 % error ellipsoid at the worst point (default; usually, not always,
         conservative), or the computed 95 % quantile of the worst error over the working disc.
+    datum_requirement : bool
+        Network mode: judge every station (and marker) against ``requirement_m`` (+
+        ``requirement_ppm``) relative to the datum (default); false: only the local
+        requirement (``local_requirement_m`` must be set).
+    local_requirement_m : float or None
+        Network mode: the 95 % relative error allowed between every pair of stations at most
+        ``local_within_m`` apart (:mod:`planner.accuracy.local`), m; ``None``: no local
+        requirement; > 0.
+    local_requirement_ppm : float
+        Parts per million of the pair's separation added to ``local_requirement_m``; in
+        [0, 1e6].
+    local_within_m : float
+        Largest horizontal separation of a pair the local requirement judges, m; in
+        (0, 10000].
+    local_kind : {"position", "distance"}
+        What the local requirement bounds: the relative position of any points of the two
+        stations' working discs, or their distance (edge length).
     n_sectors : int
         Number of equal bearing sectors around each station (site frame), default 6 x 60 deg;
         integer in [1, 36].
@@ -111,6 +135,12 @@ class PlanConfig:
     """
 
     requirement_m: float = 0.10
+    requirement_ppm: float = 0.0
+    datum_requirement: bool = True
+    local_requirement_m: float | None = None
+    local_requirement_ppm: float = 0.0
+    local_within_m: float = 50.0
+    local_kind: str = "position"
     n_sectors: int = 6
     min_sectors: int = 3
     min_markers: int = 3
@@ -152,6 +182,13 @@ class PlanConfig:
         _reject_unknown(changes, "PlanConfig.replace")
         return dataclasses.replace(self, **changes)
 
+    def as_known_control(self, **changes: Any) -> PlanConfig:
+        """This configuration in known-control mode (and ``changes``): the network-only
+        requirement kinds (ppm terms, the local requirement, no datum requirement) dropped."""
+        return self.replace(**{"network": False, "requirement_ppm": 0.0,
+                               "datum_requirement": True, "local_requirement_m": None,
+                               "local_requirement_ppm": 0.0, **changes})
+
     @property
     def max_slope_rad(self) -> float:
         return math.radians(self.max_slope_deg)
@@ -185,6 +222,10 @@ def _reject_unknown(values: dict[str, Any], where: str) -> None:
 #: (the planner itself uses 1e9 m for "no requirement").
 BOUNDS: dict[str, tuple[float, bool, float, str]] = {
     "requirement_m": (0.0, False, math.inf, " m"),
+    "requirement_ppm": (0.0, True, 1e6, " ppm"),
+    "local_requirement_m": (0.0, False, math.inf, " m"),
+    "local_requirement_ppm": (0.0, True, 1e6, " ppm"),
+    "local_within_m": (0.0, False, 10_000.0, " m"),
     "n_sectors": (1, True, 36, ""),
     "min_sectors": (1, True, 36, ""),
     "min_markers": (1, True, 100, ""),
@@ -204,9 +245,13 @@ BOUNDS: dict[str, tuple[float, bool, float, str]] = {
     "max_bias_effect_m": (0.0, False, 10.0, " m"),
 }
 _INTEGERS = ("n_sectors", "min_sectors", "min_markers", "rays_per_marker", "budget")
-_FLAGS = ("exclude_crater_interiors", "allow_out_of_domain", "redundant", "network")
+_FLAGS = ("exclude_crater_interiors", "allow_out_of_domain", "redundant", "network",
+          "datum_requirement")
 #: Settings that may be ``None`` (not set).
-_OPTIONAL = ("budget", "heading_prior_sigma_deg", "chance_epsilon", "max_bias_effect_m")
+_OPTIONAL = ("budget", "heading_prior_sigma_deg", "chance_epsilon", "max_bias_effect_m",
+             "local_requirement_m")
+#: What a local requirement bounds (:mod:`planner.accuracy.local`).
+LOCAL_KINDS = ("position", "distance")
 #: Most ids accepted in ``existing`` / ``forbidden``.
 MAX_IDS = 100_000
 
@@ -260,6 +305,7 @@ def _plan_config_iv(c: PlanConfig) -> None:
     for name in _FLAGS:
         if not isinstance(getattr(c, name), bool):
             raise ConfigError(f"`{name}` must be true or false, got {getattr(c, name)!r:.40}")
+    _requirement_kinds_iv(c)
     if c.error_figure not in ERROR_FIGURES:
         raise ConfigError(f"`error_figure` must be one of {', '.join(map(repr, ERROR_FIGURES))}, "
                           f"got {c.error_figure!r:.40}")
@@ -267,6 +313,33 @@ def _plan_config_iv(c: PlanConfig) -> None:
                                                 and c.reference_station):
         raise ConfigError(f"`reference_station` must be a station id (a non-empty string), "
                           f"got {c.reference_station!r:.40}")
+
+
+def _requirement_kinds_iv(c: PlanConfig) -> None:
+    """The network-only requirement kinds need network mode, and a plan needs one kind."""
+    if c.local_kind not in LOCAL_KINDS:
+        raise ConfigError(f"`local_kind` must be one of {', '.join(map(repr, LOCAL_KINDS))}, "
+                          f"got {c.local_kind!r:.40}")
+    if c.requirement_ppm > 0 and not c.network:
+        raise ConfigError(f"`requirement_ppm` ({c.requirement_ppm:g}) grows the requirement with "
+                          "the distance from the datum, which known control does not have; plan "
+                          "in network mode (network = true) or set requirement_ppm to 0")
+    local = c.local_requirement_m is not None
+    if local and c.redundant:
+        raise ConfigError("redundant mode does not yet judge a local requirement after the loss "
+                          "of a marker; drop redundant or local_requirement_m")
+    if not c.network and (local or not c.datum_requirement):
+        raise ConfigError("a local requirement (local_requirement_m) or datum_requirement = "
+                          "false is a network-mode requirement: known control judges each "
+                          "station against its markers alone; plan in network mode "
+                          "(network = true) or drop it")
+    if c.local_requirement_ppm > 0 and not local:
+        raise ConfigError(f"`local_requirement_ppm` ({c.local_requirement_ppm:g}) is added to "
+                          "local_requirement_m, which is not set; set local_requirement_m "
+                          "or drop the ppm term")
+    if not c.datum_requirement and not local:
+        raise ConfigError("datum_requirement = false leaves no requirement: set "
+                          "local_requirement_m or judge the datum requirement")
 
 
 def config_from_dict(values: dict[str, Any], base: PlanConfig | None = None,

@@ -7,6 +7,14 @@
   marker's;
 - :mod:`planner.accuracy.network`: network mode, stations and markers estimated together (the
   network's information and covariance, with the adjustment's observation model);
+- :mod:`planner.accuracy.network_covariance`: a network layout's pose covariance and the
+  stations it determines;
+- :mod:`planner.accuracy.network_tangents`: the network's tangent cuts (its convex
+  requirements linearised at a covariance);
+- :mod:`planner.accuracy.requirement`: network accuracy as surveyors state it, a constant plus
+  ppm of the distance from the datum;
+- :mod:`planner.accuracy.local`: local accuracy, the relative error between neighbouring
+  stations (relative position or distance), its 95 % figures and cuts;
 - :mod:`planner.accuracy.network_diagnosis`: why a network cannot meet its requirement, station
   by station;
 - :mod:`planner.accuracy.growing`: the covariance the network greedy grows one site at a time;

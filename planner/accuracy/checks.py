@@ -320,6 +320,12 @@ class LayoutCheck:
         undetected bias of one observation of minimal detectable size
         (:func:`planner.accuracy.reliability.layout_reliability`), m; ``ok`` requires it
         ``<= max_bias_effect_m``.
+    pair_error_m : (p,) float or None
+        Network mode with a local requirement: the 95 % relative error of each station pair
+        it judges (:class:`planner.accuracy.local.LocalAccuracy`; ``None`` for a verdict
+        only), m.
+    pairs_ok : bool
+        Every judged station pair meets the local requirement (always True without one).
     """
 
     count: np.ndarray
@@ -331,10 +337,12 @@ class LayoutCheck:
     marker_error_m: np.ndarray | None = None
     markers_ok: bool = True
     bias_effect_m: np.ndarray | None = None
+    pair_error_m: np.ndarray | None = None
+    pairs_ok: bool = True
 
     @property
     def all_ok(self) -> bool:
-        return bool(self.ok.all()) and self.markers_ok
+        return bool(self.ok.all()) and self.markers_ok and self.pairs_ok
 
 
 def evaluate_layout(problem: PlanProblem, selected: np.ndarray, config,
@@ -390,7 +398,7 @@ def evaluate_layout(problem: PlanProblem, selected: np.ndarray, config,
                 without = parts.sum(axis=0)[None] - parts  # J after losing each marker
                 worst_err[s] = max(worst_err[s], float(info.errors(without).max()))
         worst_sec = _worst_loss_sectors(problem, selected, config, sectors)
-        ok &= _survives_loss(count, worst_sec, worst_err, config)
+        ok &= _survives_loss(count, worst_sec, worst_err, config, config.requirement_m)
     return LayoutCheck(count=count, sectors=sectors, error_m=err, worst_loss_error_m=worst_err,
                        worst_loss_sectors=worst_sec, ok=ok)
 
@@ -410,11 +418,12 @@ def _worst_loss_sectors(problem: PlanProblem, selected: np.ndarray, config,
 
 
 def _survives_loss(count: np.ndarray, worst_sectors: np.ndarray, worst_error_m: np.ndarray,
-                   config) -> np.ndarray:
+                   config, allowed_m) -> np.ndarray:
     """(s,) bool: the redundant-mode rule, given each station's marker count, fewest sectors
-    and worst error after losing any one marker."""
+    and worst error after losing any one marker, and its allowed error ``allowed_m`` (scalar
+    or (s,), m)."""
     return (count >= config.min_markers + 1) & (worst_sectors >= config.min_sectors) \
-        & (worst_error_m <= config.requirement_m)
+        & (worst_error_m <= allowed_m)
 
 
 def _evaluate_network(problem: PlanProblem, selected: np.ndarray, config, net,
@@ -423,9 +432,12 @@ def _evaluate_network(problem: PlanProblem, selected: np.ndarray, config, net,
     network: every station and every selected marker relative to the datum; redundant mode:
     every station also after losing any one marker; ``max_bias_effect_m``: every station's
     largest MDB effect)."""
+    from planner.accuracy.local import local_accuracy
     from planner.accuracy.network import network_model
+    from planner.accuracy.requirement import NetworkRequirement
 
     net = net or network_model(problem, config)
+    allowed, allowed_site = net.allowances(NetworkRequirement.of(config))
     count, sectors = direction_status(problem, selected, config.n_sectors)
     j = net.information(selected)
     cov = net.covariance(j)
@@ -433,27 +445,35 @@ def _evaluate_network(problem: PlanProblem, selected: np.ndarray, config, net,
     merr = np.full(problem.n_sites, np.nan)
     if verdict_only:
         err = np.full(problem.n_stations, np.nan)
-        within = net.stations_within(cov, config.requirement_m)
-        markers_ok = bool(np.all(net.figure.point_within(net.marker_covariances(cov, markers),
-                                                         config.requirement_m)))
+        within = net.stations_within(cov, allowed)
+        markers_ok = bool(np.all(net.markers_within(cov, markers, allowed_site[markers])))
     else:
         err = net.station_errors_from(cov)
-        within = err <= config.requirement_m
+        within = ~net.stations_failing(err, allowed)
         merr[markers] = net.marker_errors(cov, markers)
-        markers_ok = bool(np.all(merr[markers] <= config.requirement_m))
+        markers_ok = bool(np.all(merr[markers] <= allowed_site[markers]))
     ok = (count >= config.min_markers) & (sectors >= config.min_sectors) & within
     worst_err = worst_sec = None
     if config.redundant:
         _, loss, _ = net.loss_station_errors(selected, j)
         worst_err = np.max(np.vstack([err[None], loss]), axis=0)
         worst_sec = _worst_loss_sectors(problem, selected, config, sectors)
-        ok &= _survives_loss(count, worst_sec, worst_err, config)
+        ok &= _survives_loss(count, worst_sec, worst_err, config, allowed)
     bias = None
     if config.max_bias_effect_m is not None:
         from planner.accuracy.reliability import layout_reliability
 
         bias = layout_reliability(net, selected).station_effect_m
         ok &= bias <= config.max_bias_effect_m
+    pair_err, pairs_ok = None, True
+    local = local_accuracy(net, config)
+    if local is not None:
+        if verdict_only:
+            pairs_ok = bool(local.within(cov).all())
+        else:
+            pair_err = local.errors(cov)
+            pairs_ok = bool(np.all(pair_err <= local.pairs.allowed_m))
     return LayoutCheck(count=count, sectors=sectors, error_m=err, worst_loss_error_m=worst_err,
                        worst_loss_sectors=worst_sec, ok=ok, marker_error_m=merr,
-                       markers_ok=markers_ok, bias_effect_m=bias)
+                       markers_ok=markers_ok, bias_effect_m=bias, pair_error_m=pair_err,
+                       pairs_ok=pairs_ok)

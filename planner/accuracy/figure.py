@@ -94,11 +94,11 @@ _N_RIM = 72
 _CHUNK_DRAWS = 131072  # station-directions per block of work (a (32, 4096, 73) product)
 
 
-@lru_cache(maxsize=4)
-def directions(n: int = N_DIRECTIONS) -> np.ndarray:
-    """(n, 6) unit directions: scrambled-Sobol standard normal draws, normalised (fixed seed;
-    read-only; ``n`` a power of two)."""
-    z = norm.ppf(qmc.Sobol(d=6, scramble=True, seed=DRAWS_SEED).random(n))
+@lru_cache(maxsize=8)
+def directions(n: int = N_DIRECTIONS, dims: int = 6) -> np.ndarray:
+    """(n, dims) unit directions: scrambled-Sobol standard normal draws, normalised (fixed
+    seed; read-only; ``n`` a power of two; ``dims`` 6 for a pose, 12 for two)."""
+    z = norm.ppf(qmc.Sobol(d=dims, scramble=True, seed=DRAWS_SEED).random(n))
     u = z / np.linalg.norm(z, axis=1, keepdims=True)
     u.setflags(write=False)
     return u
@@ -116,24 +116,32 @@ def _rim_terms(working_radius_m: float) -> np.ndarray:
     return np.hstack([centre, rim])
 
 
-def _square_roots(cov: np.ndarray) -> np.ndarray:
+def square_roots(cov: np.ndarray) -> np.ndarray:
     """(k, d, d) ``L`` with ``L L^T = cov`` for positive semi-definite ``cov`` (k, d, d)."""
     lam, vec = np.linalg.eigh(cov)
     return vec * np.sqrt(np.maximum(lam, 0.0))[:, None, :]
 
 
 def _chi2_cdf_pdf(x: np.ndarray, dof: int) -> tuple[np.ndarray, np.ndarray]:
-    """chi-square distribution and density functions with 3 or 6 degrees of freedom, closed
-    form."""
+    """chi-square distribution and density functions with 3 or an even number of degrees of
+    freedom, closed form (even: ``1 - exp(-x/2) sum_{i < dof/2} (x/2)^i / i!``)."""
     half = np.exp(-x / 2)
     if dof == 6:
         return -np.expm1(-x / 2) - half * (x / 2 + x * x / 8), x * x * half / 16
+    if dof % 2 == 0:
+        term, tail = np.ones_like(x), np.zeros_like(x)
+        for i in range(dof // 2):
+            tail += term
+            term = term * (x / 2) / (i + 1)
+        # term is now (x/2)^m / m! (m = dof/2); the density (x/2)^(m-1) exp(-x/2) / (2 (m-1)!)
+        return -np.expm1(-x / 2) - half * (tail - 1.0), \
+            half * term * (dof / 2) / np.maximum(x, 1e-300)
     root = np.sqrt(x)
     return erf(root / np.sqrt(2)) - np.sqrt(2 / np.pi) * root * half, \
         root * half / np.sqrt(2 * np.pi)
 
 
-def _radial_quantile(extent2: np.ndarray, dof: int, upper: np.ndarray) -> np.ndarray:
+def radial_quantile(extent2: np.ndarray, dof: int, upper: np.ndarray) -> np.ndarray:
     """(k,) ``r`` with ``P(r) = mean_i F_dof(r^2 / extent2[:, i]) = 0.95``: Newton steps in
     ``r^2``, kept inside the bracket ``[0.3 upper, upper]`` (``upper``: a radius where the
     mean is >= 0.95) by bisecting when a step leaves it, to :data:`_RADIUS_TOLERANCE`."""
@@ -201,7 +209,7 @@ def worst_disc_quantile(cov: np.ndarray, working_radius_m: float,
     out = np.empty(cov.shape[0])
     step = max(1, _CHUNK_DRAWS // u.shape[0])
     for lo in range(0, cov.shape[0], step):
-        d = np.einsum("nb,kab->kna", u, _square_roots(cov[lo:lo + step]))  # (k, N, 6)
+        d = np.einsum("nb,kab->kna", u, square_roots(cov[lo:lo + step]))  # (k, N, 6)
         t, head, roll, pitch = d[..., :3], d[..., 3], d[..., 4], d[..., 5]
         per_direction = np.stack([
             np.einsum("kni,kni->kn", t, t),
@@ -215,7 +223,7 @@ def worst_disc_quantile(cov: np.ndarray, working_radius_m: float,
         worst = (per_direction.reshape(-1, 6).astype(np.float32) @ terms).max(axis=-1)
         extent2 = np.maximum(worst.astype(float), 0.0).reshape(-1, u.shape[0])  # f(L u)^2
         upper = np.sqrt(CHI2_6_95 * extent2.max(axis=1))
-        out[lo:lo + step] = np.where(upper > 0, _radial_quantile(extent2, 6, upper), 0.0)
+        out[lo:lo + step] = np.where(upper > 0, radial_quantile(extent2, 6, upper), 0.0)
     return out
 
 
@@ -229,10 +237,10 @@ def point_quantile(cov: np.ndarray) -> np.ndarray:
     out = np.empty(cov.shape[0])
     step = max(1, _CHUNK_DRAWS // u.shape[0])
     for lo in range(0, cov.shape[0], step):
-        e = np.einsum("nb,kab->kna", u, _square_roots(cov[lo:lo + step]))
+        e = np.einsum("nb,kab->kna", u, square_roots(cov[lo:lo + step]))
         extent2 = np.einsum("kna,kna->kn", e, e)
         upper = np.sqrt(CHI2_3_95 * extent2.max(axis=1))
-        out[lo:lo + step] = np.where(upper > 0, _radial_quantile(extent2, 3, upper), 0.0)
+        out[lo:lo + step] = np.where(upper > 0, radial_quantile(extent2, 3, upper), 0.0)
     return out
 
 

@@ -43,8 +43,10 @@ Convexity and monotonicity
 convex), and a station's worst-case variance is the maximum of such functions over rim points
 and directions (``g = G(q)^T u``), so its tangent at any ``J0`` (``v = J0^-1 g``,
 ``h0 = g^T v``) bounds it from below: ``h(J) >= 2 h0 - v^T J v``. The requirement implies
-``h(J) <= b = requirement^2 / k`` (``k`` = :attr:`~planner.accuracy.figure.ErrorFigure.cut_chi2`:
-exact for the ellipsoid figure, a necessary condition for the quantile), hence the linear cut
+``h(J) <= b = a_k^2 / k`` (``a_k`` the station's allowance
+:attr:`NetworkModel.allowed_station_m`, constant or growing with its distance from the datum;
+``k`` = :attr:`~planner.accuracy.figure.ErrorFigure.cut_chi2`: exact for the ellipsoid
+figure, a necessary condition for the quantile), hence the linear cut
 ``sum_j (v^T J^(j) v) x_j >= 2 h0 - b - v^T J_prior v`` (:meth:`NetworkModel.tangent_cuts`),
 valid for every layout. Adding a site adds the PSD ``J^(j)``, so ``J`` grows in the Loewner
 order, ``C`` shrinks, and no station's (or selected marker's) error ever grows: every subset of a
@@ -54,8 +56,6 @@ the quantile figure by Anderson's theorem, to the precision of its draws).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 import scipy.linalg
 from scipy.sparse import csr_array
@@ -64,8 +64,10 @@ from scipy.sparse.csgraph import connected_components
 from markerplan.errors import ConfigError
 from pipeline.network.design import axis_weight, pose_design_blocks
 from pipeline.network.observations import Datum
-from planner.accuracy import known_control
 from planner.accuracy.figure import ErrorFigure, error_figure
+from planner.accuracy.network_covariance import NetworkCovariance
+from planner.accuracy.network_tangents import NetworkTangents
+from planner.accuracy.requirement import NetworkRequirement, datum_distances
 from planner.problem.usability import PlanProblem
 
 _CHUNK = 100_000
@@ -74,30 +76,7 @@ _CHUNK = 100_000
 SINGULAR_PIVOT = 1e-10
 
 
-@dataclass(frozen=True)
-class NetworkCovariance:
-    """Covariance of a layout's pose parameters.
-
-    Attributes
-    ----------
-    full : (6 s, 6 s) float
-        Covariance of every station's ``POSE_PARAMETERS`` (fixed parameters have zero rows);
-        rows of undetermined stations are meaningless (see ``determined``).
-    determined : (s,) bool
-        Stations whose pose the layout determines (tied to the datum).
-    """
-
-    full: np.ndarray
-    determined: np.ndarray
-
-    def station(self, k) -> np.ndarray:
-        """(6, 6) or (m, 6, 6) pose covariance blocks of station(s) ``k``."""
-        k = np.asarray(k)
-        idx = 6 * k[..., None] + np.arange(6)
-        return self.full[idx[..., :, None], idx[..., None, :]]
-
-
-class NetworkModel:
+class NetworkModel(NetworkTangents):
     """A :class:`~planner.problem.usability.PlanProblem` as a network tied to a reference station.
 
     Parameters
@@ -113,9 +92,17 @@ class NetworkModel:
         A heading prior on every non-reference station (e.g. a sun sensor), rad.
     figure : ErrorFigure, optional
         The 95 % figure of station and marker errors (default: the planner's default).
+    requirement : NetworkRequirement, optional
+        The allowed 95 % error, constant or growing with the distance from the reference
+        (default: the planner's default, 0.10 m).
 
     Attributes
     ----------
+    allowed_station_m : (s,) float
+        Each station's allowed 95 % error, m (the requirement at its distance from the
+        reference station).
+    allowed_site_m : (n,) float
+        Each candidate site's allowed 95 % marker error, m.
     free : (P,) int
         Index into the ``6 s`` pose parameters of each free (estimated) parameter.
     prior : (P,) float
@@ -137,7 +124,8 @@ class NetworkModel:
     def __init__(self, problem: PlanProblem, working_radius_m: float,
                  inclinometer_sigma_rad: float, reference: int = 0,
                  heading_prior_sigma_rad: float | None = None,
-                 figure: ErrorFigure | None = None) -> None:
+                 figure: ErrorFigure | None = None,
+                 requirement: NetworkRequirement | None = None) -> None:
         if not 0 <= reference < problem.n_stations:
             raise ConfigError(f"`reference` must index one of the {problem.n_stations} "
                               f"stations, got {reference!r}")
@@ -146,6 +134,12 @@ class NetworkModel:
         self.radius = float(working_radius_m)
         self.incl = float(inclinometer_sigma_rad)
         self.reference = int(reference)
+        self.requirement = requirement or NetworkRequirement()
+        datum = problem.station_xyz[self.reference]
+        #: (s,) and (n,) float: horizontal distances of the stations and sites from the datum, m
+        self.station_distance_m = datum_distances(problem.station_xyz, datum)
+        self.site_distance_m = datum_distances(problem.site_xyz, datum)
+        self.allowed_station_m, self.allowed_site_m = self.allowances(self.requirement)
         s = problem.n_stations
         fixed = np.zeros((s, 6), bool)
         fixed[reference, :4] = True
@@ -188,6 +182,14 @@ class NetworkModel:
         self.tie_a = self.site_start[site] + off // kk
         self.tie_b = self.site_start[site] + off % kk
         self.tie_coef = self.tie_coefficients(self.weight)
+
+    def allowances(self, requirement: NetworkRequirement) -> tuple[np.ndarray, np.ndarray]:
+        """What ``requirement`` allows each station ((s,) float) and each candidate site ((n,)
+        float) at its distance from this network's datum, m (a check of a layout against a
+        configuration other than the model's own: :func:`planner.accuracy.checks.
+        evaluate_layout`)."""
+        return (requirement.allowed_m(self.station_distance_m),
+                requirement.allowed_m(self.site_distance_m))
 
     def tie_coefficients(self, weight: np.ndarray) -> np.ndarray:
         """Each tie's ``delta_ab w_a - w_a w_b / W_j`` for the pairs' weights ``weight`` ((p,)
@@ -357,12 +359,29 @@ class NetworkModel:
                                          self.radius)
         return np.where(cov.determined, err, np.inf)
 
-    def stations_within(self, cov: NetworkCovariance, allowed_m) -> np.ndarray:
-        """(s,) bool: each station's 95 % error of a covariance is ``<= allowed_m`` (m),
-        decided from its bracket where it can be
-        (:meth:`~planner.accuracy.figure.ErrorFigure.station_within`)."""
+    def stations_failing(self, errors_m: np.ndarray, allowed_m=None) -> np.ndarray:
+        """(s,) bool: stations whose 95 % errors ``errors_m`` ((s,) m, ``inf`` where
+        undetermined) exceed ``allowed_m`` (default :attr:`allowed_station_m`), or that the
+        layout leaves undetermined (untied to the network: failing even where nothing is
+        required relative to the datum)."""
+        allowed = self.allowed_station_m if allowed_m is None else allowed_m
+        return ~(np.isfinite(errors_m) & (errors_m <= allowed))
+
+    def stations_within(self, cov: NetworkCovariance, allowed_m=None) -> np.ndarray:
+        """(s,) bool: each station's 95 % error of a covariance is within ``allowed_m`` ((s,)
+        m; default its allowance :attr:`allowed_station_m`), decided from its bracket where it
+        can be (:meth:`~planner.accuracy.figure.ErrorFigure.station_within`)."""
         blocks = cov.station(np.arange(self.problem.n_stations))
-        return cov.determined & self.figure.station_within(blocks, self.radius, allowed_m)
+        allowed = self.allowed_station_m if allowed_m is None else allowed_m
+        return cov.determined & self.figure.station_within(blocks, self.radius, allowed)
+
+    def markers_within(self, cov: NetworkCovariance, sites, allowed_m=None) -> np.ndarray:
+        """(m,) bool: the markers at ``sites`` are within ``allowed_m`` ((m,) m; default their
+        allowance :attr:`allowed_site_m`), decided as
+        :meth:`~planner.accuracy.figure.ErrorFigure.point_within`."""
+        sites = np.asarray(sites, dtype=np.int64).reshape(-1)
+        allowed = self.allowed_site_m[sites] if allowed_m is None else allowed_m
+        return self.figure.point_within(self.marker_covariances(cov, sites), allowed)
 
     def station_errors(self, selected) -> np.ndarray:
         """(s,) predicted 95 % error of every station with the layout ``selected``, m."""
@@ -447,169 +466,6 @@ class NetworkModel:
         """(m,) 95 % error of the markers at ``sites``, relative to the datum, m."""
         return self.figure.point_errors(self.marker_covariances(cov, sites))
 
-    # -- cuts ----------------------------------------------------------------------------------
-    def site_coefficients(self, v: np.ndarray) -> np.ndarray:
-        """``v^T J^(j) v`` for every site and every direction ``v``.
-
-        Parameters
-        ----------
-        v : (m, P) float
-            Directions in the free parameters.
-
-        Returns
-        -------
-        coef : (m, n) float, >= 0
-            The weighted spread ``sum_s w_s |a_s - a_bar|^2`` of ``a_s = H_s v_s``.
-        """
-        v = np.atleast_2d(np.asarray(v, dtype=float))
-        m = v.shape[0]
-        vf = np.zeros((6 * self.problem.n_stations, m))
-        vf[self.free] = v.T
-        vs = vf.reshape(-1, 6, m)[self.pair_station]  # (p, 6, m)
-        a = np.matmul(self.design, vs).reshape(-1, 3 * m)  # (p, 3 m): a_s for every direction
-        w = self.weight[:, None]
-        with np.errstate(invalid="ignore", divide="ignore"):
-            inv_w = np.where(self.site_weight > 0, 1.0 / self.site_weight, 0.0)
-        mean = (self._site_sum @ (w * a)) * inv_w[:, None]  # (n, 3 m)
-        d = a - mean[self.pair_site]
-        spread = (w * d * d).reshape(-1, 3, m).sum(axis=1)  # (p, m)
-        return (self._site_sum @ spread).T
-
-    def station_tangents(self, cov: NetworkCovariance, stations, requirement_m: float,
-                         rim: str = "worst") -> list[tuple[int, np.ndarray, float]]:
-        """Tangent (outer-approximation) cuts of the station requirement at a covariance.
-
-        Parameters
-        ----------
-        cov : NetworkCovariance
-            ``J0^-1`` (must be determined for ``stations``).
-        stations : sequence of int
-        requirement_m : float
-        rim : {"worst", "spread"}
-            Tangent at the worst rim point, or at the station and 8 rim points.
-
-        Returns
-        -------
-        cuts : list of (station, coef (n,), rhs)
-            ``sum_j coef_j x_j >= rhs``; only cuts with ``rhs > 0``.
-        """
-        gs, owners = self._station_gradients(cov, stations, rim)
-        return self._tangents(cov, gs, owners, requirement_m**2 / self.figure.cut_chi2,
-                              np.zeros(len(gs)))
-
-    def scaled_covariances(self, sites_information: np.ndarray, scales, stations):
-        """Station blocks of the covariances of ``J(t) = J_prior + t S`` for many ``t``.
-
-        One generalised eigen-decomposition ``S V = (J_prior + S) V diag(mu)`` with ``V^T
-        (J_prior + S) V = I`` gives ``J(t)^-1 = V diag(1 / (1 - mu + t mu)) V^T`` for every
-        ``t > 0``: ``O(P^3)`` once and ``O(P^2)`` per station instead of ``O(P^3)`` each.
-
-        Parameters
-        ----------
-        sites_information : (P, P) float
-            ``S``, e.g. :meth:`site_information` of every open site; ``J_prior + S`` must be
-            positive definite (every station determined).
-        scales : (k,) float
-            ``t`` per station, > 0.
-        stations : (k,) int
-
-        Returns
-        -------
-        covariances : iterator of (station, NetworkCovariance)
-            Per station, in order, a covariance whose ``full`` holds the rows and columns of
-            ``station``'s pose parameters only (zero elsewhere): all that
-            :meth:`station_tangents` and :meth:`station_errors_from` of that station read.
-
-        Raises
-        ------
-        numpy.linalg.LinAlgError
-            ``J_prior + S`` is not positive definite.
-        """
-        mu, vec = scipy.linalg.eigh(sites_information, sites_information + np.diag(self.prior))
-        return self._scaled_station_rows(mu, vec, scales, stations)
-
-    def _scaled_station_rows(self, mu, vec, scales, stations):
-        s = self.problem.n_stations
-        position = self.free_position
-        for k, t in zip(stations, scales, strict=True):
-            params = 6 * int(k) + np.arange(6)
-            own = params[position[params] >= 0]
-            rows = (vec[position[own]] / (1.0 - mu + t * mu)) @ vec.T  # (q, P)
-            full = np.zeros((6 * s, 6 * s))
-            full[np.ix_(own, self.free)] = rows
-            full[np.ix_(self.free, own)] = rows.T
-            yield int(k), NetworkCovariance(full=full, determined=np.ones(s, bool))
-
-    def worst_direction_gain(self, cov: NetworkCovariance, k: int) -> np.ndarray:
-        """(n,) ``v^T J^(j) v`` at station ``k``'s worst rim point and direction: the first-order
-        reduction of its worst variance that adding each site brings (``v = C g``)."""
-        gs, _ = self._station_gradients(cov, [k], "worst", force=True)
-        v = (np.asarray(gs) @ cov.full)[:, self.free]
-        return self.site_coefficients(v)[0]
-
-    def _station_gradients(self, cov, stations, rim, force=False):
-        """``g = G_k(q)^T u`` (in all ``6 s`` parameters) at the chosen rim points of each
-        station's worst direction ``u``; undetermined stations are skipped unless ``force``."""
-        g_rim = known_control.rim_design_blocks(self.radius)  # (r, 3, 6)
-        gs, owners = [], []
-        for k in stations:
-            if not cov.determined[k] and not force:
-                continue
-            ck = cov.station(int(k))
-            sig = np.einsum("ria,ab,rjb->rij", g_rim, ck, g_rim)
-            lam, vec = np.linalg.eigh(sig)
-            if rim == "worst":
-                points = [int(np.argmax(lam[:, -1]))]
-            else:
-                points = [0, *range(1, g_rim.shape[0], (g_rim.shape[0] - 1) // 8)]
-            for r in points:
-                g = np.zeros(6 * self.problem.n_stations)
-                g[6 * int(k):6 * int(k) + 6] = g_rim[r].T @ vec[r, :, -1]
-                gs.append(g)
-                owners.append(int(k))
-        return gs, owners
-
-    def marker_tangents(self, cov: NetworkCovariance, sites, requirement_m: float
-                        ) -> list[tuple[int, np.ndarray, float]]:
-        """Tangent cuts of the marker requirement for markers at ``sites``: ``(site, coef,
-        rhs)`` meaning ``x_site = 1  =>  sum_j coef_j x_j >= rhs`` (``rhs > 0`` only)."""
-        sites = np.asarray(sites, dtype=np.int64).reshape(-1)
-        if sites.size == 0:
-            return []
-        c = self.marker_covariances(cov, sites)
-        b = requirement_m**2 / self.figure.cut_chi2
-        gs, owners, const = [], [], []
-        for i, j in enumerate(sites):
-            if not np.isfinite(c[i]).all():
-                continue
-            u = np.linalg.eigh(c[i])[1][:, -1]
-            lo, hi = self.site_start[j], self.site_start[j + 1]
-            g = np.zeros(6 * self.problem.n_stations)
-            for p in range(lo, hi):
-                s = self.pair_station[p]
-                g[6 * s:6 * s + 6] += self.weight[p] / self.site_weight[j] * self.design[p].T @ u
-            gs.append(g)
-            owners.append(int(j))
-            const.append(1.0 / self.site_weight[j])
-        return self._tangents(cov, gs, owners, b, np.asarray(const))
-
-    def _tangents(self, cov, gs, owners, b, const):
-        if not gs:
-            return []
-        g = np.asarray(gs)
-        v = g @ cov.full  # (m, 6 s); rows of fixed parameters are zero
-        h0 = np.einsum("ma,ma->m", v, g)
-        vfree = v[:, self.free]
-        rhs = 2.0 * h0 - (b - const) - np.einsum("ma,a,ma->m", vfree, self.prior, vfree)
-        out = []
-        keep = np.flatnonzero(rhs > 0)
-        for lo in range(0, keep.size, 16):
-            sel = keep[lo:lo + 16]
-            coef = self.site_coefficients(vfree[sel])
-            for i, m in enumerate(sel):
-                out.append((owners[m], coef[i], float(rhs[m])))
-        return out
-
     # -- structure -----------------------------------------------------------------------------
     def ties(self, selected) -> np.ndarray:
         """(s, s) int: number of selected sites each pair of stations shares (diagonal 0)."""
@@ -632,7 +488,7 @@ class NetworkModel:
 def network_model(problem: PlanProblem, config) -> NetworkModel:
     """The :class:`NetworkModel` of a problem for a :class:`~planner.config.PlanConfig`
     (``working_radius_m``, ``inclinometer_sigma_rad``, ``reference_station``,
-    ``heading_prior_sigma_rad``, ``error_figure``).
+    ``heading_prior_sigma_rad``, ``error_figure``, ``requirement_m``, ``requirement_ppm``).
 
     Raises
     ------
@@ -642,4 +498,5 @@ def network_model(problem: PlanProblem, config) -> NetworkModel:
     ref = Datum(reference_station=config.reference_station).resolve(problem.station_ids)
     return NetworkModel(problem, config.working_radius_m, config.inclinometer_sigma_rad,
                         reference=ref, heading_prior_sigma_rad=config.heading_prior_sigma_rad,
-                        figure=error_figure(config))
+                        figure=error_figure(config),
+                        requirement=NetworkRequirement.of(config))

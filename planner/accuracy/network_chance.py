@@ -38,7 +38,8 @@ from planner.accuracy.chance import (
     more_losses_than,
     sizes_within,
 )
-from planner.accuracy.network import SINGULAR_PIVOT, network_model
+from planner.accuracy.local import local_accuracy
+from planner.accuracy.network import SINGULAR_PIVOT, NetworkCovariance, network_model
 from planner.problem.usability import PlanProblem, sector_index
 
 
@@ -110,7 +111,8 @@ class NetworkOdds:
         The layout.
     config : PlanConfig
         The network's datum and priors (:func:`~planner.accuracy.network.network_model`),
-        ``min_markers``, ``min_sectors``, ``n_sectors``, ``requirement_m``.
+        ``min_markers``, ``min_sectors``, ``n_sectors``, ``requirement_m``,
+        ``requirement_ppm``.
     """
 
     def __init__(self, problem: PlanProblem, selected: np.ndarray, config) -> None:
@@ -128,7 +130,7 @@ class NetworkOdds:
         self.n_sectors = config.n_sectors
         self.min_markers = config.min_markers
         self.min_sectors = config.min_sectors
-        self.requirement_m = config.requirement_m
+        self.local = local_accuracy(self.net, config)
         # each tie's block H_a^T H_b scattered into the flattened (6 s)^2 pose matrix
         blocks, flat = self.net.tie_blocks(np.arange(self.net.tie_a.size))
         self._scatter = csr_array((blocks.ravel(), (np.repeat(np.arange(len(blocks)), 36),
@@ -137,7 +139,8 @@ class NetworkOdds:
 
     def passes(self, kept: np.ndarray) -> np.ndarray:
         """(k,) bool: whether every station passes with each row of ``kept`` ((k, p) bool over
-        the network's pairs: detected or lost)."""
+        the network's pairs: detected or lost), and, with a local requirement, every station
+        pair it judges (each row that passes the rest inverted on its own)."""
         k = kept.astype(float)
         count = k @ self._station
         sectors = ((k @ self._sector) > 0).reshape(len(k), -1, self.n_sectors).sum(axis=2)
@@ -145,12 +148,18 @@ class NetworkOdds:
         n6 = 6 * self.net.problem.n_stations
         rows = np.flatnonzero(ok)
         step = max(1, _BATCH_VALUES // (n6 * n6))
+        s = self.net.problem.n_stations
         for lo in range(0, rows.size, step):
             at = rows[lo:lo + step]
-            blocks = self.station_covariances(kept[at])
+            covariances = self.covariances(kept[at])
+            blocks = np.stack([c.station(np.arange(s)) for c in covariances])
+            for row, cov in enumerate(covariances):
+                blocks[row, ~cov.determined] = np.inf
             ok[at] = self.net.figure.station_within(
                 blocks.reshape(-1, 6, 6), self.net.radius,
-                self.requirement_m).reshape(at.size, -1).all(axis=1)
+                np.tile(self.net.allowed_station_m, at.size)).reshape(at.size, -1).all(axis=1)
+            if self.local is not None:
+                ok[at] &= self.local.all_within(covariances)
         return ok
 
     def station_errors(self, kept: np.ndarray) -> np.ndarray:
@@ -162,10 +171,20 @@ class NetworkOdds:
 
     def station_covariances(self, kept: np.ndarray) -> np.ndarray:
         """(k, s, 6, 6) pose covariance of every station with each row of ``kept`` ((k, p)
-        bool), ``inf`` where a station is left undetermined: the information of the kept pairs
-        (:meth:`~planner.accuracy.network.NetworkModel.information` with ``kept``) for all
-        rows at once, inverted in one batch; a row whose information is (nearly) singular
-        goes through :meth:`~planner.accuracy.network.NetworkModel.covariance`."""
+        bool), ``inf`` where a station is left undetermined (:meth:`covariances`)."""
+        s = self.net.problem.n_stations
+        out = np.empty((len(kept), s, 6, 6))
+        for row, cov in enumerate(self.covariances(kept)):
+            out[row] = cov.station(np.arange(s))
+            out[row, ~cov.determined] = np.inf
+        return out
+
+    def covariances(self, kept: np.ndarray) -> list[NetworkCovariance]:
+        """The pose covariance with each row of ``kept`` ((k, p) bool): the information of
+        the kept pairs (:meth:`~planner.accuracy.network.NetworkModel.information` with
+        ``kept``) for all rows at once, inverted in one batch; a row whose information is
+        (nearly) singular goes through :meth:`~planner.accuracy.network.NetworkModel.
+        covariance` (which flags its undetermined stations)."""
         net = self.net
         s, n6 = net.problem.n_stations, 6 * net.problem.n_stations
         coef = net.tie_coefficients(np.where(kept, net.weight, 0.0))  # (k, t)
@@ -173,7 +192,7 @@ class NetworkOdds:
         j = full[:, net.free[:, None], net.free[None, :]]
         j = 0.5 * (j + np.swapaxes(j, 1, 2))
         j[:, np.arange(net.free.size), np.arange(net.free.size)] += net.prior
-        out = np.empty((len(kept), s, 6, 6))
+        out: list[NetworkCovariance | None] = [None] * len(kept)
         diag = np.diagonal(j, axis1=1, axis2=2)
         good = np.zeros(len(kept), bool)
         with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
@@ -184,14 +203,13 @@ class NetworkOdds:
             except np.linalg.LinAlgError:  # some row not positive definite: one by one
                 pass
             if good.any():
-                cov = np.zeros((int(good.sum()), n6, n6))
-                cov[:, net.free[:, None], net.free[None, :]] = np.linalg.inv(j[good])
-                blocks = cov.reshape(-1, s, 6, s, 6)[:, np.arange(s), :, np.arange(s), :]
-                out[good] = np.swapaxes(blocks, 0, 1)
+                inverse = np.linalg.inv(j[good])
+                for row, c in zip(np.flatnonzero(good), inverse, strict=True):
+                    cov = np.zeros((n6, n6))
+                    cov[net.free[:, None], net.free[None, :]] = c
+                    out[row] = NetworkCovariance(full=cov, determined=np.ones(s, bool))
             for row in np.flatnonzero(~good):
-                cov = net.covariance(j[row])
-                out[row] = cov.station(np.arange(s))
-                out[row, ~cov.determined] = np.inf
+                out[row] = net.covariance(j[row])
         return out
 
     def chance(self, epsilon: float, budget: int = MAX_LOSS_SETS,

@@ -8,15 +8,15 @@ import numpy as np
 from planner.accuracy.network import NetworkModel
 
 
-def diagnose_network(net: NetworkModel, available, requirement_m: float) -> dict[str, str]:
+def diagnose_network(net: NetworkModel, available) -> dict[str, str]:
     """Stations no layout within ``available`` can tie to the reference well enough.
 
     Parameters
     ----------
     net : NetworkModel
     available : (n,) bool
-        Sites a layout may use (every allowed site; by monotonicity the best case).
-    requirement_m : float
+        Sites a layout may use (every allowed site; by monotonicity the best case). Each
+        station is judged against its allowance (:attr:`NetworkModel.allowed_station_m`).
 
     Returns
     -------
@@ -41,16 +41,17 @@ def diagnose_network(net: NetworkModel, available, requirement_m: float) -> dict
     blocks = cov.station(np.arange(p.n_stations))
     at_station = net.figure.point_errors(blocks[:, :3, :3])
     dist = np.linalg.norm(p.station_xyz[:, :2] - p.station_xyz[net.reference, :2], axis=1)
+    allowed = net.allowed_station_m
     for k in range(p.n_stations):
         if not cov.determined[k]:
             out[ids[k]] = ("heading undetermined: tied to the network only through markers "
                            "at one place; it needs two shared sites apart")
-        elif err[k] > requirement_m and at_station[k] > requirement_m:
+        elif err[k] > allowed[k] and at_station[k] > allowed[k]:
             out[ids[k]] = (f"too far from the reference: {at_station[k]:.3f} m at the station "
                            f"itself with every usable site ({dist[k]:.0f} m from {ref}), "
-                           f"above {requirement_m:g} m")
-        elif err[k] > requirement_m:
+                           f"above {allowed[k]:.4g} m")
+        elif err[k] > allowed[k]:
             out[ids[k]] = (f"heading too weak: {err[k]:.3f} m at the {net.radius:g} m "
                            f"working-radius rim ({at_station[k]:.3f} m at the station "
-                           f"itself) with every usable site, above {requirement_m:g} m")
+                           f"itself) with every usable site, above {allowed[k]:.4g} m")
     return out

@@ -83,9 +83,9 @@ def sampled_chance(problem: PlanProblem, selected: np.ndarray, config, n_samples
         lost = rng.random(usable.size) >= q
         reason = sub.pair_reason.copy()
         reason[usable[lost]] = OCCLUDED
-        ok = evaluate_layout(replace(sub, pair_reason=reason), all_sites, config,
-                             verdict_only=True).ok
-        station_passed += ok
-        n_passed += bool(ok.all())
+        check = evaluate_layout(replace(sub, pair_reason=reason), all_sites, config,
+                                verdict_only=True)
+        station_passed += check.ok
+        n_passed += bool(check.ok.all()) and check.pairs_ok
     return SampledChance(n_samples=int(n_samples), seed=int(seed), n_passed=n_passed,
                          station_passed=station_passed)

@@ -126,7 +126,7 @@ def _datum_choice(datum: tuple[str, str | None] | None, control_path: Path | Non
                 help="Radius around a station over which its station error is assessed, m "
                      "(default: the plan's, else 10).")
 @renamed_option("--requirement-m", "requirement_m", "--requirement", type=REQUIREMENT_M,
-                help="Required 95 % station error, m (default: the plan's, else 0.1).")
+                help="Required 95 % station error, m. Default: the plan's, else 0.1.")
 @error_figure_option
 @json_option
 def command(tables, out, overwrite, error_model, plan_path, identity, odometry_sigma_m,

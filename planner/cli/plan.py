@@ -40,10 +40,17 @@ from planner.cli._common import (
     time_limit_option,
     with_options,
 )
+from planner.config import LOCAL_KINDS
 
 #: Cell size of the stand maps, m: rounded to whole DEM cells (at least one), so any positive
 #: size up to 10 km (one cell over any site markerplan plans; a km site is 1 km across).
 CELL_M = FiniteRange(0.0, 10_000.0, min_open=True)
+#: The requirement, m (a looser one than 10 m asks nothing of a survey), and its ppm term
+#: (:data:`planner.config.BOUNDS`).
+REQUIREMENT_M = FiniteRange(0.0, 10.0, min_open=True)
+REQUIREMENT_PPM = FiniteRange(0.0, 1e6)
+#: Largest separation of a locally judged station pair, m (planner.config.BOUNDS).
+LOCAL_WITHIN_M = FiniteRange(0.0, 10_000.0, min_open=True)
 
 
 class ChanceEpsilon(click.ParamType):
@@ -112,6 +119,29 @@ def _load_detection_model(ctx, param, path):
               help="Markers already in the field, fixed: 'as-built' or a CSV (id,x_m,y_m[,z_m]).")
 @click.option("--budget", type=click.IntRange(1, 100_000),
               help="Largest number of markers allowed.")
+@click.option("--requirement-m", "requirement_m", type=REQUIREMENT_M,
+              help="Required 95 % station error, m. Default: the config's requirement_m, else "
+                   "0.1; in network mode the constant part of the allowance (--requirement-ppm).")
+@click.option("--requirement-ppm", "requirement_ppm", type=REQUIREMENT_PPM,
+              help="Network mode: parts per million of each station's (and marker's) "
+                   "horizontal distance from the datum added to --requirement-m, e.g. "
+                   "--requirement-m 0.10 --requirement-ppm 200 (default 0: constant).")
+@click.option("--local-requirement-m", "local_requirement_m", type=REQUIREMENT_M,
+              help="Network mode: required 95 % relative error between every pair of stations "
+                   "at most --local-within-m apart (local accuracy), m; default none.")
+@click.option("--local-requirement-ppm", "local_requirement_ppm", type=REQUIREMENT_PPM,
+              help="Parts per million of a pair's separation added to --local-requirement-m "
+                   "(default 0).")
+@click.option("--local-within-m", "local_within_m", type=LOCAL_WITHIN_M,
+              help="Largest separation of a station pair the local requirement judges, m "
+                   "(default 50).")
+@click.option("--local-kind", "local_kind", type=click.Choice(LOCAL_KINDS),
+              help="What the local requirement bounds: position (the relative position of "
+                   "any points of the two working discs, default) or distance (their edge "
+                   "length).")
+@click.option("--no-datum-requirement", "no_datum_requirement", is_flag=True, default=None,
+              help="Network mode: judge only the local requirement, nothing relative to the "
+                   "datum.")
 @error_figure_option
 @network_option
 @reference_station_option
@@ -127,8 +157,10 @@ def command(site_name, site_seed, dem_path, reproject, terrain, dem_height_error
             stations_path, station_ids,
             boundary_path, exclude_paths, marker_radius_m, error_model, config_path,
             visibility_path, redundant, chance_epsilon, detection_model, existing, budget,
-            error_figure, network, reference_station, time_limit_s, stand_map_cell_m,
-            scheduler, workers, out, overwrite, as_json):
+            requirement_m, requirement_ppm, local_requirement_m, local_requirement_ppm,
+            local_within_m, local_kind, no_datum_requirement, error_figure, network,
+            reference_station, time_limit_s, stand_map_cell_m, scheduler, workers, out,
+            overwrite, as_json):
     """Plan the fewest marker sites so that every station meets the accuracy requirement.
 
     Writes under --out: plan.json, markers.csv, report.md, map.png; markers.geojson (WGS84
@@ -151,6 +183,9 @@ def command(site_name, site_seed, dem_path, reproject, terrain, dem_height_error
       markerplan plan --site large --site-seed 3 --marker-radius-m 0.15 --out plan-large/
       markerplan plan --network --out plan-network/
       markerplan plan --network --reference-station S4 --out plan-network-s4/
+      markerplan plan --network --requirement-m 0.10 --requirement-ppm 200 --out p-ppm/
+      markerplan plan --network --no-datum-requirement --local-requirement-m 0.10 \
+          --local-within-m 50 --out p-local/
       markerplan plan --dem site.tif --stations stations.csv --exclude paths.geojson --out p/
       markerplan plan --dem site.tif --stations stations.csv --stand-map-cell-m 2 --out p/
       markerplan plan --dem lonlat.tif --reproject --stations lonlat.csv --out p/
@@ -181,7 +216,14 @@ def command(site_name, site_seed, dem_path, reproject, terrain, dem_height_error
                                 time_limit_s, as_json, network, reference_station,
                                 reproject, map_groups=tasks, terrain=terrain,
                                 dem_height_error=dem_height_error, chance_epsilon=chance_epsilon,
-                                detection_model=detection_model, error_figure=error_figure)
+                                detection_model=detection_model, error_figure=error_figure,
+                                requirement=dict(
+                                    requirement_m=requirement_m,
+                                    requirement_ppm=requirement_ppm,
+                                    local_requirement_m=local_requirement_m,
+                                    local_requirement_ppm=local_requirement_ppm,
+                                    local_within_m=local_within_m, local_kind=local_kind,
+                                    datum_requirement=False if no_datum_requirement else None))
         doc = write_plan_files(outcome, stage)
         draw_plan_map(outcome, stage / "map.png")
         stand_s = {}
@@ -197,8 +239,23 @@ def command(site_name, site_seed, dem_path, reproject, terrain, dem_height_error
     timings = {**plan_timings(outcome), **stand_s}
     report_timings(timings)
     info = {**summary(doc, out), "timings_s": timings}
+    from planner.accuracy.requirement import requirement_text
+
+    need = doc["requirement"]
+    if not need.get("datum_requirement", True):
+        against = " (not judged relative to the datum); "
+    elif need["requirement_ppm"]:
+        against = f" (requirement {requirement_text(need)}); "
+    else:
+        against = f" <= {config.requirement_m:g} m; "
+    worst_pair = (doc.get("local") or {}).get("worst_pair")
+    if worst_pair is not None:
+        err = worst_pair["predicted_error_m"]
+        against += (f"local: worst pair {'-'.join(worst_pair['stations'])} "
+                    f"{'inf' if err is None else f'{err:.3f}'} m <= "
+                    f"{worst_pair['allowed_error_m']:.4g} m; ")
     human = (f"{doc['n_markers']} markers ({solver_status_text(doc['solver'])}); worst station "
-             f"{info['worst_station_error_m']:.3f} m <= {config.requirement_m:g} m; "
+             f"{info['worst_station_error_m']:.3f} m" + against
              + chance_text(doc)
              + "; ".join(f"{k.replace('_', ' ')}: {v['n_markers']}"
                          for k, v in doc["baselines"].items())
@@ -247,13 +304,14 @@ def _plan(site_name, site_seed, dem_path, stations_path, station_ids, boundary_p
           exclude_paths, marker_radius_m, error_model, config_path, visibility_path, redundant,
           existing, budget, time_limit_s, as_json, network=None, reference_station=None,
           reproject=False, map_groups=map, chance_epsilon=None, detection_model=None,
-          terrain="truth", dem_height_error=None, error_figure=None):
+          terrain="truth", dem_height_error=None, error_figure=None, requirement=None):
     """Read the inputs and make the plan; return ``(outcome, config)``. A ``--dem`` is read
     only as far as the stations see (``config.max_range_m``); ``map_groups`` maps the ray
     casting's station blocks (:func:`visibility.visibility_matrix.tiled_visibility`).
     ``chance_epsilon``: ``--chance-epsilon`` (``None``: not given, :data:`NAIVE`: none);
     ``detection_model``: ``(model, name)``, or ``None`` for none; ``error_figure``:
-    ``--error-figure`` (``None``: not given)."""
+    ``--error-figure`` (``None``: not given); ``requirement``: the requirement options by
+    their configuration names (``None``: not given)."""
     from markerplan.errors import ConfigError
     from planner.config import PlanConfig, load_config
     from planner.problem.inputs import load_inputs
@@ -263,6 +321,7 @@ def _plan(site_name, site_seed, dem_path, stations_path, station_ids, boundary_p
                           redundant=True if redundant else None, budget=budget,
                           time_limit_s=time_limit_s, error_figure=error_figure)
     config = network_settings(config, network, reference_station)
+    config = with_options(config, **(requirement or {}))
     if chance_epsilon is NAIVE:
         config = config.replace(chance_epsilon=None)
     elif chance_epsilon is not None:

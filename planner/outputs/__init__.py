@@ -6,6 +6,8 @@
   summary;
 - :mod:`planner.outputs.chance_report`: the plan's ``detection`` and ``chance`` sections and the
   report's "Chance to work";
+- :mod:`planner.outputs.local_report`: a network plan's local accuracy: ``plan.json``'s
+  ``local`` section, ``pairs.csv`` and the report's "Local accuracy";
 - :mod:`planner.outputs.plan_map`: the placement map ``map.png``;
 - :mod:`planner.outputs.stand_map`: where the rover can stand, cell by cell over the DEM;
 - :mod:`planner.outputs.gis`: ``plan.gpkg``, the stand-map GeoTIFFs and GeoJSON coordinates, in

@@ -33,7 +33,7 @@ from markerplan.reading import (
     require_type,
     unique_ids,
 )
-from planner.config import BOUNDS, MAX_MARKERS, MAX_STATIONS
+from planner.config import BOUNDS, LOCAL_KINDS, MAX_MARKERS, MAX_STATIONS
 from planner.verify.station_rule import StationRule
 from visibility.dem import DEM, read_dem
 from visibility.sites import MARKER_RADIUS_M, load_site
@@ -269,7 +269,33 @@ def _plan_iv(doc: dict, what: str, full: bool) -> dict:
     marker_ids = _markers_iv(doc["markers"], what)
     if "stations" in doc:
         _stations_iv(doc["stations"], what, set(marker_ids))
+    if "local" in doc:
+        _local_iv(doc["local"], f"{what}: local",
+                  {s["id"] for s in doc.get("stations", ())})
     return doc
+
+
+def _local_iv(local: Any, what: str, station_ids: set[str]) -> None:
+    """A plan's ``local`` section (:mod:`planner.outputs.local_report`): its kind, and every
+    pair's two known stations, separation, allowance and prediction (a number or null)."""
+    require_type(local, dict, what)
+    require_keys(local, ["requirement_text", "local_kind", "pairs"], what, _FIX)
+    require_type(local["requirement_text"], str, f"{what} requirement_text")
+    if local["local_kind"] not in LOCAL_KINDS:
+        raise InputFileError(f"{what} local_kind: must be one of {', '.join(LOCAL_KINDS)}, got "
+                             f"{local['local_kind']!r:.40}; {_FIX}")
+    for i, pair in enumerate(require_type(local["pairs"], list, f"{what} pairs")):
+        where = f"{what} pairs[{i}]"
+        require_type(pair, dict, where)
+        require_keys(pair, ["stations", "separation_m", "allowed_error_m",
+                            "predicted_error_m"], where, _FIX)
+        ids = require_type(pair["stations"], list, f"{where} stations")
+        if len(ids) != 2 or not all(isinstance(s, str) and s in station_ids for s in ids):
+            raise InputFileError(f"{where} stations: must be two of the plan's station ids, "
+                                 f"got {ids!r:.60}; {_FIX}")
+        _number(pair, "separation_m", where, 0.0, low_inclusive=True)
+        _number(pair, "allowed_error_m", where, 0.0)
+        _number(pair, "predicted_error_m", where, 0.0, nullable=True, low_inclusive=True)
 
 
 def _number(obj: dict, key: str, what: str, low: float | None = None,
@@ -304,6 +330,11 @@ def _requirement_iv(req: Any, what: str) -> None:
     require_keys(req, ["requirement_m", "working_radius_m"], what, _FIX)
     _number(req, "requirement_m", what, *REQUIREMENT_BOUNDS_M)
     _number(req, "working_radius_m", what, *WORKING_RADIUS_BOUNDS_M)
+    if "datum_requirement" in req:
+        require_type(req["datum_requirement"], bool, f"{what} datum_requirement")
+    if "requirement_ppm" in req:
+        _number(req, "requirement_ppm", what, 0.0, BOUNDS["requirement_ppm"][2],
+                low_inclusive=True)
     for key in ("n_sectors", "min_sectors", "min_markers"):
         if key in req:
             low, _, high, _ = BOUNDS[key]

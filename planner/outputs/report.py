@@ -16,7 +16,8 @@ DEM's CRS when it has one):
 - ``frame``: the coordinate frame in words (:func:`frame_note`: the DEM's CRS by name, or the
   local site frame);
 - ``site``: name, seed, CRS name (None: local site frame), marker radius, boundary;
-- ``requirement``: requirement_m, sectors, markers, working radius, redundant;
+- ``requirement``: requirement_m, requirement_ppm and the requirement in words, sectors,
+  markers, working radius, redundant, the 95 % figure;
 - ``solver``: name, HiGHS version, threads, time limit, target gap, status, objective, dual
   bound, gap, iterations, cuts;
 - ``markers``: id, x_m, y_m, z_m, existing, stations that use it;
@@ -42,8 +43,10 @@ import numpy as np
 from markerplan.provenance import provenance
 from markerplan.writing import write_gis_sidecars
 from planner.accuracy.figure import error_figure
+from planner.accuracy.requirement import NetworkRequirement, requirement_text
 from planner.outputs.chance_report import chance_markdown, chance_sections
 from planner.outputs.gis import crs_name, geojson_crs_members, geojson_positions, write_plan_gpkg
+from planner.outputs.local_report import local_markdown, local_record, write_pairs_csv
 from planner.outputs.plan_file import SCHEMA, SCHEMA_VERSION, write_plan
 from planner.problem.usability import sector_index
 from planner.program.highs import solver_record
@@ -136,7 +139,14 @@ def plan_record(outcome) -> dict:
                  "marker_radius_m": inp.marker_radius_m,
                  "boundary_xy_m": None if inp.boundary_xy is None
                  else np.asarray(inp.boundary_xy).tolist()},
-        "requirement": {"requirement_m": cfg.requirement_m, "n_sectors": cfg.n_sectors,
+        "requirement": {"requirement_m": cfg.requirement_m,
+                        "requirement_ppm": cfg.requirement_ppm,
+                        "requirement_text": NetworkRequirement.of(cfg).describe(),
+                        "datum_requirement": cfg.datum_requirement,
+                        "local_requirement_m": cfg.local_requirement_m,
+                        "local_requirement_ppm": cfg.local_requirement_ppm,
+                        "local_within_m": cfg.local_within_m, "local_kind": cfg.local_kind,
+                        "n_sectors": cfg.n_sectors,
                         "min_sectors": cfg.min_sectors, "min_markers": cfg.min_markers,
                         "working_radius_m": cfg.working_radius_m, "redundant": cfg.redundant,
                         "error_figure": cfg.error_figure,
@@ -154,16 +164,21 @@ def plan_record(outcome) -> dict:
                        "n_rays": int(vis.n_rays) if vis is not None else 0},
     }
     if network is not None:
-        doc["network"] = network
+        doc["network"], local = network
+        if local is not None:
+            doc["local"] = local
     doc.update(chance_sections(outcome))
     for rec in doc["stations"] if "chance" in doc else ():
         rec["pass_probability"] = doc["chance"]["stations"][rec["id"]]["pass_probability"]
     return doc
 
 
-def _network_record(outcome, stations: list[dict], markers: list[dict]) -> dict:
-    """Network mode: the datum, per-station ties, largest MDB effects and per-marker errors
-    (added in place to ``stations`` and ``markers``), and the weakest stations."""
+def _network_record(outcome, stations: list[dict], markers: list[dict]
+                    ) -> tuple[dict, dict | None]:
+    """Network mode: the datum, per-station ties, largest MDB effects, allowances and
+    per-marker errors (added in place to ``stations`` and ``markers``), and the weakest
+    stations; with the local requirement's section
+    (:func:`planner.outputs.local_report.local_record`, None without one)."""
     from pipeline.network.observations import POSE_PARAMETERS
     from planner.accuracy.network import network_model
     from planner.accuracy.reliability import layout_reliability, station_bias_record
@@ -173,11 +188,15 @@ def _network_record(outcome, stations: list[dict], markers: list[dict]) -> dict:
     ties = net.ties(res.selected)
     bias = station_bias_record(net, layout_reliability(net, res.selected))
     for k, rec in enumerate(stations):
+        rec["allowed_error_m"] = _num(net.allowed_station_m[k])
         rec["tied_to"] = {prob.station_ids[o]: int(ties[k, o]) for o in np.flatnonzero(ties[k])}
         rec.update(bias[rec["id"]])
     for rec, j in zip(markers, np.flatnonzero(res.selected), strict=True):
         rec["predicted_error_m"] = _num(res.check.marker_error_m[j])
-    order = np.argsort(-np.nan_to_num(res.check.error_m, posinf=1e300), kind="stable")
+        rec["allowed_error_m"] = _num(net.allowed_site_m[j])
+    allowed = net.allowed_station_m
+    relative = np.where(np.isfinite(allowed), res.check.error_m / allowed, res.check.error_m)
+    order = np.argsort(-np.nan_to_num(relative, posinf=1e300), kind="stable")
     effect = np.array([math.inf if s["bias_effect_m"] is None else s["bias_effect_m"]
                        for s in stations])
     worst_bias = stations[int(np.argmax(effect))] if stations else None
@@ -195,7 +214,8 @@ def _network_record(outcome, stations: list[dict], markers: list[dict]) -> dict:
                             "worst_bias_effect": None if worst_bias is None else {
                                 "station": worst_bias["id"],
                                 "bias_effect_m": worst_bias["bias_effect_m"],
-                                "caused_by": worst_bias["bias_effect_caused_by"]}}}
+                                "caused_by": worst_bias["bias_effect_caused_by"]}}}, \
+        local_record(outcome, net)
 
 
 def plan_timings(outcome) -> dict[str, float]:
@@ -216,6 +236,8 @@ def write_plan_files(outcome, folder: Path) -> dict:
     doc = plan_record(outcome)
     write_plan(doc, folder / "plan.json")
     _write_markers_csv(doc, folder / "markers.csv")
+    if "local" in doc:
+        write_pairs_csv(doc, folder / "pairs.csv")
     if "network" in doc:
         _write_stations_csv(doc, folder / "stations.csv")
         _write_reliability_csv(outcome, folder / "reliability.csv")
@@ -320,7 +342,7 @@ def report_markdown(doc: dict) -> str:
              f"**{doc['n_markers']} markers** meet the requirement at "
              f"{sum(s['meets_requirement'] for s in doc['stations'])} of "
              f"{len(doc['stations'])} stations: predicted 95 % registered-position error "
-             f"≤ {req['requirement_m']:g} m over a {req['working_radius_m']:g} m working radius, "
+             f"≤ {requirement_text(req)} over a {req['working_radius_m']:g} m working radius, "
              f"≥ {req['min_markers']} markers in ≥ {req['min_sectors']} of {req['n_sectors']} "
              f"sectors" + (", surviving the loss of any one marker" if req["redundant"] else "")
              + ".", "", f"95 % figure: {req['error_figure_text']}.", "",
@@ -362,6 +384,7 @@ def report_markdown(doc: dict) -> str:
         for s in doc["stations"]:
             lines.append(f"| {s['id']} | " + (", ".join(f"{k} ({v})" for k, v in
                                                          s["tied_to"].items()) or "—") + " |")
+    lines += local_markdown(doc)
     lines += chance_markdown(doc)
     bias = "network" in doc
     lines += ["", "## Stations", "",

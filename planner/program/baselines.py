@@ -20,6 +20,8 @@ from scipy.spatial import cKDTree
 
 from markerplan.errors import InfeasiblePlanError
 from planner.accuracy.checks import StationInfo, evaluate_layout, station_infos
+from planner.accuracy.local import local_accuracy
+from planner.accuracy.requirement import NetworkRequirement
 from planner.problem.usability import PlanProblem, direction_status, sector_index
 
 #: Grid phases tried at each spacing (fraction of the spacing from the bounds' lower corner).
@@ -197,15 +199,16 @@ def _grid_passes(problem: PlanProblem, selected: np.ndarray, config, infos, net)
     """Whether a grid layout meets the requirement: known control as
     :func:`~planner.accuracy.checks.evaluate_layout` judges it; network mode as ``plan
     --network`` does (every station, and every selected marker the network estimates, within
-    ``requirement_m`` relative to the reference station). A grid marker on a site no station
+    its allowance relative to the reference station). A grid marker on a site no station
     can use (occluded from all, out of range) is counted but not judged: it has no position in
     the network, and the integer program never picks such a site."""
     check = evaluate_layout(problem, selected, config, infos, net=net)
     if not config.network:
         return check.all_ok
     judged = selected & (net.n_stations_seeing > 0)
+    allowed_site = net.allowances(NetworkRequirement.of(config))[1]
     return bool(check.ok.all()) and bool(np.all(check.marker_error_m[judged]
-                                                <= config.requirement_m))
+                                                <= allowed_site[judged]))
 
 
 def greedy_network(problem: PlanProblem, config, net=None, max_steps: int = 5000,
@@ -222,9 +225,11 @@ def greedy_network(problem: PlanProblem, config, net=None, max_steps: int = 5000
     (:meth:`planner.accuracy.network.NetworkModel.worst_direction_gain`), or of the worst
     selected marker once every station passes, until every station and marker meets the
     requirement; in redundant mode then also of the station that fails worst after losing one
-    marker. ``batch > 1`` adds, per step, a site for each of the ``batch`` first untied (then
-    worst failing) stations (for large networks: fewer exact evaluations). The information and
-    covariance grow with each added site (:class:`planner.accuracy.growing.GrowingCovariance`:
+    marker; with a local requirement (:mod:`planner.accuracy.local`) then of the first failing
+    station pairs (their worst relative direction). ``batch > 1`` adds, per step, a site for
+    each of the ``batch`` first untied (then worst failing) stations (for large networks:
+    fewer exact evaluations). The information and covariance grow with each added site
+    (:class:`planner.accuracy.growing.GrowingCovariance`:
     a low-rank update per site, not a fresh inverse).
 
     ``deadline``: a :func:`time.perf_counter` value after which no further step starts (the
@@ -242,9 +247,10 @@ def greedy_network(problem: PlanProblem, config, net=None, max_steps: int = 5000
     from planner.accuracy.network import network_model
 
     net = net or network_model(problem, config)
-    req = config.requirement_m
+    allowed, allowed_site = net.allowances(NetworkRequirement.of(config))
+    local = local_accuracy(net, config)
     forbidden = problem.site_mask(config.forbidden, "forbidden")
-    selected = greedy_cover(problem, config.replace(network=False, requirement_m=1e9)).selected
+    selected = greedy_cover(problem, config.as_known_control(requirement_m=1e9)).selected
     open_site = ~forbidden & net.tying
     layout = GrowingCovariance(net, net.information(selected))
     j_all = None
@@ -270,18 +276,25 @@ def greedy_network(problem: PlanProblem, config, net=None, max_steps: int = 5000
         err = net.station_errors_from(cov)
         markers = np.flatnonzero(selected)
         # markers are judged once every station passes (until then the stations lead)
-        merr = net.marker_errors(cov, markers) if np.all(err <= req) else np.zeros(0)
+        stations_pass = bool(np.all(err <= allowed))
+        merr = net.marker_errors(cov, markers) if stations_pass else np.zeros(0)
         loss = None
-        if np.all(err <= req) and np.all(merr <= req):
+        bad_pairs = np.zeros(0, np.int64)
+        if stations_pass and np.all(merr <= allowed_site[markers]):
             if config.redundant:
                 lost, loss_err, loss_cov = net.loss_station_errors(selected, j)
-                if np.any(loss_err > req):
-                    i, k = np.unravel_index(np.argmax(np.nan_to_num(loss_err, posinf=1e300)),
+                if np.any(loss_err > allowed):
+                    i, k = np.unravel_index(np.argmax(np.nan_to_num(loss_err / allowed,
+                                                                    posinf=1e300)),
                                             loss_err.shape)
                     loss = (loss_cov[i], int(k), int(lost[i]))
-            if loss is None:
+            bad_pairs = np.zeros(0, np.int64) if local is None else local.failing(cov)
+            if loss is None and bad_pairs.size == 0:
                 return Baseline("greedy", selected, True)
-        if loss is not None:  # redundant: the station that fails worst after a loss
+        if bad_pairs.size:  # stations and markers pass: the first failing pairs
+            v = (local.gradients(cov, bad_pairs[:batch]) @ cov.full)[:, net.free]
+            gains = list(net.site_coefficients(v))
+        elif loss is not None:  # redundant: the station that fails worst after a loss
             cov, k, m = loss
             if not cov.determined.all():
                 if j_all is None:
@@ -290,13 +303,13 @@ def greedy_network(problem: PlanProblem, config, net=None, max_steps: int = 5000
                 one[m] = 1.0
                 cov = net.covariance(j - net.site_information(one) + 0.05 * j_all)
             gains = [net.worst_direction_gain(cov, k)]
-        elif np.any(err > req):
-            worst = np.argsort(-np.nan_to_num(err, posinf=1e300), kind="stable")
-            worst = worst[:min(batch, int(np.sum(err > req)))]
+        elif not stations_pass:
+            worst = np.argsort(-np.nan_to_num(err / allowed, posinf=1e300), kind="stable")
+            worst = worst[:min(batch, int(np.sum(err > allowed)))]
             gains = [net.worst_direction_gain(cov, int(k)) for k in worst]
         else:
-            m = markers[int(np.argmax(merr))]
-            cuts = net.marker_tangents(cov, [m], req)
+            m = markers[int(np.argmax(merr / allowed_site[markers]))]
+            cuts = net.marker_tangents(cov, [m])
             gains = [cuts[0][1] if cuts else np.zeros(problem.n_sites)]
         added = False
         selected = selected.copy()
@@ -320,8 +333,9 @@ def greedy_network(problem: PlanProblem, config, net=None, max_steps: int = 5000
             f"reference ({_listed(untied)}) after {int(selected.sum())} markers: {why}",
             selected)
     err = net.station_errors_from(layout.cov)
-    failing = [problem.station_ids[s] for s in np.flatnonzero(err > req)]
-    what = f"station(s) {_listed(failing)}" if failing else "every selected marker"
+    failing = [problem.station_ids[s] for s in np.flatnonzero(err > allowed)]
+    what = f"station(s) {_listed(failing)}" if failing else \
+        "every selected marker and station pair"
     raise GreedyStuckError(f"greedy (network) cannot satisfy {what} after "
                            f"{int(selected.sum())} markers: {why}", selected)
 

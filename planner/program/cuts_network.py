@@ -8,6 +8,7 @@ import scipy.sparse as sp
 
 from markerplan.errors import InfeasiblePlanError
 from planner.accuracy.checks import StationInfo, diagnose, station_infos
+from planner.accuracy.local import local_accuracy
 from planner.accuracy.network import NetworkModel
 from planner.accuracy.network_diagnosis import diagnose_network
 from planner.problem.usability import PlanProblem
@@ -54,40 +55,63 @@ def network_preflight(problem: PlanProblem, config, net: NetworkModel,
         heading undetermined or too weak, too far from the reference), or an existing marker
         that cannot meet the requirement.
     """
-    req = config.requirement_m
     forbidden = problem.site_mask(config.forbidden, "forbidden")
     existing = problem.site_mask(config.existing, "existing") | problem.site_existing
     allowed = ~forbidden & (net.n_stations_seeing > 0)
     infos = infos or station_infos(problem, config)
     _raise_network_infeasible(problem, config, net, diagnose(problem, config, infos,
                                                               accuracy_check=False)
-                              or diagnose_network(net, allowed, req))
+                              or diagnose_network(net, allowed))
     cov = net.covariance(net.information(allowed))
+    _refuse_failing_pairs(problem, net, config, cov)
     sites = np.flatnonzero(allowed)
     err = net.marker_errors(cov, sites)
     hopeless = np.zeros(problem.n_sites, bool)
-    hopeless[sites[err > req]] = True
+    hopeless[sites[err > net.allowed_site_m[sites]]] = True
     bad_existing = np.flatnonzero(hopeless & existing)
     if bad_existing.size:
         names = ", ".join(problem.site_ids[j] for j in bad_existing[:10])
-        raise InfeasiblePlanError(f"existing marker(s) {names} cannot meet {req:g} m relative to "
-                                  f"the reference {problem.station_ids[net.reference]} even with "
+        raise InfeasiblePlanError(f"existing marker(s) {names} cannot meet "
+                                  f"{net.requirement.describe()} relative to the reference "
+                                  f"{problem.station_ids[net.reference]} even with "
                                   "every usable site; relax the requirement")
     if hopeless.any():
         extra = tuple(problem.site_ids[j] for j in np.flatnonzero(hopeless & ~forbidden))
         _raise_network_infeasible(problem, config, net, diagnose(
             problem, config.replace(forbidden=config.forbidden + extra), infos,
-            accuracy_check=False) or diagnose_network(net, allowed & ~hopeless, req))
+            accuracy_check=False) or diagnose_network(net, allowed & ~hopeless))
     return hopeless
+
+
+def _refuse_failing_pairs(problem: PlanProblem, net: NetworkModel, config, cov) -> None:
+    """One-line :class:`InfeasiblePlanError` naming the station pairs of the local requirement
+    that fail even with every usable site (``cov``: that layout's covariance), with their
+    relative error and allowance; nothing when none fails (or there is no local
+    requirement)."""
+    local = local_accuracy(net, config)
+    if local is None:
+        return
+    bad = local.failing(cov)
+    if bad.size == 0:
+        return
+    err = local.errors(cov, bad[:10])
+    what = "; ".join(f"{name}: {e:.3f} m > {a:.4g} m" for name, e, a in
+                     zip(local.names(bad[:10]), err, local.pairs.allowed_m[bad[:10]],
+                         strict=True))
+    raise InfeasiblePlanError(
+        f"no layout meets the local requirement ({local.requirement.describe()}) at "
+        f"{bad.size} station pair(s), even with every usable site: {what}"
+        + (f" (and {bad.size - 10} more)" if bad.size > 10 else "")
+        + "; relax local_requirement_m, add candidate sites or a heading prior")
 
 
 def _raise_network_infeasible(problem: PlanProblem, config, net: NetworkModel,
                               failing: dict[str, str]) -> None:
     """One-line :class:`InfeasiblePlanError` naming each failing station (none: return)."""
-    req = config.requirement_m
     if failing:
         raise InfeasiblePlanError(
-            f"no layout meets the requirement in network mode ({req:g} m relative to the "
+            f"no layout meets the requirement in network mode ({net.requirement.describe()} "
+            "relative to the "
             f"reference {problem.station_ids[net.reference]}, >= {config.min_markers} markers in "
             f">= {config.min_sectors} of {config.n_sectors} sectors) at station(s): "
             + "; ".join(f"{k}: {v}" for k, v in failing.items())
@@ -136,8 +160,11 @@ def network_cuts(problem: PlanProblem, model: Model, selected: np.ndarray, confi
     leaves a station undetermined; any positive definite point gives a valid tangent). Per
     failing selected marker ``m``: ``"cut-marker"`` ``sum_{j tying, not in T} x_j - x_m >= 0``
     and ``"oa-marker"`` ``sum_j c_j x_j - rhs x_m >= 0`` (enforced only when ``x_m = 1``).
-    A layout whose stations and markers all pass (and, in redundant mode, every loss) is
-    judged by ``max_bias_effect_m`` (:func:`bias_cuts`).
+    Per failing station pair of a local requirement (:mod:`planner.accuracy.local`):
+    ``"cut-pair"`` (the no-good row over the tying sites the layout lacks: every subset of a
+    failing layout fails the pair too) and ``"oa-pair"`` (tangents of the pair's convex
+    worst-case relative variance). A layout whose stations, markers and pairs all pass (and,
+    in redundant mode, every loss) is judged by ``max_bias_effect_m`` (:func:`bias_cuts`).
 
     On large problems (``upper_bound`` given: no layout of interest has more sites, e.g. a
     feasible layout's count) tangent rows keep their ``MAX_TERMS`` largest coefficients and
@@ -158,7 +185,6 @@ def network_cuts(problem: PlanProblem, model: Model, selected: np.ndarray, confi
         As :func:`~planner.program.cuts_known.accuracy_cuts`; ``rows`` is ``None`` when
         everything passes.
     """
-    req = config.requirement_m
     in_model = model.site_var >= 0
     open_site = in_model.copy()
     open_site[model.var_site[model.ub[:model.var_site.size] == 0]] = False
@@ -166,11 +192,14 @@ def network_cuts(problem: PlanProblem, model: Model, selected: np.ndarray, confi
     j_sel = net.information(selected)
     cov = net.covariance(j_sel)
     err = net.station_errors_from(cov)
-    failing = np.flatnonzero(err > req)
+    failing = np.flatnonzero(net.stations_failing(err))
     markers = np.flatnonzero(selected & open_site)
     merr = net.marker_errors(cov, markers)
-    bad_markers = markers[merr > req]
-    if failing.size == 0 and bad_markers.size == 0:
+    marker_fails = merr > net.allowed_site_m[markers]
+    bad_markers = markers[marker_fails]
+    local = local_accuracy(net, config)
+    bad_pairs = np.zeros(0, np.int64) if local is None else local.failing(cov)
+    if failing.size == 0 and bad_markers.size == 0 and bad_pairs.size == 0:
         if config.redundant:
             loss = _network_loss_cuts(model, selected, j_sel, config, net, tying, in_model,
                                       upper_bound)
@@ -188,7 +217,7 @@ def network_cuts(problem: PlanProblem, model: Model, selected: np.ndarray, confi
     rim = "spread" if failing.size <= 10 else "worst"
     worst_first = failing[np.argsort(-np.nan_to_num(err[failing], posinf=1e300), kind="stable")]
     n_oa = _MAX_OA_STATIONS if upper_bound is None else _MAX_OA_STATIONS // 4
-    tangents = net.station_tangents(cov0, worst_first[:n_oa], req, rim=rim)
+    tangents = net.station_tangents(cov0, worst_first[:n_oa], rim=rim)
     dense_ok = upper_bound is None
 
     for k, coef, rhs in tangents:
@@ -206,7 +235,7 @@ def network_cuts(problem: PlanProblem, model: Model, selected: np.ndarray, confi
             chosen = selected & tying
             if k == grow:
                 first = [c for kk, c, _ in tangents if kk == k]
-                chosen = _grow_network(net, chosen, int(k), req, tying & ~selected, j_sel,
+                chosen = _grow_network(net, chosen, int(k), tying & ~selected, j_sel,
                                        first[0] if first else None)
             rest = np.flatnonzero(tying & ~chosen)
             if dense or rest.size <= MAX_TERMS:
@@ -232,16 +261,27 @@ def network_cuts(problem: PlanProblem, model: Model, selected: np.ndarray, confi
             add(model.implied_row(m, rest), 0.0, RowKind("cut-marker"))
 
     station_rows(failing, dense_ok)
-    worst_m = bad_markers[np.argsort(-merr[merr > req], kind="stable")]
+    worst_m = bad_markers[np.argsort(-merr[marker_fails], kind="stable")]
     if bad_markers.size:
-        for m, coef, rhs in net.marker_tangents(cov, worst_m[:n_oa], req):
+        for m, coef, rhs in net.marker_tangents(cov, worst_m[:n_oa]):
             cut = sparse_tangent(np.where(in_model, coef, 0.0), rhs, upper_bound, MAX_TERMS)
             add(model.implied_row(m, cut[0], cut[1]), 0.0, RowKind("oa-marker"))
     marker_rows(bad_markers, dense_ok)
+    if bad_pairs.size:
+        for k, coef, rhs in local.tangents(cov0, bad_pairs[:n_oa]):
+            cut = sparse_tangent(np.where(in_model, coef, 0.0), rhs, upper_bound, MAX_TERMS)
+            add(model.site_row(cut[0], cut[1]), cut[2], RowKind("oa-pair", k))
+        rest = np.flatnonzero(tying & ~selected)
+        if failing.size == 0 and (dense_ok or rest.size <= MAX_TERMS):
+            add(model.site_row(rest), 1.0, RowKind("cut-pair", int(local.pairs.first[
+                bad_pairs[0]])))
     if not rows:  # no tangent is violated and every short row was left out: the worst
         # stations' and markers' long rows (valid; merely many terms)
         station_rows(worst_first[:n_oa], True)
         marker_rows(worst_m[:n_oa], True)
+        if bad_pairs.size:
+            add(model.site_row(np.flatnonzero(tying & ~selected)), 1.0,
+                RowKind("cut-pair", int(local.pairs.first[bad_pairs[0]])))
     if not rows:  # pragma: no cover - a failing station or marker always yields a no-good cut
         raise InfeasiblePlanError("network mode: the layout fails but no cut was found")
     return sp.csr_array(sp.vstack(rows)), lower, kinds
@@ -302,18 +342,17 @@ def _network_loss_cuts(model: Model, selected: np.ndarray, j_sel: np.ndarray, co
     tying sites, ``in_model``: sites that are variables). Returns ``(None, [], [])`` when
     every loss passes.
     """
-    req = config.requirement_m
     markers, errors, covariances = net.loss_station_errors(selected, j_sel)
     rest = np.flatnonzero(tying & ~selected)
     rows, lower, kinds = [], [], []
     for m, err, cov in zip(markers, errors, covariances, strict=True):
-        bad = np.flatnonzero(err > req)
+        bad = np.flatnonzero(net.stations_failing(err))
         if bad.size == 0:
             continue
         rows.append(model.implied_row(m, rest))
         lower.append(0.0)
         kinds.append(RowKind("cut-loss", int(bad[0])))
-        for k, coef, rhs in net.station_tangents(cov, bad, req):
+        for k, coef, rhs in net.station_tangents(cov, bad):
             coef = np.where(in_model, coef, 0.0)
             coef[m] = 0.0
             sites, c, _ = sparse_tangent(coef, rhs, upper_bound, MAX_TERMS)
@@ -333,8 +372,8 @@ def _component(net: NetworkModel, selected: np.ndarray, k: int) -> frozenset:
     return frozenset(np.flatnonzero(comp == comp[k]).tolist())
 
 
-def _grow_network(net: NetworkModel, chosen: np.ndarray, k: int, requirement_m: float,
-                  candidates: np.ndarray, j_chosen: np.ndarray, coef) -> np.ndarray:
+def _grow_network(net: NetworkModel, chosen: np.ndarray, k: int, candidates: np.ndarray,
+                  j_chosen: np.ndarray, coef) -> np.ndarray:
     """Grow station ``k``'s failing set ``chosen`` by the candidate sites that help its worst
     direction least (``coef`` ascending; by site order without one), as far as it keeps
     failing: by monotonicity "the set plus the first ``m`` candidates fails" is monotone in
@@ -352,7 +391,7 @@ def _grow_network(net: NetworkModel, chosen: np.ndarray, k: int, requirement_m: 
         if not cov.determined[k]:
             return True
         e = net.station_errors_from(cov)[k]
-        return bool(e > requirement_m)
+        return not np.isfinite(e) or bool(e > net.allowed_station_m[k])
 
     lo, hi = 0, order.size
     for _ in range(_GROW_MAX_EVALS):

@@ -329,12 +329,13 @@ def _root_relaxation(problem: PlanProblem, model: Model, config, net: NetworkMod
 
     With ``x`` relaxed to ``[0, 1]``: first one tangent per station at the every-site
     information scaled onto the requirement's boundary, ``J_t = J_prior + t (J_all - J_prior)``
-    with ``t = (e_all / requirement)^2``; then an in-out cutting-plane loop: linearise at
-    ``x_lin = (x_LP + x_in) / 2`` (``x_in`` the last point where every station passes, at
-    first every open site); where ``x_lin`` passes it becomes ``x_in``, otherwise its failing
-    stations' tangents (:meth:`~planner.accuracy.network.NetworkModel.station_tangents`, worst
-    rim point) are added and the LP is solved again. Linearising between the two points keeps
-    the tangents informative where the LP solution alone leaves stations untied. Every
+    with ``t = (e_all / allowance)^2`` (the station's); then an in-out cutting-plane loop:
+    linearise at ``x_lin = (x_LP + x_in) / 2`` (``x_in`` the last point where every station
+    passes, at first every open site); where ``x_lin`` passes it becomes ``x_in``, otherwise
+    its failing stations' tangents
+    (:meth:`~planner.accuracy.network.NetworkModel.station_tangents`, worst rim point) are
+    added and the LP is solved again. Linearising between the two points keeps the tangents
+    informative where the LP solution alone leaves stations untied. Every
     tangent is valid for every layout (the error is convex in the information), so each LP
     optimum bounds the fewest markers from below. Stops after ``budget_s``, ``_ROOT_MAX_ROUNDS``
     solves, when the bound rose less than ``_ROOT_STALL`` (relative) over 5 solves, or when
@@ -353,7 +354,7 @@ def _root_relaxation(problem: PlanProblem, model: Model, config, net: NetworkMod
         Proven lower bound on the objective (``-inf`` when no LP solved).
     """
     t0 = time.perf_counter()
-    req = config.requirement_m
+    allowed = net.allowed_station_m
     nx = model.var_site.size
     in_model = model.site_var >= 0
     x_in = np.zeros(problem.n_sites)
@@ -363,14 +364,15 @@ def _root_relaxation(problem: PlanProblem, model: Model, config, net: NetworkMod
     prior = np.diag(net.prior)
     e_all = net.station_errors_from(net.covariance(prior + sites_all))
     cuts = []  # (station, coefficients (n,), rhs)
-    tied = np.flatnonzero(np.isfinite(e_all) & (np.arange(problem.n_stations) != net.reference))
+    tied = np.flatnonzero(np.isfinite(e_all) & np.isfinite(allowed)
+                          & (np.arange(problem.n_stations) != net.reference))
     try:  # every station determined: one decomposition for all the scaled informations
-        scaled = net.scaled_covariances(sites_all, (e_all[tied] / req) ** 2, tied)
+        scaled = net.scaled_covariances(sites_all, (e_all[tied] / allowed[tied]) ** 2, tied)
     except np.linalg.LinAlgError:
-        scaled = ((int(k), net.covariance(prior + (e_all[k] / req) ** 2 * sites_all))
+        scaled = ((int(k), net.covariance(prior + (e_all[k] / allowed[k]) ** 2 * sites_all))
                   for k in tied)
     for k, cov_t in scaled:
-        cuts += net.station_tangents(cov_t, [k], req)
+        cuts += net.station_tangents(cov_t, [k])
     lp = replace(model, integrality=np.zeros_like(model.integrality))
     bound, history = -np.inf, []
     added = 0
@@ -398,13 +400,13 @@ def _root_relaxation(problem: PlanProblem, model: Model, config, net: NetworkMod
         for _ in range(_ROOT_MAX_STEPS):
             x_lin = 0.5 * (x_lp + x_in)
             cov = net.covariance(net.information(x_lin))
-            failing = np.flatnonzero(net.station_errors_from(cov) > req)
+            failing = np.flatnonzero(net.stations_failing(net.station_errors_from(cov)))
             if failing.size:
                 break
             x_in = x_lin
         if failing.size == 0:  # the LP solution (nearly) passes: the relaxation is solved
             break
-        cuts += net.station_tangents(cov, failing, req)
+        cuts += net.station_tangents(cov, failing)
     kept = []
     for k, c, rhs in cuts:
         sites, coef, lo = sparse_tangent(np.where(in_model, c, 0.0), rhs, upper_bound,

@@ -71,9 +71,10 @@ class RowKind:
         "budget" (from :func:`build_model`), "heading", "oa0" (:func:`with_tightening_rows`), "cut",
         "oa", "cut-loss", "oa-loss", "info-loss", "heading-loss"
         (:func:`~planner.program.cuts_known.accuracy_cuts`);
-        network mode: "upper-bound", "cut", "connect", "oa", "cut-marker", "oa-marker"
-        (:func:`~planner.program.cuts_network.network_cuts`), redundant: "cut-loss", "oa-loss"
-        (:func:`~planner.program.cuts_network._network_loss_cuts`), "cut-bias"
+        network mode: "upper-bound", "cut", "connect", "oa", "cut-marker", "oa-marker",
+        "cut-pair", "oa-pair" (:func:`~planner.program.cuts_network.network_cuts`), redundant:
+        "cut-loss", "oa-loss" (:func:`~planner.program.cuts_network._network_loss_cuts`),
+        "cut-bias"
         (:func:`~planner.program.cuts_network.bias_cuts`); chance-constrained:
         "chance-count", "chance-critical", "chance", "chance-undecided"
         (:mod:`planner.program.cuts_chance`).

@@ -80,6 +80,9 @@ class CurvePoint:
         others), m.
     markers_ok : bool
         Network mode: every kept marker meets the requirement (always True otherwise).
+    pairs_ok : bool
+        Network mode with a local requirement: every judged station pair meets it (always
+        True otherwise; the curve still minimises the worst station error).
     """
 
     k: int
@@ -94,6 +97,7 @@ class CurvePoint:
     statuses: tuple[str, ...]
     marker_error_m: np.ndarray | None = None
     markers_ok: bool = True
+    pairs_ok: bool = True
 
     @property
     def worst_error_m(self) -> float:
@@ -118,7 +122,7 @@ class CurvePoint:
 
     @property
     def meets_requirement(self) -> bool:
-        return bool(self.ok.all()) and self.markers_ok
+        return bool(self.ok.all()) and self.markers_ok and self.pairs_ok
 
 
 @dataclass(frozen=True)
@@ -270,7 +274,7 @@ def tradeoff_curve(problem: PlanProblem, config, k_max: int | None = None,
                                  sectors=check.sectors, ok=check.ok, lower_bound_m=float(lo),
                                  proven=bool(proven), n_solves=len(statuses),
                                  statuses=tuple(statuses), marker_error_m=check.marker_error_m,
-                                 markers_ok=check.markers_ok))
+                                 markers_ok=check.markers_ok, pairs_ok=check.pairs_ok))
         best_above = check_worst(check) if proven and exact and mm.monotone else None
         previous = best
     points = _monotone(mm, points, allowed)
@@ -305,7 +309,7 @@ def _monotone(mm: MinimaxModel, points: list[CurvePoint], allowed: np.ndarray
             continue
         out[i] = replace(big, selected=sel, error_m=chk.error_m, count=chk.count,
                          sectors=chk.sectors, ok=chk.ok, marker_error_m=chk.marker_error_m,
-                         markers_ok=chk.markers_ok)
+                         markers_ok=chk.markers_ok, pairs_ok=chk.pairs_ok)
     return out
 
 

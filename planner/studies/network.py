@@ -137,7 +137,7 @@ def compare_modes(problem: PlanProblem, config, net) -> tuple[dict, dict]:
     layouts : dict of name -> (n,) bool
         ``known_control`` and ``network`` layouts that exist.
     """
-    kc, kc_sel = run_plan(problem, config.replace(network=False))
+    kc, kc_sel = run_plan(problem, config.as_known_control())
     nw, nw_sel = run_plan(problem, config.replace(network=True))
     as_net = None if kc_sel is None else \
         judge_as_network(problem, kc_sel, config.replace(network=True), net)

@@ -8,6 +8,8 @@ predicted error.
   network adjusted;
 - :mod:`planner.verify.network_report`: a network verification's ``verify.json``,
   ``verify.md`` and summary line;
+- :mod:`planner.verify.local_pairs`: a plan's local requirement verified, each station pair's
+  achieved relative error against its prediction;
 - :mod:`planner.verify.rig_draws`: each trial's rig, drawn from the mounting offsets'
   tolerances;
 - :mod:`planner.verify.trials`: ``verify --trials N`` (both modes), the plan verified with

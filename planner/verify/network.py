@@ -63,6 +63,7 @@ from pipeline.network.observations import Datum
 from pipeline.rig import MountingOffsets
 from pipeline.stages import ProcessConfig
 from planner.accuracy import known_control
+from planner.accuracy.requirement import NetworkRequirement, datum_distances
 from planner.distributed import Executor
 from planner.outputs.plan_file import SurveyPlan
 from planner.verify.fates import (
@@ -70,6 +71,7 @@ from planner.verify.fates import (
     losses_text,
     unmatched_text,
 )
+from planner.verify.local_pairs import PairOutcome, pair_outcomes
 from visibility.sensor_profile import SensorProfile
 
 
@@ -190,10 +192,19 @@ class NetworkVerification:
     detection_ids: dict[str, tuple[str | None, ...]] = field(default_factory=dict)
     """Per station the association reached, the id it gave each accepted detection (in the
     table's order; ``None``: left unidentified), whether or not the station was adjusted."""
+    requirement: NetworkRequirement = field(default_factory=NetworkRequirement)
+    """The plan's requirement (constant, or growing with the distance from the datum)."""
+    allowed_m: dict[str, float] = field(default_factory=dict)
+    """Per verified station, the error its requirement allows at its distance from the
+    datum, m."""
+    local: dict | None = None
+    """The plan's ``local`` section (its local requirement), if it has one."""
+    pairs: list[PairOutcome] = field(default_factory=list)
+    """With a local requirement: each judged station pair, predicted against achieved."""
 
     @property
     def passed(self) -> bool:
-        return all(s.passed for s in self.stations)
+        return all(s.passed for s in self.stations) and all(p.passed for p in self.pairs)
 
 
 def reference_station(named: str | None, plan_stations, chosen) -> str:
@@ -396,7 +407,13 @@ def adjust_and_compare(tables: list[Path], plan_path: Path, error_model,
     adjusted = adjust_tables(tables, error_model, functools.partial(_datum_station, reference),
                              identify, adjustment, plan=plan)
     stations, identified, result = adjusted.stations, adjusted.identified, adjusted.result
-    radius, requirement = config["working_radius_m"], config["requirement_m"]
+    radius = config["working_radius_m"]
+    need = NetworkRequirement(config["requirement_m"],
+                              float(doc["requirement"].get("requirement_ppm", 0.0)),
+                              bool(doc["requirement"].get("datum_requirement", True)))
+    datum_xyz = plan.station_xyz_m[plan.station_ids.index(reference)]
+    allowed = {sid: float(need.allowed_m(datum_distances(
+        plan.station_xyz_m[[plan.station_ids.index(sid)]], datum_xyz)[0])) for sid in truth}
 
     kept = result.observations
     s_ids = kept.station_ids
@@ -424,7 +441,7 @@ def adjust_and_compare(tables: list[Path], plan_path: Path, error_model,
         ok, reason = rule.verdict(
             plan.station_xyz_m[plan.station_ids.index(sid)],
             plan.marker_xyz_m[[plan.marker_ids.index(m) for m in sorted(named[sid])
-                               if m in plan.marker_ids]], achieved, requirement)
+                               if m in plan.marker_ids]], achieved, allowed[sid])
         missing = sorted(set((planned_markers or {}).get(sid, ())) - named[sid])
         if missing and fates and sid in fates:
             reason += f" ({unmatched_text(fates[sid], named[sid], 'identified')})"
@@ -434,6 +451,10 @@ def adjust_and_compare(tables: list[Path], plan_path: Path, error_model,
                                        len(named[sid]), int(np.sum(kept.station == i)), ok,
                                        reason))
 
+    pairs = [] if "local" not in doc else pair_outcomes(
+        doc["local"], dict(zip(plan.station_ids, plan.station_xyz_m, strict=True)),
+        {sid: result.pose[i] for i, sid in enumerate(s_ids)},
+        {sid: t.pose for sid, t in truth.items()}, radius)
     markers = _marker_outcomes(result, plan.marker_ids, truth, predicted_marker or {})
     rejected = [{"station_id": r.station_id, "marker_id": r.marker_id, "w": float(r.w)}
                 for r in result.rejected]
@@ -441,7 +462,7 @@ def adjust_and_compare(tables: list[Path], plan_path: Path, error_model,
     wrong = misidentified(tables, identified, fates) if fates else []
     return NetworkVerification(outcomes, markers, reference, config, rejected,
                                len(identified.unidentified), sigma0, int(result.dof), fates,
-                               wrong, detection_ids)
+                               wrong, detection_ids, need, allowed, doc.get("local"), pairs)
 
 
 def verify_scan(scanned: Scanned, table: Path, plan_path: Path, doc: dict, error_model,

@@ -6,9 +6,11 @@ from __future__ import annotations
 
 from markerplan.provenance import provenance
 from pipeline.rig import MountingOffsets
+from planner.accuracy.requirement import requirement_text
 from planner.outputs.plan_file import SurveyPlan
 from planner.verify.fates import fates_record, losses_markdown, stage_counts
 from planner.verify.known_control import VERIFY_SCHEMA, VERIFY_SCHEMA_VERSION
+from planner.verify.local_pairs import pairs_markdown, pairs_record
 from planner.verify.network import NetworkVerification, StationOutcome
 from visibility.sensor_profile import SensorProfile
 
@@ -21,7 +23,9 @@ def network_record(plan: SurveyPlan, check: NetworkVerification, seed: int, mode
     fates = check.fates or {}
     stations = [{"id": s.station_id, "predicted_error_m": s.predicted_error_m,
                  "adjustment_error_95_m": s.stated_error_m,
-                 "achieved_error_m": s.achieved_error_m, "n_detected_markers": s.n_accepted,
+                 "achieved_error_m": s.achieved_error_m,
+                 "allowed_error_m": check.allowed_m.get(s.station_id),
+                 "n_detected_markers": s.n_accepted,
                  "n_identified": s.n_identified, "n_used": s.n_used, "passed": s.passed,
                  "reason": s.reason, **fates_record(fates.get(s.station_id))}
                 for s in check.stations]
@@ -39,6 +43,8 @@ def network_record(plan: SurveyPlan, check: NetworkVerification, seed: int, mode
                                   "plan_config_sha256": plan.provenance.get("config_sha256"),
                                   "network": cfg}, plan=plan.provenance),
         "requirement_m": check.config["requirement_m"],
+        "requirement_ppm": check.requirement.ppm,
+        "requirement_text": check.requirement.describe(),
         "working_radius_m": check.config["working_radius_m"],
         "datum": f"station {check.reference_station} (x, y, z, heading at its planned pose)",
         "passed": check.passed,
@@ -57,6 +63,7 @@ def network_record(plan: SurveyPlan, check: NetworkVerification, seed: int, mode
                        "unidentified_detections": check.unidentified},
         "stations": stations,
         "markers": markers,
+        **({"local": pairs_record(check.local, check.pairs)} if check.local else {}),
     }
 
 
@@ -85,7 +92,7 @@ def network_markdown(rec: dict) -> str:
     w = rec["worst"]
     lines = [f"# Plan verification, network mode — {'PASSED' if rec['passed'] else 'FAILED'}",
              "", f"Datum: {rec['datum']}. Requirement: achieved station error ≤ "
-             f"{rec['requirement_m']:g} m over a {rec['working_radius_m']:g} m working radius at "
+             f"{requirement_text(rec)} over a {rec['working_radius_m']:g} m working radius at "
              "every station (simulated scans processed by the pipeline; markers identified by "
              "gated association with the plan from the planned poses; network adjustment).", "",
              f"Worst station: predicted {mm(w['predicted_error_m'])}, adjustment's 95 % "
@@ -106,6 +113,7 @@ def network_markdown(rec: dict) -> str:
         lines.append(f"| {m['id']} | {mm(m['predicted_error_m'])} | "
                      f"{mm(m['adjustment_error_95_m'])} | {mm(m['achieved_error_m'])} | "
                      f"{', '.join(m['stations'])} |")
+    lines += pairs_markdown(rec)
     adj = rec["adjustment"]
     removed = ", ".join(f"{r['station_id']}->{r['marker_id']} (w {r['w']:.1f})"
                         for r in adj["rejected"]) or "none"
@@ -144,7 +152,19 @@ def network_summary_line(rec: dict, out) -> str:
             f"{rec['datum'].split(' (')[0]}): worst station error achieved "
             f"{m(w['achieved_error_m'])} ({w['achieved_station']}), predicted "
             f"{m(w['predicted_error_m'])}, adjustment's 95 % {m(w['adjustment_error_95_m'])} "
-            f"(requirement {rec['requirement_m']:g} m); worst marker achieved "
+            f"(requirement {requirement_text(rec)}); worst marker achieved "
             f"{m(w['marker_achieved_error_m'])}"
             + (f"; not adjusted: {', '.join(w['not_adjusted'])}" if w["not_adjusted"] else "")
+            + _local_clause(rec.get("local"))
             + f" -> {out}/")
+
+
+def _local_clause(local: dict | None) -> str:
+    """The summary's local-accuracy clause: the worst pair achieved against predicted."""
+    if local is None or local["worst"] is None:
+        return ""
+    w = local["worst"]
+    predicted = "n/a" if w["predicted_error_m"] is None else f"{w['predicted_error_m']:.4f} m"
+    return (f"; local: worst pair {'-'.join(w['stations'])} achieved "
+            f"{w['achieved_error_m']:.4f} m, predicted {predicted}, allowed "
+            f"{w['allowed_error_m']:.4f} m")

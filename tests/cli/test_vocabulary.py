@@ -21,6 +21,8 @@ CONTEXTUAL = {
     "--reference-station": {"adjust"},
     # each fitting command draws its own figure
     "--plot": {"fit-detection-model"},
+    # the required station error: each command says where its default comes from
+    "--requirement-m": set(),
 }
 #: Options that reach commands under another parameter name, and why.
 PLURAL = {"--reference": "process takes several (repeatable), calibrate-sensor one"}

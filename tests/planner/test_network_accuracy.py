@@ -12,6 +12,7 @@ from planner.accuracy.growing import GrowingCovariance
 from planner.accuracy.known_control import CHI2_3_95
 from planner.accuracy.network import NetworkModel, network_model
 from planner.accuracy.network_diagnosis import diagnose_network
+from planner.accuracy.requirement import NetworkRequirement
 from planner.config import PlanConfig
 from tests.planner.instances import make_problem, ring
 
@@ -119,13 +120,13 @@ def test_diagnose_names_disconnected_weak_and_far_stations():
     sites = np.vstack([ring([0, 0], 8.0, [0, 120, 240]), [[7, 3], [7, -3]],
                        ring([200, 0], 8.0, [0, 120, 240])])
     p = make_problem([[0, 0], [15, 0], [200, 0]], sites, max_range_m=12)
-    model = NetworkModel(p, 10.0, INCL)
-    why = diagnose_network(model, np.ones(p.n_sites, bool), 0.10)
+    model = NetworkModel(p, 10.0, INCL, requirement=NetworkRequirement(0.10))
+    why = diagnose_network(model, np.ones(p.n_sites, bool))
     assert list(why) == ["S3"] and why["S3"].startswith("disconnected") and "S1" in why["S3"]
     p2 = make_problem([[0, 0], [15, 0]], sites[:5], max_range_m=12)
-    m2 = NetworkModel(p2, 10.0, INCL)
-    assert diagnose_network(m2, np.ones(5, bool), 1.0) == {}
-    weak = diagnose_network(m2, np.ones(5, bool), 0.10)
+    loose = NetworkModel(p2, 10.0, INCL, requirement=NetworkRequirement(1.0))
+    assert diagnose_network(loose, np.ones(5, bool)) == {}
+    weak = diagnose_network(NetworkModel(p2, 10.0, INCL), np.ones(5, bool))
     assert list(weak) == ["S2"] and weak["S2"].split(":")[0] in ("heading too weak",
                                                           "too far from the reference")
     with pytest.raises(ConfigError, match="reference_station"):
@@ -154,29 +155,36 @@ def test_adding_a_site_never_worsens_any_station_or_marker(seed, n_stations, fig
     assert np.all((m1 <= m0 * (1 + tol) + 1e-12) | np.isinf(m0))
 
 
-@pytest.mark.parametrize("figure", ["ellipsoid", "quantile"])
-def test_tangent_cuts_never_remove_a_passing_layout(figure):
+@pytest.mark.parametrize(("figure", "ppm"), [("ellipsoid", 0.0), ("quantile", 0.0),
+                                             ("ellipsoid", 2000.0), ("quantile", 2000.0)])
+def test_tangent_cuts_never_remove_a_passing_layout(figure, ppm):
     """Brute force on a tiny network: every layout whose stations and markers pass satisfies
     every tangent cut taken at any failing layout (marker cuts when the marker is selected);
-    for the quantile the cuts are its one-direction necessary condition."""
+    for the quantile the cuts are its one-direction necessary condition. With a ppm term each
+    station and marker is judged against its own allowance, and the cuts stay valid."""
     p = _line(3, seed=5, n_sites=10)
-    model = NetworkModel(p, 10.0, INCL, figure=ErrorFigure(figure))
+    probe = NetworkModel(p, 10.0, INCL, figure=ErrorFigure(figure))
     layouts = [np.array(b, bool) for b in itertools.product([0, 1], repeat=p.n_sites)]
-    best = model.covariance(model.information(np.ones(p.n_sites, bool)))
-    req = 1.3 * max(model.station_errors_from(best).max(),
-                    model.marker_errors(best, np.arange(p.n_sites)).max())
+    best = probe.covariance(probe.information(np.ones(p.n_sites, bool)))
+    req = 1.3 * max(probe.station_errors_from(best).max(),
+                    probe.marker_errors(best, np.arange(p.n_sites)).max())
+    # a ppm term that lets the far stations pass with about 20 % more
+    model = NetworkModel(p, 10.0, INCL, figure=ErrorFigure(figure),
+                         requirement=NetworkRequirement(req / (1 + 0.1 * ppm / 2000), ppm))
+    allowed, allowed_site = model.allowed_station_m, model.allowed_site_m
+    assert (np.ptp(allowed) > 0.05 * req) == (ppm > 0)
     passing, cuts = [], []
     for sel in layouts:
         cov = model.covariance(model.information(sel))
         e = model.station_errors_from(cov)
         markers = np.flatnonzero(sel)
         me = model.marker_errors(cov, markers)
-        if np.all(e <= req) and np.all(me <= req):
+        if np.all(e <= allowed) and np.all(me <= allowed_site[markers]):
             passing.append(sel)
         elif len(cuts) < 80 and cov.determined.all():
             cuts += [(None, c, r) for _, c, r in
-                     model.station_tangents(cov, np.flatnonzero(e > req), req, rim="spread")]
-            cuts += model.marker_tangents(cov, markers[me > req], req)
+                     model.station_tangents(cov, np.flatnonzero(e > allowed), rim="spread")]
+            cuts += model.marker_tangents(cov, markers[me > allowed_site[markers]])
     assert passing and any(c[0] is None for c in cuts) and any(c[0] is not None for c in cuts)
     x = np.asarray(passing, float)
     for owner, coef, rhs in cuts:
@@ -257,6 +265,8 @@ def test_null_reductions_count_the_free_movements_each_site_removes():
 
 def test_scaled_covariances_match_each_fresh_inverse():
     net = NetworkModel(_line(4, seed=5, n_sites=30), 10.0, INCL)
+    # a requirement no station meets: every tangent is active
+    tight = NetworkModel(net.problem, 10.0, INCL, requirement=NetworkRequirement(1e-4))
     sites = net.site_information(net.tying)
     stations, scales = np.array([1, 2, 3]), np.array([0.3, 1.0, 4.0])
     got = list(net.scaled_covariances(sites, scales, stations))
@@ -268,9 +278,8 @@ def test_scaled_covariances_match_each_fresh_inverse():
         np.testing.assert_allclose(cov.full[rows], fresh.full[rows], atol=tol)
         np.testing.assert_allclose(cov.full[:, rows], fresh.full[:, rows], atol=tol)
         assert not np.any(np.delete(np.delete(cov.full, rows, 0), rows, 1))
-        req = 0.5 * net.station_errors_from(fresh)[k]
-        (_, coef, rhs), = net.station_tangents(cov, [k], req)
-        (_, coef0, rhs0), = net.station_tangents(fresh, [k], req)
+        (_, coef, rhs), = tight.station_tangents(cov, [k])
+        (_, coef0, rhs0), = tight.station_tangents(fresh, [k])
         np.testing.assert_allclose(coef, coef0, rtol=1e-6, atol=1e-9 * coef0.max())
         assert rhs == pytest.approx(rhs0, rel=1e-6)
     with pytest.raises(np.linalg.LinAlgError):  # a station with no shared site: singular

@@ -251,3 +251,35 @@ def test_when_no_tangent_applies_and_rows_are_long_the_long_no_good_rows_are_cut
     r = plan_sites(p, cfg)
     assert r.check.all_ok
     assert any(k.family in ("cut", "connect", "cut-marker") for k in r.model.row_kind)
+
+
+@pytest.mark.parametrize("figure", ["ellipsoid", "quantile"])
+def test_a_ppm_requirement_is_met_station_by_station_and_matches_the_brute_force_optimum(figure):
+    """Network accuracy growing with the distance from the datum (a + b ppm): the plan is the
+    fewest passing layout (brute force), each station's error is within a + b ppm of its own
+    distance from the reference (computed here from the coordinates), and the allowance it
+    grants the far stations saves markers over the constant a."""
+    p = _instance(5)
+    base = PlanConfig(network=True, min_markers=3, min_sectors=2, max_range_m=16,
+                      working_radius_m=10, time_limit_s=60, error_figure=figure)
+    every = network_model(p, base).station_errors(np.ones(p.n_sites, bool))
+    a = float(1.05 * every.max())
+    ppm = 0.5 * a / 28.0 * 1e6  # the far station (28 m away) is allowed 1.5 a
+    constant = plan_sites(p, base.replace(requirement_m=a))
+    grown_cfg = base.replace(requirement_m=a, requirement_ppm=ppm)
+    grown = plan_sites(p, grown_cfg)
+    assert grown.status == "optimal" and grown.check.all_ok
+    assert grown.selected.sum() == brute_force_optimum(p, grown_cfg)
+    distance = np.hypot(*(p.station_xyz[:, :2] - p.station_xyz[0, :2]).T)
+    net = network_model(p, grown_cfg)
+    err = net.station_errors(grown.selected)
+    assert np.all(err <= a + ppm * 1e-6 * distance)
+    assert grown.selected.sum() < constant.selected.sum()
+    # the same layout judged against the constant requirement fails: the allowance was used
+    assert not evaluate_layout(p, grown.selected, base.replace(requirement_m=a)).all_ok
+
+
+def test_a_ppm_requirement_needs_network_mode():
+    with pytest.raises(ConfigError, match="network mode"):
+        PlanConfig(requirement_ppm=200.0)
+    assert PlanConfig(network=True, requirement_ppm=200.0).requirement_ppm == 200.0

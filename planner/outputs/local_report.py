@@ -1,0 +1,97 @@
+"""A network plan's local accuracy in its outputs: ``plan.json``'s ``local`` section, the
+``pairs.csv`` table (one row per judged station pair) and the report's "Local accuracy".
+
+``local`` (present when the plan has a local requirement,
+:mod:`planner.accuracy.local`): the requirement in words and its numbers, ``n_pairs``,
+``meets_requirement``, and ``pairs``: every judged pair's station ids, horizontal separation,
+predicted 95 % relative error and allowance (m), and whether it meets it.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+from pathlib import Path
+
+import numpy as np
+
+from markerplan.writing import write_gis_sidecars
+
+#: ``pairs.csv``: header and ``.csvt`` column types.
+PAIR_COLUMNS = ("first", "second", "separation_m", "predicted_error_m", "allowed_error_m",
+                "meets_requirement", "kind")
+PAIR_TYPES = ("String", "String", "Real", "Real", "Real", "Integer", "String")
+
+
+def _num(v) -> float | None:
+    v = float(v)
+    return v if math.isfinite(v) else None
+
+
+def local_record(outcome, net) -> dict | None:
+    """The ``local`` section of a network plan (None without a local requirement).
+
+    Parameters
+    ----------
+    outcome : planner.run.PlanOutcome
+    net : planner.accuracy.network.NetworkModel
+        The plan's network model.
+    """
+    from planner.accuracy.local import local_accuracy
+
+    local = local_accuracy(net, outcome.config)
+    if local is None:
+        return None
+    errors = outcome.result.check.pair_error_m
+    if errors is None:
+        errors = local.errors(net.covariance(net.information(outcome.result.selected)))
+    pairs, ids = local.pairs, outcome.problem.station_ids
+    req = local.requirement
+    rows = [{"stations": [ids[a], ids[b]], "separation_m": round(float(d), 3),
+             "predicted_error_m": _num(e), "allowed_error_m": float(allowed),
+             "meets_requirement": bool(e <= allowed)}
+            for a, b, d, e, allowed in zip(pairs.first, pairs.second, pairs.separation_m,
+                                           errors, pairs.allowed_m, strict=True)]
+    worst = int(np.argmax(np.nan_to_num(errors / pairs.allowed_m, posinf=1e300))) \
+        if pairs.size else None
+    return {"requirement_text": req.describe(), "local_requirement_m": req.constant_m,
+            "local_requirement_ppm": req.ppm, "local_within_m": req.within_m,
+            "local_kind": req.kind, "n_pairs": pairs.size,
+            "meets_requirement": all(r["meets_requirement"] for r in rows),
+            "worst_pair": None if worst is None else rows[worst], "pairs": rows}
+
+
+def write_pairs_csv(doc: dict, path: Path) -> None:
+    """``pairs.csv`` of a plan with a local requirement (header first), with its ``.csvt``."""
+    local = doc["local"]
+    with path.open("w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(PAIR_COLUMNS)
+        for r in local["pairs"]:
+            err = r["predicted_error_m"]
+            w.writerow([*r["stations"], f"{r['separation_m']:.3f}",
+                        "inf" if err is None else f"{err:.4f}", f"{r['allowed_error_m']:.4f}",
+                        int(r["meets_requirement"]), local["local_kind"]])
+    write_gis_sidecars(path, PAIR_TYPES, None)
+
+
+def local_markdown(doc: dict) -> list[str]:
+    """The report's "Local accuracy" lines (none without a local requirement)."""
+    local = doc.get("local")
+    if local is None:
+        return []
+    lines = ["", "## Local accuracy", "",
+             f"Requirement: {local['requirement_text']}, 95 % "
+             f"({doc['requirement']['error_figure_text']}); {local['n_pairs']} station pairs "
+             f"judged, {'all' if local['meets_requirement'] else 'not all'} within it "
+             "(`pairs.csv`)."]
+    ranked = sorted(local["pairs"], key=lambda r: -math.inf if r["predicted_error_m"] is None
+                    else -r["predicted_error_m"] / r["allowed_error_m"])[:5]
+    if ranked:
+        lines += ["", "| pair | separation | predicted | allowed |", "|---|---:|---:|---:|"]
+        for r in ranked:
+            err = r["predicted_error_m"]
+            lines.append(f"| {r['stations'][0]}–{r['stations'][1]} | {r['separation_m']:.1f} m "
+                         f"| {'n/a' if err is None else f'{err:.4f} m'} | "
+                         f"{r['allowed_error_m']:.4f} m |")
+    return lines

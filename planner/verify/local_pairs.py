@@ -1,0 +1,149 @@
+"""``verify --network`` of a plan with a local requirement: each judged station pair's achieved
+relative error against its prediction and allowance.
+
+A station's registration error at a point ``q`` of its working disc is ``D(q) = T_est(q) -
+T_true(q)``, the difference between the adjusted and the true mapping of its levelled frame
+into the site frame (as :func:`planner.accuracy.known_control.pose_difference_m`). The pair's
+achieved relative error is the worst over both discs (the station and 72 rim points each, as
+the prediction) of ``|D_k(q) - D_l(q')|`` (``"position"``) or ``|u . (D_k(q) - D_l(q'))|``
+(``"distance"``, ``u`` the unit vector between the planned stations): what a surveyor who
+stakes out from both stations' clouds would see between them.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from pipeline.rig import station_to_site_matrix
+
+#: Rim points of each disc (as the predicted figure's).
+_N_RIM = 72
+
+
+@dataclass(frozen=True)
+class PairOutcome:
+    """Predicted against achieved for one station pair (m; ``None`` where there is none)."""
+
+    first: str
+    second: str
+    separation_m: float
+    predicted_error_m: float | None
+    achieved_error_m: float | None
+    allowed_error_m: float
+    passed: bool
+
+    def to_json(self) -> dict:
+        return {"stations": [self.first, self.second], "separation_m": self.separation_m,
+                "predicted_error_m": self.predicted_error_m,
+                "achieved_error_m": self.achieved_error_m,
+                "allowed_error_m": self.allowed_error_m, "passed": self.passed}
+
+
+def _disc_points(radius_m: float) -> np.ndarray:
+    """(73, 3) the station and its rim points, levelled station frame, m."""
+    phi = np.linspace(0.0, 2.0 * np.pi, _N_RIM, endpoint=False)
+    rim = radius_m * np.column_stack([np.cos(phi), np.sin(phi), np.zeros_like(phi)])
+    return np.vstack([np.zeros((1, 3)), rim])
+
+
+def registration_errors(pose_est: np.ndarray, pose_true: np.ndarray,
+                        radius_m: float) -> np.ndarray:
+    """(73, 3) ``D(q)`` at the station and its rim points: adjusted minus true site position of
+    the same levelled point, m. ``pose_*``: (6,) x, y, z (m), heading, roll, pitch (rad)."""
+    p = _disc_points(radius_m)
+
+    def mapped(pose):
+        pose = np.asarray(pose, dtype=float)
+        return pose[:3] + p @ station_to_site_matrix(pose[3], pose[4], pose[5]).T
+
+    return mapped(pose_est) - mapped(pose_true)
+
+
+def relative_error_m(errors_first: np.ndarray, errors_second: np.ndarray, kind: str,
+                     direction: np.ndarray) -> float:
+    """The worst relative error of two stations' registration errors ((73, 3) each) over both
+    discs, m: ``max |D_k(q) - D_l(q')|`` or, for ``"distance"``, ``max |u . (D_k - D_l)|``.
+
+    >>> d = np.zeros((73, 3)); e = d.copy(); e[:, 0] = 0.01
+    >>> relative_error_m(d, e, "position", np.array([0, 1.0, 0]))
+    0.01
+    >>> relative_error_m(d, e, "distance", np.array([0, 1.0, 0]))
+    0.0
+    """
+    if kind == "distance":
+        a, b = errors_first @ direction, errors_second @ direction
+        return float(max(a.max() - b.min(), b.max() - a.min()))
+    diff = errors_first[:, None, :] - errors_second[None, :, :]
+    return float(np.sqrt(np.einsum("ija,ija->ij", diff, diff).max()))
+
+
+def pair_outcomes(local: dict, station_xyz: dict[str, np.ndarray],
+                  adjusted: dict[str, np.ndarray], truth: dict[str, np.ndarray],
+                  radius_m: float) -> list[PairOutcome]:
+    """Every judged pair of a plan's ``local`` section, predicted against achieved.
+
+    Parameters
+    ----------
+    local : dict
+        ``plan.json``'s ``local`` (:func:`planner.outputs.local_report.local_record`).
+    station_xyz : dict of id -> (3,) float
+        Planned station positions (the pair's direction), m.
+    adjusted, truth : dict of id -> (6,) float
+        Adjusted and true poses of the stations the adjustment holds.
+    radius_m : float
+        Working radius, m.
+
+    Returns
+    -------
+    list of PairOutcome
+        A pair with a station the adjustment lacks has no achieved error and fails.
+    """
+    errors = {sid: registration_errors(adjusted[sid], truth[sid], radius_m)
+              for sid in adjusted if sid in truth}
+    out = []
+    for row in local["pairs"]:
+        a, b = row["stations"]
+        achieved = None
+        if a in errors and b in errors:
+            delta = np.asarray(station_xyz[b], float) - np.asarray(station_xyz[a], float)
+            norm = np.linalg.norm(delta)
+            achieved = relative_error_m(errors[a], errors[b], local["local_kind"],
+                                        delta / norm if norm > 0 else delta)
+        allowed = float(row["allowed_error_m"])
+        out.append(PairOutcome(a, b, float(row["separation_m"]), row["predicted_error_m"],
+                               achieved, allowed, achieved is not None and achieved <= allowed))
+    return out
+
+
+def pairs_record(local: dict, outcomes: list[PairOutcome]) -> dict:
+    """``verify.json``'s ``local`` section: the requirement, every pair, and the worst."""
+    achieved = [p for p in outcomes if p.achieved_error_m is not None]
+    worst = max(achieved, key=lambda p: p.achieved_error_m / p.allowed_error_m, default=None)
+    return {"requirement_text": local["requirement_text"], "local_kind": local["local_kind"],
+            "n_pairs": len(outcomes), "passed": all(p.passed for p in outcomes),
+            "worst": None if worst is None else worst.to_json(),
+            "pairs": [p.to_json() for p in outcomes]}
+
+
+def pairs_markdown(rec: dict) -> list[str]:
+    """The verification report's "Local accuracy" lines (none without the section)."""
+    local = rec.get("local")
+    if local is None:
+        return []
+
+    def mm(v):
+        return "—" if v is None else f"{1e3 * v:.1f} mm"
+
+    lines = ["", "## Local accuracy", "",
+             f"Requirement: {local['requirement_text']}; {local['n_pairs']} station pairs, "
+             f"{'all' if local['passed'] else 'not all'} within it.", "",
+             "| pair | separation | predicted | achieved | allowed | passed |",
+             "|---|---:|---:|---:|---:|---|"]
+    for p in sorted(local["pairs"], key=lambda p: -(p["achieved_error_m"] or np.inf)
+                    / p["allowed_error_m"])[:10]:
+        lines.append(f"| {p['stations'][0]}–{p['stations'][1]} | {p['separation_m']:.1f} m | "
+                     f"{mm(p['predicted_error_m'])} | {mm(p['achieved_error_m'])} | "
+                     f"{mm(p['allowed_error_m'])} | {'yes' if p['passed'] else 'no'} |")
+    return lines
