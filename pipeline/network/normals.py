@@ -41,6 +41,13 @@ class Problem:
     prior_is_heading: np.ndarray  # (q,) bool: misclosure wrapped to [-pi, pi)
     fixed: np.ndarray         # (u,) bool: parameters the 'station' datum fixes
     free_defects: np.ndarray  # (d,) defect directions the 'free' datum constrains
+    #: (n,) factor on each observation's weight (robust weights, variance components); None: 1
+    factor: np.ndarray | None = None
+
+    def weight(self) -> np.ndarray:
+        """(n,) per-axis weight of each observation, ``factor * 3 / sigma^2``, 1/m^2."""
+        w = axis_weight(self.obs.sigma_m)
+        return w if self.factor is None else w * self.factor
 
 
 @dataclass
@@ -57,6 +64,9 @@ class Solution:
     converged: bool
     normal: sp.csc_matrix     # (bordered) normal matrix at the solution
     covariance_angles: np.ndarray | None = None  # (s, 3) angles the covariance is linearised at
+    #: the covariance with the observations' own weights (differs from ``covariance`` under
+    #: robust weights): the one the tests and reliability use
+    ls_covariance: np.ndarray | None = None
 
 
 def linearise(obs: NetworkObservations, pose: np.ndarray, markers: np.ndarray
@@ -145,7 +155,7 @@ def normal_system(problem: Problem, assembly: Assembly, blocks: np.ndarray,
     observations' 9 x 9 blocks (sparse), bordered by the minimal constraints ``B`` when there
     are any. A parameter the datum fixes gets a unit row and column (its step is 0)."""
     u = problem.fixed.size
-    weighted = blocks * axis_weight(problem.obs.sigma_m)[:, None, None]
+    weighted = blocks * problem.weight()[:, None, None]
     border = b[b != 0]
     values = np.concatenate([(weighted.transpose(0, 2, 1) @ blocks)[assembly.keep],
                              problem.prior_weight[assembly.prior], np.ones(assembly.n_fixed),
@@ -195,6 +205,15 @@ def covariance_from_normal(normal: sp.csc_matrix, problem: Problem) -> np.ndarra
     cov[fixed, :] = 0.0
     cov[:, fixed] = 0.0
     return cov
+
+
+def covariance_at(problem: Problem, sol: Solution) -> np.ndarray:
+    """(u, u) covariance with ``problem``'s weights at ``sol``'s linearisation, m^2, rad^2
+    (e.g. the plain least-squares covariance at a robust solution)."""
+    b = constraints(problem, sol.pose, sol.markers)
+    normal, _ = normal_system(problem, assembly(problem, sol.columns, b), sol.blocks,
+                              sol.columns, sol.misclosure, sol.prior_misclosure, b)
+    return covariance_from_normal(normal, problem)
 
 
 def downdated(covariance: np.ndarray, blocks: np.ndarray, columns: np.ndarray,
