@@ -11,8 +11,10 @@ Koch, *Parameter estimation and hypothesis testing in linear models*, 1999, sect
 iterated: the group's weights are divided by its estimate and the network adjusted again
 until the estimates no longer change (then the estimator is the best invariant quadratic
 unbiased one). A factor of 1 means the group's sigmas are right; 4 means its errors are twice
-what the error model says. Under the model an estimate scatters by about
-``sigma_g^2 sqrt(2 / r_g)`` (chi-square with ``r_g`` degrees of freedom).
+what the error model says. An estimate heading for 0 is held at :data:`MIN_COMPONENT`. Under
+the model an estimate scatters by about ``sigma_g^2 sqrt(2 / r_g)`` (chi-square with ``r_g``
+degrees of freedom). A group's redundancy changes with its estimate (a group weighted up takes
+less of it); below :data:`MIN_GROUP_REDUNDANCY` the group gets no estimate.
 
 This module only sees the weighted squared residuals and redundancy numbers of each
 observation; the adjustment (:mod:`pipeline.network.adjustment`) supplies them.
@@ -41,8 +43,12 @@ RANGE_BANDS_M = (10.0, 20.0, 50.0)
 TOLERANCE = 1e-3
 #: Most iterations.
 MAX_ITERATIONS = 100
-#: A group whose redundancy is below this has no estimate (nan): its residuals say nothing.
-MIN_GROUP_REDUNDANCY = 1e-6
+#: A group whose redundancy is below this has no estimate (nan): with less than one degree of
+#: freedom its estimate scatters by more than 140 % and its iteration barely converges.
+MIN_GROUP_REDUNDANCY = 1.0
+#: An estimate that falls below this is held there: the iteration would drive it to 0
+#: geometrically without converging (the unbiased estimate is then negative).
+MIN_COMPONENT = 1e-3
 
 
 @dataclass(frozen=True)
@@ -58,7 +64,8 @@ class VarianceComponent:
     redundancy : float
         ``r_g``, the group's share of the degrees of freedom.
     sigma0_squared : float
-        The estimate ``sigma_g^2`` (nan when ``redundancy`` is ~0).
+        The estimate ``sigma_g^2`` (nan when ``redundancy`` is below
+        :data:`MIN_GROUP_REDUNDANCY`).
     sd : float
         Its standard deviation under the model, ``sigma_g^2 sqrt(2 / r_g)``.
     """
@@ -153,6 +160,7 @@ def variance_components(solve: Callable[[np.ndarray], tuple[np.ndarray, np.ndarr
         estimable = r_g > MIN_GROUP_REDUNDANCY
         ratio = np.where(estimable, np.bincount(group, weights=vpv, minlength=len(names))
                          / np.where(estimable, r_g, 1.0), 1.0)
+        ratio = np.where(scale * ratio < MIN_COMPONENT, MIN_COMPONENT / scale, ratio)
         scale *= ratio
         if np.all(np.abs(ratio - 1.0) <= TOLERANCE * np.sqrt(2.0 / np.maximum(r_g, 1e-300))):
             break
