@@ -172,7 +172,9 @@ class NetworkAdjustment:
     redundancy, w_test, mdb_m, mdb_effect_m, point, mdb_point_m
         See :class:`pipeline.network.reliability.ObservationReliability` (kept observations),
         with the observations' own weights (not the robust ones). ``point`` is the test of
-        each point observation, the statistic data snooping and the robust weights use.
+        each point observation, the statistic data snooping and the robust weights use (under
+        robust weights: each observation against the solution of all the others,
+        :func:`~pipeline.network.reliability.point_tests`).
     sigma0_squared : float
         A-posteriori variance factor (pseudo-observations included; robust weights applied);
         nan when ``dof == 0``.
