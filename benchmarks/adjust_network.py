@@ -7,15 +7,19 @@ Prints the median wall time of
   (b) the baseline "dense normal equations": the same adjustment with every Gauss-Newton step
       solved by ``numpy.linalg.solve`` on the dense normal matrix,
 and the ratio b/a from the same run, with the network's size, the rounds of snooping and the
-machine's load average. Wall and CPU seconds are both printed: on a busy machine the wall time
-grows (BLAS threads wait for cores) while the CPU time shows the work done.
+machine's load average. With ``--robust huber|igg3`` (instead of data snooping) and/or
+``--variance-components station|range`` both (a) and (b) run those too, and the reweighting
+rounds are printed (each round computes the covariance afresh). Wall and CPU seconds are both
+printed: on a busy machine the wall time grows (BLAS threads wait for cores) while the CPU time
+shows the work done.
 
 ``--blas-threads 1`` caps OpenBLAS (numpy's and scipy's) at one thread, set before numpy is
 imported: on a machine busy with other work its idle BLAS threads otherwise spin and wait for
 cores, and the wall time doubles.
 
 Usage: ``python benchmarks/adjust_network.py [--stations 100] [--markers-per-station 2.5]
-[--repeat 5] [--seed 3] [--blas-threads N]``
+[--repeat 5] [--seed 3] [--blas-threads N] [--robust huber|igg3]
+[--variance-components station|range]``
 """
 
 from __future__ import annotations
@@ -57,13 +61,15 @@ def main() -> None:
     ap.add_argument("--repeat", type=int, default=5)
     ap.add_argument("--seed", type=int, default=3)
     ap.add_argument("--blas-threads", type=int, default=None)
+    ap.add_argument("--robust", choices=("huber", "igg3"), default=None)
+    ap.add_argument("--variance-components", choices=("station", "range"), default=None)
     args = ap.parse_args()
     if args.blas_threads is not None:
         os.environ["OPENBLAS_NUM_THREADS"] = os.environ["OMP_NUM_THREADS"] = str(args.blas_threads)
 
     import numpy as np
 
-    from pipeline.network.adjustment import adjust
+    from pipeline.network.adjustment import AdjustmentSettings, adjust
     from pipeline.network.simulation import simulated_network
 
     obs, truth = simulated_network(n_stations=args.stations,
@@ -74,21 +80,29 @@ def main() -> None:
           f"{os.getloadavg()[0]:.2f} on {os.cpu_count()} cores; BLAS threads "
           f"{args.blas_threads or 'default'}")
 
+    settings = AdjustmentSettings(snooping=args.robust is None, robust=args.robust,
+                                  variance_components=args.variance_components)
+
     def shipped():
-        return adjust(obs, nominal=truth.nominal)
+        return adjust(obs, settings=settings, nominal=truth.nominal)
 
     def dense():
         with mock.patch("scipy.sparse.linalg.splu", _DenseFactor):
-            return adjust(obs, nominal=truth.nominal)
+            return adjust(obs, settings=settings, nominal=truth.nominal)
 
     shipped()  # warm-up: imports, BLAS threads
     t_sparse, cpu_sparse, result = _median_time(shipped, args.repeat)
     t_dense, cpu_dense, baseline = _median_time(dense, args.repeat)
     assert np.allclose(result.marker_xyz_m, baseline.marker_xyz_m, atol=1e-7)
-    print(f"(a) adjust (sparse Gauss-Newton, covariance, snooping): {t_sparse:.3f} s wall, "
+    mode = ("snooping" if args.robust is None else f"robust {args.robust}") + (
+        f", variance components by {args.variance_components}" if args.variance_components
+        else "")
+    print(f"(a) adjust (sparse Gauss-Newton, covariance, {mode}): {t_sparse:.3f} s wall, "
           f"{cpu_sparse:.3f} s CPU, median of {args.repeat}; {result.iterations} iterations in "
           "the last solution, "
           f"{len(result.rejected)} observations removed by snooping, "
+          f"{result.robust_rounds} reweighting rounds, "
+          f"{int((result.robust_weight < 1).sum())} observations down-weighted, "
           f"sigma0^2 = {result.sigma0_squared:.3f}, dof = {result.dof}")
     print(f"(b) baseline (dense normal-equation solve per step):    {t_dense:.3f} s wall, "
           f"{cpu_dense:.3f} s CPU")

@@ -8,8 +8,13 @@ Turning observations into coordinates knows nothing of planning.
 - :mod:`pipeline.network.design`: the linearised observation model (design blocks and weights)
   that the adjustment and the planner's predicted accuracy share;
 - :mod:`pipeline.network.adjustment`: station poses and marker centres estimated together (the
-  least-squares solution and its covariance);
-- :mod:`pipeline.network.reliability`: Baarda's reliability and data snooping;
+  least-squares solution, data snooping and the result);
+- :mod:`pipeline.network.normals`: its numerical core: linearisation, the sparse normal
+  equations, the Gauss-Newton solve and the covariance;
+- :mod:`pipeline.network.reliability`: Baarda's reliability, the test of each point
+  observation (3-D) and data snooping;
+- :mod:`pipeline.network.robust`: robust estimation (Huber, IGG-III) by reweighting;
+- :mod:`pipeline.network.variance`: variance components of observation groups;
 - :mod:`pipeline.network.simulation`: synthetic networks with known truth;
 - :mod:`pipeline.network.run`: marker tables in, adjusted network out.
 """

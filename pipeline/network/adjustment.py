@@ -20,14 +20,10 @@ prior (sun sensor) observes each heading around its nominal value. The observati
 
 Solution
 --------
-Gauss-Newton on the sparse normal equations (``scipy.sparse``, SuperLU), assembled from each
-observation's 9 x 9 block into a sparsity pattern fixed across iterations. A parameter the datum
-fixes gets a unit row and column (its step is 0); the free datum's minimal constraints
-``B dx = 0`` border the system. The full covariance (dense, a priori: sigma0 = 1) comes from the
-normal matrix at convergence with the markers eliminated first (their block is 3 x 3
-block-diagonal, as in bundle adjustment), so only a matrix of the stations' size is inverted.
-Between data-snooping rounds the covariance is downdated for the removed observation
-(Sherman-Morrison-Woodbury); the final solution's covariance is computed afresh.
+Gauss-Newton on the sparse normal equations, and the covariance of the parameters, are
+:mod:`pipeline.network.normals`. Between data-snooping rounds the covariance is downdated for
+the removed observation (Sherman-Morrison-Woodbury); the final solution's covariance is
+computed afresh.
 
 Initial values come from :class:`NominalPoses` (odometry or the plan) when given; otherwise the
 network is chained outward from the reference station, each station placed by a closed-form
@@ -43,12 +39,12 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
-import scipy.sparse as sp
-import scipy.sparse.linalg
 from scipy.stats import chi2
 
 from markerplan.errors import ConfigError, DataError, InputFileError
-from pipeline.network.design import axis_weight, pose_design_blocks, station_rotations
+from pipeline.network import normals, variance
+from pipeline.network import robust as robust_
+from pipeline.network.design import axis_weight, station_rotations
 from pipeline.network.observations import (
     SIGMA_RULE,
     Datum,
@@ -57,12 +53,16 @@ from pipeline.network.observations import (
     usable_sigma,
 )
 from pipeline.network.reliability import (
+    PointTests,
     Rejection,
     data_snooping,
     non_centrality,
     observation_reliability,
-    w_tests,
+    point_non_centrality,
+    point_tests,
+    residual_blocks,
 )
+from pipeline.network.variance import VarianceComponent, observation_groups, variance_components
 from pipeline.rig import fit_heading_shift, rot_z
 
 #: chi-square 95 % quantile, 3 degrees of freedom: the 95 % ellipsoid's scale.
@@ -71,10 +71,6 @@ ELLIPSOID_CHI2_95 = float(chi2.ppf(0.95, 3))
 #: Between data-snooping rounds the covariance is downdated while no station angle moved more
 #: than this since it was computed (the design changes by about that fraction; w by less).
 _DOWNDATE_ANGLE_RAD = 1e-3
-
-#: A Gauss-Newton step below this (m or rad) ends the iteration: far below any sigma, and
-#: convergence is quadratic for exact data, so the truth is then recovered to ~1e-14 m.
-_STEP_TOLERANCE = 1e-8
 
 
 @dataclass(frozen=True)
@@ -91,13 +87,24 @@ class AdjustmentSettings:
         least :data:`~pipeline.network.observations.MIN_SIGMA`); None for none. Needs nominal
         poses.
     alpha0, beta0 : float
-        Significance level and power of the w-test (Baarda), in (0, 1).
+        Significance level and power of the test of each point observation (Baarda), in
+        (0, 1).
     snooping : bool
-        Remove blunders by data snooping.
+        Remove blunders by data snooping (not with ``robust``).
     max_rejections : int
         Most observations data snooping may remove.
     max_iterations : int
         Gauss-Newton iterations before giving up.
+    robust : {None, "huber", "igg3"}
+        Robust estimation (:mod:`pipeline.network.robust`) instead of data snooping: None for
+        plain least squares.
+    robust_k0, robust_k1 : float
+        Tuning constants, standardised-residual units: Huber's ``k`` (``robust_k0``; default
+        :data:`~pipeline.network.robust.HUBER_K`) or IGG-III's ``k0 < k1`` (defaults
+        :data:`~pipeline.network.robust.IGG3_K0`, :data:`~pipeline.network.robust.IGG3_K1`).
+    variance_components : {None, "station", "range"}
+        Estimate a variance factor per observing station or per range band
+        (:mod:`pipeline.network.variance`); None for none.
     """
 
     inclinometer_sigma_rad: float = math.radians(0.01)
@@ -107,6 +114,10 @@ class AdjustmentSettings:
     snooping: bool = True
     max_rejections: int = 20
     max_iterations: int = 20
+    robust: str | None = None
+    robust_k0: float = robust_.HUBER_K
+    robust_k1: float = robust_.IGG3_K1
+    variance_components: str | None = None
 
     def __post_init__(self):
         def sigma(name, value):
@@ -124,6 +135,20 @@ class AdjustmentSettings:
             value = getattr(self, name)
             if not (isinstance(value, int) and value >= least):
                 raise ConfigError(f"{name} must be an integer >= {least}, got {value!r}")
+        for name, allowed in (("robust", robust_.ESTIMATORS),
+                              ("variance_components", variance.GROUPINGS)):
+            if getattr(self, name) not in (None, *allowed):
+                raise ConfigError(f"{name} must be None or one of {', '.join(allowed)}, got "
+                                  f"{getattr(self, name)!r}")
+        k0, k1 = self.robust_k0, self.robust_k1
+        if not all(isinstance(k, int | float) and 0 < k < math.inf for k in (k0, k1)):
+            raise ConfigError(f"robust_k0 and robust_k1 must be finite numbers > 0, got {k0!r} "
+                              f"and {k1!r}")
+        if self.robust == "igg3" and not k0 < k1:
+            raise ConfigError(f"IGG-III needs robust_k0 < robust_k1, got {k0!r} and {k1!r}")
+        if self.robust is not None and self.snooping:
+            raise ConfigError("robust estimation replaces data snooping: give snooping=False "
+                              f"with robust={self.robust!r}")
 
 
 @dataclass
@@ -134,26 +159,38 @@ class NetworkAdjustment:
     Attributes
     ----------
     observations : NetworkObservations
-        The observations kept (after data snooping).
+        The observations kept (after data snooping; all of them with robust estimation).
     pose : (s, 6) float
         Station poses, site frame, m and rad (heading wrapped to [-pi, pi)).
     marker_xyz_m : (k, 3) float
         Marker centres, site frame, m.
     covariance : (6s + 3k, 6s + 3k) float
-        A-priori covariance (sigma0 = 1) relative to the datum; m^2, rad^2. Rows of parameters
-        the datum fixes are zero.
+        A-priori covariance (sigma0 = 1) relative to the datum, with the robust weights when
+        there are any; m^2, rad^2. Rows of parameters the datum fixes are zero.
     residuals_m : (n, 3) float
         ``m_j - (t_s + R_s p)`` per kept observation, site-frame axes, m.
-    redundancy, w_test, mdb_m, mdb_effect_m
-        See :class:`pipeline.network.reliability.ObservationReliability` (kept observations).
+    redundancy, w_test, mdb_m, mdb_effect_m, point, mdb_point_m
+        See :class:`pipeline.network.reliability.ObservationReliability` (kept observations),
+        with the observations' own weights (not the robust ones). ``point`` is the test of
+        each point observation, the statistic data snooping and the robust weights use (under
+        robust weights: each observation against the solution of all the others,
+        :func:`~pipeline.network.reliability.point_tests`).
     sigma0_squared : float
-        A-posteriori variance factor (pseudo-observations included); nan when ``dof == 0``.
+        A-posteriori variance factor (pseudo-observations included; robust weights applied);
+        nan when ``dof == 0``.
     dof : int
-        Degrees of freedom (redundancy).
+        Degrees of freedom (redundancy; observations of robust weight 0 not counted).
     iterations : int
         Gauss-Newton iterations of the last solution.
+    robust_weight : (n,) float
+        The robust weight factor of each kept observation, in [0, 1] (ones without ``robust``).
+    robust_rounds : int
+        Reweighting rounds of the robust estimation (0 without).
     rejected : list of Rejection
         Observations removed by data snooping, in order.
+    variance_components : list of VarianceComponent
+        Estimated variance factors of the groups of ``settings.variance_components`` (empty
+        without); a diagnostic: the solution and covariance keep the error model's weights.
     datum : Datum
     settings : AdjustmentSettings
     """
@@ -170,7 +207,12 @@ class NetworkAdjustment:
     sigma0_squared: float
     dof: int
     iterations: int
+    point: PointTests
+    mdb_point_m: np.ndarray
+    robust_weight: np.ndarray
+    robust_rounds: int = 0
     rejected: list[Rejection] = field(default_factory=list)
+    variance_components: list[VarianceComponent] = field(default_factory=list)
     datum: Datum = field(default_factory=Datum)
     settings: AdjustmentSettings = field(default_factory=AdjustmentSettings)
 
@@ -300,229 +342,6 @@ def _markers_from_poses(obs: NetworkObservations, pose: np.ndarray) -> np.ndarra
                             for a in range(3)]) / total[:, None]
 
 
-@dataclass
-class _Problem:
-    """Everything of one adjustment that does not change between iterations."""
-
-    obs: NetworkObservations
-    prior_index: np.ndarray   # (q,) parameter observed directly by a pseudo-observation
-    prior_value: np.ndarray   # (q,) its observed value (m or rad)
-    prior_weight: np.ndarray  # (q,) 1 / sigma^2
-    prior_is_heading: np.ndarray  # (q,) bool: misclosure wrapped to [-pi, pi)
-    fixed: np.ndarray         # (u,) bool: parameters the 'station' datum fixes
-    free_defects: np.ndarray  # (d,) defect directions the 'free' datum constrains
-
-
-@dataclass
-class _Solution:
-    pose: np.ndarray
-    markers: np.ndarray
-    blocks: np.ndarray        # (n, 3, 9) design blocks at the solution
-    columns: np.ndarray       # (n, 9) their parameter indices
-    misclosure: np.ndarray    # (n, 3) f = t + R p - m at the solution
-    prior_misclosure: np.ndarray
-    covariance: np.ndarray | None
-    n_constraints: int
-    iterations: int
-    converged: bool
-    normal: sp.csc_matrix     # (bordered) normal matrix at the solution
-    covariance_angles: np.ndarray | None = None  # (s, 3) angles the covariance is linearised at
-
-
-def _linearise(obs: NetworkObservations, pose: np.ndarray, markers: np.ndarray
-               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Design blocks (n, 3, 9), their parameter columns (n, 9) (the station's 6 pose
-    parameters, then the marker's x, y, z) and the misclosure ``f = t + R p - m`` (n, 3)."""
-    n, s = obs.n, len(obs.station_ids)
-    q, pose_block = pose_design_blocks(obs.xyz_m, pose[obs.station, 3:])
-    f = pose[obs.station, :3] + q - markers[obs.marker]
-    block = np.zeros((n, 3, 9))
-    block[:, :, :6] = pose_block
-    block[:, [0, 1, 2], [6, 7, 8]] = -1.0
-    columns = np.concatenate([6 * obs.station[:, None] + np.arange(6),
-                              6 * s + 3 * obs.marker[:, None] + np.arange(3)], axis=1)
-    return block, columns, f
-
-
-def _defect_basis(pose: np.ndarray, markers: np.ndarray) -> np.ndarray:
-    """(u, 4) parameter changes of a translation (x, y, z, 1 m) and a rotation about the vertical
-    through the stations' centroid (1 rad): the datum defect."""
-    s, k = pose.shape[0], markers.shape[0]
-    centre = pose[:, :2].mean(axis=0)
-    g = np.zeros((6 * s + 3 * k, 4))
-    for rows, xy in ((6 * np.arange(s), pose[:, :2]), (6 * s + 3 * np.arange(k), markers[:, :2])):
-        for axis in range(3):
-            g[rows + axis, axis] = 1.0
-        g[rows, 3] = -(xy[:, 1] - centre[1])
-        g[rows + 1, 3] = xy[:, 0] - centre[0]
-    g[6 * np.arange(s) + 3, 3] = 1.0
-    return g
-
-
-def _constraints(problem: _Problem, pose: np.ndarray, markers: np.ndarray) -> np.ndarray:
-    """(d, u) minimal constraints ``B dx = 0`` of the free datum (d = 0 for the others): the
-    defect directions restricted to the stations' x, y, z and heading."""
-    u = pose.shape[0] * 6 + markers.shape[0] * 3
-    if not problem.free_defects.size:
-        return np.zeros((0, u))
-    g = _defect_basis(pose, markers)[:, problem.free_defects]
-    on_stations = np.zeros(u, dtype=bool)
-    on_stations[: 6 * pose.shape[0]] = np.tile([1, 1, 1, 1, 0, 0], pose.shape[0]) > 0
-    return (g * on_stations[:, None]).T
-
-
-def _prior_misclosure(problem: _Problem, params: np.ndarray) -> np.ndarray:
-    f = params[problem.prior_index] - problem.prior_value
-    return np.where(problem.prior_is_heading, (f + np.pi) % (2 * np.pi) - np.pi, f)
-
-
-@dataclass
-class _Assembly:
-    """Sparsity pattern of the (bordered) normal matrix of one set of observations, the same in
-    every Gauss-Newton iteration: where each contribution goes in CSC storage."""
-
-    keep: np.ndarray     # (n, 9, 9) bool: block entries that touch no fixed parameter
-    prior: np.ndarray    # (q,) bool: pseudo-observations of parameters that are not fixed
-    n_fixed: int
-    slot: np.ndarray     # (e,) index into the CSC data of each contribution
-    indices: np.ndarray  # CSC row indices
-    indptr: np.ndarray   # CSC column pointers
-    size: int            # u + number of constraints
-
-
-def _assembly(problem: _Problem, columns: np.ndarray, b: np.ndarray) -> _Assembly:
-    """The pattern of :func:`_normal_system`: observation blocks, priors, a unit diagonal for
-    each fixed parameter, the border ``B`` (rows) and ``B^T`` (columns)."""
-    u = problem.fixed.size
-    size = u + b.shape[0]
-    keep = ~(problem.fixed[columns][:, :, None] | problem.fixed[columns][:, None, :])
-    fixed = np.flatnonzero(problem.fixed)
-    prior = ~problem.fixed[problem.prior_index]
-    border_r, border_c = np.nonzero(b)
-    row = np.concatenate([np.broadcast_to(columns[:, :, None], keep.shape)[keep],
-                          problem.prior_index[prior], fixed, u + border_r, border_c])
-    col = np.concatenate([np.broadcast_to(columns[:, None, :], keep.shape)[keep],
-                          problem.prior_index[prior], fixed, border_c, u + border_r])
-    unique, slot = np.unique(col * size + row, return_inverse=True)
-    return _Assembly(keep, prior, fixed.size, slot, unique % size,
-                     np.searchsorted(unique, np.arange(size + 1) * size), size)
-
-
-def _normal_system(problem: _Problem, assembly: _Assembly, blocks: np.ndarray,
-                   columns: np.ndarray, f: np.ndarray, fp: np.ndarray, b: np.ndarray
-                   ) -> tuple[sp.csc_matrix, np.ndarray]:
-    """Normal equations of the Gauss-Newton step ``N dx = -A^T P f``, assembled from the
-    observations' 9 x 9 blocks (sparse), bordered by the minimal constraints ``B`` when there
-    are any. A parameter the datum fixes gets a unit row and column (its step is 0)."""
-    u = problem.fixed.size
-    weighted = blocks * axis_weight(problem.obs.sigma_m)[:, None, None]
-    border = b[b != 0]
-    values = np.concatenate([(weighted.transpose(0, 2, 1) @ blocks)[assembly.keep],
-                             problem.prior_weight[assembly.prior], np.ones(assembly.n_fixed),
-                             border, border])
-    normal = sp.csc_matrix((np.bincount(assembly.slot, values, minlength=assembly.indices.size),
-                            assembly.indices, assembly.indptr),
-                           shape=(assembly.size, assembly.size))
-    rhs = -(np.bincount(columns.ravel(), np.sum(weighted * f[:, :, None], axis=1).ravel(),
-                        minlength=u)
-            + np.bincount(problem.prior_index, problem.prior_weight * fp, minlength=u))
-    rhs[problem.fixed] = 0.0
-    return normal, np.concatenate([rhs, np.zeros(b.shape[0])])
-
-
-def _covariance(normal: sp.csc_matrix, n_station_params: int, u: int, fixed: np.ndarray
-                ) -> np.ndarray:
-    """(u, u) covariance: the upper-left block of the inverse of the (bordered) normal matrix,
-    with the fixed parameters' rows and columns zeroed.
-
-    The markers are eliminated first (Schur complement, as in bundle adjustment): their block
-    ``N_mm`` is block-diagonal (3 x 3 per marker) and the border touches stations only, so
-    ``Q_ss = (N_ss - E N_ms)^-1`` with ``E = N_sm N_mm^-1``, ``Q_sm = -Q_ss E`` and
-    ``Q_mm = N_mm^-1 - E^T Q_sm`` — one dense inverse of the stations' size (plus border).
-    """
-    normal = normal.tocsr()
-    ns, k = n_station_params, (u - n_station_params) // 3
-    x = np.r_[0:ns, u:normal.shape[0]]  # stations and border
-    n_xm = normal[x][:, ns:u]
-    n_mm = normal[ns:u][:, ns:u].toarray().reshape(k, 3, k, 3)
-    m_inv = np.linalg.inv(n_mm[np.arange(k), :, np.arange(k), :])
-    e = n_xm @ sp.bsr_matrix((m_inv, np.arange(k), np.arange(k + 1)), shape=(3 * k, 3 * k))
-    schur = normal[x][:, x].toarray() - (e @ n_xm.T).toarray()
-    try:
-        q_ss = np.linalg.inv(schur)[:ns, :ns]
-    except np.linalg.LinAlgError:
-        q_ss = np.full((ns, ns), np.nan)
-    if not (np.isfinite(np.diag(q_ss)).all() and (np.diag(q_ss)[~fixed[:ns]] > 0).all()):
-        raise DataError("the network's normal matrix is singular (a station tied only by "
-                        "markers on one vertical line?)")
-    e = e[:ns].tocsr()
-    q_sm = -np.asarray((e.T @ q_ss).T)
-    q_mm = -np.asarray(e.T @ q_sm)
-    q_mm.reshape(k, 3, k, 3)[np.arange(k), :, np.arange(k), :] += m_inv
-    cov = np.empty((u, u))
-    cov[:ns, :ns], cov[:ns, ns:], cov[ns:, :ns], cov[ns:, ns:] = q_ss, q_sm, q_sm.T, q_mm
-    cov[fixed, :] = 0.0
-    cov[:, fixed] = 0.0
-    return cov
-
-
-def _downdated(covariance: np.ndarray, blocks: np.ndarray, columns: np.ndarray,
-               weight: np.ndarray) -> np.ndarray:
-    """Covariance after removing one point observation (Sherman-Morrison-Woodbury):
-    ``Q + Q U (W^-1 - U^T Q U)^-1 U^T Q`` with ``U = A_i^T`` (u, 3); also under minimal
-    constraints, since the border is unchanged.
-
-    Parameters
-    ----------
-    covariance : (u, u) float
-    blocks : (3, 9) float
-        The observation's design block.
-    columns : (9,) int
-    weight : (3,) float
-        Its component weights, 1/m^2.
-    """
-    qu = covariance[:, columns] @ blocks.T
-    residual_cov = np.diag(1.0 / weight) - blocks @ qu[columns]
-    return covariance + qu @ np.linalg.solve(residual_cov, qu.T)
-
-
-def _solve(problem: _Problem, pose: np.ndarray, markers: np.ndarray, max_iterations: int,
-           must_converge: bool = True) -> _Solution:
-    """Gauss-Newton from ``pose``/``markers`` to convergence (covariance left to the caller).
-
-    Without convergence in ``max_iterations`` steps: DataError, or with ``must_converge=False``
-    the last iterate (``converged`` False) — a blunder of metres makes Gauss-Newton converge
-    slowly, and its w-tests at the iterate already point at it.
-    """
-    s = pose.shape[0]
-    params = np.concatenate([pose.ravel(), markers.ravel()])
-    u = params.size
-    b = _constraints(problem, pose, markers)
-    step = np.full(1, np.inf)
-    for iteration in range(1, max_iterations + 2):
-        pose, markers = params[: 6 * s].reshape(s, 6), params[6 * s:].reshape(-1, 3)
-        blocks, columns, f = _linearise(problem.obs, pose, markers)
-        if iteration == 1:
-            assembly = _assembly(problem, columns, b)
-        fp = _prior_misclosure(problem, params)
-        normal, rhs = _normal_system(problem, assembly, blocks, columns, f, fp, b)
-        converged = np.abs(step).max() < _STEP_TOLERANCE
-        if converged or iteration > max_iterations:
-            break
-        try:
-            step = scipy.sparse.linalg.splu(normal).solve(rhs)[:u]
-        except RuntimeError:
-            raise DataError("the network's normal equations are singular (a station tied only "
-                            "by markers on one vertical line?)") from None
-        params = params + step
-    if must_converge and not converged:
-        raise DataError(f"the adjustment did not converge in {max_iterations} iterations "
-                        f"(last step {np.abs(step).max():.3g}); a blunder? (data snooping "
-                        "finds it)")
-    return _Solution(pose, markers, blocks, columns, f, fp, None, b.shape[0], iteration - 1,
-                     bool(converged), normal)
-
-
 def _adjust_iv(obs, datum, settings, nominal) -> int:
     if not isinstance(obs, NetworkObservations):
         raise ConfigError(f"`obs` must be NetworkObservations, got {type(obs).__name__}")
@@ -543,7 +362,7 @@ def _adjust_iv(obs, datum, settings, nominal) -> int:
 
 
 def _problem(obs: NetworkObservations, datum: Datum, settings: AdjustmentSettings,
-             nominal: NominalPoses | None, reference: int) -> _Problem:
+             nominal: NominalPoses | None, reference: int) -> normals.Problem:
     """Pseudo-observations and datum constraints; refuses a datum that leaves a defect free
     (:meth:`~pipeline.network.observations.Datum.constrained_defects`)."""
     s = len(obs.station_ids)
@@ -562,7 +381,7 @@ def _problem(obs: NetworkObservations, datum: Datum, settings: AdjustmentSetting
         value.append(c.xyz_m)
         weight.append(c.sigma_m**-2.0)
         heading.append(np.zeros(3, dtype=bool))
-    problem = _Problem(obs, np.concatenate(index), np.concatenate(value),
+    problem = normals.Problem(obs, np.concatenate(index), np.concatenate(value),
                        np.concatenate(weight), np.concatenate(heading),
                        np.zeros(6 * s + 3 * len(obs.marker_ids), dtype=bool),
                        np.zeros(0, dtype=int))
@@ -600,10 +419,138 @@ def _initial(obs: NetworkObservations, datum: Datum, nominal: NominalPoses | Non
     return pose, _markers_from_poses(obs, pose)
 
 
+def _snooped(problem: normals.Problem, obs: NetworkObservations, settings: AdjustmentSettings,
+             reference: int, start: tuple[np.ndarray, np.ndarray]
+             ) -> tuple[normals.Solution, np.ndarray, list[Rejection]]:
+    """Least squares with data snooping: the last solution (its covariance at its own
+    linearisation), the observations kept and those removed."""
+    snooping = settings.snooping and settings.max_rejections > 0
+    solved_keep = np.ones(obs.n, dtype=bool)
+
+    def solve(keep, previous):
+        # After a removal the covariance is downdated (normals.downdated) while the solution's
+        # angles (the design depends on no other parameter) stay within _DOWNDATE_ANGLE_RAD of
+        # those it was computed at; otherwise, e.g. once a blunder of metres is out, afresh.
+        problem.obs = obs.subset(keep)
+        begin = start if previous is None else (previous.pose, previous.markers)
+        sol = normals.solve(problem, *begin, settings.max_iterations, must_converge=not snooping)
+        if (previous is not None and np.abs(sol.pose[:, 3:] - previous.covariance_angles).max()
+                < _DOWNDATE_ANGLE_RAD):
+            row = int(np.flatnonzero(solved_keep & ~keep)[0])
+            i = int(np.count_nonzero(solved_keep[:row]))
+            sol.covariance = normals.downdated(previous.covariance, previous.blocks[i],
+                                               previous.columns[i],
+                                               np.full(3, axis_weight(obs.sigma_m[row])))
+            sol.covariance_angles = previous.covariance_angles
+        else:
+            sol.covariance = normals.covariance_from_normal(sol.normal, problem)
+            sol.covariance_angles = sol.pose[:, 3:].copy()
+        solved_keep[:] = keep
+        return sol, _tests(problem, sol, sol.covariance)
+
+    def removable(keep, i):
+        trial = keep.copy()
+        trial[i] = False
+        return (np.any(obs.marker[trial] == obs.marker[i])
+                and not tie_order(obs, trial, reference)[1])
+
+    sol, keep, rejected = data_snooping(
+        solve, obs.n, settings.alpha0, settings.max_rejections if snooping else 0, removable)
+    if not sol.converged:
+        tests = _tests(problem, sol, sol.covariance)
+        i = int(np.flatnonzero(keep)[np.argmax(tests.w)])
+        raise DataError(f"the adjustment did not converge in {settings.max_iterations} "
+                        f"iterations after {len(rejected)} removals by data snooping; the "
+                        f"largest point-test w ({tests.w.max():.3g}) is at station "
+                        f"{obs.station_ids[obs.station[i]]}, marker "
+                        f"{obs.marker_ids[obs.marker[i]]}")
+    if not np.array_equal(sol.covariance_angles, sol.pose[:, 3:]):  # downdated: afresh
+        sol.covariance = normals.covariance_from_normal(sol.normal, problem)
+    return sol, keep, [Rejection(obs.station_ids[obs.station[i]], obs.marker_ids[obs.marker[i]],
+                                 w, r, statistic, dof) for i, w, statistic, dof, r in rejected]
+
+
+def _tests(problem: normals.Problem, sol: normals.Solution, covariance: np.ndarray,
+           rho: np.ndarray | None = None) -> PointTests:
+    """The point tests of ``problem.obs`` at ``sol``, whose ``covariance`` has the weights of
+    the observations times ``rho`` (None: 1)."""
+    weight = np.repeat(axis_weight(problem.obs.sigma_m[:, None]), 3, axis=1)
+    return point_tests(residual_blocks(sol.blocks, sol.columns, covariance), weight,
+                       -sol.misclosure, rho)
+
+
+def _reweighted(problem: normals.Problem, settings: AdjustmentSettings,
+                start: tuple[np.ndarray, np.ndarray]
+                ) -> tuple[normals.Solution, np.ndarray, PointTests, int]:
+    """Robust estimation from plain least squares (IGG-III from Huber's solution): the solution
+    with the final weights (its ``covariance`` with them, ``ls_covariance`` with the
+    observations' own), the weight factors, the point tests they came from and the rounds.
+
+    A blunder of metres keeps Gauss-Newton from converging with the first weights; as in data
+    snooping, the tests at its last iterate already point at the blunder, and only the final
+    solution must converge."""
+    tests: list[PointTests] = []
+
+    def solve(rho, previous):
+        problem.factor = np.maximum(rho, robust_.WEIGHT_FLOOR)
+        begin = start if previous is None else (previous.pose, previous.markers)
+        sol = normals.solve(problem, *begin, settings.max_iterations, must_converge=False)
+        sol.covariance = normals.covariance_from_normal(sol.normal, problem)
+        tests[:] = [_tests(problem, sol, sol.covariance, rho)]
+        return sol, tests[0].w
+
+    k0, k1 = settings.robust_k0, settings.robust_k1
+    sol, rho, _, rounds = robust_.reweighted(
+        solve, lambda w: robust_.robust_weights(w, "huber", k0, k1),
+        solve(np.ones(problem.obs.n), None))
+    if settings.robust == "igg3":
+        sol, rho, _, more = robust_.reweighted(
+            solve, lambda w: robust_.robust_weights(w, "igg3", k0, k1), (sol, tests[0].w))
+        rounds += more
+    final = tests[0]
+    if not sol.converged:
+        raise DataError(f"the robust adjustment did not converge in {settings.max_iterations} "
+                        f"iterations with its final weights; the largest point-test w "
+                        f"({final.w.max():.3g}) is at station "
+                        f"{problem.obs.station_ids[problem.obs.station[np.argmax(final.w)]]}")
+    problem.factor = None
+    sol.ls_covariance = normals.covariance_at(problem, sol)
+    problem.factor = np.maximum(rho, robust_.WEIGHT_FLOOR)
+    return sol, rho, final, rounds
+
+
+def _components(problem: normals.Problem, sol: normals.Solution, by: str,
+                max_iterations: int) -> list[VarianceComponent]:
+    """Variance components of ``problem``'s observations grouped ``by`` station or range,
+    re-adjusting from ``sol`` (``problem.factor`` restored afterwards)."""
+    obs, base = problem.obs, problem.factor
+    group, names = observation_groups(obs.station, obs.station_ids,
+                                      np.linalg.norm(obs.xyz_m, axis=1), by)
+    current = [sol]
+
+    def solve(scale):
+        problem.factor = (1.0 if base is None else base) / scale
+        if np.any(scale != 1.0):
+            current[0] = normals.solve(problem, current[0].pose, current[0].markers,
+                                       max_iterations)
+        fit = current[0]
+        cov = normals.covariance_from_normal(fit.normal, problem)
+        weight = problem.weight()
+        aqa = residual_blocks(fit.blocks, fit.columns, cov)
+        r = np.clip(1.0 - weight[:, None] * np.diagonal(aqa, axis1=1, axis2=2), 0.0, 1.0)
+        return weight * np.sum(fit.misclosure**2, axis=1), r.sum(axis=1)
+
+    try:
+        return variance_components(solve, group, names)
+    finally:
+        problem.factor = base
+
+
 def adjust(obs: NetworkObservations, datum: Datum = Datum(),  # noqa: B008 (frozen)
            settings: AdjustmentSettings = AdjustmentSettings(),
            nominal: NominalPoses | None = None) -> NetworkAdjustment:
-    """Adjust a network of stations and markers; test it and remove blunders (data snooping).
+    """Adjust a network of stations and markers; test it and deal with blunders (data
+    snooping or robust estimation); optionally estimate variance components.
 
     Parameters
     ----------
@@ -612,7 +559,7 @@ def adjust(obs: NetworkObservations, datum: Datum = Datum(),  # noqa: B008 (froz
     datum : Datum
         What fixes the network (default: the first station).
     settings : AdjustmentSettings
-        Priors, test levels, limits.
+        Priors, test levels, limits, robust estimator, variance-component groups.
     nominal : NominalPoses or None
         Nominal poses (initial values, heading-prior centre); None chains initial values from
         the reference station.
@@ -630,15 +577,19 @@ def adjust(obs: NetworkObservations, datum: Datum = Datum(),  # noqa: B008 (froz
         Unknown reference station or control ids, a datum that leaves a defect free (named),
         a heading prior without nominal poses.
     DataError
-        Singular normal equations or no convergence.
+        Singular normal equations, no convergence (Gauss-Newton, robust reweighting or
+        variance components).
 
     Notes
     -----
-    Data snooping (``settings.snooping``) removes the point observation with the largest
-    ``|w| > Phi^-1(1 - alpha0 / 2)`` and re-adjusts, up to ``settings.max_rejections`` times. It
+    Each point observation is tested as one 3-dimensional group
+    (:class:`~pipeline.network.reliability.PointTests`). Data snooping (``settings.snooping``)
+    removes the observation with the largest normalised statistic ``w > Phi^-1(1 - alpha0 /
+    2)`` (the smallest p-value) and re-adjusts, up to ``settings.max_rejections`` times. It
     stops early, keeping the observation, when removing it would leave a station tied by fewer
-    than two markers or its marker with no observation; its ``|w|`` then stays above the critical
-    value in ``w_test`` for the report to show.
+    than two markers or its marker with no observation; its ``w`` then stays above the
+    critical value for the report to show. With ``settings.robust`` nothing is removed: the
+    weights of the observations are reweighted by their ``w`` (:mod:`pipeline.network.robust`).
 
     Examples
     --------
@@ -654,62 +605,33 @@ def adjust(obs: NetworkObservations, datum: Datum = Datum(),  # noqa: B008 (froz
     reference = _adjust_iv(obs, datum, settings, nominal)
     order = _check_tied(obs, np.ones(obs.n, dtype=bool), reference)
     problem = _problem(obs, datum, settings, nominal, reference)
-    pose0, markers0 = _initial(obs, datum, nominal, order)
-    delta0 = non_centrality(settings.alpha0, settings.beta0)
+    start = _initial(obs, datum, nominal, order)
+    rejected: list[Rejection] = []
+    rounds, robust_tests = 0, None
+    if settings.robust is None:
+        sol, keep, rejected = _snooped(problem, obs, settings, reference, start)
+        sol.ls_covariance = sol.covariance
+        rho = np.ones(int(keep.sum()))
+    else:
+        problem.obs = obs
+        sol, rho, robust_tests, rounds = _reweighted(problem, settings, start)
+    kept = problem.obs
     s, k = len(obs.station_ids), len(obs.marker_ids)
     position_columns = np.concatenate([6 * np.arange(s)[:, None], 6 * s + 3 * np.arange(k)[:, None]]
                                       ) + np.arange(3)
-
-    solved_keep = np.ones(obs.n, dtype=bool)
-    snooping = settings.snooping and settings.max_rejections > 0
-
-    def solve(keep, previous):
-        # After a removal the covariance is downdated (see _downdated) while the solution's
-        # angles (the design depends on no other parameter) stay within _DOWNDATE_ANGLE_RAD of
-        # those it was computed at; otherwise, e.g. once a blunder of metres is out, afresh.
-        problem.obs = obs.subset(keep)
-        start = (pose0, markers0) if previous is None else (previous.pose, previous.markers)
-        sol = _solve(problem, *start, settings.max_iterations, must_converge=not snooping)
-        if (previous is not None and np.abs(sol.pose[:, 3:] - previous.covariance_angles).max()
-                < _DOWNDATE_ANGLE_RAD):
-            row = int(np.flatnonzero(solved_keep & ~keep)[0])
-            i = int(np.count_nonzero(solved_keep[:row]))
-            sol.covariance = _downdated(previous.covariance, previous.blocks[i],
-                                        previous.columns[i],
-                                        np.full(3, axis_weight(obs.sigma_m[row])))
-            sol.covariance_angles = previous.covariance_angles
-        else:
-            sol.covariance = _covariance(sol.normal, 6 * s, problem.fixed.size, problem.fixed)
-            sol.covariance_angles = sol.pose[:, 3:].copy()
-        solved_keep[:] = keep
-        weight = np.repeat(axis_weight(problem.obs.sigma_m[:, None]), 3, axis=1)
-        return sol, w_tests(sol.blocks, sol.columns, weight, sol.covariance, -sol.misclosure)
-
-    def removable(keep, i):
-        trial = keep.copy()
-        trial[i] = False
-        return (np.any(obs.marker[trial] == obs.marker[i])
-                and not tie_order(obs, trial, reference)[1])
-
-    sol, keep, rejected = data_snooping(
-        solve, obs.n, settings.alpha0, settings.max_rejections if snooping else 0, removable)
-    kept = obs.subset(keep)
     w = np.repeat(axis_weight(kept.sigma_m[:, None]), 3, axis=1)
-    if not sol.converged:
-        w_last = np.abs(w_tests(sol.blocks, sol.columns, w, sol.covariance, -sol.misclosure))
-        i = int(np.flatnonzero(keep)[np.argmax(w_last.max(axis=1))])
-        raise DataError(f"the adjustment did not converge in {settings.max_iterations} "
-                        f"iterations after {len(rejected)} removals by data snooping; the "
-                        f"largest |w| ({w_last.max():.3g}) is at station "
-                        f"{obs.station_ids[obs.station[i]]}, marker "
-                        f"{obs.marker_ids[obs.marker[i]]}")
-    if not np.array_equal(sol.covariance_angles, sol.pose[:, 3:]):  # downdated: afresh
-        sol.covariance = _covariance(sol.normal, 6 * s, problem.fixed.size, problem.fixed)
-    rel = observation_reliability(sol.blocks, sol.columns, w, sol.covariance, -sol.misclosure,
-                                  position_columns, delta0)
-    dof = (3 * kept.n + problem.prior_index.size - problem.fixed.size + problem.fixed.sum()
-           + sol.n_constraints)
-    vpv = float(np.sum(w * sol.misclosure**2) + problem.prior_weight @ sol.prior_misclosure**2)
+    rel = observation_reliability(sol.blocks, sol.columns, w, sol.ls_covariance,
+                                  -sol.misclosure, position_columns,
+                                  non_centrality(settings.alpha0, settings.beta0),
+                                  point_non_centrality(settings.alpha0, settings.beta0),
+                                  robust_tests)
+    dof = (3 * int(np.count_nonzero(rho)) + problem.prior_index.size - problem.fixed.size
+           + problem.fixed.sum() + sol.n_constraints)
+    vpv = float(np.sum(rho[:, None] * w * sol.misclosure**2)
+                + problem.prior_weight @ sol.prior_misclosure**2)
+    components = ([] if settings.variance_components is None else
+                  _components(problem, sol, settings.variance_components,
+                              settings.max_iterations))
     pose = sol.pose.copy()
     pose[:, 3] = (pose[:, 3] + np.pi) % (2 * np.pi) - np.pi
     return NetworkAdjustment(
@@ -717,7 +639,6 @@ def adjust(obs: NetworkObservations, datum: Datum = Datum(),  # noqa: B008 (froz
         residuals_m=-sol.misclosure, redundancy=rel.redundancy, w_test=rel.w_test,
         mdb_m=rel.mdb_m, mdb_effect_m=rel.mdb_effect_m,
         sigma0_squared=vpv / dof if dof > 0 else float("nan"), dof=int(dof),
-        iterations=sol.iterations,
-        rejected=[Rejection(obs.station_ids[obs.station[i]], obs.marker_ids[obs.marker[i]], w_i,
-                            r) for i, w_i, r in rejected],
-        datum=datum, settings=settings)
+        iterations=sol.iterations, point=rel.point, mdb_point_m=rel.mdb_point_m,
+        robust_weight=rho, robust_rounds=rounds, rejected=rejected,
+        variance_components=components, datum=datum, settings=settings)

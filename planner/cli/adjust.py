@@ -38,6 +38,8 @@ ODOMETRY_HEADING_SIGMA_DEG = FiniteRange(math.degrees(MIN_SIGMA), 90.0)
 RADIUS_M = FiniteRange(0.0, 100.0, min_open=True)
 REQUIREMENT_M = FiniteRange(0.0, 10.0, min_open=True)
 PROBABILITY = FiniteRange(0.0, 1.0, min_open=True, max_open=True)
+#: Robust tuning constants, standardised-residual units (beyond 10 nothing is down-weighted).
+ROBUST_K = FiniteRange(0.0, 10.0, min_open=True)
 
 
 def _datum_text(ctx, param, text: str | None) -> tuple[str, str | None] | None:
@@ -115,13 +117,31 @@ def _datum_choice(datum: tuple[str, str | None] | None, control_path: Path | Non
 @click.option("--inclinometer-sigma-deg", type=ANGLE_SIGMA_DEG,
               help="1-sigma roll and pitch prior of every station, degrees (default: the plan's, "
                    "else 0.01).")
-@click.option("--snooping/--no-snooping", default=True, show_default=True,
-              help="Data snooping: remove the observation with the largest |w| above the "
-                   "critical value and adjust again, until none is (off: only flag).")
+@click.option("--snooping/--no-snooping", default=None,
+              help="Data snooping: remove the observation whose point test has the largest w "
+                   "above the critical value and adjust again, until none is (off: only flag). "
+                   "Default: on, off with --robust.")
+@click.option("--robust", type=click.Choice(("none", "huber", "igg3")), default="none",
+              show_default=True,
+              help="Robust estimation instead of data snooping: reweight every observation by "
+                   "its standardised residual (Huber, or Yang's IGG-III which gives gross "
+                   "errors weight 0); none is plain least squares.")
+@click.option("--robust-k0", type=ROBUST_K, default=1.5, show_default=True,
+              help="Huber's k, or IGG-III's k0: the standardised residual up to which an "
+                   "observation keeps its full weight.")
+@click.option("--robust-k1", type=ROBUST_K, default=3.0, show_default=True,
+              help="IGG-III's k1: the standardised residual above which an observation gets "
+                   "weight 0.")
+@click.option("--variance-components", type=click.Choice(("none", "station", "range")),
+              default="none", show_default=True,
+              help="Estimate a variance factor per observing station or per range band "
+                   "(0-10, 10-20, 20-50, 50+ m): is the error model right for each? Written "
+                   "to variance_components.csv and the report.")
 @click.option("--alpha0", type=PROBABILITY, default=0.001, show_default=True,
-              help="Significance level of the w-test.")
+              help="Significance level of the test of each point observation.")
 @click.option("--beta0", type=PROBABILITY, default=0.80, show_default=True,
-              help="Power of the w-test (for the minimal detectable biases).")
+              help="Power of the test of each point observation (for the minimal detectable "
+                   "biases).")
 @renamed_option("--working-radius-m", "working_radius_m", "--working-radius", type=RADIUS_M,
                 help="Radius around a station over which its station error is assessed, m "
                      "(default: the plan's, else 10).")
@@ -131,15 +151,18 @@ def _datum_choice(datum: tuple[str, str | None] | None, control_path: Path | Non
 @json_option
 def command(tables, out, overwrite, error_model, plan_path, identity, odometry_sigma_m,
             odometry_heading_sigma_deg, datum, reference_station, control_path,
-            heading_prior_sigma_deg, inclinometer_sigma_deg, snooping, alpha0, beta0,
-            working_radius_m, requirement_m, error_figure, as_json):
+            heading_prior_sigma_deg, inclinometer_sigma_deg, snooping, robust, robust_k0,
+            robust_k1, variance_components, alpha0, beta0, working_radius_m, requirement_m,
+            error_figure, as_json):
     """Adjust a network: estimate every station's pose and every marker's centre together
     from the marker tables (markers.csv of `markerplan process`, accepted detections only) of
-    several stations, relative to a datum; test the fit and remove blunders (data snooping).
+    several stations, relative to a datum; test the fit and remove blunders (data snooping),
+    or down-weight them (--robust).
 
     Each detection is weighted by the error model's sigma at its distance and elevation.
     Roll and pitch are unknowns with the inclinometer as prior. Writes stations.csv,
     markers.csv, observations.csv, parameters.csv + covariance.npy (full covariance),
+    (with --variance-components) variance_components.csv,
     network.geojson, adjustment.json, report.md and network.png into --out.
 
     \b
@@ -153,6 +176,7 @@ def command(tables, out, overwrite, error_model, plan_path, identity, odometry_s
     from markerplan.output_folder import output_folder
 
     kind, reference = _datum_choice(datum, control_path, reference_station)
+    snooping = _snooping_choice(snooping, robust)
     if identity is None:
         identity = "plan" if plan_path is not None else "geometry"
     _check_identity(identity, plan_path, control_path, heading_prior_sigma_deg)
@@ -177,11 +201,14 @@ def command(tables, out, overwrite, error_model, plan_path, identity, odometry_s
             heading_prior_sigma_deg=heading_prior_sigma_deg,
             inclinometer_sigma_deg=inclinometer_sigma_deg, working_radius_m=working_radius_m,
             requirement_m=requirement_m, error_figure=error_figure, snooping=snooping,
-            alpha0=alpha0, beta0=beta0, plan_geometry=plan)
+            alpha0=alpha0, beta0=beta0, robust=robust, robust_k0=robust_k0, robust_k1=robust_k1,
+            variance_components=variance_components, plan_geometry=plan)
         settings = AdjustmentSettings(
             inclinometer_sigma_rad=math.radians(config["inclinometer_sigma_deg"]),
             heading_prior_sigma_rad=_radians(config["heading_prior_sigma_deg"]),
-            alpha0=alpha0, beta0=beta0, snooping=snooping)
+            alpha0=alpha0, beta0=beta0, snooping=snooping, robust=_none(robust),
+            robust_k0=robust_k0, robust_k1=robust_k1,
+            variance_components=_none(variance_components))
         read_s = time.perf_counter() - t0
         adjusted = adjust_tables(
             tables, error_model.model, functools.partial(_reference, reference, kind, plan),
@@ -225,6 +252,22 @@ def _reference(reference: str | None, kind: str, plan, stations) -> str | None:
     if kind == "station" and plan is not None and plan.reference_station in ids:
         return plan.reference_station
     return None
+
+
+def _snooping_choice(snooping: bool | None, robust: str) -> bool:
+    """``--snooping`` resolved: on by default, off with ``--robust``; both given is refused."""
+    from markerplan.errors import ConfigError
+
+    if snooping is None:
+        return robust == "none"
+    if snooping and robust != "none":
+        raise ConfigError(f"--robust {robust} replaces data snooping: drop --snooping (or give "
+                          "--robust none)")
+    return snooping
+
+
+def _none(choice: str) -> str | None:
+    return None if choice == "none" else choice
 
 
 def _radians(degrees: float | None) -> float | None:
@@ -287,6 +330,10 @@ def _summary(doc: dict, out: Path, timings: dict[str, float]) -> dict:
             "sigma0_squared": st["sigma0_squared"], "global_test_passed": test["passed"],
             "datum": doc["datum"]["description"], "marker_ids": doc["identity"]["method"],
             "rejected": doc["data_snooping"]["rejected"],
+            "robust": None if doc["robust"] is None else doc["robust"]["estimator"],
+            "downweighted": [] if doc["robust"] is None else doc["robust"]["downweighted"],
+            "variance_components": None if doc["variance_components"] is None else {
+                c["group"]: c["sigma0_squared"] for c in doc["variance_components"]["components"]},
             "n_stations_meeting_requirement": req["n_stations_meeting"],
             "requirement_m": req["requirement_m"], "worst_station": req["worst_station"],
             "worst_station_error_95_m": req["worst_station_error_95_m"],
@@ -303,6 +350,11 @@ def _human(doc: dict, out: Path) -> str:
     rejected = doc["data_snooping"]["rejected"]
     removed = ("; removed " + ", ".join(f"{r['station_id']}->{r['marker_id']} (w {r['w']:.1f})"
                                         for r in rejected)) if rejected else ""
+    if doc["robust"] is not None:
+        down = doc["robust"]["downweighted"]
+        removed += (f"; {doc['robust']['estimator']}: {len(down)} down-weighted"
+                    + "".join(f", {d['station_id']}->{d['marker_id']} ({d['weight']:.2f})"
+                              for d in down[:5]))
     sigma0 = st["sigma0_squared"]
     return (f"adjusted {st['n_stations']} stations, {st['n_markers']} markers "
             f"({st['n_observations']} observations, dof {st['dof']}): sigma0^2 "

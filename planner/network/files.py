@@ -10,8 +10,9 @@ stations.csv       adjusted poses, sigmas, 95 % ellipsoid semi-axes, 95 % statio
 stations.csvt      its column types, for QGIS / GDAL (``"String","Real",...``)
 markers.csv        adjusted centres, sigmas, 95 % ellipsoid semi-axes, stations that saw them
 markers.csvt       its column types
-observations.csv   every identified detection: residuals, redundancy numbers, w-tests, MDBs and
-                   their effect; ``status`` kept / flagged / removed
+observations.csv   every identified detection: residuals, redundancy numbers, the test of the
+                   point observation and the per-component w-tests, MDBs and their effect,
+                   robust weight; ``status`` kept / flagged / removed
 parameters.csv     the unknowns in the covariance's order, with values and sigmas (m, rad)
 covariance.npy     the full a-priori covariance (sigma0 = 1) of all unknowns, m^2 and rad^2
 network.geojson    stations and markers (Points) and the ties (LineStrings), site frame
@@ -20,6 +21,9 @@ adjustment.json    the summary: configuration, version, solver status, datum, si
 report.md          the report a surveyor reads (:mod:`planner.network.report`)
 network.png        the network map (:mod:`planner.network.map`)
 ================== ===========================================================================
+
+With variance components estimated, ``variance_components.csv`` (:data:`VARIANCE_FILES`) holds
+them, one row per group and a last row ``all`` for the whole network.
 
 Every CSV opens with its header. With a CRS (:attr:`planner.network.record.AdjustmentRun.crs`)
 ``stations.prj`` and ``markers.prj`` (:data:`PRJ_FILES`) hold its WKT for GIS readers
@@ -46,11 +50,14 @@ FILES = ("stations.csv", "stations.csvt", "markers.csv", "markers.csvt", "observ
          "network.png")
 #: Written besides :data:`FILES` when the coordinates have a CRS.
 PRJ_FILES = ("stations.prj", "markers.prj")
+#: Written besides :data:`FILES` when variance components are estimated.
+VARIANCE_FILES = ("variance_components.csv",)
 
 
 def write_network_files(folder: str | Path, run: nr.AdjustmentRun, draw_map: bool = True
                         ) -> dict:
-    """Write every file of :data:`FILES` (and, with a CRS, :data:`PRJ_FILES`) into ``folder``.
+    """Write every file of :data:`FILES` (and, with a CRS, :data:`PRJ_FILES`; with variance
+    components, :data:`VARIANCE_FILES`) into ``folder``.
 
     Parameters
     ----------
@@ -77,6 +84,9 @@ def write_network_files(folder: str | Path, run: nr.AdjustmentRun, draw_map: boo
     files = [f for f in FILES if draw_map or f != "network.png"]
     if run.crs is not None:
         files += PRJ_FILES
+    variance = nr.variance_rows(run.result)
+    if variance:
+        files += VARIANCE_FILES
     doc = finite_json(nr.adjustment_record(run, stations, markers, observations, files))
     for name, columns, rows in (("stations.csv", nr.STATION_COLUMNS, stations),
                                 ("markers.csv", nr.MARKER_COLUMNS, markers)):
@@ -84,6 +94,8 @@ def write_network_files(folder: str | Path, run: nr.AdjustmentRun, draw_map: boo
         write_gis_sidecars(folder / name, column_types(columns, rows), run.crs)
     write_csv(folder / "observations.csv", nr.OBSERVATION_COLUMNS, observations)
     write_csv(folder / "parameters.csv", nr.PARAMETER_COLUMNS, nr.parameter_rows(run.result))
+    if variance:
+        write_csv(folder / "variance_components.csv", nr.VARIANCE_COLUMNS, variance)
     np.save(folder / "covariance.npy", np.ascontiguousarray(run.result.covariance,
                                                             dtype=np.float64))
     write_json(folder / "network.geojson",
@@ -167,7 +179,8 @@ def network_geojson(doc: dict, stations: list[dict], markers: list[dict],
                                             where["marker", o["marker_id"]]]},
                "properties": {"kind": "tie", "station_id": o["station_id"],
                               "marker_id": o["marker_id"], "status": o["status"],
-                              "max_abs_w": _round(o["max_abs_w"], 3)}}
+                              "max_abs_w": _round(o["max_abs_w"], 3),
+                              "test_w": _round(o["test_w"], 3)}}
               for o in observations if ("marker", o["marker_id"]) in where]
     prov = doc["provenance"]
     return {"type": "FeatureCollection", "name": "markerplan adjust: network",

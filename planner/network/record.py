@@ -8,8 +8,9 @@ the same in every file:
   error over the working radius (the figure the +-10 cm requirement is about);
 - :func:`marker_rows`: adjusted centres, sigmas and 95 % ellipsoid semi-axes;
 - :func:`observation_rows`: every identified detection with its residuals, redundancy numbers,
-  w-tests, minimal detectable bias and its effect, and whether data snooping flagged or removed
-  it;
+  the test of the point observation (3-D) and the per-component w-tests, minimal detectable
+  biases and their effect, its robust weight, and whether data snooping flagged or removed it;
+- :func:`variance_rows`: the estimated variance components of observation groups;
 - :func:`parameter_rows`: the order and names of the covariance matrix's rows;
 - :func:`global_test`: the test of the variance factor (Baarda's B-method);
 - :func:`adjustment_record`: the machine-readable summary (``adjustment.json``).
@@ -58,7 +59,9 @@ OBSERVATION_COLUMNS = (
     "station_id", "marker_id", "status", "x_m", "y_m", "z_m", "distance_m", "sigma_m",
     "residual_x_m", "residual_y_m", "residual_z_m", "redundancy_x", "redundancy_y",
     "redundancy_z", "w_x", "w_y", "w_z", "max_abs_w", "mdb_x_m", "mdb_y_m", "mdb_z_m",
-    "mdb_effect_m", "removed_in_round")
+    "mdb_effect_m", "removed_in_round", "test_statistic", "test_dof", "test_p_value", "test_w",
+    "mdb_3d_m", "robust_weight")
+VARIANCE_COLUMNS = ("group", "n_observations", "redundancy", "sigma0_squared", "sd")
 PARAMETER_COLUMNS = ("index", "parameter", "kind", "id", "name", "value", "sigma")
 
 
@@ -335,23 +338,31 @@ def observation_rows(run: AdjustmentRun, critical_value: float) -> list[dict]:
     """One row per observation given to the adjustment (:data:`OBSERVATION_COLUMNS`).
 
     ``status`` is ``removed`` (data snooping took it out; its statistics are those of the round
-    it was removed in: only ``max_abs_w``), ``flagged`` (kept although some ``|w|`` exceeds
-    ``critical_value``: snooping was off or stopped) or ``kept``.
+    it was removed in: only the point test's), ``flagged`` (kept although the test of the
+    point observation, ``test_w``, exceeds ``critical_value``: snooping was off or stopped,
+    or the estimation was robust) or ``kept``. ``test_statistic`` is ``T`` (chi-square with
+    ``test_dof`` degrees of freedom), ``test_w`` its p-value's normal deviate; ``w_x`` ...
+    and ``max_abs_w`` are the per-component w-tests, ``mdb_3d_m`` the point test's MDB in
+    its worst direction.
 
     Parameters
     ----------
     run : AdjustmentRun
     critical_value : float
-        Critical value of the w-test (:func:`pipeline.network.reliability.critical_value`).
+        Critical value of the normalised point test
+        (:func:`pipeline.network.reliability.critical_value`).
 
     Returns
     -------
     rows : list of dict
         In the order of ``run.observations``; residuals in site-frame axes, m.
     """
+    from pipeline.network.reliability import chi2_logsf
+
     res = run.result
     given, kept = run.observations, res.observations
     removal = {(r.station_id, r.marker_id): r for r in res.rejected}
+    p_value = np.exp(chi2_logsf(res.point.statistic, res.point.dof))
     rows, j = [], 0
     for i in range(len(given.station)):
         sid, mid = given.station_ids[given.station[i]], given.marker_ids[given.marker[i]]
@@ -361,10 +372,13 @@ def observation_rows(run: AdjustmentRun, critical_value: float) -> list[dict]:
                "sigma_m": float(given.sigma_m[i])}
         if j < len(kept.station) and _same(kept, j, sid, mid, xyz):
             w = res.w_test[j]
-            max_w = float(np.abs(w).max())
-            row.update(status="flagged" if max_w > critical_value else "kept",
-                       max_abs_w=max_w, mdb_effect_m=float(res.mdb_effect_m[j]),
-                       removed_in_round=None)
+            test_w = float(res.point.w[j])
+            row.update(status="flagged" if test_w > critical_value else "kept",
+                       max_abs_w=float(np.abs(w).max()), mdb_effect_m=float(res.mdb_effect_m[j]),
+                       removed_in_round=None, test_statistic=float(res.point.statistic[j]),
+                       test_dof=int(res.point.dof[j]), test_p_value=float(p_value[j]),
+                       test_w=test_w, mdb_3d_m=float(res.mdb_point_m[j]),
+                       robust_weight=float(res.robust_weight[j]))
             for a, axis in enumerate("xyz"):
                 row.update({f"residual_{axis}_m": float(res.residuals_m[j, a]),
                             f"redundancy_{axis}": float(res.redundancy[j, a]),
@@ -373,12 +387,41 @@ def observation_rows(run: AdjustmentRun, critical_value: float) -> list[dict]:
         else:
             r = removal.get((sid, mid))
             row.update({c: None for c in OBSERVATION_COLUMNS if c not in row})
-            row.update(status="removed", max_abs_w=None if r is None else abs(float(r.w)),
-                       removed_in_round=None if r is None else int(r.round))
+            row.update(status="removed")
+            if r is not None:
+                row.update(removed_in_round=int(r.round), test_statistic=float(r.statistic),
+                           test_dof=int(r.dof), test_w=float(r.w), test_p_value=float(
+                               np.exp(chi2_logsf(np.array([r.statistic]), np.array([r.dof]))[0])))
         rows.append(row)
     if j != len(kept.station):
         raise RuntimeError("the adjustment's kept observations are not a subsequence of the "
                            "observations given to it")
+    return rows
+
+
+def variance_rows(result) -> list[dict]:
+    """The estimated variance components (:data:`VARIANCE_COLUMNS`), one row per group, then
+    the whole network (``group`` ``all``: the a-posteriori variance factor, the redundancy its
+    degrees of freedom); empty when none were estimated.
+
+    Parameters
+    ----------
+    result : pipeline.network.adjustment.NetworkAdjustment
+
+    Returns
+    -------
+    rows : list of dict
+        ``sigma0_squared`` and its standard deviation ``sd`` under the model, dimensionless.
+    """
+    if not result.variance_components:
+        return []
+    rows = [{"group": c.group, "n_observations": c.n_observations, "redundancy": c.redundancy,
+             "sigma0_squared": c.sigma0_squared, "sd": c.sd}
+            for c in result.variance_components]
+    dof, s2 = int(result.dof), float(result.sigma0_squared)
+    rows.append({"group": "all", "n_observations": len(result.observations.station),
+                 "redundancy": float(dof), "sigma0_squared": s2,
+                 "sd": s2 * math.sqrt(2.0 / dof) if dof > 0 else None})
     return rows
 
 
@@ -430,13 +473,15 @@ def adjustment_record(run: AdjustmentRun, stations: list[dict], markers: list[di
     doc : dict
         ``schema``, ``schema_version``, ``provenance`` (configuration, version, inputs, error
         model, solver and its status), ``frame``, ``datum``, ``identity``, ``statistics``,
-        ``global_test``, ``data_snooping`` (rejected and flagged observations),
+        ``global_test``, ``data_snooping`` (rejected and flagged observations), ``robust``
+        (:func:`robust_record`), ``variance_components`` (:func:`variance_rows`, or ``None``),
         ``reliability``, ``requirement``, ``stations`` and ``markers`` (ids and 95 % figures),
         ``files``.
     """
     from pipeline.network.reliability import critical_value
 
     res, settings = run.result, run.result.settings
+    k = critical_value(settings.alpha0)
     kept = [o for o in observations if o["status"] != "removed"]
     stats = _statistics(res)
     test = global_test(res.sigma0_squared, res.dof)
@@ -461,11 +506,19 @@ def adjustment_record(run: AdjustmentRun, stations: list[dict], markers: list[di
         "global_test": test,
         "data_snooping": {
             "enabled": bool(settings.snooping), "alpha0": settings.alpha0,
-            "beta0": settings.beta0, "critical_value": critical_value(settings.alpha0),
+            "beta0": settings.beta0, "critical_value": k,
+            "test": "point observation (3-D): T = v^T Q_vv^-1 v ~ chi2(3); w = Phi^-1(1 - p/2)",
+            "critical_value_T": float(chi2.isf(settings.alpha0, 3)),
             "rejected": [{"station_id": r.station_id, "marker_id": r.marker_id,
-                          "w": float(r.w), "round": int(r.round)} for r in res.rejected],
+                          "w": float(r.w), "T": float(r.statistic), "dof": int(r.dof),
+                          "round": int(r.round)} for r in res.rejected],
             "flagged": [{"station_id": o["station_id"], "marker_id": o["marker_id"],
-                         "max_abs_w": o["max_abs_w"]} for o in kept if o["status"] == "flagged"]},
+                         "w": o["test_w"], "max_abs_w": o["max_abs_w"]}
+                        for o in kept if o["status"] == "flagged"]},
+        "robust": robust_record(res, kept),
+        "variance_components": (None if settings.variance_components is None else
+                                {"groups": settings.variance_components,
+                                 "components": variance_rows(res)}),
         "reliability": reliability_summary(kept),
         "requirement": {"requirement_m": run.requirement_m,
                         "working_radius_m": run.working_radius_m,
@@ -480,6 +533,30 @@ def adjustment_record(run: AdjustmentRun, stations: list[dict], markers: list[di
                      "n_stations": m["n_stations"]} for m in markers],
         "files": files,
     }
+
+
+def robust_record(result, kept: list[dict]) -> dict | None:
+    """The robust estimation: estimator, tuning constants, rounds and the down-weighted
+    observations (weight below 1, lowest first); ``None`` without one.
+
+    Parameters
+    ----------
+    result : pipeline.network.adjustment.NetworkAdjustment
+    kept : list of dict
+        Rows of :func:`observation_rows` of the kept observations.
+    """
+    settings = result.settings
+    if settings.robust is None:
+        return None
+    constants = ({"k": settings.robust_k0} if settings.robust == "huber" else
+                 {"k0": settings.robust_k0, "k1": settings.robust_k1})
+    down = sorted((o for o in kept if o["robust_weight"] < 1.0),
+                  key=lambda o: (o["robust_weight"], o["station_id"], o["marker_id"]))
+    return {"estimator": settings.robust, "constants": constants,
+            "rounds": int(result.robust_rounds),
+            "statistic": "w of the point test, with the observations' own weights",
+            "downweighted": [{"station_id": o["station_id"], "marker_id": o["marker_id"],
+                              "weight": o["robust_weight"], "w": o["test_w"]} for o in down]}
 
 
 def datum_record(result) -> dict:

@@ -1,7 +1,8 @@
 """``report.md`` of ``markerplan adjust``: the adjustment as a surveyor reads it, top to bottom.
 
-Datum and frame first; then the fit (variance factor, degrees of freedom, global test); the
-observations data snooping removed and why; the stations and markers, weakest first; the
+Datum and frame first; then the fit (variance factor, degrees of freedom, global test, variance
+components of observation groups when estimated); the observations data snooping removed and
+why, or those robust estimation down-weighted; the stations and markers, weakest first; the
 reliability figures (redundancy numbers, minimal detectable biases and their effect); how
 markers were identified; inputs and provenance. The numbers are those of the other files
 (:mod:`planner.network.record`).
@@ -42,7 +43,8 @@ def report_markdown(doc: dict, stations: list[dict], markers: list[dict],
     st, req = doc["statistics"], doc["requirement"]
     lines = [f"# Network adjustment — {st['n_stations']} stations, {st['n_markers']} markers",
              "", _verdict(doc), ""]
-    lines += _datum(doc) + _fit(doc) + _snooping(doc) + _stations(stations, req)
+    lines += _datum(doc) + _fit(doc) + _variance(doc) + _snooping(doc) + _robust(doc)
+    lines += _stations(stations, req)
     lines += _markers(markers) + _reliability(doc, observations) + _identity(doc)
     lines += _provenance(doc)
     return "\n".join(lines) + "\n"
@@ -113,26 +115,70 @@ def _snooping(doc: dict) -> list[str]:
     ds = doc["data_snooping"]
     k = ds["critical_value"]
     lines = ["## Data snooping", "",
-             f"Baarda's w-test per observation component, alpha0 = {ds['alpha0']:g} (critical "
-             f"value {k:.2f}), beta0 = {ds['beta0']:g}; "
-             + ("the observation with the largest |w| above it is removed and the network "
+             f"Each point observation (a marker centre) is tested as one 3-dimensional group: "
+             f"T = vᵀ Q_vv⁻¹ v, chi²(3) when the model holds, and w = Φ⁻¹(1 − p/2) from its "
+             f"p-value (Baarda's |w| for one dimension); alpha0 = {ds['alpha0']:g} (critical "
+             f"value w {k:.2f}, T {ds['critical_value_T']:.2f} for 3 dimensions), beta0 = "
+             f"{ds['beta0']:g}; "
+             + ("the observation with the largest w above it is removed and the network "
                 "adjusted again, until none is. A removed centre disagrees with the rest of the "
                 "network beyond its noise: a mis-identified or moved marker, or a bad sphere "
                 "fit." if ds["enabled"] else
                 "snooping was **off**: observations are flagged, never removed."), ""]
     if ds["rejected"]:
-        lines += ["| round | station | marker | w | why |", "|---:|---|---|---:|---|"]
+        lines += ["| round | station | marker | w | T | why |", "|---:|---|---|---:|---:|---|"]
         lines += [f"| {r['round']} | {r['station_id']} | {r['marker_id']} | {r['w']:.2f} | "
-                  f"|w| {abs(r['w']):.1f} > {k:.2f}, the largest in round {r['round']} |"
-                  for r in ds["rejected"]]
+                  f"{r['T']:.4g} | w {r['w']:.1f} > {k:.2f}, the largest in round "
+                  f"{r['round']} |" for r in ds["rejected"]]
         lines.append("")
     else:
         lines += ["No observation was removed.", ""]
     if ds["flagged"]:
-        lines += ["Flagged but kept (|w| above the critical value): "
-                  + ", ".join(f"{f['station_id']}→{f['marker_id']} (|w| {f['max_abs_w']:.2f})"
+        lines += ["Flagged but kept (w above the critical value): "
+                  + ", ".join(f"{f['station_id']}→{f['marker_id']} (w {f['w']:.2f})"
                               for f in ds["flagged"]) + ".", ""]
     return lines
+
+
+def _robust(doc: dict) -> list[str]:
+    rb = doc["robust"]
+    if rb is None:
+        return []
+    name = {"huber": "Huber", "igg3": "IGG-III (Yang)"}[rb["estimator"]]
+    constants = ", ".join(f"{key} = {value:g}" for key, value in rb["constants"].items())
+    lines = ["## Robust estimation", "",
+             f"{name} M-estimator ({constants}), iteratively reweighted least squares in "
+             f"{rb['rounds']} round(s): each point observation's weight is multiplied by a "
+             "factor in [0, 1] from its standardised residual (the w of its point test, with "
+             "its own weights); nothing is removed. Sigmas and ellipsoids below are those of "
+             "the robust weights.", ""]
+    down = rb["downweighted"]
+    if not down:
+        return lines + ["No observation was down-weighted.", ""]
+    lines += [f"Down-weighted observations ({len(down)}), lowest weight first:", "",
+              "| station | marker | weight | w |", "|---|---|---:|---:|"]
+    lines += [f"| {d['station_id']} | {d['marker_id']} | {d['weight']:.3f} | {d['w']:.2f} |"
+              for d in down[:MAX_ROWS]]
+    if len(down) > MAX_ROWS:
+        lines.append(f"| … {len(down) - MAX_ROWS} more in observations.csv | | | |")
+    return lines + [""]
+
+
+def _variance(doc: dict) -> list[str]:
+    vc = doc["variance_components"]
+    if vc is None:
+        return []
+    lines = ["## Variance components", "",
+             f"Variance factor of each {vc['groups']} group (iterated Förstner / simplified "
+             "Helmert estimator, v_gᵀ P_g v_g / r_g): 1 when the error model's sigmas hold for "
+             "the group, 4 when its errors are twice as large. The adjustment above keeps the "
+             "error model's weights; sd is an estimate's scatter under the model "
+             "(sigma0² √(2 / r_g)).", "",
+             "| group | observations | redundancy | sigma0² | sd |", "|---|---:|---:|---:|---:|"]
+    lines += [f"| {c['group']} | {c['n_observations']} | {c['redundancy']:.1f} | "
+              f"{_num(c['sigma0_squared'], '.3f')} | {_num(c['sd'], '.3f')} |"
+              for c in vc["components"]]
+    return lines + [""]
 
 
 def _stations(stations: list[dict], req: dict) -> list[str]:

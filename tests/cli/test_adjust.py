@@ -158,3 +158,40 @@ def test_smallest_documented_bounds_adjust(network, tmp_path, capsys, monkeypatc
 def test_help_has_an_example(capsys):
     code, out, _ = run_cli(capsys, ["adjust", "--help"])
     assert code == 0 and "Example:" in out and "markerplan adjust" in out
+
+
+def test_robust_igg3_downweights_the_swapped_ids_and_variance_components(tmp_path, capsys,
+                                                                        monkeypatch):
+    """``--robust igg3`` keeps every observation, gives the two swapped ones weight 0 and
+    lists them in the report; ``--variance-components station`` writes one row per station
+    and the network's; the same command writes the same bytes twice."""
+    net = write_network_inputs(tmp_path / "net", n_stations=6, seed=3,
+                               swap=("S03", "M005", "M006"))
+    monkeypatch.chdir(tmp_path)
+    args = ["adjust", *_tables(net), "--marker-ids", "table", "--robust", "igg3",
+            "--variance-components", "station", "--json"]
+    code, out, err = run_cli(capsys, args + ["--out", "r"])
+    assert code == 0, err
+    summary = json.loads(out)
+    assert summary["rejected"] == [] and summary["robust"] == "igg3"
+    zero = {(d["station_id"], d["marker_id"]) for d in summary["downweighted"]
+            if d["weight"] == 0.0}
+    assert zero == {("S03", "M005"), ("S03", "M006")}
+    assert set(summary["variance_components"]) == {*net.station_ids, "all"}
+    rows = list(csv.DictReader((tmp_path / "r" / "observations.csv").open()))
+    assert all(r["status"] != "removed" for r in rows)
+    weights = {(r["station_id"], r["marker_id"]): float(r["robust_weight"]) for r in rows}
+    assert weights[("S03", "M005")] == weights[("S03", "M006")] == 0.0
+    doc = json.loads((tmp_path / "r" / "adjustment.json").read_text())
+    assert doc["provenance"]["config"]["robust"] == "igg3"
+    assert doc["provenance"]["config"]["snooping"] is False
+    assert doc["robust"]["constants"] == {"k0": 1.5, "k1": 3.0}
+    report = (tmp_path / "r" / "report.md").read_text()
+    assert "## Robust estimation" in report and "| S03 | M005 | 0.000 |" in report
+    assert "## Variance components" in report
+    variance = list(csv.DictReader((tmp_path / "r" / "variance_components.csv").open()))
+    assert [v["group"] for v in variance] == [*net.station_ids, "all"]
+    assert "variance_components.csv" in doc["files"]
+    code, _, err = run_cli(capsys, args + ["--out", "again"])
+    assert code == 0, err
+    assert _digests(tmp_path / "r") == _digests(tmp_path / "again")

@@ -3,7 +3,7 @@ false alarms on clean data, minimal detectable biases and their effect."""
 
 import numpy as np
 import pytest
-from scipy.stats import norm
+from scipy.stats import binom, norm
 
 from markerplan.errors import DataError
 from pipeline.network.adjustment import AdjustmentSettings, adjust
@@ -87,12 +87,12 @@ def test_swapped_marker_ids_are_found_in_many_networks():
 def test_unresolvable_blunder_is_named_when_the_adjustment_cannot_converge():
     """A swap at the last station between markers few stations see: the worst observation
     cannot be removed without untying a station, the contaminated adjustment does not
-    converge, and the one-line error names where the largest |w| is."""
+    converge, and the one-line error names where the largest point-test statistic is."""
     obs, truth = simulated_network(n_stations=10, seed=120)
     rng = np.random.default_rng(20)
     rows = rng.choice(np.flatnonzero(obs.station == int(rng.integers(1, 10))), 2, replace=False)
     with pytest.raises(DataError, match=r"^the adjustment did not converge in 20 iterations "
-                       r"after 0 removals by data snooping; the largest \|w\| \(.*\) is at "
+                       r"after 0 removals by data snooping; the largest point-test w \(.*\) is at "
                        r"station S10, marker M017$"):
         adjust(swapped(obs, *rows), nominal=truth.nominal)
 
@@ -108,16 +108,17 @@ def test_max_rejections_limits_data_snooping():
 
 def test_clean_data_false_alarms_match_alpha0():
     """200 clean networks with data snooping: most lose no observation, and the rejections per
-    tested component are consistent with alpha0 = 0.001."""
-    trials, untouched, rejections, components = 200, 0, 0, 0
+    tested point observation are consistent with alpha0 = 0.001 (one test per point)."""
+    trials, untouched, rejections, tested = 200, 0, 0, 0
     for trial in range(trials):
         obs, truth = simulated_network(n_stations=5, seed=11, noise_seed=5000 + trial)
         result = adjust(obs, nominal=truth.nominal)
         untouched += not result.rejected
         rejections += len(result.rejected)
-        components += 3 * obs.n
+        tested += int(np.sum(np.bincount(obs.marker)[obs.marker] > 1))
     assert untouched / trials >= 0.8
-    assert 0.3e-3 <= rejections / components <= 2e-3, rejections / components
+    lo, hi = binom.ppf([0.0005, 0.9995], tested, 0.001)
+    assert lo <= rejections <= hi, (rejections, tested)
 
 
 def test_bias_of_one_mdb_gives_w_of_delta0_and_shifts_coordinates_by_the_effect():

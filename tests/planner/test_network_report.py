@@ -14,7 +14,7 @@ from scipy.stats import chi2
 
 from pipeline.network.adjustment import AdjustmentSettings, NetworkAdjustment
 from pipeline.network.observations import Datum, NetworkObservations
-from pipeline.network.reliability import Rejection
+from pipeline.network.reliability import PointTests, Rejection, normalised_statistic
 from planner.network import record as nr
 from planner.network.files import FILES, write_network_files
 
@@ -47,13 +47,17 @@ def hand_built(snooping: bool = True) -> nr.AdjustmentRun:
                   [0.0, 0.0, 0.0]])
     mdb = np.full((5, 3), 0.05)
     mdb[4] = np.inf
+    t = np.array([0.3, 21.0, 1.2, 0.03, 0.0])  # the second: w 3.88 > 3.29
+    dof = np.array([3, 3, 3, 3, 0])
     result = NetworkAdjustment(
         observations=kept, pose=pose,
         marker_xyz_m=np.array([[5.0, 0, -1], [0, 6, -1], [-4, -4, -1]]),
         covariance=np.diag(var), residuals_m=np.full((5, 3), 0.001),
         redundancy=np.vstack([np.full((4, 3), 0.5), np.zeros((1, 3))]), w_test=w, mdb_m=mdb,
         mdb_effect_m=np.array([0.02, 0.03, 0.01, 0.04, np.inf]), sigma0_squared=1.2, dof=4,
-        iterations=3, rejected=[Rejection("S2", "M3", -9.5, 1)], datum=Datum(),
+        iterations=3, point=PointTests(t, dof, normalised_statistic(t, dof), np.full(5, 0.5)),
+        mdb_point_m=np.array([0.06, 0.07, 0.05, 0.08, np.inf]), robust_weight=np.ones(5),
+        rejected=[Rejection("S2", "M3", 9.5, 1, 95.0, 3)], datum=Datum(),
         settings=AdjustmentSettings(snooping=snooping))
     return nr.AdjustmentRun(
         result=result, observations=given, config={"datum": "station"}, working_radius_m=10.0,
@@ -119,9 +123,15 @@ def test_observation_status():
     assert [r["status"] for r in rows] == ["kept", "flagged", "kept", "kept", "kept", "removed"]
     removed = rows[-1]
     assert (removed["station_id"], removed["marker_id"]) == ("S2", "M3")
-    assert removed["max_abs_w"] == 9.5 and removed["removed_in_round"] == 1
-    assert removed["residual_x_m"] is None
+    assert removed["test_w"] == 9.5 and removed["removed_in_round"] == 1
+    assert removed["test_statistic"] == 95.0 and removed["test_dof"] == 3
+    assert removed["test_p_value"] == pytest.approx(chi2.sf(95.0, 3), rel=1e-9)
+    assert removed["residual_x_m"] is None and removed["max_abs_w"] is None
+    # flagged by the point test (T 21 with 3 dof: p 1e-4 < 0.001), not by a component
     assert rows[1]["max_abs_w"] == pytest.approx(4.2)
+    assert rows[1]["test_p_value"] == pytest.approx(chi2.sf(21.0, 3), rel=1e-9)
+    assert rows[1]["test_w"] > 3.29 > rows[0]["test_w"]
+    assert rows[4]["test_dof"] == 0 and rows[4]["test_w"] == 0.0
     assert rows[4]["mdb_x_m"] == np.inf  # uncontrolled: written as an empty cell
 
 
@@ -161,7 +171,7 @@ def test_files_are_complete_and_deterministic(tmp_path):
     saved = json.loads((folder / "adjustment.json").read_text())
     assert saved["schema"] == nr.SCHEMA and saved["statistics"]["dof"] == 4
     assert saved["data_snooping"]["rejected"] == [
-        {"station_id": "S2", "marker_id": "M3", "w": -9.5, "round": 1}]
+        {"station_id": "S2", "marker_id": "M3", "w": 9.5, "T": 95.0, "dof": 3, "round": 1}]
     assert saved["data_snooping"]["flagged"][0]["marker_id"] == "M2"
     assert saved["provenance"]["solver"]["status"] == "converged"
     assert saved["provenance"]["markerplan_version"]
@@ -172,7 +182,8 @@ def test_files_are_complete_and_deterministic(tmp_path):
     assert kinds.count("station") == 2 and kinds.count("marker") == 3 and kinds.count("tie") == 6
     assert "not WGS84" in gj["coordinate_frame"] or "not geographic" in gj["coordinate_frame"]
     report = (folder / "report.md").read_text()
-    assert "| 1 | S2 | M3 | -9.50 |" in report
+    assert "| 1 | S2 | M3 | 9.50 | 95 |" in report
+    assert "Flagged but kept (w above the critical value): S1→M2 (w 3.88)" in report
     assert "reference station S1" in report and "Global test: passed" in report
     assert "Seen by one station only (1): M3" in report
 
