@@ -479,7 +479,24 @@ def pose_difference_m(pose_est: np.ndarray, pose_true: np.ndarray,
     >>> round(pose_difference_m(np.array([0, 0.01, 0, 0, 0, 0]), t, 10.0), 6)
     0.01
     """
-    phi = np.linspace(0.0, 2.0 * np.pi, 360, endpoint=False)
+    diff = registration_differences(pose_est, pose_true, working_radius_m, 360)
+    return float(np.linalg.norm(diff, axis=1).max())
+
+
+def registration_differences(pose_est: np.ndarray, pose_true: np.ndarray,
+                             working_radius_m: float, n_rim: int) -> np.ndarray:
+    """(1 + n_rim, 3) site-frame difference between two 6-parameter mappings of the same
+    levelled points (``t + Rz(heading) Ry(pitch) Rx(roll) p``): the station and ``n_rim``
+    equally spaced rim points at its height, m.
+
+    Parameters
+    ----------
+    pose_est, pose_true : (6,) float
+        ``POSE_PARAMETERS``: x, y, z (m), heading, roll, pitch (rad).
+    working_radius_m : float
+    n_rim : int
+    """
+    phi = np.linspace(0.0, 2.0 * np.pi, n_rim, endpoint=False)
     p = np.vstack([np.zeros((1, 3)), working_radius_m * np.column_stack(
         [np.cos(phi), np.sin(phi), np.zeros_like(phi)])])
 
@@ -488,4 +505,4 @@ def pose_difference_m(pose_est: np.ndarray, pose_true: np.ndarray,
         r = station_to_site_matrix(pose[3], pose[4], pose[5])
         return pose[:3] + p @ r.T
 
-    return float(np.linalg.norm(mapped(pose_est) - mapped(pose_true), axis=1).max())
+    return mapped(pose_est) - mapped(pose_true)

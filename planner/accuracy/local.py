@@ -47,6 +47,7 @@ from planner.accuracy.figure import (
     SCREEN_MARGIN,
     ErrorFigure,
     directions,
+    ellipsoid_bound,
     radial_quantile,
     square_roots,
 )
@@ -352,8 +353,6 @@ class LocalAccuracy:
 
     def _station_spread(self, cov) -> np.ndarray:
         """(s,) ``max_q sqrt(lambda_max(Sigma_k(q)))`` of every station, m (the screen)."""
-        from planner.accuracy.figure import ellipsoid_bound
-
         blocks = cov.station(np.arange(self.net.problem.n_stations))
         return ellipsoid_bound(blocks, self.net.radius) / np.sqrt(CHI2_3_95)
 

@@ -148,13 +148,10 @@ class NetworkOdds:
         n6 = 6 * self.net.problem.n_stations
         rows = np.flatnonzero(ok)
         step = max(1, _BATCH_VALUES // (n6 * n6))
-        s = self.net.problem.n_stations
         for lo in range(0, rows.size, step):
             at = rows[lo:lo + step]
             covariances = self.covariances(kept[at])
-            blocks = np.stack([c.station(np.arange(s)) for c in covariances])
-            for row, cov in enumerate(covariances):
-                blocks[row, ~cov.determined] = np.inf
+            blocks = self._station_blocks(covariances)
             ok[at] = self.net.figure.station_within(
                 blocks.reshape(-1, 6, 6), self.net.radius,
                 np.tile(self.net.allowed_station_m, at.size)).reshape(at.size, -1).all(axis=1)
@@ -172,9 +169,13 @@ class NetworkOdds:
     def station_covariances(self, kept: np.ndarray) -> np.ndarray:
         """(k, s, 6, 6) pose covariance of every station with each row of ``kept`` ((k, p)
         bool), ``inf`` where a station is left undetermined (:meth:`covariances`)."""
+        return self._station_blocks(self.covariances(kept))
+
+    def _station_blocks(self, covariances: list[NetworkCovariance]) -> np.ndarray:
+        """(k, s, 6, 6) every station's block of each covariance, ``inf`` where undetermined."""
         s = self.net.problem.n_stations
-        out = np.empty((len(kept), s, 6, 6))
-        for row, cov in enumerate(self.covariances(kept)):
+        out = np.empty((len(covariances), s, 6, 6))
+        for row, cov in enumerate(covariances):
             out[row] = cov.station(np.arange(s))
             out[row, ~cov.determined] = np.inf
         return out

@@ -132,6 +132,9 @@ RPM = click.IntRange(300, 1200)
 LIDAR_HEIGHT_M = FiniteRange(0.3, 3.0)
 #: Solver time limits, seconds (one day at most).
 TIME_LIMIT_S = FiniteRange(0.0, 86_400.0, min_open=True)
+#: A required 95 % error, m (a looser one than 10 m asks nothing of a survey; the plan's bound
+#: is planner.config.BOUNDS).
+REQUIREMENT_M = FiniteRange(0.0, 10.0, min_open=True)
 #: Marker (sphere) radius, m.
 SPHERE_RADIUS_M = FiniteRange(0.01, 1.0)
 #: Largest mounting axis offset (each of dx, dy), mm: the VLP-16 (103 mm across) sits on an

@@ -12,6 +12,7 @@ import click
 from pipeline.network.observations import MIN_SIGMA
 from planner.cli._common import (
     FILE,
+    REQUIREMENT_M,
     FiniteRange,
     emit_summary,
     error_figure_option,
@@ -34,9 +35,8 @@ ANGLE_SIGMA_DEG = FiniteRange(math.degrees(MIN_SIGMA), 10.0)
 ODOMETRY_SIGMA_M = FiniteRange(MIN_SIGMA, 50.0)
 #: Odometry heading, 1-sigma, degrees.
 ODOMETRY_HEADING_SIGMA_DEG = FiniteRange(math.degrees(MIN_SIGMA), 90.0)
-#: Working radius and requirement, m (the plan's bounds: planner.config.BOUNDS).
+#: Working radius, m (the plan's bound: planner.config.BOUNDS).
 RADIUS_M = FiniteRange(0.0, 100.0, min_open=True)
-REQUIREMENT_M = FiniteRange(0.0, 10.0, min_open=True)
 PROBABILITY = FiniteRange(0.0, 1.0, min_open=True, max_open=True)
 #: Robust tuning constants, standardised-residual units (beyond 10 nothing is down-weighted).
 ROBUST_K = FiniteRange(0.0, 10.0, min_open=True)

@@ -276,7 +276,7 @@ def greedy_network(problem: PlanProblem, config, net=None, max_steps: int = 5000
         err = net.station_errors_from(cov)
         markers = np.flatnonzero(selected)
         # markers are judged once every station passes (until then the stations lead)
-        stations_pass = bool(np.all(err <= allowed))
+        stations_pass = not net.stations_failing(err, allowed).any()
         merr = net.marker_errors(cov, markers) if stations_pass else np.zeros(0)
         loss = None
         bad_pairs = np.zeros(0, np.int64)

@@ -260,6 +260,14 @@ def network_cuts(problem: PlanProblem, model: Model, selected: np.ndarray, confi
         for m in markers if dense or rest.size <= MAX_TERMS else ():
             add(model.implied_row(m, rest), 0.0, RowKind("cut-marker"))
 
+    def pair_rows(dense: bool) -> None:
+        """The "cut-pair" row of the failing pairs (one: it is the same row for each; left
+        out when long unless ``dense``)."""
+        rest = np.flatnonzero(tying & ~selected)
+        if bad_pairs.size and (dense or rest.size <= MAX_TERMS):
+            add(model.site_row(rest), 1.0,
+                RowKind("cut-pair", int(local.pairs.first[bad_pairs[0]])))
+
     station_rows(failing, dense_ok)
     worst_m = bad_markers[np.argsort(-merr[marker_fails], kind="stable")]
     if bad_markers.size:
@@ -271,17 +279,13 @@ def network_cuts(problem: PlanProblem, model: Model, selected: np.ndarray, confi
         for k, coef, rhs in local.tangents(cov0, bad_pairs[:n_oa]):
             cut = sparse_tangent(np.where(in_model, coef, 0.0), rhs, upper_bound, MAX_TERMS)
             add(model.site_row(cut[0], cut[1]), cut[2], RowKind("oa-pair", k))
-        rest = np.flatnonzero(tying & ~selected)
-        if failing.size == 0 and (dense_ok or rest.size <= MAX_TERMS):
-            add(model.site_row(rest), 1.0, RowKind("cut-pair", int(local.pairs.first[
-                bad_pairs[0]])))
+    if failing.size == 0:  # (a failing station's "cut" row is the same row or stronger)
+        pair_rows(dense_ok)
     if not rows:  # no tangent is violated and every short row was left out: the worst
         # stations' and markers' long rows (valid; merely many terms)
         station_rows(worst_first[:n_oa], True)
         marker_rows(worst_m[:n_oa], True)
-        if bad_pairs.size:
-            add(model.site_row(np.flatnonzero(tying & ~selected)), 1.0,
-                RowKind("cut-pair", int(local.pairs.first[bad_pairs[0]])))
+        pair_rows(True)
     if not rows:  # pragma: no cover - a failing station or marker always yields a no-good cut
         raise InfeasiblePlanError("network mode: the layout fails but no cut was found")
     return sp.csr_array(sp.vstack(rows)), lower, kinds

@@ -3,7 +3,8 @@ relative error against its prediction and allowance.
 
 A station's registration error at a point ``q`` of its working disc is ``D(q) = T_est(q) -
 T_true(q)``, the difference between the adjusted and the true mapping of its levelled frame
-into the site frame (as :func:`planner.accuracy.known_control.pose_difference_m`). The pair's
+into the site frame (:func:`planner.accuracy.known_control.registration_differences`, as
+:func:`~planner.accuracy.known_control.pose_difference_m`). The pair's
 achieved relative error is the worst over both discs (the station and 72 rim points each, as
 the prediction) of ``|D_k(q) - D_l(q')|`` (``"position"``) or ``|u . (D_k(q) - D_l(q'))|``
 (``"distance"``, ``u`` the unit vector between the planned stations): what a surveyor who
@@ -16,7 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from pipeline.rig import station_to_site_matrix
+from planner.accuracy.known_control import registration_differences
 
 #: Rim points of each disc (as the predicted figure's).
 _N_RIM = 72
@@ -39,26 +40,6 @@ class PairOutcome:
                 "predicted_error_m": self.predicted_error_m,
                 "achieved_error_m": self.achieved_error_m,
                 "allowed_error_m": self.allowed_error_m, "passed": self.passed}
-
-
-def _disc_points(radius_m: float) -> np.ndarray:
-    """(73, 3) the station and its rim points, levelled station frame, m."""
-    phi = np.linspace(0.0, 2.0 * np.pi, _N_RIM, endpoint=False)
-    rim = radius_m * np.column_stack([np.cos(phi), np.sin(phi), np.zeros_like(phi)])
-    return np.vstack([np.zeros((1, 3)), rim])
-
-
-def registration_errors(pose_est: np.ndarray, pose_true: np.ndarray,
-                        radius_m: float) -> np.ndarray:
-    """(73, 3) ``D(q)`` at the station and its rim points: adjusted minus true site position of
-    the same levelled point, m. ``pose_*``: (6,) x, y, z (m), heading, roll, pitch (rad)."""
-    p = _disc_points(radius_m)
-
-    def mapped(pose):
-        pose = np.asarray(pose, dtype=float)
-        return pose[:3] + p @ station_to_site_matrix(pose[3], pose[4], pose[5]).T
-
-    return mapped(pose_est) - mapped(pose_true)
 
 
 def relative_error_m(errors_first: np.ndarray, errors_second: np.ndarray, kind: str,
@@ -100,7 +81,7 @@ def pair_outcomes(local: dict, station_xyz: dict[str, np.ndarray],
     list of PairOutcome
         A pair with a station the adjustment lacks has no achieved error and fails.
     """
-    errors = {sid: registration_errors(adjusted[sid], truth[sid], radius_m)
+    errors = {sid: registration_differences(adjusted[sid], truth[sid], radius_m, _N_RIM)
               for sid in adjusted if sid in truth}
     out = []
     for row in local["pairs"]:
