@@ -4,11 +4,14 @@ a + b ppm, datum at the first station or at the centre) and local (between stati
 
     OPENBLAS_NUM_THREADS=1 .venv/bin/python -u benchmarks/network_requirements.py
         [--site large] [--grid-spacing 2.5] [--requirement 0.10] [--ppm 0,200]
-        [--within 50] [--kinds datum,local,distance] [--heading-prior DEG]
-        [--plan-time-limit 0]
+        [--within 50] [--kinds datum,local,distance] [--figures ellipsoid,quantile]
+        [--heading-prior DEG] [--heading-aid sun-sensor|star-tracker] [--heading-bias DEG]
+        [--odometry-percent P] [--odometry-heading DEG_PER_M] [--plan-time-limit 0]
 
-For every combination it runs the network greedy (``greedy_network``: markers, wall time) and,
-with ``--plan-time-limit S > 0``, the integer program too (markers, status, proven bound, gap).
+For every combination it runs the network greedy (``greedy_network``: markers, wall time), then
+the local search that prunes its layout (``planner.program.local_search.prune``: markers left,
+wall time) and, with ``--plan-time-limit S > 0``, the integer program too (markers, status,
+proven bound, gap).
 Each layout is re-judged here from its covariance: the worst ratio of a station's error to its
 allowance ``a + b ppm d`` (``d`` its horizontal distance from the datum, computed in this
 script), or of a pair's relative error to ``--requirement`` for the local kinds. Prints one
@@ -25,13 +28,13 @@ import time
 import numpy as np
 
 
-def cases(problem, base, ppms, within_m, kinds):
+def cases(problem, base, ppms, within_m, kinds, figures=("ellipsoid", "quantile")):
     """(label, config) of every requirement kind asked for: datum at the first station and at
     the station nearest the centre with each ppm term; local position and distance within
-    ``within_m`` (datum at the centre, not judged); both figures."""
+    ``within_m`` (datum at the centre, not judged); each of ``figures``."""
     xy = problem.station_xyz[:, :2]
     centre = problem.station_ids[int(np.argmin(np.linalg.norm(xy - xy.mean(axis=0), axis=1)))]
-    for figure in ("ellipsoid", "quantile"):
+    for figure in figures:
         if "datum" in kinds:
             for datum in (problem.station_ids[0], centre):
                 for ppm in ppms:
@@ -75,6 +78,13 @@ def main() -> None:
     ap.add_argument("--heading-prior", type=float, default=None,
                     help="heading_prior_sigma_deg of every station (e.g. 0.00278: a 10 arcsec "
                          "star tracker); default none")
+    ap.add_argument("--heading-aid", default=None, help="heading_aid (sun-sensor, star-tracker)")
+    ap.add_argument("--heading-bias", type=float, default=None,
+                    help="heading_bias_sigma_deg (default: the aid class's, else none)")
+    ap.add_argument("--odometry-percent", type=float, default=None, help="odometry_percent")
+    ap.add_argument("--odometry-heading", type=float, default=None,
+                    help="odometry_heading_deg_per_m")
+    ap.add_argument("--figures", default="ellipsoid,quantile", help="error figures to run")
     ap.add_argument("--kinds", default="datum,local,distance",
                     help="requirement kinds: datum, local (position), distance")
     ap.add_argument("--plan-time-limit", type=float, default=0.0,
@@ -83,24 +93,30 @@ def main() -> None:
 
     from error_model import default_model
     from markerplan.errors import InfeasiblePlanError
+    from planner.accuracy.checks import evaluate_layout
     from planner.accuracy.network import network_model
     from planner.config import PlanConfig
     from planner.problem.inputs import load_inputs
     from planner.program import plan_sites
     from planner.program.baselines import greedy_network
+    from planner.program.local_search import prune
     from planner.run import build_problem
 
     inputs = load_inputs(args.site)
     base = PlanConfig(network=True, chance_epsilon=None, requirement_m=args.requirement,
                       grid_spacing_m=args.grid_spacing,
-                      heading_prior_sigma_deg=args.heading_prior,
+                      heading_prior_sigma_deg=args.heading_prior, heading_aid=args.heading_aid,
+                      heading_bias_sigma_deg=args.heading_bias,
+                      odometry_percent=args.odometry_percent,
+                      odometry_heading_deg_per_m=args.odometry_heading,
                       time_limit_s=args.plan_time_limit or 60.0)
     problem, cand, _, _ = build_problem(inputs, base, default_model(), progress=False)
     print(f"site {args.site}: {problem.n_stations} stations, {len(cand)} candidate sites")
     out = {"site": args.site, "n_stations": problem.n_stations, "n_candidates": len(cand),
-           "cases": []}
+           "aids": base.aids_record(), "cases": []}
+    print(f"aids: {json.dumps(base.aids_record())}")
     for label, cfg in cases(problem, base, [float(v) for v in args.ppm.split(",")],
-                            args.within, args.kinds.split(",")):
+                            args.within, args.kinds.split(","), args.figures.split(",")):
         row = {"case": label}
         t = time.perf_counter()
         try:
@@ -108,6 +124,10 @@ def main() -> None:
             row["greedy"] = {"markers": g.n_markers, "time_s": round(time.perf_counter() - t, 1),
                              "worst_error_over_allowance": round(judged(problem, cfg,
                                                                         g.selected), 4)}
+            pruned = prune(problem, cfg, network_model(problem, cfg), g.selected)
+            row["pruned"] = {**pruned.record(), "worst_error_over_allowance": round(
+                judged(problem, cfg, pruned.selected), 4),
+                "checked": bool(evaluate_layout(problem, pruned.selected, cfg).all_ok)}
         except InfeasiblePlanError as exc:
             row["greedy"] = {"error": str(exc)[:200]}
         if args.plan_time_limit > 0:

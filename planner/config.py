@@ -15,6 +15,7 @@ from typing import Any
 
 from markerplan.errors import ConfigError, InputFileError
 from markerplan.reading import read_text
+from planner.accuracy.aids import Odometry, heading_aid_sigmas_deg
 
 #: Most stations a site may hold: a ``--stations`` file or a plan (each station ray casts every
 #: candidate site).
@@ -122,8 +123,22 @@ class PlanConfig:
     reference_station : str or None
         Network mode: id of the datum station (x, y, z, heading fixed); ``None``: the first.
     heading_prior_sigma_deg : float or None
-        Network mode: a heading prior on every station (e.g. a sun sensor), 1-sigma degrees;
-        ``None``: none; in (0, 10].
+        Network mode: a heading reference on every station (a sun sensor, a star tracker), its
+        random 1-sigma, degrees; ``None``: none (or the ``heading_aid`` class's); in (0, 10].
+    heading_aid : str or None
+        Network mode: a heading reference class (:data:`planner.accuracy.aids.HEADING_AIDS`:
+        ``"sun-sensor"``, ``"star-tracker"``) that sets ``heading_prior_sigma_deg`` and
+        ``heading_bias_sigma_deg`` where they are not given.
+    heading_bias_sigma_deg : float or None
+        Network mode: 1-sigma of the heading reference's boresight bias, common to every
+        station, degrees; ``None``: 0 (or the class's); in (0, 10].
+    odometry_percent : float or None
+        Network mode: odometry between consecutive stations (in the stations' order), 1-sigma
+        per axis of the relative position in percent of the distance driven; ``None``: no
+        odometry; in (0, 100].
+    odometry_heading_deg_per_m : float or None
+        Network mode: 1-sigma of the odometry's relative heading, degrees per metre driven;
+        ``None``: not observed; in (0, 10].
     chance_epsilon : float or None
         Largest probability that the plan fails because planned markers are not detected and
         accepted (each station-marker pair with its detection model probability, independent
@@ -163,12 +178,17 @@ class PlanConfig:
     network: bool = False
     reference_station: str | None = None
     heading_prior_sigma_deg: float | None = None
+    heading_aid: str | None = None
+    heading_bias_sigma_deg: float | None = None
+    odometry_percent: float | None = None
+    odometry_heading_deg_per_m: float | None = None
     chance_epsilon: float | None = 0.05
     max_bias_effect_m: float | None = None
     error_figure: str = DEFAULT_ERROR_FIGURE
 
     def __post_init__(self) -> None:
         _plan_config_iv(self)
+        _aids_iv(self)
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-serialisable dict of every field (tuples as lists)."""
@@ -184,10 +204,13 @@ class PlanConfig:
 
     def as_known_control(self, **changes: Any) -> PlanConfig:
         """This configuration in known-control mode (and ``changes``): the network-only
-        requirement kinds (ppm terms, the local requirement, no datum requirement) dropped."""
+        requirement kinds (ppm terms, the local requirement, no datum requirement) and pose
+        aids (heading reference bias, odometry) dropped."""
         return self.replace(**{"network": False, "requirement_ppm": 0.0,
                                "datum_requirement": True, "local_requirement_m": None,
-                               "local_requirement_ppm": 0.0, **changes})
+                               "local_requirement_ppm": 0.0, "heading_aid": None,
+                               "heading_bias_sigma_deg": None, "odometry_percent": None,
+                               "odometry_heading_deg_per_m": None, **changes})
 
     @property
     def max_slope_rad(self) -> float:
@@ -198,9 +221,50 @@ class PlanConfig:
         return math.radians(self.inclinometer_sigma_deg)
 
     @property
+    def heading_sigmas_deg(self) -> tuple[float | None, float]:
+        """The heading reference's (random, boresight bias) 1-sigma, degrees, as used: each
+        the setting's, else the ``heading_aid`` class's (random ``None``: no heading reference;
+        bias 0: none)."""
+        aid = heading_aid_sigmas_deg(self.heading_aid) or (None, 0.0)
+        random = aid[0] if self.heading_prior_sigma_deg is None else self.heading_prior_sigma_deg
+        bias = aid[1] if self.heading_bias_sigma_deg is None else self.heading_bias_sigma_deg
+        return random, bias
+
+    @property
     def heading_prior_sigma_rad(self) -> float | None:
-        return None if self.heading_prior_sigma_deg is None \
-            else math.radians(self.heading_prior_sigma_deg)
+        random = self.heading_sigmas_deg[0]
+        return None if random is None else math.radians(random)
+
+    @property
+    def heading_bias_sigma_rad(self) -> float:
+        return math.radians(self.heading_sigmas_deg[1])
+
+    @property
+    def odometry(self) -> Odometry:
+        """The odometry between consecutive stations (:class:`planner.accuracy.aids.
+        Odometry`; empty without one)."""
+        return Odometry(
+            None if self.odometry_percent is None else self.odometry_percent / 100.0,
+            None if self.odometry_heading_deg_per_m is None
+            else math.radians(self.odometry_heading_deg_per_m))
+
+    def aids_record(self) -> dict[str, Any]:
+        """The pose aids as used (``plan.json``'s and ``reduce.json``'s ``network.datum``):
+        inclinometer, heading reference (class, random and bias sigma) and odometry."""
+        random, bias = self.heading_sigmas_deg
+        return {"inclinometer_sigma_deg": self.inclinometer_sigma_deg,
+                "heading_prior_sigma_deg": random, "heading_aid": self.heading_aid,
+                "heading_bias_sigma_deg": bias if random is not None else None,
+                "odometry_percent": self.odometry_percent,
+                "odometry_heading_deg_per_m": self.odometry_heading_deg_per_m}
+
+    @property
+    def heading_observed(self) -> bool:
+        """Network mode: an aid (a heading reference, or the odometry, whose relative position
+        turns the previous station's heading) observes stations' headings, so a station need not
+        take its heading from its own markers."""
+        return self.network and (self.heading_sigmas_deg[0] is not None
+                                 or self.odometry.any)
 
 
 def _field_names() -> list[str]:
@@ -241,6 +305,9 @@ BOUNDS: dict[str, tuple[float, bool, float, str]] = {
     "time_limit_s": (0.0, False, 86_400.0, " s"),
     "mip_gap": (0.0, True, 1.0, ""),
     "heading_prior_sigma_deg": (0.0, False, 10.0, " deg"),
+    "heading_bias_sigma_deg": (0.0, False, 10.0, " deg"),
+    "odometry_percent": (0.0, False, 100.0, " %"),
+    "odometry_heading_deg_per_m": (0.0, False, 10.0, " deg/m"),
     "chance_epsilon": (0.0, False, 0.5, ""),
     "max_bias_effect_m": (0.0, False, 10.0, " m"),
 }
@@ -249,7 +316,8 @@ _FLAGS = ("exclude_crater_interiors", "allow_out_of_domain", "redundant", "netwo
           "datum_requirement")
 #: Settings that may be ``None`` (not set).
 _OPTIONAL = ("budget", "heading_prior_sigma_deg", "chance_epsilon", "max_bias_effect_m",
-             "local_requirement_m")
+             "local_requirement_m", "heading_bias_sigma_deg", "odometry_percent",
+             "odometry_heading_deg_per_m", "heading_aid")
 #: What a local requirement bounds (:mod:`planner.accuracy.local`).
 LOCAL_KINDS = ("position", "distance")
 #: Most ids accepted in ``existing`` / ``forbidden``.
@@ -313,6 +381,21 @@ def _plan_config_iv(c: PlanConfig) -> None:
                                                 and c.reference_station):
         raise ConfigError(f"`reference_station` must be a station id (a non-empty string), "
                           f"got {c.reference_station!r:.40}")
+
+
+def _aids_iv(c: PlanConfig) -> None:
+    """The pose aids beyond the inclinometer need network mode; a bias needs its sensor."""
+    heading_aid_sigmas_deg(c.heading_aid)  # a known class
+    given = [name for name in ("heading_aid", "heading_bias_sigma_deg", "odometry_percent",
+                               "odometry_heading_deg_per_m") if getattr(c, name) is not None]
+    if given and not c.network:
+        raise ConfigError(f"`{given[0]}` is a pose aid of network mode (known control registers "
+                          "each station on its own); plan in network mode (network = true) or "
+                          f"drop {given[0]}")
+    if c.heading_bias_sigma_deg is not None and c.heading_sigmas_deg[0] is None:
+        raise ConfigError("`heading_bias_sigma_deg` is the bias of a heading reference, and none "
+                          "is set; set heading_prior_sigma_deg or heading_aid, or drop "
+                          "heading_bias_sigma_deg")
 
 
 def _requirement_kinds_iv(c: PlanConfig) -> None:

@@ -11,6 +11,8 @@
   stations it determines;
 - :mod:`planner.accuracy.network_tangents`: the network's tangent cuts (its convex
   requirements linearised at a covariance);
+- :mod:`planner.accuracy.aids`: the pose aids of a network (inclinometer, heading reference
+  with a boresight bias, odometry between consecutive stations) as pseudo-observations;
 - :mod:`planner.accuracy.requirement`: network accuracy as surveyors state it, a constant plus
   ppm of the distance from the datum;
 - :mod:`planner.accuracy.local`: local accuracy, the relative error between neighbouring

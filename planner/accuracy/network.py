@@ -64,6 +64,7 @@ from scipy.sparse.csgraph import connected_components
 from markerplan.errors import ConfigError
 from pipeline.network.design import axis_weight, pose_design_blocks
 from pipeline.network.observations import Datum
+from planner.accuracy.aids import Odometry, pose_aids
 from planner.accuracy.figure import ErrorFigure, error_figure
 from planner.accuracy.network_covariance import NetworkCovariance
 from planner.accuracy.network_tangents import NetworkTangents
@@ -89,12 +90,17 @@ class NetworkModel(NetworkTangents):
     reference : int
         Index of the datum station (x, y, z, heading fixed).
     heading_prior_sigma_rad : float, optional
-        A heading prior on every non-reference station (e.g. a sun sensor), rad.
+        A heading reference on every station (a sun sensor, a star tracker): its random
+        1-sigma, rad (:mod:`planner.accuracy.aids`).
     figure : ErrorFigure, optional
         The 95 % figure of station and marker errors (default: the planner's default).
     requirement : NetworkRequirement, optional
         The allowed 95 % error, constant or growing with the distance from the reference
         (default: the planner's default, 0.10 m).
+    heading_bias_sigma_rad : float
+        The heading reference's common boresight bias, 1-sigma, rad.
+    odometry : Odometry, optional
+        Odometry between consecutive stations (in the problem's station order).
 
     Attributes
     ----------
@@ -105,8 +111,10 @@ class NetworkModel(NetworkTangents):
         Each candidate site's allowed 95 % marker error, m.
     free : (P,) int
         Index into the ``6 s`` pose parameters of each free (estimated) parameter.
-    prior : (P,) float
-        Diagonal prior information of the free parameters.
+    aids : PoseAids
+        The pose aids as pseudo-observations.
+    prior_information : (P, P) float
+        Their information ``J_prior`` on the free parameters.
     pair_station, pair_site : (p,) int
         Usable pairs, sorted by site then station.
     pair_index : (p,) int
@@ -125,7 +133,9 @@ class NetworkModel(NetworkTangents):
                  inclinometer_sigma_rad: float, reference: int = 0,
                  heading_prior_sigma_rad: float | None = None,
                  figure: ErrorFigure | None = None,
-                 requirement: NetworkRequirement | None = None) -> None:
+                 requirement: NetworkRequirement | None = None,
+                 heading_bias_sigma_rad: float = 0.0,
+                 odometry: Odometry | None = None) -> None:
         if not 0 <= reference < problem.n_stations:
             raise ConfigError(f"`reference` must index one of the {problem.n_stations} "
                               f"stations, got {reference!r}")
@@ -143,19 +153,17 @@ class NetworkModel(NetworkTangents):
         s = problem.n_stations
         fixed = np.zeros((s, 6), bool)
         fixed[reference, :4] = True
-        prior = np.zeros((s, 6))
-        if self.incl > 0:
-            prior[:, 4:] = 1.0 / self.incl**2
-        else:
+        if self.incl <= 0:
             fixed[:, 4:] = True
-        if heading_prior_sigma_rad is not None:
-            prior[:, 3] = 1.0 / heading_prior_sigma_rad**2
-        self.heading_prior = heading_prior_sigma_rad is not None
         self.free = np.flatnonzero(~fixed.ravel())
         #: (6 s,) int: each pose parameter's index among the free ones (-1: fixed)
         self.free_position = np.full(6 * s, -1)
         self.free_position[self.free] = np.arange(self.free.size)
-        self.prior = prior.ravel()[self.free]
+        #: PoseAids: the inclinometer, heading reference and odometry as pseudo-observations
+        self.aids = pose_aids(problem.station_xyz, self.incl, heading_prior_sigma_rad,
+                              heading_bias_sigma_rad, odometry)
+        #: (P, P) float: their information ``J_prior`` on the free parameters
+        self.prior_information = self.aids.information(self.free)
         idx = np.flatnonzero(problem.pair_usable)
         idx = idx[np.lexsort((problem.pair_station[idx], problem.pair_site[idx]))]
         self.pair_index = idx
@@ -226,9 +234,7 @@ class NetworkModel(NetworkTangents):
         -------
         J : (P, P) float
         """
-        j = self.site_information(x, kept)
-        j[np.diag_indices_from(j)] += self.prior
-        return j
+        return self.site_information(x, kept) + self.prior_information
 
     def site_information(self, x, kept: np.ndarray | None = None) -> np.ndarray:
         """The sites' share of the information, ``sum_j x_j J^(j)`` (no prior), (P, P); ``x``
@@ -479,16 +485,20 @@ class NetworkModel(NetworkTangents):
         return t
 
     def connected_to_reference(self, selected) -> np.ndarray:
-        """(s,) bool: stations linked to the reference by a chain of shared selected sites."""
-        t = self.ties(selected)
-        _, comp = connected_components(csr_array(t > 0), directed=False)
+        """(s,) bool: stations linked to the reference by a chain of shared selected sites or
+        odometry."""
+        t = self.ties(selected) > 0
+        link = self.aids.links()
+        t[link[:, 0], link[:, 1]] = t[link[:, 1], link[:, 0]] = True
+        _, comp = connected_components(csr_array(t), directed=False)
         return comp == comp[self.reference]
 
 
 def network_model(problem: PlanProblem, config) -> NetworkModel:
     """The :class:`NetworkModel` of a problem for a :class:`~planner.config.PlanConfig`
     (``working_radius_m``, ``inclinometer_sigma_rad``, ``reference_station``,
-    ``heading_prior_sigma_rad``, ``error_figure``, ``requirement_m``, ``requirement_ppm``).
+    ``heading_prior_sigma_rad``, ``heading_bias_sigma_deg``, ``odometry_percent``,
+    ``odometry_heading_deg_per_m``, ``error_figure``, ``requirement_m``, ``requirement_ppm``).
 
     Raises
     ------
@@ -499,4 +509,6 @@ def network_model(problem: PlanProblem, config) -> NetworkModel:
     return NetworkModel(problem, config.working_radius_m, config.inclinometer_sigma_rad,
                         reference=ref, heading_prior_sigma_rad=config.heading_prior_sigma_rad,
                         figure=error_figure(config),
-                        requirement=NetworkRequirement.of(config))
+                        requirement=NetworkRequirement.of(config),
+                        heading_bias_sigma_rad=config.heading_bias_sigma_rad,
+                        odometry=config.odometry)

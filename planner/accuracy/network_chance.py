@@ -192,7 +192,7 @@ class NetworkOdds:
         full = (self._scatter.T @ coef.T).T.reshape(-1, n6, n6)
         j = full[:, net.free[:, None], net.free[None, :]]
         j = 0.5 * (j + np.swapaxes(j, 1, 2))
-        j[:, np.arange(net.free.size), np.arange(net.free.size)] += net.prior
+        j += net.prior_information
         out: list[NetworkCovariance | None] = [None] * len(kept)
         diag = np.diagonal(j, axis1=1, axis2=2)
         good = np.zeros(len(kept), bool)

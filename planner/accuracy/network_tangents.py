@@ -94,7 +94,7 @@ class NetworkTangents:
         numpy.linalg.LinAlgError
             ``J_prior + S`` is not positive definite.
         """
-        mu, vec = scipy.linalg.eigh(sites_information, sites_information + np.diag(self.prior))
+        mu, vec = scipy.linalg.eigh(sites_information, sites_information + self.prior_information)
         return self._scaled_station_rows(mu, vec, scales, stations)
 
     def _scaled_station_rows(self, mu, vec, scales, stations):
@@ -190,7 +190,8 @@ class NetworkTangents:
         v = g @ cov.full  # (m, 6 s); rows of fixed parameters are zero
         h0 = np.einsum("ma,ma->m", v, g)
         vfree = v[:, self.free]
-        rhs = 2.0 * h0 - (b - const) - np.einsum("ma,a,ma->m", vfree, self.prior, vfree)
+        rhs = 2.0 * h0 - (b - const) - np.einsum("ma,ab,mb->m", vfree, self.prior_information,
+                                                   vfree)
         out = []
         keep = np.flatnonzero(rhs > 0)
         for lo in range(0, keep.size, 16):

@@ -5,8 +5,9 @@ Model
 -----
 The network of :mod:`planner.accuracy.network`: station ``s`` measures the marker at site ``j``
 with design ``[H_s | -I3]`` and per-axis weight ``w_s``; the datum is the reference station's
-x, y, z and heading (fixed), roll and pitch (and heading, with a heading prior) have their
-priors. With the markers eliminated the pose covariance is ``C = J^-1``
+x, y, z and heading (fixed); the pose aids (:mod:`planner.accuracy.aids`: inclinometer, heading
+reference, odometry) are pseudo-observations. With the markers eliminated the pose covariance is
+``C = J^-1``
 (:meth:`~planner.accuracy.network.NetworkModel.covariance`, zero rows for fixed parameters)
 and the marker at ``j`` is ``m_j = M_j xi - l_bar_j`` with ``M_j = (1 / W_j) sum_s w_s H_s E_s``
 (``E_s`` picks station ``s``'s pose). For the observation ``i = (s, j)``, with
@@ -87,7 +88,8 @@ class LayoutReliability:
         Row (into ``pair`` etc.) of the observation causing it (-1 when none moves it, or the
         station is undetermined: its effect is then ``inf``).
     prior_redundancy : (P_prior,) float
-        Redundancy numbers of the pseudo-observations (tilt and heading priors).
+        Redundancy numbers of the pose aids' pseudo-observations that bear on the free
+        parameters (:meth:`planner.accuracy.aids.PoseAids.redundancy`).
     dof : int
         Degrees of freedom: ``3 q + P_prior - 3 n_markers - P`` (``P`` free pose parameters).
     delta0 : float
@@ -185,9 +187,7 @@ def layout_reliability(net, selected, delta0: float | None = None) -> LayoutReli
     station_effect = per_obs.max(axis=1, initial=0.0)  # (2, s)
     cause = np.where(station_effect > 0, np.argmax(per_obs, axis=1) if q else 0, -1)
     cause[:, undetermined] = -1  # no observation is to blame: the layout leaves it loose
-    prior = net.prior > 0
-    c_free = np.diag(cov.full)[net.free]
-    prior_r = np.clip(1.0 - net.prior[prior] * c_free[prior], 0.0, 1.0)
+    _, prior_r = net.aids.redundancy(cov.full[np.ix_(net.free, net.free)], net.free)
     n_markers = int(np.unique(net.pair_site[pairs]).size)
     return LayoutReliability(
         pair=pairs, station=net.pair_station[pairs], site=net.pair_site[pairs],

@@ -7,6 +7,7 @@ import sys
 
 import click
 
+from planner.accuracy.aids import HEADING_AIDS
 from planner.cli._common import (
     FILE,
     REQUIREMENT_M,
@@ -50,6 +51,8 @@ CELL_M = FiniteRange(0.0, 10_000.0, min_open=True)
 REQUIREMENT_PPM = FiniteRange(0.0, 1e6)
 #: Largest separation of a locally judged station pair, m (planner.config.BOUNDS).
 LOCAL_WITHIN_M = FiniteRange(0.0, 10_000.0, min_open=True)
+#: Odometry's 1-sigma in percent of the distance driven (planner.config.BOUNDS).
+ODOMETRY_PERCENT = FiniteRange(0.0, 100.0, min_open=True)
 
 
 class ChanceEpsilon(click.ParamType):
@@ -141,6 +144,14 @@ def _load_detection_model(ctx, param, path):
 @click.option("--no-datum-requirement", "no_datum_requirement", is_flag=True, default=None,
               help="Network mode: judge only the local requirement, nothing relative to the "
                    "datum.")
+@click.option("--heading-aid", "heading_aid", type=click.Choice(sorted(HEADING_AIDS)),
+              help="Network mode: a heading reference on every station, by class (random and "
+                   "boresight-bias sigma: sun-sensor 0.1 and 0.05 deg, star-tracker 10 and 20 "
+                   "arcsec); the config's heading_prior_sigma_deg and heading_bias_sigma_deg "
+                   "override them.")
+@click.option("--odometry-percent", "odometry_percent", type=ODOMETRY_PERCENT,
+              help="Network mode: odometry between consecutive stations (in the stations' "
+                   "order), 1-sigma per axis in percent of the distance driven, e.g. 2.")
 @error_figure_option
 @network_option
 @reference_station_option
@@ -157,7 +168,8 @@ def command(site_name, site_seed, dem_path, reproject, terrain, dem_height_error
             boundary_path, exclude_paths, marker_radius_m, error_model, config_path,
             visibility_path, redundant, chance_epsilon, detection_model, existing, budget,
             requirement_m, requirement_ppm, local_requirement_m, local_requirement_ppm,
-            local_within_m, local_kind, no_datum_requirement, error_figure, network,
+            local_within_m, local_kind, no_datum_requirement, heading_aid, odometry_percent,
+            error_figure, network,
             reference_station, time_limit_s, stand_map_cell_m, scheduler, workers, out,
             overwrite, as_json):
     """Plan the fewest marker sites so that every station meets the accuracy requirement.
@@ -185,6 +197,7 @@ def command(site_name, site_seed, dem_path, reproject, terrain, dem_height_error
       markerplan plan --network --requirement-m 0.10 --requirement-ppm 200 --out p-ppm/
       markerplan plan --network --no-datum-requirement --local-requirement-m 0.10 \
           --local-within-m 50 --out p-local/
+      markerplan plan --network --heading-aid star-tracker --odometry-percent 2 --out p-aids/
       markerplan plan --dem site.tif --stations stations.csv --exclude paths.geojson --out p/
       markerplan plan --dem site.tif --stations stations.csv --stand-map-cell-m 2 --out p/
       markerplan plan --dem lonlat.tif --reproject --stations lonlat.csv --out p/
@@ -222,7 +235,8 @@ def command(site_name, site_seed, dem_path, reproject, terrain, dem_height_error
                                     local_requirement_m=local_requirement_m,
                                     local_requirement_ppm=local_requirement_ppm,
                                     local_within_m=local_within_m, local_kind=local_kind,
-                                    datum_requirement=False if no_datum_requirement else None))
+                                    datum_requirement=False if no_datum_requirement else None,
+                                    heading_aid=heading_aid, odometry_percent=odometry_percent))
         doc = write_plan_files(outcome, stage)
         draw_plan_map(outcome, stage / "map.png")
         stand_s = {}
@@ -309,8 +323,8 @@ def _plan(site_name, site_seed, dem_path, stations_path, station_ids, boundary_p
     casting's station blocks (:func:`visibility.visibility_matrix.tiled_visibility`).
     ``chance_epsilon``: ``--chance-epsilon`` (``None``: not given, :data:`NAIVE`: none);
     ``detection_model``: ``(model, name)``, or ``None`` for none; ``error_figure``:
-    ``--error-figure`` (``None``: not given); ``requirement``: the requirement options by
-    their configuration names (``None``: not given)."""
+    ``--error-figure`` (``None``: not given); ``requirement``: the requirement and pose-aid
+    options by their configuration names (``None``: not given)."""
     from markerplan.errors import ConfigError
     from planner.config import PlanConfig, load_config
     from planner.problem.inputs import load_inputs

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from markerplan.errors import InputFileError
+from markerplan.errors import ConfigError, InputFileError
 from markerplan.reading import finite_number, require_type
 from pipeline.network.detections import PlanGeometry
 from pipeline.network.observations import MIN_SIGMA, usable_sigma
@@ -48,6 +48,13 @@ def plan_geometry(doc: dict, path: Path) -> PlanGeometry:
     what = f"`plan_path` {path}: provenance config"
     incl, heading = (_plan_sigma_deg(cfg, k, what)
                      for k in ("inclinometer_sigma_deg", "heading_prior_sigma_deg"))
+    if heading is None and cfg.get("heading_aid") is not None:  # the class's random sigma
+        from planner.accuracy.aids import heading_aid_sigmas_deg
+
+        try:
+            heading = heading_aid_sigmas_deg(cfg["heading_aid"])[0]
+        except ConfigError as exc:
+            raise InputFileError(f"{what} heading_aid: {exc}") from exc
     reference = cfg.get("reference_station")
     figure = cfg.get("error_figure", "ellipsoid")
     from planner.config import ERROR_FIGURES

@@ -19,7 +19,8 @@ DEM's CRS when it has one):
 - ``requirement``: requirement_m, requirement_ppm and the requirement in words, sectors,
   markers, working radius, redundant, the 95 % figure;
 - ``solver``: name, HiGHS version, threads, time limit, target gap, status, objective, dual
-  bound, gap, iterations, cuts;
+  bound, gap, iterations, cuts, and ``local_search`` (large network plans: the greedy start's
+  markers and how many its pruning removed);
 - ``markers``: id, x_m, y_m, z_m, existing, stations that use it;
 - ``stations``: id, position, heading, predicted error, markers used, occupied sectors,
   (redundant mode) worst error after losing one marker, meets_requirement;
@@ -124,7 +125,8 @@ def plan_record(outcome) -> dict:
               "objective": _num(sol.objective), "dual_bound": _num(sol.dual_bound),
               "gap": _num(sol.gap),
               "iterations": res.iterations, "accuracy_cuts": res.n_cuts,
-              "proven_optimal": sol.status == "optimal"}
+              "proven_optimal": sol.status == "optimal",
+              "local_search": None if res.pruning is None else res.pruning.record()}
     vis = outcome.visibility
     network = _network_record(outcome, stations, markers) if cfg.network else None
     doc = {
@@ -201,9 +203,7 @@ def _network_record(outcome, stations: list[dict], markers: list[dict]
                        for s in stations])
     worst_bias = stations[int(np.argmax(effect))] if stations else None
     return {"datum": {"kind": "station", "reference_station": prob.station_ids[net.reference],
-                      "fixed": list(POSE_PARAMETERS[:4]),
-                      "inclinometer_sigma_deg": cfg.inclinometer_sigma_deg,
-                      "heading_prior_sigma_deg": cfg.heading_prior_sigma_deg},
+                      "fixed": list(POSE_PARAMETERS[:4]), **cfg.aids_record()},
             "weakest_stations": [{"id": prob.station_ids[k],
                                   "predicted_error_m": _num(res.check.error_m[k])}
                                  for k in order[:5]],
@@ -354,8 +354,14 @@ def report_markdown(doc: dict) -> str:
              f"- objective {sol['objective']}, dual bound {sol['dual_bound']}, gap {sol['gap']}",
              f"- {sol['iterations']} solve(s), {sol['accuracy_cuts']} accuracy cut(s), "
              f"solver time limit {sol['time_limit_s']:g} s, target gap {sol['target_gap']:g}"
-             + (f", {sol['threads']} thread(s)" if "threads" in sol else ""), "",
-             "## Compared with", "", "| layout | markers | meets requirement | plan saves |",
+             + (f", {sol['threads']} thread(s)" if "threads" in sol else "")]
+    search = sol.get("local_search")
+    if search:
+        lines.append(f"- started from the network greedy's {search['start_markers']} markers, "
+                     f"pruned by local search to {search['markers']} ({search['removed']} removed"
+                     f" in {search['time_s']:g} s"
+                     + ("" if search["finished"] else ", stopped by its time share") + ")")
+    lines += ["", "## Compared with", "", "| layout | markers | meets requirement | plan saves |",
              "|---|---:|---|---:|"]
     for name, b in doc["baselines"].items():
         label = name.replace("_", " ")

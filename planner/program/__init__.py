@@ -14,7 +14,9 @@
   (the chance-constrained search's incumbent);
 - :mod:`planner.program.loop`: :func:`~planner.program.loop.plan_sites`, the accuracy-cut loop
   (solve, check every station exactly, cut, re-solve until all pass);
-- :mod:`planner.program.baselines`: greedy and regular-grid layouts to compare against.
+- :mod:`planner.program.baselines`: greedy and regular-grid layouts to compare against;
+- :mod:`planner.program.local_search`: the network greedy's layout pruned of the sites it does
+  not need (the large-problem search's incumbent).
 """
 
 from planner.program.cuts_known import accuracy_cuts

@@ -58,6 +58,7 @@ from planner.problem.usability import PlanProblem, sector_index
 
 if TYPE_CHECKING:
     from planner.program.baselines import Baseline
+    from planner.program.local_search import Pruning
 
 
 @dataclass(frozen=True)
@@ -220,6 +221,8 @@ class PlanResult:
     greedy : planner.program.baselines.Baseline or None
         Network mode on large problems: the greedy layout the loop started from (its
         incumbent and upper bound), so callers need not run the greedy baseline again.
+    pruning : planner.program.local_search.Pruning or None
+        Network mode on large problems: the local search that pruned the greedy layout.
     """
 
     selected: np.ndarray
@@ -231,6 +234,7 @@ class PlanResult:
     model: Model
     history: list = field(default_factory=list)
     greedy: Baseline | None = None
+    pruning: Pruning | None = None
 
     @property
     def status(self) -> str:
@@ -396,7 +400,7 @@ def with_tightening_rows(problem: PlanProblem, model: Model, config) -> Model:
         idx = problem.usable_pairs(s)
         if idx.size == 0 or s == reference:
             continue
-        if not (config.network and config.heading_prior_sigma_deg is not None):
+        if not config.heading_observed:
             _, w_h = info_weights(problem, idx, config)
             rows.append(model.site_row(problem.pair_site[idx], w_h))
             lower.append(1.0)

@@ -79,9 +79,7 @@ def _network(prob, cfg) -> dict:
 
     ref = prob.station_ids[network_model(prob, cfg).reference]
     return {"datum": {"kind": "station", "reference_station": ref,
-                      "fixed": list(POSE_PARAMETERS[:4]),
-                      "inclinometer_sigma_deg": cfg.inclinometer_sigma_deg,
-                      "heading_prior_sigma_deg": cfg.heading_prior_sigma_deg},
+                      "fixed": list(POSE_PARAMETERS[:4]), **cfg.aids_record()},
             "errors": "95 % figures relative to the datum, from the whole network's information "
                       "(markers are unknowns); a point's worst error is the worst of its "
                       "stations and kept markers"}

@@ -378,6 +378,7 @@ def adjust_and_compare(tables: list[Path], plan_path: Path, error_model,
     from planner.verify.station_rule import StationRule
 
     doc = read_plan(plan_path, "`plan_path`", full=True)
+    _refuse_odometry(doc, plan_path)
     plan, rule = plan_geometry(doc, plan_path), StationRule.of(doc["requirement"])
     reference = reference_station(reference or plan.reference_station, plan.station_ids,
                                   list(truth))
@@ -601,6 +602,18 @@ def _marker_outcomes(result, plan_marker_ids: tuple[str, ...], truth: dict[str, 
                                  float(np.linalg.norm(diff)), tuple(float(v) for v in diff),
                                  seen))
     return out
+
+
+def _refuse_odometry(doc: dict, plan_path) -> None:
+    """A plan that counts on odometry between stations cannot be verified: the adjustment has
+    no odometry factors yet, so its stations would be judged without what they were planned
+    with."""
+    cfg = doc["provenance"].get("config", {})
+    used = [k for k in ("odometry_percent", "odometry_heading_deg_per_m") if cfg.get(k) is not None]
+    if used:
+        raise ConfigError(f"`plan_path` {plan_path} was planned with odometry between stations "
+                          f"({', '.join(used)}), which the adjustment does not model yet; verify a "
+                          "plan made without odometry")
 
 
 def tied_network(stations: list, plan, reference: str, settings: NetworkVerifySettings):

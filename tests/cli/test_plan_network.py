@@ -37,7 +37,9 @@ def test_network_plan_records_the_mode_datum_ties_and_errors(network_plan):
     assert doc["network"]["datum"] == {"kind": "station", "reference_station": "S1",
                                        "fixed": ["x_m", "y_m", "z_m", "heading_rad"],
                                        "inclinometer_sigma_deg": 0.01,
-                                       "heading_prior_sigma_deg": None}
+                                       "heading_prior_sigma_deg": None, "heading_aid": None,
+                                       "heading_bias_sigma_deg": None, "odometry_percent": None,
+                                       "odometry_heading_deg_per_m": None}
     for s in doc["stations"]:
         assert s["predicted_error_m"] <= 0.10 and s["tied_to"]
     for m in doc["markers"]:

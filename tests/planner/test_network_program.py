@@ -156,6 +156,10 @@ def test_large_problem_path_bound_never_exceeds_the_brute_force_optimum(seed, mo
     assert r.greedy is not None and r.check.all_ok
     assert r.solution.dual_bound <= best + 1e-6
     assert r.selected.sum() >= best and r.selected.sum() <= r.greedy.n_markers
+    # the greedy's layout was pruned to a subset before the search started from it
+    assert r.pruning is not None and not np.any(r.pruning.selected & ~r.greedy.selected)
+    assert r.pruning.start_markers == r.greedy.n_markers
+    assert r.selected.sum() <= r.pruning.selected.sum()
     if r.status == "optimal":
         assert r.selected.sum() == best
     assert any(k.family == "oa-root" for k in r.model.row_kind)

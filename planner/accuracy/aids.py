@@ -1,0 +1,242 @@
+"""Pose aids of a network: what the rover knows of its poses besides the markers.
+
+Each aid is a pseudo-observation of the pose parameters (:data:`pipeline.network.observations.
+POSE_PARAMETERS` of every station, site frame), linear at the nominal layout (headings and tilts
+0, site axes, as :mod:`planner.accuracy.network` linearises the markers):
+
+- the **inclinometer**: each station's roll and pitch observed as 0, 1-sigma
+  ``inclinometer_sigma_rad`` (independent);
+- a **heading reference** (sun sensor, star tracker, :data:`HEADING_AIDS`): each station's
+  heading observed with a random error (1-sigma ``random_sigma_rad``, independent per station)
+  plus one **boresight bias** common to every station (1-sigma ``bias_sigma_rad``: how well the
+  sensor's mounting to the LiDAR is calibrated). The bias is eliminated, so the heading
+  observations are correlated: covariance ``sigma_r^2 I + sigma_b^2 1 1^T``, whose inverse is
+  ``(I - c 1 1^T) / sigma_r^2`` with ``c = sigma_b^2 / (sigma_r^2 + s sigma_b^2)``
+  (Sherman-Morrison). With the datum station's heading fixed only differences of headings are
+  observed, so a large bias leaves each heading about ``sqrt(2) sigma_r``;
+- **odometry** between consecutive stations (the order the stations are listed in: the order
+  the rover drives them): the pose of station ``k + 1`` in the levelled frame of station ``k``,
+  ``Rz(psi_k)^T (t_(k+1) - t_k)`` and ``psi_(k+1) - psi_k``, with a 1-sigma per axis growing
+  with the distance driven (``position_ratio * d``, and ``heading_rad_per_m * d`` for the
+  heading), ``d`` the straight distance between the two stations (the least the rover drives).
+  Linearised at ``psi_k = 0`` the position rows are ``dt_(k+1) - dt_k + (d_y, -d_x, 0) dpsi_k``
+  with ``(d_x, d_y)`` the offset between them; the error is isotropic per axis, so the frame
+  the odometry reports in does not change the information.
+
+Their information ``J_prior = A^T W A`` (:attr:`PoseAids.information`) is a constant of the
+layout: the network's information stays ``J_prior + sum_j x_j J^(j)``, linear in the selection,
+and every cut of :mod:`planner.accuracy.network` keeps its validity. Odometry ties every station
+to the datum, so with it no station is ever cut off (:meth:`PoseAids.links`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+
+from markerplan.errors import ConfigError
+from pipeline.network.observations import MIN_SIGMA
+
+#: Heading reference classes: name -> (random 1-sigma, boresight bias 1-sigma), degrees. A fine
+#: sun sensor reads the sun's azimuth to about 0.1 deg, mounted to about 0.05 deg; a star
+#: tracker reads attitude to about 10 arcsec, its boresight calibrated to the LiDAR to about
+#: 20 arcsec. Either figure can be set on its own (``heading_prior_sigma_deg``,
+#: ``heading_bias_sigma_deg``).
+HEADING_AIDS: dict[str, tuple[float, float]] = {
+    "sun-sensor": (0.1, 0.05),
+    "star-tracker": (10.0 / 3600.0, 20.0 / 3600.0),
+}
+
+
+@dataclass(frozen=True)
+class Odometry:
+    """The rover's odometry between consecutive stations.
+
+    Attributes
+    ----------
+    position_ratio : float or None
+        1-sigma per axis of the relative position, per metre driven (e.g. 0.02: 2 %);
+        ``None``: no position rows.
+    heading_rad_per_m : float or None
+        1-sigma of the relative heading, rad per metre driven; ``None``: no heading row.
+    """
+
+    position_ratio: float | None = None
+    heading_rad_per_m: float | None = None
+
+    @property
+    def any(self) -> bool:
+        return self.position_ratio is not None or self.heading_rad_per_m is not None
+
+
+@dataclass(frozen=True)
+class PoseAids:
+    """The aids of a network as pseudo-observations of all ``6 s`` pose parameters.
+
+    Attributes
+    ----------
+    design : (m, 6 s) scipy.sparse.csr_array
+        ``A``: each pseudo-observation's row (fixed parameters included).
+    weight : (m, m) scipy.sparse.csr_array
+        ``W``: their weight matrix (block diagonal; the heading block dense when it has a
+        boresight bias), 1/m^2 and 1/rad^2.
+    kind : (m,) str
+        ``"tilt"``, ``"heading"``, ``"odometry"`` or ``"odometry-heading"``.
+    station : (m,) int
+        The station each row belongs to (odometry: the later of the two).
+    odometry_links : bool
+        Odometry position rows tie every station to its predecessor.
+    """
+
+    design: sp.csr_array
+    weight: sp.csr_array
+    kind: np.ndarray
+    station: np.ndarray
+    odometry_links: bool
+
+    def information(self, free: np.ndarray) -> np.ndarray:
+        """``J_prior = A^T W A`` on the free parameters ``free`` ((P,) int into the ``6 s``):
+        (P, P) float."""
+        a = self.design[:, free]
+        j = (a.T @ (self.weight @ a)).toarray()
+        return 0.5 * (j + j.T)
+
+    def redundancy(self, covariance: np.ndarray, free: np.ndarray) -> tuple[np.ndarray,
+                                                                             np.ndarray]:
+        """Redundancy numbers ``diag(I - A C A^T W)`` of the rows that bear on the free
+        parameters (their own design or, through a correlated weight, another row's).
+
+        Parameters
+        ----------
+        covariance : (P, P) float
+            ``C`` of the free parameters.
+        free : (P,) int
+
+        Returns
+        -------
+        rows : (r,) int
+            The rows judged.
+        redundancy : (r,) float
+            Their redundancy numbers, clipped to [0, 1].
+        """
+        a = self.design[:, free]
+        bears = np.asarray(abs(self.weight @ a).sum(axis=1)).ravel() > 0
+        rows = np.flatnonzero(bears)
+        ar = a[rows]
+        aca = ar @ (ar @ covariance).T  # (r, r) = A C A^T
+        w = self.weight[rows][:, rows].toarray()
+        return rows, np.clip(1.0 - np.einsum("ik,ki->i", aca, w), 0.0, 1.0)
+
+    def links(self) -> np.ndarray:
+        """(s - 1, 2) int: station pairs the odometry ties in position (empty without it)."""
+        if not self.odometry_links:
+            return np.zeros((0, 2), np.int64)
+        later = np.unique(self.station[self.kind == "odometry"])
+        return np.column_stack([later - 1, later])
+
+
+def pose_aids(station_xyz: np.ndarray, inclinometer_sigma_rad: float,
+              heading_sigma_rad: float | None = None, heading_bias_sigma_rad: float = 0.0,
+              odometry: Odometry | None = None) -> PoseAids:
+    """The :class:`PoseAids` of a network of stations.
+
+    Parameters
+    ----------
+    station_xyz : (s, 3) float
+        Nominal station positions, site frame, m, in the order the rover visits them.
+    inclinometer_sigma_rad : float
+        Roll and pitch prior, rad; 0: no tilt rows (the caller fixes roll and pitch).
+    heading_sigma_rad : float, optional
+        Random 1-sigma of the heading reference, rad; ``None``: no heading reference.
+    heading_bias_sigma_rad : float
+        1-sigma of the heading reference's common boresight bias, rad.
+    odometry : Odometry, optional
+
+    Returns
+    -------
+    PoseAids
+
+    Raises
+    ------
+    ConfigError
+        A boresight bias without a heading reference, or two consecutive stations at one
+        position (no distance driven for the odometry's sigma).
+    """
+    xyz = np.asarray(station_xyz, dtype=float)
+    s = xyz.shape[0]
+    rows, cols, vals, sigma, kind, station = [], [], [], [], [], []
+
+    def row(entries: list[tuple[int, float]], sig: float, what: str, k: int) -> None:
+        r = len(sigma)
+        for c, v in entries:
+            rows.append(r)
+            cols.append(c)
+            vals.append(v)
+        sigma.append(sig)
+        kind.append(what)
+        station.append(k)
+
+    if inclinometer_sigma_rad > 0:
+        for k in range(s):
+            for p in (4, 5):
+                row([(6 * k + p, 1.0)], inclinometer_sigma_rad, "tilt", k)
+    if heading_bias_sigma_rad > 0 and heading_sigma_rad is None:
+        raise ConfigError("a heading boresight bias needs a heading reference; set "
+                          "heading_prior_sigma_deg or heading_aid, or drop heading_bias_sigma_deg")
+    heading_rows = len(sigma)
+    if heading_sigma_rad is not None:
+        for k in range(s):
+            row([(6 * k + 3, 1.0)], heading_sigma_rad, "heading", k)
+    odo = odometry or Odometry()
+    if odo.any and s > 1:
+        offset = np.diff(xyz, axis=0)
+        driven = np.linalg.norm(offset, axis=1)
+        if np.any(driven <= 0):
+            k = int(np.flatnonzero(driven <= 0)[0])
+            raise ConfigError(f"stations {k} and {k + 1} (in the order given) stand at one "
+                              "position, so the odometry has no distance driven; remove the "
+                              "duplicate station or drop the odometry")
+        for k in range(s - 1):
+            a, b, (dx, dy, _) = 6 * k, 6 * (k + 1), offset[k]
+            if odo.position_ratio is not None:
+                sig = max(odo.position_ratio * driven[k], MIN_SIGMA)
+                lever = ((dy,), (-dx,), (0.0,))
+                for axis in range(3):
+                    entries = [(b + axis, 1.0), (a + axis, -1.0)]
+                    if lever[axis][0] != 0.0:
+                        entries.append((a + 3, lever[axis][0]))
+                    row(entries, sig, "odometry", k + 1)
+            if odo.heading_rad_per_m is not None:
+                row([(b + 3, 1.0), (a + 3, -1.0)],
+                    max(odo.heading_rad_per_m * driven[k], MIN_SIGMA), "odometry-heading", k + 1)
+    m = len(sigma)
+    design = sp.csr_array((vals, (rows, cols)), shape=(m, 6 * s))
+    weight = sp.lil_array((m, m))
+    sig = np.asarray(sigma, dtype=float)
+    weight.setdiag(1.0 / sig**2 if m else sig)
+    if heading_sigma_rad is not None and heading_bias_sigma_rad > 0:
+        r2, b2 = heading_sigma_rad**2, heading_bias_sigma_rad**2
+        c = b2 / (r2 + s * b2)
+        block = (np.eye(s) - c) / r2
+        h = slice(heading_rows, heading_rows + s)
+        weight[h, h] = block
+    return PoseAids(design=design, weight=sp.csr_array(weight), kind=np.asarray(kind, dtype=str),
+                    station=np.asarray(station, dtype=np.int64),
+                    odometry_links=odo.position_ratio is not None and s > 1)
+
+
+def heading_aid_sigmas_deg(aid: str | None) -> tuple[float, float] | None:
+    """The (random, bias) 1-sigma of a heading reference class, degrees; ``None`` for none.
+
+    >>> [round(v * 3600) for v in heading_aid_sigmas_deg("star-tracker")]
+    [10, 20]
+    """
+    if aid is None:
+        return None
+    if aid not in HEADING_AIDS:
+        raise ConfigError(f"`heading_aid` must be one of {', '.join(map(repr, HEADING_AIDS))}, "
+                          f"got {aid!r:.40}; or set heading_prior_sigma_deg yourself")
+    return HEADING_AIDS[aid]
+
