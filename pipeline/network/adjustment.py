@@ -170,7 +170,8 @@ class AdjustmentSettings:
             raise ConfigError(f"body must be a Body (Body.named('moon'|'earth'|'plane')), got "
                               f"{self.body!r:.40}")
         tp = self.tangent_point_m
-        if tp is not None and not (np.shape(tp) == (2,) and np.isfinite(tp).all()):
+        if tp is not None and not (np.shape(tp) == (2,) and all(
+                isinstance(v, int | float) and math.isfinite(v) for v in tp)):
             raise ConfigError(f"tangent_point_m must be None or 2 finite numbers (x, y) in m, got "
                               f"{tp!r:.60}")
         if self.robust is not None and self.snooping:

@@ -72,6 +72,7 @@ def test_pitch_along_heading_roll_across():
     (lambda: Body("moon"), "needs a radius_m > 0"),
     (lambda: AdjustmentSettings(body="moon"), "body must be a Body"),
     (lambda: AdjustmentSettings(tangent_point_m=(1.0,)), "tangent_point_m must be None or 2"),
+    (lambda: AdjustmentSettings(tangent_point_m=("a", 1.0)), "tangent_point_m must be None or 2"),
     (lambda: simulated_network(body="moon"), "`body` must be a Body"),
 ])
 def test_bad_body_is_one_config_error(make, message):
