@@ -15,6 +15,8 @@ Turning observations into coordinates knows nothing of planning.
   observation (3-D) and data snooping;
 - :mod:`pipeline.network.robust`: robust estimation (Huber, IGG-III) by reweighting;
 - :mod:`pipeline.network.variance`: variance components of observation groups;
+- :mod:`pipeline.network.body`: the body's curvature: the local vertical's deflection that the
+  tilt priors are centred on;
 - :mod:`pipeline.network.simulation`: synthetic networks with known truth;
 - :mod:`pipeline.network.run`: marker tables in, adjusted network out.
 """

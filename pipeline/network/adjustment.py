@@ -12,7 +12,14 @@ gives the observation equation
 whose design blocks and weights are :mod:`pipeline.network.design` (shared with the planner's
 predicted accuracy). Roll and pitch are the inclinometer's residual errors: unknowns with the
 prior ``0 +- inclinometer_sigma_rad`` each, because a tilt error is common to all of a station's
-observations (correlated), which treating it as noise would ignore. The rotation is exact
+observations (correlated), which treating it as noise would ignore. On a curved body
+(``settings.body``, :mod:`pipeline.network.body`) the inclinometer levels to the local vertical,
+which leans away from the site frame's tangent point by about ``d / R``; the prior is then
+``deflection +- inclinometer_sigma_rad``, the deflection taken at each station's initial
+position and heading (a position error ``delta`` moves it by ``delta / R``: 0.6 microrad per m
+on the Moon, 0.003 sigma of a 0.01 deg inclinometer). The prior's centre changes no
+covariance: the planner's predicted accuracy (:mod:`planner.accuracy.network`) is the same on
+every body. The rotation is exact
 (``pipeline.rig.station_to_site_matrix``) and linearised at each iterate. An optional heading
 prior (sun sensor) observes each heading around its nominal value. The observations, the datum
 (what fixes the network's 4-DoF defect) and the nominal poses are
@@ -44,6 +51,7 @@ from scipy.stats import chi2
 from markerplan.errors import ConfigError, DataError, InputFileError
 from pipeline.network import normals, variance
 from pipeline.network import robust as robust_
+from pipeline.network.body import Body
 from pipeline.network.design import axis_weight, station_rotations
 from pipeline.network.observations import (
     SIGMA_RULE,
@@ -80,8 +88,9 @@ class AdjustmentSettings:
     Attributes
     ----------
     inclinometer_sigma_rad : float
-        1-sigma of each station's roll and pitch prior (0), rad (at least
-        :data:`~pipeline.network.observations.MIN_SIGMA`).
+        1-sigma of each station's roll and pitch prior, rad (at least
+        :data:`~pipeline.network.observations.MIN_SIGMA`). The prior's centre is the local
+        vertical's deflection on ``body`` (0 on the plane); the covariance does not depend on it.
     heading_prior_sigma_rad : float or None
         1-sigma of a heading observation around the nominal heading (sun sensor), rad (at
         least :data:`~pipeline.network.observations.MIN_SIGMA`); None for none. Needs nominal
@@ -105,6 +114,15 @@ class AdjustmentSettings:
     variance_components : {None, "station", "range"}
         Estimate a variance factor per observing station or per range band
         (:mod:`pipeline.network.variance`); None for none.
+    body : Body
+        The body whose local vertical the inclinometer levels to
+        (:class:`~pipeline.network.body.Body`); default the plane (no deflection: the model of
+        earlier versions, and right where the body or the site frame is unknown).
+    tangent_point_m : (2,) float or None
+        Horizontal site-frame position where the site frame's z axis is the local vertical, m;
+        None for the reference station's initial position (the datum station defines the site
+        frame; :meth:`~pipeline.network.observations.Datum.resolve`'s station for the other
+        datums).
     """
 
     inclinometer_sigma_rad: float = math.radians(0.01)
@@ -118,6 +136,8 @@ class AdjustmentSettings:
     robust_k0: float = robust_.HUBER_K
     robust_k1: float = robust_.IGG3_K1
     variance_components: str | None = None
+    body: Body = Body()
+    tangent_point_m: tuple[float, float] | None = None
 
     def __post_init__(self):
         def sigma(name, value):
@@ -146,6 +166,14 @@ class AdjustmentSettings:
                               f"and {k1!r}")
         if self.robust == "igg3" and not k0 < k1:
             raise ConfigError(f"IGG-III needs robust_k0 < robust_k1, got {k0!r} and {k1!r}")
+        if not isinstance(self.body, Body):
+            raise ConfigError(f"body must be a Body (Body.named('moon'|'earth'|'plane')), got "
+                              f"{self.body!r:.40}")
+        tp = self.tangent_point_m
+        if tp is not None and not (np.shape(tp) == (2,) and all(
+                isinstance(v, int | float) and math.isfinite(v) for v in tp)):
+            raise ConfigError(f"tangent_point_m must be None or 2 finite numbers (x, y) in m, got "
+                              f"{tp!r:.60}")
         if self.robust is not None and self.snooping:
             raise ConfigError("robust estimation replaces data snooping: give snooping=False "
                               f"with robust={self.robust!r}")
@@ -361,14 +389,40 @@ def _adjust_iv(obs, datum, settings, nominal) -> int:
     return reference
 
 
+def tilt_prior_centre(settings: AdjustmentSettings, pose: np.ndarray, reference: int
+                      ) -> np.ndarray:
+    """Centre of the roll and pitch priors: the local vertical's deflection on
+    ``settings.body`` at ``pose`` (module doc).
+
+    Parameters
+    ----------
+    settings : AdjustmentSettings
+    pose : (s, 6) float
+        Station poses to take the deflection at (the initial values), site frame, m and rad.
+    reference : int
+        The reference station, whose horizontal position is the default tangent point.
+
+    Returns
+    -------
+    tilt_rad : (s, 2) float
+        ``(roll, pitch)`` of each station, rad (zeros on the plane).
+    """
+    tangent = (pose[reference, :2] if settings.tangent_point_m is None
+               else settings.tangent_point_m)
+    return settings.body.vertical_tilt(pose[:, :3], pose[:, 3], tangent)
+
+
 def _problem(obs: NetworkObservations, datum: Datum, settings: AdjustmentSettings,
-             nominal: NominalPoses | None, reference: int) -> normals.Problem:
+             nominal: NominalPoses | None, reference: int, start_pose: np.ndarray
+             ) -> normals.Problem:
     """Pseudo-observations and datum constraints; refuses a datum that leaves a defect free
-    (:meth:`~pipeline.network.observations.Datum.constrained_defects`)."""
+    (:meth:`~pipeline.network.observations.Datum.constrained_defects`). The tilt priors are
+    centred at :func:`tilt_prior_centre` of ``start_pose`` (s, 6)."""
     s = len(obs.station_ids)
     stations = np.arange(s)
     index = [6 * stations + 4, 6 * stations + 5]
-    value = [np.zeros(s), np.zeros(s)]
+    tilt = tilt_prior_centre(settings, start_pose, reference)
+    value = [tilt[:, 0], tilt[:, 1]]
     weight = [np.full(2 * s, settings.inclinometer_sigma_rad**-2.0)]
     heading = [np.zeros(2 * s, dtype=bool)]
     if settings.heading_prior_sigma_rad is not None:
@@ -604,8 +658,8 @@ def adjust(obs: NetworkObservations, datum: Datum = Datum(),  # noqa: B008 (froz
     """
     reference = _adjust_iv(obs, datum, settings, nominal)
     order = _check_tied(obs, np.ones(obs.n, dtype=bool), reference)
-    problem = _problem(obs, datum, settings, nominal, reference)
     start = _initial(obs, datum, nominal, order)
+    problem = _problem(obs, datum, settings, nominal, reference, start[0])
     rejected: list[Rejection] = []
     rounds, robust_tests = 0, None
     if settings.robust is None:

@@ -15,7 +15,8 @@ Both the network adjustment (:mod:`pipeline.network.adjustment`, linearised at e
 Gauss-Newton iterate) and the planner's predicted network accuracy
 (:mod:`planner.accuracy.network`, linearised at the nominal layout: tilts 0 and the levelled
 frame along the site axes) use these two functions, so the planner predicts the covariance the
-adjustment will report.
+adjustment will report (on a curved body too: the tilt prior's centre, the local vertical's
+deflection of :mod:`pipeline.network.body`, changes no covariance).
 """
 
 from __future__ import annotations

@@ -1,16 +1,19 @@
 """Synthetic networks with known truth, for tests, benchmarks and planning studies.
 
 Stations lie along a traverse: each step is ``spacing_m`` long in a direction that turns by a
-random amount, the rover faces along it (the station's heading) and the ground height wanders.
+random amount (1-sigma ``turn_sigma_rad`` per step; 0 for a straight line), the rover faces
+along it (the station's heading) and the ground height wanders.
 Markers are scattered around the stations (uniform in a ring between 2 m and
 ``0.9 max_range_m`` around a random station, about a metre below the LiDAR centre). Each
 station observes every marker within ``max_range_m`` (3D distance); the measurement is the true
-centre in the station's levelled frame — the frame the inclinometer believes is level, so the
-station's true residual tilt (roll, pitch, drawn from ``inclinometer_sigma_rad``) is in it —
+centre in the station's levelled frame — the frame the inclinometer believes is level: the
+local vertical of ``body`` (:mod:`pipeline.network.body`; the site frame is the tangent plane at
+the first station, the site origin), so the station's true roll and pitch are the vertical's
+deflection plus the inclinometer's error drawn from ``inclinometer_sigma_rad`` —
 plus isotropic noise of per-axis variance ``sigma**2 / 3``. The nominal poses are odometry: the
 reference (first) station at its true pose, then a random walk of position and heading errors.
 This is the model of :mod:`pipeline.network.adjustment`, so with zero noise the adjustment
-recovers the truth exactly.
+given the same body recovers the truth exactly.
 """
 
 from __future__ import annotations
@@ -22,6 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from markerplan.errors import ConfigError
+from pipeline.network.body import Body
 from pipeline.network.observations import NetworkObservations, NominalPoses
 from pipeline.rig import station_to_site_matrix
 
@@ -50,7 +54,8 @@ def simulated_network(n_stations: int = 10, spacing_m: float = 15.0,
                       sigma_m: float | Callable[[np.ndarray], np.ndarray] = 0.01,
                       inclinometer_sigma_rad: float = math.radians(0.01),
                       odometry_sigma_m: float = 0.3, odometry_heading_sigma_rad: float = 0.02,
-                      noise_scale: float = 1.0, seed: int = 0, noise_seed: int | None = None
+                      noise_scale: float = 1.0, seed: int = 0, noise_seed: int | None = None,
+                      turn_sigma_rad: float = 0.4, body: Body = Body()  # noqa: B008 (frozen)
                       ) -> tuple[NetworkObservations, NetworkTruth]:
     """A random traverse network, its observations and its truth.
 
@@ -79,6 +84,11 @@ def simulated_network(n_stations: int = 10, spacing_m: float = 15.0,
     noise_seed : int or None
         Separate seed of the noise (measurements, tilts, odometry): the same network with new
         noise, e.g. for Monte-Carlo trials.
+    turn_sigma_rad : float
+        1-sigma of the traverse's turn at each station, rad (0: a straight line).
+    body : Body
+        The body whose local vertical the stations are levelled to (tangent point: the site
+        origin, where the first station stands); default the plane.
 
     Returns
     -------
@@ -99,16 +109,19 @@ def simulated_network(n_stations: int = 10, spacing_m: float = 15.0,
     for name, value in (("spacing_m", spacing_m), ("markers_per_station", markers_per_station),
                         ("max_range_m", max_range_m),
                         ("inclinometer_sigma_rad", inclinometer_sigma_rad),
-                        ("noise_scale", noise_scale),
+                        ("noise_scale", noise_scale), ("turn_sigma_rad", turn_sigma_rad),
                         ("odometry_sigma_m", odometry_sigma_m),
                         ("odometry_heading_sigma_rad", odometry_heading_sigma_rad)):
         if not (np.isfinite(value) and value >= 0):
             raise ConfigError(f"`{name}` must be a finite number >= 0, got {value!r}")
+    if not isinstance(body, Body):
+        raise ConfigError(f"`body` must be a Body (Body.named('moon'|'earth'|'plane')), got "
+                          f"{body!r:.40}")
     rng = np.random.default_rng(seed)
     noise = rng if noise_seed is None else np.random.default_rng(noise_seed)
     s = n_stations
     direction = np.cumsum(np.concatenate([[rng.uniform(-np.pi, np.pi)],
-                                          rng.normal(0.0, 0.4, s - 1)]))
+                                          rng.normal(0.0, turn_sigma_rad, s - 1)]))
     step = spacing_m * np.column_stack([np.cos(direction), np.sin(direction)])
     pose = np.zeros((s, 6))
     pose[1:, :2] = np.cumsum(step[:-1], axis=0)
@@ -131,7 +144,8 @@ def simulated_network(n_stations: int = 10, spacing_m: float = 15.0,
     sigma = (np.asarray(sigma_m(d), dtype=float) if callable(sigma_m)
              else np.full(d.shape, float(sigma_m)))
 
-    pose[:, 4:] = noise.normal(0.0, inclinometer_sigma_rad, (s, 2))
+    pose[:, 4:] = (noise.normal(0.0, inclinometer_sigma_rad, (s, 2))
+                   + body.vertical_tilt(pose[:, :3], pose[:, 3]))
     rotation = np.stack([station_to_site_matrix(*p[3:]) for p in pose])
     levelled = np.einsum("nji,nj->ni", rotation[station], markers[marker] - pose[station, :3])
     per_axis = noise_scale * sigma / math.sqrt(3.0)

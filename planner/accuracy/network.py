@@ -13,7 +13,11 @@ block ``H_sj`` (3 x 6) is :func:`pipeline.network.design.pose_design_blocks` lin
 nominal layout with heading and tilts 0, i.e. at the offset ``p = site - station`` along the
 site axes. At a station heading ``psi`` the adjustment's roll and pitch are about the station's
 own axes, the planner's about the site axes: a rotation by ``psi`` of the two tilt parameters,
-which leaves every position covariance unchanged (the tilt prior is isotropic).
+which leaves every position covariance unchanged (the tilt prior is isotropic). On a curved
+body the adjustment centres the tilt prior on the local vertical's deflection
+(:mod:`pipeline.network.body`) instead of 0; a prior's centre changes no covariance, and the
+design at tilts of d / R (0.03 deg at 800 m on the Moon) differs from the one at 0 by that
+fraction, so the prediction here holds on every body.
 
 Eliminating the marker's 3 coordinates (Schur complement) leaves the fixed positive
 semi-definite contribution of site ``j`` on the poses of the stations ``S_j`` that can use it::

@@ -117,6 +117,14 @@ def _datum_choice(datum: tuple[str, str | None] | None, control_path: Path | Non
 @click.option("--inclinometer-sigma-deg", type=ANGLE_SIGMA_DEG,
               help="1-sigma roll and pitch prior of every station, degrees (default: the plan's, "
                    "else 0.01).")
+@click.option("--body", type=click.Choice(("plane", "moon", "earth", "crs")), default="plane",
+              show_default=True,
+              help="The body whose local vertical the inclinometer levels every station to: "
+                   "the roll and pitch priors are centred on the vertical's deflection, d/R "
+                   "away from the reference station (whose vertical is the site frame's z): "
+                   "moon (R 1737.4 km), earth (6371 km), crs (the body of --plan's CRS "
+                   "ellipsoid); plane: none (earlier versions, and right for a site frame that "
+                   "is no tangent plane).")
 @click.option("--snooping/--no-snooping", default=None,
               help="Data snooping: remove the observation whose point test has the largest w "
                    "above the critical value and adjust again, until none is (off: only flag). "
@@ -151,7 +159,7 @@ def _datum_choice(datum: tuple[str, str | None] | None, control_path: Path | Non
 @json_option
 def command(tables, out, overwrite, error_model, plan_path, identity, odometry_sigma_m,
             odometry_heading_sigma_deg, datum, reference_station, control_path,
-            heading_prior_sigma_deg, inclinometer_sigma_deg, snooping, robust, robust_k0,
+            heading_prior_sigma_deg, inclinometer_sigma_deg, body, snooping, robust, robust_k0,
             robust_k1, variance_components, alpha0, beta0, working_radius_m, requirement_m,
             error_figure, as_json):
     """Adjust a network: estimate every station's pose and every marker's centre together
@@ -160,7 +168,8 @@ def command(tables, out, overwrite, error_model, plan_path, identity, odometry_s
     or down-weight them (--robust).
 
     Each detection is weighted by the error model's sigma at its distance and elevation.
-    Roll and pitch are unknowns with the inclinometer as prior. Writes stations.csv,
+    Roll and pitch are unknowns with the inclinometer as prior (centred on the local vertical
+    of --body). Writes stations.csv,
     markers.csv, observations.csv, parameters.csv + covariance.npy (full covariance),
     (with --variance-components) variance_components.csv,
     network.geojson, adjustment.json, report.md and network.png into --out.
@@ -187,7 +196,11 @@ def command(tables, out, overwrite, error_model, plan_path, identity, odometry_s
         from pipeline.network.detections import read_control
         from pipeline.network.run import adjust_tables
         from planner.network.files import write_network_files
-        from planner.network.plan_geometry import read_plan_geometry, resolved_configuration
+        from planner.network.plan_geometry import (
+            body_configuration,
+            read_plan_geometry,
+            resolved_configuration,
+        )
         from planner.network.record import AdjustmentRun, frame_note
 
         t0 = time.perf_counter()
@@ -204,6 +217,7 @@ def command(tables, out, overwrite, error_model, plan_path, identity, odometry_s
             alpha0=alpha0, beta0=beta0, robust=robust, robust_k0=robust_k0, robust_k1=robust_k1,
             variance_components=variance_components, plan_geometry=plan)
         settings = AdjustmentSettings(
+            body=_body(body, plan),
             inclinometer_sigma_rad=math.radians(config["inclinometer_sigma_deg"]),
             heading_prior_sigma_rad=_radians(config["heading_prior_sigma_deg"]),
             alpha0=alpha0, beta0=beta0, snooping=snooping, robust=_none(robust),
@@ -219,7 +233,9 @@ def command(tables, out, overwrite, error_model, plan_path, identity, odometry_s
         timings.update(adjusted.timings_s)
         timings["read"] += read_s
         result, obs, identified = adjusted.result, adjusted.observations, adjusted.identified
-        config.update(reference_station=adjusted.reference_station,
+        config.update(body=body_configuration(settings.body,
+                                              result.datum.reference_id(obs.station_ids)),
+                      reference_station=adjusted.reference_station,
                       max_rejections=settings.max_rejections,
                       max_iterations=settings.max_iterations)
         t0 = time.perf_counter()
@@ -252,6 +268,21 @@ def _reference(reference: str | None, kind: str, plan, stations) -> str | None:
     if kind == "station" and plan is not None and plan.reference_station in ids:
         return plan.reference_station
     return None
+
+
+def _body(choice: str, plan):
+    """``--body`` as a :class:`~pipeline.network.body.Body` (``crs``: the plan's CRS's)."""
+    from markerplan.errors import ConfigError
+    from pipeline.network.body import Body
+    from planner.outputs.gis import crs_body
+
+    if choice != "crs":
+        return Body.named(choice)
+    found = crs_body(plan.crs) if plan is not None else None
+    if found is None:
+        raise ConfigError("--body crs takes the body from the ellipsoid of --plan's CRS (plan.json "
+                          "site.crs_wkt), and there is none; give --body moon, earth or plane")
+    return found
 
 
 def _snooping_choice(snooping: bool | None, robust: str) -> bool:

@@ -109,6 +109,19 @@ def _plan_sigma_deg(cfg: dict, key: str, what: str) -> float | None:
     return sigma
 
 
+def body_configuration(body, reference_id: str) -> dict:
+    """The record of the body whose local vertical centred the tilt priors
+    (:class:`pipeline.network.body.Body`) and of its tangent point (the reference station's
+    initial position: :class:`pipeline.network.adjustment.AdjustmentSettings`'s default).
+
+    >>> from pipeline.network.body import Body
+    >>> body_configuration(Body.named("moon"), "S01")["radius_m"]
+    1737400.0
+    """
+    return {**body.to_dict(),
+            "tangent_point": f"station {reference_id}'s initial position (the reference)"}
+
+
 def resolved_configuration(plan_geometry, **options) -> dict:
     """The resolved configuration of an adjustment (``adjust``, ``verify --network``).
 

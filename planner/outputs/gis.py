@@ -34,6 +34,8 @@ GPKG_DATE = "2000-01-01T00:00:00Z"
 
 #: Semi-major axes of Earth's ellipsoids lie in this range, m (GRS80/WGS84: 6378137).
 EARTH_AXIS_M = (6.37e6, 6.39e6)
+#: The Moon's radii in CRS ellipsoids lie in this range, m (IAU 2015 sphere: 1737400).
+MOON_AXIS_M = (1.7370e6, 1.7385e6)
 
 #: Decimals of longitude/latitude in GeoJSON (1e-9 degree is about 0.1 mm).
 LONLAT_DECIMALS = 9
@@ -69,13 +71,42 @@ def is_earth_crs(crs: str | None) -> bool:
     >>> is_earth_crs(CRS.from_user_input("IAU_2015:30100").to_wkt())
     False
     """
+    axis = _semi_major_m(crs)
+    return axis is not None and EARTH_AXIS_M[0] <= axis <= EARTH_AXIS_M[1]
+
+
+def _semi_major_m(crs: str | None) -> float | None:
+    """Semi-major axis of a WKT CRS's ellipsoid, m (``None``: no CRS or no ellipsoid)."""
     if crs is None:
-        return False
+        return None
     from rasterio.crs import CRS
 
     m = re.search(r'(?:SPHEROID|ELLIPSOID)\["[^"]*",\s*([0-9.eE+]+)',
                   CRS.from_user_input(crs).to_wkt())
-    return m is not None and EARTH_AXIS_M[0] <= float(m.group(1)) <= EARTH_AXIS_M[1]
+    return None if m is None else float(m.group(1))
+
+
+def crs_body(crs: str | None):
+    """The body of a WKT CRS's ellipsoid, for the local vertical's curvature
+    (:class:`pipeline.network.body.Body`): Earth's or the Moon's ellipsoid give the named body
+    (its mean radius), any other a sphere of its semi-major axis; ``None`` without a CRS or an
+    ellipsoid.
+
+    >>> from rasterio.crs import CRS
+    >>> crs_body(CRS.from_user_input("IAU_2015:30100").to_wkt())
+    Body(name='moon', radius_m=1737400.0)
+    >>> crs_body(CRS.from_epsg(32633).to_wkt()).name, crs_body(None)
+    ('earth', None)
+    """
+    from pipeline.network.body import Body
+
+    axis = _semi_major_m(crs)
+    if axis is None:
+        return None
+    for name, (low, high) in (("earth", EARTH_AXIS_M), ("moon", MOON_AXIS_M)):
+        if low <= axis <= high:
+            return Body.named(name)
+    return Body("sphere", axis)
 
 
 def to_lonlat(crs: str, xy: np.ndarray) -> np.ndarray:

@@ -371,8 +371,13 @@ def adjust_and_compare(tables: list[Path], plan_path: Path, error_model,
         to the network (named), a plan that is not one.
     """
     from pipeline.network.adjustment import AdjustmentSettings
+    from pipeline.network.body import Body
     from pipeline.network.run import adjust_tables
-    from planner.network.plan_geometry import plan_geometry, resolved_configuration
+    from planner.network.plan_geometry import (
+        body_configuration,
+        plan_geometry,
+        resolved_configuration,
+    )
     from planner.network.record import station_errors
     from planner.outputs.plan_file import read_plan
     from planner.verify.station_rule import StationRule
@@ -391,6 +396,8 @@ def adjust_and_compare(tables: list[Path], plan_path: Path, error_model,
         heading_prior_sigma_deg=None, inclinometer_sigma_deg=None, working_radius_m=None,
         requirement_m=None, error_figure=None, snooping=settings.snooping, alpha0=settings.alpha0,
         beta0=settings.beta0, plan_geometry=plan)
+    # the scan simulator stands every station level in the site frame: the plane's vertical
+    config["body"] = body_configuration(Body(), reference)
     heading_prior = config["heading_prior_sigma_deg"]
     adjustment = AdjustmentSettings(
         inclinometer_sigma_rad=math.radians(config["inclinometer_sigma_deg"]),

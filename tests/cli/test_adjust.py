@@ -76,9 +76,39 @@ def test_plan_association_within_ellipsoids_and_reproducible(network, tmp_path, 
     assert doc["identity"]["n_identified"] == doc["statistics"]["n_observations"]
     assert doc["datum"]["reference_station"] == "S01"
     assert doc["provenance"]["config"]["marker_ids"] == "plan"
+    assert doc["provenance"]["config"]["body"] == {
+        "name": "plane", "radius_m": None,
+        "tangent_point": "station S01's initial position (the reference)"}
     code, _, err = run_cli(capsys, args + ["--out", "second"])
     assert code == 0, err
     assert _digests(folder) == _digests(tmp_path / "second")
+
+
+def test_body_moon_centres_the_tilt_priors_on_the_local_vertical(network, tmp_path, capsys,
+                                                                monkeypatch):
+    """``--body moon`` moves each station's roll and pitch by (up to) the local vertical's
+    deflection from S01's, and adjustment.json records the body."""
+    from pipeline.network.body import Body
+
+    monkeypatch.chdir(tmp_path)
+    args = ["adjust", *_tables(network), "--plan", str(network.plan), "--json"]
+    tilt = {}
+    for body in ("plane", "moon"):
+        code, _, err = run_cli(capsys, args + ["--body", body, "--out", body])
+        assert code == 0, err
+        rows = list(csv.DictReader((tmp_path / body / "stations.csv").open()))
+        tilt[body] = np.radians([[float(r["roll_deg"]), float(r["pitch_deg"])] for r in rows])
+    config = json.loads((tmp_path / "moon" / "adjustment.json").read_text())["provenance"][
+        "config"]
+    assert config["body"]["name"] == "moon" and config["body"]["radius_m"] == 1_737_400.0
+    pose = network.truth.pose
+    deflection = Body.named("moon").vertical_tilt(pose[:, :3], pose[:, 3], pose[0, :2])
+    shift = tilt["moon"] - tilt["plane"]
+    # the prior pulls the tilts towards the deflection; the markers hold them back in part
+    far = int(np.argmax(np.abs(deflection).max(axis=1)))
+    assert np.abs(deflection[far]).max() > 1e-6
+    assert np.all(np.abs(shift[far] - deflection[far]) < np.abs(deflection[far]) + 1e-9)
+    assert np.dot(shift[far], deflection[far]) > 0.3 * np.dot(deflection[far], deflection[far])
 
 
 def test_swapped_marker_id_is_removed_and_named(tmp_path, capsys, monkeypatch):

@@ -220,12 +220,15 @@ def test_the_plans_crs_reaches_the_network_geojson(planned):
     WGS84 lon/lat like markers.geojson, and names the CRS."""
     from rasterio.crs import CRS
 
+    from pipeline.network.body import Body
     from planner.network.files import network_geojson
     from planner.network.plan_geometry import read_plan_geometry
+    from planner.outputs.gis import crs_body
 
     _, out, _, dem = planned
     geometry = read_plan_geometry(out / "plan.json")
     assert CRS.from_wkt(geometry.crs) == CRS.from_wkt(dem.crs)
+    assert crs_body(geometry.crs) == Body.named("earth")  # adjust --body crs
     markers = [{"marker_id": m, "x_m": x, "y_m": y, "z_m": z, "control": False,
                 "ellipsoid_major_m": 0.01, "n_stations": 1, "stations": "S1"}
                for m, (x, y, z) in zip(geometry.marker_ids, geometry.marker_xyz_m, strict=True)]
