@@ -114,8 +114,8 @@ class AdjustmentSettings:
         (:mod:`pipeline.network.variance`); None for none.
     covariance : {"auto", "dense", "sparse"}
         ``"dense"``: the full covariance array; ``"sparse"``: only its marginal blocks
-        (:class:`pipeline.network.marginals.MarginalCovariance`, exact; computed afresh after
-        each data-snooping removal instead of downdated); ``"auto"``: sparse above
+        (:class:`pipeline.network.marginals.MarginalCovariance`, exact; downdated between
+        data-snooping rounds as the dense one is); ``"auto"``: sparse above
         :data:`SPARSE_ABOVE_PARAMETERS` parameters.
     """
 
@@ -449,14 +449,13 @@ def _snooped(problem: normals.Problem, obs: NetworkObservations, settings: Adjus
     solved_keep = np.ones(obs.n, dtype=bool)
 
     def solve(keep, previous):
-        # After a removal a dense covariance is downdated (normals.downdated) while the solution's
+        # After a removal the covariance is downdated (normals.downdated) while the solution's
         # angles (the design depends on no other parameter) stay within _DOWNDATE_ANGLE_RAD of
         # those it was computed at; otherwise, e.g. once a blunder of metres is out, afresh.
         problem.obs = obs.subset(keep)
         begin = start if previous is None else (previous.pose, previous.markers)
         sol = normals.solve(problem, *begin, settings.max_iterations, must_converge=not snooping)
-        if (previous is not None and problem.covariance_kind == "dense"
-                and np.abs(sol.pose[:, 3:] - previous.covariance_angles).max()
+        if (previous is not None and np.abs(sol.pose[:, 3:] - previous.covariance_angles).max()
                 < _DOWNDATE_ANGLE_RAD):
             row = int(np.flatnonzero(solved_keep & ~keep)[0])
             i = int(np.count_nonzero(solved_keep[:row]))

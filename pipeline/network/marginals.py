@@ -14,10 +14,14 @@ every observed station-marker pair (what each observation's 9 x 9 block, and so 
 needs), chunk by chunk; any other block, or ``Q y`` for a vector ``y`` (the MDBs' effect), is
 computed when asked for. It indexes like the dense array for the patterns the adjustment uses
 (``cov[i:j, i:j]``, ``cov[:, idx]``, ``cov[rows, cols]`` with broadcast index arrays of
-observed blocks, ``cov.diagonal()``).
+observed blocks, ``cov.diagonal()``). After data snooping removes an observation it is
+downdated like the dense array (:meth:`MarginalCovariance.downdated`: the blocks held updated,
+the rank-3 term kept for products).
 """
 
 from __future__ import annotations
+
+import copy
 
 import numpy as np
 import scipy.sparse as sp
@@ -65,6 +69,8 @@ class MarginalCovariance:
         q_ss[station_fixed, :] = 0.0
         q_ss[:, station_fixed] = 0.0
         self.q_ss = q_ss
+        self._q0 = q_ss  # the Schur complement's inverse, before any downdate
+        self._low_rank: list[tuple[np.ndarray, np.ndarray]] = []  # downdates: Q += V C V^T
         self.e = sp.csr_matrix(e)
         self.et = sp.csr_matrix(e.T)
         self.m_inv = m_inv
@@ -101,9 +107,43 @@ class MarginalCovariance:
         y = sp.csc_matrix(y)
         ys, ym = y[:ns], y[ns:]
         w = sp.csr_matrix((ys - self.e @ ym).T)
-        z = np.asarray(w @ self.q_ss).T  # Q_ss symmetric
-        return np.concatenate([z, np.asarray(self._m_inv_matrix @ ym.toarray())
-                               - np.asarray(self.et @ z)])
+        z = np.asarray(w @ self._q0).T  # Q_ss symmetric
+        out = np.concatenate([z, np.asarray(self._m_inv_matrix @ ym.toarray())
+                              - np.asarray(self.et @ z)])
+        for v, c in self._low_rank:
+            out += v @ (c @ np.asarray(y.T @ v).T)
+        return out
+
+    def downdated(self, blocks: np.ndarray, columns: np.ndarray, weight: np.ndarray
+                  ) -> MarginalCovariance:
+        """The covariance after removing one point observation (Sherman-Morrison-Woodbury, as
+        :func:`pipeline.network.normals.downdated`): ``Q + V C V^T`` with ``V = Q A_i^T``
+        (u, 3) and ``C = (W^-1 - A_i Q A_i^T)^-1``; the blocks held are updated, the rank-3
+        term kept for :meth:`matmul`.
+
+        Parameters
+        ----------
+        blocks : (3, 9) float
+            The observation's design block.
+        columns : (9,) int
+        weight : (3,) float
+            Its component weights, 1/m^2.
+        """
+        u_mat = sp.csc_matrix((blocks.T.ravel(), (np.repeat(columns, 3),
+                                                  np.tile(np.arange(3), columns.size))),
+                              shape=(self.shape[0], 3))
+        v = self.matmul(u_mat)
+        c = np.linalg.inv(np.diag(1.0 / np.asarray(weight, float)) - blocks @ v[columns])
+        new = copy.copy(self)
+        ns, k = self.ns, self.k
+        vs, vm = v[:ns], v[ns:].reshape(k, 3, 3)
+        new.q_ss = self.q_ss + vs @ c @ vs.T
+        new.marker_blocks = self.marker_blocks + vm @ c @ np.swapaxes(vm, 1, 2)
+        station, marker = np.divmod(self.pairs, k)
+        vp = vs.reshape(-1, 6, 3)[station]
+        new.cross_blocks = self.cross_blocks + vp @ c @ np.swapaxes(vm[marker], 1, 2)
+        new._low_rank = [*self._low_rank, (v, c)]
+        return new
 
     def columns(self, idx) -> np.ndarray:
         """``Q[:, idx]``, (u, len(idx)) float."""

@@ -273,13 +273,16 @@ def downdated(covariance: np.ndarray, blocks: np.ndarray, columns: np.ndarray,
 
     Parameters
     ----------
-    covariance : (u, u) float
+    covariance : (u, u) float or MarginalCovariance
+        (:meth:`pipeline.network.marginals.MarginalCovariance.downdated` for the latter.)
     blocks : (3, 9) float
         The observation's design block.
     columns : (9,) int
     weight : (3,) float
         Its component weights, 1/m^2.
     """
+    if not isinstance(covariance, np.ndarray):  # MarginalCovariance
+        return covariance.downdated(blocks, columns, weight)
     qu = covariance[:, columns] @ blocks.T
     residual_cov = np.diag(1.0 / weight) - blocks @ qu[columns]
     return covariance + qu @ np.linalg.solve(residual_cov, qu.T)

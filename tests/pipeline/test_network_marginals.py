@@ -84,3 +84,26 @@ def test_covariance_setting_is_checked_and_auto_follows_size():
     obs, truth = simulated_network(n_stations=4, seed=1)
     small = adjust(obs, settings=AdjustmentSettings(snooping=False), nominal=truth.nominal)
     assert isinstance(small.covariance, np.ndarray)
+
+
+def test_sparse_downdate_equals_the_dense_one():
+    """Two observations removed in turn (Sherman-Morrison-Woodbury, as data snooping does):
+    every entry, the blocks held and the products stay those of the dense downdate."""
+    from pipeline.network.design import axis_weight
+    from pipeline.network.normals import downdated, linearise
+
+    obs, truth = simulated_network(n_stations=9, seed=5)
+    dense, sparse = both(obs, Datum(), truth.nominal, snooping=False)
+    blocks, columns, _ = linearise(sparse.observations, sparse.pose, sparse.marker_xyz_m)
+    q, m = dense.covariance, sparse.covariance
+    for i in (3, 17):
+        weight = np.full(3, axis_weight(obs.sigma_m[i]))
+        q = downdated(q, blocks[i], columns[i], weight)
+        m = downdated(m, blocks[i], columns[i], weight)
+    scale = np.abs(q).max()
+    assert np.abs(m.columns(np.arange(q.shape[0])) - q).max() < 1e-9 * scale
+    assert np.abs(m.diagonal() - np.diag(q)).max() < 1e-9 * scale
+    st = 6 * obs.station[:, None, None] + np.arange(6)[None, :, None]
+    mk = 6 * len(obs.station_ids) + 3 * obs.marker[:, None, None] + np.arange(3)[None, None, :]
+    assert np.abs(m[st, mk] - q[st, mk]).max() < 1e-9 * scale
+    assert np.abs(m[mk, np.swapaxes(mk, 1, 2)] - q[mk, np.swapaxes(mk, 1, 2)]).max() < 1e-9 * scale
