@@ -185,6 +185,15 @@ def _cases() -> list[Case]:
         Case("adjust-plan-inclinometer-sigma-tiny", a + ["--plan", PLAN],
              "inclinometer_sigma", setup=with_net(
                  edit_plan=_inclinometer_sigma(1e-300))),
+        *(Case(f"adjust-relative-within-{name}", a + ["--relative-within-m", value],
+               "--relative-within-m", code=2) for name, value in (("zero", "0"),
+                                                                 ("negative", "-5"))),
+        Case("adjust-negative-relative-requirement", a + ["--relative-requirement-m", "-0.1"],
+             "--relative-requirement-m", code=2),
+        Case("adjust-negative-relative-ppm", a + ["--relative-requirement-ppm", "-1"],
+             "--relative-requirement-ppm", code=2),
+        Case("adjust-unknown-covariance", a + ["--covariance", "cholmod"], "--covariance",
+             code=2),
         Case("adjust-out-holds-the-table", ["adjust", "{inputs}/markers.csv", "--out",
                                             "{inputs}", "--overwrite"], "holds the input"),
     ]
