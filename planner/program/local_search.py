@@ -102,9 +102,9 @@ def prune(problem: PlanProblem, config, net: NetworkModel, selected: np.ndarray,
     cov = net.covariance(net.information(sel)).full
     removed: list[int] = []
     candidates = np.flatnonzero(sel & ~fixed)
-    order = np.argsort([judge.cost(cov, int(j)) for j in candidates], kind="stable")
-    finished = True
-    for j in candidates[order]:
+    cost = _costs(judge, cov, candidates, deadline)
+    finished = cost is not None
+    for j in candidates[np.argsort(cost, kind="stable")] if finished else ():
         if deadline is not None and time.perf_counter() > deadline:
             finished = False
             break
@@ -169,7 +169,9 @@ def swap_pairs(problem: PlanProblem, config, net: NetworkModel, selected: np.nda
     use = sp.csr_array((np.ones(net.pair_site.size), (net.pair_station, net.pair_site)),
                        shape=(problem.n_stations, problem.n_sites))
     candidates = np.flatnonzero(sel & ~fixed & net.tying)
-    cost = np.array([judge.cost(cov, int(j)) for j in candidates])
+    cost = _costs(judge, cov, candidates, deadline)
+    if cost is None:
+        return sel, 0
     rank = np.full(problem.n_sites, np.inf)
     rank[candidates] = cost
     swaps = 0
@@ -188,6 +190,18 @@ def swap_pairs(problem: PlanProblem, config, net: NetworkModel, selected: np.nda
                 swaps += 1
                 break
     return sel, swaps
+
+
+def _costs(judge: _Judge, cov: np.ndarray, sites: np.ndarray,
+           deadline: float | None) -> np.ndarray | None:
+    """(k,) :meth:`_Judge.cost` of removing each of ``sites``; ``None`` when ``deadline``
+    passes first."""
+    out = np.empty(sites.size)
+    for i, j in enumerate(sites):
+        if deadline is not None and time.perf_counter() > deadline:
+            return None
+        out[i] = judge.cost(cov, int(j))
+    return out
 
 
 def _swap(problem, config, net, judge, sel, cov, a: int, b: int, open_site: np.ndarray):

@@ -102,3 +102,13 @@ def test_a_one_minimal_layout_above_the_optimum_is_improved_by_a_two_for_one_swa
         assert swaps == 1 and out.sum() == best and passes(out)
         joint = local_search(p, cfg, net, sel)
         assert joint.swaps == 1 and joint.record()["markers"] == best
+
+
+def test_a_passed_deadline_leaves_the_layout_as_it_was():
+    p = _instance()
+    cfg = _config(p)
+    net = network_model(p, cfg)
+    every = np.ones(p.n_sites, bool)
+    out = local_search(p, cfg, net, every, deadline=0.0)
+    assert not out.finished and out.removed == () and out.swaps == 0
+    assert out.selected.tolist() == every.tolist()
