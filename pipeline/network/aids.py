@@ -302,3 +302,68 @@ def aids_iv(n_stations: int, settings, odometry: OdometryReadings | None,
         if heading.heading_rad.shape != (n_stations,):
             raise ConfigError(f"heading readings must be given for all {n_stations} stations, "
                               f"got {heading.heading_rad.shape[0]}")
+
+
+#: Columns of an odometry file: dead-reckoned poses in drive order (site frame, m, degrees).
+ODOMETRY_COLUMNS = ("id", "x_m", "y_m", "z_m", "heading_deg")
+
+
+@dataclass(frozen=True)
+class DeadReckonedPoses:
+    """Dead-reckoned station poses in drive order, as an odometry file gives them.
+
+    Attributes
+    ----------
+    ids : tuple of str
+        Station ids in drive order.
+    position_m : (s, 3) float
+    heading_rad : (s,) float
+    """
+
+    ids: tuple[str, ...]
+    position_m: np.ndarray
+    heading_rad: np.ndarray
+
+    def readings(self, station_ids) -> OdometryReadings:
+        """The relative poses between consecutive poses, as :class:`OdometryReadings` of the
+        network whose stations are ``station_ids`` (every id of the file must be one)."""
+        station_ids = list(station_ids)
+        unknown = [i for i in self.ids if i not in station_ids]
+        if unknown:
+            from markerplan.errors import InputFileError
+
+            raise InputFileError(f"odometry stations {', '.join(unknown[:4])} are not stations of "
+                              "the network; drop their rows from the odometry file")
+        order = np.array([station_ids.index(i) for i in self.ids], dtype=np.int64)
+        return OdometryReadings.from_poses(order, self.position_m, self.heading_rad)
+
+
+def read_odometry(path) -> DeadReckonedPoses:
+    """Dead-reckoned poses from a CSV ``id,x_m,y_m,z_m,heading_deg``, one row per station in
+    the order the rover drove them (site frame, m, degrees).
+
+    Raises
+    ------
+    InputFileError
+        Missing file or columns, fewer than 2 rows, repeated or empty ids, non-finite numbers,
+        two consecutive rows at one position.
+    """
+    from markerplan.errors import InputFileError
+    from markerplan.reading import finite_number, read_csv, unique_ids
+
+    what = f"odometry file {path}"
+    header, rows = read_csv(path, what, ODOMETRY_COLUMNS,
+                            "give one row per station in drive order: id,x_m,y_m,z_m,heading_deg")
+    if len(rows) < 2:
+        raise InputFileError(f"{what}: {len(rows)} station(s); odometry needs at least 2 rows "
+                             "(id,x_m,y_m,z_m,heading_deg) in drive order")
+    col = {c: header.index(c) for c in ODOMETRY_COLUMNS}
+    ids = unique_ids([r[col["id"]].strip() for r in rows], what)
+    values = np.array([[finite_number(r[col[c]], f"{what} row {line} {c}")
+                        for c in ODOMETRY_COLUMNS[1:]] for line, r in enumerate(rows, start=2)])
+    step = np.linalg.norm(np.diff(values[:, :3], axis=0), axis=1)
+    if np.any(step <= 0):
+        i = int(np.flatnonzero(step <= 0)[0])
+        raise InputFileError(f"{what} rows {i + 2} and {i + 3} ({ids[i]}, {ids[i + 1]}): one "
+                             "position, so no distance driven; drop the repeated station")
+    return DeadReckonedPoses(tuple(ids), values[:, :3], np.radians(values[:, 3]))
