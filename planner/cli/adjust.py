@@ -124,7 +124,7 @@ def _datum_choice(datum: tuple[str, str | None] | None, control_path: Path | Non
                    "prior: --heading-prior-sigma-deg or the plan's).")
 @click.option("--odometry", "odometry_path", type=FILE,
               help="Odometry between consecutive stations: CSV id,x_m,y_m,z_m,heading_deg of "
-                   "the dead-reckoned poses in drive order (site frame); the relative poses of "
+                   "the dead-reckoned poses in drive order (any frame); the relative poses of "
                    "consecutive rows are observed (needs --odometry-percent and/or "
                    "--odometry-heading-deg-per-m).")
 @click.option("--odometry-percent", type=ODOMETRY_PERCENT,
