@@ -9,7 +9,9 @@ Calibration (:mod:`planner.studies.figure_calibration`): per geometry, ``--draws
 observation sets, each adjusted (network: Gauss-Newton on the non-linear model; known control:
 the 4-parameter fit) and each station's worst error over its 10 m working disc measured on 720
 rim points; the share of station-draws above each figure, with Wilson 95 % intervals. A
-calibrated 95 % figure is exceeded in 5 %.
+calibrated 95 % figure is exceeded in 5 %. The local requirement's pair figures likewise: each
+consecutive pair's worst relative position (or distance) error over both discs (72 rim points
+each, as ``verify`` measures it) against the pair's figures.
 
 Plans (``plan_sites``, one process, the same candidate sites for both figures): markers and
 status in known control and network mode (the integer program, with ``--time-limit``), and the
@@ -36,6 +38,7 @@ def calibration(draws: int) -> list[dict]:
     from planner.studies.figure_calibration import (
         known_control_calibration,
         network_calibration,
+        pair_calibration,
     )
 
     cases = [lambda: network_calibration(6, draws, seed=1),
@@ -43,7 +46,11 @@ def calibration(draws: int) -> list[dict]:
              lambda: network_calibration(10, draws, seed=3, spacing_m=20.0),
              lambda: known_control_calibration(4, draws, seed=1),
              lambda: known_control_calibration(4, draws, seed=3),
-             lambda: known_control_calibration(8, draws, seed=4)]
+             lambda: known_control_calibration(8, draws, seed=4),
+             lambda: pair_calibration(6, draws, seed=1, kind="position"),
+             lambda: pair_calibration(6, draws, seed=1, kind="distance"),
+             lambda: pair_calibration(10, draws, seed=3, spacing_m=20.0, kind="position"),
+             lambda: pair_calibration(10, draws, seed=3, spacing_m=20.0, kind="distance")]
     out = []
     print(f"calibration: {draws} draws per case")
     for make in cases:

@@ -9,9 +9,9 @@ a + b ppm, datum at the first station or at the centre) and local (between stati
         [--odometry-percent P] [--odometry-heading DEG_PER_M] [--plan-time-limit 0]
 
 For every combination it runs the network greedy (``greedy_network``: markers, wall time), then
-the local search that prunes its layout (``planner.program.local_search.prune``: markers left,
-wall time) and, with ``--plan-time-limit S > 0``, the integer program too (markers, status,
-proven bound, gap).
+the local search that prunes its layout and swaps pairs of its sites for one
+(``planner.program.local_search.local_search``: markers left, removals, swaps, wall time) and,
+with ``--plan-time-limit S > 0``, the integer program too (markers, status, proven bound, gap).
 Each layout is re-judged here from its covariance: the worst ratio of a station's error to its
 allowance ``a + b ppm d`` (``d`` its horizontal distance from the datum, computed in this
 script), or of a pair's relative error to ``--requirement`` for the local kinds. Prints one
@@ -99,7 +99,7 @@ def main() -> None:
     from planner.problem.inputs import load_inputs
     from planner.program import plan_sites
     from planner.program.baselines import greedy_network
-    from planner.program.local_search import prune
+    from planner.program.local_search import local_search
     from planner.run import build_problem
 
     inputs = load_inputs(args.site)
@@ -124,7 +124,7 @@ def main() -> None:
             row["greedy"] = {"markers": g.n_markers, "time_s": round(time.perf_counter() - t, 1),
                              "worst_error_over_allowance": round(judged(problem, cfg,
                                                                         g.selected), 4)}
-            pruned = prune(problem, cfg, network_model(problem, cfg), g.selected)
+            pruned = local_search(problem, cfg, network_model(problem, cfg), g.selected)
             row["pruned"] = {**pruned.record(), "worst_error_over_allowance": round(
                 judged(problem, cfg, pruned.selected), 4),
                 "checked": bool(evaluate_layout(problem, pruned.selected, cfg).all_ok)}

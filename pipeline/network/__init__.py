@@ -11,6 +11,9 @@ Turning observations into coordinates knows nothing of planning.
   least-squares solution, data snooping and the result);
 - :mod:`pipeline.network.normals`: its numerical core: linearisation, the sparse normal
   equations, the Gauss-Newton solve and the covariance;
+- :mod:`pipeline.network.marginals`: the covariance's marginal blocks (stations, markers,
+  observed station-marker pairs) without the full matrix;
+- :mod:`pipeline.network.relative`: relative error ellipses between pairs of stations;
 - :mod:`pipeline.network.reliability`: Baarda's reliability, the test of each point
   observation (3-D) and data snooping;
 - :mod:`pipeline.network.robust`: robust estimation (Huber, IGG-III) by reweighting;

@@ -81,6 +81,13 @@ from pipeline.rig import fit_heading_shift, rot_z
 #: chi-square 95 % quantile, 3 degrees of freedom: the 95 % ellipsoid's scale.
 ELLIPSOID_CHI2_95 = float(chi2.ppf(0.95, 3))
 
+#: How the covariance is held (:attr:`AdjustmentSettings.covariance`).
+COVARIANCE_KINDS = ("auto", "dense", "sparse")
+
+#: ``covariance="auto"`` holds marginal blocks only above this many parameters (6s + 3k): the
+#: full array is then above 36 MB and the marginal blocks are faster too.
+SPARSE_ABOVE_PARAMETERS = 2000
+
 #: Between data-snooping rounds the covariance is downdated while no station angle moved more
 #: than this since it was computed (the design changes by about that fraction; w by less).
 _DOWNDATE_ANGLE_RAD = 1e-3
@@ -134,6 +141,11 @@ class AdjustmentSettings:
         None for the reference station's initial position (the datum station defines the site
         frame; :meth:`~pipeline.network.observations.Datum.resolve`'s station for the other
         datums).
+    covariance : {"auto", "dense", "sparse"}
+        ``"dense"``: the full covariance array; ``"sparse"``: only its marginal blocks
+        (:class:`pipeline.network.marginals.MarginalCovariance`, exact; downdated between
+        data-snooping rounds as the dense one is); ``"auto"``: sparse above
+        :data:`SPARSE_ABOVE_PARAMETERS` parameters.
     """
 
     inclinometer_sigma_rad: float = math.radians(0.01)
@@ -152,6 +164,7 @@ class AdjustmentSettings:
     variance_components: str | None = None
     body: Body = Body()
     tangent_point_m: tuple[float, float] | None = None
+    covariance: str = "auto"
 
     def __post_init__(self):
         def sigma(name, value):
@@ -174,6 +187,9 @@ class AdjustmentSettings:
             value = getattr(self, name)
             if not (isinstance(value, int) and value >= least):
                 raise ConfigError(f"{name} must be an integer >= {least}, got {value!r}")
+        if self.covariance not in COVARIANCE_KINDS:
+            raise ConfigError(f"covariance must be one of {', '.join(COVARIANCE_KINDS)}, got "
+                              f"{self.covariance!r}")
         for name, allowed in (("robust", robust_.ESTIMATORS),
                               ("variance_components", variance.GROUPINGS)):
             if getattr(self, name) not in (None, *allowed):
@@ -211,9 +227,11 @@ class NetworkAdjustment:
         Station poses, site frame, m and rad (heading wrapped to [-pi, pi)).
     marker_xyz_m : (k, 3) float
         Marker centres, site frame, m.
-    covariance : (6s + 3k, 6s + 3k) float
+    covariance : (6s + 3k, 6s + 3k) float or MarginalCovariance
         A-priori covariance (sigma0 = 1) relative to the datum, with the robust weights when
-        there are any; m^2, rad^2. Rows of parameters the datum fixes are zero.
+        there are any; m^2, rad^2. Rows of parameters the datum fixes are zero. The full array,
+        or with ``settings.covariance`` sparse its marginal blocks
+        (:class:`pipeline.network.marginals.MarginalCovariance`, indexed alike).
     residuals_m : (n, 3) float
         ``m_j - (t_s + R_s p)`` per kept observation, site-frame axes, m.
     redundancy, w_test, mdb_m, mdb_effect_m, point, mdb_point_m
@@ -434,6 +452,9 @@ def _problem(obs: NetworkObservations, datum: Datum, settings: AdjustmentSetting
                              settings.heading_prior_sigma_rad, settings.heading_bias_sigma_rad)
     if datum.kind == "station":
         problem.fixed[6 * reference + np.arange(4)] = True
+    sparse = (settings.covariance == "sparse" or settings.covariance == "auto"
+              and problem.fixed.size > SPARSE_ABOVE_PARAMETERS)
+    problem.covariance_kind = "sparse" if sparse else "dense"
     problem.free_defects = np.asarray(
         datum.constrained_defects(settings.heading_prior_sigma_rad is not None), dtype=int)
     return problem

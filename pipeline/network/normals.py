@@ -8,10 +8,12 @@ first (6 each), then markers (3 each).
 The normal equations are sparse (``scipy.sparse``, SuperLU), assembled from each observation's
 9 x 9 block into a sparsity pattern fixed across iterations. A parameter the datum fixes gets a
 unit row and column (its step is 0); the free datum's minimal constraints ``B dx = 0`` border
-the system. The covariance (dense, a priori: sigma0 = 1) comes from the normal matrix at
+the system. The covariance (a priori: sigma0 = 1) comes from the normal matrix at
 convergence with the markers eliminated first (their block is 3 x 3 block-diagonal, as in
-bundle adjustment), so only a matrix of the stations' size is inverted; after removing one
-observation it can be downdated (Sherman-Morrison-Woodbury).
+bundle adjustment), so only a matrix of the stations' size is inverted; then either the full
+array is formed (after removing one observation it can be downdated,
+Sherman-Morrison-Woodbury) or only the blocks wanted
+(:class:`pipeline.network.marginals.MarginalCovariance`).
 """
 
 from __future__ import annotations
@@ -44,6 +46,8 @@ class Problem:
     free_defects: np.ndarray  # (d,) defect directions the 'free' datum constrains
     #: (n,) factor on each observation's weight (robust weights, variance components); None: 1
     factor: np.ndarray | None = None
+    #: "dense" (the full array) or "sparse" (marginal blocks: :mod:`pipeline.network.marginals`)
+    covariance_kind: str = "dense"
     #: odometry and a biased heading reference (:class:`pipeline.network.aids.AidModel`); None
     aids: AidModel | None = None
 
@@ -175,14 +179,26 @@ def normal_system(problem: Problem, assembly: Assembly, blocks: np.ndarray,
     return normal, np.concatenate([rhs, np.zeros(b.shape[0])])
 
 
-def covariance_from_normal(normal: sp.csc_matrix, problem: Problem) -> np.ndarray:
-    """(u, u) covariance: the upper-left block of the inverse of the (bordered) normal matrix,
-    with the rows and columns of the parameters the datum fixes zeroed; m^2, rad^2.
+def station_schur(normal: sp.csc_matrix, problem: Problem
+                  ) -> tuple[np.ndarray, sp.csr_matrix, np.ndarray]:
+    """The markers eliminated from the (bordered) normal matrix (Schur complement, as in bundle
+    adjustment): their block ``N_mm`` is block-diagonal (3 x 3 per marker) and the border
+    touches stations only.
 
-    The markers are eliminated first (Schur complement, as in bundle adjustment): their block
-    ``N_mm`` is block-diagonal (3 x 3 per marker) and the border touches stations only, so
-    ``Q_ss = (N_ss - E N_ms)^-1`` with ``E = N_sm N_mm^-1``, ``Q_sm = -Q_ss E`` and
-    ``Q_mm = N_mm^-1 - E^T Q_sm`` — one dense inverse of the stations' size (plus border).
+    Returns
+    -------
+    q_ss : (6s, 6s) float
+        The stations' covariance ``(N_ss - E N_ms)^-1`` (the bordered inverse's station block;
+        rows of parameters the datum fixes not yet zeroed), m^2, rad^2.
+    e : (6s, 3k) sparse float
+        ``E = N_sm N_mm^-1``: then ``Q_sm = -Q_ss E`` and ``Q_mm = N_mm^-1 + E^T Q_ss E``.
+    m_inv : (k, 3, 3) float
+        Each marker's ``N_mm^-1`` block, m^2.
+
+    Raises
+    ------
+    DataError
+        A singular normal matrix.
     """
     fixed = problem.fixed
     u, ns = fixed.size, 6 * len(problem.obs.station_ids)
@@ -190,8 +206,10 @@ def covariance_from_normal(normal: sp.csc_matrix, problem: Problem) -> np.ndarra
     k = (u - ns) // 3
     x = np.r_[0:ns, u:normal.shape[0]]  # stations and border
     n_xm = normal[x][:, ns:u]
-    n_mm = normal[ns:u][:, ns:u].toarray().reshape(k, 3, k, 3)
-    m_inv = np.linalg.inv(n_mm[np.arange(k), :, np.arange(k), :])
+    n_mm = normal[ns:u][:, ns:u].tocoo()
+    blocks = np.zeros((k, 3, 3))
+    blocks[n_mm.row // 3, n_mm.row % 3, n_mm.col % 3] = n_mm.data
+    m_inv = np.linalg.inv(blocks)
     e = n_xm @ sp.bsr_matrix((m_inv, np.arange(k), np.arange(k + 1)), shape=(3 * k, 3 * k))
     schur = normal[x][:, x].toarray() - (e @ n_xm.T).toarray()
     try:
@@ -201,9 +219,39 @@ def covariance_from_normal(normal: sp.csc_matrix, problem: Problem) -> np.ndarra
     if not (np.isfinite(np.diag(q_ss)).all() and (np.diag(q_ss)[~fixed[:ns]] > 0).all()):
         raise DataError("the network's normal matrix is singular (a station tied only by "
                         "markers on one vertical line?)")
-    e = e[:ns].tocsr()
+    return q_ss, sp.csr_matrix(e[:ns]), m_inv
+
+
+def covariance_from_normal(normal: sp.csc_matrix, problem: Problem):
+    """The covariance of the parameters: the upper-left block of the inverse of the
+    (bordered) normal matrix, with the rows and columns of the parameters the datum fixes
+    zeroed; m^2, rad^2.
+
+    From :func:`station_schur` (one dense inverse of the stations' size, plus border):
+    ``Q_sm = -Q_ss E`` and ``Q_mm = N_mm^-1 + E^T Q_ss E``.
+
+    Parameters
+    ----------
+    normal : (u + d, u + d) sparse float
+    problem : Problem
+
+    Returns
+    -------
+    covariance : (u, u) float or MarginalCovariance
+        With ``problem.covariance_kind`` ``"dense"`` the full array; ``"sparse"`` a
+        :class:`pipeline.network.marginals.MarginalCovariance` (station, marker and observed
+        station-marker blocks ready, any other computed on demand).
+    """
+    from pipeline.network.marginals import MarginalCovariance
+
+    q_ss, e, m_inv = station_schur(normal, problem)
+    fixed = problem.fixed
+    if problem.covariance_kind == "sparse":
+        return MarginalCovariance(q_ss, e, m_inv, fixed, problem.obs)
+    u, ns = fixed.size, q_ss.shape[0]
     q_sm = -np.asarray((e.T @ q_ss).T)
     q_mm = -np.asarray(e.T @ q_sm)
+    k = m_inv.shape[0]
     q_mm.reshape(k, 3, k, 3)[np.arange(k), :, np.arange(k), :] += m_inv
     cov = np.empty((u, u))
     cov[:ns, :ns], cov[:ns, ns:], cov[ns:, :ns], cov[ns:, ns:] = q_ss, q_sm, q_sm.T, q_mm
@@ -212,9 +260,10 @@ def covariance_from_normal(normal: sp.csc_matrix, problem: Problem) -> np.ndarra
     return cov
 
 
-def covariance_at(problem: Problem, sol: Solution) -> np.ndarray:
-    """(u, u) covariance with ``problem``'s weights at ``sol``'s linearisation, m^2, rad^2
-    (e.g. the plain least-squares covariance at a robust solution)."""
+def covariance_at(problem: Problem, sol: Solution):
+    """The covariance (:func:`covariance_from_normal`) with ``problem``'s weights at ``sol``'s
+    linearisation, m^2, rad^2 (e.g. the plain least-squares covariance at a robust
+    solution)."""
     b = constraints(problem, sol.pose, sol.markers)
     normal, rhs = normal_system(problem, assembly(problem, sol.columns, b), sol.blocks,
                                 sol.columns, sol.misclosure, sol.prior_misclosure, b)
@@ -231,13 +280,16 @@ def downdated(covariance: np.ndarray, blocks: np.ndarray, columns: np.ndarray,
 
     Parameters
     ----------
-    covariance : (u, u) float
+    covariance : (u, u) float or MarginalCovariance
+        (:meth:`pipeline.network.marginals.MarginalCovariance.downdated` for the latter.)
     blocks : (3, 9) float
         The observation's design block.
     columns : (9,) int
     weight : (3,) float
         Its component weights, 1/m^2.
     """
+    if not isinstance(covariance, np.ndarray):  # MarginalCovariance
+        return covariance.downdated(blocks, columns, weight)
     qu = covariance[:, columns] @ blocks.T
     residual_cov = np.diag(1.0 / weight) - blocks @ qu[columns]
     return covariance + qu @ np.linalg.solve(residual_cov, qu.T)

@@ -55,6 +55,8 @@ from scipy.optimize import brentq
 from scipy.special import erfcx, ndtri_exp
 from scipy.stats import chi2, ncx2, norm
 
+from pipeline.network.marginals import design_times
+
 #: Redundancy below which a component is uncontrolled (its own error never shows): w = 0 there.
 _MIN_REDUNDANCY = 1e-10
 
@@ -240,6 +242,10 @@ class ObservationReliability:
     mdb_point_m: np.ndarray
 
 
+#: Observation components per chunk of the MDB effect (a chunk holds (rows, 3 (s + k)) floats).
+_SHIFT_ROWS = 1536
+
+
 def residual_blocks(blocks: np.ndarray, columns: np.ndarray, covariance: np.ndarray
                     ) -> np.ndarray:
     """``A_i Q A_i^T`` (n, 3, 3) of each observation from the covariance's blocks, m^2.
@@ -336,8 +342,9 @@ def observation_reliability(blocks: np.ndarray, columns: np.ndarray, weight: np.
         Those parameters' indices.
     weight : (n, 3) float
         Weights ``1 / sigma_component**2``, 1/m^2.
-    covariance : (u, u) float
-        A-priori covariance ``Q`` of the parameters (zero rows for parameters the datum fixes).
+    covariance : (u, u) float or MarginalCovariance
+        A-priori covariance ``Q`` of the parameters (zero rows for parameters the datum fixes),
+        dense or :class:`pipeline.network.marginals.MarginalCovariance`.
     residual : (n, 3) float
         Residuals ``v``, m.
     position_columns : (p, 3) int
@@ -375,9 +382,13 @@ def observation_reliability(blocks: np.ndarray, columns: np.ndarray, weight: np.
     n, c = columns.shape
     design = sp.csr_matrix((blocks.ravel(), np.repeat(columns, 3, axis=0).ravel(),
                             np.arange(0, 3 * n * c + 1, c)), shape=(3 * n, covariance.shape[0]))
-    shift = np.asarray(design @ covariance[:, position_columns.ravel()])  # Q A_i^T per unit
-    per_unit = np.sqrt(np.max(np.sum(shift.reshape(3 * n, -1, 3) ** 2, axis=2), axis=1)
-                       ).reshape(n, 3)
+    per_unit = np.empty(3 * n)
+    for first in range(0, 3 * n, _SHIFT_ROWS):  # Q A_i^T per unit, in chunks of rows
+        rows = slice(first, min(first + _SHIFT_ROWS, 3 * n))
+        shift = design_times(covariance, design[rows], position_columns.ravel())
+        per_unit[rows] = np.sqrt(np.max(np.sum(shift.reshape(shift.shape[0], -1, 3) ** 2,
+                                               axis=2), axis=1))
+    per_unit = per_unit.reshape(n, 3)
     effect = np.where(controlled, per_unit * weight * np.where(controlled, mdb, 0.0), np.inf)
     tests = point_tests(aqa, weight, residual)
     full = tests.dof == 3

@@ -15,8 +15,12 @@ error be at most ``a + b ppm`` of their separation:
     first station to the second: the worst over both discs.
 
 The 95 % figure is the plan's (:class:`~planner.accuracy.figure.ErrorFigure`): the ellipsoid
-figure ``sqrt(chi2 max lambda_max(Sigma(q, q')))`` (``chi2_3(0.95)`` for a position,
-``chi2_1(0.95)`` for a distance, whose error is one-dimensional), or the computed 95 % quantile
+figure, the 3-D 95 % ellipsoid of ``e`` at the worst point pair — its semi-major axis
+``sqrt(chi2_3(0.95) max lambda_max(Sigma(q, q')))`` for a position, its extent along the line
+``sqrt(chi2_3(0.95) max u^T Sigma(q, q') u)`` for a distance (the one-dimensional
+``chi2_1(0.95)`` there would be a pointwise 95 %, which the worst over both discs exceeds: 9.9 %
+of pair-draws in :func:`planner.studies.figure_calibration.pair_calibration`), or the computed
+95 % quantile
 of the worst error over both discs (spherical-radial integration over 12-dimensional
 directions, :func:`pair_quantile`). The maximum over the discs lies on their rims (``|e|^2``
 is convex in ``(q, q')``), at the stations and 72 rim points each, as for a station.
@@ -45,7 +49,6 @@ from planner.accuracy.figure import (
     CHI2_1_95,
     QUANTILE,
     SCREEN_MARGIN,
-    ErrorFigure,
     directions,
     ellipsoid_bound,
     radial_quantile,
@@ -320,16 +323,6 @@ def pair_quantile(blocks: np.ndarray, direction: np.ndarray, radius_m: float, ki
     return out
 
 
-def _cut_chi2(figure: ErrorFigure, kind: str) -> float:
-    """The tangent cuts' constant: the figure's for a position, ``chi2_1`` for a distance (a
-    one-dimensional error)."""
-    return figure.cut_chi2 if kind == "position" else CHI2_1_95
-
-
-def _ellipsoid_chi2(kind: str) -> float:
-    return CHI2_3_95 if kind == "position" else CHI2_1_95
-
-
 class LocalAccuracy:
     """A network's station pairs judged by a :class:`LocalRequirement`.
 
@@ -372,7 +365,7 @@ class LocalAccuracy:
                                     self.net.figure.n_directions)
         else:
             var = pair_worst(blocks, direction, self.net.radius, self.kind)[0]
-            out[ok] = np.sqrt(_ellipsoid_chi2(self.kind) * var)
+            out[ok] = np.sqrt(CHI2_3_95 * var)
         return out
 
     def within(self, cov) -> np.ndarray:
@@ -399,7 +392,7 @@ class LocalAccuracy:
         spread = np.stack([self._station_spread(c) for c in covariances])
         bound = spread[:, pairs.first] + spread[:, pairs.second]
         quantile = self.net.figure.kind == QUANTILE
-        top = CHI2_12_95 if quantile else _ellipsoid_chi2(self.kind)
+        top = CHI2_12_95 if quantile else CHI2_3_95
         sure = ok & (np.sqrt(top) * (1 + SCREEN_MARGIN) * bound <= pairs.allowed_m)
         out[sure] = True
         row, rest = np.nonzero(ok & ~sure)
@@ -410,7 +403,7 @@ class LocalAccuracy:
         allowed = pairs.allowed_m[rest]
         direction = pairs.direction[rest]
         if not quantile:  # the coarse bracket decides most pairs; the rest on the full grid
-            chi = _ellipsoid_chi2(self.kind)
+            chi = CHI2_3_95
             low, high = pair_variance_bracket(blocks, direction, self.net.radius, self.kind)
             verdict = chi * high <= allowed**2
             unsure = np.flatnonzero(~verdict & (chi * low <= allowed**2))
@@ -462,7 +455,7 @@ class LocalAccuracy:
         if which.size == 0:
             return []
         g = self.gradients(cov, which)
-        b = self.pairs.allowed_m[which] ** 2 / _cut_chi2(self.net.figure, self.kind)
+        b = self.pairs.allowed_m[which] ** 2 / self.net.figure.cut_chi2
         return self.net.tangents(cov, list(g), [int(k) for k in self.pairs.first[which]], b,
                                  np.zeros(which.size))
 

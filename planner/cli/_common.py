@@ -135,6 +135,10 @@ TIME_LIMIT_S = FiniteRange(0.0, 86_400.0, min_open=True)
 #: A required 95 % error, m (a looser one than 10 m asks nothing of a survey; the plan's bound
 #: is planner.config.BOUNDS).
 REQUIREMENT_M = FiniteRange(0.0, 10.0, min_open=True)
+#: A requirement's ppm term (:data:`planner.config.BOUNDS`).
+REQUIREMENT_PPM = FiniteRange(0.0, 1e6)
+#: Largest separation of a locally judged station pair, m (planner.config.BOUNDS).
+LOCAL_WITHIN_M = FiniteRange(0.0, 10_000.0, min_open=True)
 #: Marker (sphere) radius, m.
 SPHERE_RADIUS_M = FiniteRange(0.01, 1.0)
 #: Largest mounting axis offset (each of dx, dy), mm: the VLP-16 (103 mm across) sits on an

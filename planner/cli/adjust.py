@@ -12,7 +12,9 @@ import click
 from pipeline.network.observations import MIN_SIGMA
 from planner.cli._common import (
     FILE,
+    LOCAL_WITHIN_M,
     REQUIREMENT_M,
+    REQUIREMENT_PPM,
     FiniteRange,
     emit_summary,
     error_figure_option,
@@ -42,6 +44,9 @@ ODOMETRY_HEADING_DEG_PER_M = FiniteRange(0.0, 10.0, min_open=True)
 #: Working radius, m (the plan's bound: planner.config.BOUNDS).
 RADIUS_M = FiniteRange(0.0, 100.0, min_open=True)
 PROBABILITY = FiniteRange(0.0, 1.0, min_open=True, max_open=True)
+#: ``--covariance`` (pipeline.network.adjustment.COVARIANCE_KINDS, spelled here so that
+#: ``--help`` imports no scipy; a test holds them equal).
+COVARIANCE_KINDS = ("auto", "dense", "sparse")
 #: Robust tuning constants, standardised-residual units (beyond 10 nothing is down-weighted).
 ROBUST_K = FiniteRange(0.0, 10.0, min_open=True)
 
@@ -173,6 +178,23 @@ def _datum_choice(datum: tuple[str, str | None] | None, control_path: Path | Non
                      "(default: the plan's, else 10).")
 @renamed_option("--requirement-m", "requirement_m", "--requirement", type=REQUIREMENT_M,
                 help="Required 95 % station error, m. Default: the plan's, else 0.1.")
+@click.option("--relative-within-m", "relative_within_m", type=LOCAL_WITHIN_M, default=50.0,
+              show_default=True,
+              help="Report the 95 % relative error ellipse of every pair of stations at most "
+                   "this far apart horizontally (relative.csv), m.")
+@click.option("--relative-requirement-m", "relative_requirement_m", type=REQUIREMENT_M,
+              help="Allowed semi-major axis of a pair's 95 % horizontal relative ellipse, "
+                   "constant part, m (as a plan's --local-requirement-m); default "
+                   "--requirement-m.")
+@click.option("--relative-requirement-ppm", "relative_requirement_ppm", type=REQUIREMENT_PPM,
+              default=0.0, show_default=True,
+              help="Parts per million of a pair's separation added to "
+                   "--relative-requirement-m.")
+@click.option("--covariance", "covariance", type=click.Choice(COVARIANCE_KINDS),
+              default="auto", show_default=True,
+              help="dense: the full covariance (covariance.npy); sparse: only the blocks the "
+                   "outputs need (stations, markers, observed pairs; no covariance.npy), for "
+                   "large networks; auto: sparse above 2,000 unknowns.")
 @error_figure_option
 @json_option
 def command(tables, out, overwrite, error_model, plan_path, identity, odometry_sigma_m,
@@ -180,6 +202,7 @@ def command(tables, out, overwrite, error_model, plan_path, identity, odometry_s
             heading_prior_sigma_deg, heading_bias_sigma_deg, odometry_path, odometry_percent,
             odometry_heading_deg_per_m, inclinometer_sigma_deg, body, snooping, robust, robust_k0,
             robust_k1, variance_components, alpha0, beta0, working_radius_m, requirement_m,
+            relative_within_m, relative_requirement_m, relative_requirement_ppm, covariance,
             error_figure, as_json):
     """Adjust a network: estimate every station's pose and every marker's centre together
     from the marker tables (markers.csv of `markerplan process`, accepted detections only) of
@@ -189,8 +212,9 @@ def command(tables, out, overwrite, error_model, plan_path, identity, odometry_s
     Each detection is weighted by the error model's sigma at its distance and elevation.
     Roll and pitch are unknowns with the inclinometer as prior (centred on the local vertical
     of --body). Writes stations.csv,
-    markers.csv, observations.csv, parameters.csv + covariance.npy (full covariance),
-    (with --variance-components) variance_components.csv,
+    markers.csv, observations.csv, parameters.csv + covariance.npy (full covariance;
+    not with --covariance sparse), relative.csv (relative error ellipses of stations within
+    --relative-within-m), (with --variance-components) variance_components.csv,
     network.geojson, adjustment.json, report.md and network.png into --out.
 
     \b
@@ -215,6 +239,7 @@ def command(tables, out, overwrite, error_model, plan_path, identity, odometry_s
         from pipeline.network.aids import read_odometry
         from pipeline.network.detections import read_control
         from pipeline.network.run import adjust_tables
+        from planner.accuracy.local import LocalRequirement
         from planner.network.files import write_network_files
         from planner.network.plan_geometry import (
             body_configuration,
@@ -236,10 +261,15 @@ def command(tables, out, overwrite, error_model, plan_path, identity, odometry_s
             inclinometer_sigma_deg=inclinometer_sigma_deg, working_radius_m=working_radius_m,
             requirement_m=requirement_m, error_figure=error_figure, snooping=snooping,
             alpha0=alpha0, beta0=beta0, robust=robust, robust_k0=robust_k0, robust_k1=robust_k1,
-            variance_components=variance_components, plan_geometry=plan,
+            variance_components=variance_components, relative_within_m=relative_within_m,
+            relative_requirement_m=relative_requirement_m,
+            relative_requirement_ppm=relative_requirement_ppm, covariance=covariance,
+            plan_geometry=plan,
             odometry=_str(odometry_path), odometry_percent=odometry_percent,
             odometry_heading_deg_per_m=odometry_heading_deg_per_m,
             heading_bias_sigma_deg=heading_bias_sigma_deg)
+        if config["relative_requirement_m"] is None:
+            config["relative_requirement_m"] = config["requirement_m"]
         _check_aids(config, odometry_path)
         settings = AdjustmentSettings(
             body=_body(body, plan),
@@ -250,7 +280,7 @@ def command(tables, out, overwrite, error_model, plan_path, identity, odometry_s
             odometry_heading_rad_per_m=_radians(odometry_heading_deg_per_m),
             alpha0=alpha0, beta0=beta0, snooping=snooping, robust=_none(robust),
             robust_k0=robust_k0, robust_k1=robust_k1,
-            variance_components=_none(variance_components))
+            variance_components=_none(variance_components), covariance=covariance)
         read_s = time.perf_counter() - t0
         adjusted = adjust_tables(
             tables, error_model.model, functools.partial(_reference, reference, kind, plan),
@@ -280,7 +310,9 @@ def command(tables, out, overwrite, error_model, plan_path, identity, odometry_s
             error_model=error_model.name, unidentified=identified.unidentified,
             plan_markers=(dict(zip(plan.marker_ids, plan.marker_xyz_m, strict=True))
                           if plan and identity != "geometry" else {}),
-            crs=plan.crs if plan is not None and kind == "station" else None)
+            crs=plan.crs if plan is not None and kind == "station" else None,
+            relative=LocalRequirement(config["relative_requirement_m"],
+                                      relative_requirement_ppm, relative_within_m))
         doc = write_network_files(stage, run)
         timings["write"] = time.perf_counter() - t0
     report_timings(timings)
@@ -417,6 +449,9 @@ def _summary(doc: dict, out: Path, timings: dict[str, float]) -> dict:
             "requirement_m": req["requirement_m"], "worst_station": req["worst_station"],
             "worst_station_error_95_m": req["worst_station_error_95_m"],
             "stations": {s["id"]: s["station_error_95_m"] for s in doc["stations"]},
+            "relative": None if doc["relative"] is None else {
+                k: doc["relative"][k] for k in ("requirement", "n_pairs", "n_passed",
+                                                "worst_pair")},
             "timings_s": {k: round(v, 3) for k, v in timings.items()}}
 
 

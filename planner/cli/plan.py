@@ -10,7 +10,9 @@ import click
 from planner.accuracy.aids import HEADING_AIDS
 from planner.cli._common import (
     FILE,
+    LOCAL_WITHIN_M,
     REQUIREMENT_M,
+    REQUIREMENT_PPM,
     FiniteRange,
     boundary_option,
     config_option,
@@ -47,10 +49,6 @@ from planner.config import LOCAL_KINDS
 #: Cell size of the stand maps, m: rounded to whole DEM cells (at least one), so any positive
 #: size up to 10 km (one cell over any site markerplan plans; a km site is 1 km across).
 CELL_M = FiniteRange(0.0, 10_000.0, min_open=True)
-#: A requirement's ppm term (:data:`planner.config.BOUNDS`).
-REQUIREMENT_PPM = FiniteRange(0.0, 1e6)
-#: Largest separation of a locally judged station pair, m (planner.config.BOUNDS).
-LOCAL_WITHIN_M = FiniteRange(0.0, 10_000.0, min_open=True)
 #: Odometry's 1-sigma in percent of the distance driven (planner.config.BOUNDS).
 ODOMETRY_PERCENT = FiniteRange(0.0, 100.0, min_open=True)
 

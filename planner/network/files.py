@@ -15,6 +15,7 @@ observations.csv   every identified detection: residuals, redundancy numbers, th
                    robust weight; ``status`` kept / flagged / removed
 parameters.csv     the unknowns in the covariance's order, with values and sigmas (m, rad)
 covariance.npy     the full a-priori covariance (sigma0 = 1) of all unknowns, m^2 and rad^2
+                   (not with the sparse covariance: only its marginal blocks exist)
 network.geojson    stations and markers (Points) and the ties (LineStrings), site frame
 adjustment.json    the summary: configuration, version, solver status, datum, sigma0^2, dof,
                    global test, rejected observations, reliability, requirement
@@ -23,7 +24,10 @@ network.png        the network map (:mod:`planner.network.map`)
 ================== ===========================================================================
 
 With variance components estimated, ``variance_components.csv`` (:data:`VARIANCE_FILES`) holds
-them, one row per group and a last row ``all`` for the whole network.
+them, one row per group and a last row ``all`` for the whole network. With relative accuracy
+asked for (:attr:`planner.network.record.AdjustmentRun.relative`), ``relative.csv``
+(:data:`RELATIVE_FILES`) holds the relative error ellipses of the neighbouring station pairs
+(:mod:`planner.network.relative`) and ``adjustment.json`` its ``relative`` section.
 
 Every CSV opens with its header. With a CRS (:attr:`planner.network.record.AdjustmentRun.crs`)
 ``stations.prj`` and ``markers.prj`` (:data:`PRJ_FILES`) hold its WKT for GIS readers
@@ -43,6 +47,7 @@ import numpy as np
 
 from markerplan.writing import column_types, json_default, write_csv, write_gis_sidecars
 from planner.network import record as nr
+from planner.network.relative import RELATIVE_COLUMNS, relative_rows, relative_section
 from planner.outputs.gis import geojson_crs_members, geojson_positions
 
 FILES = ("stations.csv", "stations.csvt", "markers.csv", "markers.csvt", "observations.csv",
@@ -52,6 +57,8 @@ FILES = ("stations.csv", "stations.csvt", "markers.csv", "markers.csvt", "observ
 PRJ_FILES = ("stations.prj", "markers.prj")
 #: Written besides :data:`FILES` when variance components are estimated.
 VARIANCE_FILES = ("variance_components.csv",)
+#: Written besides :data:`FILES` with relative accuracy.
+RELATIVE_FILES = ("relative.csv",)
 
 
 def write_network_files(folder: str | Path, run: nr.AdjustmentRun, draw_map: bool = True
@@ -81,13 +88,21 @@ def write_network_files(folder: str | Path, run: nr.AdjustmentRun, draw_map: boo
     stations = nr.station_rows(run)
     markers = nr.marker_rows(run)
     observations = nr.observation_rows(run, critical_value(run.result.settings.alpha0))
-    files = [f for f in FILES if draw_map or f != "network.png"]
+    dense = isinstance(run.result.covariance, np.ndarray)
+    files = [f for f in FILES if (draw_map or f != "network.png")
+             and (dense or f != "covariance.npy")]
     if run.crs is not None:
         files += PRJ_FILES
     variance = nr.variance_rows(run.result)
     if variance:
         files += VARIANCE_FILES
-    doc = finite_json(nr.adjustment_record(run, stations, markers, observations, files))
+    relative = [] if run.relative is None else relative_rows(run.result, run.relative)
+    if run.relative is not None:
+        files += RELATIVE_FILES
+    doc = nr.adjustment_record(run, stations, markers, observations, files)
+    doc["relative"] = (None if run.relative is None
+                       else relative_section(relative, run.relative))
+    doc = finite_json(doc)
     for name, columns, rows in (("stations.csv", nr.STATION_COLUMNS, stations),
                                 ("markers.csv", nr.MARKER_COLUMNS, markers)):
         write_csv(folder / name, columns, rows)
@@ -96,13 +111,16 @@ def write_network_files(folder: str | Path, run: nr.AdjustmentRun, draw_map: boo
     write_csv(folder / "parameters.csv", nr.PARAMETER_COLUMNS, nr.parameter_rows(run.result))
     if variance:
         write_csv(folder / "variance_components.csv", nr.VARIANCE_COLUMNS, variance)
-    np.save(folder / "covariance.npy", np.ascontiguousarray(run.result.covariance,
-                                                            dtype=np.float64))
+    if run.relative is not None:
+        write_csv(folder / "relative.csv", RELATIVE_COLUMNS, relative)
+    if dense:
+        np.save(folder / "covariance.npy", np.ascontiguousarray(run.result.covariance,
+                                                                dtype=np.float64))
     write_json(folder / "network.geojson",
                network_geojson(doc, stations, markers, observations, run.crs))
     write_json(folder / "adjustment.json", doc)
-    (folder / "report.md").write_text(report_markdown(doc, stations, markers, observations),
-                                      encoding="utf-8")
+    (folder / "report.md").write_text(report_markdown(doc, stations, markers, observations,
+                                                      relative), encoding="utf-8")
     if draw_map:
         draw_network_map(run, stations, markers, observations, folder / "network.png")
     return doc

@@ -98,6 +98,9 @@ class AdjustmentRun:
     crs : str or None
         The CRS (WKT) the coordinates are in: the plan's, when a station is held at its
         planned pose; else ``None`` (a local frame).
+    relative : planner.accuracy.local.LocalRequirement or None
+        The pairs of stations whose relative error ellipses are reported, and the allowance
+        they are judged against (:mod:`planner.network.relative`); None for none.
     """
 
     result: Any
@@ -113,6 +116,7 @@ class AdjustmentRun:
     unidentified: list = field(default_factory=list)
     plan_markers: dict = field(default_factory=dict)
     crs: str | None = None
+    relative: Any = None
 
 
 def ellipsoid_axes(cov3: np.ndarray) -> np.ndarray:
@@ -450,7 +454,7 @@ def parameter_rows(result) -> list[dict]:
     names += [("marker", mid, p) for mid in obs.marker_ids for p in ("x_m", "y_m", "z_m")]
     values = np.concatenate([np.asarray(result.pose, float).ravel(),
                              np.asarray(result.marker_xyz_m, float).ravel()])
-    sigma = np.sqrt(np.clip(np.diagonal(result.covariance), 0.0, None))
+    sigma = np.sqrt(np.clip(result.covariance.diagonal(), 0.0, None))
     return [{"index": k, "parameter": f"{i}.{p}", "kind": kind, "id": i, "name": p,
              "value": float(values[k]), "sigma": float(sigma[k])}
             for k, (kind, i, p) in enumerate(names)]

@@ -2,7 +2,8 @@
 
 Datum and frame first; then the fit (variance factor, degrees of freedom, global test, variance
 components of observation groups when estimated); the observations data snooping removed and
-why, or those robust estimation down-weighted; the stations and markers, weakest first; the
+why, or those robust estimation down-weighted; the stations, the relative accuracy of
+neighbouring stations (:mod:`planner.network.relative`) and the markers, weakest first; the
 reliability figures (redundancy numbers, minimal detectable biases and their effect); how
 markers were identified; inputs and provenance. The numbers are those of the other files
 (:mod:`planner.network.record`).
@@ -11,6 +12,7 @@ markers were identified; inputs and provenance. The numbers are those of the oth
 from __future__ import annotations
 
 from planner.accuracy.figure import ErrorFigure
+from planner.network.relative import relative_markdown
 
 #: Rows of the weakest-first tables shown in full (the CSV files hold every one).
 MAX_ROWS = 15
@@ -26,7 +28,7 @@ def _mm(value: float | None) -> str:
 
 
 def report_markdown(doc: dict, stations: list[dict], markers: list[dict],
-                    observations: list[dict]) -> str:
+                    observations: list[dict], relative: list[dict] = ()) -> str:
     """The Markdown report.
 
     Parameters
@@ -35,6 +37,9 @@ def report_markdown(doc: dict, stations: list[dict], markers: list[dict],
         The ``adjustment.json`` document (:func:`planner.network.record.adjustment_record`).
     stations, markers, observations : list of dict
         The rows of ``stations.csv``, ``markers.csv`` and ``observations.csv``.
+    relative : list of dict
+        The rows of ``relative.csv`` (:mod:`planner.network.relative`; shown when ``doc`` has
+        a ``relative`` section).
 
     Returns
     -------
@@ -44,7 +49,7 @@ def report_markdown(doc: dict, stations: list[dict], markers: list[dict],
     lines = [f"# Network adjustment — {st['n_stations']} stations, {st['n_markers']} markers",
              "", _verdict(doc), ""]
     lines += _datum(doc) + _fit(doc) + _variance(doc) + _snooping(doc) + _robust(doc)
-    lines += _stations(stations, req)
+    lines += _stations(stations, req) + relative_markdown(doc.get("relative"), list(relative))
     lines += _markers(markers) + _reliability(doc, observations) + _identity(doc)
     lines += _provenance(doc)
     return "\n".join(lines) + "\n"

@@ -358,8 +358,9 @@ def report_markdown(doc: dict) -> str:
     search = sol.get("local_search")
     if search:
         lines.append(f"- started from the network greedy's {search['start_markers']} markers, "
-                     f"pruned by local search to {search['markers']} ({search['removed']} removed"
-                     f" in {search['time_s']:g} s"
+                     f"improved by local search to {search['markers']} ({search['removed']} "
+                     f"removed, {search.get('swaps', 0)} pairs swapped for one, in "
+                     f"{search['time_s']:g} s"
                      + ("" if search["finished"] else ", stopped by its time share") + ")")
     lines += ["", "## Compared with", "", "| layout | markers | meets requirement | plan saves |",
              "|---|---:|---|---:|"]

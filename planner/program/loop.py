@@ -5,9 +5,9 @@ predicted accuracy exactly (:class:`planner.accuracy.checks.StationInfo`), adds 
 stations that fail (:mod:`planner.program.cuts_known`, :mod:`planner.program.cuts_network`) and
 re-solves until all pass. In known-control mode the first solve is the directions-only
 relaxation (:func:`_combinatorial_first`); the full model is built only when its layout fails a
-station. Large network problems start from the greedy layout, pruned by a local search
-(:func:`planner.program.local_search.prune`) and repaired until it meets the chance targets in
-a chance-constrained plan, and a root relaxation (:func:`_root_relaxation`).
+station. Large network problems start from the greedy layout, improved by a local search
+(:func:`planner.program.local_search.local_search`) and repaired until it meets the chance
+targets in a chance-constrained plan, and a root relaxation (:func:`_root_relaxation`).
 """
 
 from __future__ import annotations
@@ -26,7 +26,7 @@ from planner.problem.usability import PlanProblem
 from planner.program.cuts_chance import ChanceRule, chance_preflight, chance_rule
 from planner.program.cuts_known import accuracy_cuts
 from planner.program.cuts_network import MAX_TERMS, network_cuts, network_preflight, sparse_tangent
-from planner.program.local_search import prune
+from planner.program.local_search import local_search
 from planner.program.model import (
     Model,
     PlanResult,
@@ -48,8 +48,8 @@ MAX_NETWORK_TYING_SITES = 20_000
 #: (:func:`~planner.program.baselines.greedy_network`) starts no step after this fraction of the
 #: time limit (it stops without a layout; the search goes on without an incumbent).
 _GREEDY_TIME_FRACTION = 0.5
-#: ... and its local search (:func:`~planner.program.local_search.prune`) tries no removal after
-#: this fraction of the time limit.
+#: ... and its local search (:func:`~planner.program.local_search.local_search`) tries no move
+#: after this fraction of the time limit.
 _PRUNE_TIME_FRACTION = 0.65
 #: Network mode, large problems: the root relaxation (:func:`_root_relaxation`) spends at most
 #: this fraction of the time left after the greedy incumbent, at most this many LP solves, and
@@ -302,11 +302,12 @@ def _plan_network(problem: PlanProblem, config, model: Model | None,
             and (config.max_bias_effect_m is None  # the greedy ignores the bias bound
                  or check(greedy.selected).all_ok):
         start = greedy.selected
-        pruning = prune(problem, config, net, start,
-                        deadline=t0 + _PRUNE_TIME_FRACTION * config.time_limit_s)
-        if pruning.removed and not check(pruning.selected).all_ok:
+        pruning = local_search(problem, config, net, start,
+                               deadline=t0 + _PRUNE_TIME_FRACTION * config.time_limit_s)
+        changed = bool(pruning.removed) or pruning.swaps > 0
+        if changed and not check(pruning.selected).all_ok:
             pruning = None  # it fails a rule the search does not judge (the bias bound)
-        elif pruning.removed:
+        elif changed:
             start = pruning.selected
         if chance is not None and not chance.layout_ok(start):
             start = repair(start)  # None: it cannot

@@ -11,6 +11,11 @@ rim points and the station itself, mapped with the full rotations. The figures
 (:mod:`planner.accuracy.figure`) are computed once, from the covariance the adjustment states
 for the noise-free network. A calibrated 95 % figure is exceeded in 5 %
 of station-draws; the ellipsoid figure, usually in fewer.
+
+:func:`pair_calibration` does the same for the local requirement's pair figures
+(:mod:`planner.accuracy.local`): each draw's worst relative error of two stations over both
+discs (:func:`planner.verify.local_pairs.relative_error_m`, the quantity ``verify`` measures)
+against the pair's 95 % figures from the stated joint covariance.
 """
 
 from __future__ import annotations
@@ -24,8 +29,11 @@ from pipeline.network.adjustment import AdjustmentSettings, adjust
 from pipeline.network.simulation import simulated_network
 from pipeline.rig import station_to_site_matrix
 from planner.accuracy import known_control
-from planner.accuracy.figure import ErrorFigure
+from planner.accuracy.figure import N_DIRECTIONS, ErrorFigure
+from planner.accuracy.known_control import CHI2_3_95, registration_differences
+from planner.accuracy.local import pair_quantile, pair_worst
 from planner.config import ERROR_FIGURES
+from planner.verify.local_pairs import relative_error_m
 
 #: Rim bearings of the measured worst error (ten times the figures' 72).
 MEASURED_RIM = 720
@@ -135,6 +143,68 @@ def network_calibration(n_stations: int, n_draws: int, seed: int = 0, spacing_m:
         worst[d] = worst_disc_error(res.pose[judged], truth_d.pose[judged], working_radius_m)
     return FigureCalibration(f"network traverse, {n_stations} stations {spacing_m:g} m apart "
                              f"(seed {seed})", n_draws, figures, worst)
+
+
+def site_axes(pose_covariance: np.ndarray, heading_rad: np.ndarray) -> np.ndarray:
+    """(6 s, 6 s) pose covariance with each station's roll and pitch turned from its own axes
+    (the adjustment's ``Rz(heading) Ry(pitch) Rx(roll)``) to the site axes the planner's
+    figures use: the small rotation ``roll Rz e_x + pitch Rz e_y`` has site components
+    ``R2(heading) (roll, pitch)``. Translations and headings are site-frame already."""
+    turn = np.eye(pose_covariance.shape[0])
+    for k, h in enumerate(heading_rad):
+        c, s = math.cos(h), math.sin(h)
+        turn[6 * k + 4:6 * k + 6, 6 * k + 4:6 * k + 6] = [[c, -s], [s, c]]
+    return turn @ pose_covariance @ turn.T
+
+
+def pair_calibration(n_stations: int, n_draws: int, seed: int = 0, spacing_m: float = 15.0,
+                     kind: str = "position", sigma_m: float = 0.01,
+                     working_radius_m: float = 10.0, markers_per_station: float = 3.0,
+                     inclinometer_sigma_rad: float = math.radians(0.01)) -> FigureCalibration:
+    """Exceedance of the local requirement's pair figures over a simulated traverse: every
+    pair of consecutive stations, its worst relative error over both discs
+    (:func:`~planner.verify.local_pairs.relative_error_m`: position, or ``kind="distance"``
+    along the line between them) in each draw against the figures from the joint covariance
+    the adjustment states for the noise-free network (:func:`site_axes`).
+
+    Parameters
+    ----------
+    n_stations, n_draws, seed, spacing_m, sigma_m, working_radius_m, markers_per_station,
+    inclinometer_sigma_rad : as :func:`network_calibration`
+    kind : {"position", "distance"}
+
+    Returns
+    -------
+    FigureCalibration
+        One column per pair (the stations ``k``, ``k + 1``).
+    """
+    settings = AdjustmentSettings(inclinometer_sigma_rad=inclinometer_sigma_rad, snooping=False)
+    kw = dict(n_stations=n_stations, spacing_m=spacing_m, sigma_m=sigma_m, seed=seed,
+              markers_per_station=markers_per_station,
+              inclinometer_sigma_rad=inclinometer_sigma_rad)
+    obs, truth = simulated_network(noise_scale=0.0, **kw)
+    stated = adjust(obs, settings=settings, nominal=truth.nominal)
+    six = 6 * n_stations
+    cov = site_axes(stated.covariance[:six, :six], truth.pose[:, 3])
+    first, second = np.arange(n_stations - 1), np.arange(1, n_stations)
+    idx = np.hstack([6 * first[:, None] + np.arange(6), 6 * second[:, None] + np.arange(6)])
+    blocks = cov[idx[:, :, None], idx[:, None, :]]
+    delta = truth.pose[second, :3] - truth.pose[first, :3]
+    direction = delta / np.linalg.norm(delta, axis=1, keepdims=True)
+    figures = {"quantile": pair_quantile(blocks, direction, working_radius_m, kind, N_DIRECTIONS),
+               "ellipsoid": np.sqrt(CHI2_3_95 * pair_worst(blocks, direction, working_radius_m,
+                                                      kind)[0])}
+    worst = np.empty((n_draws, first.size))
+    n_rim = MEASURED_RIM // 10  # the figures' rim
+    for d in range(n_draws):
+        obs_d, truth_d = simulated_network(noise_seed=10_000 + d, **kw)
+        res = adjust(obs_d, settings=settings, nominal=truth_d.nominal)
+        errors = [registration_differences(res.pose[k], truth_d.pose[k], working_radius_m,
+                                           n_rim) for k in range(n_stations)]
+        worst[d] = [relative_error_m(errors[a], errors[b], kind, direction[i])
+                    for i, (a, b) in enumerate(zip(first, second, strict=True))]
+    return FigureCalibration(f"network traverse, pairs of {n_stations} stations {spacing_m:g} m "
+                             f"apart, {kind} (seed {seed})", n_draws, figures, worst)
 
 
 def known_control_calibration(n_markers: int, n_draws: int, seed: int = 0,

@@ -276,3 +276,53 @@ def test_odometry_and_a_heading_bias_are_used_and_recorded(network, tmp_path, ca
     d2 = _mahalanobis(tmp_path / "aided", network.truth.pose[:, :3], network.truth.marker_xyz_m,
                       network.station_ids, network.marker_ids)
     assert d2.max() <= chi2.ppf(0.999, 3), d2
+
+
+def test_relative_pairs_within_d_and_sparse_equals_dense(network, tmp_path, capsys,
+                                                         monkeypatch):
+    """relative.csv holds exactly the station pairs at most --relative-within-m apart
+    horizontally (recomputed from stations.csv); the sparse covariance writes the same
+    relative.csv and report, and no covariance.npy; --json names the worst pair."""
+    from pipeline.network.adjustment import COVARIANCE_KINDS
+    from planner.cli.adjust import COVARIANCE_KINDS as CLI_KINDS
+
+    assert CLI_KINDS == COVARIANCE_KINDS
+    monkeypatch.chdir(tmp_path)
+    args = ["adjust", *_tables(network), "--plan", str(network.plan), "--json",
+            "--relative-within-m", "30", "--relative-requirement-m", "0.02",
+            "--relative-requirement-ppm", "500"]
+    summaries = {}
+    for kind in ("dense", "sparse"):
+        code, out, err = run_cli(capsys, args + ["--covariance", kind, "--out", kind])
+        assert code == 0, err
+        summaries[kind] = json.loads(out)["relative"]
+    stations = list(csv.DictReader((tmp_path / "dense" / "stations.csv").open()))
+    xy = {s["station_id"]: (float(s["x_m"]), float(s["y_m"])) for s in stations}
+    ids = [s["station_id"] for s in stations]
+    expected = [(a, b) for i, a in enumerate(ids) for b in ids[i + 1:]
+                if math.dist(xy[a], xy[b]) <= 30.0]
+    rows = list(csv.DictReader((tmp_path / "dense" / "relative.csv").open()))
+    assert [(r["first_station"], r["second_station"]) for r in rows] == expected
+    assert 0 < len(expected) < len(ids) * (len(ids) - 1) // 2
+    for r in rows:
+        assert float(r["allowed_95_m"]) == pytest.approx(
+            0.02 + 500e-6 * float(r["separation_m"]), abs=1e-6)
+        assert (r["passed"] == "true") == (float(r["horizontal_major_95_m"])
+                                           <= float(r["allowed_95_m"]))
+        assert float(r["horizontal_minor_95_m"]) <= float(r["horizontal_major_95_m"])
+    worst = max(rows, key=lambda r: float(r["horizontal_major_95_m"]) / float(r["allowed_95_m"]))
+    assert summaries["dense"]["worst_pair"]["first_station"] == worst["first_station"]
+    assert summaries["dense"]["worst_pair"]["second_station"] == worst["second_station"]
+    assert summaries["dense"] == summaries["sparse"]
+    for name in ("relative.csv", "stations.csv", "markers.csv", "observations.csv"):
+        assert (tmp_path / "dense" / name).read_bytes() == (tmp_path / "sparse" / name
+                                                            ).read_bytes(), name
+    reports = [[line for line in (tmp_path / kind / "report.md").read_text().splitlines()
+                if "configuration sha256" not in line] for kind in ("dense", "sparse")]
+    assert reports[0] == reports[1]  # all but the configuration's digest (--covariance)
+    assert (tmp_path / "dense" / "covariance.npy").exists()
+    assert not (tmp_path / "sparse" / "covariance.npy").exists()
+    doc = json.loads((tmp_path / "sparse" / "adjustment.json").read_text())
+    assert doc["relative"]["n_pairs"] == len(expected)
+    assert "## Relative accuracy between neighbouring stations" in (
+        tmp_path / "sparse" / "report.md").read_text()

@@ -154,3 +154,26 @@ def test_aids_that_do_not_fit_the_settings_are_one_line_errors():
         OdometryReadings([0, 1], [[0.0, 0, 0]], [0.0])
     with pytest.raises(ConfigError, match="lists a station twice"):
         OdometryReadings([0, 1, 0], [[1.0, 0, 0]] * 2, [0.0] * 2)
+
+
+def test_sparse_marginals_with_aids_equal_the_dense_covariance():
+    """The aids touch only the stations' block of the normal matrix, so the markers'
+    elimination and the sparse marginal covariance hold unchanged (snooping on: the
+    downdates too)."""
+    obs, truth = simulated_network(n_stations=5, seed=4, noise_seed=11, **AIDED)
+    kw = dict(heading_prior_sigma_rad=HEADING, heading_bias_sigma_rad=BIAS,
+              odometry_ratio=RATIO, odometry_heading_rad_per_m=RATE)
+    run = {kind: adjust(obs, settings=AdjustmentSettings(covariance=kind, **kw),
+                        nominal=truth.nominal, odometry=truth.odometry,
+                        heading=HeadingReadings(truth.heading_reading_rad))
+           for kind in ("dense", "sparse")}
+    dense, sparse = run["dense"], run["sparse"]
+    np.testing.assert_allclose(sparse.pose, dense.pose, atol=1e-12)
+    for i in range(5):
+        np.testing.assert_allclose(sparse.station_covariance(i), dense.station_covariance(i),
+                                   rtol=1e-9, atol=1e-20)
+    for j in range(len(obs.marker_ids)):
+        np.testing.assert_allclose(sparse.marker_covariance(j), dense.marker_covariance(j),
+                                   rtol=1e-9, atol=1e-20)
+    assert sparse.dof == dense.dof and sparse.sigma0_squared == pytest.approx(
+        dense.sigma0_squared, rel=1e-9)

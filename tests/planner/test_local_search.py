@@ -1,13 +1,16 @@
 """The network layout's local search (planner.program.local_search): every removal keeps a
-passing layout, the result is 1-minimal (checked by the planner's own layout evaluation), and
-the downdated covariance equals a fresh inverse."""
+passing layout, the result is 1-minimal (checked by the planner's own layout evaluation), the
+downdated covariance equals a fresh inverse, and a 2-for-1 swap improves a 1-minimal layout
+above the optimum."""
+
+import itertools
 
 import numpy as np
 
 from planner.accuracy.checks import evaluate_layout
 from planner.accuracy.network import network_model
 from planner.config import PlanConfig
-from planner.program.local_search import _Judge, prune
+from planner.program.local_search import _Judge, local_search, prune, swap_pairs
 from tests.planner.instances import brute_force_optimum, make_problem
 
 
@@ -67,3 +70,35 @@ def test_the_downdated_covariance_equals_a_fresh_inverse_and_untying_is_refused(
         tied[j] = True
     cov = net.covariance(net.information(tied)).full
     assert any(judge.without(cov, int(j)) is None for j in np.flatnonzero(tied & net.tying))
+
+
+def test_a_one_minimal_layout_above_the_optimum_is_improved_by_a_two_for_one_swap():
+    """Layouts one above the optimum (6 sites of 11 here; brute force) that no single removal
+    improves: the swap replaces two sites by one and the result passes the planner's own
+    evaluation."""
+    p = _instance(2)
+    base = PlanConfig(network=True, min_markers=3, min_sectors=2, max_range_m=16,
+                      working_radius_m=10, chance_epsilon=None)
+    every = network_model(p, base).station_errors(np.ones(p.n_sites, bool)).max()
+    cfg = base.replace(requirement_m=float(1.3 * every))
+    net = network_model(p, cfg)
+    best = brute_force_optimum(p, cfg)
+
+    def passes(sel):
+        return evaluate_layout(p, sel, cfg, net=net).all_ok
+
+    stuck = []
+    for sites in itertools.combinations(range(p.n_sites), best + 1):
+        sel = np.zeros(p.n_sites, bool)
+        sel[list(sites)] = True
+        if passes(sel) and not any(passes(sel & (np.arange(p.n_sites) != j)) for j in sites):
+            stuck.append(sel)
+        if len(stuck) == 3:
+            break
+    assert stuck
+    for sel in stuck:
+        assert prune(p, cfg, net, sel).removed == ()  # 1-minimal indeed
+        out, swaps = swap_pairs(p, cfg, net, sel)
+        assert swaps == 1 and out.sum() == best and passes(out)
+        joint = local_search(p, cfg, net, sel)
+        assert joint.swaps == 1 and joint.record()["markers"] == best
