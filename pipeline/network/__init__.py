@@ -18,6 +18,9 @@ Turning observations into coordinates knows nothing of planning.
   observation (3-D) and data snooping;
 - :mod:`pipeline.network.robust`: robust estimation (Huber, IGG-III) by reweighting;
 - :mod:`pipeline.network.variance`: variance components of observation groups;
+- :mod:`pipeline.network.aids`: odometry between consecutive stations and a heading reference
+  with a common boresight bias, as observations of the poses;
+- :mod:`pipeline.network.initial`: initial values chained from the reference station;
 - :mod:`pipeline.network.body`: the body's curvature: the local vertical's deflection that the
   tilt priors are centred on;
 - :mod:`pipeline.network.simulation`: synthetic networks with known truth;

@@ -21,7 +21,9 @@ on the Moon, 0.003 sigma of a 0.01 deg inclinometer). The prior's centre changes
 covariance: the planner's predicted accuracy (:mod:`planner.accuracy.network`) is the same on
 every body. The rotation is exact
 (``pipeline.rig.station_to_site_matrix``) and linearised at each iterate. An optional heading
-prior (sun sensor) observes each heading around its nominal value. The observations, the datum
+prior (sun sensor) observes each heading around its reading (or nominal value); odometry
+between consecutive stations and the heading's boresight bias are :mod:`pipeline.network.aids`.
+The observations, the datum
 (what fixes the network's 4-DoF defect) and the nominal poses are
 :mod:`pipeline.network.observations`.
 
@@ -51,8 +53,11 @@ from scipy.stats import chi2
 from markerplan.errors import ConfigError, DataError, InputFileError
 from pipeline.network import normals, variance
 from pipeline.network import robust as robust_
+from pipeline.network.aids import HeadingReadings, OdometryReadings, aid_model, aids_iv
 from pipeline.network.body import Body
-from pipeline.network.design import axis_weight, station_rotations
+from pipeline.network.design import axis_weight
+from pipeline.network.initial import chained_initial as _chained_initial
+from pipeline.network.initial import markers_from_poses as _markers_from_poses
 from pipeline.network.observations import (
     SIGMA_RULE,
     Datum,
@@ -101,7 +106,13 @@ class AdjustmentSettings:
     heading_prior_sigma_rad : float or None
         1-sigma of a heading observation around the nominal heading (sun sensor), rad (at
         least :data:`~pipeline.network.observations.MIN_SIGMA`); None for none. Needs nominal
-        poses.
+        poses or heading readings (then centred on those).
+    heading_bias_sigma_rad : float or None
+        1-sigma of the heading reference's common boresight bias, rad (eliminated: the heading
+        observations correlated, :mod:`pipeline.network.aids`); needs the heading prior.
+    odometry_ratio, odometry_heading_rad_per_m : float or None
+        1-sigma of odometry readings per metre driven: per axis of the relative position (e.g.
+        0.02), and of the relative heading (rad/m); needed with odometry readings.
     alpha0, beta0 : float
         Significance level and power of the test of each point observation (Baarda), in
         (0, 1).
@@ -139,6 +150,9 @@ class AdjustmentSettings:
 
     inclinometer_sigma_rad: float = math.radians(0.01)
     heading_prior_sigma_rad: float | None = None
+    heading_bias_sigma_rad: float | None = None
+    odometry_ratio: float | None = None
+    odometry_heading_rad_per_m: float | None = None
     alpha0: float = 0.001
     beta0: float = 0.80
     snooping: bool = True
@@ -158,8 +172,13 @@ class AdjustmentSettings:
                 raise ConfigError(f"{name} must be a number {SIGMA_RULE}, got {value!r}")
 
         sigma("inclinometer_sigma_rad", self.inclinometer_sigma_rad)
-        if self.heading_prior_sigma_rad is not None:
-            sigma("heading_prior_sigma_rad", self.heading_prior_sigma_rad)
+        for name in ("heading_prior_sigma_rad", "heading_bias_sigma_rad", "odometry_ratio",
+                     "odometry_heading_rad_per_m"):
+            if getattr(self, name) is not None:
+                sigma(name, getattr(self, name))
+        if self.heading_bias_sigma_rad is not None and self.heading_prior_sigma_rad is None:
+            raise ConfigError("heading_bias_sigma_rad needs a heading reference: set "
+                              "heading_prior_sigma_rad too, or drop the bias")
         for name in ("alpha0", "beta0"):
             value = getattr(self, name)
             if not (isinstance(value, int | float) and 0 < value < 1):
@@ -355,40 +374,7 @@ def _check_tied(obs: NetworkObservations, keep: np.ndarray, reference: int) -> l
     return order
 
 
-def _chained_initial(obs: NetworkObservations, order: list[int], reference_pose: np.ndarray
-                     ) -> tuple[np.ndarray, np.ndarray]:
-    """Initial poses (s, 6) and markers (k, 3) chained outward from the reference station."""
-    s, k = len(obs.station_ids), len(obs.marker_ids)
-    pose = np.zeros((s, 6))
-    markers = np.full((k, 3), np.nan)
-    weight = 1.0 / obs.sigma_m**2
-    for position, i in enumerate(order):
-        rows = np.flatnonzero(obs.station == i)
-        known = rows[~np.isnan(markers[obs.marker[rows], 0])]
-        if position == 0:
-            pose[i, :4] = reference_pose
-        else:
-            heading, t, _, _ = fit_heading_shift(obs.xyz_m[known],
-                                                 markers[obs.marker[known]], weight[known])
-            pose[i, :3], pose[i, 3] = t, heading
-        new = rows[np.isnan(markers[obs.marker[rows], 0])]
-        markers[obs.marker[new]] = pose[i, :3] + obs.xyz_m[new] @ rot_z(pose[i, 3]).T
-    return pose, markers
-
-
-def _markers_from_poses(obs: NetworkObservations, pose: np.ndarray) -> np.ndarray:
-    """Each marker's weighted mean position as its stations (at ``pose``) see it, (k, 3)."""
-    rz, ry, rx = station_rotations(pose[:, 3:])
-    r = rz @ ry @ rx
-    site = pose[obs.station, :3] + np.einsum("nij,nj->ni", r[obs.station], obs.xyz_m)
-    w = 1.0 / obs.sigma_m**2
-    k = len(obs.marker_ids)
-    total = np.bincount(obs.marker, weights=w, minlength=k)
-    return np.column_stack([np.bincount(obs.marker, weights=w * site[:, a], minlength=k)
-                            for a in range(3)]) / total[:, None]
-
-
-def _adjust_iv(obs, datum, settings, nominal) -> int:
+def _adjust_iv(obs, datum, settings, nominal, odometry, heading) -> int:
     if not isinstance(obs, NetworkObservations):
         raise ConfigError(f"`obs` must be NetworkObservations, got {type(obs).__name__}")
     s = len(obs.station_ids)
@@ -401,9 +387,10 @@ def _adjust_iv(obs, datum, settings, nominal) -> int:
     if nominal is not None and nominal.heading_rad.shape != (s,):
         raise ConfigError(f"nominal poses must be given for all {s} stations, got "
                           f"{nominal.heading_rad.shape[0]}")
-    if settings.heading_prior_sigma_rad is not None and nominal is None:
+    if settings.heading_prior_sigma_rad is not None and nominal is None and heading is None:
         raise ConfigError("a heading prior (heading_prior_sigma_rad) needs nominal poses "
-                          "(its centre)")
+                          "or heading readings (its centre)")
+    aids_iv(s, settings, odometry, heading)
     return reference
 
 
@@ -431,8 +418,9 @@ def tilt_prior_centre(settings: AdjustmentSettings, pose: np.ndarray, reference:
 
 
 def _problem(obs: NetworkObservations, datum: Datum, settings: AdjustmentSettings,
-             nominal: NominalPoses | None, reference: int, start_pose: np.ndarray
-             ) -> normals.Problem:
+             nominal: NominalPoses | None, reference: int, start_pose: np.ndarray,
+             odometry: OdometryReadings | None = None,
+             readings: HeadingReadings | None = None) -> normals.Problem:
     """Pseudo-observations and datum constraints; refuses a datum that leaves a defect free
     (:meth:`~pipeline.network.observations.Datum.constrained_defects`). The tilt priors are
     centred at :func:`tilt_prior_centre` of ``start_pose`` (s, 6)."""
@@ -443,9 +431,11 @@ def _problem(obs: NetworkObservations, datum: Datum, settings: AdjustmentSetting
     value = [tilt[:, 0], tilt[:, 1]]
     weight = [np.full(2 * s, settings.inclinometer_sigma_rad**-2.0)]
     heading = [np.zeros(2 * s, dtype=bool)]
-    if settings.heading_prior_sigma_rad is not None:
+    centre = (readings if readings is not None else nominal).heading_rad if (
+        readings is not None or nominal is not None) else None
+    if settings.heading_prior_sigma_rad is not None and settings.heading_bias_sigma_rad is None:
         index.append(6 * stations + 3)
-        value.append(nominal.heading_rad)
+        value.append(centre)
         weight.append(np.full(s, settings.heading_prior_sigma_rad**-2.0))
         heading.append(np.ones(s, dtype=bool))
     for c in datum.control:
@@ -457,6 +447,9 @@ def _problem(obs: NetworkObservations, datum: Datum, settings: AdjustmentSetting
                        np.concatenate(weight), np.concatenate(heading),
                        np.zeros(6 * s + 3 * len(obs.marker_ids), dtype=bool),
                        np.zeros(0, dtype=int))
+    problem.aids = aid_model(s, odometry, settings.odometry_ratio,
+                             settings.odometry_heading_rad_per_m, centre,
+                             settings.heading_prior_sigma_rad, settings.heading_bias_sigma_rad)
     if datum.kind == "station":
         problem.fixed[6 * reference + np.arange(4)] = True
     sparse = (settings.covariance == "sparse" or settings.covariance == "auto"
@@ -623,7 +616,8 @@ def _components(problem: normals.Problem, sol: normals.Solution, by: str,
 
 def adjust(obs: NetworkObservations, datum: Datum = Datum(),  # noqa: B008 (frozen)
            settings: AdjustmentSettings = AdjustmentSettings(),
-           nominal: NominalPoses | None = None) -> NetworkAdjustment:
+           nominal: NominalPoses | None = None, odometry: OdometryReadings | None = None,
+           heading: HeadingReadings | None = None) -> NetworkAdjustment:
     """Adjust a network of stations and markers; test it and deal with blunders (data
     snooping or robust estimation); optionally estimate variance components.
 
@@ -638,6 +632,10 @@ def adjust(obs: NetworkObservations, datum: Datum = Datum(),  # noqa: B008 (froz
     nominal : NominalPoses or None
         Nominal poses (initial values, heading-prior centre); None chains initial values from
         the reference station.
+    odometry, heading : OdometryReadings, HeadingReadings or None
+        Pose aids (:mod:`pipeline.network.aids`): relative poses between consecutive stations
+        (sigmas from ``settings.odometry_*``) and the heading reference's readings (the heading
+        prior's centre instead of the nominal headings).
 
     Returns
     -------
@@ -677,10 +675,10 @@ def adjust(obs: NetworkObservations, datum: Datum = Datum(),  # noqa: B008 (froz
     >>> bool(np.abs(result.marker_xyz_m - truth.marker_xyz_m).max() < 0.05)
     True
     """
-    reference = _adjust_iv(obs, datum, settings, nominal)
+    reference = _adjust_iv(obs, datum, settings, nominal, odometry, heading)
     order = _check_tied(obs, np.ones(obs.n, dtype=bool), reference)
     start = _initial(obs, datum, nominal, order)
-    problem = _problem(obs, datum, settings, nominal, reference, start[0])
+    problem = _problem(obs, datum, settings, nominal, reference, start[0], odometry, heading)
     rejected: list[Rejection] = []
     rounds, robust_tests = 0, None
     if settings.robust is None:
@@ -704,6 +702,9 @@ def adjust(obs: NetworkObservations, datum: Datum = Datum(),  # noqa: B008 (froz
            + problem.fixed.sum() + sol.n_constraints)
     vpv = float(np.sum(rho[:, None] * w * sol.misclosure**2)
                 + problem.prior_weight @ sol.prior_misclosure**2)
+    if problem.aids is not None:  # the aids' rows (pipeline.network.aids)
+        dof += problem.aids.n_rows
+        vpv += float(sol.aid_misclosure @ (problem.aids.weight @ sol.aid_misclosure))
     components = ([] if settings.variance_components is None else
                   _components(problem, sol, settings.variance_components,
                               settings.max_iterations))

@@ -25,6 +25,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg
 
 from markerplan.errors import DataError
+from pipeline.network.aids import AidModel, add_to_normal
 from pipeline.network.design import axis_weight, pose_design_blocks
 from pipeline.network.observations import NetworkObservations
 
@@ -47,6 +48,8 @@ class Problem:
     factor: np.ndarray | None = None
     #: "dense" (the full array) or "sparse" (marginal blocks: :mod:`pipeline.network.marginals`)
     covariance_kind: str = "dense"
+    #: odometry and a biased heading reference (:class:`pipeline.network.aids.AidModel`); None
+    aids: AidModel | None = None
 
     def weight(self) -> np.ndarray:
         """(n,) per-axis weight of each observation, ``factor * 3 / sigma^2``, 1/m^2."""
@@ -71,6 +74,8 @@ class Solution:
     #: the covariance with the observations' own weights (differs from ``covariance`` under
     #: robust weights): the one the tests and reliability use
     ls_covariance: np.ndarray | None = None
+    #: (m,) misclosure of the aids' rows (:mod:`pipeline.network.aids`) at the solution
+    aid_misclosure: np.ndarray | None = None
 
 
 def linearise(obs: NetworkObservations, pose: np.ndarray, markers: np.ndarray
@@ -260,8 +265,10 @@ def covariance_at(problem: Problem, sol: Solution):
     linearisation, m^2, rad^2 (e.g. the plain least-squares covariance at a robust
     solution)."""
     b = constraints(problem, sol.pose, sol.markers)
-    normal, _ = normal_system(problem, assembly(problem, sol.columns, b), sol.blocks,
-                              sol.columns, sol.misclosure, sol.prior_misclosure, b)
+    normal, rhs = normal_system(problem, assembly(problem, sol.columns, b), sol.blocks,
+                                sol.columns, sol.misclosure, sol.prior_misclosure, b)
+    if problem.aids is not None:
+        normal, _, _ = add_to_normal(problem.aids, problem.fixed, normal, rhs, sol.pose)
     return covariance_from_normal(normal, problem)
 
 
@@ -308,6 +315,9 @@ def solve(problem: Problem, pose: np.ndarray, markers: np.ndarray, max_iteration
             pattern = assembly(problem, columns, b)
         fp = prior_misclosure(problem, params)
         normal, rhs = normal_system(problem, pattern, blocks, columns, f, fp, b)
+        fa = None
+        if problem.aids is not None:
+            normal, rhs, fa = add_to_normal(problem.aids, problem.fixed, normal, rhs, pose)
         converged = np.abs(step).max() < STEP_TOLERANCE
         if converged or iteration > max_iterations:
             break
@@ -322,4 +332,4 @@ def solve(problem: Problem, pose: np.ndarray, markers: np.ndarray, max_iteration
                         f"(last step {np.abs(step).max():.3g}); a blunder? (data snooping "
                         "finds it)")
     return Solution(pose, markers, blocks, columns, f, fp, None, b.shape[0], iteration - 1,
-                     bool(converged), normal)
+                     bool(converged), normal, aid_misclosure=fa)

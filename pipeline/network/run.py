@@ -60,7 +60,9 @@ def adjust_tables(tables: Sequence[Path], error_model,
                   identify: Callable[[list[StationDetections]], Identified],
                   settings: AdjustmentSettings, datum_kind: str = "station",
                   control: tuple[ControlPoint, ...] = (),
-                  plan: PlanGeometry | None = None) -> TablesAdjustment:
+                  plan: PlanGeometry | None = None,
+                  aids: Callable[[NetworkObservations], tuple] | None = None
+                  ) -> TablesAdjustment:
     """Read the marker tables, identify their markers and adjust the network.
 
     Parameters
@@ -83,6 +85,11 @@ def adjust_tables(tables: Sequence[Path], error_model,
         The control points of ``"control"``, site frame, m.
     plan : PlanGeometry, optional
         The plan whose planned poses (site frame, m, rad) are the stations' odometry.
+    aids : callable, optional
+        ``aids(observations)`` -> ``(odometry, heading)``: the pose aids' readings of the
+        identified network (:class:`~pipeline.network.aids.OdometryReadings`,
+        :class:`~pipeline.network.aids.HeadingReadings`, either None), passed to
+        :func:`~pipeline.network.adjustment.adjust`.
 
     Returns
     -------
@@ -103,7 +110,9 @@ def adjust_tables(tables: Sequence[Path], error_model,
     identified = identify(stations)
     obs = network_observations(identified)
     t2 = time.perf_counter()
-    result = adjust(obs, Datum(datum_kind, station, control), settings, nominal_poses(plan, obs))
+    odometry, heading = aids(obs) if aids is not None else (None, None)
+    result = adjust(obs, Datum(datum_kind, station, control), settings, nominal_poses(plan, obs),
+                    odometry=odometry, heading=heading)
     t3 = time.perf_counter()
     return TablesAdjustment(stations, identified, obs, result, station,
                             {"read": t1 - t0, "identify": t2 - t1, "adjust": t3 - t2})

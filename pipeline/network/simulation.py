@@ -25,6 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from markerplan.errors import ConfigError
+from pipeline.network.aids import OdometryReadings
 from pipeline.network.body import Body
 from pipeline.network.observations import NetworkObservations, NominalPoses
 from pipeline.rig import station_to_site_matrix
@@ -42,11 +43,22 @@ class NetworkTruth:
         True marker centres, site frame, m (in ``NetworkObservations.marker_ids`` order).
     nominal : NominalPoses
         Odometry: the first station exact, the others with accumulated errors.
+    odometry : OdometryReadings or None
+        Measured relative poses between consecutive stations (station order), when asked for
+        (``odometry_ratio`` or ``odometry_heading_rad_per_m``).
+    heading_reading_rad : (s,) float or None
+        The heading reference's readings (true heading + one common bias + per-station
+        noise), when asked for (``heading_sigma_rad``).
+    heading_bias_rad : float
+        The bias drawn (0 without readings).
     """
 
     pose: np.ndarray
     marker_xyz_m: np.ndarray
     nominal: NominalPoses
+    odometry: OdometryReadings | None = None
+    heading_reading_rad: np.ndarray | None = None
+    heading_bias_rad: float = 0.0
 
 
 def simulated_network(n_stations: int = 10, spacing_m: float = 15.0,
@@ -55,7 +67,10 @@ def simulated_network(n_stations: int = 10, spacing_m: float = 15.0,
                       inclinometer_sigma_rad: float = math.radians(0.01),
                       odometry_sigma_m: float = 0.3, odometry_heading_sigma_rad: float = 0.02,
                       noise_scale: float = 1.0, seed: int = 0, noise_seed: int | None = None,
-                      turn_sigma_rad: float = 0.4, body: Body = Body()  # noqa: B008 (frozen)
+                      turn_sigma_rad: float = 0.4, body: Body = Body(),  # noqa: B008 (frozen)
+                      odometry_ratio: float | None = None,
+                      odometry_heading_rad_per_m: float | None = None,
+                      heading_sigma_rad: float | None = None, heading_bias_sigma_rad: float = 0.0
                       ) -> tuple[NetworkObservations, NetworkTruth]:
     """A random traverse network, its observations and its truth.
 
@@ -89,6 +104,16 @@ def simulated_network(n_stations: int = 10, spacing_m: float = 15.0,
     body : Body
         The body whose local vertical the stations are levelled to (tangent point: the site
         origin, where the first station stands); default the plane.
+    odometry_ratio, odometry_heading_rad_per_m : float or None
+        Measure the relative poses of consecutive stations
+        (:class:`~pipeline.network.aids.OdometryReadings`, from the true poses) with per-axis
+        noise ``odometry_ratio * d`` and heading noise ``odometry_heading_rad_per_m * d`` (``d``
+        the true 3D distance; None: exact); neither: no readings.
+    heading_sigma_rad, heading_bias_sigma_rad : float or None, float
+        Read each station's heading: true heading + one common bias (1-sigma
+        ``heading_bias_sigma_rad``) + independent noise (``heading_sigma_rad``); None: no
+        readings. All these draws come after the others, so asking for them changes nothing
+        else.
 
     Returns
     -------
@@ -111,7 +136,11 @@ def simulated_network(n_stations: int = 10, spacing_m: float = 15.0,
                         ("inclinometer_sigma_rad", inclinometer_sigma_rad),
                         ("noise_scale", noise_scale), ("turn_sigma_rad", turn_sigma_rad),
                         ("odometry_sigma_m", odometry_sigma_m),
-                        ("odometry_heading_sigma_rad", odometry_heading_sigma_rad)):
+                        ("odometry_heading_sigma_rad", odometry_heading_sigma_rad),
+                        ("odometry_ratio", odometry_ratio or 0.0),
+                        ("odometry_heading_rad_per_m", odometry_heading_rad_per_m or 0.0),
+                        ("heading_sigma_rad", heading_sigma_rad or 0.0),
+                        ("heading_bias_sigma_rad", heading_bias_sigma_rad)):
         if not (np.isfinite(value) and value >= 0):
             raise ConfigError(f"`{name}` must be a finite number >= 0, got {value!r}")
     if not isinstance(body, Body):
@@ -157,4 +186,17 @@ def simulated_network(n_stations: int = 10, spacing_m: float = 15.0,
                            pose[:, 3] + heading_error - heading_error[0])
     obs = NetworkObservations(tuple(f"S{i + 1:02d}" for i in range(s)),
                               tuple(f"M{j + 1:03d}" for j in seen), station, marker, xyz, sigma)
-    return obs, NetworkTruth(pose, markers, nominal)
+    odometry = reading = None
+    bias = 0.0
+    if (odometry_ratio is not None or odometry_heading_rad_per_m is not None) and s > 1:
+        driven = np.linalg.norm(np.diff(pose[:, :3], axis=0), axis=1)
+        exact = OdometryReadings.from_poses(np.arange(s), pose[:, :3], pose[:, 3])
+        dp = exact.delta_xyz_m + noise.normal(size=(s - 1, 3)) * (
+            (odometry_ratio or 0.0) * driven[:, None])
+        dpsi = exact.delta_heading_rad + noise.normal(size=s - 1) * (
+            (odometry_heading_rad_per_m or 0.0) * driven)
+        odometry = OdometryReadings(np.arange(s), dp, dpsi)
+    if heading_sigma_rad is not None:
+        bias = float(noise.normal(0.0, heading_bias_sigma_rad))
+        reading = pose[:, 3] + bias + noise.normal(0.0, heading_sigma_rad, s)
+    return obs, NetworkTruth(pose, markers, nominal, odometry, reading, bias)

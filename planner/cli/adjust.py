@@ -37,6 +37,10 @@ ANGLE_SIGMA_DEG = FiniteRange(math.degrees(MIN_SIGMA), 10.0)
 ODOMETRY_SIGMA_M = FiniteRange(MIN_SIGMA, 50.0)
 #: Odometry heading, 1-sigma, degrees.
 ODOMETRY_HEADING_SIGMA_DEG = FiniteRange(math.degrees(MIN_SIGMA), 90.0)
+#: Odometry between consecutive stations: 1-sigma per axis, percent of the distance driven,
+#: and of the relative heading, degrees per metre (the plan's bounds: planner.config).
+ODOMETRY_PERCENT = FiniteRange(0.0, 100.0, min_open=True)
+ODOMETRY_HEADING_DEG_PER_M = FiniteRange(0.0, 10.0, min_open=True)
 #: Working radius, m (the plan's bound: planner.config.BOUNDS).
 RADIUS_M = FiniteRange(0.0, 100.0, min_open=True)
 PROBABILITY = FiniteRange(0.0, 1.0, min_open=True, max_open=True)
@@ -119,6 +123,20 @@ def _datum_choice(datum: tuple[str, str | None] | None, control_path: Path | Non
 @click.option("--heading-prior-sigma-deg", type=ANGLE_SIGMA_DEG,
               help="Heading observed at every station (sun sensor) around its planned heading, "
                    "1-sigma degrees (needs --plan; default: the plan's, else none).")
+@click.option("--heading-bias-sigma-deg", type=ANGLE_SIGMA_DEG,
+              help="1-sigma of the heading reference's boresight bias, common to every station, "
+                   "degrees: the heading observations are then correlated (needs a heading "
+                   "prior: --heading-prior-sigma-deg or the plan's).")
+@click.option("--odometry", "odometry_path", type=FILE,
+              help="Odometry between consecutive stations: CSV id,x_m,y_m,z_m,heading_deg of "
+                   "the dead-reckoned poses in drive order (any frame); the relative poses of "
+                   "consecutive rows are observed (needs --odometry-percent and/or "
+                   "--odometry-heading-deg-per-m).")
+@click.option("--odometry-percent", type=ODOMETRY_PERCENT,
+              help="1-sigma per axis of an --odometry relative position, percent of the "
+                   "distance driven.")
+@click.option("--odometry-heading-deg-per-m", type=ODOMETRY_HEADING_DEG_PER_M,
+              help="1-sigma of an --odometry relative heading, degrees per metre driven.")
 @click.option("--inclinometer-sigma-deg", type=ANGLE_SIGMA_DEG,
               help="1-sigma roll and pitch prior of every station, degrees (default: the plan's, "
                    "else 0.01).")
@@ -181,7 +199,8 @@ def _datum_choice(datum: tuple[str, str | None] | None, control_path: Path | Non
 @json_option
 def command(tables, out, overwrite, error_model, plan_path, identity, odometry_sigma_m,
             odometry_heading_sigma_deg, datum, reference_station, control_path,
-            heading_prior_sigma_deg, inclinometer_sigma_deg, body, snooping, robust, robust_k0,
+            heading_prior_sigma_deg, heading_bias_sigma_deg, odometry_path, odometry_percent,
+            odometry_heading_deg_per_m, inclinometer_sigma_deg, body, snooping, robust, robust_k0,
             robust_k1, variance_components, alpha0, beta0, working_radius_m, requirement_m,
             relative_within_m, relative_requirement_m, relative_requirement_ppm, covariance,
             error_figure, as_json):
@@ -214,9 +233,10 @@ def command(tables, out, overwrite, error_model, plan_path, identity, odometry_s
         identity = "plan" if plan_path is not None else "geometry"
     _check_identity(identity, plan_path, control_path, heading_prior_sigma_deg)
     timings: dict[str, float] = {}
-    inputs = given_paths(*tables, plan_path, control_path, error_model.path)
+    inputs = given_paths(*tables, plan_path, control_path, odometry_path, error_model.path)
     with output_folder(out, overwrite, "adjust", inputs=inputs) as stage:
         from pipeline.network.adjustment import AdjustmentSettings
+        from pipeline.network.aids import read_odometry
         from pipeline.network.detections import read_control
         from pipeline.network.run import adjust_tables
         from planner.accuracy.local import LocalRequirement
@@ -231,6 +251,7 @@ def command(tables, out, overwrite, error_model, plan_path, identity, odometry_s
         t0 = time.perf_counter()
         plan = read_plan_geometry(plan_path) if plan_path is not None else None
         control = read_control(control_path) if control_path is not None else ()
+        dead_reckoned = read_odometry(odometry_path) if odometry_path is not None else None
         config = resolved_configuration(
             tables=[str(t) for t in tables], plan=_str(plan_path), control=_str(control_path),
             error_model=error_model.name, marker_ids=identity, datum=kind,
@@ -243,13 +264,20 @@ def command(tables, out, overwrite, error_model, plan_path, identity, odometry_s
             variance_components=variance_components, relative_within_m=relative_within_m,
             relative_requirement_m=relative_requirement_m,
             relative_requirement_ppm=relative_requirement_ppm, covariance=covariance,
-            plan_geometry=plan)
+            plan_geometry=plan,
+            odometry=_str(odometry_path), odometry_percent=odometry_percent,
+            odometry_heading_deg_per_m=odometry_heading_deg_per_m,
+            heading_bias_sigma_deg=heading_bias_sigma_deg)
         if config["relative_requirement_m"] is None:
             config["relative_requirement_m"] = config["requirement_m"]
+        _check_aids(config, odometry_path)
         settings = AdjustmentSettings(
             body=_body(body, plan),
             inclinometer_sigma_rad=math.radians(config["inclinometer_sigma_deg"]),
             heading_prior_sigma_rad=_radians(config["heading_prior_sigma_deg"]),
+            heading_bias_sigma_rad=_radians(heading_bias_sigma_deg),
+            odometry_ratio=None if odometry_percent is None else odometry_percent / 100.0,
+            odometry_heading_rad_per_m=_radians(odometry_heading_deg_per_m),
             alpha0=alpha0, beta0=beta0, snooping=snooping, robust=_none(robust),
             robust_k0=robust_k0, robust_k1=robust_k1,
             variance_components=_none(variance_components), covariance=covariance)
@@ -259,7 +287,9 @@ def command(tables, out, overwrite, error_model, plan_path, identity, odometry_s
             functools.partial(_identify, identity, plan=plan, odometry_sigma_m=odometry_sigma_m,
                               odometry_heading_sigma_rad=math.radians(odometry_heading_sigma_deg),
                               inclinometer_sigma_rad=settings.inclinometer_sigma_rad),
-            settings, kind, control, plan)
+            settings, kind, control, plan,
+            aids=(None if dead_reckoned is None else
+                  lambda obs: (dead_reckoned.readings(obs.station_ids), None)))
         timings.update(adjusted.timings_s)
         timings["read"] += read_s
         result, obs, identified = adjusted.result, adjusted.observations, adjusted.identified
@@ -276,7 +306,7 @@ def command(tables, out, overwrite, error_model, plan_path, identity, odometry_s
             identity=identity, frame=frame_note(
                 kind, result.datum.reference_id(obs.station_ids), plan is not None,
                 plan.dem if plan else None, plan.crs if plan else None),
-            inputs=_input_files(tables, plan_path, control_path),
+            inputs=_input_files(tables, plan_path, control_path, odometry_path),
             error_model=error_model.name, unidentified=identified.unidentified,
             plan_markers=(dict(zip(plan.marker_ids, plan.marker_xyz_m, strict=True))
                           if plan and identity != "geometry" else {}),
@@ -337,18 +367,36 @@ def _radians(degrees: float | None) -> float | None:
     return None if degrees is None else math.radians(degrees)
 
 
-def _input_files(tables, plan_path, control_path) -> list[dict]:
+def _input_files(tables, plan_path, control_path, odometry_path=None) -> list[dict]:
     """Kind, path and SHA-256 of every input file, for the outputs' provenance."""
     import hashlib
 
     files = [("marker table", t) for t in tables] + [
-        (k, p) for k, p in (("plan", plan_path), ("control", control_path)) if p is not None]
+        (k, p) for k, p in (("plan", plan_path), ("control", control_path),
+                            ("odometry", odometry_path)) if p is not None]
     return [{"kind": k, "path": str(p), "sha256": hashlib.sha256(Path(p).read_bytes())
              .hexdigest()} for k, p in files]
 
 
 def _str(path: Path | None) -> str | None:
     return None if path is None else str(path)
+
+
+def _check_aids(config: dict, odometry_path) -> None:
+    """``--odometry`` with its sigmas, and a boresight bias with a heading prior."""
+    from markerplan.errors import ConfigError
+
+    sigmas = (config["odometry_percent"] is not None
+              or config["odometry_heading_deg_per_m"] is not None)
+    if odometry_path is not None and not sigmas:
+        raise ConfigError("--odometry needs its sigmas: give --odometry-percent and/or "
+                          "--odometry-heading-deg-per-m")
+    if sigmas and odometry_path is None:
+        raise ConfigError("--odometry-percent and --odometry-heading-deg-per-m are the sigmas "
+                          "of --odometry FILE; give the file or drop them")
+    if config["heading_bias_sigma_deg"] is not None and config["heading_prior_sigma_deg"] is None:
+        raise ConfigError("--heading-bias-sigma-deg needs a heading prior: give "
+                          "--heading-prior-sigma-deg (with --plan)")
 
 
 def _check_identity(identity: str, plan_path, control_path, heading_prior) -> None:

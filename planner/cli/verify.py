@@ -241,7 +241,7 @@ def _verify_network(plan_path, plan, doc, ids, inputs, error_model, seed, offset
                             executor=ex)
         write_fates(stage / "fates.csv", [list(scanned[2].values())])
         check = verify_scan(scanned, stage / "markers.csv", plan_path, doc, error_model.model,
-                            error_model.name, settings, datum)
+                            error_model.name, settings, datum, seed)
         rec = network_record(plan, check, seed, error_model.name, offsets, profile)
         (stage / "verify.json").write_text(json.dumps(rec, indent=2) + "\n")
         (stage / "verify.md").write_text(network_markdown(rec))

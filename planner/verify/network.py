@@ -38,9 +38,12 @@ The plan passes when every chosen station took part in the adjustment and its ac
 is within the requirement (markers are reported, not judged: the requirement is the stations').
 Because the plan's markers are simulated at their planned centres and the stations at their
 planned poses, the truth is the plan; the pipeline and the adjustment never see it. Two
-consequences: the odometry error only widens the association's gate (the rover is exactly where
-it was planned to be), and a plan's heading prior (sun sensor) is centred on the true heading,
-an exact sun sensor, so with a heading prior the achieved errors are somewhat optimistic.
+consequences: the odometry error of the association only widens its gate (the rover is
+exactly where it was planned to be), and the plan's pose aids are simulated from the truth with
+the plan's sigmas (:mod:`planner.verify.network_aids`): a heading reference reads the true
+heading plus one common boresight bias plus per-station noise, and odometry between
+consecutive stations (plan order) reads their true relative pose plus noise growing with the
+distance; both are seeded from verify's seed and go to the adjustment with the plan's sigmas.
 A station that identifies no planned marker, or shares fewer than two identified markers with
 the part of the network holding the reference, fails with that reason and is left out of the
 adjustment (:func:`tied_network`); the others are still adjusted and compared.
@@ -328,7 +331,8 @@ def adjust_and_compare(tables: list[Path], plan_path: Path, error_model,
                        error_model_name: str = "",
                        planned_markers: dict[str, tuple[str, ...]] | None = None,
                        reference: str | None = None,
-                       fates: dict[str, StationFates] | None = None) -> NetworkVerification:
+                       fates: dict[str, StationFates] | None = None,
+                       seed: int = 0) -> NetworkVerification:
     """Identify, adjust and compare (step 2 of the module docstring): a station passes when
     its identified markers meet the plan's rule (:mod:`planner.verify.station_rule`) and its
     achieved error the requirement.
@@ -357,6 +361,8 @@ def adjust_and_compare(tables: list[Path], plan_path: Path, error_model,
     fates : dict of str to StationFates, optional
         :func:`scan_plan`'s: each station's reason names its losses, and the association's
         ids are checked against the true ones (:func:`misidentified`).
+    seed : int
+        Seed of the pose aids' readings (:mod:`planner.verify.network_aids`).
 
     Returns
     -------
@@ -380,10 +386,10 @@ def adjust_and_compare(tables: list[Path], plan_path: Path, error_model,
     )
     from planner.network.record import station_errors
     from planner.outputs.plan_file import read_plan
+    from planner.verify.network_aids import plan_aids
     from planner.verify.station_rule import StationRule
 
     doc = read_plan(plan_path, "`plan_path`", full=True)
-    _refuse_odometry(doc, plan_path)
     plan, rule = plan_geometry(doc, plan_path), StationRule.of(doc["requirement"])
     reference = reference_station(reference or plan.reference_station, plan.station_ids,
                                   list(truth))
@@ -398,11 +404,12 @@ def adjust_and_compare(tables: list[Path], plan_path: Path, error_model,
         beta0=settings.beta0, plan_geometry=plan)
     # the scan simulator stands every station level in the site frame: the plane's vertical
     config["body"] = body_configuration(Body(), reference)
-    heading_prior = config["heading_prior_sigma_deg"]
+    aids = plan_aids(doc, plan_path, config["heading_prior_sigma_deg"])
+    config.update(aids.record(), aids_seed=int(seed))
     adjustment = AdjustmentSettings(
-        inclinometer_sigma_rad=math.radians(config["inclinometer_sigma_deg"]),
-        heading_prior_sigma_rad=None if heading_prior is None else math.radians(heading_prior),
+        inclinometer_sigma_rad=math.radians(config["inclinometer_sigma_deg"]), **aids.settings(),
         alpha0=settings.alpha0, beta0=settings.beta0, snooping=settings.snooping)
+    verified = [sid for sid in plan.station_ids if sid in truth]
     left_out: dict[str, str] = {}
     detection_ids: dict[str, tuple[str | None, ...]] = {}
 
@@ -413,7 +420,9 @@ def adjust_and_compare(tables: list[Path], plan_path: Path, error_model,
         return identified
 
     adjusted = adjust_tables(tables, error_model, functools.partial(_datum_station, reference),
-                             identify, adjustment, plan=plan)
+                             identify, adjustment, plan=plan,
+                             aids=aids.readings(verified, np.stack(
+                                 [truth[sid].pose for sid in verified]), seed))
     stations, identified, result = adjusted.stations, adjusted.identified, adjusted.result
     radius = config["working_radius_m"]
     need = NetworkRequirement(config["requirement_m"],
@@ -475,7 +484,7 @@ def adjust_and_compare(tables: list[Path], plan_path: Path, error_model,
 
 def verify_scan(scanned: Scanned, table: Path, plan_path: Path, doc: dict, error_model,
                 error_model_name: str, settings: NetworkVerifySettings,
-                reference: str | None = None) -> NetworkVerification:
+                reference: str | None = None, seed: int = 0) -> NetworkVerification:
     """Step 2 of the module docstring for one scan of a plan: its marker table written to
     ``table`` (``marker_id`` filled by the association, :func:`identified_rows`), identified,
     adjusted and compared with the plan's predictions.
@@ -490,8 +499,8 @@ def verify_scan(scanned: Scanned, table: Path, plan_path: Path, doc: dict, error
     doc : dict
         The ``plan.json`` (:func:`planner.outputs.plan_file.read_plan`, full): the stations'
         and markers' predicted errors and each station's planned markers.
-    error_model, error_model_name, settings, reference
-        As :func:`adjust_and_compare`.
+    error_model, error_model_name, settings, reference, seed
+        As :func:`adjust_and_compare` (``seed``: the scan's).
 
     Returns
     -------
@@ -506,7 +515,7 @@ def verify_scan(scanned: Scanned, table: Path, plan_path: Path, doc: dict, error
         {s["id"]: s.get("predicted_error_m") for s in doc["stations"]},
         {m["id"]: m.get("predicted_error_m") for m in doc["markers"]}, settings,
         error_model_name, {s["id"]: tuple(s.get("markers", ())) for s in doc["stations"]},
-        reference=reference, fates=fates)
+        reference=reference, fates=fates, seed=seed)
     write_marker_table(table, identified_rows(rows, check))
     return check
 
@@ -609,18 +618,6 @@ def _marker_outcomes(result, plan_marker_ids: tuple[str, ...], truth: dict[str, 
                                  float(np.linalg.norm(diff)), tuple(float(v) for v in diff),
                                  seen))
     return out
-
-
-def _refuse_odometry(doc: dict, plan_path) -> None:
-    """A plan that counts on odometry between stations cannot be verified: the adjustment has
-    no odometry factors yet, so its stations would be judged without what they were planned
-    with."""
-    cfg = doc["provenance"].get("config", {})
-    used = [k for k in ("odometry_percent", "odometry_heading_deg_per_m") if cfg.get(k) is not None]
-    if used:
-        raise ConfigError(f"`plan_path` {plan_path} was planned with odometry between stations "
-                          f"({', '.join(used)}), which the adjustment does not model yet; verify a "
-                          "plan made without odometry")
 
 
 def tied_network(stations: list, plan, reference: str, settings: NetworkVerifySettings):

@@ -157,7 +157,8 @@ def verify_network_trials(plan: SurveyPlan, plan_path: Path, doc: dict, error_mo
         fates = scanned[2]
         try:
             check = verify_scan(scanned, tables / f"trial_{t:03d}.csv", plan_path, doc,
-                                error_model, error_model_name, settings, reference)
+                                error_model, error_model_name, settings, reference,
+                                seeds[t])
         except InputFileError as exc:  # no datum in this trial: every station fails
             out.append([StationCheck(sid, _predicted(doc, sid), None, planned[sid],
                                      sum(r.accepted for r in f.rows), False,

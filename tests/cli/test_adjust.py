@@ -227,6 +227,57 @@ def test_robust_igg3_downweights_the_swapped_ids_and_variance_components(tmp_pat
     assert _digests(tmp_path / "r") == _digests(tmp_path / "again")
 
 
+def _write_odometry(path, ids, pose, rng, ratio, rate):
+    """Dead-reckoned poses in drive order: the truth's relative poses with noise of the
+    stated sigmas, composed from the first station's true pose."""
+    from pipeline.network.aids import OdometryReadings
+
+    exact = OdometryReadings.from_poses(np.arange(len(ids)), pose[:, :3], pose[:, 3])
+    d = np.linalg.norm(exact.delta_xyz_m, axis=1)
+    dp = exact.delta_xyz_m + rng.normal(size=(d.size, 3)) * (ratio * d)[:, None]
+    dpsi = exact.delta_heading_rad + rng.normal(size=d.size) * rate * d
+    xyz, h = [pose[0, :3]], [pose[0, 3]]
+    for k in range(d.size):
+        c, s = math.cos(h[-1]), math.sin(h[-1])
+        xyz.append(xyz[-1] + np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]]) @ dp[k])
+        h.append(h[-1] + dpsi[k])
+    path.write_text("id,x_m,y_m,z_m,heading_deg\n" + "".join(
+        f"{i},{p[0]:.6f},{p[1]:.6f},{p[2]:.6f},{math.degrees(a):.6f}\n"
+        for i, p, a in zip(ids, xyz, h, strict=True)))
+
+
+def test_odometry_and_a_heading_bias_are_used_and_recorded(network, tmp_path, capsys,
+                                                           monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    _write_odometry(tmp_path / "odo.csv", network.station_ids, network.truth.pose,
+                    np.random.default_rng(5), 0.01, math.radians(0.05))
+    base = ["adjust", *_tables(network), "--plan", str(network.plan), "--json"]
+    aids = ["--odometry", "odo.csv", "--odometry-percent", "1",
+            "--odometry-heading-deg-per-m", "0.05"]
+    bias = ["--heading-prior-sigma-deg", "0.1", "--heading-bias-sigma-deg", "0.05"]
+    for out, extra in (("plain", []), ("aided", aids), ("biased", bias)):
+        code, _, err = run_cli(capsys, base + extra + ["--out", out])
+        assert code == 0, err
+    doc = json.loads((tmp_path / "aided" / "adjustment.json").read_text())
+    config = doc["provenance"]["config"]
+    assert config["odometry"] == "odo.csv" and config["odometry_percent"] == 1.0
+    assert config["odometry_heading_deg_per_m"] == 0.05
+    assert config["heading_bias_sigma_deg"] is None
+    assert "odometry" in [f["kind"] for f in doc["provenance"]["inputs"]]
+    config = json.loads((tmp_path / "biased" / "adjustment.json").read_text()
+                        )["provenance"]["config"]
+    assert config["heading_bias_sigma_deg"] == 0.05 and config["odometry"] is None
+    plain_cov = np.load(tmp_path / "plain" / "covariance.npy")
+    aided_cov = np.load(tmp_path / "aided" / "covariance.npy")
+    n6 = 6 * len(network.station_ids)
+    # the odometry ties consecutive stations: every variance at most that without it
+    assert np.all(np.diag(aided_cov)[:n6] <= np.diag(plain_cov)[:n6] * (1 + 1e-9))
+    assert np.trace(aided_cov[:n6, :n6]) < np.trace(plain_cov[:n6, :n6])
+    d2 = _mahalanobis(tmp_path / "aided", network.truth.pose[:, :3], network.truth.marker_xyz_m,
+                      network.station_ids, network.marker_ids)
+    assert d2.max() <= chi2.ppf(0.999, 3), d2
+
+
 def test_relative_pairs_within_d_and_sparse_equals_dense(network, tmp_path, capsys,
                                                          monkeypatch):
     """relative.csv holds exactly the station pairs at most --relative-within-m apart

@@ -18,6 +18,9 @@ from tests.cli.bad_input import Case, check_refused
 from tests.cli.network_inputs import write_network_inputs
 from tests.cli.test_bad_input_output import _cases_for
 
+#: An odometry file of the 4 stations (positions along x: only the file's checks matter)
+ODO_HEADER = "id,x_m,y_m,z_m,heading_deg\n"
+ODO = ODO_HEADER + "S01,0,0,0,0\nS02,15,0,0,0\nS03,30,0,0,0\nS04,45,0,0,0\n"
 T1, T2, PLAN = "net/table_1.csv", "net/table_2.csv", "net/plan.json"
 TABLES = [T1, T2]
 
@@ -185,6 +188,37 @@ def _cases() -> list[Case]:
         Case("adjust-plan-inclinometer-sigma-tiny", a + ["--plan", PLAN],
              "inclinometer_sigma", setup=with_net(
                  edit_plan=_inclinometer_sigma(1e-300))),
+        Case("adjust-odometry-without-sigmas", a + ["--odometry", "odo.csv"],
+             "--odometry needs its sigmas", files={"odo.csv": ODO}, setup=net),
+        Case("adjust-odometry-sigma-without-file", a + ["--odometry-percent", "1"],
+             "give the file or drop them", setup=net),
+        Case("adjust-odometry-percent-zero", a + ["--odometry", "odo.csv", "--odometry-percent",
+                                                  "0"], "--odometry-percent", code=2,
+             files={"odo.csv": ODO}, setup=net),
+        Case("adjust-odometry-heading-rate-negative",
+             a + ["--odometry", "odo.csv", "--odometry-heading-deg-per-m", "-0.1"],
+             "--odometry-heading-deg-per-m", code=2, files={"odo.csv": ODO}, setup=net),
+        Case("adjust-odometry-unknown-station", a + ["--odometry", "odo.csv",
+                                                     "--odometry-percent", "1"],
+             "odometry stations S09 are not stations of the network",
+             files={"odo.csv": ODO + "S09,40,0,0,0\n"}, setup=net),
+        Case("adjust-odometry-one-row", a + ["--odometry", "odo.csv", "--odometry-percent", "1"],
+             "odometry needs at least 2 rows", files={"odo.csv": ODO_HEADER + "S01,0,0,0,0\n"},
+             setup=net),
+        Case("adjust-odometry-repeated-position",
+             a + ["--odometry", "odo.csv", "--odometry-percent", "1"], "no distance driven",
+             files={"odo.csv": ODO_HEADER + "S01,0,0,0,0\nS02,0,0,0,5\n"}, setup=net),
+        Case("adjust-odometry-wrong-columns",
+             a + ["--odometry", "odo.csv", "--odometry-percent", "1"], "missing column",
+             files={"odo.csv": "id,x_m,y_m\nS01,0,0\n"}, setup=net),
+        Case("adjust-odometry-non-finite", a + ["--odometry", "odo.csv", "--odometry-percent",
+                                                "1"], "heading_deg: must be a finite number",
+             files={"odo.csv": ODO_HEADER + "S01,0,0,0,nan\nS02,1,0,0,0\n"}, setup=net),
+        Case("adjust-heading-bias-without-prior", a + ["--heading-bias-sigma-deg", "0.05"],
+             "--heading-bias-sigma-deg needs a heading prior", setup=net),
+        Case("adjust-heading-bias-zero", a + ["--plan", PLAN, "--heading-prior-sigma-deg", "0.1",
+                                              "--heading-bias-sigma-deg", "0"],
+             "--heading-bias-sigma-deg", code=2, setup=net),
         *(Case(f"adjust-relative-within-{name}", a + ["--relative-within-m", value],
                "--relative-within-m", code=2) for name, value in (("zero", "0"),
                                                                  ("negative", "-5"))),

@@ -17,8 +17,10 @@ import numpy as np
 import pytest
 
 from pipeline.network.adjustment import AdjustmentSettings, adjust
+from pipeline.network.aids import HeadingReadings, OdometryReadings
 from pipeline.network.observations import Datum, NominalPoses
 from pipeline.network.simulation import simulated_network
+from planner.accuracy.aids import Odometry
 from planner.accuracy.network import NetworkModel
 from planner.problem.usability import USABLE, PlanProblem
 
@@ -88,6 +90,46 @@ def test_planner_predicts_the_adjustments_covariance(seed, reference, heading_pr
     n6 = 6 * problem.n_stations
     assert not cov.full[6 * reference:6 * reference + 4].any()
     assert not result.covariance[6 * reference:6 * reference + 4, :n6].any()
+    _assert_same_covariance(cov.full, _tilts_to_site_axes(result.covariance[:n6, :n6],
+                                                          truth.pose[:, 3]))
+    predicted = net.marker_covariances(cov, np.arange(problem.n_sites))
+    for j in range(problem.n_sites):
+        _assert_same_covariance(predicted[j], result.marker_covariance(j))
+
+
+@pytest.mark.parametrize("seed, reference, heading, bias, odometry", [
+    (1, 0, None, None, (0.02, math.radians(0.05))),
+    (3, 2, math.radians(0.1), math.radians(0.05), None),
+    (5, 1, math.radians(0.1), math.radians(0.05), (0.01, None)),
+    (7, 4, math.radians(0.2), None, (None, math.radians(0.1))),
+])
+def test_planner_predicts_the_adjustments_covariance_with_pose_aids(seed, reference, heading,
+                                                                    bias, odometry):
+    """Odometry between consecutive stations and a heading reference with a boresight bias:
+    the planner's constant information (linearised at headings 0) and the adjustment's
+    non-linear observations (at the true headings) give the same covariance."""
+    obs, truth, problem = _network(seed)
+    ratio, rate = odometry or (None, None)
+    net = NetworkModel(problem, 10.0, INCL, reference=reference,
+                       heading_prior_sigma_rad=heading, heading_bias_sigma_rad=bias or 0.0,
+                       odometry=Odometry(ratio, rate) if odometry else None)
+    cov = net.covariance(net.information(np.ones(problem.n_sites, bool)))
+    assert cov.determined.all()
+
+    s = problem.n_stations
+    readings = (OdometryReadings.from_poses(np.arange(s), truth.pose[:, :3], truth.pose[:, 3])
+                if odometry else None)
+    result = adjust(obs, Datum(reference_station=obs.station_ids[reference]),
+                    AdjustmentSettings(inclinometer_sigma_rad=INCL,
+                                       heading_prior_sigma_rad=heading,
+                                       heading_bias_sigma_rad=bias, odometry_ratio=ratio,
+                                       odometry_heading_rad_per_m=rate, snooping=False),
+                    nominal=NominalPoses(truth.pose[:, :3], truth.pose[:, 3]),
+                    odometry=readings,
+                    heading=HeadingReadings(truth.pose[:, 3]) if heading else None)
+    assert np.abs(result.marker_xyz_m - truth.marker_xyz_m).max() < 1e-9
+    assert result.sigma0_squared < 1e-12  # exact data: every row closes, the aids' too
+    n6 = 6 * s
     _assert_same_covariance(cov.full, _tilts_to_site_axes(result.covariance[:n6, :n6],
                                                           truth.pose[:, 3]))
     predicted = net.marker_covariances(cov, np.arange(problem.n_sites))

@@ -163,14 +163,9 @@ def test_bad_aid_settings_are_one_line_errors():
     assert cfg.heading_sigmas_deg == (0.001, 20 / 3600)  # the setting over the class
 
 
-def test_the_aids_are_recorded_as_used_and_verify_refuses_odometry(tmp_path):
-    from planner.verify.network import _refuse_odometry
-
+def test_the_aids_are_recorded_as_used():
     cfg = PlanConfig(network=True, heading_aid="sun-sensor", odometry_percent=2.0)
     assert cfg.aids_record() == {
         "inclinometer_sigma_deg": 0.01, "heading_prior_sigma_deg": 0.1,
         "heading_aid": "sun-sensor", "heading_bias_sigma_deg": 0.05, "odometry_percent": 2.0,
         "odometry_heading_deg_per_m": None}
-    with pytest.raises(ConfigError, match="odometry_percent.*without odometry"):
-        _refuse_odometry({"provenance": {"config": cfg.to_dict()}}, tmp_path / "plan.json")
-    _refuse_odometry({"provenance": {"config": PlanConfig(network=True).to_dict()}}, "p")

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from error_model import default_model
-from markerplan.errors import ConfigError
+from markerplan.errors import ConfigError, InputFileError
 from planner.accuracy.known_control import pose_difference_m
 from planner.verify.network import NetworkVerifySettings, TrueStation, adjust_and_compare
 from planner.verify.network_report import network_markdown, network_record
@@ -161,3 +161,49 @@ def test_a_station_left_with_two_identified_markers_breaks_the_plans_rule(networ
     assert out[last].reason.startswith("2 marker(s) in ") and "the plan's rule asks >= 3" \
         in out[last].reason
     assert all(out[sid].passed for sid in inputs.station_ids[:-1])
+
+
+def _plan_with_aids(inputs, tmp_path, **aids):
+    doc = json.loads(inputs.plan.read_text())
+    doc["provenance"]["config"].update(network=True, **aids)
+    path = tmp_path / "plan.json"
+    path.write_text(json.dumps(doc))
+    return path
+
+
+def _compare_with(inputs, truth, plan, seed):
+    return adjust_and_compare(inputs.tables, plan, default_model(), truth,
+                              {sid: 0.05 for sid in truth}, None, NetworkVerifySettings(),
+                              "default", seed=seed)
+
+
+def test_a_plan_with_odometry_and_a_biased_heading_reference_is_verified_with_them(network,
+                                                                                   tmp_path):
+    """The plan's aids are simulated from the truth with its sigmas and used by the
+    adjustment: its stated errors shrink, the achieved errors stay within reach of them, the
+    same seed repeats the outputs exactly and another seed draws other readings."""
+    inputs, truth = network
+    aided = _plan_with_aids(inputs, tmp_path, odometry_percent=1.0,
+                            odometry_heading_deg_per_m=0.05, heading_aid="sun-sensor")
+    plain = _compare_with(inputs, truth, inputs.plan, 0)
+    first = _compare_with(inputs, truth, aided, 7)
+    assert first.config["odometry_percent"] == 1.0 and first.config["aids_seed"] == 7
+    assert first.config["heading_prior_sigma_deg"] == 0.1
+    assert first.config["heading_bias_sigma_deg"] == 0.05
+    stated = np.array([[s.stated_error_m for s in c.stations] for c in (plain, first)])
+    assert np.all(stated[1, 1:] < stated[0, 1:])
+    achieved = np.array([s.achieved_error_m for s in first.stations])
+    assert np.all(achieved < 2.0 * stated[1]) and first.passed
+    again = _compare_with(inputs, truth, aided, 7)
+    other = _compare_with(inputs, truth, aided, 8)
+    assert [s.achieved_error_m for s in again.stations] == achieved.tolist()
+    assert again.sigma0_squared == first.sigma0_squared
+    assert [s.achieved_error_m for s in other.stations] != achieved.tolist()
+
+
+def test_a_plan_with_bad_aids_is_refused_in_one_line(network, tmp_path):
+    inputs, truth = network
+    bad = _plan_with_aids(inputs, tmp_path, odometry_percent=-1.0)
+    with pytest.raises(InputFileError, match="odometry_percent") as err:
+        _compare_with(inputs, truth, bad, 0)
+    assert "\n" not in str(err.value)
