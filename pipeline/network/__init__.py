@@ -9,6 +9,8 @@ Turning observations into coordinates knows nothing of planning.
   that the adjustment and the planner's predicted accuracy share;
 - :mod:`pipeline.network.adjustment`: station poses and marker centres estimated together (the
   least-squares solution, data snooping and the result);
+- :mod:`pipeline.network.settings`: the adjustment's settings (priors, aids, test levels,
+  robust estimation, variance components, the body, the covariance's form);
 - :mod:`pipeline.network.normals`: its numerical core: linearisation, the sparse normal
   equations, the Gauss-Newton solve and the covariance;
 - :mod:`pipeline.network.marginals`: the covariance's marginal blocks (stations, markers,

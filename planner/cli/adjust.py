@@ -44,7 +44,7 @@ ODOMETRY_HEADING_DEG_PER_M = FiniteRange(0.0, 10.0, min_open=True)
 #: Working radius, m (the plan's bound: planner.config.BOUNDS).
 RADIUS_M = FiniteRange(0.0, 100.0, min_open=True)
 PROBABILITY = FiniteRange(0.0, 1.0, min_open=True, max_open=True)
-#: ``--covariance`` (pipeline.network.adjustment.COVARIANCE_KINDS, spelled here so that
+#: ``--covariance`` (pipeline.network.settings.COVARIANCE_KINDS, spelled here so that
 #: ``--help`` imports no scipy; a test holds them equal).
 COVARIANCE_KINDS = ("auto", "dense", "sparse")
 #: Robust tuning constants, standardised-residual units (beyond 10 nothing is down-weighted).

@@ -283,7 +283,7 @@ def test_relative_pairs_within_d_and_sparse_equals_dense(network, tmp_path, caps
     """relative.csv holds exactly the station pairs at most --relative-within-m apart
     horizontally (recomputed from stations.csv); the sparse covariance writes the same
     relative.csv and report, and no covariance.npy; --json names the worst pair."""
-    from pipeline.network.adjustment import COVARIANCE_KINDS
+    from pipeline.network.settings import COVARIANCE_KINDS
     from planner.cli.adjust import COVARIANCE_KINDS as CLI_KINDS
 
     assert CLI_KINDS == COVARIANCE_KINDS
