@@ -6,7 +6,8 @@ a + b ppm, datum at the first station or at the centre) and local (between stati
         [--site large] [--grid-spacing 2.5] [--requirement 0.10] [--ppm 0,200]
         [--within 50] [--kinds datum,local,distance] [--figures ellipsoid,quantile]
         [--heading-prior DEG] [--heading-aid sun-sensor|star-tracker] [--heading-bias DEG]
-        [--odometry-percent P] [--odometry-heading DEG_PER_M] [--plan-time-limit 0]
+        [--odometry-percent P] [--odometry-heading DEG_PER_M] [--search-time-limit 300]
+        [--plan-time-limit 0]
 
 For every combination it runs the network greedy (``greedy_network``: markers, wall time), then
 the local search that prunes its layout and swaps pairs of its sites for one
@@ -85,6 +86,8 @@ def main() -> None:
     ap.add_argument("--odometry-heading", type=float, default=None,
                     help="odometry_heading_deg_per_m")
     ap.add_argument("--figures", default="ellipsoid,quantile", help="error figures to run")
+    ap.add_argument("--search-time-limit", type=float, default=300.0,
+                    help="the local search's time limit after the greedy, s")
     ap.add_argument("--kinds", default="datum,local,distance",
                     help="requirement kinds: datum, local (position), distance")
     ap.add_argument("--plan-time-limit", type=float, default=0.0,
@@ -124,7 +127,8 @@ def main() -> None:
             row["greedy"] = {"markers": g.n_markers, "time_s": round(time.perf_counter() - t, 1),
                              "worst_error_over_allowance": round(judged(problem, cfg,
                                                                         g.selected), 4)}
-            pruned = local_search(problem, cfg, network_model(problem, cfg), g.selected)
+            pruned = local_search(problem, cfg, network_model(problem, cfg), g.selected,
+                                  deadline=time.perf_counter() + args.search_time_limit)
             row["pruned"] = {**pruned.record(), "worst_error_over_allowance": round(
                 judged(problem, cfg, pruned.selected), 4),
                 "checked": bool(evaluate_layout(problem, pruned.selected, cfg).all_ok)}

@@ -123,11 +123,15 @@ def prune(problem: PlanProblem, config, net: NetworkModel, selected: np.ndarray,
 
 def local_search(problem: PlanProblem, config, net: NetworkModel, selected: np.ndarray,
                  deadline: float | None = None) -> Pruning:
-    """:func:`prune`, then :func:`swap_pairs` on what is left (arguments as :func:`prune`);
-    ``finished`` is ``False`` when the deadline stopped either."""
+    """:func:`prune`, then rounds of :func:`swap_pairs` on what is left until a round swaps
+    nothing (arguments as :func:`prune`); ``finished`` is ``False`` when the deadline stopped
+    it first."""
     t0 = time.perf_counter()
     pruned = prune(problem, config, net, selected, deadline)
-    sel, swaps = swap_pairs(problem, config, net, pruned.selected, deadline)
+    sel, swaps, found = pruned.selected, 0, pruned.finished
+    while found and (deadline is None or time.perf_counter() <= deadline):
+        sel, found = swap_pairs(problem, config, net, sel, deadline)
+        swaps += found
     finished = pruned.finished and (deadline is None or time.perf_counter() <= deadline)
     return Pruning(sel, pruned.removed, swaps, pruned.start_markers, time.perf_counter() - t0,
                    finished)
