@@ -531,6 +531,14 @@ network_option = click.option(
          "the reference station (--reference-station, default the first); no total station "
          "needed.")
 
+#: Odometry's 1-sigma per axis in percent of the distance driven (planner.config.BOUNDS).
+ODOMETRY_PERCENT = FiniteRange(0.0, 100.0, min_open=True)
+
+odometry_percent_option = click.option(
+    "--odometry-percent", "odometry_percent", type=ODOMETRY_PERCENT,
+    help="Odometry between consecutive stations: 1-sigma per axis of the relative position, "
+         "percent of the distance driven (e.g. 2).")
+
 reference_station_option = click.option(
     "--reference-station", "reference_station", metavar="ID",
     help="The datum station in network mode (its x, y, z and heading fixed; every error is "

@@ -21,6 +21,7 @@ from planner.cli._common import (
     error_model_option,
     given_paths,
     json_option,
+    odometry_percent_option,
     out_option,
     overwrite_option,
     renamed_option,
@@ -37,9 +38,8 @@ ANGLE_SIGMA_DEG = FiniteRange(math.degrees(MIN_SIGMA), 10.0)
 ODOMETRY_SIGMA_M = FiniteRange(MIN_SIGMA, 50.0)
 #: Odometry heading, 1-sigma, degrees.
 ODOMETRY_HEADING_SIGMA_DEG = FiniteRange(math.degrees(MIN_SIGMA), 90.0)
-#: Odometry between consecutive stations: 1-sigma per axis, percent of the distance driven,
-#: and of the relative heading, degrees per metre (the plan's bounds: planner.config).
-ODOMETRY_PERCENT = FiniteRange(0.0, 100.0, min_open=True)
+#: Odometry between consecutive stations: 1-sigma of the relative heading, degrees per metre
+#: (the plan's bound: planner.config; the position's is _common.ODOMETRY_PERCENT).
 ODOMETRY_HEADING_DEG_PER_M = FiniteRange(0.0, 10.0, min_open=True)
 #: Working radius, m (the plan's bound: planner.config.BOUNDS).
 RADIUS_M = FiniteRange(0.0, 100.0, min_open=True)
@@ -132,9 +132,7 @@ def _datum_choice(datum: tuple[str, str | None] | None, control_path: Path | Non
                    "the dead-reckoned poses in drive order (any frame); the relative poses of "
                    "consecutive rows are observed (needs --odometry-percent and/or "
                    "--odometry-heading-deg-per-m).")
-@click.option("--odometry-percent", type=ODOMETRY_PERCENT,
-              help="1-sigma per axis of an --odometry relative position, percent of the "
-                   "distance driven.")
+@odometry_percent_option
 @click.option("--odometry-heading-deg-per-m", type=ODOMETRY_HEADING_DEG_PER_M,
               help="1-sigma of an --odometry relative heading, degrees per metre driven.")
 @click.option("--inclinometer-sigma-deg", type=ANGLE_SIGMA_DEG,

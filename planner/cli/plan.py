@@ -27,6 +27,7 @@ from planner.cli._common import (
     marker_radius_option,
     network_option,
     network_settings,
+    odometry_percent_option,
     out_option,
     overwrite_option,
     reference_station_option,
@@ -49,8 +50,6 @@ from planner.config import LOCAL_KINDS
 #: Cell size of the stand maps, m: rounded to whole DEM cells (at least one), so any positive
 #: size up to 10 km (one cell over any site markerplan plans; a km site is 1 km across).
 CELL_M = FiniteRange(0.0, 10_000.0, min_open=True)
-#: Odometry's 1-sigma in percent of the distance driven (planner.config.BOUNDS).
-ODOMETRY_PERCENT = FiniteRange(0.0, 100.0, min_open=True)
 
 
 class ChanceEpsilon(click.ParamType):
@@ -147,9 +146,7 @@ def _load_detection_model(ctx, param, path):
                    "boresight-bias sigma: sun-sensor 0.1 and 0.05 deg, star-tracker 10 and 20 "
                    "arcsec); the config's heading_prior_sigma_deg and heading_bias_sigma_deg "
                    "override them.")
-@click.option("--odometry-percent", "odometry_percent", type=ODOMETRY_PERCENT,
-              help="Network mode: odometry between consecutive stations (in the stations' "
-                   "order), 1-sigma per axis in percent of the distance driven, e.g. 2.")
+@odometry_percent_option
 @error_figure_option
 @network_option
 @reference_station_option

@@ -236,7 +236,8 @@ def test_network_trials_count_each_trials_verdict(monkeypatch, tmp_path):
         return [([], {}, {"S1": _fates("S1"), "S2": _fates("S2", "gate" if t % 2 else None)})
                 for t in range(len(seeds_))]
 
-    def fake_verify_scan(scanned, table, plan_path, doc, model, name, settings, reference):
+    def fake_verify_scan(scanned, table, plan_path, doc, model, name, settings, reference,
+                         seed=0):
         if table.name == "trial_003.csv":
             raise InputFileError("the reference station S1 (the datum) has no detection")
         ok = scanned[2]["S2"].rows[1].accepted
