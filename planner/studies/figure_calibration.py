@@ -100,6 +100,19 @@ def _figures(cov: np.ndarray, working_radius_m: float) -> dict:
     return {f: ErrorFigure(f).station_errors(cov, working_radius_m) for f in ERROR_FIGURES}
 
 
+def _stated_traverse(n_stations: int, seed: int, spacing_m: float, sigma_m: float,
+                     markers_per_station: float, inclinometer_sigma_rad: float):
+    """The adjustment settings (no snooping), the simulator's keywords, the noise-free truth and
+    the adjustment of the noise-free network (whose covariance the figures are computed
+    from) of a simulated traverse (:func:`pipeline.network.simulation.simulated_network`)."""
+    settings = AdjustmentSettings(inclinometer_sigma_rad=inclinometer_sigma_rad, snooping=False)
+    kw = dict(n_stations=n_stations, spacing_m=spacing_m, sigma_m=sigma_m, seed=seed,
+              markers_per_station=markers_per_station,
+              inclinometer_sigma_rad=inclinometer_sigma_rad)
+    obs, truth = simulated_network(noise_scale=0.0, **kw)
+    return settings, kw, truth, adjust(obs, settings=settings, nominal=truth.nominal)
+
+
 def network_calibration(n_stations: int, n_draws: int, seed: int = 0, spacing_m: float = 15.0,
                         sigma_m: float = 0.01, working_radius_m: float = 10.0,
                         markers_per_station: float = 3.0,
@@ -123,12 +136,8 @@ def network_calibration(n_stations: int, n_draws: int, seed: int = 0, spacing_m:
     -------
     FigureCalibration
     """
-    settings = AdjustmentSettings(inclinometer_sigma_rad=inclinometer_sigma_rad, snooping=False)
-    kw = dict(n_stations=n_stations, spacing_m=spacing_m, sigma_m=sigma_m, seed=seed,
-              markers_per_station=markers_per_station,
-              inclinometer_sigma_rad=inclinometer_sigma_rad)
-    obs, truth = simulated_network(noise_scale=0.0, **kw)
-    stated = adjust(obs, settings=settings, nominal=truth.nominal)
+    settings, kw, truth, stated = _stated_traverse(n_stations, seed, spacing_m, sigma_m,
+                                                   markers_per_station, inclinometer_sigma_rad)
     judged = np.arange(1, n_stations)
     cov = np.stack([stated.station_covariance(int(i)) for i in judged])
     # the figures take the translation along the station's own axes (heading 0 frame)
@@ -178,12 +187,8 @@ def pair_calibration(n_stations: int, n_draws: int, seed: int = 0, spacing_m: fl
     FigureCalibration
         One column per pair (the stations ``k``, ``k + 1``).
     """
-    settings = AdjustmentSettings(inclinometer_sigma_rad=inclinometer_sigma_rad, snooping=False)
-    kw = dict(n_stations=n_stations, spacing_m=spacing_m, sigma_m=sigma_m, seed=seed,
-              markers_per_station=markers_per_station,
-              inclinometer_sigma_rad=inclinometer_sigma_rad)
-    obs, truth = simulated_network(noise_scale=0.0, **kw)
-    stated = adjust(obs, settings=settings, nominal=truth.nominal)
+    settings, kw, truth, stated = _stated_traverse(n_stations, seed, spacing_m, sigma_m,
+                                                   markers_per_station, inclinometer_sigma_rad)
     six = 6 * n_stations
     cov = site_axes(stated.covariance[:six, :six], truth.pose[:, 3])
     first, second = np.arange(n_stations - 1), np.arange(1, n_stations)
