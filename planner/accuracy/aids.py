@@ -23,9 +23,12 @@ POSE_PARAMETERS` of every station, site frame), linear at the nominal layout (he
   with ``(d_x, d_y)`` the offset between them; the error is isotropic per axis, so the frame
   the odometry reports in does not change the information.
 
-Their information ``J_prior = A^T W A`` (:attr:`PoseAids.information`) is a constant of the
-layout: the network's information stays ``J_prior + sum_j x_j J^(j)``, linear in the selection,
-and every cut of :mod:`planner.accuracy.network` keeps its validity. Odometry ties every station
+The odometry and heading-reference rows are the adjustment's own
+(:func:`pipeline.network.aids.aid_model`, at noise-free readings of the nominal layout), so the
+planner and ``adjust`` share one model of them. Their information ``J_prior = A^T W A``
+(:attr:`PoseAids.information`) is a constant of the layout: the network's information stays
+``J_prior + sum_j x_j J^(j)``, linear in the selection, and every cut of
+:mod:`planner.accuracy.network` keeps its validity. Odometry ties every station
 to the datum, so with it no station is ever cut off (:meth:`PoseAids.links`).
 """
 
@@ -37,7 +40,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from markerplan.errors import ConfigError
-from pipeline.network.observations import MIN_SIGMA
+from pipeline.network.aids import OdometryReadings, aid_model
 
 #: Heading reference classes: name -> (random 1-sigma, boresight bias 1-sigma), degrees. A fine
 #: sun sensor reads the sun's azimuth to about 0.1 deg, mounted to about 0.05 deg; a star
@@ -82,19 +85,13 @@ class PoseAids:
     weight : (m, m) scipy.sparse.csr_array
         ``W``: their weight matrix (block diagonal; the heading block dense when it has a
         boresight bias), 1/m^2 and 1/rad^2.
-    kind : (m,) str
-        ``"tilt"``, ``"heading"``, ``"odometry"`` or ``"odometry-heading"``.
-    station : (m,) int
-        The station each row belongs to (odometry: the later of the two).
-    odometry_links : bool
-        Odometry position rows tie every station to its predecessor.
+    position_links : (p, 2) int
+        Consecutive stations the odometry ties in position (empty without position rows).
     """
 
     design: sp.csr_array
     weight: sp.csr_array
-    kind: np.ndarray
-    station: np.ndarray
-    odometry_links: bool
+    position_links: np.ndarray
 
     def information(self, free: np.ndarray) -> np.ndarray:
         """``J_prior = A^T W A`` on the free parameters ``free`` ((P,) int into the ``6 s``):
@@ -130,17 +127,17 @@ class PoseAids:
         return rows, np.clip(1.0 - np.einsum("ik,ki->i", aca, w), 0.0, 1.0)
 
     def links(self) -> np.ndarray:
-        """(s - 1, 2) int: station pairs the odometry ties in position (empty without it)."""
-        if not self.odometry_links:
-            return np.zeros((0, 2), np.int64)
-        later = np.unique(self.station[self.kind == "odometry"])
-        return np.column_stack([later - 1, later])
+        """(p, 2) int: station pairs the odometry ties in position (empty without it)."""
+        return self.position_links
 
 
 def pose_aids(station_xyz: np.ndarray, inclinometer_sigma_rad: float,
               heading_sigma_rad: float | None = None, heading_bias_sigma_rad: float = 0.0,
               odometry: Odometry | None = None) -> PoseAids:
-    """The :class:`PoseAids` of a network of stations.
+    """The :class:`PoseAids` of a network of stations: the tilt rows, then the odometry and
+    heading-reference rows of the adjustment's own model
+    (:func:`pipeline.network.aids.aid_model`, linearised at the nominal layout with headings 0:
+    noise-free readings of it).
 
     Parameters
     ----------
@@ -166,65 +163,41 @@ def pose_aids(station_xyz: np.ndarray, inclinometer_sigma_rad: float,
     """
     xyz = np.asarray(station_xyz, dtype=float)
     s = xyz.shape[0]
-    rows, cols, vals, sigma, kind, station = [], [], [], [], [], []
-
-    def row(entries: list[tuple[int, float]], sig: float, what: str, k: int) -> None:
-        r = len(sigma)
-        for c, v in entries:
-            rows.append(r)
-            cols.append(c)
-            vals.append(v)
-        sigma.append(sig)
-        kind.append(what)
-        station.append(k)
-
-    if inclinometer_sigma_rad > 0:
-        for k in range(s):
-            for p in (4, 5):
-                row([(6 * k + p, 1.0)], inclinometer_sigma_rad, "tilt", k)
     if heading_bias_sigma_rad > 0 and heading_sigma_rad is None:
         raise ConfigError("a heading boresight bias needs a heading reference; set "
                           "heading_prior_sigma_deg or heading_aid, or drop heading_bias_sigma_deg")
-    heading_rows = len(sigma)
-    if heading_sigma_rad is not None:
-        for k in range(s):
-            row([(6 * k + 3, 1.0)], heading_sigma_rad, "heading", k)
     odo = odometry or Odometry()
+    readings = None
     if odo.any and s > 1:
-        offset = np.diff(xyz, axis=0)
-        driven = np.linalg.norm(offset, axis=1)
+        driven = np.linalg.norm(np.diff(xyz, axis=0), axis=1)
         if np.any(driven <= 0):
             k = int(np.flatnonzero(driven <= 0)[0])
             raise ConfigError(f"stations {k} and {k + 1} (in the order given) stand at one "
                               "position, so the odometry has no distance driven; remove the "
                               "duplicate station or drop the odometry")
-        for k in range(s - 1):
-            a, b, (dx, dy, _) = 6 * k, 6 * (k + 1), offset[k]
-            if odo.position_ratio is not None:
-                sig = max(odo.position_ratio * driven[k], MIN_SIGMA)
-                lever = ((dy,), (-dx,), (0.0,))
-                for axis in range(3):
-                    entries = [(b + axis, 1.0), (a + axis, -1.0)]
-                    if lever[axis][0] != 0.0:
-                        entries.append((a + 3, lever[axis][0]))
-                    row(entries, sig, "odometry", k + 1)
-            if odo.heading_rad_per_m is not None:
-                row([(b + 3, 1.0), (a + 3, -1.0)],
-                    max(odo.heading_rad_per_m * driven[k], MIN_SIGMA), "odometry-heading", k + 1)
-    m = len(sigma)
-    design = sp.csr_array((vals, (rows, cols)), shape=(m, 6 * s))
-    weight = sp.lil_array((m, m))
-    sig = np.asarray(sigma, dtype=float)
-    weight.setdiag(1.0 / sig**2 if m else sig)
-    if heading_sigma_rad is not None and heading_bias_sigma_rad > 0:
-        r2, b2 = heading_sigma_rad**2, heading_bias_sigma_rad**2
-        c = b2 / (r2 + s * b2)
-        block = (np.eye(s) - c) / r2
-        h = slice(heading_rows, heading_rows + s)
-        weight[h, h] = block
-    return PoseAids(design=design, weight=sp.csr_array(weight), kind=np.asarray(kind, dtype=str),
-                    station=np.asarray(station, dtype=np.int64),
-                    odometry_links=odo.position_ratio is not None and s > 1)
+        readings = OdometryReadings.from_poses(np.arange(s), xyz, np.zeros(s))
+    heading = heading_sigma_rad is not None
+    model = aid_model(s, readings, odo.position_ratio, odo.heading_rad_per_m,
+                      np.zeros(s) if heading else None, heading_sigma_rad,
+                      heading_bias_sigma_rad if heading else None)
+    designs, weights = [], []
+    if inclinometer_sigma_rad > 0:
+        tilt = (6 * np.arange(s)[:, None] + np.array([4, 5])).ravel()
+        designs.append(sp.csr_array((np.ones(tilt.size), (np.arange(tilt.size), tilt)),
+                                    shape=(tilt.size, 6 * s)))
+        weights.append(sp.diags_array(np.full(tilt.size, inclinometer_sigma_rad**-2.0)))
+    links = np.zeros((0, 2), np.int64)
+    if model is not None:
+        pose = np.zeros((s, 6))
+        pose[:, :3] = xyz
+        designs.append(model.linearise(pose)[0])
+        weights.append(model.weight)
+        if model.position_sigma_m is not None:
+            links = model.pairs
+    if not designs:
+        return PoseAids(sp.csr_array((0, 6 * s)), sp.csr_array((0, 0)), links)
+    return PoseAids(sp.csr_array(sp.vstack(designs, format="csr")),
+                    sp.csr_array(sp.block_diag(weights, format="csr")), links)
 
 
 def heading_aid_sigmas_deg(aid: str | None) -> tuple[float, float] | None:
