@@ -23,6 +23,7 @@ from pipeline.network.simulation import simulated_network
 from planner.accuracy.aids import Odometry
 from planner.accuracy.network import NetworkModel
 from planner.problem.usability import USABLE, PlanProblem
+from planner.studies.figure_calibration import site_axes
 
 INCL = math.radians(0.01)
 #: They agree to ~1e-14; a 0.1 % error in any design column or weight is far above this.
@@ -49,16 +50,6 @@ def _network(seed):
         pair_bearing_rad=np.arctan2(diff[:, 1], diff[:, 0]), pair_sigma_m=obs.sigma_m,
         pair_reason=np.full(obs.n, USABLE, dtype=np.int8))
     return obs, truth, problem
-
-
-def _tilts_to_site_axes(pose_cov, heading_rad):
-    """(6 s, 6 s) pose covariance with each station's (roll, pitch) about its own axes turned
-    to roll and pitch about the site axes (``theta_site = M(heading) theta_station``)."""
-    t = np.eye(pose_cov.shape[0])
-    for k, psi in enumerate(heading_rad):
-        c, s = math.cos(psi), math.sin(psi)
-        t[6 * k + 4:6 * k + 6, 6 * k + 4:6 * k + 6] = [[c, -s], [s, c]]
-    return t @ pose_cov @ t.T
 
 
 def _assert_same_covariance(predicted, adjusted):
@@ -90,7 +81,7 @@ def test_planner_predicts_the_adjustments_covariance(seed, reference, heading_pr
     n6 = 6 * problem.n_stations
     assert not cov.full[6 * reference:6 * reference + 4].any()
     assert not result.covariance[6 * reference:6 * reference + 4, :n6].any()
-    _assert_same_covariance(cov.full, _tilts_to_site_axes(result.covariance[:n6, :n6],
+    _assert_same_covariance(cov.full, site_axes(result.covariance[:n6, :n6],
                                                           truth.pose[:, 3]))
     predicted = net.marker_covariances(cov, np.arange(problem.n_sites))
     for j in range(problem.n_sites):
@@ -130,7 +121,7 @@ def test_planner_predicts_the_adjustments_covariance_with_pose_aids(seed, refere
     assert np.abs(result.marker_xyz_m - truth.marker_xyz_m).max() < 1e-9
     assert result.sigma0_squared < 1e-12  # exact data: every row closes, the aids' too
     n6 = 6 * s
-    _assert_same_covariance(cov.full, _tilts_to_site_axes(result.covariance[:n6, :n6],
+    _assert_same_covariance(cov.full, site_axes(result.covariance[:n6, :n6],
                                                           truth.pose[:, 3]))
     predicted = net.marker_covariances(cov, np.arange(problem.n_sites))
     for j in range(problem.n_sites):
