@@ -10,11 +10,11 @@ check :func:`planner.accuracy.checks.evaluate_layout`.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
-from markerplan.errors import InputFileError
+from markerplan.errors import ConfigError, InputFileError
 from planner.accuracy.chance import PlanChance, plan_chance, station_odds
 from planner.accuracy.checks import LayoutCheck, evaluate_layout, station_infos
 from planner.accuracy.network_chance import NetworkChance, network_chance
@@ -70,9 +70,10 @@ def build_problem(inputs: PlanInputs, config, error_model, progress: bool = True
     """Candidates + visibility matrix + usability (:func:`planner.problem.sight.sight_problem`, its
     station groups mapped over by ``map_groups``) -> the program's input.
 
-    Returns ``(problem, candidates, visibility, timings_s)``; existing markers are appended to
-    the candidate sites (ids as given) and fixed. With ``detection_model`` every pair gets its
-    chance of being detected and accepted.
+    Returns ``(problem, candidates, visibility, timings_s)``; existing markers, then control
+    points (with their sigmas, :attr:`~planner.problem.usability.PlanProblem.
+    site_control_sigma_m`), are appended to the candidate sites (ids as given) and fixed.
+    With ``detection_model`` every pair gets its chance of being detected and accepted.
     """
     timings = {}
     t = time.perf_counter()
@@ -80,17 +81,26 @@ def build_problem(inputs: PlanInputs, config, error_model, progress: bool = True
                            exclusions=inputs.exclusions, station_xy=inputs.station_xyz,
                            craters=inputs.craters, marker_radius_m=inputs.marker_radius_m)
     timings["candidates"] = time.perf_counter() - t
-    site_ids = list(cand.ids) + list(inputs.existing_ids)
+    control_ids = [c.marker_id for c in inputs.control]
+    site_ids = list(cand.ids) + list(inputs.existing_ids) + control_ids
     if len(set(site_ids)) != len(site_ids):
-        raise InputFileError("existing marker ids clash with candidate ids (C00000...); "
-                             "rename the existing markers")
-    site_xyz = np.vstack([cand.centre_m, inputs.existing_xyz])
-    existing = np.r_[np.zeros(len(cand), bool), np.ones(len(inputs.existing_ids), bool)]
+        raise InputFileError("existing marker or control point ids clash with candidate ids "
+                             "(C00000...) or with each other; rename them")
+    site_xyz = np.vstack([cand.centre_m, inputs.existing_xyz]
+                         + [c.xyz_m[None] for c in inputs.control])
+    fixed = len(inputs.existing_ids) + len(control_ids)
+    existing = np.r_[np.zeros(len(cand), bool), np.ones(fixed, bool)]
     sight = sight_problem(inputs, site_ids, site_xyz, config, error_model,
                           site_existing=existing, progress=progress, map_groups=map_groups,
                           detection_model=detection_model)
     timings.update(sight.timings_s)
-    return sight.problem, cand, sight.visibility, timings
+    problem = sight.problem
+    if control_ids:
+        # the planner's prior is isotropic: each point's largest sigma (conservative)
+        sigma = np.r_[np.zeros(len(site_ids) - len(control_ids)),
+                      [c.sigma_m.max() for c in inputs.control]]
+        problem = replace(problem, site_control_sigma_m=sigma)
+    return problem, cand, sight.visibility, timings
 
 
 #: Sampled detection outcomes a plan's pass rate is estimated from.
@@ -128,6 +138,12 @@ def make_plan(inputs: PlanInputs, config, error_model, model_name: str = "defaul
     """
     timings: dict = {}
     cand = vis = None
+    if inputs.control and not config.network:
+        raise ConfigError("control points (--control) are network mode's datum: add --network "
+                          "(or network = true), or list the points as --existing markers")
+    if inputs.control and config.reference_station is not None:
+        raise ConfigError("control points (--control) are the datum and fix no station: drop "
+                          "--reference-station (reference_station), or the control points")
     if problem is None:
         problem, cand, vis, timings = build_problem(inputs, config, error_model, progress,
                                                     map_groups, detection_model)

@@ -5,10 +5,13 @@ Model (shared with :mod:`pipeline.network.adjustment`)
 The observation model is :mod:`pipeline.network.design`, the one the adjustment uses. Every
 station has 6 pose parameters (x, y, z, heading, roll, pitch,
 :data:`pipeline.network.observations.POSE_PARAMETERS`); roll and pitch carry the
-inclinometer's prior ``0 +- inclinometer_sigma_rad``; the datum is the reference station (the
-first by default) whose x, y, z and heading are fixed (the adjustment's ``"station"`` datum).
-Markers are unknowns. Station ``s`` measures the marker at candidate site ``j`` with per-axis
-weight ``w_sj = 3 / sigma_sj^2`` (:func:`pipeline.network.design.axis_weight`); its design
+inclinometer's prior ``0 +- inclinometer_sigma_rad``. The datum is either the reference station
+(the first by default) whose x, y, z and heading are fixed (the adjustment's ``"station"``
+datum), or the problem's control points (a lander's fiducials,
+:attr:`~planner.problem.usability.PlanProblem.site_control`: existing sites with known
+coordinates ``+- sigma_c`` per axis, the adjustment's ``"control"`` datum), and then no station
+is fixed. Markers are unknowns. Station ``s`` measures the marker at candidate site ``j`` with
+per-axis weight ``w_sj = 3 / sigma_sj^2`` (:func:`pipeline.network.design.axis_weight`); its design
 block ``H_sj`` (3 x 6) is :func:`pipeline.network.design.pose_design_blocks` linearised at the
 nominal layout with heading and tilts 0, i.e. at the offset ``p = site - station`` along the
 site axes. At a station heading ``psi`` the adjustment's roll and pitch are about the station's
@@ -22,14 +25,19 @@ fraction, so the prediction here holds on every body.
 Eliminating the marker's 3 coordinates (Schur complement) leaves the fixed positive
 semi-definite contribution of site ``j`` on the poses of the stations ``S_j`` that can use it::
 
-    J^(j) = sum_s w_s H_s^T H_s - (1 / W_j) (sum_s w_s H_s)^T (sum_s w_s H_s),  W_j = sum_s w_s
+    J^(j) = sum_s w_s H_s^T H_s - (1 / T_j) (sum_s w_s H_s)^T (sum_s w_s H_s),  W_j = sum_s w_s
 
 so the pose information of a layout ``x`` (0/1 per site) is ``J(x) = J_prior + sum_j x_j J^(j)``,
 linear in the selection. ``v^T J^(j) v = sum_s w_s |a_s - a_bar|^2`` with ``a_s = H_s v_s`` and
 ``a_bar`` their ``w``-weighted mean: the weighted spread of what the stations would see of a
 pose change ``v`` (:meth:`NetworkModel.site_coefficients` vectorises it over all pairs). A site
 seen by one station only contributes nothing (its marker absorbs it): a network needs markers
-that tie stations together.
+that tie stations together. ``T_j = W_j`` for a marker; a control point's known coordinates add
+their prior weight ``lambda_j = 1 / sigma_c^2`` per axis, ``T_j = W_j + lambda_j``, which adds
+``(lambda_j / (W_j T_j)) |sum_s w_s a_s|^2`` to the spread: a control point seen by a single
+station ties it to the datum (``sigma_c -> 0`` gives the known-control information
+``sum_s w_s H_s^T H_s``). Control points are always in the layout (existing sites), so their
+``J^(j)`` is a constant of every layout.
 
 Errors
 ------
@@ -37,9 +45,10 @@ Station ``k``'s error is known-control mode's 95 % figure over the station's wor
 (:class:`planner.accuracy.figure.ErrorFigure`: the quantile of the worst error, or the
 ellipsoid figure ``sqrt(chi2_3(0.95) max_q lambda_max(G(q) C_k G(q)^T))``), with the 6 x 6
 block ``C_k`` of ``C = J^-1`` (zero rows for the datum's fixed parameters). A selected marker at
-``j`` is estimated as the weighted mean of its stations' registered measurements: covariance
-``I / W_j + M_j C M_j^T`` with ``M_j = (1 / W_j) sum_s w_s H_s``
-(:meth:`NetworkModel.marker_errors`).
+``j`` is estimated as the weighted mean of its stations' registered measurements (and, at a
+control point, its known coordinates): covariance ``I / T_j + M_j C M_j^T`` with
+``M_j = (1 / T_j) sum_s w_s H_s`` (:meth:`NetworkModel.marker_errors`). Control points are not
+judged against the marker requirement: their accuracy is given.
 
 Convexity and monotonicity
 --------------------------
@@ -91,8 +100,9 @@ class NetworkModel(NetworkTangents):
         Radius of each station's working disc, m.
     inclinometer_sigma_rad : float
         Roll/pitch prior, rad (0: roll and pitch fixed).
-    reference : int
-        Index of the datum station (x, y, z, heading fixed).
+    reference : int, optional
+        Index of the datum station (x, y, z, heading fixed); default the first station, or
+        none when the problem has control points (they are the datum).
     heading_prior_sigma_rad : float, optional
         A heading reference on every station (a sun sensor, a star tracker): its random
         1-sigma, rad (:mod:`planner.accuracy.aids`).
@@ -108,11 +118,21 @@ class NetworkModel(NetworkTangents):
 
     Attributes
     ----------
+    reference : int or None
+        The datum station; ``None`` with control points.
+    control : (n,) bool
+        The control points among the sites.
+    site_prior_weight : (n,) float
+        ``lambda_j``: a control point's prior weight per axis ``1 / sigma_c^2``, 1/m^2; 0 for
+        every other site.
+    datum_xyz : (3,) float
+        The datum point distances are measured from: the reference station, or the control
+        points' centroid (the lander), site frame, m.
     allowed_station_m : (s,) float
         Each station's allowed 95 % error, m (the requirement at its distance from the
-        reference station).
+        datum point).
     allowed_site_m : (n,) float
-        Each candidate site's allowed 95 % marker error, m.
+        Each candidate site's allowed 95 % marker error, m (``inf`` at control points).
     free : (P,) int
         Index into the ``6 s`` pose parameters of each free (estimated) parameter.
     aids : PoseAids
@@ -129,34 +149,49 @@ class NetworkModel(NetworkTangents):
         ``H`` of each pair.
     site_weight : (n,) float
         ``W_j``; 0 for sites no station can use.
+    site_total_weight : (n,) float
+        ``T_j = W_j + lambda_j``.
     n_stations_seeing : (n,) int
         ``|S_j|``.
     """
 
     def __init__(self, problem: PlanProblem, working_radius_m: float,
-                 inclinometer_sigma_rad: float, reference: int = 0,
+                 inclinometer_sigma_rad: float, reference: int | None = None,
                  heading_prior_sigma_rad: float | None = None,
                  figure: ErrorFigure | None = None,
                  requirement: NetworkRequirement | None = None,
                  heading_bias_sigma_rad: float = 0.0,
                  odometry: Odometry | None = None) -> None:
-        if not 0 <= reference < problem.n_stations:
+        self.control = problem.site_control
+        if self.control.any():
+            if reference is not None:
+                raise ConfigError("control points are the datum and fix no station: drop the "
+                                  "reference station (reference_station / "
+                                  "--reference-station), or the control points")
+        elif reference is None:
+            reference = 0
+        elif not 0 <= reference < problem.n_stations:
             raise ConfigError(f"`reference` must index one of the {problem.n_stations} "
                               f"stations, got {reference!r}")
         self.problem = problem
         self.figure = figure or ErrorFigure()
         self.radius = float(working_radius_m)
         self.incl = float(inclinometer_sigma_rad)
-        self.reference = int(reference)
+        self.reference = None if reference is None else int(reference)
         self.requirement = requirement or NetworkRequirement()
-        datum = problem.station_xyz[self.reference]
+        sigma_c = np.where(self.control, problem.site_control_sigma_m
+                           if problem.site_control_sigma_m is not None else 1.0, 1.0)
+        self.site_prior_weight = np.where(self.control, 1.0 / sigma_c**2, 0.0)
+        self.datum_xyz = (problem.site_xyz[self.control].mean(axis=0) if self.reference is None
+                          else problem.station_xyz[self.reference])
         #: (s,) and (n,) float: horizontal distances of the stations and sites from the datum, m
-        self.station_distance_m = datum_distances(problem.station_xyz, datum)
-        self.site_distance_m = datum_distances(problem.site_xyz, datum)
+        self.station_distance_m = datum_distances(problem.station_xyz, self.datum_xyz)
+        self.site_distance_m = datum_distances(problem.site_xyz, self.datum_xyz)
         self.allowed_station_m, self.allowed_site_m = self.allowances(self.requirement)
         s = problem.n_stations
         fixed = np.zeros((s, 6), bool)
-        fixed[reference, :4] = True
+        if self.reference is not None:
+            fixed[self.reference, :4] = True
         if self.incl <= 0:
             fixed[:, 4:] = True
         self.free = np.flatnonzero(~fixed.ravel())
@@ -178,14 +213,15 @@ class NetworkModel(NetworkTangents):
             problem.site_xyz[self.pair_site] - problem.station_xyz[self.pair_station])
         n = problem.n_sites
         self.site_weight = np.bincount(self.pair_site, self.weight, minlength=n)
+        self.site_total_weight = self.site_weight + self.site_prior_weight
         self.n_stations_seeing = np.bincount(self.pair_site, minlength=n)
         self.site_start = np.r_[0, np.cumsum(self.n_stations_seeing)]
         self._site_sum = csr_array((np.ones(self.pair_site.size),
                                     (self.pair_site, np.arange(self.pair_site.size))),
                                    shape=(n, self.pair_site.size))  # (n, p): sum over a site
-        # ordered pairs (a, b) of pairs of one site, for sites seen by >= 2 stations
+        # ordered pairs (a, b) of pairs of one site, for the tying sites
         k = self.n_stations_seeing
-        multi = np.flatnonzero(k >= 2)
+        multi = np.flatnonzero(self.tying)
         reps = k[multi] ** 2
         site = np.repeat(multi, reps)
         off = np.arange(reps.sum()) - np.repeat(np.cumsum(reps) - reps, reps)
@@ -201,13 +237,24 @@ class NetworkModel(NetworkTangents):
         configuration other than the model's own: :func:`planner.accuracy.checks.
         evaluate_layout`)."""
         return (requirement.allowed_m(self.station_distance_m),
-                requirement.allowed_m(self.site_distance_m))
+                np.where(self.control, np.inf, requirement.allowed_m(self.site_distance_m)))
+
+    @property
+    def datum_text(self) -> str:
+        """The datum in words, for messages and reports: ``"station S1"`` or ``"the control
+        points L1, L2, L3"``."""
+        ids = self.problem.site_ids
+        if self.reference is not None:
+            return f"station {self.problem.station_ids[self.reference]}"
+        names = [ids[j] for j in np.flatnonzero(self.control)]
+        return "the control points " + ", ".join(names[:5]) + (
+            f" (and {len(names) - 5} more)" if len(names) > 5 else "")
 
     def tie_coefficients(self, weight: np.ndarray) -> np.ndarray:
-        """Each tie's ``delta_ab w_a - w_a w_b / W_j`` for the pairs' weights ``weight`` ((p,)
+        """Each tie's ``delta_ab w_a - w_a w_b / T_j`` for the pairs' weights ``weight`` ((p,)
         or (k, p), 0 for a lost pair; 0 where a site keeps no pair): (t,) or (k, t)."""
         site_weight = (self._site_sum @ np.atleast_2d(weight).T).T.reshape(
-            weight.shape[:-1] + (self.problem.n_sites,))
+            weight.shape[:-1] + (self.problem.n_sites,)) + self.site_prior_weight
         wa, wb = weight[..., self.tie_a], weight[..., self.tie_b]
         total = site_weight[..., self.tie_site]
         return np.where(self.tie_a == self.tie_b, wa, 0.0) \
@@ -220,8 +267,9 @@ class NetworkModel(NetworkTangents):
 
     @property
     def tying(self) -> np.ndarray:
-        """(n,) bool: sites whose contribution ``J^(j)`` is not zero (seen by >= 2 stations)."""
-        return self.n_stations_seeing >= 2
+        """(n,) bool: sites whose contribution ``J^(j)`` is not zero (seen by >= 2 stations, or
+        a control point seen by one)."""
+        return (self.n_stations_seeing >= 2) | (self.control & (self.n_stations_seeing >= 1))
 
     def information(self, x, kept: np.ndarray | None = None) -> np.ndarray:
         """Pose information ``J(x) = J_prior + sum_j x_j J^(j)`` of the free parameters.
@@ -306,8 +354,9 @@ class NetworkModel(NetworkTangents):
         """A low-rank factor of one site's information ``J^(j)``.
 
         ``J^(j) = B^T (D kron I_3) B`` with ``B`` the block diagonal of the ``m`` stations'
-        ``H_s`` and ``D = diag(w) - w w^T / W_j`` (positive semi-definite, rank ``m - 1``);
-        ``D = L L^T`` from its eigen-decomposition gives ``U = B^T (L kron I_3)``.
+        ``H_s`` and ``D = diag(w) - w w^T / T_j`` (positive semi-definite, rank ``m - 1``; at a
+        control point positive definite, rank ``m``); ``D = L L^T`` from its
+        eigen-decomposition gives ``U = B^T (L kron I_3)``.
 
         Parameters
         ----------
@@ -320,11 +369,12 @@ class NetworkModel(NetworkTangents):
             The pose parameters (of all ``6 s``, fixed ones included) of the stations that use
             the site.
         factor : (6 m, r) float
-            ``U`` with ``J^(j) = U U^T`` on ``index`` (``r = 3 (m - 1)``; 0 columns when
-            ``m < 2``). Rows of fixed parameters are to be ignored.
+            ``U`` with ``J^(j) = U U^T`` on ``index`` (``r = 3 (m - 1)``, ``3 m`` at a control
+            point; 0 columns when the site does not tie). Rows of fixed parameters are to be
+            ignored.
         """
         m = int(self.n_stations_seeing[site])
-        if m < 2:
+        if not self.tying[site]:
             lo = self.site_start[site]
             index = (6 * self.pair_station[lo:lo + m][:, None] + np.arange(6)).ravel()
             return index, np.zeros((index.size, 0))
@@ -337,27 +387,32 @@ class NetworkModel(NetworkTangents):
         Parameters
         ----------
         sites : (k,) int
-            Candidate sites; those fewer than two stations use are skipped (no factor).
+            Candidate sites; those that do not tie (:attr:`tying`) are skipped (no factor).
 
         Yields
         ------
         group : (g,) int
-            The sites of ``sites`` that ``m >= 2`` stations use (one ``m`` per group, rising).
+            The tying sites of ``sites`` that ``m`` stations use (one ``m`` and one kind, marker
+            or control point, per group; ``m`` rising).
         index : (g, 6 m) int
             Each site's pose parameters, as :meth:`site_factor`.
-        factor : (g, 6 m, 3 (m - 1)) float
-            Each site's ``U``, as :meth:`site_factor`.
+        factor : (g, 6 m, r) float
+            Each site's ``U``, as :meth:`site_factor` (``r = 3 (m - 1)``, or ``3 m`` for a group
+            of control points).
         """
         sites = np.asarray(sites, dtype=np.int64)
+        sites = sites[self.tying[sites]]
         seen = self.n_stations_seeing[sites]
-        for m in np.unique(seen[seen >= 2]):
-            group = sites[seen == m]
+        kind = self.control[sites]
+        for m, control in sorted(set(zip(seen.tolist(), kind.tolist(), strict=True))):
+            group = sites[(seen == m) & (kind == control)]
             pairs = self.site_start[group][:, None] + np.arange(m)  # (g, m)
             w = self.weight[pairs]
             d = w[:, :, None] * np.eye(m) - w[:, :, None] * w[:, None, :] \
-                / w.sum(axis=1)[:, None, None]
+                / self.site_total_weight[group][:, None, None]
             lam, vec = np.linalg.eigh(d)
-            root = vec[:, :, 1:] * np.sqrt(np.maximum(lam[:, None, 1:], 0.0))  # lam[:, 0] = 0
+            first = 0 if control else 1  # a marker's D has the null vector (1, ..., 1)
+            root = vec[:, :, first:] * np.sqrt(np.maximum(lam[:, None, first:], 0.0))
             u = np.einsum("gaib,gak->gabki", self.design[pairs], root)  # (g, m, 6, m - 1, 3)
             index = (6 * self.pair_station[pairs][:, :, None] + np.arange(6)).reshape(
                 group.size, -1)
@@ -441,12 +496,13 @@ class NetworkModel(NetworkTangents):
         return start + off, pos
 
     def marker_covariances(self, cov: NetworkCovariance, sites) -> np.ndarray:
-        """(m, 3, 3) covariance of the markers at candidate sites ``sites``, m^2: ``I / W_j +
+        """(m, 3, 3) covariance of the markers at candidate sites ``sites``, m^2: ``I / T_j +
         M_j C M_j^T`` (every station that can use the site measures it). Sites no station
-        can use, or seen from an undetermined station, get ``inf``."""
+        can use (but control points: their prior), or seen from an undetermined station, get
+        ``inf``."""
         sites = np.asarray(sites, dtype=np.int64).reshape(-1)
         out = np.zeros((sites.size, 3, 3))
-        w_site = self.site_weight[sites]
+        w_site = self.site_total_weight[sites]
         pairs, pos = self._pairs_of(sites)
         ka = self.n_stations_seeing[sites]
         # ordered pairs of pairs within each site
@@ -489,13 +545,16 @@ class NetworkModel(NetworkTangents):
         return t
 
     def connected_to_reference(self, selected) -> np.ndarray:
-        """(s,) bool: stations linked to the reference by a chain of shared selected sites or
-        odometry."""
+        """(s,) bool: stations linked to the datum (the reference station, or a station that
+        sees a control point) by a chain of shared selected sites or odometry."""
         t = self.ties(selected) > 0
         link = self.aids.links()
         t[link[:, 0], link[:, 1]] = t[link[:, 1], link[:, 0]] = True
         _, comp = connected_components(csr_array(t), directed=False)
-        return comp == comp[self.reference]
+        if self.reference is not None:
+            return comp == comp[self.reference]
+        sees = self.control[self.pair_site] & np.asarray(selected, bool)[self.pair_site]
+        return np.isin(comp, comp[self.pair_station[sees]])
 
 
 def network_model(problem: PlanProblem, config) -> NetworkModel:
@@ -507,9 +566,11 @@ def network_model(problem: PlanProblem, config) -> NetworkModel:
     Raises
     ------
     ConfigError
-        ``reference_station`` names no station of the problem.
+        ``reference_station`` names no station of the problem, or is given with control
+        points.
     """
-    ref = Datum(reference_station=config.reference_station).resolve(problem.station_ids)
+    ref = None if problem.site_control.any() and config.reference_station is None \
+        else Datum(reference_station=config.reference_station).resolve(problem.station_ids)
     return NetworkModel(problem, config.working_radius_m, config.inclinometer_sigma_rad,
                         reference=ref, heading_prior_sigma_rad=config.heading_prior_sigma_rad,
                         figure=error_figure(config),

@@ -28,26 +28,26 @@ def diagnose_network(net: NetworkModel, available) -> dict[str, str]:
     """
     p = net.problem
     ids = p.station_ids
-    ref = ids[net.reference]
+    ref = net.datum_text
     linked = net.connected_to_reference(available)
     out = {}
     for k in np.flatnonzero(~linked):
         out[ids[k]] = (f"disconnected: shares no usable marker site with the part of the "
-                       f"network holding the reference {ref}")
+                       f"network holding the datum, {ref}")
     if out:
         return out
     cov = net.covariance(net.information(available))
     err = net.station_errors_from(cov)
     blocks = cov.station(np.arange(p.n_stations))
     at_station = net.figure.point_errors(blocks[:, :3, :3])
-    dist = np.linalg.norm(p.station_xyz[:, :2] - p.station_xyz[net.reference, :2], axis=1)
+    dist = net.station_distance_m
     allowed = net.allowed_station_m
     for k in range(p.n_stations):
         if not cov.determined[k]:
             out[ids[k]] = ("heading undetermined: tied to the network only through markers "
                            "at one place; it needs two shared sites apart")
         elif err[k] > allowed[k] and at_station[k] > allowed[k]:
-            out[ids[k]] = (f"too far from the reference: {at_station[k]:.3f} m at the station "
+            out[ids[k]] = (f"too far from the datum: {at_station[k]:.3f} m at the station "
                            f"itself with every usable site ({dist[k]:.0f} m from {ref}), "
                            f"above {allowed[k]:.4g} m")
         elif err[k] > allowed[k]:

@@ -27,7 +27,8 @@ class NetworkTangents:
         Returns
         -------
         coef : (m, n) float, >= 0
-            The weighted spread ``sum_s w_s |a_s - a_bar|^2`` of ``a_s = H_s v_s``.
+            The weighted spread ``sum_s w_s |a_s - a_bar|^2`` of ``a_s = H_s v_s`` (plus
+            ``(lambda_j / (W_j T_j)) |sum_s w_s a_s|^2`` at a control point).
         """
         v = np.atleast_2d(np.asarray(v, dtype=float))
         m = v.shape[0]
@@ -38,10 +39,13 @@ class NetworkTangents:
         w = self.weight[:, None]
         with np.errstate(invalid="ignore", divide="ignore"):
             inv_w = np.where(self.site_weight > 0, 1.0 / self.site_weight, 0.0)
-        mean = (self._site_sum @ (w * a)) * inv_w[:, None]  # (n, 3 m)
+        total = self._site_sum @ (w * a)  # (n, 3 m): sum_s w_s a_s
+        mean = total * inv_w[:, None]
         d = a - mean[self.pair_site]
         spread = (w * d * d).reshape(-1, 3, m).sum(axis=1)  # (p, m)
-        return (self._site_sum @ spread).T
+        anchored = inv_w * self.site_prior_weight / self.site_total_weight.clip(min=1e-300)
+        return (self._site_sum @ spread
+                + anchored[:, None] * (total * total).reshape(-1, 3, m).sum(axis=1)).T
 
     def station_tangents(self, cov: NetworkCovariance, stations, rim: str = "worst"
                          ) -> list[tuple[int, np.ndarray, float]]:
@@ -156,10 +160,11 @@ class NetworkTangents:
             g = np.zeros(6 * self.problem.n_stations)
             for p in range(lo, hi):
                 s = self.pair_station[p]
-                g[6 * s:6 * s + 6] += self.weight[p] / self.site_weight[j] * self.design[p].T @ u
+                g[6 * s:6 * s + 6] += (self.weight[p] / self.site_total_weight[j]
+                                       * self.design[p].T @ u)
             gs.append(g)
             owners.append(int(j))
-            const.append(1.0 / self.site_weight[j])
+            const.append(1.0 / self.site_total_weight[j])
         return self.tangents(cov, gs, owners,
                               self.allowed_site_m[owners] ** 2 / self.figure.cut_chi2,
                               np.asarray(const))

@@ -119,14 +119,15 @@ class LayoutReliability:
 
 def _difference_design(net, pairs: np.ndarray) -> sp.csr_array:
     """``D`` of the observations ``pairs`` (all pairs of their sites, sorted by site), as a
-    sparse ``(3 q, 6 s)`` matrix: row block ``i`` is ``H_a E_{s_a} - sum_b (w_b / W_j) H_b
-    E_{s_b}`` over the pairs ``b`` of observation ``a``'s site."""
+    sparse ``(3 q, 6 s)`` matrix: row block ``i`` is ``H_a E_{s_a} - sum_b (w_b / T_j) H_b
+    E_{s_b}`` over the pairs ``b`` of observation ``a``'s site (``T_j`` its
+    :attr:`~planner.accuracy.network.NetworkModel.site_total_weight`)."""
     q = pairs.size
     row_of = np.full(net.pair_site.size, -1)
     row_of[pairs] = np.arange(q)
     take = np.flatnonzero(row_of[net.tie_a] >= 0)  # ordered pairs (a, b) of selected sites
     a, b = net.tie_a[take], net.tie_b[take]
-    coef = np.where(a == b, 1.0, 0.0) - net.weight[b] / net.site_weight[net.pair_site[b]]
+    coef = np.where(a == b, 1.0, 0.0) - net.weight[b] / net.site_total_weight[net.pair_site[b]]
     blocks = coef[:, None, None] * net.design[b]  # (t, 3, 6)
     rows = 3 * row_of[a][:, None, None] + np.arange(3)[None, :, None]
     cols = 6 * net.pair_station[b][:, None, None] + np.arange(6)[None, None, :]
@@ -158,7 +159,7 @@ def layout_reliability(net, selected, delta0: float | None = None) -> LayoutReli
     q = pairs.size
     w = net.weight[pairs]
     d = _difference_design(net, pairs)
-    w_site = net.site_weight[net.pair_site[pairs]]
+    w_site = net.site_total_weight[net.pair_site[pairs]]
     redundancy = np.empty((q, 3))
     mdb = np.empty((q, 3))
     shift = np.zeros((2, q, 3, s))  # per unit bias: 3-D and horizontal shift of each station
@@ -188,7 +189,8 @@ def layout_reliability(net, selected, delta0: float | None = None) -> LayoutReli
     cause = np.where(station_effect > 0, np.argmax(per_obs, axis=1) if q else 0, -1)
     cause[:, undetermined] = -1  # no observation is to blame: the layout leaves it loose
     _, prior_r = net.aids.redundancy(cov.full[np.ix_(net.free, net.free)], net.free)
-    n_markers = int(np.unique(net.pair_site[pairs]).size)
+    observed = np.unique(net.pair_site[pairs])
+    n_markers = int(observed.size - np.count_nonzero(net.control[observed]))
     return LayoutReliability(
         pair=pairs, station=net.pair_station[pairs], site=net.pair_site[pairs],
         redundancy=redundancy, mdb_m=mdb, effect_m=per_obs[0].max(axis=1, initial=0.0),

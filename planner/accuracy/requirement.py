@@ -99,6 +99,16 @@ def datum_distances(xyz: np.ndarray, datum_xyz: np.ndarray) -> np.ndarray:
     return np.linalg.norm(xyz[:, :2] - np.asarray(datum_xyz, dtype=float)[:2], axis=1)
 
 
+def datum_text(datum: dict) -> str:
+    """The datum of a plan's ``network.datum`` record in words: its ``description``, or for a
+    record written before control datums its reference station.
+
+    >>> datum_text({"reference_station": "S1"})
+    'station S1'
+    """
+    return datum.get("description") or f"station {datum['reference_station']}"
+
+
 def requirement_text(section: dict) -> str:
     """The requirement of a plan's (or a verification's) record in words: its
     ``requirement_text``, or for a record written before it existed its constant

@@ -116,6 +116,10 @@ def _load_detection_model(ctx, param, path):
                    "being detected and accepted (default: the shipped model).")
 @click.option("--existing",
               help="Markers already in the field, fixed: 'as-built' or a CSV (id,x_m,y_m[,z_m]).")
+@click.option("--control", "control_path", type=FILE,
+              help="Network mode's datum: control points with known coordinates, e.g. the "
+                   "lander's fiducials, CSV id,x_m,y_m,z_m,sigma_m (site frame; sigma_m per "
+                   "coordinate); no station is fixed, distances are from their centroid.")
 @click.option("--budget", type=click.IntRange(1, 100_000),
               help="Largest number of markers allowed.")
 @click.option("--requirement-m", "requirement_m", type=REQUIREMENT_M,
@@ -161,8 +165,8 @@ def _load_detection_model(ctx, param, path):
 def command(site_name, site_seed, dem_path, reproject, terrain, dem_height_error,
             stations_path, station_ids,
             boundary_path, exclude_paths, marker_radius_m, error_model, config_path,
-            visibility_path, redundant, chance_epsilon, detection_model, existing, budget,
-            requirement_m, requirement_ppm, local_requirement_m, local_requirement_ppm,
+            visibility_path, redundant, chance_epsilon, detection_model, existing, control_path,
+            budget, requirement_m, requirement_ppm, local_requirement_m, local_requirement_ppm,
             local_within_m, local_kind, no_datum_requirement, heading_aid, odometry_percent,
             error_figure, network,
             reference_station, time_limit_s, stand_map_cell_m, scheduler, workers, out,
@@ -193,6 +197,7 @@ def command(site_name, site_seed, dem_path, reproject, terrain, dem_height_error
       markerplan plan --network --no-datum-requirement --local-requirement-m 0.10 \
           --local-within-m 50 --out p-local/
       markerplan plan --network --heading-aid star-tracker --odometry-percent 2 --out p-aids/
+      markerplan plan --network --control lander.csv --out p-lander/
       markerplan plan --dem site.tif --stations stations.csv --exclude paths.geojson --out p/
       markerplan plan --dem site.tif --stations stations.csv --stand-map-cell-m 2 --out p/
       markerplan plan --dem lonlat.tif --reproject --stations lonlat.csv --out p/
@@ -213,7 +218,7 @@ def command(site_name, site_seed, dem_path, reproject, terrain, dem_height_error
                                config_path, visibility_path, *exclude_paths,
                                None if detection_model[1].startswith("default") else
                                detection_model[1],
-                               None if existing == "as-built" else existing)
+                               None if existing == "as-built" else existing, control_path)
     progress = not as_json or sys.stderr.isatty()
     with output_folder(out, overwrite, "plan", inputs=inputs_given) as stage, \
             executor(scheduler, workers, progress) as tasks:
@@ -223,6 +228,7 @@ def command(site_name, site_seed, dem_path, reproject, terrain, dem_height_error
                                 time_limit_s, as_json, network, reference_station,
                                 reproject, map_groups=tasks, terrain=terrain,
                                 dem_height_error=dem_height_error, chance_epsilon=chance_epsilon,
+                                control_path=control_path,
                                 detection_model=detection_model, error_figure=error_figure,
                                 requirement=dict(
                                     requirement_m=requirement_m,
@@ -267,7 +273,7 @@ def command(site_name, site_seed, dem_path, reproject, terrain, dem_height_error
              + chance_text(doc)
              + "; ".join(f"{k.replace('_', ' ')}: {v['n_markers']}"
                          for k, v in doc["baselines"].items())
-             + (f"; network mode, datum {info['reference_station']}, worst marker "
+             + (f"; network mode, datum {info['datum']}, worst marker "
                 f"{info['worst_marker_error_m']:.3f} m" if "mode" in info else "")
              + f" -> {out}/")
     emit_summary(info, as_json, human)
@@ -312,14 +318,16 @@ def _plan(site_name, site_seed, dem_path, stations_path, station_ids, boundary_p
           exclude_paths, marker_radius_m, error_model, config_path, visibility_path, redundant,
           existing, budget, time_limit_s, as_json, network=None, reference_station=None,
           reproject=False, map_groups=map, chance_epsilon=None, detection_model=None,
-          terrain="truth", dem_height_error=None, error_figure=None, requirement=None):
+          terrain="truth", dem_height_error=None, error_figure=None, requirement=None,
+          control_path=None):
     """Read the inputs and make the plan; return ``(outcome, config)``. A ``--dem`` is read
     only as far as the stations see (``config.max_range_m``); ``map_groups`` maps the ray
     casting's station blocks (:func:`visibility.visibility_matrix.tiled_visibility`).
     ``chance_epsilon``: ``--chance-epsilon`` (``None``: not given, :data:`NAIVE`: none);
     ``detection_model``: ``(model, name)``, or ``None`` for none; ``error_figure``:
     ``--error-figure`` (``None``: not given); ``requirement``: the requirement and pose-aid
-    options by their configuration names (``None``: not given)."""
+    options by their configuration names (``None``: not given); ``control_path``:
+    ``--control``."""
     from markerplan.errors import ConfigError
     from planner.config import PlanConfig, load_config
     from planner.problem.inputs import load_inputs
@@ -339,7 +347,7 @@ def _plan(site_name, site_seed, dem_path, stations_path, station_ids, boundary_p
                          existing=existing, marker_radius_m=marker_radius_m,
                          station_ids=station_ids, reproject=reproject,
                          sight_radius_m=config.max_range_m, terrain=terrain,
-                         dem_height_error=dem_height_error)
+                         dem_height_error=dem_height_error, control=control_path)
     if inputs.existing_ids:
         config = config.replace(existing=tuple(inputs.existing_ids))
     problem = None
@@ -347,9 +355,9 @@ def _plan(site_name, site_seed, dem_path, stations_path, station_ids, boundary_p
         from planner.problem.visibility_table import read_visibility_table
 
         problem = read_visibility_table(visibility_path, inputs.station_ids, inputs.station_xyz)
-        if inputs.existing_ids:
-            raise ConfigError("--existing cannot be combined with --visibility; list the "
-                              "existing markers as sites in the visibility table instead")
+        if inputs.existing_ids or inputs.control:
+            raise ConfigError("--existing and --control cannot be combined with --visibility; "
+                              "plan by ray casting (drop --visibility) to use them")
         model, model_name = None, f"from visibility table {visibility_path}"
     else:
         model, model_name = error_model.model, error_model.name

@@ -29,6 +29,8 @@ from pathlib import Path
 
 import numpy as np
 
+from planner.accuracy.requirement import datum_text
+
 #: Timestamp GDAL writes into every GPKG (instead of the time of writing).
 GPKG_DATE = "2000-01-01T00:00:00Z"
 
@@ -207,8 +209,7 @@ def write_plan_gpkg(outcome, doc: dict, path: Path) -> Path:
     prob, res = outcome.problem, outcome.result
     crs = outcome.inputs.dem.crs
     markers, stations = doc["markers"], doc["stations"]
-    relative = (f"station {doc['network']['datum']['reference_station']}" if "network" in doc
-                else "known control")
+    relative = datum_text(doc["network"]["datum"]) if "network" in doc else "known control"
 
     def xyz(rows):
         return np.array([[r["x_m"], r["y_m"], r["z_m"]] for r in rows], float).reshape(-1, 3)

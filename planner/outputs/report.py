@@ -44,7 +44,7 @@ import numpy as np
 from markerplan.provenance import provenance
 from markerplan.writing import write_gis_sidecars
 from planner.accuracy.figure import error_figure
-from planner.accuracy.requirement import NetworkRequirement, requirement_text
+from planner.accuracy.requirement import NetworkRequirement, datum_text, requirement_text
 from planner.outputs.chance_report import chance_markdown, chance_sections
 from planner.outputs.gis import crs_name, geojson_crs_members, geojson_positions, write_plan_gpkg
 from planner.outputs.local_report import local_markdown, local_record, write_pairs_csv
@@ -101,7 +101,9 @@ def plan_record(outcome) -> dict:
         stations.append(rec)
     markers = [{"id": prob.site_ids[j], "x_m": _num(prob.site_xyz[j, 0]),
                 "y_m": _num(prob.site_xyz[j, 1]), "z_m": _num(prob.site_xyz[j, 2]),
-                "existing": bool(prob.site_existing[j]), "stations": used_by[int(j)]}
+                "existing": bool(prob.site_existing[j]), "stations": used_by[int(j)],
+                **({"control": bool(prob.site_control[j])}
+                   if prob.site_control_sigma_m is not None else {})}
                for j in sel]
     n_plan = len(sel)
     baselines = {}
@@ -202,8 +204,17 @@ def _network_record(outcome, stations: list[dict], markers: list[dict]
     effect = np.array([math.inf if s["bias_effect_m"] is None else s["bias_effect_m"]
                        for s in stations])
     worst_bias = stations[int(np.argmax(effect))] if stations else None
-    return {"datum": {"kind": "station", "reference_station": prob.station_ids[net.reference],
-                      "fixed": list(POSE_PARAMETERS[:4]), **cfg.aids_record()},
+    control = np.flatnonzero(net.control)
+    return {"datum": {"kind": "station" if net.reference is not None else "control",
+                      "reference_station": None if net.reference is None
+                      else prob.station_ids[net.reference],
+                      "fixed": list(POSE_PARAMETERS[:4]) if net.reference is not None else [],
+                      "control": [{"marker_id": prob.site_ids[j],
+                                   "xyz_m": prob.site_xyz[j].tolist(),
+                                   "sigma_m": float(prob.site_control_sigma_m[j])}
+                                  for j in control],
+                      "datum_xyz_m": [float(v) for v in net.datum_xyz],
+                      "description": net.datum_text, **cfg.aids_record()},
             "weakest_stations": [{"id": prob.station_ids[k],
                                   "predicted_error_m": _num(res.check.error_m[k])}
                                  for k in order[:5]],
@@ -271,7 +282,7 @@ def _write_markers_csv(doc: dict, path: Path) -> None:
 def _write_stations_csv(doc: dict, path: Path) -> None:
     """Network mode's ``stations.csv`` (header first; ``error_relative_to`` names the datum),
     its ``.csvt`` and, with a CRS, its ``.prj``."""
-    datum = f"station {doc['network']['datum']['reference_station']}"
+    datum = datum_text(doc['network']['datum'])
     with path.open("w", newline="") as fh:
         w = csv.writer(fh)
         w.writerow(STATION_COLUMNS)
@@ -379,9 +390,8 @@ def report_markdown(doc: dict) -> str:
         net = doc["network"]
         lines += ["", "## Network", "",
                   f"Network mode: markers are unknowns; every error is relative to the datum, "
-                  f"station **{net['datum']['reference_station']}** (x, y, z and heading fixed; "
-                  "roll and pitch from the inclinometer, "
-                  f"{net['datum']['inclinometer_sigma_deg']:g} deg 1-sigma). "
+                  f"{_datum_words(net['datum'])}; roll and pitch from the inclinometer "
+                  f"({net['datum']['inclinometer_sigma_deg']:g} deg 1-sigma). "
                   f"{net['n_station_ties']} station pairs share markers; worst "
                   f"marker {_fmt(net['worst_marker_error_m'])}.", "",
                   "Weakest stations: " + ", ".join(f"{w['id']} ({_fmt(w['predicted_error_m'])})"
@@ -428,6 +438,16 @@ def _bias_cell(station: dict) -> str:
         f"{station['bias_effect_m']:.3f} m ({cause['station']}→{cause['site']})"
 
 
+def _datum_words(datum: dict) -> str:
+    """The report's datum clause: the station and what it fixes, or the control points with
+    their sigmas."""
+    if datum.get("kind", "station") == "station":
+        return (f"station **{datum['reference_station']}** (x, y, z and heading fixed)")
+    points = ", ".join(f"{c['marker_id']} (+-{c['sigma_m']:g} m)" for c in datum["control"])
+    return (f"the **control points** {points}, no station fixed; distances from their centroid "
+            f"({datum['datum_xyz_m'][0]:.2f}, {datum['datum_xyz_m'][1]:.2f}) m")
+
+
 def _bias_sentence(rel: dict) -> str:
     """The network's worst MDB effect (and the bound, when one is set)."""
     worst = rel["worst_bias_effect"]
@@ -459,5 +479,6 @@ def summary(doc: dict, out: Path) -> dict:
             "markers": [m["id"] for m in doc["markers"]],
             **({"mode": "network",
                 "reference_station": doc["network"]["datum"]["reference_station"],
+                "datum": datum_text(doc["network"]["datum"]),
                 "worst_marker_error_m": doc["network"]["worst_marker_error_m"]}
                if "network" in doc else {})}

@@ -70,6 +70,9 @@ class PlanInputs:
     existing_ids : list of str
     existing_xyz : (e, 3) float
         Markers already in the field, fixed in the plan, m.
+    control : tuple of pipeline.network.observations.ControlPoint
+        Network mode's datum: control points with known coordinates and sigmas (a lander's
+        fiducials), in the plan like existing markers; empty: none.
     marker_radius_m : float
     sources : dict
         Where each input came from (for provenance): the preset, and input files as absolute
@@ -93,6 +96,7 @@ class PlanInputs:
     as_built_xyz: np.ndarray
     existing_ids: list[str] = field(default_factory=list)
     existing_xyz: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    control: tuple = ()
     marker_radius_m: float = 0.10
     lidar_height_m: float = 1.0
     sources: dict = field(default_factory=dict)
@@ -157,7 +161,7 @@ def load_inputs(site: str = "default", site_seed: int | None = None, dem_path=No
                 existing: str | None = None, marker_radius_m: float | None = None,
                 station_ids=None, reproject: bool = False,
                 sight_radius_m: float | None = None, terrain: str = "truth",
-                dem_height_error: HeightError | None = None) -> PlanInputs:
+                dem_height_error: HeightError | None = None, control=None) -> PlanInputs:
     """Assemble the inputs of a plan from a site preset and optional files.
 
     Parameters
@@ -203,6 +207,8 @@ def load_inputs(site: str = "default", site_seed: int | None = None, dem_path=No
     dem_height_error : HeightError, optional
         The planning DEM's height error: a ``dem_path``'s, or, with ``terrain="orbital"``, one
         replacing the preset's grade (the orbital DEM is then drawn with it).
+    control : path, optional
+        Control points CSV (``id,x_m,y_m,z_m,sigma_m``, :func:`read_control_points`).
 
     Raises
     ------
@@ -290,10 +296,14 @@ def load_inputs(site: str = "default", site_seed: int | None = None, dem_path=No
                                       off_dem_fix=off_site)
     if existing is not None:
         sources["existing"] = existing if existing == "as-built" else _absolute(existing)
+    control_points = () if control is None else read_control_points(control, dem, off_site)
+    if control is not None:
+        sources["control"] = _absolute(control)
     inputs = PlanInputs(site_name=site_name, site_seed=site_seed, dem=dem, station_ids=ids,
                         station_xyz=xyz, station_heading_rad=heading, boundary_xy=boundary,
                         exclusions=exclusions, craters=craters, as_built_ids=as_built_ids,
                         as_built_xyz=as_built_xyz, existing_ids=ex_ids, existing_xyz=ex_xyz,
+                        control=control_points,
                         marker_radius_m=float(preset.marker_radius_m), lidar_height_m=lidar_h,
                         sources=sources, height_error=dem_height_error)
     if station_ids is None:
@@ -587,6 +597,46 @@ def read_markers(path, dem, marker_radius_m: float, option: str = "`existing`",
     """
     return _points_on_dem(read_points(path, option, MAX_MARKERS), dem, marker_radius_m,
                           "marker", off_dem_fix, sink_m=marker_radius_m)
+
+
+def read_control_points(path, dem, off_dem_fix: str = OFF_DEM_FIX) -> tuple:
+    """Control points (a lander's fiducials) from a CSV ``id,x_m,y_m,z_m,sigma_m``
+    (:func:`pipeline.network.detections.read_control`, the adjustment's ``--control`` file),
+    each over the DEM's measured terrain.
+
+    Parameters
+    ----------
+    path : str or Path
+    dem : visibility.dem.DEM
+    off_dem_fix : str
+        The advice when a point lies off the DEM.
+
+    Returns
+    -------
+    control : tuple of pipeline.network.observations.ControlPoint
+        Site frame (a reprojected DEM's file CRS mapped like the other inputs), m.
+
+    Raises
+    ------
+    InputFileError, DataError
+        A malformed file, a point off the DEM or on nodata, or below the ground (``z_m`` is
+        the point's centre, on the lander above the ground).
+    """
+    from pipeline.network.detections import read_control
+    from pipeline.network.observations import ControlPoint
+
+    points = read_control(Path(path))
+    ids = [c.marker_id for c in points]
+    xy = to_dem_xy(dem, np.array([c.xyz_m[:2] for c in points]))
+    _check_inside(dem, xy, ids, "control point", off_dem_fix)
+    below = dem.height_at(xy) - np.array([c.xyz_m[2] for c in points])
+    if np.any(below > 0):
+        k = int(np.argmax(below > 0))
+        raise DataError(f"control point {ids[k]} at ({xy[k, 0]:.2f}, {xy[k, 1]:.2f}) m lies "
+                        f"{below[k]:.2f} m below the ground: z_m is the point's centre in the "
+                        "site frame, above the ground; fix z_m in the control file")
+    return tuple(ControlPoint(c.marker_id, np.r_[q, c.xyz_m[2]], c.sigma_m)
+                 for c, q in zip(points, xy, strict=True))
 
 
 def _points_on_dem(points: list[dict], dem, height_m: float, label: str,

@@ -49,6 +49,10 @@ class PlanProblem:
         Probability that each pair's marker is detected and accepted when it is there (the
         detection model's, times the chance that the terrain lets the station see it); ``None``:
         not known, every planned marker counted as detected (:attr:`detection_p` gives ones).
+    site_control_sigma_m : (n,) float or None
+        Network mode's control points (a lander's fiducials, existing sites with known
+        coordinates): the 1-sigma of each coordinate, m; 0 for every other site. ``None``: no
+        control point (:attr:`site_control` gives all False).
     """
 
     station_ids: tuple[str, ...]
@@ -64,6 +68,7 @@ class PlanProblem:
     pair_sigma_m: np.ndarray
     pair_reason: np.ndarray
     pair_detection_p: np.ndarray | None = None
+    site_control_sigma_m: np.ndarray | None = None
     meta: dict = field(default_factory=dict)
 
     def __post_init__(self) -> None:
@@ -76,6 +81,13 @@ class PlanProblem:
     @property
     def n_sites(self) -> int:
         return len(self.site_ids)
+
+    @property
+    def site_control(self) -> np.ndarray:
+        """(n,) bool: the control points among the sites."""
+        if self.site_control_sigma_m is None:
+            return np.zeros(self.n_sites, bool)
+        return self.site_control_sigma_m > 0
 
     @property
     def pair_usable(self) -> np.ndarray:
@@ -163,7 +175,9 @@ class PlanProblem:
                        pair_sigma_m=self.pair_sigma_m[pairs],
                        pair_reason=self.pair_reason[pairs],
                        pair_detection_p=None if self.pair_detection_p is None
-                       else self.pair_detection_p[pairs])
+                       else self.pair_detection_p[pairs],
+                       site_control_sigma_m=None if self.site_control_sigma_m is None
+                       else self.site_control_sigma_m[idx])
 
 
 def _problem_iv(p: PlanProblem) -> None:
@@ -176,12 +190,19 @@ def _problem_iv(p: PlanProblem) -> None:
         checks.append((name, getattr(p, name), npair))
     if p.pair_detection_p is not None:
         checks.append(("pair_detection_p", p.pair_detection_p, npair))
+    if p.site_control_sigma_m is not None:
+        checks.append(("site_control_sigma_m", p.site_control_sigma_m, (n,)))
     for name, arr, shape in checks:
         if np.shape(arr) != shape:
             raise ConfigError(f"PlanProblem `{name}` must have shape {shape}, got {np.shape(arr)}")
     if p.pair_detection_p is not None and not np.all((p.pair_detection_p >= 0)
                                                      & (p.pair_detection_p <= 1)):
         raise ConfigError("PlanProblem `pair_detection_p` must hold probabilities in [0, 1]")
+    if p.site_control_sigma_m is not None and not (
+            np.all(np.isfinite(p.site_control_sigma_m) & (p.site_control_sigma_m >= 0))
+            and np.all(p.site_existing[p.site_control_sigma_m > 0])):
+        raise ConfigError("PlanProblem `site_control_sigma_m` must be finite, >= 0, and > 0 "
+                          "only at existing sites (control points are always in the layout)")
     if len(set(p.station_ids)) != s:
         raise ConfigError("PlanProblem `station_ids` must be unique")
     if len(set(p.site_ids)) != n:

@@ -52,7 +52,7 @@ def network_preflight(problem: PlanProblem, config, net: NetworkModel,
     ------
     InfeasiblePlanError
         Naming each station that cannot be satisfied and why (directions, disconnected,
-        heading undetermined or too weak, too far from the reference), or an existing marker
+        heading undetermined or too weak, too far from the datum), or an existing marker
         that cannot meet the requirement.
     """
     forbidden = problem.site_mask(config.forbidden, "forbidden")
@@ -72,8 +72,8 @@ def network_preflight(problem: PlanProblem, config, net: NetworkModel,
     if bad_existing.size:
         names = ", ".join(problem.site_ids[j] for j in bad_existing[:10])
         raise InfeasiblePlanError(f"existing marker(s) {names} cannot meet "
-                                  f"{net.requirement.describe()} relative to the reference "
-                                  f"{problem.station_ids[net.reference]} even with "
+                                  f"{net.requirement.describe()} relative to the datum, "
+                                  f"{net.datum_text}, even with "
                                   "every usable site; relax the requirement")
     if hopeless.any():
         extra = tuple(problem.site_ids[j] for j in np.flatnonzero(hopeless & ~forbidden))
@@ -111,8 +111,7 @@ def _raise_network_infeasible(problem: PlanProblem, config, net: NetworkModel,
     if failing:
         raise InfeasiblePlanError(
             f"no layout meets the requirement in network mode ({net.requirement.describe()} "
-            "relative to the "
-            f"reference {problem.station_ids[net.reference]}, >= {config.min_markers} markers in "
+            f"relative to the datum, {net.datum_text}; >= {config.min_markers} markers in "
             f">= {config.min_sectors} of {config.n_sectors} sectors) at station(s): "
             + "; ".join(f"{k}: {v}" for k, v in failing.items())
             + "; relax the configuration, add candidate sites or a heading prior")

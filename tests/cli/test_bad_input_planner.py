@@ -18,6 +18,9 @@ SQUARE = [[-5, -5], [5, -5], [5, 5], [-5, 5], [-5, -5]]
 HOLE = [[-1, -1], [1, -1], [1, 1], [-1, 1], [-1, -1]]
 VIS_HEADER = "station,site,usable,bearing_deg,sigma_m,site_x_m,site_y_m,site_z_m\n"
 VIS_ROW = "S1,A,1,30,0.008,4.3,2.5,0.1\n"
+#: Three fiducials on a lander on the default site (site frame, m).
+LANDER = "id,x_m,y_m,z_m,sigma_m\nL1,8,-3.8,1.33,0.005\nL2,6.96,-5.6,1.4,0.005\n" \
+    "L3,9.04,-5.6,1.31,0.005\n"
 
 
 def _poly(coords) -> str:
@@ -70,6 +73,23 @@ CONFIG_CASES = [
          "--requirement-ppm", 2),
     Case("plan-odometry-known-control", ["plan", "--odometry-percent", "2", "--out", "out"],
          "network mode"),
+    Case("plan-control-known-control", ["plan", "--control", "lander.csv", "--out", "out"],
+         "network mode's datum: add --network", files={"lander.csv": LANDER}),
+    Case("plan-control-and-reference", ["plan", "--network", "--control", "lander.csv",
+                                        "--reference-station", "S1", "--out", "out"],
+         "drop --reference-station", files={"lander.csv": LANDER}),
+    Case("plan-control-off-dem", ["plan", "--network", "--control", "lander.csv", "--out",
+                                  "out"], "control point L2",
+         files={"lander.csv": "id,x_m,y_m,z_m,sigma_m\nL1,8,-4,1.4,0.005\nL2,80,-4,1.4,0.005\n"}),
+    Case("plan-control-underground", ["plan", "--network", "--control", "lander.csv", "--out",
+                                      "out"], "below the ground",
+         files={"lander.csv": "id,x_m,y_m,z_m,sigma_m\nL1,8,-4,-3,0.005\n"}),
+    Case("plan-control-zero-sigma", ["plan", "--network", "--control", "lander.csv", "--out",
+                                     "out"], "sigma_m",
+         files={"lander.csv": "id,x_m,y_m,z_m,sigma_m\nL1,8,-4,1.4,0\n"}),
+    Case("plan-control-id-clash", ["plan", "--network", "--control", "lander.csv", "--out",
+                                   "out"], "clash",
+         files={"lander.csv": "id,x_m,y_m,z_m,sigma_m\nC00001,8,-4,1.4,0.005\n"}),
     Case("plan-odometry-zero", ["plan", "--network", "--odometry-percent", "0", "--out", "out"],
          "--odometry-percent", 2),
     Case("plan-heading-aid-unknown", ["plan", "--network", "--heading-aid", "compass",

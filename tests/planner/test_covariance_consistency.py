@@ -12,13 +12,14 @@ block is turned by the station's heading before comparing.
 """
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
 
 from pipeline.network.adjustment import AdjustmentSettings, adjust
 from pipeline.network.aids import HeadingReadings, OdometryReadings
-from pipeline.network.observations import Datum, NominalPoses
+from pipeline.network.observations import ControlPoint, Datum, NominalPoses
 from pipeline.network.simulation import simulated_network
 from planner.accuracy.aids import Odometry
 from planner.accuracy.network import NetworkModel
@@ -50,6 +51,17 @@ def _network(seed):
         pair_bearing_rad=np.arctan2(diff[:, 1], diff[:, 0]), pair_sigma_m=obs.sigma_m,
         pair_reason=np.full(obs.n, USABLE, dtype=np.int8))
     return obs, truth, problem
+
+
+def _with_control(problem, truth, control, sigma_c):
+    """``problem`` with the sites ``control`` as control points known to ``sigma_c`` per axis
+    (existing, at their true positions), and those points for the adjustment's datum."""
+    sigma = np.zeros(problem.n_sites)
+    sigma[list(control)] = sigma_c
+    problem = replace(problem, site_existing=sigma > 0, site_control_sigma_m=sigma)
+    points = tuple(ControlPoint(problem.site_ids[j], truth.marker_xyz_m[j], np.full(3, sigma_c))
+                   for j in control)
+    return problem, points
 
 
 def _assert_same_covariance(predicted, adjusted):
@@ -123,6 +135,41 @@ def test_planner_predicts_the_adjustments_covariance_with_pose_aids(seed, refere
     n6 = 6 * s
     _assert_same_covariance(cov.full, site_axes(result.covariance[:n6, :n6],
                                                           truth.pose[:, 3]))
+    predicted = net.marker_covariances(cov, np.arange(problem.n_sites))
+    for j in range(problem.n_sites):
+        _assert_same_covariance(predicted[j], result.marker_covariance(j))
+
+
+@pytest.mark.parametrize("seed, control, sigma_c", [
+    (1, (0, 3, 5), 0.002),
+    (3, (2, 4), 0.01),
+    (5, (1,), 0.0005),
+])
+def test_planner_predicts_the_adjustments_covariance_with_a_control_datum(seed, control,
+                                                                           sigma_c):
+    """Control points (a lander's fiducials, known to ``sigma_c`` per axis) as the datum: no
+    station fixed. The planner folds each control point's prior into its site's
+    ``J^(j)`` (``T_j = W_j + 1 / sigma_c^2``); the adjustment carries the markers as unknowns
+    with the prior as observations. With one control point the headings hang on the tilts and
+    the lever arms of the network alone, so a single point is the hardest case."""
+    obs, truth, problem = _network(seed)
+    problem, points = _with_control(problem, truth, control, sigma_c)
+    heading = math.radians(0.5) if len(control) == 1 else None
+    net = NetworkModel(problem, 10.0, INCL, heading_prior_sigma_rad=heading)
+    assert net.reference is None
+    np.testing.assert_allclose(net.datum_xyz, truth.marker_xyz_m[list(control)].mean(axis=0))
+    cov = net.covariance(net.information(np.ones(problem.n_sites, bool)))
+    assert cov.determined.all()
+
+    result = adjust(obs, Datum(kind="control", control=points),
+                    AdjustmentSettings(inclinometer_sigma_rad=INCL,
+                                       heading_prior_sigma_rad=heading, snooping=False),
+                    nominal=NominalPoses(truth.pose[:, :3], truth.pose[:, 3]),
+                    heading=HeadingReadings(truth.pose[:, 3]) if heading else None)
+    assert np.abs(result.marker_xyz_m - truth.marker_xyz_m).max() < 1e-9
+    n6 = 6 * problem.n_stations
+    _assert_same_covariance(cov.full, site_axes(result.covariance[:n6, :n6],
+                                                truth.pose[:, 3]))
     predicted = net.marker_covariances(cov, np.arange(problem.n_sites))
     for j in range(problem.n_sites):
         _assert_same_covariance(predicted[j], result.marker_covariance(j))

@@ -128,7 +128,7 @@ def test_diagnose_names_disconnected_weak_and_far_stations():
     assert diagnose_network(loose, np.ones(5, bool)) == {}
     weak = diagnose_network(NetworkModel(p2, 10.0, INCL), np.ones(5, bool))
     assert list(weak) == ["S2"] and weak["S2"].split(":")[0] in ("heading too weak",
-                                                          "too far from the reference")
+                                                          "too far from the datum")
     with pytest.raises(ConfigError, match="reference_station"):
         network_model(p2, PlanConfig(network=True, reference_station="S9"))
     assert network_model(p2, PlanConfig(network=True, reference_station="S2")).reference == 1
