@@ -76,7 +76,7 @@ from scipy.sparse.csgraph import connected_components
 
 from markerplan.errors import ConfigError
 from pipeline.network.design import axis_weight, pose_design_blocks
-from pipeline.network.observations import Datum
+from pipeline.network.observations import POSE_PARAMETERS, Datum
 from planner.accuracy.aids import Odometry, pose_aids
 from planner.accuracy.figure import ErrorFigure, error_figure
 from planner.accuracy.network_covariance import NetworkCovariance
@@ -249,6 +249,22 @@ class NetworkModel(NetworkTangents):
         names = [ids[j] for j in np.flatnonzero(self.control)]
         return "the control points " + ", ".join(names[:5]) + (
             f" (and {len(names) - 5} more)" if len(names) > 5 else "")
+
+    def datum_record(self) -> dict:
+        """The datum as ``plan.json`` and ``reduce.json`` record it (``network.datum``):
+        ``kind`` (``"station"`` or ``"control"``), ``reference_station``, the ``fixed``
+        parameters, the ``control`` points (id, site-frame xyz and sigma, m), ``datum_xyz_m``
+        (where distances are measured from) and ``description`` (:attr:`datum_text`)."""
+        p = self.problem
+        station = self.reference is not None
+        return {"kind": "station" if station else "control",
+                "reference_station": p.station_ids[self.reference] if station else None,
+                "fixed": list(POSE_PARAMETERS[:4]) if station else [],
+                "control": [{"marker_id": p.site_ids[j], "xyz_m": p.site_xyz[j].tolist(),
+                             "sigma_m": float(p.site_control_sigma_m[j])}
+                            for j in np.flatnonzero(self.control)],
+                "datum_xyz_m": [float(v) for v in self.datum_xyz],
+                "description": self.datum_text}
 
     def tie_coefficients(self, weight: np.ndarray) -> np.ndarray:
         """Each tie's ``delta_ab w_a - w_a w_b / T_j`` for the pairs' weights ``weight`` ((p,)

@@ -109,6 +109,19 @@ def datum_text(datum: dict) -> str:
     return datum.get("description") or f"station {datum['reference_station']}"
 
 
+def datum_clause(datum: dict) -> str:
+    """The reports' clause naming a ``network.datum`` record and what it fixes (Markdown).
+
+    >>> datum_clause({"kind": "station", "reference_station": "S1"})
+    'station **S1** (x, y, z and heading fixed)'
+    """
+    if datum.get("kind", "station") == "station":
+        return f"station **{datum['reference_station']}** (x, y, z and heading fixed)"
+    points = ", ".join(f"{c['marker_id']} (+-{c['sigma_m']:g} m)" for c in datum["control"])
+    return (f"the **control points** {points}, no station fixed; distances from their centroid "
+            f"({datum['datum_xyz_m'][0]:.2f}, {datum['datum_xyz_m'][1]:.2f}) m")
+
+
 def requirement_text(section: dict) -> str:
     """The requirement of a plan's (or a verification's) record in words: its
     ``requirement_text``, or for a record written before it existed its constant

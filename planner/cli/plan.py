@@ -273,7 +273,7 @@ def command(site_name, site_seed, dem_path, reproject, terrain, dem_height_error
              + chance_text(doc)
              + "; ".join(f"{k.replace('_', ' ')}: {v['n_markers']}"
                          for k, v in doc["baselines"].items())
-             + (f"; network mode, datum {info['datum']}, worst marker "
+             + (f"; network mode, datum {info['reference_station'] or info['datum']}, worst marker "
                 f"{info['worst_marker_error_m']:.3f} m" if "mode" in info else "")
              + f" -> {out}/")
     emit_summary(info, as_json, human)

@@ -106,7 +106,12 @@ def command(layout_spec, site_name, site_seed, dem_path, reproject, stations_pat
     """
     from markerplan.output_folder import output_folder
     from planner.reduction.plot import plot_tradeoff
-    from planner.reduction.report import reduce_timings, summary, write_reduce_files
+    from planner.reduction.report import (
+        accuracy_mode,
+        reduce_timings,
+        summary,
+        write_reduce_files,
+    )
     from planner.reduction.study import is_plan
 
     _where_needs_verify(verify)
@@ -137,7 +142,7 @@ def command(layout_spec, site_name, site_seed, dem_path, reproject, stations_pat
              if kf is not None else "no count meets the requirement at every station")
     human += ("" if doc["solver"]["proven_optimal"] else " (time limit: not proven optimal)")
     if "network" in doc:
-        human += f"; network mode, datum {doc['network']['datum']['reference_station']}"
+        human += f"; {accuracy_mode(doc)}"
     emit_summary(info, as_json, human + f" -> {out}/")
 
 
@@ -157,10 +162,15 @@ def _study(layout_spec, sources, error_model, config_path, free, keep_ids, drop_
 
     config = load_config(config_path) if config_path else None
     inputs, layout, config = resolve_inputs(layout_spec, config=config, **sources)
-    config = with_options(config,
-                          existing=known_ids(keep_ids or (), layout.ids, "--keep", "marker"),
-                          forbidden=known_ids(drop_ids or (), layout.ids, "--drop", "marker"),
-                          time_limit_s=time_limit_s)
+    control = tuple(layout.control_sigma_m)  # the datum: in every subset
+    dropped = known_ids(drop_ids or (), layout.ids, "--drop", "marker")
+    if set(dropped) & set(control):
+        raise ConfigError(f"--drop names control point(s) "
+                          f"{', '.join(sorted(set(dropped) & set(control)))}: they are the "
+                          "plan's datum and stay in every subset; drop other markers")
+    keep = known_ids(keep_ids or (), layout.ids, "--keep", "marker")
+    config = with_options(config, existing=keep + tuple(c for c in control if c not in keep),
+                          forbidden=dropped, time_limit_s=time_limit_s)
     config = network_settings(config, network, reference_station)
     if config.network and verify:
         raise ConfigError("reduce --verify simulates known-control registration; in network "

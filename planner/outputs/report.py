@@ -44,7 +44,12 @@ import numpy as np
 from markerplan.provenance import provenance
 from markerplan.writing import write_gis_sidecars
 from planner.accuracy.figure import error_figure
-from planner.accuracy.requirement import NetworkRequirement, datum_text, requirement_text
+from planner.accuracy.requirement import (
+    NetworkRequirement,
+    datum_clause,
+    datum_text,
+    requirement_text,
+)
 from planner.outputs.chance_report import chance_markdown, chance_sections
 from planner.outputs.gis import crs_name, geojson_crs_members, geojson_positions, write_plan_gpkg
 from planner.outputs.local_report import local_markdown, local_record, write_pairs_csv
@@ -183,7 +188,6 @@ def _network_record(outcome, stations: list[dict], markers: list[dict]
     per-marker errors (added in place to ``stations`` and ``markers``), and the weakest
     stations; with the local requirement's section
     (:func:`planner.outputs.local_report.local_record`, None without one)."""
-    from pipeline.network.observations import POSE_PARAMETERS
     from planner.accuracy.network import network_model
     from planner.accuracy.reliability import layout_reliability, station_bias_record
 
@@ -204,17 +208,7 @@ def _network_record(outcome, stations: list[dict], markers: list[dict]
     effect = np.array([math.inf if s["bias_effect_m"] is None else s["bias_effect_m"]
                        for s in stations])
     worst_bias = stations[int(np.argmax(effect))] if stations else None
-    control = np.flatnonzero(net.control)
-    return {"datum": {"kind": "station" if net.reference is not None else "control",
-                      "reference_station": None if net.reference is None
-                      else prob.station_ids[net.reference],
-                      "fixed": list(POSE_PARAMETERS[:4]) if net.reference is not None else [],
-                      "control": [{"marker_id": prob.site_ids[j],
-                                   "xyz_m": prob.site_xyz[j].tolist(),
-                                   "sigma_m": float(prob.site_control_sigma_m[j])}
-                                  for j in control],
-                      "datum_xyz_m": [float(v) for v in net.datum_xyz],
-                      "description": net.datum_text, **cfg.aids_record()},
+    return {"datum": {**net.datum_record(), **cfg.aids_record()},
             "weakest_stations": [{"id": prob.station_ids[k],
                                   "predicted_error_m": _num(res.check.error_m[k])}
                                  for k in order[:5]],
@@ -390,7 +384,7 @@ def report_markdown(doc: dict) -> str:
         net = doc["network"]
         lines += ["", "## Network", "",
                   f"Network mode: markers are unknowns; every error is relative to the datum, "
-                  f"{_datum_words(net['datum'])}; roll and pitch from the inclinometer "
+                  f"{datum_clause(net['datum'])}; roll and pitch from the inclinometer "
                   f"({net['datum']['inclinometer_sigma_deg']:g} deg 1-sigma). "
                   f"{net['n_station_ties']} station pairs share markers; worst "
                   f"marker {_fmt(net['worst_marker_error_m'])}.", "",
@@ -436,16 +430,6 @@ def _bias_cell(station: dict) -> str:
             f"inf ({cause['station']}→{cause['site']} uncontrolled)"
     return "0 (datum or no observation moves it)" if cause is None else \
         f"{station['bias_effect_m']:.3f} m ({cause['station']}→{cause['site']})"
-
-
-def _datum_words(datum: dict) -> str:
-    """The report's datum clause: the station and what it fixes, or the control points with
-    their sigmas."""
-    if datum.get("kind", "station") == "station":
-        return (f"station **{datum['reference_station']}** (x, y, z and heading fixed)")
-    points = ", ".join(f"{c['marker_id']} (+-{c['sigma_m']:g} m)" for c in datum["control"])
-    return (f"the **control points** {points}, no station fixed; distances from their centroid "
-            f"({datum['datum_xyz_m'][0]:.2f}, {datum['datum_xyz_m'][1]:.2f}) m")
 
 
 def _bias_sentence(rel: dict) -> str:

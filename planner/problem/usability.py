@@ -50,9 +50,10 @@ class PlanProblem:
         detection model's, times the chance that the terrain lets the station see it); ``None``:
         not known, every planned marker counted as detected (:attr:`detection_p` gives ones).
     site_control_sigma_m : (n,) float or None
-        Network mode's control points (a lander's fiducials, existing sites with known
-        coordinates): the 1-sigma of each coordinate, m; 0 for every other site. ``None``: no
-        control point (:attr:`site_control` gives all False).
+        Network mode's control points (a lander's fiducials, sites with known coordinates,
+        always in the layout: existing in a plan, kept in a reduction study): the 1-sigma of
+        each coordinate, m; 0 for every other site. ``None``: no control point
+        (:attr:`site_control` gives all False).
     """
 
     station_ids: tuple[str, ...]
@@ -198,11 +199,9 @@ def _problem_iv(p: PlanProblem) -> None:
     if p.pair_detection_p is not None and not np.all((p.pair_detection_p >= 0)
                                                      & (p.pair_detection_p <= 1)):
         raise ConfigError("PlanProblem `pair_detection_p` must hold probabilities in [0, 1]")
-    if p.site_control_sigma_m is not None and not (
-            np.all(np.isfinite(p.site_control_sigma_m) & (p.site_control_sigma_m >= 0))
-            and np.all(p.site_existing[p.site_control_sigma_m > 0])):
-        raise ConfigError("PlanProblem `site_control_sigma_m` must be finite, >= 0, and > 0 "
-                          "only at existing sites (control points are always in the layout)")
+    if p.site_control_sigma_m is not None and not np.all(
+            np.isfinite(p.site_control_sigma_m) & (p.site_control_sigma_m >= 0)):
+        raise ConfigError("PlanProblem `site_control_sigma_m` must be finite and >= 0")
     if len(set(p.station_ids)) != s:
         raise ConfigError("PlanProblem `station_ids` must be unique")
     if len(set(p.site_ids)) != n:

@@ -35,6 +35,7 @@ import numpy as np
 from markerplan.provenance import provenance
 from markerplan.writing import write_csv
 from planner.accuracy.figure import error_figure
+from planner.accuracy.requirement import datum_clause, datum_text
 from planner.reduction.losses import check_worst, failure_reason
 
 SCHEMA = "markerplan-reduce"
@@ -74,12 +75,9 @@ def _failing(prob, check, cfg) -> dict[str, str]:
 
 def _network(prob, cfg) -> dict:
     """The datum of a network-mode study (as ``plan.json``'s ``network.datum``)."""
-    from pipeline.network.observations import POSE_PARAMETERS
     from planner.accuracy.network import network_model
 
-    ref = prob.station_ids[network_model(prob, cfg).reference]
-    return {"datum": {"kind": "station", "reference_station": ref,
-                      "fixed": list(POSE_PARAMETERS[:4]), **cfg.aids_record()},
+    return {"datum": {**network_model(prob, cfg).datum_record(), **cfg.aids_record()},
             "errors": "95 % figures relative to the datum, from the whole network's information "
                       "(markers are unknowns); a point's worst error is the worst of its "
                       "stations and kept markers"}
@@ -204,8 +202,9 @@ def accuracy_mode(doc: dict) -> str:
     """How a ``reduce.json`` document judges accuracy, in words ("network mode, datum S1" or
     "known control")."""
     net = doc.get("network")
-    return "known control" if net is None else \
-        f"network mode, datum {net['datum']['reference_station']}"
+    if net is None:
+        return "known control"
+    return f"network mode, datum {net['datum']['reference_station'] or datum_text(net['datum'])}"
 
 
 def report_markdown(doc: dict) -> str:
@@ -235,8 +234,8 @@ def report_markdown(doc: dict) -> str:
         prior = ("no heading prior" if d["heading_prior_sigma_deg"] is None
                  else f"heading prior {d['heading_prior_sigma_deg']:g} deg 1-sigma")
         lines += [f"Accuracy: **{accuracy_mode(doc)}** — markers are unknowns estimated with "
-                  f"every station's pose; every error is relative to station "
-                  f"{d['reference_station']} (x, y, z and heading fixed; inclinometer "
+                  f"every station's pose; every error is relative to the datum, "
+                  f"{datum_clause(d)} (inclinometer "
                   f"{d['inclinometer_sigma_deg']:g} deg 1-sigma; {prior}), as `plan --network` "
                   "judges a layout: a count's worst error is the worst of its stations and "
                   "its kept markers.", ""]

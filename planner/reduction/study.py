@@ -41,11 +41,15 @@ class Layout:
         Marker centres, m.
     source : str
         ``"as-built"``, or the file it was read from.
+    control_sigma_m : dict of str -> float
+        The layout's control points (a network plan's datum, ``plan --control``): id -> the
+        1-sigma of each coordinate, m. They stay in every subset.
     """
 
     ids: tuple[str, ...]
     xyz: np.ndarray
     source: str
+    control_sigma_m: dict = field(default_factory=dict)
 
 
 @dataclass
@@ -260,20 +264,25 @@ def _read_plan(path: Path) -> dict:
 
 
 def _plan_layout(data: dict, path) -> Layout:
-    """The selected markers of a checked ``plan.json`` (``markers``: ``{id, x_m, y_m, z_m}``)."""
+    """The selected markers of a checked ``plan.json`` (``markers``: ``{id, x_m, y_m, z_m}``),
+    with the control points of its network datum."""
     markers = data["markers"]
     ids = tuple(m["id"] for m in markers)
     xyz = np.array([[m["x_m"], m["y_m"], m["z_m"]] for m in markers], float)
-    return Layout(ids, xyz, str(path))
+    control = (data.get("network") or {}).get("datum", {}).get("control") or []
+    return Layout(ids, xyz, str(path), {c["marker_id"]: float(c["sigma_m"]) for c in control})
 
 
 def _inside_site_iv(layout: Layout, inputs) -> None:
+    """Refuse a marker off the DEM's measured terrain or outside the site boundary (control
+    points, on the lander, need only be on the DEM)."""
     xy = layout.xyz[:, :2]
     inside = inputs.dem.valid_at(xy)
     where = "the DEM's measured terrain"
     if inputs.boundary_xy is not None:
         poly = shapely.Polygon(np.asarray(inputs.boundary_xy, float))
-        inside &= shapely.intersects_xy(poly, xy[:, 0], xy[:, 1])
+        control = np.isin(layout.ids, list(layout.control_sigma_m))
+        inside &= shapely.intersects_xy(poly, xy[:, 0], xy[:, 1]) | control
         where = "the site boundary"
     if not inside.all():
         k = int(np.flatnonzero(~inside)[0])
@@ -309,10 +318,20 @@ def layout_problem(inputs, layout: Layout, config, error_model, free: bool = Fal
         problem = replace(problem, site_existing=np.zeros(problem.n_sites, bool),
                           site_cost=np.ones(problem.n_sites))
         mask = problem.site_mask(layout.ids, "layout")
-        return problem, mask, timings
+        return _with_control(problem, layout), mask, timings
     sight = sight_problem(inputs, layout.ids, layout.xyz, config, error_model,
                           progress=progress)
-    return sight.problem, np.ones(sight.problem.n_sites, bool), sight.timings_s
+    return (_with_control(sight.problem, layout), np.ones(sight.problem.n_sites, bool),
+            sight.timings_s)
+
+
+def _with_control(problem: PlanProblem, layout: Layout) -> PlanProblem:
+    """``problem`` with the layout's control points (:attr:`Layout.control_sigma_m`) as its
+    control sites (unchanged without any)."""
+    if not layout.control_sigma_m:
+        return problem
+    sigma = np.array([layout.control_sigma_m.get(i, 0.0) for i in problem.site_ids])
+    return replace(problem, site_control_sigma_m=sigma)
 
 
 def run_study(problem: PlanProblem, config, layout: np.ndarray, free: bool = False,

@@ -34,8 +34,11 @@ def test_network_plan_records_the_mode_datum_ties_and_errors(network_plan):
     assert summary["status"] in ("optimal", "time_limit") and summary["meets_requirement"]
     doc = json.loads((out / "plan.json").read_text())
     assert doc["provenance"]["config"]["network"] is True
-    assert doc["network"]["datum"] == {"kind": "station", "reference_station": "S1",
+    datum = doc["network"]["datum"]
+    assert datum.pop("datum_xyz_m")[:2] == [0.0, 0.0]  # S1's position
+    assert datum == {"kind": "station", "reference_station": "S1",
                                        "fixed": ["x_m", "y_m", "z_m", "heading_rad"],
+                                       "control": [], "description": "station S1",
                                        "inclinometer_sigma_deg": 0.01,
                                        "heading_prior_sigma_deg": None, "heading_aid": None,
                                        "heading_bias_sigma_deg": None, "odometry_percent": None,

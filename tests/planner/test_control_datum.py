@@ -196,3 +196,27 @@ def test_the_lander_plans_files_name_the_control_datum(lander_plan, tmp_path):
     assert "the **control points** L1 (+-0.005 m)" in (tmp_path / "report.md").read_text()
     flagged = {m["id"]: m["control"] for m in doc["markers"]}
     assert flagged["L1"] and sum(flagged.values()) == 3
+
+
+def test_reduce_keeps_the_landers_fiducials_and_its_datum(lander_plan, tmp_path, capsys):
+    """``reduce`` of a plan on a lander: the control points stay in every subset (they are the
+    datum), are refused in --drop, and the study is judged relative to them."""
+    import json
+
+    from planner.outputs.report import write_plan_files
+    from tests.cli.invoke import run_cli
+
+    (tmp_path / "plan").mkdir()
+    write_plan_files(lander_plan, tmp_path / "plan")
+    code, out, err = run_cli(capsys, ["reduce", str(tmp_path / "plan" / "plan.json"), "--json",
+                                      "--out", str(tmp_path / "r")])
+    assert code == 0, err
+    summary = json.loads(out)
+    assert summary["accuracy"] == "network mode, datum the control points L1, L2, L3"
+    doc = json.loads((tmp_path / "r" / "reduce.json").read_text())
+    assert doc["network"]["datum"]["kind"] == "control"
+    for point in doc["curve"]:
+        assert {"L1", "L2", "L3"} <= set(point["markers"])
+    code, _, err = run_cli(capsys, ["reduce", str(tmp_path / "plan" / "plan.json"), "--drop",
+                                    "L2", "--out", str(tmp_path / "r2")])
+    assert code == 1 and "control point(s) L2" in err and not (tmp_path / "r2").exists()
