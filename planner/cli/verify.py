@@ -201,6 +201,12 @@ def _network_datum(plan_path, ids, datum):
     from planner.verify.network import reference_station
 
     doc = read_plan(plan_path, "PLAN", full=True)
+    if ((doc.get("network") or {}).get("datum") or {}).get("kind") == "control":
+        from planner.network.plan_geometry import plan_geometry
+        from planner.verify.network_datum import verify_datum
+
+        verify_datum(doc, plan_geometry(doc, plan_path), datum, ids, 0)  # refuses up front
+        return doc, None
     planned = doc["provenance"].get("config", {})
     named = planned.get("reference_station")
     named = named if isinstance(named, str) else None

@@ -387,15 +387,16 @@ def adjust_and_compare(tables: list[Path], plan_path: Path, error_model,
     from planner.network.record import station_errors
     from planner.outputs.plan_file import read_plan
     from planner.verify.network_aids import plan_aids
+    from planner.verify.network_datum import verify_datum
     from planner.verify.station_rule import StationRule
 
     doc = read_plan(plan_path, "`plan_path`", full=True)
     plan, rule = plan_geometry(doc, plan_path), StationRule.of(doc["requirement"])
-    reference = reference_station(reference or plan.reference_station, plan.station_ids,
-                                  list(truth))
+    datum = verify_datum(doc, plan, reference, list(truth), seed)
+    reference = datum.reference
     config = resolved_configuration(
         tables=[str(t) for t in tables], plan=str(plan_path), control=None,
-        error_model=error_model_name, marker_ids="plan", datum="station",
+        error_model=error_model_name, marker_ids="plan", datum=datum.kind,
         reference_station=reference,
         odometry_sigma_m=settings.odometry_sigma_m,
         odometry_heading_sigma_deg=settings.odometry_heading_sigma_deg,
@@ -406,6 +407,8 @@ def adjust_and_compare(tables: list[Path], plan_path: Path, error_model,
     config["body"] = body_configuration(Body(), reference)
     aids = plan_aids(doc, plan_path, config["heading_prior_sigma_deg"])
     config.update(aids.record(), aids_seed=int(seed))
+    if datum.control:
+        config["control_points"] = datum.record()["control"]
     adjustment = AdjustmentSettings(
         inclinometer_sigma_rad=math.radians(config["inclinometer_sigma_deg"]), **aids.settings(),
         alpha0=settings.alpha0, beta0=settings.beta0, snooping=settings.snooping)
@@ -420,7 +423,8 @@ def adjust_and_compare(tables: list[Path], plan_path: Path, error_model,
         return identified
 
     adjusted = adjust_tables(tables, error_model, functools.partial(_datum_station, reference),
-                             identify, adjustment, plan=plan,
+                             identify, adjustment, datum_kind=datum.kind,
+                             control=datum.control, plan=plan,
                              aids=aids.readings(verified, np.stack(
                                  [truth[sid].pose for sid in verified]), seed))
     stations, identified, result = adjusted.stations, adjusted.identified, adjusted.result
@@ -428,9 +432,9 @@ def adjust_and_compare(tables: list[Path], plan_path: Path, error_model,
     need = NetworkRequirement(config["requirement_m"],
                               float(doc["requirement"].get("requirement_ppm", 0.0)),
                               bool(doc["requirement"].get("datum_requirement", True)))
-    datum_xyz = plan.station_xyz_m[plan.station_ids.index(reference)]
     allowed = {sid: float(need.allowed_m(datum_distances(
-        plan.station_xyz_m[[plan.station_ids.index(sid)]], datum_xyz)[0])) for sid in truth}
+        plan.station_xyz_m[[plan.station_ids.index(sid)]], datum.datum_xyz)[0]))
+        for sid in truth}
 
     kept = result.observations
     s_ids = kept.station_ids

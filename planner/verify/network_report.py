@@ -46,7 +46,7 @@ def network_record(plan: SurveyPlan, check: NetworkVerification, seed: int, mode
         "requirement_ppm": check.requirement.ppm,
         "requirement_text": check.requirement.describe(),
         "working_radius_m": check.config["working_radius_m"],
-        "datum": f"station {check.reference_station} (x, y, z, heading at its planned pose)",
+        "datum": _datum_words(check.config),
         "passed": check.passed,
         "worst": {"predicted_error_m": _worst(s.predicted_error_m for s in check.stations),
                   "adjustment_error_95_m": _worst(s.stated_error_m for s in check.stations),
@@ -129,6 +129,18 @@ def network_markdown(rec: dict) -> str:
               "`markerplan adjust markers.csv --plan PLAN --out DIR` repeats the adjustment "
               "with its full report; `fates.csv` every planned marker's fate, by its true id."]
     return "\n".join(lines) + "\n"
+
+
+def _datum_words(config: dict) -> str:
+    """The verification's datum in words (the record's ``datum``; the summary line keeps the
+    part before the first parenthesis)."""
+    if config.get("datum") != "control":
+        return (f"station {config['reference_station']} (x, y, z, heading at its planned "
+                "pose)")
+    points = config["control_points"]
+    return (f"control points {', '.join(c['marker_id'] for c in points)} (their coordinates "
+            f"known to +-{max(c['sigma_m'] for c in points):g} m, drawn from verify's seed; "
+            "no station fixed)")
 
 
 def network_summary_line(rec: dict, out) -> str:

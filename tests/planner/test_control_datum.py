@@ -220,3 +220,36 @@ def test_reduce_keeps_the_landers_fiducials_and_its_datum(lander_plan, tmp_path,
     code, _, err = run_cli(capsys, ["reduce", str(tmp_path / "plan" / "plan.json"), "--drop",
                                     "L2", "--out", str(tmp_path / "r2")])
     assert code == 1 and "control point(s) L2" in err and not (tmp_path / "r2").exists()
+
+
+def test_verify_knows_the_control_points_only_to_their_sigma(lander_plan, tmp_path):
+    """verify --network adjusts on the lander's control points as the survey knows them: the
+    simulated centre plus one seeded draw of their stated error (2,000 draws: per-axis spread
+    within 5 % of sigma, mean within 4 standard errors of 0), chained from a station the plan
+    gives a control point; a --reference-station is refused."""
+    import json
+
+    from markerplan.errors import ConfigError
+    from planner.network.plan_geometry import plan_geometry
+    from planner.outputs.report import write_plan_files
+    from planner.verify.network_datum import verify_datum
+
+    write_plan_files(lander_plan, tmp_path)
+    doc = json.loads((tmp_path / "plan.json").read_text())
+    geometry = plan_geometry(doc, tmp_path / "plan.json")
+    ids = [s["id"] for s in doc["stations"]]
+    first = verify_datum(doc, geometry, None, ids, 0)
+    again = verify_datum(doc, geometry, None, ids, 0)
+    assert first.kind == "control" and first.record() == again.record()
+    sees = [s["id"] for s in doc["stations"] if {"L1", "L2", "L3"} & set(s["markers"])]
+    assert first.reference == sees[0]
+    np.testing.assert_allclose(first.datum_xyz[:2], [8.0, -5.0], atol=1e-9)
+    truth = np.array([c["xyz_m"] for c in doc["network"]["datum"]["control"]])
+    errors = np.array([[c.xyz_m for c in verify_datum(doc, geometry, None, ids, seed).control]
+                       for seed in range(2000)]) - truth
+    assert np.all(np.abs(errors.std(axis=0) / 0.005 - 1) < 0.05)
+    assert np.all(np.abs(errors.mean(axis=0)) < 4 * 0.005 / np.sqrt(2000))
+    with pytest.raises(ConfigError, match="datum is its control points"):
+        verify_datum(doc, geometry, "S1", ids, 0)
+    with pytest.raises(ConfigError, match="none of the stations verified"):
+        verify_datum(doc, geometry, None, [i for i in ids if i not in sees], 0)

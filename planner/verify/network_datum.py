@@ -1,0 +1,97 @@
+"""The datum of a network verification (:func:`verify_datum`): the plan's reference station,
+or the lander's control points, whose coordinates the simulated survey knows only to their
+sigma."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from markerplan.errors import ConfigError
+from pipeline.network.observations import ControlPoint
+
+#: Mixed into verify's seed for the control points' coordinate errors (one stream of its own).
+CONTROL_STREAM = 0xC0
+
+
+@dataclass(frozen=True)
+class VerifyDatum:
+    """What ties a verified network to the site frame.
+
+    Attributes
+    ----------
+    kind : {"station", "control"}
+        The plan's datum (``plan.json``'s ``network.datum.kind``).
+    reference : str
+        The datum station; with control points, the station the network is chained from (the
+        first verified station the plan gives a control point).
+    control : tuple of ControlPoint
+        The control points as the survey knows them: the simulated (true) centre plus one draw
+        of their stated error, with their sigmas; empty for a station datum.
+    datum_xyz : (3,) float
+        Where the requirement's distances are measured from, site frame, m.
+    """
+
+    kind: str
+    reference: str
+    control: tuple[ControlPoint, ...]
+    datum_xyz: np.ndarray
+
+    def record(self) -> dict:
+        """The verification configuration's ``datum`` entry: kind, reference and the control
+        coordinates the adjustment was given (m)."""
+        return {"kind": self.kind, "reference_station": self.reference,
+                "control": [{"marker_id": c.marker_id, "xyz_m": c.xyz_m.tolist(),
+                             "sigma_m": float(c.sigma_m[0])} for c in self.control]}
+
+
+def verify_datum(doc: dict, plan, named: str | None, chosen, seed: int) -> VerifyDatum:
+    """The datum of a network verification of the plan ``doc``.
+
+    Parameters
+    ----------
+    doc : dict
+        The ``plan.json`` (full).
+    plan : pipeline.network.detections.PlanGeometry
+        Its geometry (station ids and positions).
+    named : str or None
+        ``--reference-station`` (refused for a plan on control points), else the plan's.
+    chosen : sequence of str
+        The stations verified.
+    seed : int
+        Verify's seed: the control points' coordinate errors are drawn from it.
+
+    Returns
+    -------
+    VerifyDatum
+
+    Raises
+    ------
+    ConfigError
+        A reference station named for a plan on control points, no verified station the plan
+        gives a control point, or (station datum) the reference not verified
+        (:func:`planner.verify.network.reference_station`).
+    """
+    from planner.verify.network import reference_station
+
+    datum = (doc.get("network") or {}).get("datum") or {}
+    if datum.get("kind", "station") != "control":
+        ref = reference_station(named or plan.reference_station, plan.station_ids, chosen)
+        return VerifyDatum("station", ref, (),
+                           np.asarray(plan.station_xyz_m[plan.station_ids.index(ref)], float))
+    if named is not None:
+        raise ConfigError(f"--reference-station {named}: the plan's datum is its control points "
+                          "(no station is fixed); drop --reference-station")
+    ids = {c["marker_id"] for c in datum["control"]}
+    seeing = [s["id"] for s in doc["stations"]
+              if s["id"] in chosen and ids & set(s.get("markers", ()))]
+    if not seeing:
+        raise ConfigError("none of the stations verified is planned to see a control point "
+                          f"({', '.join(sorted(ids))}), so the network has no datum; verify "
+                          "the stations that see them too")
+    rng = np.random.default_rng([int(seed), CONTROL_STREAM])
+    control = tuple(ControlPoint(c["marker_id"],
+                                 np.asarray(c["xyz_m"], float) + rng.normal(0.0, c["sigma_m"], 3),
+                                 np.full(3, float(c["sigma_m"]))) for c in datum["control"])
+    return VerifyDatum("control", seeing[0], control, np.asarray(datum["datum_xyz_m"], float))
