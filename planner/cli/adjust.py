@@ -330,8 +330,10 @@ def _reference(reference: str | None, kind: str, plan, stations) -> str | None:
     return None
 
 
-def _body(choice: str, plan):
-    """``--body`` as a :class:`~pipeline.network.body.Body` (``crs``: the plan's CRS's)."""
+def _body(choice: str, plan, plan_name: str = "--plan"):
+    """``--body`` as a :class:`~pipeline.network.body.Body` (``crs``: the CRS's of ``plan``, a
+    :class:`~pipeline.network.detections.PlanGeometry` or None, named ``plan_name`` in the
+    error)."""
     from markerplan.errors import ConfigError
     from pipeline.network.body import Body
     from planner.outputs.gis import crs_body
@@ -340,8 +342,9 @@ def _body(choice: str, plan):
         return Body.named(choice)
     found = crs_body(plan.crs) if plan is not None else None
     if found is None:
-        raise ConfigError("--body crs takes the body from the ellipsoid of --plan's CRS (plan.json "
-                          "site.crs_wkt), and there is none; give --body moon, earth or plane")
+        raise ConfigError(f"--body crs takes the body from the ellipsoid of {plan_name}'s CRS "
+                          "(plan.json site.crs_wkt), and there is none; give --body moon, earth "
+                          "or plane")
     return found
 
 

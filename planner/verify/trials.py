@@ -150,7 +150,8 @@ def verify_network_trials(plan: SurveyPlan, plan_path: Path, doc: dict, error_mo
 
     scans = scan_plans(plan, list(seeds), progress,
                        list(offsets) if isinstance(offsets, Sequence) else offsets,
-                       station_ids, profile, executor, _names(len(seeds)))
+                       station_ids, profile, executor, _names(len(seeds)), settings.body,
+                       reference)
     planned = {s["id"]: len(s.get("markers", ())) for s in doc["stations"]}
     out = []
     for t, scanned in enumerate(scans):
