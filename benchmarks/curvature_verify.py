@@ -25,7 +25,8 @@ comes out rotated about the datum by the mean deflection, and the far end drops 
 ``D^2 / 2R`` (41.8 mm at 381 m on the Moon); with the curved prior the bias is gone.
 
 Usage: ``python benchmarks/curvature_verify.py [--stations 20] [--spacing 20] [--frames 200]
-[--radius-km 1737.4] [--baseline]``; prints the far station's and the far marker's errors for each prior.
+[--radius-km 1737.4] [--baseline]``; prints the far station's and the far marker's errors for
+each prior.
 """
 
 from __future__ import annotations
