@@ -269,7 +269,7 @@ class StationJob:
         Ray-casting threads (None: all cores).
     tilt_rad : (2,) float
         The station's true roll and pitch, rad: level (zeros) unless it is levelled to a
-        curved body's local vertical (:func:`planner.verify.network.levelled_tilts`).
+        curved body's local vertical (:func:`planner.verify.levelling.levelled_tilts`).
     """
 
     station: PlannedStation
