@@ -4,7 +4,8 @@ marker errors with the predicted ones.
 
 The closed loop of ``markerplan verify --network``, in two steps:
 
-1. :func:`scan_plan` — every chosen station is simulated at its planned pose with only the
+1. :func:`scan_plan` — every chosen station is simulated at its planned pose (levelled to the
+   local vertical of a curved ``body``, :mod:`planner.verify.levelling`) with only the
    planned markers (:func:`planner.verify.known_control.map_stations`: the sensor profile and the
    mis-mounted rig of known-control ``verify``) and processed by the published chain
    (:func:`pipeline.process.process_station`) *without* a reference, so the marker table's
