@@ -2,9 +2,12 @@
 
 For frame ``f`` at turntable angle ``theta_f`` the sensor pose in the station frame comes from
 :func:`pipeline.rig.frame_poses` (the geometry contract, true mounting offsets applied), and
-the station frame sits at ``position`` in the site frame, rotated by ``heading`` (level: zero
-roll and pitch). A beam of channel ``i`` at spin azimuth ``alpha`` leaves the LiDAR centre along
-``Rz(heading) R_f d_S(i, alpha)``. Its first hit (terrain or marker sphere) gives the true range.
+the station frame sits at ``position`` in the site frame, rotated by ``heading`` and, for a
+station levelled to a curved body's local vertical, by its ``roll`` and ``pitch``
+(:func:`pipeline.rig.station_to_site_matrix`; default level: zero roll and pitch). A beam of
+channel ``i`` at spin azimuth ``alpha`` leaves the LiDAR centre along
+``Rz(heading) Ry(pitch) Rx(roll) R_f d_S(i, alpha)``. Its first hit (terrain or marker sphere)
+gives the true range.
 The point stored in the sensor frame is ``range * d_S`` along the *nominal* beam, and the scan
 stores the *nominal* turntable angles. Sensor physics (``docs/simulator.md``, "Sensor physics";
 each term is off when its parameter is zero or false):
@@ -70,6 +73,7 @@ seed gives byte-identical files.
 from __future__ import annotations
 
 import json
+import math
 import os
 import zlib
 from collections.abc import Callable, Sequence
@@ -143,7 +147,8 @@ def simulate_scan(scene: RayScene, position_m: np.ndarray, heading_rad: float,
                   sensor: SensorConfig, rig: RigConfig, seed: int,
                   frames: Sequence[int] | None = None,
                   progress: Callable[[int], None] | None = None,
-                  threads: int | None = None, station_id: str = "S1") -> dict[str, np.ndarray]:
+                  threads: int | None = None, station_id: str = "S1",
+                  roll_rad: float = 0.0, pitch_rad: float = 0.0) -> dict[str, np.ndarray]:
     """Cast one station's turntable scan into ``scene``.
 
     Parameters
@@ -166,6 +171,10 @@ def simulate_scan(scene: RayScene, position_m: np.ndarray, heading_rad: float,
         Worker threads (default: all cores).
     station_id : str
         Names the station in messages.
+    roll_rad, pitch_rad : float
+        Tilt of the station frame, rad: ``Rz(heading) Ry(pitch) Rx(roll)`` maps it to the site
+        frame (a station levelled to a curved body's local vertical,
+        :meth:`pipeline.network.body.Body.vertical_tilt`); default level.
 
     Returns
     -------
@@ -183,11 +192,14 @@ def simulate_scan(scene: RayScene, position_m: np.ndarray, heading_rad: float,
                                         rig.offsets)
     tilt = rot_x(wobble[:, 0]) @ rot_y(wobble[:, 1])
     rotation, translation = tilt @ rotation, np.einsum("fij,fj->fi", tilt, translation)
-    m = station_to_site_matrix(heading_rad)
-    # the bound holds for origins in a level disc; wobble also lowers some of them
-    low = min(0.0, float(translation[:, 2].min()))
+    m = station_to_site_matrix(heading_rad, roll_rad, pitch_rad)
+    # the bound holds for origins in a level disc; wobble and the station's tilt lower some of
+    # them, and the tilt may widen the disc by up to |origin| sin(tilt)
+    low = min(0.0, float((translation @ m[2]).min()))
+    widen = float(np.linalg.norm(translation, axis=1).max()) * math.sin(
+        min(math.hypot(roll_rad, pitch_rad), math.pi / 2))
     horizon = HorizonBound(scene.dem, position + [0.0, 0.0, low],
-                           float(np.hypot(translation[:, 0], translation[:, 1]).max()),
+                           float(np.hypot(translation[:, 0], translation[:, 1]).max()) + widen,
                            scene.sphere_centres_m, scene.sphere_radius_m, sensor.max_range_m)
     tasks = [np.arange(a, min(a + _FRAMES_PER_TASK, len(frame_ids)))
              for a in range(0, len(frame_ids), _FRAMES_PER_TASK)]
@@ -480,8 +492,8 @@ def _scan_from_points(points: dict, rig: RigConfig, sensor: SensorConfig, statio
 def _truth(station_id: str, position: np.ndarray, heading_rad: float, rig: RigConfig,
            marker_ids: Sequence[str], marker_centres_m: np.ndarray, marker_radius_m: float,
            points: dict, rock_centres_m: np.ndarray, rock_radii_m: np.ndarray,
-           config: dict) -> dict:
-    m = station_to_site_matrix(heading_rad)
+           config: dict, roll_rad: float = 0.0, pitch_rad: float = 0.0) -> dict:
+    m = station_to_site_matrix(heading_rad, roll_rad, pitch_rad)
     counts = np.bincount(points["sphere_index"][points["sphere_index"] >= 0],
                          minlength=len(marker_ids))
     markers = [{"id": mid, "centre_site_m": [float(v) for v in c],
@@ -498,7 +510,8 @@ def _truth(station_id: str, position: np.ndarray, heading_rad: float, rig: RigCo
     return {
         "station_id": station_id,
         "station_pose": {"position_m": [float(v) for v in position],
-                         "heading_rad": float(heading_rad), "roll_rad": 0.0, "pitch_rad": 0.0},
+                         "heading_rad": float(heading_rad), "roll_rad": float(roll_rad),
+                         "pitch_rad": float(pitch_rad)},
         "mounting_offsets": rig.offsets.to_dict(),
         "marker_radius_m": float(marker_radius_m),
         "markers": markers,
@@ -667,7 +680,8 @@ def simulate_markers(dem: DEM, station_position_m: np.ndarray, heading_rad: floa
                      station_id: str = "S1", frames: Sequence[int] | None = None,
                      progress: Callable[[int], None] | None = None,
                      threads: int | None = None,
-                     sensor_profile: str | None = None) -> tuple[StationScan, dict]:
+                     sensor_profile: str | None = None, roll_rad: float = 0.0,
+                     pitch_rad: float = 0.0) -> tuple[StationScan, dict]:
     """Simulate one station seeing arbitrary markers on a DEM (range study, what-ifs).
 
     Parameters
@@ -691,6 +705,9 @@ def simulate_markers(dem: DEM, station_position_m: np.ndarray, heading_rad: floa
         As in :func:`simulate_scan`.
     sensor_profile : str, optional
         As in :func:`simulate_station`.
+    roll_rad, pitch_rad : float
+        Tilt of the station frame, rad (:func:`simulate_scan`; default level); the truth's
+        ``station_pose`` records it.
 
     Returns
     -------
@@ -719,12 +736,15 @@ def simulate_markers(dem: DEM, station_position_m: np.ndarray, heading_rad: floa
     scene = RayScene(dem, centres, marker_radius_m, threads=threads)
     position = np.asarray(station_position_m, dtype=float)
     points = simulate_scan(scene, position, heading_rad, sensor, rig, seed, frames, progress,
-                           threads, station_id)
+                           threads, station_id, roll_rad, pitch_rad)
+    # a tilt is recorded only when there is one: a level station's provenance stays as it was
+    tilt = ({"roll_rad": float(roll_rad), "pitch_rad": float(pitch_rad)}
+            if roll_rad or pitch_rad else {})
     config = _config(sensor, rig, seed, sensor_profile, station_id=station_id,
                      marker_centres_m=centres.tolist(), station_position_m=position.tolist(),
-                     heading_rad=float(heading_rad))
+                     heading_rad=float(heading_rad), **tilt)
     scan = _scan_from_points(points, rig, sensor, station_id, config)
     truth = _truth(station_id, position, heading_rad, rig, ids, centres, marker_radius_m,
                    points, np.zeros((0, 3)), np.zeros(0),
-                   {**config, "mounting_offsets": rig.offsets.to_dict()})
+                   {**config, "mounting_offsets": rig.offsets.to_dict()}, roll_rad, pitch_rad)
     return scan, truth

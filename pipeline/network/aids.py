@@ -367,3 +367,65 @@ def read_odometry(path) -> DeadReckonedPoses:
         raise InputFileError(f"{what} rows {i + 2} and {i + 3} ({ids[i]}, {ids[i + 1]}): one "
                              "position, so no distance driven; drop the repeated station")
     return DeadReckonedPoses(tuple(ids), values[:, :3], np.radians(values[:, 3]))
+
+
+#: Columns of a heading file: each station's heading as the heading reference read it (site
+#: frame, degrees, the boresight bias included).
+HEADING_COLUMNS = ("id", "heading_deg")
+
+
+@dataclass(frozen=True)
+class MeasuredHeadings:
+    """The heading reference's readings per station, as a heading file gives them.
+
+    Attributes
+    ----------
+    ids : tuple of str
+        Station ids, in the file's order.
+    heading_rad : (s,) float
+        Their readings, site frame, rad.
+    """
+
+    ids: tuple[str, ...]
+    heading_rad: np.ndarray
+
+    def readings(self, station_ids) -> HeadingReadings:
+        """The readings of the network whose stations are ``station_ids`` (in its order), as
+        :class:`HeadingReadings`: every station of the network needs one, and every id of the
+        file must be one of its stations."""
+        from markerplan.errors import InputFileError
+
+        station_ids = list(station_ids)
+        unknown = [i for i in self.ids if i not in station_ids]
+        if unknown:
+            raise InputFileError(f"heading readings of {', '.join(unknown[:4])}: not stations "
+                                 "of the network; drop their rows from the heading file")
+        missing = [i for i in station_ids if i not in self.ids]
+        if missing:
+            raise InputFileError(f"station(s) {', '.join(missing[:4])} have no heading reading; "
+                                 "give one row (id,heading_deg) per station adjusted")
+        return HeadingReadings(self.heading_rad[[self.ids.index(i) for i in station_ids]])
+
+
+def read_headings(path) -> MeasuredHeadings:
+    """Heading readings from a CSV ``id,heading_deg``, one row per station (site frame,
+    degrees).
+
+    Raises
+    ------
+    InputFileError
+        Missing file or columns, no rows, repeated or empty ids, non-finite numbers.
+    """
+    from markerplan.errors import InputFileError
+    from markerplan.reading import finite_number, read_csv, unique_ids
+
+    what = f"heading file {path}"
+    header, rows = read_csv(path, what, HEADING_COLUMNS,
+                            "give one row per station: id,heading_deg")
+    if not rows:
+        raise InputFileError(f"{what}: no rows; give one row per station: id,heading_deg")
+    col = {c: header.index(c) for c in HEADING_COLUMNS}
+    ids = unique_ids([r[col["id"]].strip() for r in rows], what)
+    degrees = [finite_number(r[col["heading_deg"]], f"{what} row {line} heading_deg", 1e6)
+               for line, r in enumerate(rows, start=2)]
+    return MeasuredHeadings(tuple(ids), np.radians(degrees))

@@ -234,6 +234,10 @@ class PlanGeometry:
     error_figure: str = "ellipsoid"
     """The 95 % figure the plan judged its requirement by (``"quantile"`` or ``"ellipsoid"``;
     a plan that records none used the ellipsoid)."""
+    heading_bias_sigma_deg: float | None = None
+    """The heading reference's boresight bias the plan assumed, 1-sigma degrees (its
+    ``network.datum`` record of the aids: the ``heading_aid`` class's or the plan's setting),
+    or ``None`` for none."""
 
 
 def identify_with_plan(stations: list[StationDetections], plan: PlanGeometry,

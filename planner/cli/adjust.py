@@ -121,12 +121,19 @@ def _datum_choice(datum: tuple[str, str | None] | None, control_path: Path | Non
               help="Datum: control points, CSV id,x_m,y_m,z_m,sigma_m (site frame; sigma_m per "
                    "coordinate), e.g. a lander's fiducials; they must fix position and heading.")
 @click.option("--heading-prior-sigma-deg", type=ANGLE_SIGMA_DEG,
-              help="Heading observed at every station (sun sensor) around its planned heading, "
-                   "1-sigma degrees (needs --plan; default: the plan's, else none).")
+              help="Heading observed at every station (sun sensor) around its planned heading "
+                   "(needs --plan) or its reading in --headings, 1-sigma degrees (default: the "
+                   "plan's, else none).")
 @click.option("--heading-bias-sigma-deg", type=ANGLE_SIGMA_DEG,
               help="1-sigma of the heading reference's boresight bias, common to every station, "
                    "degrees: the heading observations are then correlated (needs a heading "
-                   "prior: --heading-prior-sigma-deg or the plan's).")
+                   "prior: --heading-prior-sigma-deg or the plan's; default: the plan's, the "
+                   "bias of its heading aid as its network.datum records it, else none).")
+@click.option("--headings", "headings_path", type=FILE,
+              help="The heading reference's readings: CSV id,heading_deg, one row per station "
+                   "(site frame, degrees, the boresight bias included); the heading prior is "
+                   "centred on them instead of the planned headings (needs its 1-sigma: "
+                   "--heading-prior-sigma-deg or the plan's).")
 @click.option("--odometry", "odometry_path", type=FILE,
               help="Odometry between consecutive stations: CSV id,x_m,y_m,z_m,heading_deg of "
                    "the dead-reckoned poses in drive order (any frame); the relative poses of "
@@ -197,7 +204,8 @@ def _datum_choice(datum: tuple[str, str | None] | None, control_path: Path | Non
 @json_option
 def command(tables, out, overwrite, error_model, plan_path, identity, odometry_sigma_m,
             odometry_heading_sigma_deg, datum, reference_station, control_path,
-            heading_prior_sigma_deg, heading_bias_sigma_deg, odometry_path, odometry_percent,
+            heading_prior_sigma_deg, heading_bias_sigma_deg, headings_path, odometry_path,
+            odometry_percent,
             odometry_heading_deg_per_m, inclinometer_sigma_deg, body, snooping, robust, robust_k0,
             robust_k1, variance_components, alpha0, beta0, working_radius_m, requirement_m,
             relative_within_m, relative_requirement_m, relative_requirement_ppm, covariance,
@@ -229,12 +237,13 @@ def command(tables, out, overwrite, error_model, plan_path, identity, odometry_s
     snooping = _snooping_choice(snooping, robust)
     if identity is None:
         identity = "plan" if plan_path is not None else "geometry"
-    _check_identity(identity, plan_path, control_path, heading_prior_sigma_deg)
+    _check_identity(identity, plan_path, control_path, heading_prior_sigma_deg, headings_path)
     timings: dict[str, float] = {}
-    inputs = given_paths(*tables, plan_path, control_path, odometry_path, error_model.path)
+    inputs = given_paths(*tables, plan_path, control_path, odometry_path, headings_path,
+                         error_model.path)
     with output_folder(out, overwrite, "adjust", inputs=inputs) as stage:
         from pipeline.network.adjustment import AdjustmentSettings
-        from pipeline.network.aids import read_odometry
+        from pipeline.network.aids import read_headings, read_odometry
         from pipeline.network.detections import read_control
         from pipeline.network.run import adjust_tables
         from planner.accuracy.local import LocalRequirement
@@ -250,6 +259,7 @@ def command(tables, out, overwrite, error_model, plan_path, identity, odometry_s
         plan = read_plan_geometry(plan_path) if plan_path is not None else None
         control = read_control(control_path) if control_path is not None else ()
         dead_reckoned = read_odometry(odometry_path) if odometry_path is not None else None
+        measured = read_headings(headings_path) if headings_path is not None else None
         config = resolved_configuration(
             tables=[str(t) for t in tables], plan=_str(plan_path), control=_str(control_path),
             error_model=error_model.name, marker_ids=identity, datum=kind,
@@ -265,15 +275,18 @@ def command(tables, out, overwrite, error_model, plan_path, identity, odometry_s
             plan_geometry=plan,
             odometry=_str(odometry_path), odometry_percent=odometry_percent,
             odometry_heading_deg_per_m=odometry_heading_deg_per_m,
-            heading_bias_sigma_deg=heading_bias_sigma_deg)
+            heading_bias_sigma_deg=heading_bias_sigma_deg, headings=_str(headings_path))
         if config["relative_requirement_m"] is None:
             config["relative_requirement_m"] = config["requirement_m"]
-        _check_aids(config, odometry_path)
+        if (heading_bias_sigma_deg is None and plan is not None
+                and config["heading_prior_sigma_deg"] is not None):
+            config["heading_bias_sigma_deg"] = plan.heading_bias_sigma_deg
+        _check_aids(config, odometry_path, headings_path)
         settings = AdjustmentSettings(
             body=_body(body, plan),
             inclinometer_sigma_rad=math.radians(config["inclinometer_sigma_deg"]),
             heading_prior_sigma_rad=_radians(config["heading_prior_sigma_deg"]),
-            heading_bias_sigma_rad=_radians(heading_bias_sigma_deg),
+            heading_bias_sigma_rad=_radians(config["heading_bias_sigma_deg"]),
             odometry_ratio=None if odometry_percent is None else odometry_percent / 100.0,
             odometry_heading_rad_per_m=_radians(odometry_heading_deg_per_m),
             alpha0=alpha0, beta0=beta0, snooping=snooping, robust=_none(robust),
@@ -286,8 +299,7 @@ def command(tables, out, overwrite, error_model, plan_path, identity, odometry_s
                               odometry_heading_sigma_rad=math.radians(odometry_heading_sigma_deg),
                               inclinometer_sigma_rad=settings.inclinometer_sigma_rad),
             settings, kind, control, plan,
-            aids=(None if dead_reckoned is None else
-                  lambda obs: (dead_reckoned.readings(obs.station_ids), None)))
+            aids=_aids(dead_reckoned, measured))
         timings.update(adjusted.timings_s)
         timings["read"] += read_s
         result, obs, identified = adjusted.result, adjusted.observations, adjusted.identified
@@ -304,7 +316,7 @@ def command(tables, out, overwrite, error_model, plan_path, identity, odometry_s
             identity=identity, frame=frame_note(
                 kind, result.datum.reference_id(obs.station_ids), plan is not None,
                 plan.dem if plan else None, plan.crs if plan else None),
-            inputs=_input_files(tables, plan_path, control_path, odometry_path),
+            inputs=_input_files(tables, plan_path, control_path, odometry_path, headings_path),
             error_model=error_model.name, unidentified=identified.unidentified,
             plan_markers=(dict(zip(plan.marker_ids, plan.marker_xyz_m, strict=True))
                           if plan and identity != "geometry" else {}),
@@ -330,8 +342,10 @@ def _reference(reference: str | None, kind: str, plan, stations) -> str | None:
     return None
 
 
-def _body(choice: str, plan):
-    """``--body`` as a :class:`~pipeline.network.body.Body` (``crs``: the plan's CRS's)."""
+def _body(choice: str, plan, plan_name: str = "--plan"):
+    """``--body`` as a :class:`~pipeline.network.body.Body` (``crs``: the CRS's of ``plan``, a
+    :class:`~pipeline.network.detections.PlanGeometry` or None, named ``plan_name`` in the
+    error)."""
     from markerplan.errors import ConfigError
     from pipeline.network.body import Body
     from planner.outputs.gis import crs_body
@@ -340,8 +354,9 @@ def _body(choice: str, plan):
         return Body.named(choice)
     found = crs_body(plan.crs) if plan is not None else None
     if found is None:
-        raise ConfigError("--body crs takes the body from the ellipsoid of --plan's CRS (plan.json "
-                          "site.crs_wkt), and there is none; give --body moon, earth or plane")
+        raise ConfigError(f"--body crs takes the body from the ellipsoid of {plan_name}'s CRS "
+                          "(plan.json site.crs_wkt), and there is none; give --body moon, earth "
+                          "or plane")
     return found
 
 
@@ -365,13 +380,25 @@ def _radians(degrees: float | None) -> float | None:
     return None if degrees is None else math.radians(degrees)
 
 
-def _input_files(tables, plan_path, control_path, odometry_path=None) -> list[dict]:
+def _aids(dead_reckoned, measured):
+    """The :func:`pipeline.network.run.adjust_tables` ``aids`` of ``--odometry`` and
+    ``--headings`` (:class:`~pipeline.network.aids.DeadReckonedPoses`,
+    :class:`~pipeline.network.aids.MeasuredHeadings`, either None); None without both."""
+    if dead_reckoned is None and measured is None:
+        return None
+    return lambda obs: (None if dead_reckoned is None else dead_reckoned.readings(obs.station_ids),
+                        None if measured is None else measured.readings(obs.station_ids))
+
+
+def _input_files(tables, plan_path, control_path, odometry_path=None,
+                 headings_path=None) -> list[dict]:
     """Kind, path and SHA-256 of every input file, for the outputs' provenance."""
     import hashlib
 
     files = [("marker table", t) for t in tables] + [
         (k, p) for k, p in (("plan", plan_path), ("control", control_path),
-                            ("odometry", odometry_path)) if p is not None]
+                            ("odometry", odometry_path), ("headings", headings_path))
+        if p is not None]
     return [{"kind": k, "path": str(p), "sha256": hashlib.sha256(Path(p).read_bytes())
              .hexdigest()} for k, p in files]
 
@@ -380,8 +407,9 @@ def _str(path: Path | None) -> str | None:
     return None if path is None else str(path)
 
 
-def _check_aids(config: dict, odometry_path) -> None:
-    """``--odometry`` with its sigmas, and a boresight bias with a heading prior."""
+def _check_aids(config: dict, odometry_path, headings_path=None) -> None:
+    """``--odometry`` with its sigmas, a boresight bias with a heading prior, and
+    ``--headings`` with their sigma."""
     from markerplan.errors import ConfigError
 
     sigmas = (config["odometry_percent"] is not None
@@ -394,10 +422,14 @@ def _check_aids(config: dict, odometry_path) -> None:
                           "of --odometry FILE; give the file or drop them")
     if config["heading_bias_sigma_deg"] is not None and config["heading_prior_sigma_deg"] is None:
         raise ConfigError("--heading-bias-sigma-deg needs a heading prior: give "
-                          "--heading-prior-sigma-deg (with --plan)")
+                          "--heading-prior-sigma-deg (with --plan or --headings)")
+    if headings_path is not None and config["heading_prior_sigma_deg"] is None:
+        raise ConfigError("--headings needs the readings' 1-sigma: give "
+                          "--heading-prior-sigma-deg (or a --plan with a heading aid)")
 
 
-def _check_identity(identity: str, plan_path, control_path, heading_prior) -> None:
+def _check_identity(identity: str, plan_path, control_path, heading_prior,
+                    headings_path=None) -> None:
     from markerplan.errors import ConfigError
 
     if identity == "plan" and plan_path is None:
@@ -406,9 +438,9 @@ def _check_identity(identity: str, plan_path, control_path, heading_prior) -> No
     if identity == "geometry" and control_path is not None:
         raise ConfigError("--control names markers by id, which association by geometry does "
                           "not know (it names them M001, ...); give --plan or --marker-ids table")
-    if heading_prior is not None and plan_path is None:
-        raise ConfigError("--heading-prior-sigma-deg needs --plan: the heading prior is centred "
-                          "on each station's planned heading")
+    if heading_prior is not None and plan_path is None and headings_path is None:
+        raise ConfigError("--heading-prior-sigma-deg needs --plan or --headings: the heading "
+                          "prior is centred on each station's planned heading or its reading")
 
 
 def _identify(identity: str, stations, plan, odometry_sigma_m: float,

@@ -53,7 +53,7 @@ def _adjust_options(*names: str):
 @sensor_profile_option
 @network_option
 @reference_station_option
-@_adjust_options("odometry_sigma_m", "odometry_heading_sigma_deg")
+@_adjust_options("odometry_sigma_m", "odometry_heading_sigma_deg", "body")
 @click.option("--trials", type=click.IntRange(1, MAX_TRIALS), default=1, show_default=True,
               metavar="N",
               help="Verify the plan N times with independent noise and turntable-error seeds "
@@ -69,7 +69,7 @@ def _adjust_options(*names: str):
 @overwrite_option
 @json_option
 def command(plan_path, error_model, seed, station_ids, offsets, tolerance, profile, network,
-            reference_station, odometry_sigma_m, odometry_heading_sigma_deg, trials,
+            reference_station, odometry_sigma_m, odometry_heading_sigma_deg, body, trials,
             truth_dem_path, scheduler, workers, out, overwrite, as_json):
     """Check a plan by simulation: scan each station with the planned markers, process the
     scans, register each station to its detected markers, and compare achieved with predicted
@@ -93,6 +93,10 @@ def command(plan_path, error_model, seed, station_ids, offsets, tolerance, profi
     cannot be tied to the reference (fewer than 2 shared identified markers) fails and is
     left out of the adjustment. --reference-station names the datum: a network plan's
     predictions are relative to its own datum, so for such a plan it may only repeat it.
+    --body (network mode, `adjust`'s option) stands the simulated rover on a curved body: each
+    station levels itself to the local vertical at its planned position (tilted by d/R away
+    from the reference station, the tangent point of the site frame; the truth records that
+    roll and pitch), and the adjustment centres its tilt priors on the same body.
 
     The scans are simulated on the truth terrain, never on a planning DEM: a plan made with
     `plan --terrain orbital` on the preset's fine terrain, any plan with --truth-dem FILE on
@@ -153,14 +157,18 @@ def command(plan_path, error_model, seed, station_ids, offsets, tolerance, profi
     planned_network = bool(plan.provenance.get("config", {}).get("network"))
     network = network or planned_network
     require_network(reference_station, network)
+    if body != "plane" and not network:
+        raise ConfigError(f"--body {body} levels the simulated stations of network mode and "
+                          "centres its adjustment's tilt priors; give --network, or drop it")
     if tolerance is not None and trials == 1:
         raise ConfigError("the mounting-offset tolerances are drawn once per trial; give "
                           "--trials N (N > 1) with them, or drop them")
     if network:
         from planner.verify.network import NetworkVerifySettings
 
-        settings = NetworkVerifySettings(odometry_sigma_m, odometry_heading_sigma_deg)
         doc, datum = _network_datum(plan_path, ids, reference_station)
+        settings = NetworkVerifySettings(odometry_sigma_m, odometry_heading_sigma_deg,
+                                         body=_network_body(body, doc, plan_path))
     if trials > 1:
         _verify_trials(plan_path, plan, ids, inputs, error_model, seed, offsets, tolerance,
                        profile, trials, out, overwrite, as_json, (scheduler, workers),
@@ -220,6 +228,14 @@ def _network_datum(plan_path, ids, datum):
     return doc, datum
 
 
+def _network_body(choice: str, doc: dict, plan_path: Path):
+    """``--body`` of network mode (``crs``: the ellipsoid's of the plan's CRS)."""
+    from planner.cli.adjust import _body
+    from planner.network.plan_geometry import plan_geometry
+
+    return _body(choice, plan_geometry(doc, plan_path) if choice == "crs" else None, "PLAN")
+
+
 def _verify_network(plan_path, plan, doc, ids, inputs, error_model, seed, offsets, profile,
                     settings, out, overwrite, as_json, datum, where):
     """``verify --network``: scan, write the marker table, adjust and compare
@@ -244,7 +260,7 @@ def _verify_network(plan_path, plan, doc, ids, inputs, error_model, seed, offset
     with executor(*where, progress) as ex, \
             output_folder(out, overwrite, "verify", inputs=inputs) as stage:
         scanned = scan_plan(plan, seed, offsets=offsets, station_ids=ids, profile=profile,
-                            executor=ex)
+                            executor=ex, body=settings.body, reference=datum)
         write_fates(stage / "fates.csv", [list(scanned[2].values())])
         check = verify_scan(scanned, stage / "markers.csv", plan_path, doc, error_model.model,
                             error_model.name, settings, datum, seed)
@@ -272,7 +288,6 @@ def _verify_trials(plan_path, plan, ids, inputs, error_model, seed, offsets, tol
     """``verify --trials N`` (``N`` > 1; :mod:`planner.verify.trials`): exit code 1 when any
     trial fails. ``where``: ``(scheduler, workers)`` of the tasks; ``network``: ``(settings,
     doc, datum)`` in network mode, else ``None``."""
-    import dataclasses
     import json
 
     from markerplan.errors import VerificationFailedError
@@ -306,7 +321,7 @@ def _verify_trials(plan_path, plan, ids, inputs, error_model, seed, offsets, tol
                                            settings, rigs, ids, profile, ex, datum)
         rec = trials_record(plan, trials, seed, seeds, error_model.name, rigs, profile,
                             network=None if network is None else
-                            {**dataclasses.asdict(network[0]), "reference_station": datum},
+                            {**network[0].record(), "reference_station": datum},
                             nominal=offsets, tolerance=tolerance, predictions=predictions)
         (stage / "verify.json").write_text(json.dumps(rec, indent=2) + "\n")
         (stage / "verify.md").write_text(trials_markdown(rec))

@@ -71,7 +71,25 @@ def plan_geometry(doc: dict, path: Path) -> PlanGeometry:
         np.array([s.heading_rad for s in layout.stations]),
         float(doc["requirement"]["working_radius_m"]), float(doc["requirement"]["requirement_m"]),
         incl, heading, reference if isinstance(reference, str) else None,
-        plan_dem_path(doc["provenance"]), _plan_crs(doc["site"], path), figure)
+        plan_dem_path(doc["provenance"]), _plan_crs(doc["site"], path), figure,
+        _plan_heading_bias_deg(doc, path) if heading is not None else None)
+
+
+def _plan_heading_bias_deg(doc: dict, path: Path) -> float | None:
+    """The boresight bias of the plan's heading reference, degrees, from its ``network.datum``
+    record of the aids (:meth:`planner.config.PlanConfig.aids_record`); ``None`` when it records
+    none or 0 (a plan that is no network plan records no aids)."""
+    datum = doc.get("network")
+    datum = datum.get("datum") if isinstance(datum, dict) else None
+    bias = datum.get("heading_bias_sigma_deg") if isinstance(datum, dict) else None
+    if bias is None:
+        return None
+    bias = finite_number(bias, f"`plan_path` {path}: network datum heading_bias_sigma_deg", 10.0)
+    if bias < 0.0 or (bias and not usable_sigma(np.radians(bias))):
+        raise InputFileError(f"`plan_path` {path}: network datum heading_bias_sigma_deg: must be "
+                             f"0 (none) or at least {np.degrees(MIN_SIGMA):.2g} degrees (a "
+                             f"1-sigma), got {bias:g}; plan again or correct it")
+    return bias or None
 
 
 def _plan_crs(site: dict, path: Path) -> str | None:

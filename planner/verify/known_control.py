@@ -267,6 +267,9 @@ class StationJob:
         or a ``functools.partial`` of one).
     threads : int or None
         Ray-casting threads (None: all cores).
+    tilt_rad : (2,) float
+        The station's true roll and pitch, rad: level (zeros) unless it is levelled to a
+        curved body's local vertical (:func:`planner.verify.levelling.levelled_tilts`).
     """
 
     station: PlannedStation
@@ -278,6 +281,7 @@ class StationJob:
     offsets: MountingOffsets
     process: Callable
     threads: int | None = None
+    tilt_rad: tuple[float, float] = (0.0, 0.0)
 
 
 def station_tile(dem: DEM, position_m: np.ndarray, reach_m: float) -> DEM:
@@ -326,7 +330,8 @@ def station_task(dem: DEM, job: StationJob):
                                    sensor, rig, seed=job.seed,
                                    marker_radius_m=job.marker_radius_m,
                                    marker_ids=list(job.marker_ids), station_id=st.id,
-                                   threads=job.threads, sensor_profile=profile.name)
+                                   threads=job.threads, sensor_profile=profile.name,
+                                   roll_rad=job.tilt_rad[0], pitch_rad=job.tilt_rad[1])
     return job.process(st, scan, truth)
 
 
@@ -358,7 +363,8 @@ def map_plan_stations(plans: Sequence[SurveyPlan], processes: Sequence[Callable]
                       offsets: MountingOffsets | Sequence[MountingOffsets] | None = None,
                       station_ids: list[str] | None = None,
                       profile: SensorProfile | None = None, executor: Executor | None = None,
-                      names: Sequence[str] | None = None) -> list[list]:
+                      names: Sequence[str] | None = None,
+                      tilt_rad: dict[str, tuple[float, float]] | None = None) -> list[list]:
     """:func:`map_stations` of several plans on one terrain as one map (one progress bar).
 
     Parameters
@@ -377,6 +383,9 @@ def map_plan_stations(plans: Sequence[SurveyPlan], processes: Sequence[Callable]
         As :func:`verify_plan`.
     names : sequence of str, optional
         A name per plan for the task errors (``station S2 (k=11)``); default none.
+    tilt_rad : dict of str to (2,) float, optional
+        Per station id, its true roll and pitch, rad (:attr:`StationJob.tilt_rad`); default
+        every station level.
 
     Returns
     -------
@@ -401,7 +410,7 @@ def map_plan_stations(plans: Sequence[SurveyPlan], processes: Sequence[Callable]
                                                                 progress=progress))
         jobs = [StationJob(st, int(s) + k, tuple(plan.marker_ids), plan.marker_xyz_m,
                            plan.marker_radius_m, profile, rig, process,
-                           executor.threads(n_tasks))
+                           executor.threads(n_tasks), (tilt_rad or {}).get(st.id, (0.0, 0.0)))
                 for plan, process, stations, s, rig in zip(plans, processes, chosen, seeds,
                                                            rigs, strict=True)
                 for k, st in stations]

@@ -4,7 +4,8 @@ marker errors with the predicted ones.
 
 The closed loop of ``markerplan verify --network``, in two steps:
 
-1. :func:`scan_plan` — every chosen station is simulated at its planned pose with only the
+1. :func:`scan_plan` — every chosen station is simulated at its planned pose (levelled to the
+   local vertical of a curved ``body``, :mod:`planner.verify.levelling`) with only the
    planned markers (:func:`planner.verify.known_control.map_stations`: the sensor profile and the
    mis-mounted rig of known-control ``verify``) and processed by the published chain
    (:func:`pipeline.process.process_station`) *without* a reference, so the marker table's
@@ -61,6 +62,7 @@ import numpy as np
 
 from markerplan.errors import ConfigError, InputFileError
 from pipeline.marker_table import MarkerRow, read_marker_table
+from pipeline.network.body import Body
 from pipeline.network.detections import Identified, StationDetections
 from pipeline.network.observations import Datum
 from pipeline.rig import MountingOffsets
@@ -119,6 +121,10 @@ class NetworkVerifySettings:
         Remove blunders by data snooping (else only flag them).
     alpha0, beta0 : float
         Significance level and power of the w-test.
+    body : Body
+        The body whose local vertical the simulated stations level to and the adjustment
+        centres its tilt priors on (``adjust --body``; :mod:`planner.verify.levelling`);
+        default the plane: every station level in the site frame.
     """
 
     odometry_sigma_m: float = 0.5
@@ -126,6 +132,7 @@ class NetworkVerifySettings:
     snooping: bool = True
     alpha0: float = 0.001
     beta0: float = 0.80
+    body: Body = Body()
 
     def __post_init__(self):
         for name, high in (("odometry_sigma_m", 50.0), ("odometry_heading_sigma_deg", 90.0)):
@@ -136,6 +143,16 @@ class NetworkVerifySettings:
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and 0.0 < v < 1.0):
                 raise ConfigError(f"`{name}` must be in (0, 1), got {v!r:.40}")
+        if not isinstance(self.body, Body):
+            raise ConfigError(f"`body` must be a Body (Body.named('moon'|'earth'|'plane')), got "
+                              f"{self.body!r:.40}")
+
+    def record(self) -> dict:
+        """The settings for the outputs; the body only when it is not the plane (the record of
+        earlier versions, which had none)."""
+        rec = dataclasses.asdict(self)
+        body = rec.pop("body")
+        return rec if self.body.radius_m is None else {**rec, "body": body}
 
 
 @dataclass
@@ -252,11 +269,12 @@ Scanned = tuple[list[MarkerRow], dict[str, TrueStation], dict[str, StationFates]
 
 def scan_plan(plan: SurveyPlan, seed: int = 0, progress: bool = True,
               offsets: MountingOffsets | None = None, station_ids: list[str] | None = None,
-              profile: SensorProfile | None = None, executor: Executor | None = None
-              ) -> Scanned:
+              profile: SensorProfile | None = None, executor: Executor | None = None,
+              body: Body = Body(), reference: str | None = None) -> Scanned:  # noqa: B008
     """Simulate and process the chosen stations of a plan (step 1 of the module docstring).
 
-    Parameters are those of :func:`planner.verify.known_control.verify_plan`.
+    Parameters are those of :func:`planner.verify.known_control.verify_plan`, and ``body``,
+    ``reference`` those of :func:`scan_plans`.
 
     Returns
     -------
@@ -269,13 +287,15 @@ def scan_plan(plan: SurveyPlan, seed: int = 0, progress: bool = True,
         Per station id, its planned markers' fates (``candidate``: the row among the
         station's ``rows``).
     """
-    return scan_plans(plan, [seed], progress, offsets, station_ids, profile, executor)[0]
+    return scan_plans(plan, [seed], progress, offsets, station_ids, profile, executor,
+                      body=body, reference=reference)[0]
 
 
 def scan_plans(plan: SurveyPlan, seeds: list[int], progress: bool = True,
                offsets: MountingOffsets | list[MountingOffsets] | None = None,
                station_ids: list[str] | None = None, profile: SensorProfile | None = None,
-               executor: Executor | None = None, names: list[str] | None = None
+               executor: Executor | None = None, names: list[str] | None = None,
+               body: Body = Body(), reference: str | None = None  # noqa: B008 (frozen)
                ) -> list[Scanned]:
     """:func:`scan_plan` once per seed (the trials of ``verify --network --trials N``), every
     scan x station one task of one map
@@ -292,6 +312,10 @@ def scan_plans(plan: SurveyPlan, seeds: list[int], progress: bool = True,
         As :func:`planner.verify.known_control.verify_plan`.
     names : list of str, optional
         A name per scan for the task errors (``trial 3``).
+    body : Body
+        The stations level to its local vertical (:mod:`planner.verify.levelling`).
+    reference : str, optional
+        The datum station, the tangent point of its vertical (default the plan's).
 
     Returns
     -------
@@ -300,11 +324,13 @@ def scan_plans(plan: SurveyPlan, seeds: list[int], progress: bool = True,
     """
     from pipeline.survey import ProcessingSettings, processing_config
     from planner.verify.known_control import map_plan_stations
+    from planner.verify.levelling import levelled_tilts
 
     cfg = processing_config(ProcessingSettings(marker_radius_m=plan.marker_radius_m))
     done = map_plan_stations([plan] * len(seeds),
                              [functools.partial(station_rows, cfg, s) for s in seeds], seeds,
-                             progress, offsets, station_ids, profile, executor, names)
+                             progress, offsets, station_ids, profile, executor, names,
+                             levelled_tilts(plan, body, reference, station_ids))
     return [([r for station, _, _ in scan for r in station],
              {true.station_id: true for _, true, _ in scan},
              {true.station_id: fates for _, true, fates in scan}) for scan in done]
@@ -377,7 +403,6 @@ def adjust_and_compare(tables: list[Path], plan_path: Path, error_model,
         to the network (named), a plan that is not one.
     """
     from pipeline.network.adjustment import AdjustmentSettings
-    from pipeline.network.body import Body
     from pipeline.network.run import adjust_tables
     from planner.network.plan_geometry import (
         body_configuration,
@@ -403,13 +428,14 @@ def adjust_and_compare(tables: list[Path], plan_path: Path, error_model,
         heading_prior_sigma_deg=None, inclinometer_sigma_deg=None, working_radius_m=None,
         requirement_m=None, error_figure=None, snooping=settings.snooping, alpha0=settings.alpha0,
         beta0=settings.beta0, plan_geometry=plan)
-    # the scan simulator stands every station level in the site frame: the plane's vertical
-    config["body"] = body_configuration(Body(), reference)
+    # the scan simulator levels every station to settings.body's vertical (scan_plans)
+    config["body"] = body_configuration(settings.body, reference)
     aids = plan_aids(doc, plan_path, config["heading_prior_sigma_deg"])
     config.update(aids.record(), aids_seed=int(seed))
     if datum.control:
         config["control_points"] = datum.record()["control"]
     adjustment = AdjustmentSettings(
+        body=settings.body,
         inclinometer_sigma_rad=math.radians(config["inclinometer_sigma_deg"]), **aids.settings(),
         alpha0=settings.alpha0, beta0=settings.beta0, snooping=settings.snooping)
     verified = [sid for sid in plan.station_ids if sid in truth]

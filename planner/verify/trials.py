@@ -146,11 +146,12 @@ def verify_network_trials(plan: SurveyPlan, plan_path: Path, doc: dict, error_mo
         Per trial, the chosen stations in the plan's order (no per-marker errors: the
         network's are its markers', not a station's).
     """
-    from planner.verify.network import scan_plans, verify_scan
+    from planner.verify.network import NetworkVerifySettings, scan_plans, verify_scan
 
+    body = (settings or NetworkVerifySettings()).body
     scans = scan_plans(plan, list(seeds), progress,
                        list(offsets) if isinstance(offsets, Sequence) else offsets,
-                       station_ids, profile, executor, _names(len(seeds)))
+                       station_ids, profile, executor, _names(len(seeds)), body, reference)
     planned = {s["id"]: len(s.get("markers", ())) for s in doc["stations"]}
     out = []
     for t, scanned in enumerate(scans):

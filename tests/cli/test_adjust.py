@@ -326,3 +326,46 @@ def test_relative_pairs_within_d_and_sparse_equals_dense(network, tmp_path, caps
     assert doc["relative"]["n_pairs"] == len(expected)
     assert "## Relative accuracy between neighbouring stations" in (
         tmp_path / "sparse" / "report.md").read_text()
+
+
+def test_heading_readings_and_the_plans_heading_aid_bias(network, tmp_path, capsys,
+                                                         monkeypatch):
+    """``--headings`` centres the heading prior on the readings: with their common bias
+    eliminated (``--heading-bias-sigma-deg``) the headings stay on the truth, without it they
+    follow the biased readings; a plan's ``network.datum`` bias is taken unless the option
+    overrides it."""
+    monkeypatch.chdir(tmp_path)
+    truth = np.degrees(network.truth.pose[:, 3])
+    readings = truth + 0.5 + np.random.default_rng(7).normal(0.0, 0.01, truth.size)
+    (tmp_path / "headings.csv").write_text("id,heading_deg\n" + "".join(
+        f"{i},{h:.6f}\n" for i, h in zip(network.station_ids, readings, strict=True)))
+    base = ["adjust", *_tables(network), "--plan", str(network.plan), "--json",
+            "--headings", "headings.csv", "--heading-prior-sigma-deg", "0.01"]
+    error = {}
+    for out, extra in (("eliminated", ["--heading-bias-sigma-deg", "2"]), ("followed", [])):
+        code, _, err = run_cli(capsys, base + extra + ["--out", out])
+        assert code == 0, err
+        doc = json.loads((tmp_path / out / "adjustment.json").read_text())
+        with (tmp_path / out / "stations.csv").open() as fh:
+            adjusted = {r["station_id"]: float(r["heading_deg"]) for r in csv.DictReader(fh)}
+        error[out] = np.array([(adjusted[sid] - t + 180.0) % 360.0 - 180.0
+                               for sid, t in zip(network.station_ids, truth, strict=True)])
+        assert doc["provenance"]["config"]["headings"] == "headings.csv"
+        assert "headings" in [f["kind"] for f in doc["provenance"]["inputs"]]
+    assert np.abs(error["eliminated"]).max() < 0.1
+    assert np.abs(error["followed"][1:]).min() > 0.25  # the datum's heading is fixed
+
+    plan = json.loads(network.plan.read_text())
+    plan["provenance"]["config"]["heading_aid"] = "sun-sensor"
+    plan["network"] = {"datum": {"heading_aid": "sun-sensor", "heading_prior_sigma_deg": 0.1,
+                                 "heading_bias_sigma_deg": 0.05}}
+    (tmp_path / "aided.json").write_text(json.dumps(plan))
+    for out, extra, bias in (("plan-bias", [], 0.05),
+                             ("given-bias", ["--heading-bias-sigma-deg", "0.2"], 0.2)):
+        code, _, err = run_cli(capsys, ["adjust", *_tables(network), "--plan", "aided.json",
+                                        *extra, "--out", out])
+        assert code == 0, err
+        config = json.loads((tmp_path / out / "adjustment.json").read_text()
+                            )["provenance"]["config"]
+        assert config["heading_prior_sigma_deg"] == 0.1
+        assert config["heading_bias_sigma_deg"] == bias

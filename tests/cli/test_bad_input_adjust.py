@@ -18,6 +18,9 @@ from tests.cli.bad_input import Case, check_refused
 from tests.cli.network_inputs import write_network_inputs
 from tests.cli.test_bad_input_output import _cases_for
 
+#: A heading file of the 4 stations
+HEAD_HEADER = "id,heading_deg\n"
+HEADINGS = HEAD_HEADER + "S01,0\nS02,10\nS03,20\nS04,30\n"
 #: An odometry file of the 4 stations (positions along x: only the file's checks matter)
 ODO_HEADER = "id,x_m,y_m,z_m,heading_deg\n"
 ODO = ODO_HEADER + "S01,0,0,0,0\nS02,15,0,0,0\nS03,30,0,0,0\nS04,45,0,0,0\n"
@@ -67,6 +70,15 @@ def _moved_plan(doc):
 def _inclinometer_sigma(value):
     def edit(doc):
         doc["provenance"]["config"]["inclinometer_sigma_deg"] = value
+    return edit
+
+
+def _heading_bias(value):
+    """A network plan whose heading aid's recorded bias is ``value``."""
+    def edit(doc):
+        doc["provenance"]["config"]["heading_prior_sigma_deg"] = 0.1
+        doc["network"] = {"datum": {"heading_prior_sigma_deg": 0.1,
+                                    "heading_bias_sigma_deg": value}}
     return edit
 
 
@@ -216,6 +228,26 @@ def _cases() -> list[Case]:
              files={"odo.csv": ODO_HEADER + "S01,0,0,0,nan\nS02,1,0,0,0\n"}, setup=net),
         Case("adjust-heading-bias-without-prior", a + ["--heading-bias-sigma-deg", "0.05"],
              "--heading-bias-sigma-deg needs a heading prior", setup=net),
+        Case("adjust-headings-without-sigma", a + ["--headings", "h.csv"],
+             "--headings needs the readings' 1-sigma", files={"h.csv": HEADINGS}, setup=net),
+        *(Case(f"adjust-headings-{name}", a + ["--headings", "h.csv",
+                                               "--heading-prior-sigma-deg", "0.1"],
+               needle, files={"h.csv": text}, setup=net)
+          for name, text, needle in (
+              ("missing-station", HEAD_HEADER + "S01,0\nS02,10\n",
+               "station(s) S03, S04 have no heading reading"),
+              ("unknown-station", HEADINGS + "S09,5\n",
+               "heading readings of S09: not stations of the network"),
+              ("non-finite", HEAD_HEADER + "S01,0\nS02,inf\n",
+               "row 3 heading_deg: must be a finite number"),
+              ("wrong-columns", "id,heading_rad\nS01,0\n", "missing column"),
+              ("no-rows", HEAD_HEADER, "no rows"),
+              ("repeated-id", HEADINGS + "S01,1\n", "appears more than once"))),
+        *(Case(f"adjust-plan-heading-bias-{name}", a + ["--plan", PLAN],
+               needle, setup=with_net(edit_plan=_heading_bias(value)))
+          for name, value, needle in (
+              ("negative", -0.05, "heading_bias_sigma_deg: must be 0 (none) or at least"),
+              ("text", "big", "heading_bias_sigma_deg: must be a number"))),
         Case("adjust-heading-bias-zero", a + ["--plan", PLAN, "--heading-prior-sigma-deg", "0.1",
                                               "--heading-bias-sigma-deg", "0"],
              "--heading-bias-sigma-deg", code=2, setup=net),

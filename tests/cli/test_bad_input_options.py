@@ -125,6 +125,15 @@ CASES = [
                                                       "--network", "--reference-station", "S9",
                                                       "--out", "out"],
          "--reference-station 'S9' is not a station of the network"),
+    # --body (adjust's option): network mode only, a known body, crs only with a CRS
+    Case("verify-body-without-network", ["verify", "{inputs}/plan/plan.json", "--body", "moon",
+                                         "--out", "out"],
+         "--body moon levels the simulated stations of network mode"),
+    usage("verify-body-unknown", ["verify", "{inputs}/plan/plan.json", "--network", "--body",
+                                  "mars", "--out", "out"], "--body"),
+    Case("verify-body-crs-without-a-crs", ["verify", "{inputs}/plan/plan.json", "--network",
+                                           "--body", "crs", "--out", "out"],
+         "--body crs takes the body from the ellipsoid of PLAN's CRS"),
     Case("reduce-network-verify", ["reduce", "as-built", "--network", "--verify", "--out",
                                    "out"], "markerplan verify PLAN --network"),
     # --scheduler/--workers place --verify's station tasks: refused without --verify

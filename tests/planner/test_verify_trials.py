@@ -231,8 +231,9 @@ def test_network_trials_count_each_trials_verdict(monkeypatch, tmp_path):
     asked = {}
 
     def fake_scan_plans(plan, seeds_, progress, offsets, station_ids, profile, executor,
-                        names):
+                        names, body, reference):
         asked.update(seeds=seeds_, offsets=offsets, names=names)
+        assert body.radius_m is None and reference is None  # the plane, the plan's datum
         return [([], {}, {"S1": _fates("S1"), "S2": _fates("S2", "gate" if t % 2 else None)})
                 for t in range(len(seeds_))]
 
