@@ -206,7 +206,7 @@ def _network_datum(plan_path, ids, datum):
     from markerplan.errors import ConfigError
     from pipeline.network.observations import Datum
     from planner.outputs.plan_file import read_plan
-    from planner.verify.network import reference_station
+    from planner.verify.network_datum import reference_station
 
     doc = read_plan(plan_path, "PLAN", full=True)
     if ((doc.get("network") or {}).get("datum") or {}).get("kind") == "control":

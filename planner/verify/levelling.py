@@ -33,7 +33,7 @@ def levelled_tilts(plan: SurveyPlan, body: Body, reference: str | None = None,
     reference : str, optional
         The datum station, whose vertical is the site frame's z axis (``verify
         --reference-station``); default the plan's
-        (:func:`planner.verify.network.reference_station`).
+        (:func:`planner.verify.network_datum.reference_station`).
     station_ids : list of str, optional
         The stations verified (the reference must be among them); default all.
 
@@ -48,7 +48,7 @@ def levelled_tilts(plan: SurveyPlan, body: Body, reference: str | None = None,
     ConfigError
         The reference is not a station of the plan, or not among ``station_ids``.
     """
-    from planner.verify.network import reference_station
+    from planner.verify.network_datum import reference_station
 
     if body.radius_m is None:
         return None

@@ -10,10 +10,10 @@ The closed loop of ``markerplan verify --network``, in two steps:
    mis-mounted rig of known-control ``verify``) and processed by the published chain
    (:func:`pipeline.process.process_station`) *without* a reference, so the marker table's
    ``marker_id`` column is empty until the association of step 2 fills it
-   (:func:`identified_rows`). The truth of every station (its pose and the markers' true
-   centres) is kept apart, for the comparison only, and so are the fates of its planned markers
-   (:func:`planner.verify.fates.station_fates`: the stage that lost each, against the
-   true centres; ``fates.csv`` names them by their true ids).
+   (:func:`~planner.verify.network_identify.identified_rows`). The truth of every station (its
+   pose and the markers' true centres) is kept apart, for the comparison only, and so are the
+   fates of its planned markers (:func:`planner.verify.fates.station_fates`: the stage that
+   lost each, against the true centres; ``fates.csv`` names them by their true ids).
 2. :func:`adjust_and_compare` — the marker table goes through the steps of ``markerplan adjust``
    (:func:`pipeline.network.run.adjust_tables`): detections weighted by the error model;
    identified by gated association with the plan's markers from each station's planned pose
@@ -28,7 +28,8 @@ The closed loop of ``markerplan verify --network``, in two steps:
    - achieved marker error: the adjusted minus the true centre, its length.
 
    - identification: the association's id of every accepted planned marker's detection
-     against its true id (:func:`misidentified`), when the fates are given.
+     against its true id (:func:`~planner.verify.network_identify.misidentified`), when the
+     fates are given.
 
    Each is set beside the plan's prediction (the station's ``predicted_error_m``; a marker's
    ``predicted_error_m`` where the plan gives one, as a network plan may) and beside the
@@ -47,7 +48,8 @@ consecutive stations (plan order) reads their true relative pose plus noise grow
 distance; both are seeded from verify's seed and go to the adjustment with the plan's sigmas.
 A station that identifies no planned marker, or shares fewer than two identified markers with
 the part of the network holding the reference, fails with that reason and is left out of the
-adjustment (:func:`tied_network`); the others are still adjusted and compared.
+adjustment (:func:`~planner.verify.network_identify.tied_network`); the others are still
+adjusted and compared.
 """
 
 from __future__ import annotations
@@ -60,11 +62,10 @@ from pathlib import Path
 
 import numpy as np
 
-from markerplan.errors import ConfigError, InputFileError
-from pipeline.marker_table import MarkerRow, read_marker_table
+from markerplan.errors import ConfigError
+from pipeline.marker_table import MarkerRow
 from pipeline.network.body import Body
 from pipeline.network.detections import Identified, StationDetections
-from pipeline.network.observations import Datum
 from pipeline.rig import MountingOffsets
 from pipeline.stages import ProcessConfig
 from planner.accuracy import known_control
@@ -77,6 +78,12 @@ from planner.verify.fates import (
     unmatched_text,
 )
 from planner.verify.local_pairs import PairOutcome, pair_outcomes
+from planner.verify.network_identify import (
+    datum_station,
+    identified_rows,
+    misidentified,
+    tied_network,
+)
 from visibility.sensor_profile import SensorProfile
 
 
@@ -227,42 +234,6 @@ class NetworkVerification:
         return all(s.passed for s in self.stations) and all(p.passed for p in self.pairs)
 
 
-def reference_station(named: str | None, plan_stations, chosen) -> str:
-    """The datum station of a network verification: the one named, else the plan's first
-    (:meth:`pipeline.network.observations.Datum.resolve`).
-
-    Parameters
-    ----------
-    named : str or None
-        The reference station asked for, or the plan's ``reference_station`` (its
-        configuration's), if any.
-    plan_stations : sequence of str
-        The plan's station ids, in order.
-    chosen : sequence of str
-        The stations to verify (``station_ids``).
-
-    Raises
-    ------
-    ConfigError
-        ``named`` is not a station of the plan, or the reference is not among ``chosen``.
-
-    Examples
-    --------
-    >>> reference_station(None, ["S1", "S2"], ["S1", "S2"])
-    'S1'
-    >>> reference_station("S2", ["S1", "S2"], ["S1"])  # doctest: +ELLIPSIS
-    Traceback (most recent call last):
-    ...
-    markerplan.errors.ConfigError: the plan's reference station S2 ... in `station_ids`
-    """
-    reference = Datum(reference_station=named).reference_id(plan_stations)
-    if reference not in chosen:
-        raise ConfigError(f"the plan's reference station {reference} (the datum of network "
-                          f"mode) is not among the stations verified ({', '.join(chosen)}); "
-                          "include it in `station_ids`")
-    return reference
-
-
 #: :func:`scan_plan`'s result: the marker-table rows, the truth and the fates of one scan.
 Scanned = tuple[list[MarkerRow], dict[str, TrueStation], dict[str, StationFates]]
 
@@ -386,7 +357,8 @@ def adjust_and_compare(tables: list[Path], plan_path: Path, error_model,
         The datum station (``verify --reference-station``); default the plan's.
     fates : dict of str to StationFates, optional
         :func:`scan_plan`'s: each station's reason names its losses, and the association's
-        ids are checked against the true ones (:func:`misidentified`).
+        ids are checked against the true ones (:func:`~planner.verify.network_identify.
+        misidentified`).
     seed : int
         Seed of the pose aids' readings (:mod:`planner.verify.network_aids`).
 
@@ -448,7 +420,7 @@ def adjust_and_compare(tables: list[Path], plan_path: Path, error_model,
         detection_ids.update(ids)
         return identified
 
-    adjusted = adjust_tables(tables, error_model, functools.partial(_datum_station, reference),
+    adjusted = adjust_tables(tables, error_model, functools.partial(datum_station, reference),
                              identify, adjustment, datum_kind=datum.kind,
                              control=datum.control, plan=plan,
                              aids=aids.readings(verified, np.stack(
@@ -550,85 +522,6 @@ def verify_scan(scanned: Scanned, table: Path, plan_path: Path, doc: dict, error
     return check
 
 
-def identified_rows(rows: list[MarkerRow], check: NetworkVerification) -> list[MarkerRow]:
-    """The marker-table rows with ``marker_id`` filled: each accepted detection gets the id the
-    association gave it (``check.detection_ids``), the rest stay empty.
-
-    Parameters
-    ----------
-    rows : list of MarkerRow
-        :func:`scan_plan`'s rows (every candidate of every station, in table order).
-    check : NetworkVerification
-        :func:`adjust_and_compare`'s result on those rows.
-
-    Returns
-    -------
-    rows : list of MarkerRow
-        Copies, in the same order.
-    """
-    seen: dict[str, int] = {}
-    out = []
-    for row in rows:
-        name = ""
-        if row.accepted:
-            k = seen[row.station_id] = seen.get(row.station_id, -1) + 1
-            ids = check.detection_ids.get(row.station_id, ())
-            name = (ids[k] if k < len(ids) else None) or ""
-        out.append(dataclasses.replace(row, marker_id=name))
-    return out
-
-
-def misidentified(tables: list[Path], identified: Identified,
-                  fates: dict[str, StationFates]) -> list[dict]:
-    """The accepted planned markers whose detection the association did not give their true id.
-
-    Parameters
-    ----------
-    tables : list of Path
-        The marker tables the association read (a station's accepted rows, in order, are its
-        detections).
-    identified : Identified
-        The association's ids of the adjusted stations.
-    fates : dict of str to StationFates
-        Per station, the fates of its planned markers (``candidate``: the row among the
-        station's rows of the tables).
-
-    Returns
-    -------
-    wrong : list of dict
-        ``station_id``, ``marker_id`` (the true id), ``identified_as`` (the association's id,
-        ``None`` when it left the detection unidentified), in the stations' order.
-    """
-    accepted_rows: dict[str, list[int]] = {}
-    for table in tables:
-        count: dict[str, int] = {}
-        for row in read_marker_table(table):
-            sid = row["station_id"]
-            count[sid] = count.get(sid, 0) + 1
-            if row["accepted"] == "true":
-                accepted_rows.setdefault(sid, []).append(count[sid] - 1)
-    wrong = []
-    for s, ids in zip(identified.stations, identified.ids, strict=True):
-        position = {row: j for j, row in enumerate(accepted_rows.get(s.station_id, ()))}
-        station = fates.get(s.station_id)
-        for fate in station.rows if station else ():
-            named = ids[position[fate.candidate]] if fate.accepted else fate.marker_id
-            if named != fate.marker_id:
-                wrong.append({"station_id": s.station_id, "marker_id": fate.marker_id,
-                              "identified_as": named})
-    return wrong
-
-
-def _datum_station(reference: str, stations: list) -> str:
-    """``reference``, checked to be among the stations with accepted detections (an
-    :func:`pipeline.network.run.adjust_tables` ``reference``)."""
-    if reference not in [s.station_id for s in stations]:
-        raise InputFileError(f"the reference station {reference} (the datum) has no accepted "
-                             "detection, so the network has no datum; the plan cannot be "
-                             "verified in network mode")
-    return reference
-
-
 def _marker_outcomes(result, plan_marker_ids: tuple[str, ...], truth: dict[str, TrueStation],
                      predicted: dict[str, float | None]) -> list[MarkerOutcome]:
     """Every adjusted marker against its true centre and its prediction, in the plan's order."""
@@ -648,74 +541,3 @@ def _marker_outcomes(result, plan_marker_ids: tuple[str, ...], truth: dict[str, 
                                  float(np.linalg.norm(diff)), tuple(float(v) for v in diff),
                                  seen))
     return out
-
-
-def tied_network(stations: list, plan, reference: str, settings: NetworkVerifySettings):
-    """Identify every station's detections with the plan's markers and keep the stations tied to
-    the reference; a station that is not is a failed station of the verification, not an error.
-
-    Parameters
-    ----------
-    stations : list of pipeline.network.detections.StationDetections
-    plan : pipeline.network.detections.PlanGeometry
-    reference : str
-        The datum station.
-    settings : NetworkVerifySettings
-        The odometry sigmas of the gated association.
-
-    Returns
-    -------
-    identified : pipeline.network.detections.Identified
-        The stations kept (tied to the reference through chains of >= 2 shared identified
-        markers, as :func:`pipeline.network.adjustment.adjust` requires) and their ids.
-    left_out : dict of str to str
-        Why each other station was left out.
-    detection_ids : dict of str to tuple of (str or None)
-        The association's id of each accepted detection of every station it matched, kept or
-        not (``None``: left unidentified).
-
-    Raises
-    ------
-    InputFileError
-        The reference station has no identified detection (the network has no datum).
-    """
-    from pipeline.network import detections as no
-    from pipeline.network.adjustment import tie_order
-
-    left_out: dict[str, str] = {}
-    detection_ids: dict[str, tuple[str | None, ...]] = {}
-    kept, ids, reasons = [], [], []
-    for s in stations:
-        try:
-            one = no.identify_with_plan([s], plan, settings.odometry_sigma_m,
-                                        math.radians(settings.odometry_heading_sigma_deg))
-        except InputFileError:  # no detection inside the odometry gate of a planned marker
-            left_out[s.station_id] = ("none of its detections matches a planned marker within "
-                                      "the odometry's sigma")
-            continue
-        detection_ids[s.station_id] = tuple(one.ids[0])
-        if any(i is not None for i in one.ids[0]):
-            kept.append(s)
-            ids += one.ids
-            reasons += one.reasons
-        else:
-            left_out[s.station_id] = "no detection identified (ambiguous association)"
-    identified = no.Identified(kept, ids, "plan", reasons)
-    obs = no.network_observations(identified)
-    if reference not in obs.station_ids:
-        why = left_out.get(reference, "no accepted detection")
-        raise InputFileError(f"the reference station {reference} (the datum) has no detection "
-                             f"identified with a planned marker ({why}), so the network has no "
-                             "datum and cannot be verified")
-    _, untied = tie_order(obs, np.ones(obs.n, dtype=bool), obs.station_ids.index(reference))
-    if untied:
-        names = {obs.station_ids[i] for i in untied}
-        for k, sid in enumerate(obs.station_ids):
-            if sid in names:
-                n = len(set(obs.marker[obs.station == k]))
-                left_out[sid] = (f"{n} identified marker(s), fewer than 2 shared with the part "
-                                 f"of the network holding the reference {reference}")
-        keep = [k for k, s in enumerate(kept) if s.station_id not in names]
-        identified = no.Identified([kept[k] for k in keep], [ids[k] for k in keep], "plan",
-                                   [reasons[k] for k in keep])
-    return identified, left_out, detection_ids

@@ -9,7 +9,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from markerplan.errors import ConfigError
-from pipeline.network.observations import ControlPoint
+from pipeline.network.observations import ControlPoint, Datum
 
 #: Mixed into verify's seed for the control points' coordinate errors (one stream of its own).
 CONTROL_STREAM = 0xC0
@@ -71,10 +71,8 @@ def verify_datum(doc: dict, plan, named: str | None, chosen, seed: int) -> Verif
     ConfigError
         A reference station named for a plan on control points, no verified station the plan
         gives a control point, or (station datum) the reference not verified
-        (:func:`planner.verify.network.reference_station`).
+        (:func:`reference_station`).
     """
-    from planner.verify.network import reference_station
-
     datum = (doc.get("network") or {}).get("datum") or {}
     if datum.get("kind", "station") != "control":
         ref = reference_station(named or plan.reference_station, plan.station_ids, chosen)
@@ -95,3 +93,39 @@ def verify_datum(doc: dict, plan, named: str | None, chosen, seed: int) -> Verif
                                  np.asarray(c["xyz_m"], float) + rng.normal(0.0, c["sigma_m"], 3),
                                  np.full(3, float(c["sigma_m"]))) for c in datum["control"])
     return VerifyDatum("control", seeing[0], control, np.asarray(datum["datum_xyz_m"], float))
+
+
+def reference_station(named: str | None, plan_stations, chosen) -> str:
+    """The datum station of a network verification: the one named, else the plan's first
+    (:meth:`pipeline.network.observations.Datum.resolve`).
+
+    Parameters
+    ----------
+    named : str or None
+        The reference station asked for, or the plan's ``reference_station`` (its
+        configuration's), if any.
+    plan_stations : sequence of str
+        The plan's station ids, in order.
+    chosen : sequence of str
+        The stations to verify (``station_ids``).
+
+    Raises
+    ------
+    ConfigError
+        ``named`` is not a station of the plan, or the reference is not among ``chosen``.
+
+    Examples
+    --------
+    >>> reference_station(None, ["S1", "S2"], ["S1", "S2"])
+    'S1'
+    >>> reference_station("S2", ["S1", "S2"], ["S1"])  # doctest: +ELLIPSIS
+    Traceback (most recent call last):
+    ...
+    markerplan.errors.ConfigError: the plan's reference station S2 ... in `station_ids`
+    """
+    reference = Datum(reference_station=named).reference_id(plan_stations)
+    if reference not in chosen:
+        raise ConfigError(f"the plan's reference station {reference} (the datum of network "
+                          f"mode) is not among the stations verified ({', '.join(chosen)}); "
+                          "include it in `station_ids`")
+    return reference
