@@ -156,3 +156,36 @@ def test_a_plan_with_local_markers_is_the_fewest_passing_layout():
     assert r.selected.sum() == brute_force_optimum(p, cfg)
     loose = plan_sites(p, cfg.replace(local_markers=False))
     assert not evaluate_layout(p, loose.selected, cfg).marker_pairs_ok
+
+
+@pytest.mark.parametrize("covariance", ["dense", "sparse"])
+def test_planner_and_adjustment_agree_on_marker_pairs(covariance):
+    """The planner's marker-pair covariances and figures are the adjustment's on the same
+    noise-free geometry (:mod:`tests.planner.test_covariance_consistency`), from its dense
+    covariance and from the sparse marginals' exact columns."""
+    from pipeline.network.adjustment import AdjustmentSettings, adjust
+    from pipeline.network.observations import Datum, NominalPoses
+    from pipeline.network.relative import marker_pair_covariances, relative_figures
+    from tests.planner.test_covariance_consistency import _network
+
+    obs, truth, problem = _network(3)
+    net = NetworkModel(problem, RADIUS, INCL, figure=ErrorFigure("ellipsoid"))
+    every = np.ones(problem.n_sites, bool)
+    cov = net.covariance(net.information(every))
+    result = adjust(obs, Datum(reference_station=obs.station_ids[0]),
+                    AdjustmentSettings(inclinometer_sigma_rad=INCL, snooping=False,
+                                       covariance=covariance),
+                    nominal=NominalPoses(truth.pose[:, :3], truth.pose[:, 3]))
+    for kind in ("position", "distance"):
+        local = LocalMarkerAccuracy(net, LocalRequirement(1.0, within_m=40.0, kind=kind))
+        pairs = local.pairs(every)
+        assert pairs.size > 10
+        predicted = local.difference_covariances(cov, pairs)
+        adjusted = marker_pair_covariances(result.covariance, 6 * problem.n_stations,
+                                           pairs.first, pairs.second)
+        np.testing.assert_allclose(predicted, adjusted, rtol=1e-8,
+                                   atol=1e-9 * np.abs(adjusted).max())
+        fig = relative_figures(adjusted, pairs.direction)
+        want = fig.ellipsoid_m if kind == "position" \
+            else fig.along_m * np.sqrt(net.figure.cut_chi2) / 1.959963984540054
+        np.testing.assert_allclose(local.errors(cov, pairs), want, rtol=1e-7)
