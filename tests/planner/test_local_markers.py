@@ -189,3 +189,37 @@ def test_planner_and_adjustment_agree_on_marker_pairs(covariance):
         want = fig.ellipsoid_m if kind == "position" \
             else fig.along_m * np.sqrt(net.figure.cut_chi2) / 1.959963984540054
         np.testing.assert_allclose(local.errors(cov, pairs), want, rtol=1e-7)
+
+
+def test_plan_json_and_verify_record_the_marker_pairs(tmp_path):
+    """plan.json's ``local`` lists every judged marker pair (ids, separation, prediction);
+    marker_pairs.csv holds them; verify's record measures them (``markers``/``markers_passed``)."""
+    from types import SimpleNamespace
+
+    from planner.outputs.local_report import local_record, write_pairs_csv
+    from planner.verify.local_pairs import marker_pair_outcomes, pairs_record
+
+    p = _line(3, n_sites=10, seed=6)
+    cfg = PlanConfig(network=True, working_radius_m=RADIUS, chance_epsilon=None,
+                     datum_requirement=False, local_requirement_m=0.05, local_within_m=25.0,
+                     local_markers=True)
+    net = NetworkModel(p, RADIUS, INCL)
+    sel = net.site_weight > 0
+    outcome = SimpleNamespace(config=cfg, problem=p, result=SimpleNamespace(
+        selected=sel, check=SimpleNamespace(pair_error_m=None, marker_pair_error_m=None)))
+    local = local_record(outcome, net)
+    pairs = LocalMarkerAccuracy(net, LocalRequirement(0.05, within_m=25.0)).pairs(sel)
+    assert local["n_marker_pairs"] == pairs.size > 0
+    assert [r["markers"] for r in local["marker_pairs"]] == [
+        [p.site_ids[a], p.site_ids[b]] for a, b in zip(pairs.first, pairs.second, strict=True)]
+    assert local["markers_meet_requirement"] == all(
+        r["predicted_error_m"] <= 0.05 for r in local["marker_pairs"])
+    write_pairs_csv({"local": local}, tmp_path / "marker_pairs.csv", markers=True)
+    assert len((tmp_path / "marker_pairs.csv").read_text().splitlines()) == pairs.size + 1
+    no_error = [SimpleNamespace(marker_id=i, achieved_xyz_m=(0.0, 0.0, 0.0)) for i in p.site_ids]
+    outcomes = marker_pair_outcomes(local, dict(zip(p.site_ids, p.site_xyz, strict=True)),
+                                    no_error[1:])  # the first site's marker was not adjusted
+    rec = pairs_record(local, [], outcomes)
+    assert len(rec["marker_pairs"]) == pairs.size and "markers" in rec["marker_pairs"][0]
+    lacking = [r["passed"] for r in rec["marker_pairs"] if p.site_ids[0] in r["markers"]]
+    assert rec["markers_passed"] == (not lacking) and not any(lacking)
