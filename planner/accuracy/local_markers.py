@@ -1,6 +1,7 @@
 """Local accuracy between markers: the relative error of every pair of selected markers within
 ``within_m`` of each other (horizontally), judged by the plan's :class:`~planner.accuracy.local.
-LocalRequirement` (``local_markers``).
+LocalRequirement` (``local_markers``). A selected marker no station uses (an existing one out of
+sight) is not estimated by the network and is not judged.
 
 Cross-covariance
 ----------------
@@ -177,9 +178,10 @@ class LocalMarkerAccuracy:
         self.kind = requirement.kind
 
     def pairs(self, selected) -> MarkerPairs:
-        """The judged pairs of the layout ``selected`` ((n,) bool)."""
-        return marker_pairs(self.net.problem.site_xyz, np.flatnonzero(selected),
-                            self.requirement)
+        """The judged pairs of the layout ``selected`` ((n,) bool): its markers some station
+        uses (a marker no station sees is not estimated by the network, and not judged)."""
+        seen = np.asarray(selected, bool) & (self.net.site_weight > 0)
+        return marker_pairs(self.net.problem.site_xyz, np.flatnonzero(seen), self.requirement)
 
     def difference_covariances(self, cov, pairs: MarkerPairs) -> np.ndarray:
         """(p, 3, 3) covariance ``Sigma_jk`` of each pair's relative position, m^2 (``inf``
@@ -241,6 +243,9 @@ class LocalMarkerAccuracy:
         markers determined): a layout holding both markers passes only if ``sum_i coef_i x_i
         >= rhs``; ``rhs > 0`` only."""
         which = np.asarray(which, np.int64)
+        determined = ~_undetermined(self.net, cov, pairs.first[which]) \
+            & ~_undetermined(self.net, cov, pairs.second[which])
+        which = which[determined]
         if which.size == 0:
             return []
         g, u = self.gradients(cov, pairs, which)
