@@ -7,7 +7,7 @@ a + b ppm, datum at the first station or at the centre) and local (between stati
         [--within 50] [--kinds datum,local,distance] [--figures ellipsoid,quantile]
         [--heading-prior DEG] [--heading-aid sun-sensor|star-tracker] [--heading-bias DEG]
         [--odometry-percent P] [--odometry-heading DEG_PER_M] [--search-time-limit 300]
-        [--plan-time-limit 0]
+        [--plan-time-limit 0] [--local-markers]
 
 For every combination it runs the network greedy (``greedy_network``: markers, wall time), then
 the local search that prunes its layout and swaps pairs of its sites for one
@@ -54,15 +54,22 @@ def cases(problem, base, ppms, within_m, kinds, figures=("ellipsoid", "quantile"
 def judged(problem, config, selected) -> float:
     """Worst station error over its allowance, recomputed from the layout's covariance and the
     distances computed here; for a local requirement, the worst pair's relative error over
-    its allowance."""
+    its allowance (and of each judged marker pair's, with ``local_markers``)."""
     from planner.accuracy.local import local_accuracy
+    from planner.accuracy.local_markers import local_marker_accuracy
     from planner.accuracy.network import network_model
 
     net = network_model(problem, config)
     local = local_accuracy(net, config)
     if local is not None:
         cov = net.covariance(net.information(selected))
-        return float(np.max(local.errors(cov) / config.local_requirement_m))
+        worst = float(np.max(local.errors(cov) / local.pairs.allowed_m))
+        markers = local_marker_accuracy(net, config)
+        if markers is not None:
+            pairs = markers.pairs(selected)
+            worst = max(worst, float(np.max(markers.errors(cov, pairs) / pairs.allowed_m,
+                                            initial=0.0)))
+        return worst
     err = net.station_errors(selected)
     ref = problem.station_ids.index(config.reference_station)
     d = np.hypot(*(problem.station_xyz[:, :2] - problem.station_xyz[ref, :2]).T)
@@ -90,6 +97,9 @@ def main() -> None:
                     help="the local search's time limit after the greedy, s")
     ap.add_argument("--kinds", default="datum,local,distance",
                     help="requirement kinds: datum, local (position), distance")
+    ap.add_argument("--local-markers", action="store_true",
+                    help="the local kinds also judge every pair of selected markers within "
+                         "--within (local_markers)")
     ap.add_argument("--plan-time-limit", type=float, default=0.0,
                     help="also run the integer program with this time limit, s (0: greedy only)")
     args = ap.parse_args()
@@ -120,6 +130,8 @@ def main() -> None:
     print(f"aids: {json.dumps(base.aids_record())}")
     for label, cfg in cases(problem, base, [float(v) for v in args.ppm.split(",")],
                             args.within, args.kinds.split(","), args.figures.split(",")):
+        if args.local_markers and cfg.local_requirement_m is not None:
+            cfg, label = cfg.replace(local_markers=True), label + " (and markers)"
         row = {"case": label}
         t = time.perf_counter()
         try:

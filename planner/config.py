@@ -71,6 +71,10 @@ class PlanConfig:
     local_kind : {"position", "distance"}
         What the local requirement bounds: the relative position of any points of the two
         stations' working discs, or their distance (edge length).
+    local_markers : bool
+        Also judge every pair of selected markers at most ``local_within_m`` apart by the
+        local requirement (:mod:`planner.accuracy.local_markers`; default false: stations
+        only); needs ``local_requirement_m``.
     n_sectors : int
         Number of equal bearing sectors around each station (site frame), default 6 x 60 deg;
         integer in [1, 36].
@@ -156,6 +160,7 @@ class PlanConfig:
     local_requirement_ppm: float = 0.0
     local_within_m: float = 50.0
     local_kind: str = "position"
+    local_markers: bool = False
     n_sectors: int = 6
     min_sectors: int = 3
     min_markers: int = 3
@@ -208,7 +213,8 @@ class PlanConfig:
         aids (heading reference bias, odometry) dropped."""
         return self.replace(**{"network": False, "requirement_ppm": 0.0,
                                "datum_requirement": True, "local_requirement_m": None,
-                               "local_requirement_ppm": 0.0, "heading_aid": None,
+                               "local_requirement_ppm": 0.0, "local_markers": False,
+                               "heading_aid": None,
                                "heading_bias_sigma_deg": None, "odometry_percent": None,
                                "odometry_heading_deg_per_m": None, **changes})
 
@@ -313,7 +319,7 @@ BOUNDS: dict[str, tuple[float, bool, float, str]] = {
 }
 _INTEGERS = ("n_sectors", "min_sectors", "min_markers", "rays_per_marker", "budget")
 _FLAGS = ("exclude_crater_interiors", "allow_out_of_domain", "redundant", "network",
-          "datum_requirement")
+          "datum_requirement", "local_markers")
 #: Settings that may be ``None`` (not set).
 _OPTIONAL = ("budget", "heading_prior_sigma_deg", "chance_epsilon", "max_bias_effect_m",
              "local_requirement_m", "heading_bias_sigma_deg", "odometry_percent",
@@ -416,6 +422,9 @@ def _requirement_kinds_iv(c: PlanConfig) -> None:
                           "false is a network-mode requirement: known control judges each "
                           "station against its markers alone; plan in network mode "
                           "(network = true) or drop it")
+    if c.local_markers and not local:
+        raise ConfigError("`local_markers` judges marker pairs by the local requirement, which "
+                          "is not set; set local_requirement_m or drop local_markers")
     if c.local_requirement_ppm > 0 and not local:
         raise ConfigError(f"`local_requirement_ppm` ({c.local_requirement_ppm:g}) is added to "
                           "local_requirement_m, which is not set; set local_requirement_m "

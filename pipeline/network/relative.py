@@ -16,6 +16,13 @@ figures at 95 %, as STAR*NET reports them:
 - along the line (the distance's error): ``1.96 sqrt(u^T Sigma u)``, ``u`` the unit vector from
   ``i`` to ``j``.
 
+Pairs of adjusted markers (:func:`marker_pair_covariances`) get the same figures from their
+``x, y, z`` blocks, ``Sigma_jk = Q_jj + Q_kk - Q_jk - Q_kj``: a dense covariance holds the
+cross blocks ``Q_jk``; a :class:`~pipeline.network.marginals.MarginalCovariance` holds only each
+marker's own block, so its cross blocks are computed exactly as columns ``Q[:, cols]``
+(:meth:`~pipeline.network.marginals.MarginalCovariance.columns`, one product per chunk of
+markers).
+
 Which pairs, and the allowance they are judged against, are the caller's (the planner's
 :class:`planner.accuracy.local.LocalRequirement` in ``markerplan adjust``).
 """
@@ -91,6 +98,58 @@ def pair_covariances(covariance, first: np.ndarray, second: np.ndarray) -> np.nd
 
     cross = block(a, b)
     return block(a, a) + block(b, b) - cross - np.swapaxes(cross, 1, 2)
+
+
+#: Markers per chunk of :func:`marker_pair_covariances`' columns of a MarginalCovariance.
+_MARKER_CHUNK = 128
+
+
+def marker_pair_covariances(covariance, n_station_params: int, first: np.ndarray,
+                            second: np.ndarray) -> np.ndarray:
+    """Covariance of ``m_second - m_first`` for marker pairs, (p, 3, 3), m^2.
+
+    Parameters
+    ----------
+    covariance : (u, u) float or MarginalCovariance
+        The adjustment's covariance (stations first, ``n_station_params`` of them, then 3 per
+        marker).
+    n_station_params : int
+        ``6 s``.
+    first, second : (p,) int
+        Marker indices.
+
+    Examples
+    --------
+    Two markers of 1 cm^2 per axis with a covariance of 0.5 cm^2 per axis between them:
+
+    >>> q = np.zeros((6, 6)); q[np.arange(6), np.arange(6)] = 1e-4
+    >>> q[np.arange(3), np.arange(3, 6)] = q[np.arange(3, 6), np.arange(3)] = 5e-5
+    >>> np.round(np.diag(marker_pair_covariances(q, 0, np.array([0]), np.array([1]))[0]),
+    ...          12).tolist()
+    [0.0001, 0.0001, 0.0001]
+    """
+    from pipeline.network.marginals import MarginalCovariance
+
+    first = np.asarray(first, dtype=int).reshape(-1)
+    second = np.asarray(second, dtype=int).reshape(-1)
+    ax = np.arange(3)
+    a = n_station_params + 3 * first[:, None] + ax
+    b = n_station_params + 3 * second[:, None] + ax
+    if not isinstance(covariance, MarginalCovariance):
+        cross = covariance[a[:, :, None], b[:, None, :]]
+        own_a = covariance[a[:, :, None], a[:, None, :]]
+        own_b = covariance[b[:, :, None], b[:, None, :]]
+    else:
+        own_a, own_b = covariance.marker_blocks[first], covariance.marker_blocks[second]
+        cross = np.empty((first.size, 3, 3))
+        seconds = np.unique(second)
+        for lo in range(0, seconds.size, _MARKER_CHUNK):
+            cols = seconds[lo:lo + _MARKER_CHUNK]
+            q = covariance.columns(n_station_params + 3 * cols[:, None] + ax)  # (u, 3c)
+            sel = np.flatnonzero(np.isin(second, cols))
+            at = np.searchsorted(cols, second[sel])
+            cross[sel] = q[a[sel][:, :, None], 3 * at[:, None, None] + ax[None, None, :]]
+    return own_a + own_b - cross - np.swapaxes(cross, 1, 2)
 
 
 def relative_figures(cov3: np.ndarray, direction: np.ndarray) -> RelativeFigures:

@@ -326,6 +326,12 @@ class LayoutCheck:
         only), m.
     pairs_ok : bool
         Every judged station pair meets the local requirement (always True without one).
+    marker_pair_error_m : (q,) float or None
+        With ``local_markers``: the 95 % relative error of each judged pair of selected
+        markers (:meth:`planner.accuracy.local_markers.LocalMarkerAccuracy.pairs` order), m.
+    marker_pairs_ok : bool
+        Every judged marker pair meets the local requirement (always True without
+        ``local_markers``).
     """
 
     count: np.ndarray
@@ -339,10 +345,13 @@ class LayoutCheck:
     bias_effect_m: np.ndarray | None = None
     pair_error_m: np.ndarray | None = None
     pairs_ok: bool = True
+    marker_pair_error_m: np.ndarray | None = None
+    marker_pairs_ok: bool = True
 
     @property
     def all_ok(self) -> bool:
-        return bool(self.ok.all()) and self.markers_ok and self.pairs_ok
+        return bool(self.ok.all()) and self.markers_ok and self.pairs_ok \
+            and self.marker_pairs_ok
 
 
 def evaluate_layout(problem: PlanProblem, selected: np.ndarray, config,
@@ -433,6 +442,7 @@ def _evaluate_network(problem: PlanProblem, selected: np.ndarray, config, net,
     every station also after losing any one marker; ``max_bias_effect_m``: every station's
     largest MDB effect)."""
     from planner.accuracy.local import local_accuracy
+    from planner.accuracy.local_markers import local_marker_accuracy
     from planner.accuracy.network import network_model
     from planner.accuracy.requirement import NetworkRequirement
 
@@ -473,7 +483,14 @@ def _evaluate_network(problem: PlanProblem, selected: np.ndarray, config, net,
         else:
             pair_err = local.errors(cov)
             pairs_ok = bool(np.all(pair_err <= local.pairs.allowed_m))
+    marker_pair_err, marker_pairs_ok = None, True
+    local_markers = local_marker_accuracy(net, config)
+    if local_markers is not None:
+        marker_pairs = local_markers.pairs(selected)
+        marker_pair_err = local_markers.errors(cov, marker_pairs)
+        marker_pairs_ok = bool(np.all(marker_pair_err <= marker_pairs.allowed_m))
     return LayoutCheck(count=count, sectors=sectors, error_m=err, worst_loss_error_m=worst_err,
                        worst_loss_sectors=worst_sec, ok=ok, marker_error_m=merr,
                        markers_ok=markers_ok, bias_effect_m=bias, pair_error_m=pair_err,
-                       pairs_ok=pairs_ok)
+                       pairs_ok=pairs_ok, marker_pair_error_m=marker_pair_err,
+                       marker_pairs_ok=marker_pairs_ok)

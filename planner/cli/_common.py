@@ -38,6 +38,9 @@ option                      meaning (and the value the command receives)
 ``--error-figure NAME``     how a 95 % error is computed: ``quantile`` of the worst error over
                             the working disc, or the ``ellipsoid`` figure (default)
                             (:mod:`planner.accuracy.figure`; ``str``)
+``--local-markers``         the local requirement also judges every pair of selected markers
+                            within ``--local-within-m`` (``local_markers``; ``True`` or
+                            ``None``: the config's; :mod:`planner.accuracy.local_markers`)
 ``--scheduler ADDRESS``     where the per-station tasks run: ``local`` (a LocalCluster sized to
                             the machine), ``none`` (in process) or a dask scheduler address
                             (``str``; :func:`planner.distributed.executor`)
@@ -596,6 +599,14 @@ def error_figure_option(f):
              "the working disc; ellipsoid = the semi-major axis of the 3-D 95 % error ellipsoid "
              f"at the worst point, usually the larger (default: the config's or the plan's, "
              f"else {DEFAULT_ERROR_FIGURE}).")(f)
+
+
+#: ``--local-markers``: the local requirement judges pairs of markers too (``None`` when not
+#: given: the config's ``local_markers``).
+local_markers_option = click.option(
+    "--local-markers", "local_markers", is_flag=True, default=None,
+    help="Network mode: the local requirement also judges every pair of selected markers at "
+         "most --local-within-m apart (their relative position, or distance, at 95 %).")
 
 
 #: ``--time-limit-s S`` (old spelling ``--time-limit``): the solver time limit, seconds.

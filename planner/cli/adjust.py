@@ -481,7 +481,8 @@ def _summary(doc: dict, out: Path, timings: dict[str, float]) -> dict:
             "stations": {s["id"]: s["station_error_95_m"] for s in doc["stations"]},
             "relative": None if doc["relative"] is None else {
                 k: doc["relative"][k] for k in ("requirement", "n_pairs", "n_passed",
-                                                "worst_pair")},
+                                                "worst_pair", "n_marker_pairs",
+                                                "n_marker_passed", "worst_marker_pair")},
             "timings_s": {k: round(v, 3) for k, v in timings.items()}}
 
 

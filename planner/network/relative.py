@@ -1,13 +1,14 @@
 """``relative.csv`` and the ``relative`` section of ``markerplan adjust``: STAR*NET-style
-relative error ellipses between neighbouring adjusted stations, judged against a local
-requirement.
+relative error ellipses between neighbouring adjusted stations and between neighbouring
+adjusted markers, judged against a local requirement.
 
 The pairs and the allowance are :mod:`planner.accuracy.local`'s (every pair of stations at
 most ``within_m`` apart horizontally; ``constant_m + ppm 1e-6 separation``, the meaning of a
-plan's ``local_requirement_m/ppm``); the figures are
-:mod:`pipeline.network.relative`'s. A pair passes when the semi-major axis of its 95 %
-horizontal relative ellipse is within its allowance (as STAR*NET judges an ALTA/NSPS relative
-positional precision).
+plan's ``local_requirement_m/ppm``), and the same for every pair of adjusted markers
+(:func:`planner.accuracy.local_markers.marker_pairs`; ``kind`` ``"station"`` or ``"marker"``,
+``first``/``second`` their ids); the figures are :mod:`pipeline.network.relative`'s. A pair
+passes when the semi-major axis of its 95 % horizontal relative ellipse is within its allowance
+(as STAR*NET judges an ALTA/NSPS relative positional precision).
 """
 
 from __future__ import annotations
@@ -15,9 +16,10 @@ from __future__ import annotations
 import numpy as np
 
 from planner.accuracy.local import LocalRequirement, station_pairs
+from planner.accuracy.local_markers import marker_pairs
 
 #: Columns of ``relative.csv`` (m, degrees).
-RELATIVE_COLUMNS = ("first_station", "second_station", "separation_m", "horizontal_major_95_m",
+RELATIVE_COLUMNS = ("kind", "first", "second", "separation_m", "horizontal_major_95_m",
                     "horizontal_minor_95_m", "azimuth_deg", "vertical_95_m", "ellipsoid_95_m",
                     "along_95_m", "allowed_95_m", "passed")
 #: Digits of the figures in ``relative.csv`` and ``adjustment.json`` (0.1 um).
@@ -26,7 +28,8 @@ _DIGITS = 7
 
 def relative_rows(result, requirement: LocalRequirement) -> list[dict]:
     """One row (:data:`RELATIVE_COLUMNS`) per pair of adjusted stations at most
-    ``requirement.within_m`` apart horizontally, in lexicographic order of station index.
+    ``requirement.within_m`` apart horizontally, in lexicographic order of station index, then
+    one per such pair of adjusted markers (in order of marker index).
 
     Parameters
     ----------
@@ -37,15 +40,30 @@ def relative_rows(result, requirement: LocalRequirement) -> list[dict]:
     -------
     rows : list of dict
     """
-    from pipeline.network.relative import pair_covariances, relative_figures
+    from pipeline.network.relative import (
+        marker_pair_covariances,
+        pair_covariances,
+        relative_figures,
+    )
 
     pairs = station_pairs(np.asarray(result.pose)[:, :3], requirement)
-    if not pairs.size:
-        return []
-    fig = relative_figures(pair_covariances(result.covariance, pairs.first, pairs.second),
-                           pairs.direction)
-    ids = result.observations.station_ids
-    return [{"first_station": ids[int(a)], "second_station": ids[int(b)],
+    rows = [] if not pairs.size else _rows(
+        "station", result.observations.station_ids, pairs, relative_figures(
+            pair_covariances(result.covariance, pairs.first, pairs.second), pairs.direction))
+    xyz = np.asarray(result.marker_xyz_m, dtype=float).reshape(-1, 3)
+    markers = marker_pairs(xyz, np.arange(xyz.shape[0]), requirement)
+    if markers.size:
+        cov = marker_pair_covariances(result.covariance, 6 * np.shape(result.pose)[0],
+                                      markers.first, markers.second)
+        rows += _rows("marker", result.observations.marker_ids, markers,
+                      relative_figures(cov, markers.direction))
+    return rows
+
+
+def _rows(kind: str, ids, pairs, fig) -> list[dict]:
+    """The rows of one kind's ``pairs`` (``StationPairs`` or ``MarkerPairs``) with figures
+    ``fig``."""
+    return [{"kind": kind, "first": ids[int(a)], "second": ids[int(b)],
              "separation_m": round(float(pairs.separation_m[p]), 4),
              "horizontal_major_95_m": round(float(fig.horizontal_major_m[p]), _DIGITS),
              "horizontal_minor_95_m": round(float(fig.horizontal_minor_m[p]), _DIGITS),
@@ -60,19 +78,28 @@ def relative_rows(result, requirement: LocalRequirement) -> list[dict]:
 
 def relative_section(rows: list[dict], requirement: LocalRequirement) -> dict:
     """The ``relative`` section of ``adjustment.json``: the requirement, counts and the worst
-    pair (largest horizontal semi-major axis over its allowance; None without pairs)."""
-    worst = (max(rows, key=lambda r: (r["horizontal_major_95_m"] / r["allowed_95_m"],
-                                      r["first_station"], r["second_station"]))
-             if rows else None)
+    pair (largest horizontal semi-major axis over its allowance; None without pairs), of the
+    station pairs, then the same of the marker pairs (``n_marker_pairs``,
+    ``n_marker_passed``, ``worst_marker_pair``)."""
+    def worst(kind):
+        of = [r for r in rows if r["kind"] == kind]
+        return (max(of, key=lambda r: (r["horizontal_major_95_m"] / r["allowed_95_m"],
+                                       r["first"], r["second"])) if of else None)
+
+    stations = [r for r in rows if r["kind"] == "station"]
+    markers = [r for r in rows if r["kind"] == "marker"]
     return {"requirement": requirement.describe().replace("(relative position)",
                                                           "(95 % horizontal relative ellipse)"),
             "requirement_m": requirement.constant_m, "requirement_ppm": requirement.ppm,
-            "within_m": requirement.within_m, "n_pairs": len(rows),
-            "n_passed": sum(r["passed"] for r in rows), "worst_pair": worst}
+            "within_m": requirement.within_m, "n_pairs": len(stations),
+            "n_passed": sum(r["passed"] for r in stations), "worst_pair": worst("station"),
+            "n_marker_pairs": len(markers), "n_marker_passed": sum(r["passed"] for r in markers),
+            "worst_marker_pair": worst("marker")}
 
 
 def relative_markdown(section: dict | None, rows: list[dict]) -> list[str]:
-    """The report's lines on relative accuracy (none without a ``relative`` section)."""
+    """The report's lines on relative accuracy (none without a ``relative`` section): the
+    station pairs, then the marker pairs."""
     if section is None:
         return []
     lines = ["## Relative accuracy between neighbouring stations", "",
@@ -81,12 +108,26 @@ def relative_markdown(section: dict | None, rows: list[dict]) -> list[str]:
              "horizontal ellipse is scaled by 2.447 (chi² with 2 degrees of freedom), the "
              "vertical and along-the-line figures by 1.96, the 3-D one by √chi²₃(0.95). "
              f"{section['n_passed']} of {section['n_pairs']} pairs pass.", ""]
-    if not rows:
-        return lines + ["No pair of stations is that close.", ""]
-    lines += ["| pair | separation | ellipse major / minor | azimuth | vertical | 3-D | "
-              "along line | allowed | |", "|---|---:|---:|---:|---:|---:|---:|---:|---|"]
+    stations = [r for r in rows if r["kind"] == "station"]
+    lines += _table(stations, "stations") if stations \
+        else ["No pair of stations is that close.", ""]
+    markers = [r for r in rows if r["kind"] == "marker"]
+    if "n_marker_pairs" in section:
+        lines += ["### Between neighbouring markers", "",
+                  f"The same figures and requirement for every pair of adjusted markers as "
+                  f"close: {section['n_marker_passed']} of {section['n_marker_pairs']} pairs "
+                  "pass.", ""]
+        lines += _table(markers, "markers") if markers \
+            else ["No pair of markers is that close.", ""]
+    return lines
+
+
+def _table(rows: list[dict], what: str) -> list[str]:
+    """The 20 pairs of ``rows`` nearest their allowance, as a table."""
+    lines = [f"| {what} | separation | ellipse major / minor | azimuth | vertical | 3-D | "
+             "along line | allowed | |", "|---|---:|---:|---:|---:|---:|---:|---:|---|"]
     shown = sorted(rows, key=lambda r: -r["horizontal_major_95_m"] / r["allowed_95_m"])[:20]
-    lines += [f"| {r['first_station']}–{r['second_station']} | {r['separation_m']:.1f} m | "
+    lines += [f"| {r['first']}–{r['second']} | {r['separation_m']:.1f} m | "
               f"{1e3 * r['horizontal_major_95_m']:.1f} / {1e3 * r['horizontal_minor_95_m']:.1f}"
               f" mm | {r['azimuth_deg']:.1f}° | {1e3 * r['vertical_95_m']:.1f} mm | "
               f"{1e3 * r['ellipsoid_95_m']:.1f} mm | {1e3 * r['along_95_m']:.1f} mm | "

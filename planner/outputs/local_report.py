@@ -4,7 +4,11 @@
 ``local`` (present when the plan has a local requirement,
 :mod:`planner.accuracy.local`): the requirement in words and its numbers, ``n_pairs``,
 ``meets_requirement``, and ``pairs``: every judged pair's station ids, horizontal separation,
-predicted 95 % relative error and allowance (m), and whether it meets it.
+predicted 95 % relative error and allowance (m), and whether it meets it. With
+``local_markers`` (:mod:`planner.accuracy.local_markers`) also ``n_marker_pairs``,
+``markers_meet_requirement``, ``worst_marker_pair`` and ``marker_pairs`` (each pair of selected
+markers' site ids as ``markers``, the same fields), and ``marker_pairs.csv`` (the columns of
+``pairs.csv``).
 """
 
 from __future__ import annotations
@@ -54,22 +58,49 @@ def local_record(outcome, net) -> dict | None:
                                            errors, pairs.allowed_m, strict=True)]
     worst = int(np.argmax(np.nan_to_num(errors / pairs.allowed_m, posinf=1e300))) \
         if pairs.size else None
-    return {"requirement_text": req.describe(), "local_requirement_m": req.constant_m,
-            "local_requirement_ppm": req.ppm, "local_within_m": req.within_m,
-            "local_kind": req.kind, "n_pairs": pairs.size,
-            "meets_requirement": all(r["meets_requirement"] for r in rows),
-            "worst_pair": None if worst is None else rows[worst], "pairs": rows}
+    out = {"requirement_text": req.describe(), "local_requirement_m": req.constant_m,
+           "local_requirement_ppm": req.ppm, "local_within_m": req.within_m,
+           "local_kind": req.kind, "n_pairs": pairs.size,
+           "meets_requirement": all(r["meets_requirement"] for r in rows),
+           "worst_pair": None if worst is None else rows[worst], "pairs": rows}
+    return {**out, **_marker_pairs_record(outcome, net)}
 
 
-def write_pairs_csv(doc: dict, path: Path) -> None:
-    """``pairs.csv`` of a plan with a local requirement (header first), with its ``.csvt``."""
+def _marker_pairs_record(outcome, net) -> dict:
+    """``local``'s marker-pair fields (none without ``local_markers``)."""
+    from planner.accuracy.local_markers import local_marker_accuracy
+
+    local = local_marker_accuracy(net, outcome.config)
+    if local is None:
+        return {}
+    selected = outcome.result.selected
+    pairs = local.pairs(selected)
+    errors = outcome.result.check.marker_pair_error_m
+    if errors is None or errors.size != pairs.size:
+        errors = local.errors(net.covariance(net.information(selected)), pairs)
+    ids = outcome.problem.site_ids
+    rows = [{"markers": [ids[a], ids[b]], "separation_m": round(float(d), 3),
+             "predicted_error_m": _num(e), "allowed_error_m": float(allowed),
+             "meets_requirement": bool(e <= allowed)}
+            for a, b, d, e, allowed in zip(pairs.first, pairs.second, pairs.separation_m,
+                                           errors, pairs.allowed_m, strict=True)]
+    worst = int(np.argmax(np.nan_to_num(errors / pairs.allowed_m, posinf=1e300))) \
+        if pairs.size else None
+    return {"n_marker_pairs": pairs.size,
+            "markers_meet_requirement": all(r["meets_requirement"] for r in rows),
+            "worst_marker_pair": None if worst is None else rows[worst], "marker_pairs": rows}
+
+
+def write_pairs_csv(doc: dict, path: Path, markers: bool = False) -> None:
+    """``pairs.csv`` of a plan with a local requirement (header first), with its ``.csvt``;
+    ``markers``: ``marker_pairs.csv`` (the marker pairs, their site ids first)."""
     local = doc["local"]
     with path.open("w", newline="") as fh:
         w = csv.writer(fh)
         w.writerow(PAIR_COLUMNS)
-        for r in local["pairs"]:
+        for r in local["marker_pairs" if markers else "pairs"]:
             err = r["predicted_error_m"]
-            w.writerow([*r["stations"], f"{r['separation_m']:.3f}",
+            w.writerow([*r["markers" if markers else "stations"], f"{r['separation_m']:.3f}",
                         "inf" if err is None else f"{err:.4f}", f"{r['allowed_error_m']:.4f}",
                         int(r["meets_requirement"]), local["local_kind"]])
     write_gis_sidecars(path, PAIR_TYPES, None)
@@ -94,4 +125,19 @@ def local_markdown(doc: dict) -> list[str]:
             lines.append(f"| {r['stations'][0]}–{r['stations'][1]} | {r['separation_m']:.1f} m "
                          f"| {'n/a' if err is None else f'{err:.4f} m'} | "
                          f"{r['allowed_error_m']:.4f} m |")
+    if "marker_pairs" in local:
+        lines += ["", f"Marker pairs (selected markers within {local['local_within_m']:g} m): "
+                      f"{local['n_marker_pairs']} judged, "
+                      f"{'all' if local['markers_meet_requirement'] else 'not all'} within it "
+                      "(`marker_pairs.csv`)."]
+        ranked = sorted(local["marker_pairs"], key=lambda r: -math.inf
+                        if r["predicted_error_m"] is None
+                        else -r["predicted_error_m"] / r["allowed_error_m"])[:5]
+        if ranked:
+            lines += ["", "| markers | separation | predicted | allowed |",
+                      "|---|---:|---:|---:|"]
+            lines += [f"| {r['markers'][0]}–{r['markers'][1]} | {r['separation_m']:.1f} m | "
+                      + ("n/a" if r["predicted_error_m"] is None
+                         else f"{r['predicted_error_m']:.4f} m")
+                      + f" | {r['allowed_error_m']:.4f} m |" for r in ranked]
     return lines

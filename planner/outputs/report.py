@@ -243,6 +243,8 @@ def write_plan_files(outcome, folder: Path) -> dict:
     _write_markers_csv(doc, folder / "markers.csv")
     if "local" in doc:
         write_pairs_csv(doc, folder / "pairs.csv")
+        if "marker_pairs" in doc["local"]:
+            write_pairs_csv(doc, folder / "marker_pairs.csv", markers=True)
     if "network" in doc:
         _write_stations_csv(doc, folder / "stations.csv")
         _write_reliability_csv(outcome, folder / "reliability.csv")

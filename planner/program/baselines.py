@@ -21,6 +21,7 @@ from scipy.spatial import cKDTree
 from markerplan.errors import InfeasiblePlanError
 from planner.accuracy.checks import StationInfo, evaluate_layout, station_infos
 from planner.accuracy.local import local_accuracy
+from planner.accuracy.local_markers import local_marker_accuracy
 from planner.accuracy.requirement import NetworkRequirement
 from planner.problem.usability import PlanProblem, direction_status, sector_index
 
@@ -226,11 +227,12 @@ def greedy_network(problem: PlanProblem, config, net=None, max_steps: int = 5000
     selected marker once every station passes, until every station and marker meets the
     requirement; in redundant mode then also of the station that fails worst after losing one
     marker; with a local requirement (:mod:`planner.accuracy.local`) then of the first failing
-    station pairs (their worst relative direction). ``batch > 1`` adds, per step, a site for
-    each of the ``batch`` first untied (then worst failing) stations (for large networks:
-    fewer exact evaluations). The information and covariance grow with each added site
-    (:class:`planner.accuracy.growing.GrowingCovariance`:
-    a low-rank update per site, not a fresh inverse).
+    station pairs (their worst relative direction), and with ``local_markers`` of the first
+    failing marker pairs (:mod:`planner.accuracy.local_markers`). ``batch > 1`` adds, per
+    step, a site for each of the ``batch`` first untied (then worst failing) stations (for
+    large networks: fewer exact evaluations). The information and covariance grow with each
+    added site (:class:`planner.accuracy.growing.GrowingCovariance`: a low-rank update per
+    site, not a fresh inverse).
 
     ``deadline``: a :func:`time.perf_counter` value after which no further step starts (the
     greedy's share of a plan's time limit; the directions-only cover it starts from is not
@@ -249,6 +251,7 @@ def greedy_network(problem: PlanProblem, config, net=None, max_steps: int = 5000
     net = net or network_model(problem, config)
     allowed, allowed_site = net.allowances(NetworkRequirement.of(config))
     local = local_accuracy(net, config)
+    local_markers = local_marker_accuracy(net, config)
     forbidden = problem.site_mask(config.forbidden, "forbidden")
     selected = greedy_cover(problem, config.as_known_control(requirement_m=1e9)).selected
     open_site = ~forbidden & net.tying
@@ -279,7 +282,7 @@ def greedy_network(problem: PlanProblem, config, net=None, max_steps: int = 5000
         stations_pass = not net.stations_failing(err, allowed).any()
         merr = net.marker_errors(cov, markers) if stations_pass else np.zeros(0)
         loss = None
-        bad_pairs = np.zeros(0, np.int64)
+        bad_pairs = bad_mpairs = np.zeros(0, np.int64)
         if stations_pass and np.all(merr <= allowed_site[markers]):
             if config.redundant:
                 lost, loss_err, loss_cov = net.loss_station_errors(selected, j)
@@ -289,11 +292,16 @@ def greedy_network(problem: PlanProblem, config, net=None, max_steps: int = 5000
                                             loss_err.shape)
                     loss = (loss_cov[i], int(k), int(lost[i]))
             bad_pairs = np.zeros(0, np.int64) if local is None else local.failing(cov)
-            if loss is None and bad_pairs.size == 0:
+            if local_markers is not None and loss is None and bad_pairs.size == 0:
+                mpairs, bad_mpairs = local_markers.failing(cov, selected)
+            if loss is None and bad_pairs.size == 0 and bad_mpairs.size == 0:
                 return Baseline("greedy", selected, True)
         if bad_pairs.size:  # stations and markers pass: the first failing pairs
             v = (local.gradients(cov, bad_pairs[:batch]) @ cov.full)[:, net.free]
             gains = list(net.site_coefficients(v))
+        elif bad_mpairs.size:  # then the first failing marker pairs
+            g = local_markers.gradients(cov, mpairs, bad_mpairs[:batch])[0]
+            gains = list(net.site_coefficients((g @ cov.full)[:, net.free]))
         elif loss is not None:  # redundant: the station that fails worst after a loss
             cov, k, m = loss
             if not cov.determined.all():

@@ -9,6 +9,7 @@ import scipy.sparse as sp
 from markerplan.errors import InfeasiblePlanError
 from planner.accuracy.checks import StationInfo, diagnose, station_infos
 from planner.accuracy.local import local_accuracy
+from planner.accuracy.local_markers import local_marker_accuracy, pair_cut_rows
 from planner.accuracy.network import NetworkModel
 from planner.accuracy.network_diagnosis import diagnose_network
 from planner.problem.usability import PlanProblem
@@ -162,8 +163,11 @@ def network_cuts(problem: PlanProblem, model: Model, selected: np.ndarray, confi
     Per failing station pair of a local requirement (:mod:`planner.accuracy.local`):
     ``"cut-pair"`` (the no-good row over the tying sites the layout lacks: every subset of a
     failing layout fails the pair too) and ``"oa-pair"`` (tangents of the pair's convex
-    worst-case relative variance). A layout whose stations, markers and pairs all pass (and,
-    in redundant mode, every loss) is judged by ``max_bias_effect_m`` (:func:`bias_cuts`).
+    worst-case relative variance). With ``local_markers``, per failing pair of selected
+    markers (:mod:`planner.accuracy.local_markers`): ``"cut-marker-pair"`` and
+    ``"oa-marker-pair"``, enforced only when both markers are selected. A layout whose
+    stations, markers and pairs all pass (and, in redundant mode, every loss) is judged by
+    ``max_bias_effect_m`` (:func:`bias_cuts`).
 
     On large problems (``upper_bound`` given: no layout of interest has more sites, e.g. a
     feasible layout's count) tangent rows keep their ``MAX_TERMS`` largest coefficients and
@@ -198,7 +202,11 @@ def network_cuts(problem: PlanProblem, model: Model, selected: np.ndarray, confi
     bad_markers = markers[marker_fails]
     local = local_accuracy(net, config)
     bad_pairs = np.zeros(0, np.int64) if local is None else local.failing(cov)
-    if failing.size == 0 and bad_markers.size == 0 and bad_pairs.size == 0:
+    local_markers = local_marker_accuracy(net, config)
+    marker_pairs, bad_marker_pairs = (None, np.zeros(0, np.int64)) if local_markers is None \
+        else local_markers.failing(cov, selected)
+    if failing.size == 0 and bad_markers.size == 0 and bad_pairs.size == 0 \
+            and bad_marker_pairs.size == 0:
         if config.redundant:
             loss = _network_loss_cuts(model, selected, j_sel, config, net, tying, in_model,
                                       upper_bound)
@@ -267,6 +275,21 @@ def network_cuts(problem: PlanProblem, model: Model, selected: np.ndarray, confi
             add(model.site_row(rest), 1.0,
                 RowKind("cut-pair", int(local.pairs.first[bad_pairs[0]])))
 
+    def marker_pair_rows(dense: bool) -> None:
+        """The "cut-marker-pair" and "oa-marker-pair" rows of the failing marker pairs
+        (:mod:`planner.accuracy.local_markers`; the no-good rows left out when long unless
+        ``dense``)."""
+        rest = np.flatnonzero(tying & ~selected)
+        worst = bad_marker_pairs[:n_oa]
+        tangents = []
+        for p, coef, rhs in local_markers.tangents(cov0, marker_pairs, worst):
+            cut = sparse_tangent(np.where(in_model, coef, 0.0), rhs, upper_bound, MAX_TERMS)
+            tangents.append((p, cut[0], cut[1]))
+        nogood = worst if dense or rest.size <= MAX_TERMS else worst[:0]
+        for row, lo, kind in zip(*pair_cut_rows(model, marker_pairs, nogood, rest, tangents,
+                                                selected), strict=True):
+            add(row, lo, RowKind(kind))
+
     station_rows(failing, dense_ok)
     worst_m = bad_markers[np.argsort(-merr[marker_fails], kind="stable")]
     if bad_markers.size:
@@ -280,11 +303,15 @@ def network_cuts(problem: PlanProblem, model: Model, selected: np.ndarray, confi
             add(model.site_row(cut[0], cut[1]), cut[2], RowKind("oa-pair", k))
     if failing.size == 0:  # (a failing station's "cut" row is the same row or stronger)
         pair_rows(dense_ok)
+    if bad_marker_pairs.size:
+        marker_pair_rows(dense_ok)
     if not rows:  # no tangent is violated and every short row was left out: the worst
         # stations' and markers' long rows (valid; merely many terms)
         station_rows(worst_first[:n_oa], True)
         marker_rows(worst_m[:n_oa], True)
         pair_rows(True)
+        if bad_marker_pairs.size:
+            marker_pair_rows(True)
     if not rows:  # pragma: no cover - a failing station or marker always yields a no-good cut
         raise InfeasiblePlanError("network mode: the layout fails but no cut was found")
     return sp.csr_array(sp.vstack(rows)), lower, kinds

@@ -29,6 +29,7 @@ import scipy.linalg
 import scipy.sparse as sp
 
 from planner.accuracy.local import local_accuracy
+from planner.accuracy.local_markers import local_marker_accuracy
 from planner.accuracy.network import NetworkCovariance, NetworkModel
 from planner.problem.usability import PlanProblem, directions_ok
 
@@ -237,6 +238,7 @@ class _Judge:
     def __init__(self, problem: PlanProblem, config, net: NetworkModel) -> None:
         self.problem, self.config, self.net = problem, config, net
         self.local = local_accuracy(net, config)
+        self.local_markers = local_marker_accuracy(net, config)
         self.determined = np.ones(problem.n_stations, bool)
 
     def without(self, cov: np.ndarray, site: int, sign: float = -1.0) -> np.ndarray | None:
@@ -275,12 +277,14 @@ class _Judge:
 
     def meets(self, sel: np.ndarray, cov: np.ndarray) -> bool:
         """Whether the layout ``sel`` with covariance ``cov`` meets the accuracy rules (its
-        stations, its markers, the local pairs)."""
+        stations, its markers, the local pairs of stations and of markers)."""
         full = NetworkCovariance(cov, self.determined)
         net = self.net
         if net.stations_failing(net.station_errors_from(full)).any():
             return False
         markers = np.flatnonzero(sel)
         if np.any(net.marker_errors(full, markers) > net.allowed_site_m[markers]):
+            return False
+        if self.local_markers is not None and self.local_markers.failing(full, sel)[1].size:
             return False
         return self.local is None or not self.local.failing(full).size

@@ -73,7 +73,8 @@ class RowKind:
         "oa", "cut-loss", "oa-loss", "info-loss", "heading-loss"
         (:func:`~planner.program.cuts_known.accuracy_cuts`);
         network mode: "upper-bound", "cut", "connect", "oa", "cut-marker", "oa-marker",
-        "cut-pair", "oa-pair" (:func:`~planner.program.cuts_network.network_cuts`), redundant:
+        "cut-pair", "oa-pair", "cut-marker-pair", "oa-marker-pair"
+        (:func:`~planner.program.cuts_network.network_cuts`), redundant:
         "cut-loss", "oa-loss" (:func:`~planner.program.cuts_network._network_loss_cuts`),
         "cut-bias"
         (:func:`~planner.program.cuts_network.bias_cuts`); chance-constrained:

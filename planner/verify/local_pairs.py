@@ -9,6 +9,11 @@ achieved relative error is the worst over both discs (the station and 72 rim poi
 the prediction) of ``|D_k(q) - D_l(q')|`` (``"position"``) or ``|u . (D_k(q) - D_l(q'))|``
 (``"distance"``, ``u`` the unit vector between the planned stations): what a surveyor who
 stakes out from both stations' clouds would see between them.
+
+With ``local_markers`` (the plan's ``local`` holds ``marker_pairs``) each judged pair of markers
+is verified too: its achieved relative error is ``|delta_k - delta_j|`` (``"position"``) or
+``|u . (delta_k - delta_j)|`` (``"distance"``, ``u`` between the planned centres), ``delta``
+each marker's adjusted minus true centre (:func:`marker_pair_outcomes`).
 """
 
 from __future__ import annotations
@@ -98,14 +103,73 @@ def pair_outcomes(local: dict, station_xyz: dict[str, np.ndarray],
     return out
 
 
-def pairs_record(local: dict, outcomes: list[PairOutcome]) -> dict:
-    """``verify.json``'s ``local`` section: the requirement, every pair, and the worst."""
+def marker_pair_outcomes(local: dict | None, marker_xyz: dict[str, np.ndarray],
+                         markers) -> list[PairOutcome]:
+    """Every judged marker pair of a plan's ``local`` section (none without ``marker_pairs``),
+    predicted against achieved.
+
+    Parameters
+    ----------
+    local : dict or None
+        ``plan.json``'s ``local``.
+    marker_xyz : dict of id -> (3,) float
+        Planned marker centres (the pair's direction), m.
+    markers : list of planner.verify.network.MarkerOutcome
+        The adjusted markers (``achieved_xyz_m``: adjusted minus true centre, m).
+
+    Returns
+    -------
+    list of PairOutcome
+        ``first``/``second`` the markers' ids; a pair with a marker the adjustment lacks has no
+        achieved error and fails.
+
+    Examples
+    --------
+    >>> from types import SimpleNamespace as N
+    >>> local = {"local_kind": "position", "marker_pairs": [{"markers": ["a", "b"],
+    ...          "separation_m": 5.0, "predicted_error_m": 0.01, "allowed_error_m": 0.02}]}
+    >>> got = marker_pair_outcomes(local, {"a": np.zeros(3), "b": np.array([5.0, 0, 0])},
+    ...                            [N(marker_id="a", achieved_xyz_m=(0.0, 0.0, 0.0)),
+    ...                             N(marker_id="b", achieved_xyz_m=(0.003, 0.004, 0.0))])
+    >>> round(got[0].achieved_error_m, 6), got[0].passed
+    (0.005, True)
+    """
+    if not local or "marker_pairs" not in local:
+        return []
+    delta = {m.marker_id: np.asarray(m.achieved_xyz_m, float) for m in markers}
+    out = []
+    for row in local["marker_pairs"]:
+        a, b = row["markers"]
+        achieved = None
+        if a in delta and b in delta:
+            diff = delta[b] - delta[a]
+            if local["local_kind"] == "distance":
+                line = np.asarray(marker_xyz[b], float) - np.asarray(marker_xyz[a], float)
+                norm = np.linalg.norm(line)
+                diff = np.array([diff @ line / norm if norm > 0 else 0.0])
+            achieved = float(np.linalg.norm(diff))
+        allowed = float(row["allowed_error_m"])
+        out.append(PairOutcome(a, b, float(row["separation_m"]), row["predicted_error_m"],
+                               achieved, allowed, achieved is not None and achieved <= allowed))
+    return out
+
+
+def pairs_record(local: dict, outcomes: list[PairOutcome],
+                 marker_outcomes: list[PairOutcome] = ()) -> dict:
+    """``verify.json``'s ``local`` section: the requirement, every pair, and the worst (with
+    ``local_markers`` also ``marker_pairs``, each with ``markers`` for ``stations``, and
+    ``markers_passed``)."""
     achieved = [p for p in outcomes if p.achieved_error_m is not None]
     worst = max(achieved, key=lambda p: p.achieved_error_m / p.allowed_error_m, default=None)
-    return {"requirement_text": local["requirement_text"], "local_kind": local["local_kind"],
-            "n_pairs": len(outcomes), "passed": all(p.passed for p in outcomes),
-            "worst": None if worst is None else worst.to_json(),
-            "pairs": [p.to_json() for p in outcomes]}
+    out = {"requirement_text": local["requirement_text"], "local_kind": local["local_kind"],
+           "n_pairs": len(outcomes), "passed": all(p.passed for p in outcomes),
+           "worst": None if worst is None else worst.to_json(),
+           "pairs": [p.to_json() for p in outcomes]}
+    if "marker_pairs" in local:
+        out["markers_passed"] = all(p.passed for p in marker_outcomes)
+        out["marker_pairs"] = [{"markers": j.pop("stations"), **j}
+                               for j in (p.to_json() for p in marker_outcomes)]
+    return out
 
 
 def pairs_markdown(rec: dict) -> list[str]:
@@ -127,4 +191,14 @@ def pairs_markdown(rec: dict) -> list[str]:
         lines.append(f"| {p['stations'][0]}–{p['stations'][1]} | {p['separation_m']:.1f} m | "
                      f"{mm(p['predicted_error_m'])} | {mm(p['achieved_error_m'])} | "
                      f"{mm(p['allowed_error_m'])} | {'yes' if p['passed'] else 'no'} |")
+    if "marker_pairs" in local:
+        lines += ["", f"Marker pairs: {len(local['marker_pairs'])}, "
+                      f"{'all' if local['markers_passed'] else 'not all'} within it.", "",
+                  "| markers | separation | predicted | achieved | allowed | passed |",
+                  "|---|---:|---:|---:|---:|---|"]
+        for p in sorted(local["marker_pairs"], key=lambda p: -(p["achieved_error_m"] or np.inf)
+                        / p["allowed_error_m"])[:10]:
+            lines.append(f"| {p['markers'][0]}–{p['markers'][1]} | {p['separation_m']:.1f} m "
+                         f"| {mm(p['predicted_error_m'])} | {mm(p['achieved_error_m'])} | "
+                         f"{mm(p['allowed_error_m'])} | {'yes' if p['passed'] else 'no'} |")
     return lines

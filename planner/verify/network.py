@@ -77,7 +77,7 @@ from planner.verify.fates import (
     losses_text,
     unmatched_text,
 )
-from planner.verify.local_pairs import PairOutcome, pair_outcomes
+from planner.verify.local_pairs import PairOutcome, marker_pair_outcomes, pair_outcomes
 from planner.verify.network_identify import (
     datum_station,
     identified_rows,
@@ -228,10 +228,13 @@ class NetworkVerification:
     """The plan's ``local`` section (its local requirement), if it has one."""
     pairs: list[PairOutcome] = field(default_factory=list)
     """With a local requirement: each judged station pair, predicted against achieved."""
+    marker_pairs: list[PairOutcome] = field(default_factory=list)
+    """With ``local_markers``: each judged marker pair, predicted against achieved."""
 
     @property
     def passed(self) -> bool:
-        return all(s.passed for s in self.stations) and all(p.passed for p in self.pairs)
+        return all(s.passed for s in self.stations) \
+            and all(p.passed for p in self.pairs + self.marker_pairs)
 
 
 #: :func:`scan_plan`'s result: the marker-table rows, the truth and the fates of one scan.
@@ -475,13 +478,16 @@ def adjust_and_compare(tables: list[Path], plan_path: Path, error_model,
         {sid: result.pose[i] for i, sid in enumerate(s_ids)},
         {sid: t.pose for sid, t in truth.items()}, radius)
     markers = _marker_outcomes(result, plan.marker_ids, truth, predicted_marker or {})
+    marker_pairs = marker_pair_outcomes(
+        doc.get("local"), dict(zip(plan.marker_ids, plan.marker_xyz_m, strict=True)), markers)
     rejected = [{"station_id": r.station_id, "marker_id": r.marker_id, "w": float(r.w)}
                 for r in result.rejected]
     sigma0 = None if not np.isfinite(result.sigma0_squared) else float(result.sigma0_squared)
     wrong = misidentified(tables, identified, fates) if fates else []
     return NetworkVerification(outcomes, markers, reference, config, rejected,
                                len(identified.unidentified), sigma0, int(result.dof), fates,
-                               wrong, detection_ids, need, allowed, doc.get("local"), pairs)
+                               wrong, detection_ids, need, allowed, doc.get("local"), pairs,
+                               marker_pairs)
 
 
 def verify_scan(scanned: Scanned, table: Path, plan_path: Path, doc: dict, error_model,

@@ -63,7 +63,8 @@ def network_record(plan: SurveyPlan, check: NetworkVerification, seed: int, mode
                        "unidentified_detections": check.unidentified},
         "stations": stations,
         "markers": markers,
-        **({"local": pairs_record(check.local, check.pairs)} if check.local else {}),
+        **({"local": pairs_record(check.local, check.pairs, check.marker_pairs)}
+           if check.local else {}),
     }
 
 

@@ -301,8 +301,18 @@ def test_relative_pairs_within_d_and_sparse_equals_dense(network, tmp_path, caps
     ids = [s["station_id"] for s in stations]
     expected = [(a, b) for i, a in enumerate(ids) for b in ids[i + 1:]
                 if math.dist(xy[a], xy[b]) <= 30.0]
-    rows = list(csv.DictReader((tmp_path / "dense" / "relative.csv").open()))
-    assert [(r["first_station"], r["second_station"]) for r in rows] == expected
+    every = list(csv.DictReader((tmp_path / "dense" / "relative.csv").open()))
+    rows = [r for r in every if r["kind"] == "station"]
+    assert [(r["first"], r["second"]) for r in rows] == expected
+    # then every pair of adjusted markers as close, from markers.csv
+    markers = list(csv.DictReader((tmp_path / "dense" / "markers.csv").open()))
+    mxy = {m["marker_id"]: (float(m["x_m"]), float(m["y_m"])) for m in markers}
+    mids = [m["marker_id"] for m in markers]
+    expected_m = [(a, b) for i, a in enumerate(mids) for b in mids[i + 1:]
+                  if math.dist(mxy[a], mxy[b]) <= 30.0]
+    assert [(r["first"], r["second"]) for r in every if r["kind"] == "marker"] == expected_m
+    assert expected_m and [r["kind"] for r in every] == ["station"] * len(rows) + [
+        "marker"] * len(expected_m)
     assert 0 < len(expected) < len(ids) * (len(ids) - 1) // 2
     for r in rows:
         assert float(r["allowed_95_m"]) == pytest.approx(
@@ -311,8 +321,9 @@ def test_relative_pairs_within_d_and_sparse_equals_dense(network, tmp_path, caps
                                            <= float(r["allowed_95_m"]))
         assert float(r["horizontal_minor_95_m"]) <= float(r["horizontal_major_95_m"])
     worst = max(rows, key=lambda r: float(r["horizontal_major_95_m"]) / float(r["allowed_95_m"]))
-    assert summaries["dense"]["worst_pair"]["first_station"] == worst["first_station"]
-    assert summaries["dense"]["worst_pair"]["second_station"] == worst["second_station"]
+    assert summaries["dense"]["worst_pair"]["first"] == worst["first"]
+    assert summaries["dense"]["worst_pair"]["second"] == worst["second"]
+    assert summaries["dense"]["n_marker_pairs"] == len(expected_m)
     assert summaries["dense"] == summaries["sparse"]
     for name in ("relative.csv", "stations.csv", "markers.csv", "observations.csv"):
         assert (tmp_path / "dense" / name).read_bytes() == (tmp_path / "sparse" / name

@@ -1,0 +1,314 @@
+"""Local accuracy between markers: the relative error of every pair of selected markers within
+``within_m`` of each other (horizontally), judged by the plan's :class:`~planner.accuracy.local.
+LocalRequirement` (``local_markers``). A selected marker no station uses (an existing one out of
+sight) is not estimated by the network and is not judged.
+
+Cross-covariance
+----------------
+A selected marker at site ``j`` is estimated as the weighted mean of its stations' registered
+measurements (:mod:`planner.accuracy.network`): its error is ``e_j = e_j0 + M_j d`` with ``d``
+the pose errors (covariance ``C``), ``M_j = (1 / W_j) sum_s w_s H_s`` (3 x 6 s) and ``e_j0`` the
+measurement noise's own mean (covariance ``I / W_j``, independent between markers and of
+``d``). Hence ``cov(e_j, e_k) = delta_jk I / W_j + M_j C M_k^T``, and the relative position
+``e_k - e_j`` of two markers has covariance
+
+    Sigma_jk = I / W_j + I / W_k + (M_k - M_j) C (M_k - M_j)^T.
+
+Figures
+-------
+Markers are points (no working disc): the ``"position"`` figure is the plan's point figure of
+``Sigma_jk`` (:meth:`~planner.accuracy.figure.ErrorFigure.point_errors`: the ellipsoid's
+semi-major axis, or the 95 % quantile of ``|e|``); the ``"distance"`` figure is
+``sqrt(k u^T Sigma_jk u)`` with ``u`` the unit vector from ``j`` to ``k`` and ``k`` the
+figure's :attr:`~planner.accuracy.figure.ErrorFigure.cut_chi2` (the 3-D ellipsoid's extent
+along the line, ``chi2_3(0.95)``; the exact 95 % of the 1-D distance error, ``chi2_1(0.95)``,
+for the quantile figure).
+
+The integer program
+-------------------
+A pair applies only when both markers are selected, so the rule is not monotone in the
+selection: a site added shrinks ``C`` (every existing pair's ``Sigma_jk`` shrinks, since
+``M_j`` and ``W_j`` are the site's, not the layout's) but may bring new pairs. It is checked
+lazily on each candidate layout, and a failing pair ``(j, k)`` gives two valid cuts:
+
+``"cut-marker-pair"``
+    ``sum_{i tying, not selected} x_i >= x_j + x_k - 1``: a layout holding both markers and no
+    tying site outside the failing layout's has a subset ``T'`` of its tying sites, so its
+    information is no larger (a site seen by one station adds none), ``C`` no smaller and
+    ``Sigma_jk`` no smaller: it fails the pair too;
+``"oa-marker-pair"``
+    the tangent of ``g^T J^-1 g`` (``g = (M_k - M_j)^T u`` at the worst direction ``u``),
+    enforced only when both are selected: ``sum_i c_i x_i >= rhs (x_j + x_k - 1)``.
+
+Both rows leave every layout that holds one of the two markers or neither untouched.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+
+from planner.accuracy.local import LocalRequirement
+
+
+@dataclass(frozen=True)
+class MarkerPairs:
+    """The pairs of selected markers a :class:`~planner.accuracy.local.LocalRequirement` judges.
+
+    Attributes
+    ----------
+    first, second : (p,) int
+        Candidate sites, ``first < second``.
+    separation_m : (p,) float
+        Horizontal separation, m.
+    direction : (p, 3) float
+        Unit vector from the first marker to the second (site frame).
+    allowed_m : (p,) float
+        The requirement's allowance for each pair, m.
+    """
+
+    first: np.ndarray
+    second: np.ndarray
+    separation_m: np.ndarray
+    direction: np.ndarray
+    allowed_m: np.ndarray
+
+    @property
+    def size(self) -> int:
+        return int(self.first.size)
+
+
+def marker_pairs(site_xyz: np.ndarray, sites, requirement: LocalRequirement) -> MarkerPairs:
+    """Every pair of the markers at ``sites`` ((m,) int into ``site_xyz``, (n, 3) m) at most
+    ``requirement.within_m`` apart horizontally, in lexicographic order of site.
+
+    >>> p = marker_pairs(np.array([[0, 0, 0], [30, 0, 0], [90, 0, 0.0]]), [2, 0, 1],
+    ...                  LocalRequirement(0.1, within_m=60.0))
+    >>> p.first.tolist(), p.second.tolist(), p.separation_m.tolist()
+    ([0, 1], [1, 2], [30.0, 60.0])
+    """
+    sites = np.sort(np.asarray(sites, dtype=np.int64).reshape(-1))
+    xyz = np.asarray(site_xyz, dtype=float)[sites]
+    a, b = np.triu_indices(sites.size, k=1)
+    sep = np.linalg.norm(xyz[b, :2] - xyz[a, :2], axis=1)
+    keep = sep <= requirement.within_m
+    a, b, sep = a[keep], b[keep], sep[keep]
+    delta = xyz[b] - xyz[a]
+    length = np.linalg.norm(delta, axis=1, keepdims=True)
+    direction = np.divide(delta, length, out=np.zeros_like(delta), where=length > 0)
+    return MarkerPairs(sites[a], sites[b], sep, direction, requirement.allowed_m(sep))
+
+
+def marker_maps(net, sites) -> sp.csr_array:
+    """``M_j = (1 / W_j) sum_s w_s H_s`` of the markers at ``sites`` ((m,) int), stacked:
+    (3 m, 6 s) sparse, rows ``3 i .. 3 i + 2`` the marker ``sites[i]``'s (zero for a site no
+    station uses).
+
+    Parameters
+    ----------
+    net : planner.accuracy.network.NetworkModel
+        Its public ``pair_site``, ``pair_station``, ``weight``, ``design``, ``site_weight``,
+        ``site_start`` and ``n_stations_seeing`` are used.
+    sites : (m,) int
+    """
+    sites = np.asarray(sites, dtype=np.int64).reshape(-1)
+    k = net.n_stations_seeing[sites]
+    pos = np.repeat(np.arange(sites.size), k)
+    pairs = np.repeat(net.site_start[sites], k) + np.arange(k.sum()) \
+        - np.repeat(np.cumsum(k) - k, k)
+    w = net.site_weight[sites]
+    f = net.weight[pairs] / np.where(w > 0, w, 1.0)[pos]  # (q,)
+    blocks = f[:, None, None] * net.design[pairs]  # (q, 3, 6)
+    rows = 3 * pos[:, None, None] + np.arange(3)[None, :, None] + np.zeros((1, 1, 6), np.int64)
+    cols = 6 * net.pair_station[pairs][:, None, None] + np.arange(6)[None, None, :] \
+        + np.zeros((1, 3, 1), np.int64)
+    return sp.csr_array((blocks.ravel(), (rows.ravel(), cols.ravel())),
+                        shape=(3 * sites.size, 6 * net.problem.n_stations))
+
+
+def marker_cross_covariance(net, cov, sites) -> np.ndarray:
+    """(m, m, 3, 3) joint covariance of the markers at ``sites``, m^2: block ``(a, b)`` is
+    ``cov(e_a, e_b) = delta_ab I / W_a + M_a C M_b^T`` (see the module doc); ``inf`` in the
+    rows and columns of a marker no station uses or seen from an undetermined station.
+
+    Parameters
+    ----------
+    net : planner.accuracy.network.NetworkModel
+    cov : planner.accuracy.network_covariance.NetworkCovariance
+    sites : (m,) int
+    """
+    sites = np.asarray(sites, dtype=np.int64).reshape(-1)
+    m = marker_maps(net, sites)
+    mc = np.asarray(m @ cov.full)  # (3m, 6s)
+    out = np.asarray(m @ mc.T).reshape(sites.size, 3, sites.size, 3).transpose(0, 2, 1, 3)
+    w = net.site_weight[sites]
+    idx = np.arange(sites.size)
+    out[idx, idx] += (1.0 / np.where(w > 0, w, 1.0))[:, None, None] * np.eye(3)
+    bad = (w <= 0) | _undetermined(net, cov, sites)
+    out[bad] = np.inf
+    out[:, bad] = np.inf
+    return out
+
+
+def _undetermined(net, cov, sites: np.ndarray) -> np.ndarray:
+    """(m,) bool: markers some station of which the layout leaves undetermined."""
+    k = net.n_stations_seeing[sites]
+    pos = np.repeat(np.arange(sites.size), k)
+    pairs = np.repeat(net.site_start[sites], k) + np.arange(k.sum()) \
+        - np.repeat(np.cumsum(k) - k, k)
+    out = np.zeros(sites.size, bool)
+    np.logical_or.at(out, pos, ~cov.determined[net.pair_station[pairs]])
+    return out
+
+
+class LocalMarkerAccuracy:
+    """The selected markers' pairs of a layout judged by a local requirement.
+
+    Parameters
+    ----------
+    net : planner.accuracy.network.NetworkModel
+    requirement : LocalRequirement
+    """
+
+    def __init__(self, net, requirement: LocalRequirement) -> None:
+        self.net = net
+        self.requirement = requirement
+        self.kind = requirement.kind
+
+    def pairs(self, selected) -> MarkerPairs:
+        """The judged pairs of the layout ``selected`` ((n,) bool): its markers some station
+        uses (a marker no station sees is not estimated by the network, and not judged)."""
+        seen = np.asarray(selected, bool) & (self.net.site_weight > 0)
+        return marker_pairs(self.net.problem.site_xyz, np.flatnonzero(seen), self.requirement)
+
+    def difference_covariances(self, cov, pairs: MarkerPairs) -> np.ndarray:
+        """(p, 3, 3) covariance ``Sigma_jk`` of each pair's relative position, m^2 (``inf``
+        where a marker is undetermined)."""
+        if pairs.size == 0:
+            return np.zeros((0, 3, 3))
+        sites, inv = np.unique(np.r_[pairs.first, pairs.second], return_inverse=True)
+        a, b = inv[:pairs.size], inv[pairs.size:]
+        full = marker_cross_covariance(self.net, cov, sites)
+        finite = np.isfinite(full[np.arange(sites.size), np.arange(sites.size)]).all(axis=(1, 2))
+        full[~finite] = 0.0
+        full[:, ~finite] = 0.0
+        cross = full[a, b]
+        out = full[a, a] + full[b, b] - cross - np.swapaxes(cross, 1, 2)
+        out[~(finite[a] & finite[b])] = np.inf
+        return out
+
+    def errors(self, cov, pairs: MarkerPairs) -> np.ndarray:
+        """(p,) 95 % relative error of each pair (module doc), m; ``inf`` where undetermined."""
+        sigma = self.difference_covariances(cov, pairs)
+        if self.kind == "position":
+            return self.net.figure.point_errors(sigma)
+        out = np.full(pairs.size, np.inf)
+        ok = np.isfinite(sigma).all(axis=(1, 2))
+        var = np.einsum("pa,pab,pb->p", pairs.direction[ok], sigma[ok], pairs.direction[ok])
+        out[ok] = np.sqrt(self.net.figure.cut_chi2 * np.maximum(var, 0.0))
+        return out
+
+    def failing(self, cov, selected) -> tuple[MarkerPairs, np.ndarray]:
+        """The layout's judged pairs and the indices (into them) of those that fail."""
+        pairs = self.pairs(selected)
+        if pairs.size == 0:
+            return pairs, np.zeros(0, np.int64)
+        if self.kind == "position":
+            ok = self.net.figure.point_within(self.difference_covariances(cov, pairs),
+                                              pairs.allowed_m)
+        else:
+            ok = self.errors(cov, pairs) <= pairs.allowed_m
+        return pairs, np.flatnonzero(~ok)
+
+    def gradients(self, cov, pairs: MarkerPairs, which) -> np.ndarray:
+        """(q, 6 s) ``g = (M_k - M_j)^T u`` of the pairs ``which`` at their worst direction
+        ``u`` (the top eigenvector of ``Sigma_jk``, or the line for ``"distance"``)."""
+        which = np.asarray(which, np.int64)
+        first, second = pairs.first[which], pairs.second[which]
+        m1 = marker_maps(self.net, first).toarray().reshape(which.size, 3, -1)
+        m2 = marker_maps(self.net, second).toarray().reshape(which.size, 3, -1)
+        if self.kind == "position":
+            sigma = self.difference_covariances(cov, MarkerPairs(
+                first, second, pairs.separation_m[which], pairs.direction[which],
+                pairs.allowed_m[which]))
+            u = np.linalg.eigh(sigma)[1][:, :, -1]
+        else:
+            u = pairs.direction[which]
+        return np.einsum("qa,qab->qb", u, m2 - m1), u
+
+    def tangents(self, cov, pairs: MarkerPairs, which) -> list[tuple[int, np.ndarray, float]]:
+        """Tangent cuts ``(pair index, coef (n,), rhs)`` of the pairs ``which`` at ``cov`` (both
+        markers determined): a layout holding both markers passes only if ``sum_i coef_i x_i
+        >= rhs``; ``rhs > 0`` only."""
+        which = np.asarray(which, np.int64)
+        determined = ~_undetermined(self.net, cov, pairs.first[which]) \
+            & ~_undetermined(self.net, cov, pairs.second[which])
+        which = which[determined]
+        if which.size == 0:
+            return []
+        g, u = self.gradients(cov, pairs, which)
+        w1 = self.net.site_weight[pairs.first[which]]
+        w2 = self.net.site_weight[pairs.second[which]]
+        const = np.einsum("qa,qa->q", u, u) * (1.0 / w1 + 1.0 / w2)
+        b = pairs.allowed_m[which] ** 2 / self.net.figure.cut_chi2
+        return self.net.tangents(cov, list(g), [int(i) for i in which], b, const)
+
+
+def local_marker_accuracy(net, config) -> LocalMarkerAccuracy | None:
+    """The :class:`LocalMarkerAccuracy` of a network model under a configuration (None unless
+    it sets ``local_requirement_m`` and ``local_markers``)."""
+    requirement = LocalRequirement.of(config)
+    if requirement is None or not getattr(config, "local_markers", False):
+        return None
+    return LocalMarkerAccuracy(net, requirement)
+
+
+def pair_cut_rows(model, pairs: MarkerPairs, bad, tying_rest: np.ndarray, tangents,
+                  selected: np.ndarray) -> tuple[list, list[float], list[str]]:
+    """The ``"cut-marker-pair"`` and ``"oa-marker-pair"`` rows (module doc) of the failing
+    pairs ``bad``.
+
+    Parameters
+    ----------
+    model : planner.program.model.Model
+    pairs : MarkerPairs
+    bad : (q,) int
+        Failing pairs (indices into ``pairs``).
+    tying_rest : (r,) int
+        The open tying sites the layout does not select (model variables).
+    tangents : list of (pair index, sites (t,) int, coef (t,) float)
+        Sparse tangents normalised to ``sum coef x >= 1`` (:func:`~planner.program.
+        cuts_network.sparse_tangent`).
+    selected : (n,) bool
+
+    Returns
+    -------
+    rows : list of (1, n_vars) sparse
+    lower : list of float
+    kinds : list of str
+        Each row is ``row @ vars >= lower``.
+    """
+    rows, lower, kinds = [], [], []
+    for p in np.asarray(bad, np.int64):
+        implied, shift = _both(model, pairs.first[p], pairs.second[p])
+        rows.append(model.site_row(np.r_[tying_rest, implied],
+                                   np.r_[np.ones(tying_rest.size), -np.ones(implied.size)]))
+        lower.append(shift)
+        kinds.append("cut-marker-pair")
+    for p, sites, coef in tangents:
+        implied, shift = _both(model, pairs.first[p], pairs.second[p])
+        rows.append(model.site_row(np.r_[sites, implied], np.r_[coef, -np.ones(implied.size)]))
+        lower.append(shift)
+        kinds.append("oa-marker-pair")
+    return rows, lower, kinds
+
+
+def _both(model, j: int, k: int) -> tuple[np.ndarray, float]:
+    """``x_j + x_k - 1`` as the variables among ``j, k`` and the lower bound of a row
+    ``(...) - (x_j + x_k) >= -1`` once a fixed site's ``x = 1`` is moved to it."""
+    sites = np.array([j, k], np.int64)
+    var = model.site_var[sites] >= 0
+    return sites[var], -1.0 + float(np.sum(~var))
+
