@@ -24,6 +24,7 @@ from planner.cli._common import (
     exclude_option,
     given_paths,
     json_option,
+    local_markers_option,
     marker_radius_option,
     network_option,
     network_settings,
@@ -142,6 +143,7 @@ def _load_detection_model(ctx, param, path):
               help="What the local requirement bounds: position (the relative position of "
                    "any points of the two working discs, default) or distance (their edge "
                    "length).")
+@local_markers_option
 @click.option("--no-datum-requirement", "no_datum_requirement", is_flag=True, default=None,
               help="Network mode: judge only the local requirement, nothing relative to the "
                    "datum.")
@@ -167,8 +169,8 @@ def command(site_name, site_seed, dem_path, reproject, terrain, dem_height_error
             boundary_path, exclude_paths, marker_radius_m, error_model, config_path,
             visibility_path, redundant, chance_epsilon, detection_model, existing, control_path,
             budget, requirement_m, requirement_ppm, local_requirement_m, local_requirement_ppm,
-            local_within_m, local_kind, no_datum_requirement, heading_aid, odometry_percent,
-            error_figure, network,
+            local_within_m, local_kind, local_markers, no_datum_requirement, heading_aid,
+            odometry_percent, error_figure, network,
             reference_station, time_limit_s, stand_map_cell_m, scheduler, workers, out,
             overwrite, as_json):
     """Plan the fewest marker sites so that every station meets the accuracy requirement.
@@ -236,6 +238,7 @@ def command(site_name, site_seed, dem_path, reproject, terrain, dem_height_error
                                     local_requirement_m=local_requirement_m,
                                     local_requirement_ppm=local_requirement_ppm,
                                     local_within_m=local_within_m, local_kind=local_kind,
+                                    local_markers=local_markers,
                                     datum_requirement=False if no_datum_requirement else None,
                                     heading_aid=heading_aid, odometry_percent=odometry_percent))
         doc = write_plan_files(outcome, stage)

@@ -90,6 +90,8 @@ CONFIG_CASES = [
     Case("plan-control-id-clash", ["plan", "--network", "--control", "lander.csv", "--out",
                                    "out"], "clash",
          files={"lander.csv": "id,x_m,y_m,z_m,sigma_m\nC00001,8,-4,1.4,0.005\n"}),
+    Case("plan-local-markers-without-local", ["plan", "--network", "--local-markers", "--out",
+                                              "out"], "set local_requirement_m"),
     Case("plan-odometry-zero", ["plan", "--network", "--odometry-percent", "0", "--out", "out"],
          "--odometry-percent", 2),
     Case("plan-heading-aid-unknown", ["plan", "--network", "--heading-aid", "compass",
