@@ -7,7 +7,7 @@ a + b ppm, datum at the first station or at the centre) and local (between stati
         [--within 50] [--kinds datum,local,distance] [--figures ellipsoid,quantile]
         [--heading-prior DEG] [--heading-aid sun-sensor|star-tracker] [--heading-bias DEG]
         [--odometry-percent P] [--odometry-heading DEG_PER_M] [--search-time-limit 300]
-        [--plan-time-limit 0] [--local-markers]
+        [--plan-time-limit 0] [--local-markers] [--save-layouts DIR]
 
 For every combination it runs the network greedy (``greedy_network``: markers, wall time), then
 the local search that prunes its layout and swaps pairs of its sites for one
@@ -17,7 +17,10 @@ Each layout is re-judged here from its covariance: the worst ratio of a station'
 allowance ``a + b ppm d`` (``d`` its horizontal distance from the datum, computed in this
 script), or of a pair's relative error to ``--requirement`` for the local kinds. Prints one
 line per case and a final JSON object. No chance constraint (the
-requirement alone is measured).
+requirement alone is measured). With ``--save-layouts DIR`` each case's best passing layout
+(fewest markers of the local search's and the program's) is written to ``DIR/<case>.npz``
+(:func:`planner.studies.layout_geometry.save_layout`), for the suite's independent re-check
+(``tests/planner/test_large_layouts.py``).
 """
 
 from __future__ import annotations
@@ -102,6 +105,8 @@ def main() -> None:
                          "--within (local_markers)")
     ap.add_argument("--plan-time-limit", type=float, default=0.0,
                     help="also run the integer program with this time limit, s (0: greedy only)")
+    ap.add_argument("--save-layouts", default=None,
+                    help="write each case's best passing layout to DIR/<case>.npz")
     args = ap.parse_args()
 
     from error_model import default_model
@@ -132,7 +137,7 @@ def main() -> None:
                             args.within, args.kinds.split(","), args.figures.split(",")):
         if args.local_markers and cfg.local_requirement_m is not None:
             cfg, label = cfg.replace(local_markers=True), label + " (and markers)"
-        row = {"case": label}
+        row, layouts = {"case": label}, {}
         t = time.perf_counter()
         try:
             g = greedy_network(problem, cfg, network_model(problem, cfg))
@@ -141,6 +146,7 @@ def main() -> None:
                                                                         g.selected), 4)}
             pruned = local_search(problem, cfg, network_model(problem, cfg), g.selected,
                                   deadline=time.perf_counter() + args.search_time_limit)
+            layouts["pruned"] = pruned.selected
             row["pruned"] = {**pruned.record(), "worst_error_over_allowance": round(
                 judged(problem, cfg, pruned.selected), 4),
                 "checked": bool(evaluate_layout(problem, pruned.selected, cfg).all_ok)}
@@ -151,6 +157,7 @@ def main() -> None:
             try:
                 r = plan_sites(problem, cfg)
                 sol = r.solution
+                layouts["plan"] = r.selected
                 row["plan"] = {"markers": int(r.selected.sum()), "status": sol.status,
                                "dual_bound": sol.dual_bound, "gap": sol.gap,
                                "time_s": round(time.perf_counter() - t, 1),
@@ -158,10 +165,31 @@ def main() -> None:
                                                                           r.selected), 4)}
             except InfeasiblePlanError as exc:
                 row["plan"] = {"error": str(exc)[:200]}
+        if args.save_layouts:
+            _save_best(args.save_layouts, problem, cfg, label, row, layouts)
         print(f"  {label}: {json.dumps({k: v for k, v in row.items() if k != 'case'})}",
               flush=True)
         out["cases"].append(row)
     print(json.dumps(out))
+
+
+def _save_best(folder, problem, config, label, row, layouts) -> None:
+    """Write the case's passing layout with the fewest markers (the local search's or the
+    program's) to ``folder/<label as a file name>.npz``, with its label, source and count."""
+    import re
+    from pathlib import Path
+
+    from planner.studies.layout_geometry import save_layout
+
+    passing = {k: sel for k, sel in layouts.items()
+               if row[k].get("worst_error_over_allowance", 2.0) <= 1.0}
+    if not passing:
+        return
+    best = min(passing, key=lambda k: int(passing[k].sum()))
+    name = re.sub(r"[^a-z0-9]+", "-", label.lower()).strip("-")
+    Path(folder).mkdir(parents=True, exist_ok=True)
+    save_layout(Path(folder) / f"{name}.npz", problem, config, passing[best],
+                {"label": label, "source": best, "markers": int(passing[best].sum())})
 
 
 if __name__ == "__main__":
