@@ -126,7 +126,8 @@ def plan_record(outcome) -> dict:
               "gap": _num(sol.gap),
               "iterations": res.iterations, "accuracy_cuts": res.n_cuts,
               "proven_optimal": sol.status == "optimal",
-              "local_search": None if res.pruning is None else res.pruning.record()}
+              "local_search": None if res.pruning is None else res.pruning.record(),
+              "root_relaxation": res.root}
     vis = outcome.visibility
     network = _network_record(outcome, stations, markers) if cfg.network else None
     doc = {

@@ -280,7 +280,7 @@ def _plan_network(problem: PlanProblem, config, model: Model | None,
     forbidden = problem.site_mask(config.forbidden, "forbidden")
     j_all = net.information(~forbidden & ~hopeless & (net.n_stations_seeing > 0))
     upper_bound = greedy = None
-    root_bound = -np.inf
+    root_bound, root = -np.inf, None
     existing = problem.site_mask(config.existing, "existing") | problem.site_existing
     if int(net.tying.sum()) > _SPARSE_ABOVE_SITES and not config.redundant \
             and np.all(problem.site_cost[~existing] == 1):
@@ -321,7 +321,8 @@ def _plan_network(problem: PlanProblem, config, model: Model | None,
                                 [RowKind("upper-bound")])
         budget_s = max(_ROOT_TIME_FRACTION * (config.time_limit_s - (time.perf_counter() - t0)),
                        _ROOT_MIN_TIME_FRACTION * config.time_limit_s)
-        model, root_bound = _root_relaxation(problem, model, config, net, upper_bound, budget_s)
+        model, root_bound, root = _root_relaxation(problem, model, config, net, upper_bound,
+                                                   budget_s)
 
     def cuts(selected):
         rows = _stacked(network_cuts(problem, model, selected, config, net, j_all, upper_bound),
@@ -332,11 +333,11 @@ def _plan_network(problem: PlanProblem, config, model: Model | None,
 
     result = _cut_loop(problem, config, model, cuts, check, incumbent=start, t0=t0,
                        bound=root_bound, repair=repair)
-    return replace(result, greedy=greedy, pruning=pruning)
+    return replace(result, greedy=greedy, pruning=pruning, root=root)
 
 
 def _root_relaxation(problem: PlanProblem, model: Model, config, net: NetworkModel,
-                     upper_bound: int, budget_s: float) -> tuple[Model, float]:
+                     upper_bound: int, budget_s: float) -> tuple[Model, float, dict]:
     """Tighten a large network model at its LP relaxation before branching; a lower bound.
 
     With ``x`` relaxed to ``[0, 1]``: first one tangent per station at the every-site
@@ -364,6 +365,10 @@ def _root_relaxation(problem: PlanProblem, model: Model, config, net: NetworkMod
         ``model`` with the rows (family ``"oa-root"``).
     bound : float
         Proven lower bound on the objective (``-inf`` when no LP solved).
+    record : dict
+        ``bound``, ``lp_solves``, ``rows`` (tangents), ``time_s`` and ``stopped``: why the loop
+        ended (``"budget"``, ``"rounds"``, ``"stall"``, ``"solved"``: the LP solution passes,
+        or the LP's status).
     """
     t0 = time.perf_counter()
     allowed = net.allowed_station_m
@@ -388,6 +393,7 @@ def _root_relaxation(problem: PlanProblem, model: Model, config, net: NetworkMod
     lp = replace(model, integrality=np.zeros_like(model.integrality))
     bound, history = -np.inf, []
     added = 0
+    stopped = "rounds"
     for _ in range(_ROOT_MAX_ROUNDS):
         if cuts[added:]:
             rows = sp.vstack([model.site_row(np.flatnonzero(in_model & (c > 0)),
@@ -398,15 +404,18 @@ def _root_relaxation(problem: PlanProblem, model: Model, config, net: NetworkMod
             added = len(cuts)
         remaining = budget_s - (time.perf_counter() - t0)
         if remaining <= 0:
+            stopped = "budget"
             break
         sol = solve(lp, remaining, 0.0)
         if sol.status != "optimal" or sol.x is None:
+            stopped = sol.status
             break
         bound = max(bound, sol.objective)
         history.append(bound)
         x_lp = np.zeros(problem.n_sites)
         x_lp[model.var_site] = sol.x[:nx]
         if len(history) > 5 and history[-1] - history[-6] < _ROOT_STALL * abs(history[-1]):
+            stopped = "stall"
             break
         failing = np.zeros(0, np.int64)
         for _ in range(_ROOT_MAX_STEPS):
@@ -417,6 +426,7 @@ def _root_relaxation(problem: PlanProblem, model: Model, config, net: NetworkMod
                 break
             x_in = x_lin
         if failing.size == 0:  # the LP solution (nearly) passes: the relaxation is solved
+            stopped = "solved"
             break
         cuts += net.station_tangents(cov, failing)
     kept = []
@@ -427,7 +437,13 @@ def _root_relaxation(problem: PlanProblem, model: Model, config, net: NetworkMod
     if kept:
         rows, lower, kinds = zip(*kept, strict=True)
         model = model.with_rows(sp.vstack(rows), lower, np.full(len(lower), np.inf), kinds)
-    return model, bound
+    if np.isfinite(bound) and np.all(model.integrality == 1) \
+            and np.all(model.c == np.round(model.c)):
+        bound = float(math.ceil(bound - 1e-6))  # a bound on a whole number: on its ceiling
+    record = {"bound": float(bound), "lp_solves": len(history), "rows": len(cuts),
+              "time_s": round(time.perf_counter() - t0, 1), "stopped": stopped,
+              "bounds": [round(float(b), 2) for b in history]}
+    return model, bound, record
 
 
 def _cut_loop(problem: PlanProblem, config, model: Model, cuts, check,

@@ -210,3 +210,20 @@ def test_model_rows_spell_the_formulation(redundant):
         row = np.zeros(m.n_vars)
         row[list(entries)] = list(entries.values())
         np.testing.assert_array_equal(a[r], row, err_msg=f"row {r} ({family}, station {s})")
+
+
+def test_a_linear_relaxation_keeps_its_fractional_solution():
+    # the root relaxation linearises at the LP's own point: its x must not come back rounded
+    import scipy.sparse as sp
+
+    from planner.program.model import Model
+
+    model = Model(c=np.ones(2), A=sp.csr_array(np.array([[2.0, 2.0]])), row_lb=np.ones(1),
+                  row_ub=np.full(1, np.inf), lb=np.zeros(2), ub=np.ones(2),
+                  integrality=np.zeros(2, np.int32), var_site=np.arange(2),
+                  site_var=np.arange(2), row_kind=(RowKind("cover"),))
+    sol = solve(model, 10.0)
+    assert sol.status == "optimal" and sol.objective == pytest.approx(0.5)
+    assert sol.x.sum() == pytest.approx(0.5)
+    integer = solve(replace(model, integrality=np.ones(2, np.int32)), 10.0)
+    assert integer.objective == 1.0 and set(integer.x) <= {0.0, 1.0}
