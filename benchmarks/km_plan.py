@@ -136,7 +136,7 @@ def main() -> None:
     lines = [f"grid_spacing_m = {args.network_grid_spacing or args.grid_spacing}",
              f"requirement_m = {args.network_requirement}"]
     if args.network_local is not None:
-        lines += [f"local_requirement_m = {args.network_local}",
+        lines += ["network = true", f"local_requirement_m = {args.network_local}",
                   f"local_within_m = {args.network_within}", "datum_requirement = false"]
     if args.error_figure:
         lines.append(f'error_figure = "{args.error_figure}"')

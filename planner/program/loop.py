@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import math
 import time
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import replace
 
 import numpy as np
@@ -51,15 +52,13 @@ _GREEDY_TIME_FRACTION = 0.5
 #: ... and its local search (:func:`~planner.program.local_search.local_search`) tries no move
 #: after this fraction of the time limit.
 _PRUNE_TIME_FRACTION = 0.65
-#: Network mode, large problems: the root relaxation (:func:`_root_relaxation`) spends at most
-#: this fraction of the time left after the greedy incumbent, at most this many LP solves, and
-#: stops when its bound rose less than this (relative) over 5 solves; its rows in the integer
-#: program give up at most this fraction of their right-hand side.
-_ROOT_TIME_FRACTION = 0.5
-#: ... and at least this fraction of the whole time limit, even when the greedy incumbent took
-#: the rest (a time-limited plan then still reports a proven bound; the run may exceed the
-#: time limit by up to this fraction).
-_ROOT_MIN_TIME_FRACTION = 0.1
+#: Network mode, large problems: the root relaxation (:func:`_root_relaxation`) runs in a second
+#: thread while the greedy incumbent and its local search run (HiGHS and the linear algebra
+#: release the interpreter lock: on two cores the bound costs the incumbent little time), and
+#: stops at this fraction of the time limit, after at most this many LP solves, or when its bound
+#: rose less than this (relative) over 5 solves; its rows in the integer program give up at most
+#: this fraction of their right-hand side.
+_ROOT_TIME_FRACTION = 0.75
 _ROOT_MAX_ROUNDS = 100
 _ROOT_STALL = 2e-3
 _ROOT_SPARSE_SLACK = 0.05
@@ -282,11 +281,16 @@ def _plan_network(problem: PlanProblem, config, model: Model | None,
     upper_bound = greedy = None
     root_bound, root = -np.inf, None
     existing = problem.site_mask(config.existing, "existing") | problem.site_existing
+    root_job = None
     if int(net.tying.sum()) > _SPARSE_ABOVE_SITES and not config.redundant \
             and np.all(problem.site_cost[~existing] == 1):
         # every layout at least as good as the greedy one has at most its number of sites
         from planner.program.baselines import network_baseline
 
+        pool = ThreadPoolExecutor(1, thread_name_prefix="root-relaxation")
+        root_job = pool.submit(_root_relaxation, problem, model, net,
+                               t0 + _ROOT_TIME_FRACTION * config.time_limit_s)
+        pool.shutdown(wait=False)  # the job runs on; its result is waited for below
         # a stuck greedy gives no starting layout: the search goes on without one
         greedy = network_baseline(problem, config.replace(
             forbidden=config.forbidden + tuple(
@@ -311,6 +315,9 @@ def _plan_network(problem: PlanProblem, config, model: Model | None,
             start = pruning.selected
         if chance is not None and not chance.layout_ok(start):
             start = repair(start)  # None: it cannot
+    root_cuts = []
+    if root_job is not None:  # valid with or without a starting layout
+        root_cuts, root_bound, root = root_job.result()
     if start is not None:
         in_model = model.site_var >= 0
         upper_bound = int((start & in_model).sum())
@@ -319,10 +326,7 @@ def _plan_network(problem: PlanProblem, config, model: Model | None,
                            shape=(1, model.n_vars))
         model = model.with_rows(row, [-np.inf], [float(upper_bound)],
                                 [RowKind("upper-bound")])
-        budget_s = max(_ROOT_TIME_FRACTION * (config.time_limit_s - (time.perf_counter() - t0)),
-                       _ROOT_MIN_TIME_FRACTION * config.time_limit_s)
-        model, root_bound, root = _root_relaxation(problem, model, config, net, upper_bound,
-                                                   budget_s)
+        model = _root_rows(model, root_cuts, upper_bound)
 
     def cuts(selected):
         rows = _stacked(network_cuts(problem, model, selected, config, net, j_all, upper_bound),
@@ -336,9 +340,9 @@ def _plan_network(problem: PlanProblem, config, model: Model | None,
     return replace(result, greedy=greedy, pruning=pruning, root=root)
 
 
-def _root_relaxation(problem: PlanProblem, model: Model, config, net: NetworkModel,
-                     upper_bound: int, budget_s: float) -> tuple[Model, float, dict]:
-    """Tighten a large network model at its LP relaxation before branching; a lower bound.
+def _root_relaxation(problem: PlanProblem, model: Model, net: NetworkModel, deadline: float
+                     ) -> tuple[list[tuple[int, np.ndarray, float]], float, dict]:
+    """Tangent rows that tighten a large network model at its LP relaxation; a lower bound.
 
     With ``x`` relaxed to ``[0, 1]``: first one tangent per station at the every-site
     information scaled onto the requirement's boundary, ``J_t = J_prior + t (J_all - J_prior)``
@@ -352,19 +356,22 @@ def _root_relaxation(problem: PlanProblem, model: Model, config, net: NetworkMod
     tangent is valid for every layout (the error is convex in the information), so each LP
     optimum bounds the fewest markers from below. Stops after ``budget_s``, ``_ROOT_MAX_ROUNDS``
     solves, when the bound rose less than ``_ROOT_STALL`` (relative) over 5 solves, or when
-    the LP solution passes every station (to ``_ROOT_MAX_STEPS`` halvings).
+    the LP solution passes every station (to ``_ROOT_MAX_STEPS`` halvings). The LP is
+    ``model`` relaxed; it reads ``model`` and ``net`` only (it runs beside the greedy).
 
-    The integer program gets the rows sparsified under ``upper_bound``
-    (:func:`~planner.program.cuts_network.sparse_tangent`, giving up at most
-    ``_ROOT_SPARSE_SLACK`` of each right-hand side); the returned bound is the LP's with the
-    full rows.
+    Parameters
+    ----------
+    deadline : float
+        :func:`time.perf_counter` value after which no LP is started (one running is stopped).
 
     Returns
     -------
-    model : Model
-        ``model`` with the rows (family ``"oa-root"``).
+    cuts : list of (station, coef (n,), rhs)
+        The tangents, ``sum_j coef_j x_j >= rhs`` over every site (:func:`_root_rows` adds them
+        to the integer program).
     bound : float
-        Proven lower bound on the objective (``-inf`` when no LP solved).
+        Proven lower bound on the objective (``-inf`` when no LP solved), rounded up when every
+        feasible objective is a whole number.
     record : dict
         ``bound``, ``lp_solves``, ``rows`` (tangents), ``time_s`` and ``stopped``: why the loop
         ended (``"budget"``, ``"rounds"``, ``"stall"``, ``"solved"``: the LP solution passes,
@@ -402,7 +409,7 @@ def _root_relaxation(problem: PlanProblem, model: Model, config, net: NetworkMod
             n = len(cuts) - added
             lp = lp.with_rows(rows, np.ones(n), np.full(n, np.inf), [RowKind("oa-root")] * n)
             added = len(cuts)
-        remaining = budget_s - (time.perf_counter() - t0)
+        remaining = deadline - time.perf_counter()
         if remaining <= 0:
             stopped = "budget"
             break
@@ -429,21 +436,31 @@ def _root_relaxation(problem: PlanProblem, model: Model, config, net: NetworkMod
             stopped = "solved"
             break
         cuts += net.station_tangents(cov, failing)
-    kept = []
-    for k, c, rhs in cuts:
-        sites, coef, lo = sparse_tangent(np.where(in_model, c, 0.0), rhs, upper_bound,
-                                          MAX_TERMS, _ROOT_SPARSE_SLACK)
-        kept.append((model.site_row(sites, coef), lo, RowKind("oa-root", int(k))))
-    if kept:
-        rows, lower, kinds = zip(*kept, strict=True)
-        model = model.with_rows(sp.vstack(rows), lower, np.full(len(lower), np.inf), kinds)
     if np.isfinite(bound) and np.all(model.integrality == 1) \
             and np.all(model.c == np.round(model.c)):
         bound = float(math.ceil(bound - 1e-6))  # a bound on a whole number: on its ceiling
     record = {"bound": float(bound), "lp_solves": len(history), "rows": len(cuts),
               "time_s": round(time.perf_counter() - t0, 1), "stopped": stopped,
               "bounds": [round(float(b), 2) for b in history]}
-    return model, bound, record
+    return cuts, bound, record
+
+
+def _root_rows(model: Model, cuts, upper_bound: int) -> Model:
+    """``model`` with the root relaxation's tangents (:func:`_root_relaxation`) as rows of
+    family ``"oa-root"``, sparsified under ``upper_bound``
+    (:func:`~planner.program.cuts_network.sparse_tangent`, giving up at most
+    ``_ROOT_SPARSE_SLACK`` of each right-hand side: valid for every layout of at most
+    ``upper_bound`` sites)."""
+    in_model = model.site_var >= 0
+    kept = []
+    for k, c, rhs in cuts:
+        sites, coef, lo = sparse_tangent(np.where(in_model, c, 0.0), rhs, upper_bound,
+                                          MAX_TERMS, _ROOT_SPARSE_SLACK)
+        kept.append((model.site_row(sites, coef), lo, RowKind("oa-root", int(k))))
+    if not kept:
+        return model
+    rows, lower, kinds = zip(*kept, strict=True)
+    return model.with_rows(sp.vstack(rows), lower, np.full(len(lower), np.inf), kinds)
 
 
 def _cut_loop(problem: PlanProblem, config, model: Model, cuts, check,
