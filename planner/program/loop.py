@@ -25,6 +25,7 @@ from planner.accuracy.checks import StationInfo, diagnose, evaluate_layout, stat
 from planner.accuracy.network import NetworkModel, network_model
 from planner.problem.usability import PlanProblem
 from planner.program.cuts_chance import ChanceRule, chance_preflight, chance_rule
+from planner.program.cuts_count import station_count_rows
 from planner.program.cuts_known import accuracy_cuts
 from planner.program.cuts_network import MAX_TERMS, network_cuts, network_preflight, sparse_tangent
 from planner.program.local_search import local_search
@@ -315,9 +316,9 @@ def _plan_network(problem: PlanProblem, config, model: Model | None,
             start = pruning.selected
         if chance is not None and not chance.layout_ok(start):
             start = repair(start)  # None: it cannot
-    root_cuts = []
+    root_cuts, counts = [], (None, [], [])
     if root_job is not None:  # valid with or without a starting layout
-        root_cuts, root_bound, root = root_job.result()
+        root_cuts, counts, root_bound, root = root_job.result()
     if start is not None:
         in_model = model.site_var >= 0
         upper_bound = int((start & in_model).sum())
@@ -327,6 +328,9 @@ def _plan_network(problem: PlanProblem, config, model: Model | None,
         model = model.with_rows(row, [-np.inf], [float(upper_bound)],
                                 [RowKind("upper-bound")])
         model = _root_rows(model, root_cuts, upper_bound)
+        if counts[0] is not None:
+            model = model.with_rows(counts[0], counts[1], np.full(len(counts[1]), np.inf),
+                                    counts[2])
 
     def cuts(selected):
         rows = _stacked(network_cuts(problem, model, selected, config, net, j_all, upper_bound),
@@ -341,7 +345,7 @@ def _plan_network(problem: PlanProblem, config, model: Model | None,
 
 
 def _root_relaxation(problem: PlanProblem, model: Model, net: NetworkModel, deadline: float
-                     ) -> tuple[list[tuple[int, np.ndarray, float]], float, dict]:
+                     ) -> tuple[list[tuple[int, np.ndarray, float]], tuple, float, dict]:
     """Tangent rows that tighten a large network model at its LP relaxation; a lower bound.
 
     With ``x`` relaxed to ``[0, 1]``: first one tangent per station at the every-site
@@ -356,8 +360,11 @@ def _root_relaxation(problem: PlanProblem, model: Model, net: NetworkModel, dead
     tangent is valid for every layout (the error is convex in the information), so each LP
     optimum bounds the fewest markers from below. Stops after ``budget_s``, ``_ROOT_MAX_ROUNDS``
     solves, when the bound rose less than ``_ROOT_STALL`` (relative) over 5 solves, or when
-    the LP solution passes every station (to ``_ROOT_MAX_STEPS`` halvings). The LP is
-    ``model`` relaxed; it reads ``model`` and ``net`` only (it runs beside the greedy).
+    the LP solution passes every station (to ``_ROOT_MAX_STEPS`` halvings). Then, before
+    ``deadline``, the per-station count rows (each station's count of its own tying sites,
+    rounded up: :func:`~planner.program.cuts_count.station_count_rows`) join the LP, which is
+    solved once more. The LP is ``model`` relaxed; it reads ``model`` and ``net`` only (it
+    runs beside the greedy).
 
     Parameters
     ----------
@@ -369,6 +376,8 @@ def _root_relaxation(problem: PlanProblem, model: Model, net: NetworkModel, dead
     cuts : list of (station, coef (n,), rhs)
         The tangents, ``sum_j coef_j x_j >= rhs`` over every site (:func:`_root_rows` adds them
         to the integer program).
+    counts : (rows, lower, kinds)
+        The count rows (``rows`` None: none), for the integer program as they are.
     bound : float
         Proven lower bound on the objective (``-inf`` when no LP solved), rounded up when every
         feasible objective is a whole number.
@@ -436,13 +445,32 @@ def _root_relaxation(problem: PlanProblem, model: Model, net: NetworkModel, dead
             stopped = "solved"
             break
         cuts += net.station_tangents(cov, failing)
+    counts = (None, [], [])
+    if stopped != "budget" and time.perf_counter() < deadline:
+        rows, lower, kinds, extra = station_count_rows(model, net, cuts, deadline)
+        cuts += extra
+        counts = (rows, lower, kinds)
+        new = cuts[added:]
+        if rows is not None or new:
+            blocks = [rows] if rows is not None else []
+            blocks += [model.site_row(np.flatnonzero(in_model & (c > 0)),
+                                      c[in_model & (c > 0)] / rhs) for _, c, rhs in new]
+            lp = lp.with_rows(sp.vstack(blocks), list(lower) + [1.0] * len(new),
+                              np.full(len(lower) + len(new), np.inf),
+                              list(kinds) + [RowKind("oa-root")] * len(new))
+            remaining = deadline - time.perf_counter()
+            sol = solve(lp, remaining, 0.0) if remaining > 0 else None
+            if sol is not None and sol.status == "optimal":
+                bound = max(bound, sol.objective)
+                history.append(bound)
     if np.isfinite(bound) and np.all(model.integrality == 1) \
             and np.all(model.c == np.round(model.c)):
         bound = float(math.ceil(bound - 1e-6))  # a bound on a whole number: on its ceiling
     record = {"bound": float(bound), "lp_solves": len(history), "rows": len(cuts),
+              "count_rows": len(counts[1]),
               "time_s": round(time.perf_counter() - t0, 1), "stopped": stopped,
               "bounds": [round(float(b), 2) for b in history]}
-    return cuts, bound, record
+    return cuts, counts, bound, record
 
 
 def _root_rows(model: Model, cuts, upper_bound: int) -> Model:
