@@ -28,6 +28,7 @@ from planner.program.cuts_chance import ChanceRule, chance_preflight, chance_rul
 from planner.program.cuts_count import station_count_rows
 from planner.program.cuts_known import accuracy_cuts
 from planner.program.cuts_network import MAX_TERMS, network_cuts, network_preflight, sparse_tangent
+from planner.program.highs import WarmLP
 from planner.program.local_search import local_search
 from planner.program.model import (
     Model,
@@ -363,8 +364,9 @@ def _root_relaxation(problem: PlanProblem, model: Model, net: NetworkModel, dead
     the LP solution passes every station (to ``_ROOT_MAX_STEPS`` halvings). Then, before
     ``deadline``, the per-station count rows (each station's count of its own tying sites,
     rounded up: :func:`~planner.program.cuts_count.station_count_rows`) join the LP, which is
-    solved once more. The LP is ``model`` relaxed; it reads ``model`` and ``net`` only (it
-    runs beside the greedy).
+    solved once more. The LP is ``model`` relaxed, kept in HiGHS between rounds
+    (:class:`~planner.program.highs.WarmLP`: each round starts from the last basis); it reads
+    ``model`` and ``net`` only (it runs beside the greedy).
 
     Parameters
     ----------
@@ -406,7 +408,7 @@ def _root_relaxation(problem: PlanProblem, model: Model, net: NetworkModel, dead
                   for k in tied)
     for k, cov_t in scaled:
         cuts += net.station_tangents(cov_t, [k])
-    lp = replace(model, integrality=np.zeros_like(model.integrality))
+    lp = WarmLP(model.c, model.A, model.row_lb, model.row_ub, model.lb, model.ub)
     bound, history = -np.inf, []
     added = 0
     stopped = "rounds"
@@ -416,13 +418,13 @@ def _root_relaxation(problem: PlanProblem, model: Model, net: NetworkModel, dead
                                              c[in_model & (c > 0)] / rhs)
                               for _, c, rhs in cuts[added:]])
             n = len(cuts) - added
-            lp = lp.with_rows(rows, np.ones(n), np.full(n, np.inf), [RowKind("oa-root")] * n)
+            lp.add_rows(rows, np.ones(n), np.full(n, np.inf))
             added = len(cuts)
         remaining = deadline - time.perf_counter()
         if remaining <= 0:
             stopped = "budget"
             break
-        sol = solve(lp, remaining, 0.0)
+        sol = lp.solve(remaining)
         if sol.status != "optimal" or sol.x is None:
             stopped = sol.status
             break
@@ -455,11 +457,10 @@ def _root_relaxation(problem: PlanProblem, model: Model, net: NetworkModel, dead
             blocks = [rows] if rows is not None else []
             blocks += [model.site_row(np.flatnonzero(in_model & (c > 0)),
                                       c[in_model & (c > 0)] / rhs) for _, c, rhs in new]
-            lp = lp.with_rows(sp.vstack(blocks), list(lower) + [1.0] * len(new),
-                              np.full(len(lower) + len(new), np.inf),
-                              list(kinds) + [RowKind("oa-root")] * len(new))
+            lp.add_rows(sp.vstack(blocks), list(lower) + [1.0] * len(new),
+                        np.full(len(lower) + len(new), np.inf))
             remaining = deadline - time.perf_counter()
-            sol = solve(lp, remaining, 0.0) if remaining > 0 else None
+            sol = lp.solve(remaining) if remaining > 0 else None
             if sol is not None and sol.status == "optimal":
                 bound = max(bound, sol.objective)
                 history.append(bound)

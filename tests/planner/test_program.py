@@ -227,3 +227,21 @@ def test_a_linear_relaxation_keeps_its_fractional_solution():
     assert sol.x.sum() == pytest.approx(0.5)
     integer = solve(replace(model, integrality=np.ones(2, np.int32)), 10.0)
     assert integer.objective == 1.0 and set(integer.x) <= {0.0, 1.0}
+
+
+def test_a_warm_lp_with_rows_added_solves_as_the_whole_lp_would():
+    import scipy.sparse as sp
+
+    from planner.program.highs import WarmLP, run_highs
+
+    rng = np.random.default_rng(0)
+    a = sp.csr_array(rng.uniform(0, 1, (6, 8)) * (rng.uniform(size=(6, 8)) < 0.6))
+    c, lb, ub = rng.uniform(1, 2, 8), np.zeros(8), np.ones(8)
+    lp = WarmLP(c, a[:2], np.ones(2), np.full(2, np.inf), lb, ub)
+    assert lp.solve(10.0).status == "optimal"
+    lp.add_rows(a[2:], np.ones(4), np.full(4, np.inf))
+    warm = lp.solve(10.0)
+    whole = run_highs(c, a, np.ones(6), np.full(6, np.inf), lb, ub, np.zeros(8, np.int32),
+                      10.0, 0.0)
+    assert warm.status == whole.status
+    assert warm.objective == pytest.approx(whole.objective, rel=1e-9, abs=1e-9)
