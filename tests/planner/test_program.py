@@ -235,7 +235,8 @@ def test_a_warm_lp_with_rows_added_solves_as_the_whole_lp_would():
     from planner.program.highs import WarmLP, run_highs
 
     rng = np.random.default_rng(0)
-    a = sp.csr_array(rng.uniform(0, 1, (6, 8)) * (rng.uniform(size=(6, 8)) < 0.6))
+    a = sp.csr_array(rng.uniform(0, 1, (6, 8)) * (rng.uniform(size=(6, 8)) < 0.6)
+                     + np.eye(6, 8))  # every row can reach 1 with x <= 1
     c, lb, ub = rng.uniform(1, 2, 8), np.zeros(8), np.ones(8)
     lp = WarmLP(c, a[:2], np.ones(2), np.full(2, np.inf), lb, ub)
     assert lp.solve(10.0).status == "optimal"
@@ -243,5 +244,5 @@ def test_a_warm_lp_with_rows_added_solves_as_the_whole_lp_would():
     warm = lp.solve(10.0)
     whole = run_highs(c, a, np.ones(6), np.full(6, np.inf), lb, ub, np.zeros(8, np.int32),
                       10.0, 0.0)
-    assert warm.status == whole.status
+    assert warm.status == whole.status == "optimal"
     assert warm.objective == pytest.approx(whole.objective, rel=1e-9, abs=1e-9)
