@@ -9,6 +9,7 @@ one tile in the same run (a whole-site scene is not built). Finally one JSON obj
     .venv/bin/python -u benchmarks/km_plan.py [--grid-spacing 4] [--network-grid-spacing G]
         [--time-limit 120] [--network-time-limit 600] [--network-requirement 6] [--keep DIR]
         [--network-local 0.10] [--network-within 50] [--error-figure quantile]
+        [--heading-aid sun-sensor|star-tracker]
         [--plans plan,plan_network]
 
 The network plan's requirement is relative to the station nearest the centre, without a heading
@@ -108,6 +109,7 @@ def main() -> None:
                     help="local_within_m of the network plan with --network-local, m")
     ap.add_argument("--error-figure", help="error_figure of the network plan (default the "
                                            "planner's)")
+    ap.add_argument("--heading-aid", help="heading_aid of the network plan (default none)")
     ap.add_argument("--plans", default="plan,plan_network",
                     help="plans to run, comma-separated: plan, plan_network")
     ap.add_argument("--keep", type=Path, help="Write the configuration and plans here.")
@@ -140,6 +142,8 @@ def main() -> None:
                   f"local_within_m = {args.network_within}", "datum_requirement = false"]
     if args.error_figure:
         lines.append(f'error_figure = "{args.error_figure}"')
+    if args.heading_aid:
+        lines.append(f'heading_aid = "{args.heading_aid}"')
     network.write_text("\n".join(lines) + "\n")
     cli = str(Path(sys.executable).with_name("markerplan"))
     figures = {"site": site, "whole_mesh_mb": whole_mb, "whole_mesh_s": whole_s,
