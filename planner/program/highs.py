@@ -54,6 +54,12 @@ class HighsOutcome:
     message: str
 
 
+def reset_after_fork() -> None:
+    """In a forked child: drop HiGHS' global thread scheduler inherited from the parent (its
+    worker threads do not exist in the child); the next run starts a new one."""
+    _core._Highs.resetThreadScheduler(False)
+
+
 def highs_version() -> str:
     """The HiGHS version highspy runs, e.g. ``"1.16.0"``."""
     return _core._Highs().version()

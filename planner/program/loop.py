@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import math
 import time
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import replace
 
 import numpy as np
@@ -24,11 +23,12 @@ from markerplan.errors import ConfigError, InfeasiblePlanError, PlanTimeLimitErr
 from planner.accuracy.checks import StationInfo, diagnose, evaluate_layout, station_infos
 from planner.accuracy.network import NetworkModel, network_model
 from planner.problem.usability import PlanProblem
+from planner.program.background import in_background
 from planner.program.cuts_chance import ChanceRule, chance_preflight, chance_rule
 from planner.program.cuts_count import station_count_rows
 from planner.program.cuts_known import accuracy_cuts
 from planner.program.cuts_network import MAX_TERMS, network_cuts, network_preflight, sparse_tangent
-from planner.program.highs import WarmLP
+from planner.program.highs import WarmLP, reset_after_fork
 from planner.program.local_search import local_search
 from planner.program.model import (
     Model,
@@ -54,9 +54,9 @@ _GREEDY_TIME_FRACTION = 0.5
 #: ... and its local search (:func:`~planner.program.local_search.local_search`) tries no move
 #: after this fraction of the time limit.
 _PRUNE_TIME_FRACTION = 0.65
-#: Network mode, large problems: the root relaxation (:func:`_root_relaxation`) runs in a second
-#: thread while the greedy incumbent and its local search run (HiGHS and the linear algebra
-#: release the interpreter lock: on two cores the bound costs the incumbent little time), and
+#: Network mode, large problems: the root relaxation (:func:`_root_relaxation`) runs in a forked
+#: process (:func:`~planner.program.background.in_background`) while the greedy incumbent and
+#: its local search run (on two cores the bound costs the incumbent little time), and
 #: stops at this fraction of the time limit, after at most this many LP solves, or when its bound
 #: rose less than this (relative) over 5 solves; its rows in the integer program give up at most
 #: this fraction of their right-hand side.
@@ -289,10 +289,9 @@ def _plan_network(problem: PlanProblem, config, model: Model | None,
         # every layout at least as good as the greedy one has at most its number of sites
         from planner.program.baselines import network_baseline
 
-        pool = ThreadPoolExecutor(1, thread_name_prefix="root-relaxation")
-        root_job = pool.submit(_root_relaxation, problem, model, net,
-                               t0 + _ROOT_TIME_FRACTION * config.time_limit_s)
-        pool.shutdown(wait=False)  # the job runs on; its result is waited for below
+        root_job = in_background(_root_relaxation, problem, model, net,
+                                 t0 + _ROOT_TIME_FRACTION * config.time_limit_s,
+                                 after_fork=reset_after_fork)
         # a stuck greedy gives no starting layout: the search goes on without one
         greedy = network_baseline(problem, config.replace(
             forbidden=config.forbidden + tuple(
@@ -319,7 +318,7 @@ def _plan_network(problem: PlanProblem, config, model: Model | None,
             start = repair(start)  # None: it cannot
     root_cuts, counts = [], (None, [], [])
     if root_job is not None:  # valid with or without a starting layout
-        root_cuts, counts, root_bound, root = root_job.result()
+        root_cuts, counts, root_bound, root = root_job()
     if start is not None:
         in_model = model.site_var >= 0
         upper_bound = int((start & in_model).sum())
