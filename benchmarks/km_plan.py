@@ -158,7 +158,8 @@ def main() -> None:
         code, wall, peak = _child(cmd, root / f"{name}.log")
         if code:
             tail = Path(f"{root / name}.log.err").read_text().strip().splitlines()[-1:]
-            sys.exit(f"{name} failed ({code}): {tail}")
+            sys.exit(f"{name} failed ({code}) after {wall:.0f} s wall, peak RSS {peak:.0f} MB: "
+                     f"{tail}")
         summary = json.loads((root / f"{name}.log").read_text().strip().splitlines()[-1])
         doc = json.loads((out / "plan.json").read_text())
         solver = doc["solver"]
