@@ -8,12 +8,20 @@ one tile in the same run (a whole-site scene is not built). Finally one JSON obj
 
     .venv/bin/python -u benchmarks/km_plan.py [--grid-spacing 4] [--network-grid-spacing G]
         [--time-limit 120] [--network-time-limit 600] [--network-requirement 6] [--keep DIR]
+        [--network-local 0.10] [--network-within 50] [--error-figure quantile]
+        [--heading-aid sun-sensor|star-tracker]
+        [--plans plan,plan_network]
 
 The network plan's requirement is relative to the station nearest the centre, without a heading
 aid. With every one of the 19,470 tying sites (4 m grid) the farthest stations reach 1.96 m, and
 with a random 60 % of them 2.5 m (the error shrinks about as one over the square root of the
 number of markers): 2.5 m would take thousands of markers. 6 m is met by the greedy with about
 900.
+
+``--network-local R`` plans the network to a local requirement instead: every pair of stations
+within ``--network-within`` m to ``R`` m relative to each other (``local_requirement_m``,
+``local_within_m``, ``datum_requirement = false``; datum still at the centre station).
+``--plans`` picks the plans run (default both).
 """
 
 from __future__ import annotations
@@ -94,6 +102,16 @@ def main() -> None:
     ap.add_argument("--network-requirement", type=float, default=6.0,
                     help="requirement_m of the network plan, m (relative to the station nearest "
                          "the centre; with every site the farthest stations reach only 1.96 m).")
+    ap.add_argument("--network-local", type=float,
+                    help="local_requirement_m of the network plan, m (then datum_requirement = "
+                         "false: only pairs within --network-within m are judged)")
+    ap.add_argument("--network-within", type=float, default=50.0,
+                    help="local_within_m of the network plan with --network-local, m")
+    ap.add_argument("--error-figure", help="error_figure of the network plan (default the "
+                                           "planner's)")
+    ap.add_argument("--heading-aid", help="heading_aid of the network plan (default none)")
+    ap.add_argument("--plans", default="plan,plan_network",
+                    help="plans to run, comma-separated: plan, plan_network")
     ap.add_argument("--keep", type=Path, help="Write the configuration and plans here.")
     args = ap.parse_args()
 
@@ -117,30 +135,41 @@ def main() -> None:
     config = root / "km.toml"
     config.write_text(f"grid_spacing_m = {args.grid_spacing}\n")
     network = root / "km-network.toml"
-    network.write_text(f"grid_spacing_m = {args.network_grid_spacing or args.grid_spacing}\n"
-                       f"requirement_m = {args.network_requirement}\n")
+    lines = [f"grid_spacing_m = {args.network_grid_spacing or args.grid_spacing}",
+             f"requirement_m = {args.network_requirement}"]
+    if args.network_local is not None:
+        lines += ["network = true", f"local_requirement_m = {args.network_local}",
+                  f"local_within_m = {args.network_within}", "datum_requirement = false"]
+    if args.error_figure:
+        lines.append(f'error_figure = "{args.error_figure}"')
+    if args.heading_aid:
+        lines.append(f'heading_aid = "{args.heading_aid}"')
+    network.write_text("\n".join(lines) + "\n")
     cli = str(Path(sys.executable).with_name("markerplan"))
     figures = {"site": site, "whole_mesh_mb": whole_mb, "whole_mesh_s": whole_s,
                "probe_mesh": mesh}
     runs = (("plan", config, args.time_limit, []),
             ("plan_network", network, args.network_time_limit,
              ["--network", "--reference-station", site["centre_station"]]))
-    for name, cfg, limit, extra in runs:
+    for name, cfg, limit, extra in (r for r in runs if r[0] in args.plans.split(",")):
         out = root / name
         cmd = [cli, "plan", "--site", "km", "--config", str(cfg), "--time-limit-s", str(limit),
                "--json", "--out", str(out), "--overwrite", *extra]
         code, wall, peak = _child(cmd, root / f"{name}.log")
         if code:
             tail = Path(f"{root / name}.log.err").read_text().strip().splitlines()[-1:]
-            sys.exit(f"{name} failed ({code}): {tail}")
+            sys.exit(f"{name} failed ({code}) after {wall:.0f} s wall, peak RSS {peak:.0f} MB: "
+                     f"{tail}")
         summary = json.loads((root / f"{name}.log").read_text().strip().splitlines()[-1])
         doc = json.loads((out / "plan.json").read_text())
         solver = doc["solver"]
         cast_s = summary["timings_s"]["scene"] + summary["timings_s"]["visibility"]
         stages = ", ".join(f"{k} {v:.1f} s" for k, v in summary["timings_s"].items())
-        req = (f" (requirement {args.network_requirement:g} m relative to "
-               f"{site['centre_station']}: 0.1 m is out of reach ~200 m from it)"
-               if extra else "")
+        req = "" if not extra else (
+            f" (local requirement {args.network_local:g} m within {args.network_within:g} m, "
+            f"datum {site['centre_station']})" if args.network_local is not None else
+            f" (requirement {args.network_requirement:g} m relative to "
+            f"{site['centre_station']}: 0.1 m is out of reach ~200 m from it)")
         greedy = summary.get("baselines", {}).get("greedy", {})
         print(f"{name}{req}: {doc['n_markers']} markers (greedy {greedy.get('n_markers')}, "
               f"meets: {greedy.get('meets_requirement')}), status {solver.get('status')}, bound "

@@ -19,8 +19,9 @@ DEM's CRS when it has one):
 - ``requirement``: requirement_m, requirement_ppm and the requirement in words, sectors,
   markers, working radius, redundant, the 95 % figure;
 - ``solver``: name, HiGHS version, threads, time limit, target gap, status, objective, dual
-  bound, gap, iterations, cuts, and ``local_search`` (large network plans: the greedy start's
-  markers and how many its pruning removed);
+  bound, gap, iterations, cuts, ``local_search`` (large network plans: the greedy start's
+  markers and how many its pruning removed) and ``root_relaxation`` (large network plans: the
+  root bound, LP solves, tangent and count rows, time and why it stopped);
 - ``markers``: id, x_m, y_m, z_m, existing, stations that use it;
 - ``stations``: id, position, heading, predicted error, markers used, occupied sectors,
   (redundant mode) worst error after losing one marker, meets_requirement;
@@ -133,7 +134,8 @@ def plan_record(outcome) -> dict:
               "gap": _num(sol.gap),
               "iterations": res.iterations, "accuracy_cuts": res.n_cuts,
               "proven_optimal": sol.status == "optimal",
-              "local_search": None if res.pruning is None else res.pruning.record()}
+              "local_search": None if res.pruning is None else res.pruning.record(),
+              "root_relaxation": res.root}
     vis = outcome.visibility
     network = _network_record(outcome, stations, markers) if cfg.network else None
     doc = {

@@ -4,7 +4,8 @@
 lb <= x <= ub`` to HiGHS in one row-wise call (the CSR arrays as they are: no
 ``scipy.optimize.milp`` wrapping, no transposing copy in Python), with a thread count, a time
 limit and a relative gap; :func:`solver_record` gives the name, version and limits a plan
-records.
+records. :class:`WarmLP` keeps a linear program in HiGHS between solves, so rows added later
+are solved from the last optimal basis (dual simplex) instead of from scratch.
 """
 
 from __future__ import annotations
@@ -53,6 +54,12 @@ class HighsOutcome:
     message: str
 
 
+def reset_after_fork() -> None:
+    """In a forked child: drop HiGHS' global thread scheduler inherited from the parent (its
+    worker threads do not exist in the child); the next run starts a new one."""
+    _core._Highs.resetThreadScheduler(False)
+
+
 def highs_version() -> str:
     """The HiGHS version highspy runs, e.g. ``"1.16.0"``."""
     return _core._Highs().version()
@@ -99,10 +106,7 @@ def run_highs(c: np.ndarray, a: sp.sparray, row_lb: np.ndarray, row_ub: np.ndarr
     outcome : HighsOutcome
     """
     t0 = time.perf_counter()
-    a = sp.csr_array(a)
-    if not a.has_canonical_format:  # HiGHS wants each row's columns sorted and distinct
-        a = a.copy()
-        a.sum_duplicates()
+    a = _canonical(a)
     h = _core._Highs()
     h.setOptionValue("output_flag", False)
     h.setOptionValue("threads", THREADS)
@@ -118,6 +122,11 @@ def run_highs(c: np.ndarray, a: sp.sparray, row_lb: np.ndarray, row_ub: np.ndarr
                 a.indptr.astype(np.int32), a.indices.astype(np.int32),
                 np.ascontiguousarray(a.data, float), np.asarray(integrality, np.int32))
     h.run()
+    return _outcome(h, t0)
+
+
+def _outcome(h, t0: float) -> HighsOutcome:
+    """The :class:`HighsOutcome` of HiGHS instance ``h``'s last run, started at ``t0``."""
     model_status = h.getModelStatus()
     info = h.getInfo()
     has_x = info.primal_solution_status == int(_core.SolutionStatus.kSolutionStatusFeasible)
@@ -138,3 +147,54 @@ def run_highs(c: np.ndarray, a: sp.sparray, row_lb: np.ndarray, row_ub: np.ndarr
                         dual_bound=float(info.mip_dual_bound), gap=float(info.mip_gap),
                         solve_time_s=time.perf_counter() - t0,
                         message=h.modelStatusToString(model_status))
+
+
+class WarmLP:
+    """A linear program ``min c x  s.t.  row_lb <= A x <= row_ub, lb <= x <= ub`` kept in one
+    HiGHS instance: :meth:`add_rows` appends rows, :meth:`solve` re-solves from the last basis.
+
+    Parameters
+    ----------
+    c, lb, ub : (v,) float
+    a : (m, v) sparse
+    row_lb, row_ub : (m,) float
+        Infinite entries are open sides.
+    """
+
+    def __init__(self, c: np.ndarray, a: sp.sparray, row_lb: np.ndarray, row_ub: np.ndarray,
+                 lb: np.ndarray, ub: np.ndarray):
+        self._h = h = _core._Highs()
+        h.setOptionValue("output_flag", False)
+        h.setOptionValue("threads", THREADS)
+        a = _canonical(a)
+        h.passModel(c.shape[0], a.shape[0], int(a.nnz), int(_core.MatrixFormat.kRowwise),
+                    int(_core.ObjSense.kMinimize), 0.0, np.ascontiguousarray(c, float),
+                    np.ascontiguousarray(lb, float), np.ascontiguousarray(ub, float),
+                    np.ascontiguousarray(row_lb, float), np.ascontiguousarray(row_ub, float),
+                    a.indptr.astype(np.int32), a.indices.astype(np.int32),
+                    np.ascontiguousarray(a.data, float), np.zeros(c.shape[0], np.int32))
+
+    def add_rows(self, a: sp.sparray, row_lb, row_ub) -> None:
+        """Append rows ``row_lb <= a x <= row_ub`` (``a``: (r, v) sparse)."""
+        a = _canonical(a)
+        self._h.addRows(a.shape[0], np.ascontiguousarray(row_lb, float),
+                        np.ascontiguousarray(row_ub, float), int(a.nnz),
+                        a.indptr[:-1].astype(np.int32), a.indices.astype(np.int32),
+                        np.ascontiguousarray(a.data, float))
+
+    def solve(self, time_limit_s: float) -> HighsOutcome:
+        """Solve (from the last basis) for at most ``time_limit_s`` s of wall clock."""
+        t0 = time.perf_counter()
+        # HiGHS' time limit counts the instance's whole run time: move it on by what is spent
+        self._h.setOptionValue("time_limit", float(self._h.getRunTime() + time_limit_s))
+        self._h.run()
+        return _outcome(self._h, t0)
+
+
+def _canonical(a: sp.sparray) -> sp.csr_array:
+    """``a`` as CSR with each row's columns sorted and distinct (what HiGHS wants)."""
+    a = sp.csr_array(a)
+    if not a.has_canonical_format:
+        a = a.copy()
+        a.sum_duplicates()
+    return a

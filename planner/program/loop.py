@@ -23,9 +23,12 @@ from markerplan.errors import ConfigError, InfeasiblePlanError, PlanTimeLimitErr
 from planner.accuracy.checks import StationInfo, diagnose, evaluate_layout, station_infos
 from planner.accuracy.network import NetworkModel, network_model
 from planner.problem.usability import PlanProblem
+from planner.program.background import in_background
 from planner.program.cuts_chance import ChanceRule, chance_preflight, chance_rule
+from planner.program.cuts_count import station_count_rows
 from planner.program.cuts_known import accuracy_cuts
 from planner.program.cuts_network import MAX_TERMS, network_cuts, network_preflight, sparse_tangent
+from planner.program.highs import WarmLP, reset_after_fork
 from planner.program.local_search import local_search
 from planner.program.model import (
     Model,
@@ -51,15 +54,13 @@ _GREEDY_TIME_FRACTION = 0.5
 #: ... and its local search (:func:`~planner.program.local_search.local_search`) tries no move
 #: after this fraction of the time limit.
 _PRUNE_TIME_FRACTION = 0.65
-#: Network mode, large problems: the root relaxation (:func:`_root_relaxation`) spends at most
-#: this fraction of the time left after the greedy incumbent, at most this many LP solves, and
-#: stops when its bound rose less than this (relative) over 5 solves; its rows in the integer
-#: program give up at most this fraction of their right-hand side.
-_ROOT_TIME_FRACTION = 0.5
-#: ... and at least this fraction of the whole time limit, even when the greedy incumbent took
-#: the rest (a time-limited plan then still reports a proven bound; the run may exceed the
-#: time limit by up to this fraction).
-_ROOT_MIN_TIME_FRACTION = 0.1
+#: Network mode, large problems: the root relaxation (:func:`_root_relaxation`) runs in a forked
+#: process (:func:`~planner.program.background.in_background`) while the greedy incumbent and
+#: its local search run (on two cores the bound costs the incumbent little time), and
+#: stops at this fraction of the time limit, after at most this many LP solves, or when its bound
+#: rose less than this (relative) over 5 solves; its rows in the integer program give up at most
+#: this fraction of their right-hand side.
+_ROOT_TIME_FRACTION = 0.75
 _ROOT_MAX_ROUNDS = 100
 _ROOT_STALL = 2e-3
 _ROOT_SPARSE_SLACK = 0.05
@@ -280,13 +281,17 @@ def _plan_network(problem: PlanProblem, config, model: Model | None,
     forbidden = problem.site_mask(config.forbidden, "forbidden")
     j_all = net.information(~forbidden & ~hopeless & (net.n_stations_seeing > 0))
     upper_bound = greedy = None
-    root_bound = -np.inf
+    root_bound, root = -np.inf, None
     existing = problem.site_mask(config.existing, "existing") | problem.site_existing
+    root_job = None
     if int(net.tying.sum()) > _SPARSE_ABOVE_SITES and not config.redundant \
             and np.all(problem.site_cost[~existing] == 1):
         # every layout at least as good as the greedy one has at most its number of sites
         from planner.program.baselines import network_baseline
 
+        root_job = in_background(_root_relaxation, problem, model, net,
+                                 t0 + _ROOT_TIME_FRACTION * config.time_limit_s,
+                                 after_fork=reset_after_fork)
         # a stuck greedy gives no starting layout: the search goes on without one
         greedy = network_baseline(problem, config.replace(
             forbidden=config.forbidden + tuple(
@@ -311,6 +316,9 @@ def _plan_network(problem: PlanProblem, config, model: Model | None,
             start = pruning.selected
         if chance is not None and not chance.layout_ok(start):
             start = repair(start)  # None: it cannot
+    root_cuts, counts = [], (None, [], [])
+    if root_job is not None:  # valid with or without a starting layout
+        root_cuts, counts, root_bound, root = root_job()
     if start is not None:
         in_model = model.site_var >= 0
         upper_bound = int((start & in_model).sum())
@@ -319,9 +327,10 @@ def _plan_network(problem: PlanProblem, config, model: Model | None,
                            shape=(1, model.n_vars))
         model = model.with_rows(row, [-np.inf], [float(upper_bound)],
                                 [RowKind("upper-bound")])
-        budget_s = max(_ROOT_TIME_FRACTION * (config.time_limit_s - (time.perf_counter() - t0)),
-                       _ROOT_MIN_TIME_FRACTION * config.time_limit_s)
-        model, root_bound = _root_relaxation(problem, model, config, net, upper_bound, budget_s)
+        model = _root_rows(model, root_cuts, upper_bound)
+        if counts[0] is not None:
+            model = model.with_rows(counts[0], counts[1], np.full(len(counts[1]), np.inf),
+                                    counts[2])
 
     def cuts(selected):
         rows = _stacked(network_cuts(problem, model, selected, config, net, j_all, upper_bound),
@@ -332,12 +341,12 @@ def _plan_network(problem: PlanProblem, config, model: Model | None,
 
     result = _cut_loop(problem, config, model, cuts, check, incumbent=start, t0=t0,
                        bound=root_bound, repair=repair)
-    return replace(result, greedy=greedy, pruning=pruning)
+    return replace(result, greedy=greedy, pruning=pruning, root=root)
 
 
-def _root_relaxation(problem: PlanProblem, model: Model, config, net: NetworkModel,
-                     upper_bound: int, budget_s: float) -> tuple[Model, float]:
-    """Tighten a large network model at its LP relaxation before branching; a lower bound.
+def _root_relaxation(problem: PlanProblem, model: Model, net: NetworkModel, deadline: float
+                     ) -> tuple[list[tuple[int, np.ndarray, float]], tuple, float, dict]:
+    """Tangent rows that tighten a large network model at its LP relaxation; a lower bound.
 
     With ``x`` relaxed to ``[0, 1]``: first one tangent per station at the every-site
     information scaled onto the requirement's boundary, ``J_t = J_prior + t (J_all - J_prior)``
@@ -351,19 +360,32 @@ def _root_relaxation(problem: PlanProblem, model: Model, config, net: NetworkMod
     tangent is valid for every layout (the error is convex in the information), so each LP
     optimum bounds the fewest markers from below. Stops after ``budget_s``, ``_ROOT_MAX_ROUNDS``
     solves, when the bound rose less than ``_ROOT_STALL`` (relative) over 5 solves, or when
-    the LP solution passes every station (to ``_ROOT_MAX_STEPS`` halvings).
+    the LP solution passes every station (to ``_ROOT_MAX_STEPS`` halvings). Then, before
+    ``deadline``, the per-station count rows (each station's count of its own tying sites,
+    rounded up: :func:`~planner.program.cuts_count.station_count_rows`) join the LP, which is
+    solved once more. The LP is ``model`` relaxed, kept in HiGHS between rounds
+    (:class:`~planner.program.highs.WarmLP`: each round starts from the last basis); it reads
+    ``model`` and ``net`` only (it runs beside the greedy).
 
-    The integer program gets the rows sparsified under ``upper_bound``
-    (:func:`~planner.program.cuts_network.sparse_tangent`, giving up at most
-    ``_ROOT_SPARSE_SLACK`` of each right-hand side); the returned bound is the LP's with the
-    full rows.
+    Parameters
+    ----------
+    deadline : float
+        :func:`time.perf_counter` value after which no LP is started (one running is stopped).
 
     Returns
     -------
-    model : Model
-        ``model`` with the rows (family ``"oa-root"``).
+    cuts : list of (station, coef (n,), rhs)
+        The tangents, ``sum_j coef_j x_j >= rhs`` over every site (:func:`_root_rows` adds them
+        to the integer program).
+    counts : (rows, lower, kinds)
+        The count rows (``rows`` None: none), for the integer program as they are.
     bound : float
-        Proven lower bound on the objective (``-inf`` when no LP solved).
+        Proven lower bound on the objective (``-inf`` when no LP solved), rounded up when every
+        feasible objective is a whole number.
+    record : dict
+        ``bound``, ``lp_solves``, ``rows`` (tangents), ``time_s`` and ``stopped``: why the loop
+        ended (``"budget"``, ``"rounds"``, ``"stall"``, ``"solved"``: the LP solution passes,
+        or the LP's status).
     """
     t0 = time.perf_counter()
     allowed = net.allowed_station_m
@@ -385,28 +407,32 @@ def _root_relaxation(problem: PlanProblem, model: Model, config, net: NetworkMod
                   for k in tied)
     for k, cov_t in scaled:
         cuts += net.station_tangents(cov_t, [k])
-    lp = replace(model, integrality=np.zeros_like(model.integrality))
+    lp = WarmLP(model.c, model.A, model.row_lb, model.row_ub, model.lb, model.ub)
     bound, history = -np.inf, []
     added = 0
+    stopped = "rounds"
     for _ in range(_ROOT_MAX_ROUNDS):
         if cuts[added:]:
             rows = sp.vstack([model.site_row(np.flatnonzero(in_model & (c > 0)),
                                              c[in_model & (c > 0)] / rhs)
                               for _, c, rhs in cuts[added:]])
             n = len(cuts) - added
-            lp = lp.with_rows(rows, np.ones(n), np.full(n, np.inf), [RowKind("oa-root")] * n)
+            lp.add_rows(rows, np.ones(n), np.full(n, np.inf))
             added = len(cuts)
-        remaining = budget_s - (time.perf_counter() - t0)
+        remaining = deadline - time.perf_counter()
         if remaining <= 0:
+            stopped = "budget"
             break
-        sol = solve(lp, remaining, 0.0)
+        sol = lp.solve(remaining)
         if sol.status != "optimal" or sol.x is None:
+            stopped = sol.status
             break
         bound = max(bound, sol.objective)
         history.append(bound)
         x_lp = np.zeros(problem.n_sites)
         x_lp[model.var_site] = sol.x[:nx]
         if len(history) > 5 and history[-1] - history[-6] < _ROOT_STALL * abs(history[-1]):
+            stopped = "stall"
             break
         failing = np.zeros(0, np.int64)
         for _ in range(_ROOT_MAX_STEPS):
@@ -417,17 +443,52 @@ def _root_relaxation(problem: PlanProblem, model: Model, config, net: NetworkMod
                 break
             x_in = x_lin
         if failing.size == 0:  # the LP solution (nearly) passes: the relaxation is solved
+            stopped = "solved"
             break
         cuts += net.station_tangents(cov, failing)
+    counts = (None, [], [])
+    if stopped != "budget" and time.perf_counter() < deadline:
+        rows, lower, kinds, extra = station_count_rows(model, net, cuts, deadline)
+        cuts += extra
+        counts = (rows, lower, kinds)
+        new = cuts[added:]
+        if rows is not None or new:
+            blocks = [rows] if rows is not None else []
+            blocks += [model.site_row(np.flatnonzero(in_model & (c > 0)),
+                                      c[in_model & (c > 0)] / rhs) for _, c, rhs in new]
+            lp.add_rows(sp.vstack(blocks), list(lower) + [1.0] * len(new),
+                        np.full(len(lower) + len(new), np.inf))
+            remaining = deadline - time.perf_counter()
+            sol = lp.solve(remaining) if remaining > 0 else None
+            if sol is not None and sol.status == "optimal":
+                bound = max(bound, sol.objective)
+                history.append(bound)
+    if np.isfinite(bound) and np.all(model.integrality == 1) \
+            and np.all(model.c == np.round(model.c)):
+        bound = float(math.ceil(bound - 1e-6))  # a bound on a whole number: on its ceiling
+    record = {"bound": float(bound), "lp_solves": len(history), "rows": len(cuts),
+              "count_rows": len(counts[1]),
+              "time_s": round(time.perf_counter() - t0, 1), "stopped": stopped,
+              "bounds": [round(float(b), 2) for b in history]}
+    return cuts, counts, bound, record
+
+
+def _root_rows(model: Model, cuts, upper_bound: int) -> Model:
+    """``model`` with the root relaxation's tangents (:func:`_root_relaxation`) as rows of
+    family ``"oa-root"``, sparsified under ``upper_bound``
+    (:func:`~planner.program.cuts_network.sparse_tangent`, giving up at most
+    ``_ROOT_SPARSE_SLACK`` of each right-hand side: valid for every layout of at most
+    ``upper_bound`` sites)."""
+    in_model = model.site_var >= 0
     kept = []
     for k, c, rhs in cuts:
         sites, coef, lo = sparse_tangent(np.where(in_model, c, 0.0), rhs, upper_bound,
                                           MAX_TERMS, _ROOT_SPARSE_SLACK)
         kept.append((model.site_row(sites, coef), lo, RowKind("oa-root", int(k))))
-    if kept:
-        rows, lower, kinds = zip(*kept, strict=True)
-        model = model.with_rows(sp.vstack(rows), lower, np.full(len(lower), np.inf), kinds)
-    return model, bound
+    if not kept:
+        return model
+    rows, lower, kinds = zip(*kept, strict=True)
+    return model.with_rows(sp.vstack(rows), lower, np.full(len(lower), np.inf), kinds)
 
 
 def _cut_loop(problem: PlanProblem, config, model: Model, cuts, check,

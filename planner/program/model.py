@@ -172,6 +172,8 @@ class Solution:
     solve_time_s : float
     message : str
     x : (v,) float or None
+        The solution: integer variables rounded to whole numbers, continuous ones (a linear
+        relaxation's) as solved.
     """
 
     status: str
@@ -224,6 +226,10 @@ class PlanResult:
         incumbent and upper bound), so callers need not run the greedy baseline again.
     pruning : planner.program.local_search.Pruning or None
         Network mode on large problems: the local search that pruned the greedy layout.
+    root : dict or None
+        Network mode on large problems: the root relaxation's record
+        (:func:`~planner.program.loop._root_relaxation`: proven bound, LP solves, rows, wall
+        time s, why it stopped).
     """
 
     selected: np.ndarray
@@ -236,6 +242,7 @@ class PlanResult:
     history: list = field(default_factory=list)
     greedy: Baseline | None = None
     pruning: Pruning | None = None
+    root: dict | None = None
 
     @property
     def status(self) -> str:

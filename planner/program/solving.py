@@ -50,7 +50,9 @@ def solve(model: Model, time_limit_s: float = 60.0, gap: float = 0.0,
     out = run_highs(c, model.A, model.row_lb, model.row_ub, model.lb, model.ub, integrality,
                     max(time_limit_s - (time.perf_counter() - t0), 1e-3), gap,
                     integral_objective=integral)
-    x = None if out.x is None else np.round(out.x)
+    # integer variables rounded (HiGHS returns them within its tolerance); continuous ones,
+    # e.g. a linear relaxation's, as solved
+    x = None if out.x is None else np.where(integrality == 1, np.round(out.x), out.x)
     if x is not None and priority is not None:
         group, first = aggregate_columns(model)
         count = np.r_[np.bincount(group, x[:nx], minlength=first.size), x[nx:]]

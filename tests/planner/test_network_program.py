@@ -163,6 +163,10 @@ def test_large_problem_path_bound_never_exceeds_the_brute_force_optimum(seed, mo
     if r.status == "optimal":
         assert r.selected.sum() == best
     assert any(k.family == "oa-root" for k in r.model.row_kind)
+    # the root relaxation's own bound (a whole number: unit costs) is valid too
+    assert r.root["bound"] <= best and r.root["bound"] == round(r.root["bound"])
+    assert r.root["lp_solves"] >= 1 and r.root["stopped"] in ("budget", "rounds", "stall",
+                                                              "solved")
 
 
 def _reachable_network_case(time_limit_s: float):

@@ -210,3 +210,39 @@ def test_model_rows_spell_the_formulation(redundant):
         row = np.zeros(m.n_vars)
         row[list(entries)] = list(entries.values())
         np.testing.assert_array_equal(a[r], row, err_msg=f"row {r} ({family}, station {s})")
+
+
+def test_a_linear_relaxation_keeps_its_fractional_solution():
+    # the root relaxation linearises at the LP's own point: its x must not come back rounded
+    import scipy.sparse as sp
+
+    from planner.program.model import Model
+
+    model = Model(c=np.ones(2), A=sp.csr_array(np.array([[2.0, 2.0]])), row_lb=np.ones(1),
+                  row_ub=np.full(1, np.inf), lb=np.zeros(2), ub=np.ones(2),
+                  integrality=np.zeros(2, np.int32), var_site=np.arange(2),
+                  site_var=np.arange(2), row_kind=(RowKind("cover"),))
+    sol = solve(model, 10.0)
+    assert sol.status == "optimal" and sol.objective == pytest.approx(0.5)
+    assert sol.x.sum() == pytest.approx(0.5)
+    integer = solve(replace(model, integrality=np.ones(2, np.int32)), 10.0)
+    assert integer.objective == 1.0 and set(integer.x) <= {0.0, 1.0}
+
+
+def test_a_warm_lp_with_rows_added_solves_as_the_whole_lp_would():
+    import scipy.sparse as sp
+
+    from planner.program.highs import WarmLP, run_highs
+
+    rng = np.random.default_rng(0)
+    a = sp.csr_array(rng.uniform(0, 1, (6, 8)) * (rng.uniform(size=(6, 8)) < 0.6)
+                     + np.eye(6, 8))  # every row can reach 1 with x <= 1
+    c, lb, ub = rng.uniform(1, 2, 8), np.zeros(8), np.ones(8)
+    lp = WarmLP(c, a[:2], np.ones(2), np.full(2, np.inf), lb, ub)
+    assert lp.solve(10.0).status == "optimal"
+    lp.add_rows(a[2:], np.ones(4), np.full(4, np.inf))
+    warm = lp.solve(10.0)
+    whole = run_highs(c, a, np.ones(6), np.full(6, np.inf), lb, ub, np.zeros(8, np.int32),
+                      10.0, 0.0)
+    assert warm.status == whole.status == "optimal"
+    assert warm.objective == pytest.approx(whole.objective, rel=1e-9, abs=1e-9)
