@@ -139,11 +139,12 @@ def make_plan(inputs: PlanInputs, config, error_model, model_name: str = "defaul
     timings: dict = {}
     cand = vis = None
     if inputs.control and not config.network:
-        raise ConfigError("control points (--control) are network mode's datum: add --network "
-                          "(or network = true), or list the points as --existing markers")
+        raise ConfigError("control points (`control_path`) are network mode's datum: plan in "
+                          "network mode (network = true), or list the points as `existing` "
+                          "markers")
     if inputs.control and config.reference_station is not None:
-        raise ConfigError("control points (--control) are the datum and fix no station: drop "
-                          "--reference-station (reference_station), or the control points")
+        raise ConfigError("control points (`control_path`) are the datum and fix no station: "
+                          "drop `reference_station`, or the control points")
     if problem is None:
         problem, cand, vis, timings = build_problem(inputs, config, error_model, progress,
                                                     map_groups, detection_model)

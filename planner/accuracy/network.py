@@ -165,9 +165,8 @@ class NetworkModel(NetworkTangents):
         self.control = problem.site_control
         if self.control.any():
             if reference is not None:
-                raise ConfigError("control points are the datum and fix no station: drop the "
-                                  "reference station (reference_station / "
-                                  "--reference-station), or the control points")
+                raise ConfigError("control points are the datum and fix no station: drop "
+                                  "`reference_station`, or the control points")
         elif reference is None:
             reference = 0
         elif not 0 <= reference < problem.n_stations:

@@ -120,8 +120,8 @@ class LayoutReliability:
 def _difference_design(net, pairs: np.ndarray) -> sp.csr_array:
     """``D`` of the observations ``pairs`` (all pairs of their sites, sorted by site), as a
     sparse ``(3 q, 6 s)`` matrix: row block ``i`` is ``H_a E_{s_a} - sum_b (w_b / T_j) H_b
-    E_{s_b}`` over the pairs ``b`` of observation ``a``'s site (``T_j`` its
-    :attr:`~planner.accuracy.network.NetworkModel.site_total_weight`)."""
+    E_{s_b}`` over the pairs ``b`` of observation ``a``'s site (``T_j`` its total weight, the
+    network's ``site_total_weight``)."""
     q = pairs.size
     row_of = np.full(net.pair_site.size, -1)
     row_of[pairs] = np.arange(q)

@@ -79,8 +79,8 @@ def verify_datum(doc: dict, plan, named: str | None, chosen, seed: int) -> Verif
         return VerifyDatum("station", ref, (),
                            np.asarray(plan.station_xyz_m[plan.station_ids.index(ref)], float))
     if named is not None:
-        raise ConfigError(f"--reference-station {named}: the plan's datum is its control points "
-                          "(no station is fixed); drop --reference-station")
+        raise ConfigError(f"`reference_station` {named}: the plan's datum is its control points "
+                          "(no station is fixed); drop `reference_station`")
     ids = {c["marker_id"] for c in datum["control"]}
     seeing = [s["id"] for s in doc["stations"]
               if s["id"] in chosen and ids & set(s.get("markers", ()))]

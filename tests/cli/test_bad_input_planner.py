@@ -74,7 +74,7 @@ CONFIG_CASES = [
     Case("plan-odometry-known-control", ["plan", "--odometry-percent", "2", "--out", "out"],
          "network mode"),
     Case("plan-control-known-control", ["plan", "--control", "lander.csv", "--out", "out"],
-         "network mode's datum: add --network", files={"lander.csv": LANDER}),
+         "network mode's datum: plan in network mode", files={"lander.csv": LANDER}),
     Case("plan-control-and-reference", ["plan", "--network", "--control", "lander.csv",
                                         "--reference-station", "S1", "--out", "out"],
          "drop --reference-station", files={"lander.csv": LANDER}),
