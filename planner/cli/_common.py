@@ -603,6 +603,14 @@ def error_figure_option(f):
 
 #: ``--local-markers``: the local requirement judges pairs of markers too (``None`` when not
 #: given: the config's ``local_markers``).
+#: ``--control FILE``: network mode's datum, control points (``plan``, ``adjust``).
+control_option = click.option(
+    "--control", "control_path", type=FILE,
+    help="Network mode's datum: control points with known coordinates, e.g. a lander's "
+         "fiducials, CSV id,x_m,y_m,z_m,sigma_m (site frame; sigma_m per coordinate); no "
+         "station is fixed, and together they must fix position and heading.")
+
+
 local_markers_option = click.option(
     "--local-markers", "local_markers", is_flag=True, default=None,
     help="Network mode: the local requirement also judges every pair of selected markers at "

@@ -16,6 +16,7 @@ from planner.cli._common import (
     REQUIREMENT_M,
     REQUIREMENT_PPM,
     FiniteRange,
+    control_option,
     emit_summary,
     error_figure_option,
     error_model_option,
@@ -117,9 +118,7 @@ def _datum_choice(datum: tuple[str, str | None] | None, control_path: Path | Non
               help="The datum station of --datum station (its x, y, z and heading fixed; every "
                    "error is relative to it); default: the plan's reference station, else the "
                    "first station of the tables.")
-@click.option("--control", "control_path", type=FILE,
-              help="Datum: control points, CSV id,x_m,y_m,z_m,sigma_m (site frame; sigma_m per "
-                   "coordinate), e.g. a lander's fiducials; they must fix position and heading.")
+@control_option
 @click.option("--heading-prior-sigma-deg", type=ANGLE_SIGMA_DEG,
               help="Heading observed at every station (sun sensor) around its planned heading "
                    "(needs --plan) or its reading in --headings, 1-sigma degrees (default: the "

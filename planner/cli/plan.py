@@ -16,6 +16,7 @@ from planner.cli._common import (
     FiniteRange,
     boundary_option,
     config_option,
+    control_option,
     dem_height_error_option,
     dem_option,
     emit_summary,
@@ -117,10 +118,7 @@ def _load_detection_model(ctx, param, path):
                    "being detected and accepted (default: the shipped model).")
 @click.option("--existing",
               help="Markers already in the field, fixed: 'as-built' or a CSV (id,x_m,y_m[,z_m]).")
-@click.option("--control", "control_path", type=FILE,
-              help="Network mode's datum: control points with known coordinates, e.g. the "
-                   "lander's fiducials, CSV id,x_m,y_m,z_m,sigma_m (site frame; sigma_m per "
-                   "coordinate); no station is fixed, distances are from their centroid.")
+@control_option
 @click.option("--budget", type=click.IntRange(1, 100_000),
               help="Largest number of markers allowed.")
 @click.option("--requirement-m", "requirement_m", type=REQUIREMENT_M,
