@@ -14,7 +14,8 @@ from tests.visibility.test_simulate import _flat, _frames_facing, _station_point
 from visibility.dem import DEM
 from visibility.horizon import PatternBound
 from visibility.sensor import RigConfig, SensorConfig, TurntableErrors
-from visibility.simulate import simulate_markers, turntable_errors
+from visibility.simulate import simulate_markers
+from visibility.turntable import turntable_errors
 
 EXACT = SensorConfig(range_noise_m=0.0, range_resolution_m=0.0)
 
