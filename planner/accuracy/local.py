@@ -124,17 +124,18 @@ class LocalRequirement:
 
 
 @dataclass(frozen=True)
-class StationPairs:
-    """The pairs of stations a :class:`LocalRequirement` judges.
+class PointPairs:
+    """The pairs of points (stations, or markers' candidate sites) a :class:`LocalRequirement`
+    judges.
 
     Attributes
     ----------
     first, second : (p,) int
-        Station indices, ``first < second``.
+        Station (or site) indices, ``first < second``.
     separation_m : (p,) float
         Horizontal separation, m.
     direction : (p, 3) float
-        Unit vector from the first station to the second (site frame).
+        Unit vector from the first point to the second (site frame).
     allowed_m : (p,) float
         The requirement's allowance for each pair, m.
     """
@@ -149,17 +150,22 @@ class StationPairs:
     def size(self) -> int:
         return int(self.first.size)
 
+    def subset(self, which) -> PointPairs:
+        """The pairs ``which`` ((q,) int or (p,) bool) of these."""
+        return PointPairs(self.first[which], self.second[which], self.separation_m[which],
+                          self.direction[which], self.allowed_m[which])
 
-def station_pairs(station_xyz: np.ndarray, requirement: LocalRequirement) -> StationPairs:
-    """Every pair of stations (of ``station_xyz``, (s, 3) m) at most ``requirement.within_m``
-    apart horizontally, in lexicographic order.
 
-    >>> p = station_pairs(np.array([[0, 0, 0], [30, 0, 0], [90, 0, 0.0]]),
-    ...                   LocalRequirement(0.1, within_m=60.0))
+def point_pairs(xyz: np.ndarray, requirement: LocalRequirement) -> PointPairs:
+    """Every pair of the points ``xyz`` ((k, 3) m) at most ``requirement.within_m`` apart
+    horizontally, in lexicographic order (indices into ``xyz``).
+
+    >>> p = point_pairs(np.array([[0, 0, 0], [30, 0, 0], [90, 0, 0.0]]),
+    ...                 LocalRequirement(0.1, within_m=60.0))
     >>> p.first.tolist(), p.second.tolist(), p.separation_m.tolist()
     ([0, 1], [1, 2], [30.0, 60.0])
     """
-    xyz = np.asarray(station_xyz, dtype=float)
+    xyz = np.asarray(xyz, dtype=float)
     first, second = np.triu_indices(xyz.shape[0], k=1)
     sep = np.linalg.norm(xyz[second, :2] - xyz[first, :2], axis=1)
     keep = sep <= requirement.within_m
@@ -167,7 +173,7 @@ def station_pairs(station_xyz: np.ndarray, requirement: LocalRequirement) -> Sta
     delta = xyz[second] - xyz[first]
     length = np.linalg.norm(delta, axis=1, keepdims=True)
     direction = np.divide(delta, length, out=np.zeros_like(delta), where=length > 0)
-    return StationPairs(first, second, sep, direction, requirement.allowed_m(sep))
+    return PointPairs(first, second, sep, direction, requirement.allowed_m(sep))
 
 
 def pair_blocks(full: np.ndarray, first: np.ndarray, second: np.ndarray) -> np.ndarray:
@@ -336,7 +342,7 @@ class LocalAccuracy:
         self.net = net
         self.requirement = requirement
         self.kind = requirement.kind
-        self.pairs = station_pairs(net.problem.station_xyz, requirement)
+        self.pairs = point_pairs(net.problem.station_xyz, requirement)
 
     def _blocks(self, cov, which: np.ndarray) -> np.ndarray:
         return pair_blocks(cov.full, self.pairs.first[which], self.pairs.second[which])

@@ -14,6 +14,10 @@ measurement noise's own mean (covariance ``I / W_j``, independent between marker
 
     Sigma_jk = I / W_j + I / W_k + (M_k - M_j) C (M_k - M_j)^T.
 
+(At a control point ``W_j`` is the network's total weight ``T_j``, its coordinate prior
+included; control points are in the cross-covariance but not judged, their accuracy being
+given.)
+
 Figures
 -------
 Markers are points (no working disc): the ``"position"`` figure is the plan's point figure of
@@ -45,42 +49,15 @@ Both rows leave every layout that holds one of the two markers or neither untouc
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import replace
 
 import numpy as np
 import scipy.sparse as sp
 
-from planner.accuracy.local import LocalRequirement
+from planner.accuracy.local import LocalRequirement, PointPairs, point_pairs
 
 
-@dataclass(frozen=True)
-class MarkerPairs:
-    """The pairs of selected markers a :class:`~planner.accuracy.local.LocalRequirement` judges.
-
-    Attributes
-    ----------
-    first, second : (p,) int
-        Candidate sites, ``first < second``.
-    separation_m : (p,) float
-        Horizontal separation, m.
-    direction : (p, 3) float
-        Unit vector from the first marker to the second (site frame).
-    allowed_m : (p,) float
-        The requirement's allowance for each pair, m.
-    """
-
-    first: np.ndarray
-    second: np.ndarray
-    separation_m: np.ndarray
-    direction: np.ndarray
-    allowed_m: np.ndarray
-
-    @property
-    def size(self) -> int:
-        return int(self.first.size)
-
-
-def marker_pairs(site_xyz: np.ndarray, sites, requirement: LocalRequirement) -> MarkerPairs:
+def marker_pairs(site_xyz: np.ndarray, sites, requirement: LocalRequirement) -> PointPairs:
     """Every pair of the markers at ``sites`` ((m,) int into ``site_xyz``, (n, 3) m) at most
     ``requirement.within_m`` apart horizontally, in lexicographic order of site.
 
@@ -90,15 +67,8 @@ def marker_pairs(site_xyz: np.ndarray, sites, requirement: LocalRequirement) -> 
     ([0, 1], [1, 2], [30.0, 60.0])
     """
     sites = np.sort(np.asarray(sites, dtype=np.int64).reshape(-1))
-    xyz = np.asarray(site_xyz, dtype=float)[sites]
-    a, b = np.triu_indices(sites.size, k=1)
-    sep = np.linalg.norm(xyz[b, :2] - xyz[a, :2], axis=1)
-    keep = sep <= requirement.within_m
-    a, b, sep = a[keep], b[keep], sep[keep]
-    delta = xyz[b] - xyz[a]
-    length = np.linalg.norm(delta, axis=1, keepdims=True)
-    direction = np.divide(delta, length, out=np.zeros_like(delta), where=length > 0)
-    return MarkerPairs(sites[a], sites[b], sep, direction, requirement.allowed_m(sep))
+    pairs = point_pairs(np.asarray(site_xyz, dtype=float)[sites], requirement)
+    return replace(pairs, first=sites[pairs.first], second=sites[pairs.second])
 
 
 def marker_maps(net, sites) -> sp.csr_array:
@@ -109,16 +79,13 @@ def marker_maps(net, sites) -> sp.csr_array:
     Parameters
     ----------
     net : planner.accuracy.network.NetworkModel
-        Its public ``pair_site``, ``pair_station``, ``weight``, ``design``, ``site_weight``,
-        ``site_start`` and ``n_stations_seeing`` are used.
+        Its :meth:`~planner.accuracy.network.NetworkModel.pairs_of`, ``pair_station``,
+        ``weight``, ``design`` and ``site_total_weight`` are used.
     sites : (m,) int
     """
     sites = np.asarray(sites, dtype=np.int64).reshape(-1)
-    k = net.n_stations_seeing[sites]
-    pos = np.repeat(np.arange(sites.size), k)
-    pairs = np.repeat(net.site_start[sites], k) + np.arange(k.sum()) \
-        - np.repeat(np.cumsum(k) - k, k)
-    w = net.site_weight[sites]
+    pairs, pos = net.pairs_of(sites)
+    w = net.site_total_weight[sites]
     f = net.weight[pairs] / np.where(w > 0, w, 1.0)[pos]  # (q,)
     blocks = f[:, None, None] * net.design[pairs]  # (q, 3, 6)
     rows = 3 * pos[:, None, None] + np.arange(3)[None, :, None] + np.zeros((1, 1, 6), np.int64)
@@ -143,23 +110,12 @@ def marker_cross_covariance(net, cov, sites) -> np.ndarray:
     m = marker_maps(net, sites)
     mc = np.asarray(m @ cov.full)  # (3m, 6s)
     out = np.asarray(m @ mc.T).reshape(sites.size, 3, sites.size, 3).transpose(0, 2, 1, 3)
-    w = net.site_weight[sites]
+    w = net.site_total_weight[sites]
     idx = np.arange(sites.size)
     out[idx, idx] += (1.0 / np.where(w > 0, w, 1.0))[:, None, None] * np.eye(3)
-    bad = (w <= 0) | _undetermined(net, cov, sites)
+    bad = (w <= 0) | net.undetermined_markers(cov, sites)
     out[bad] = np.inf
     out[:, bad] = np.inf
-    return out
-
-
-def _undetermined(net, cov, sites: np.ndarray) -> np.ndarray:
-    """(m,) bool: markers some station of which the layout leaves undetermined."""
-    k = net.n_stations_seeing[sites]
-    pos = np.repeat(np.arange(sites.size), k)
-    pairs = np.repeat(net.site_start[sites], k) + np.arange(k.sum()) \
-        - np.repeat(np.cumsum(k) - k, k)
-    out = np.zeros(sites.size, bool)
-    np.logical_or.at(out, pos, ~cov.determined[net.pair_station[pairs]])
     return out
 
 
@@ -177,13 +133,14 @@ class LocalMarkerAccuracy:
         self.requirement = requirement
         self.kind = requirement.kind
 
-    def pairs(self, selected) -> MarkerPairs:
+    def pairs(self, selected) -> PointPairs:
         """The judged pairs of the layout ``selected`` ((n,) bool): its markers some station
-        uses (a marker no station sees is not estimated by the network, and not judged)."""
-        seen = np.asarray(selected, bool) & (self.net.site_weight > 0)
+        uses (a marker no station sees is not estimated by the network, and not judged), but
+        the control points (their accuracy is given, as for the network requirement)."""
+        seen = np.asarray(selected, bool) & (self.net.site_weight > 0) & ~self.net.control
         return marker_pairs(self.net.problem.site_xyz, np.flatnonzero(seen), self.requirement)
 
-    def difference_covariances(self, cov, pairs: MarkerPairs) -> np.ndarray:
+    def difference_covariances(self, cov, pairs: PointPairs) -> np.ndarray:
         """(p, 3, 3) covariance ``Sigma_jk`` of each pair's relative position, m^2 (``inf``
         where a marker is undetermined)."""
         if pairs.size == 0:
@@ -199,7 +156,7 @@ class LocalMarkerAccuracy:
         out[~(finite[a] & finite[b])] = np.inf
         return out
 
-    def errors(self, cov, pairs: MarkerPairs) -> np.ndarray:
+    def errors(self, cov, pairs: PointPairs) -> np.ndarray:
         """(p,) 95 % relative error of each pair (module doc), m; ``inf`` where undetermined."""
         sigma = self.difference_covariances(cov, pairs)
         if self.kind == "position":
@@ -210,7 +167,7 @@ class LocalMarkerAccuracy:
         out[ok] = np.sqrt(self.net.figure.cut_chi2 * np.maximum(var, 0.0))
         return out
 
-    def failing(self, cov, selected) -> tuple[MarkerPairs, np.ndarray]:
+    def failing(self, cov, selected) -> tuple[PointPairs, np.ndarray]:
         """The layout's judged pairs and the indices (into them) of those that fail."""
         pairs = self.pairs(selected)
         if pairs.size == 0:
@@ -222,7 +179,7 @@ class LocalMarkerAccuracy:
             ok = self.errors(cov, pairs) <= pairs.allowed_m
         return pairs, np.flatnonzero(~ok)
 
-    def gradients(self, cov, pairs: MarkerPairs, which) -> np.ndarray:
+    def gradients(self, cov, pairs: PointPairs, which) -> np.ndarray:
         """(q, 6 s) ``g = (M_k - M_j)^T u`` of the pairs ``which`` at their worst direction
         ``u`` (the top eigenvector of ``Sigma_jk``, or the line for ``"distance"``)."""
         which = np.asarray(which, np.int64)
@@ -230,27 +187,25 @@ class LocalMarkerAccuracy:
         m1 = marker_maps(self.net, first).toarray().reshape(which.size, 3, -1)
         m2 = marker_maps(self.net, second).toarray().reshape(which.size, 3, -1)
         if self.kind == "position":
-            sigma = self.difference_covariances(cov, MarkerPairs(
-                first, second, pairs.separation_m[which], pairs.direction[which],
-                pairs.allowed_m[which]))
+            sigma = self.difference_covariances(cov, pairs.subset(which))
             u = np.linalg.eigh(sigma)[1][:, :, -1]
         else:
             u = pairs.direction[which]
         return np.einsum("qa,qab->qb", u, m2 - m1), u
 
-    def tangents(self, cov, pairs: MarkerPairs, which) -> list[tuple[int, np.ndarray, float]]:
+    def tangents(self, cov, pairs: PointPairs, which) -> list[tuple[int, np.ndarray, float]]:
         """Tangent cuts ``(pair index, coef (n,), rhs)`` of the pairs ``which`` at ``cov`` (both
         markers determined): a layout holding both markers passes only if ``sum_i coef_i x_i
         >= rhs``; ``rhs > 0`` only."""
         which = np.asarray(which, np.int64)
-        determined = ~_undetermined(self.net, cov, pairs.first[which]) \
-            & ~_undetermined(self.net, cov, pairs.second[which])
+        determined = ~self.net.undetermined_markers(cov, pairs.first[which]) \
+            & ~self.net.undetermined_markers(cov, pairs.second[which])
         which = which[determined]
         if which.size == 0:
             return []
         g, u = self.gradients(cov, pairs, which)
-        w1 = self.net.site_weight[pairs.first[which]]
-        w2 = self.net.site_weight[pairs.second[which]]
+        w1 = self.net.site_total_weight[pairs.first[which]]
+        w2 = self.net.site_total_weight[pairs.second[which]]
         const = np.einsum("qa,qa->q", u, u) * (1.0 / w1 + 1.0 / w2)
         b = pairs.allowed_m[which] ** 2 / self.net.figure.cut_chi2
         return self.net.tangents(cov, list(g), [int(i) for i in which], b, const)
@@ -265,7 +220,7 @@ def local_marker_accuracy(net, config) -> LocalMarkerAccuracy | None:
     return LocalMarkerAccuracy(net, requirement)
 
 
-def pair_cut_rows(model, pairs: MarkerPairs, bad, tying_rest: np.ndarray, tangents,
+def pair_cut_rows(model, pairs: PointPairs, bad, tying_rest: np.ndarray, tangents,
                   selected: np.ndarray) -> tuple[list, list[float], list[str]]:
     """The ``"cut-marker-pair"`` and ``"oa-marker-pair"`` rows (module doc) of the failing
     pairs ``bad``.
@@ -273,7 +228,7 @@ def pair_cut_rows(model, pairs: MarkerPairs, bad, tying_rest: np.ndarray, tangen
     Parameters
     ----------
     model : planner.program.model.Model
-    pairs : MarkerPairs
+    pairs : PointPairs
     bad : (q,) int
         Failing pairs (indices into ``pairs``).
     tying_rest : (r,) int

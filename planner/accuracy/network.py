@@ -502,8 +502,9 @@ class NetworkModel(NetworkTangents):
             covariances.append(cov)
         return markers, errors, covariances
 
-    def _pairs_of(self, sites: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Pair indices of ``sites`` and, for each, the position of its site in ``sites``."""
+    def pairs_of(self, sites: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Pair indices ((q,) int) of ``sites`` ((m,) int) and, for each, the position of its
+        site in ``sites`` ((q,) int)."""
         k = self.n_stations_seeing[sites]
         pos = np.repeat(np.arange(sites.size), k)
         start = np.repeat(self.site_start[sites], k)
@@ -518,7 +519,7 @@ class NetworkModel(NetworkTangents):
         sites = np.asarray(sites, dtype=np.int64).reshape(-1)
         out = np.zeros((sites.size, 3, 3))
         w_site = self.site_total_weight[sites]
-        pairs, pos = self._pairs_of(sites)
+        pairs, _ = self.pairs_of(sites)
         ka = self.n_stations_seeing[sites]
         # ordered pairs of pairs within each site
         reps = ka**2
@@ -538,9 +539,16 @@ class NetworkModel(NetworkTangents):
             np.add.at(out, sp_, blk)
         out += np.where(w_site > 0, 1.0 / np.where(w_site > 0, w_site, 1.0), 0.0)[:, None, None] \
             * np.eye(3)
-        undetermined = np.zeros(sites.size, bool)
-        np.logical_or.at(undetermined, pos, ~cov.determined[self.pair_station[pairs]])
-        out[(w_site <= 0) | undetermined] = np.inf
+        out[(w_site <= 0) | self.undetermined_markers(cov, sites)] = np.inf
+        return out
+
+    def undetermined_markers(self, cov: NetworkCovariance, sites) -> np.ndarray:
+        """(m,) bool: the markers at ``sites`` ((m,) int) seen from a station the covariance
+        leaves undetermined."""
+        sites = np.asarray(sites, dtype=np.int64).reshape(-1)
+        pairs, pos = self.pairs_of(sites)
+        out = np.zeros(sites.size, bool)
+        np.logical_or.at(out, pos, ~cov.determined[self.pair_station[pairs]])
         return out
 
     def marker_errors(self, cov: NetworkCovariance, sites) -> np.ndarray:

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from planner.accuracy.local import LocalRequirement, station_pairs
+from planner.accuracy.local import LocalRequirement, point_pairs
 from planner.accuracy.local_markers import marker_pairs
 
 #: Columns of ``relative.csv`` (m, degrees).
@@ -46,7 +46,7 @@ def relative_rows(result, requirement: LocalRequirement) -> list[dict]:
         relative_figures,
     )
 
-    pairs = station_pairs(np.asarray(result.pose)[:, :3], requirement)
+    pairs = point_pairs(np.asarray(result.pose)[:, :3], requirement)
     rows = [] if not pairs.size else _rows(
         "station", result.observations.station_ids, pairs, relative_figures(
             pair_covariances(result.covariance, pairs.first, pairs.second), pairs.direction))
@@ -61,8 +61,8 @@ def relative_rows(result, requirement: LocalRequirement) -> list[dict]:
 
 
 def _rows(kind: str, ids, pairs, fig) -> list[dict]:
-    """The rows of one kind's ``pairs`` (``StationPairs`` or ``MarkerPairs``) with figures
-    ``fig``."""
+    """The rows of one kind's ``pairs`` (:class:`~planner.accuracy.local.PointPairs` of
+    stations or of markers) with figures ``fig``."""
     return [{"kind": kind, "first": ids[int(a)], "second": ids[int(b)],
              "separation_m": round(float(pairs.separation_m[p]), 4),
              "horizontal_major_95_m": round(float(fig.horizontal_major_m[p]), _DIGITS),

@@ -16,7 +16,7 @@ from planner.accuracy.local import (
     LocalRequirement,
     pair_quantile,
     pair_worst,
-    station_pairs,
+    point_pairs,
 )
 from planner.accuracy.network import NetworkModel, network_model
 from planner.config import PlanConfig
@@ -87,7 +87,7 @@ def test_pair_quantile_matches_plain_monte_carlo(kind):
 
 
 def test_station_pairs_and_requirement_bounds():
-    pairs = station_pairs(np.array([[0, 0, 1], [30, 40, 1], [0, 40, 1.0]]),
+    pairs = point_pairs(np.array([[0, 0, 1], [30, 40, 1], [0, 40, 1.0]]),
                           LocalRequirement(0.05, 1000.0, 50.0))
     assert pairs.first.tolist() == [0, 0, 1] and pairs.second.tolist() == [1, 2, 2]
     np.testing.assert_allclose(pairs.allowed_m, 0.05 + 1e-3 * np.array([50, 40, 30.0]))

@@ -2,6 +2,7 @@
 matrix, the cuts against every layout, the plan against the fewest passing layout."""
 
 import itertools
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -41,6 +42,9 @@ def _dense_marker_covariance(net, sites):
     keep = np.r_[free, s6 + np.arange(3 * m)]
     n = np.zeros((keep.size, keep.size))
     n[:free.size, :free.size] = net.prior_information
+    # a control point's known coordinates: a prior on its marker
+    prior = np.repeat(net.site_prior_weight[sites], 3)
+    n[free.size:, free.size:] += np.diag(prior)
     for q in np.flatnonzero(np.isin(net.pair_site, sites)):
         a = np.zeros((3, s6 + 3 * m))
         st, j = net.pair_station[q], pos[int(net.pair_site[q])]
@@ -52,9 +56,13 @@ def _dense_marker_covariance(net, sites):
     return q.reshape(m, 3, m, 3).transpose(0, 2, 1, 3)
 
 
-@pytest.mark.parametrize("subset", [False, True])
-def test_marker_cross_covariance_is_the_full_normal_matrix_inverse(subset):
+@pytest.mark.parametrize("subset, control", [(False, False), (True, False), (False, True)])
+def test_marker_cross_covariance_is_the_full_normal_matrix_inverse(subset, control):
     p = _line()
+    if control:  # two sites as control points (a lander's fiducials), no station fixed
+        sigma = np.zeros(p.n_sites)
+        sigma[[2, 7]] = 0.003
+        p = replace(p, site_existing=sigma > 0, site_control_sigma_m=sigma)
     net = NetworkModel(p, RADIUS, INCL)
     sel = np.ones(p.n_sites, bool)
     if subset:
