@@ -49,20 +49,13 @@ def local_record(outcome, net) -> dict | None:
     errors = outcome.result.check.pair_error_m
     if errors is None:
         errors = local.errors(net.covariance(net.information(outcome.result.selected)))
-    pairs, ids = local.pairs, outcome.problem.station_ids
-    req = local.requirement
-    rows = [{"stations": [ids[a], ids[b]], "separation_m": round(float(d), 3),
-             "predicted_error_m": _num(e), "allowed_error_m": float(allowed),
-             "meets_requirement": bool(e <= allowed)}
-            for a, b, d, e, allowed in zip(pairs.first, pairs.second, pairs.separation_m,
-                                           errors, pairs.allowed_m, strict=True)]
-    worst = int(np.argmax(np.nan_to_num(errors / pairs.allowed_m, posinf=1e300))) \
-        if pairs.size else None
+    pairs, req = local.pairs, local.requirement
+    rows, worst = _pair_rows("stations", outcome.problem.station_ids, pairs, errors)
     out = {"requirement_text": req.describe(), "local_requirement_m": req.constant_m,
            "local_requirement_ppm": req.ppm, "local_within_m": req.within_m,
            "local_kind": req.kind, "n_pairs": pairs.size,
            "meets_requirement": all(r["meets_requirement"] for r in rows),
-           "worst_pair": None if worst is None else rows[worst], "pairs": rows}
+           "worst_pair": worst, "pairs": rows}
     return {**out, **_marker_pairs_record(outcome, net)}
 
 
@@ -78,17 +71,24 @@ def _marker_pairs_record(outcome, net) -> dict:
     errors = outcome.result.check.marker_pair_error_m
     if errors is None or errors.size != pairs.size:
         errors = local.errors(net.covariance(net.information(selected)), pairs)
-    ids = outcome.problem.site_ids
-    rows = [{"markers": [ids[a], ids[b]], "separation_m": round(float(d), 3),
+    rows, worst = _pair_rows("markers", outcome.problem.site_ids, pairs, errors)
+    return {"n_marker_pairs": pairs.size,
+            "markers_meet_requirement": all(r["meets_requirement"] for r in rows),
+            "worst_marker_pair": worst, "marker_pairs": rows}
+
+
+def _pair_rows(key: str, ids, pairs, errors: np.ndarray) -> tuple[list[dict], dict | None]:
+    """One record per pair (``key``: ``"stations"`` or ``"markers"``, their ``ids``) with its
+    separation, predicted error ``errors`` ((p,) m) and allowance, and the worst of them
+    relative to its allowance (None without pairs)."""
+    rows = [{key: [ids[a], ids[b]], "separation_m": round(float(d), 3),
              "predicted_error_m": _num(e), "allowed_error_m": float(allowed),
              "meets_requirement": bool(e <= allowed)}
             for a, b, d, e, allowed in zip(pairs.first, pairs.second, pairs.separation_m,
                                            errors, pairs.allowed_m, strict=True)]
-    worst = int(np.argmax(np.nan_to_num(errors / pairs.allowed_m, posinf=1e300))) \
-        if pairs.size else None
-    return {"n_marker_pairs": pairs.size,
-            "markers_meet_requirement": all(r["meets_requirement"] for r in rows),
-            "worst_marker_pair": None if worst is None else rows[worst], "marker_pairs": rows}
+    if not pairs.size:
+        return rows, None
+    return rows, rows[int(np.argmax(np.nan_to_num(errors / pairs.allowed_m, posinf=1e300)))]
 
 
 def write_pairs_csv(doc: dict, path: Path, markers: bool = False) -> None:

@@ -106,23 +106,30 @@ def run_highs(c: np.ndarray, a: sp.sparray, row_lb: np.ndarray, row_ub: np.ndarr
     outcome : HighsOutcome
     """
     t0 = time.perf_counter()
-    a = _canonical(a)
-    h = _core._Highs()
-    h.setOptionValue("output_flag", False)
-    h.setOptionValue("threads", THREADS)
+    h = _loaded(c, a, row_lb, row_ub, lb, ub, integrality)
     h.setOptionValue("time_limit", float(time_limit_s))
     h.setOptionValue("mip_rel_gap", float(gap))
     if integral_objective:
         h.setOptionValue("mip_abs_gap", INTEGRAL_ABS_GAP)
-    n_col, n_row = c.shape[0], a.shape[0]
-    h.passModel(n_col, n_row, int(a.nnz), int(_core.MatrixFormat.kRowwise),
+    h.run()
+    return _outcome(h, t0)
+
+
+def _loaded(c, a, row_lb, row_ub, lb, ub, integrality):
+    """A quiet HiGHS instance on :data:`THREADS` threads holding the model ``min c x  s.t.
+    row_lb <= a x <= row_ub, lb <= x <= ub`` (``integrality`` (v,) int: 1 integer, 0
+    continuous)."""
+    a = _canonical(a)
+    h = _core._Highs()
+    h.setOptionValue("output_flag", False)
+    h.setOptionValue("threads", THREADS)
+    h.passModel(c.shape[0], a.shape[0], int(a.nnz), int(_core.MatrixFormat.kRowwise),
                 int(_core.ObjSense.kMinimize), 0.0, np.ascontiguousarray(c, float),
                 np.ascontiguousarray(lb, float), np.ascontiguousarray(ub, float),
                 np.ascontiguousarray(row_lb, float), np.ascontiguousarray(row_ub, float),
                 a.indptr.astype(np.int32), a.indices.astype(np.int32),
                 np.ascontiguousarray(a.data, float), np.asarray(integrality, np.int32))
-    h.run()
-    return _outcome(h, t0)
+    return h
 
 
 def _outcome(h, t0: float) -> HighsOutcome:
@@ -163,16 +170,7 @@ class WarmLP:
 
     def __init__(self, c: np.ndarray, a: sp.sparray, row_lb: np.ndarray, row_ub: np.ndarray,
                  lb: np.ndarray, ub: np.ndarray):
-        self._h = h = _core._Highs()
-        h.setOptionValue("output_flag", False)
-        h.setOptionValue("threads", THREADS)
-        a = _canonical(a)
-        h.passModel(c.shape[0], a.shape[0], int(a.nnz), int(_core.MatrixFormat.kRowwise),
-                    int(_core.ObjSense.kMinimize), 0.0, np.ascontiguousarray(c, float),
-                    np.ascontiguousarray(lb, float), np.ascontiguousarray(ub, float),
-                    np.ascontiguousarray(row_lb, float), np.ascontiguousarray(row_ub, float),
-                    a.indptr.astype(np.int32), a.indices.astype(np.int32),
-                    np.ascontiguousarray(a.data, float), np.zeros(c.shape[0], np.int32))
+        self._h = _loaded(c, a, row_lb, row_ub, lb, ub, np.zeros(c.shape[0], np.int32))
 
     def add_rows(self, a: sp.sparray, row_lb, row_ub) -> None:
         """Append rows ``row_lb <= a x <= row_ub`` (``a``: (r, v) sparse)."""
