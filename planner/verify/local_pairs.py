@@ -50,7 +50,8 @@ class PairOutcome:
 def relative_error_m(errors_first: np.ndarray, errors_second: np.ndarray, kind: str,
                      direction: np.ndarray) -> float:
     """The worst relative error of two stations' registration errors ((73, 3) each) over both
-    discs, m: ``max |D_k(q) - D_l(q')|`` or, for ``"distance"``, ``max |u . (D_k - D_l)|``.
+    discs, m: ``max |D_k(q) - D_l(q')|`` or, for ``"distance"``, ``max |u . (D_k - D_l)|``
+    (two markers: (1, 3) each, their centres' errors).
 
     >>> d = np.zeros((73, 3)); e = d.copy(); e[:, 0] = 0.01
     >>> relative_error_m(d, e, "position", np.array([0, 1.0, 0]))
@@ -88,14 +89,22 @@ def pair_outcomes(local: dict, station_xyz: dict[str, np.ndarray],
     """
     errors = {sid: registration_differences(adjusted[sid], truth[sid], radius_m, _N_RIM)
               for sid in adjusted if sid in truth}
+    return _outcomes(local["pairs"], "stations", errors, station_xyz, local["local_kind"])
+
+
+def _outcomes(rows: list[dict], key: str, errors: dict[str, np.ndarray],
+              xyz: dict[str, np.ndarray], kind: str) -> list[PairOutcome]:
+    """Each pair record of ``rows`` (ids under ``key``) against the achieved errors of its two
+    points (``errors``: id -> (k, 3) adjusted minus true, m; a pair with a point missing has no
+    achieved error and fails), along the line between their planned positions ``xyz``."""
     out = []
-    for row in local["pairs"]:
-        a, b = row["stations"]
+    for row in rows:
+        a, b = row[key]
         achieved = None
         if a in errors and b in errors:
-            delta = np.asarray(station_xyz[b], float) - np.asarray(station_xyz[a], float)
+            delta = np.asarray(xyz[b], float) - np.asarray(xyz[a], float)
             norm = np.linalg.norm(delta)
-            achieved = relative_error_m(errors[a], errors[b], local["local_kind"],
+            achieved = relative_error_m(errors[a], errors[b], kind,
                                         delta / norm if norm > 0 else delta)
         allowed = float(row["allowed_error_m"])
         out.append(PairOutcome(a, b, float(row["separation_m"]), row["predicted_error_m"],
@@ -136,22 +145,8 @@ def marker_pair_outcomes(local: dict | None, marker_xyz: dict[str, np.ndarray],
     """
     if not local or "marker_pairs" not in local:
         return []
-    delta = {m.marker_id: np.asarray(m.achieved_xyz_m, float) for m in markers}
-    out = []
-    for row in local["marker_pairs"]:
-        a, b = row["markers"]
-        achieved = None
-        if a in delta and b in delta:
-            diff = delta[b] - delta[a]
-            if local["local_kind"] == "distance":
-                line = np.asarray(marker_xyz[b], float) - np.asarray(marker_xyz[a], float)
-                norm = np.linalg.norm(line)
-                diff = np.array([diff @ line / norm if norm > 0 else 0.0])
-            achieved = float(np.linalg.norm(diff))
-        allowed = float(row["allowed_error_m"])
-        out.append(PairOutcome(a, b, float(row["separation_m"]), row["predicted_error_m"],
-                               achieved, allowed, achieved is not None and achieved <= allowed))
-    return out
+    errors = {m.marker_id: np.asarray(m.achieved_xyz_m, float)[None] for m in markers}
+    return _outcomes(local["marker_pairs"], "markers", errors, marker_xyz, local["local_kind"])
 
 
 def pairs_record(local: dict, outcomes: list[PairOutcome],
@@ -178,27 +173,29 @@ def pairs_markdown(rec: dict) -> list[str]:
     if local is None:
         return []
 
-    def mm(v):
-        return "—" if v is None else f"{1e3 * v:.1f} mm"
-
     lines = ["", "## Local accuracy", "",
              f"Requirement: {local['requirement_text']}; {local['n_pairs']} station pairs, "
              f"{'all' if local['passed'] else 'not all'} within it.", "",
-             "| pair | separation | predicted | achieved | allowed | passed |",
-             "|---|---:|---:|---:|---:|---|"]
-    for p in sorted(local["pairs"], key=lambda p: -(p["achieved_error_m"] or np.inf)
-                    / p["allowed_error_m"])[:10]:
-        lines.append(f"| {p['stations'][0]}–{p['stations'][1]} | {p['separation_m']:.1f} m | "
-                     f"{mm(p['predicted_error_m'])} | {mm(p['achieved_error_m'])} | "
-                     f"{mm(p['allowed_error_m'])} | {'yes' if p['passed'] else 'no'} |")
+             *_worst_table("pair", "stations", local["pairs"])]
     if "marker_pairs" in local:
         lines += ["", f"Marker pairs: {len(local['marker_pairs'])}, "
                       f"{'all' if local['markers_passed'] else 'not all'} within it.", "",
-                  "| markers | separation | predicted | achieved | allowed | passed |",
-                  "|---|---:|---:|---:|---:|---|"]
-        for p in sorted(local["marker_pairs"], key=lambda p: -(p["achieved_error_m"] or np.inf)
-                        / p["allowed_error_m"])[:10]:
-            lines.append(f"| {p['markers'][0]}–{p['markers'][1]} | {p['separation_m']:.1f} m "
-                         f"| {mm(p['predicted_error_m'])} | {mm(p['achieved_error_m'])} | "
-                         f"{mm(p['allowed_error_m'])} | {'yes' if p['passed'] else 'no'} |")
+                  *_worst_table("markers", "markers", local["marker_pairs"])]
+    return lines
+
+
+def _worst_table(heading: str, key: str, pairs: list[dict]) -> list[str]:
+    """The Markdown table of the ten pairs (ids under ``key``) worst relative to their
+    allowance, achieved against predicted."""
+
+    def mm(v):
+        return "—" if v is None else f"{1e3 * v:.1f} mm"
+
+    lines = [f"| {heading} | separation | predicted | achieved | allowed | passed |",
+             "|---|---:|---:|---:|---:|---|"]
+    for p in sorted(pairs, key=lambda p: -(p["achieved_error_m"] or np.inf)
+                    / p["allowed_error_m"])[:10]:
+        lines.append(f"| {p[key][0]}–{p[key][1]} | {p['separation_m']:.1f} m | "
+                     f"{mm(p['predicted_error_m'])} | {mm(p['achieved_error_m'])} | "
+                     f"{mm(p['allowed_error_m'])} | {'yes' if p['passed'] else 'no'} |")
     return lines
