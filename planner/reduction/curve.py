@@ -32,6 +32,15 @@ everything <= ``eps``?" is then the planner's own network program
 (:func:`planner.program.loop.plan_sites`, requirement ``eps``, budget row ``= k``): see
 :class:`~planner.reduction.minimax.NetworkMinimax`. A kept marker's own error counts, so the
 curve need not be monotone.
+
+Every requirement kind of the configuration is judged as ``plan`` judges it
+(:func:`planner.accuracy.checks.evaluate_layout`'s ``all_ok``): the allowance relative to the
+datum (``requirement_m`` plus ``requirement_ppm``, none with ``datum_requirement`` false), the
+pose aids (``heading_aid``, ``odometry_percent``), a control-point datum, and the local
+requirement on station pairs and (``local_markers``) on pairs of kept markers within
+``local_within_m``. The local requirement is a constraint: each count's subset minimises the
+worst error relative to the datum among the subsets meeting it (the program holds it as rows),
+and the curve stops at the first count where none does.
 """
 
 from __future__ import annotations
@@ -44,7 +53,7 @@ import numpy as np
 from markerplan.errors import ConfigError, InfeasiblePlanError
 from planner.accuracy.checks import diagnose
 from planner.problem.usability import PlanProblem, directions_ok
-from planner.reduction.losses import check_worst, reduction_iv, worst_marker
+from planner.reduction.losses import check_worst, local_ok, reduction_iv, worst_marker
 from planner.reduction.minimax import MinimaxModel, NetworkMinimax
 
 #: Final bisection step: a subset is proven optimal when nothing is feasible this far below it.
@@ -68,7 +77,9 @@ class CurvePoint:
     ok : (s,) bool
         Station meets count, directions and the requirement.
     lower_bound_m : float
-        Proven: no ``k``-subset has a worst-station error <= this, m (``-inf`` if nothing proven).
+        Proven: no ``k``-subset has a worst-station error <= this, m (``-inf`` if nothing proven;
+        network mode with ``requirement_ppm``: of the error scaled to the allowance's constant
+        part, :meth:`planner.reduction.minimax.NetworkMinimax.worst`).
     proven : bool
         False when a solve hit its time limit, so the subset is not proven optimal.
     n_solves : int
@@ -82,7 +93,11 @@ class CurvePoint:
         Network mode: every kept marker meets the requirement (always True otherwise).
     pairs_ok : bool
         Network mode with a local requirement: every judged station pair meets it (always
-        True otherwise; the curve still minimises the worst station error).
+        True otherwise).
+    marker_pairs_ok : bool
+        Network mode with ``local_markers``: every judged pair of kept markers meets the local
+        requirement (always True otherwise). The curve minimises the worst error relative to
+        the datum among the subsets meeting the local requirement.
     """
 
     k: int
@@ -98,6 +113,7 @@ class CurvePoint:
     marker_error_m: np.ndarray | None = None
     markers_ok: bool = True
     pairs_ok: bool = True
+    marker_pairs_ok: bool = True
 
     @property
     def worst_error_m(self) -> float:
@@ -122,7 +138,8 @@ class CurvePoint:
 
     @property
     def meets_requirement(self) -> bool:
-        return bool(self.ok.all()) and self.markers_ok and self.pairs_ok
+        return bool(self.ok.all()) and self.markers_ok and self.pairs_ok \
+            and self.marker_pairs_ok
 
 
 @dataclass(frozen=True)
@@ -134,8 +151,8 @@ class Curve:
     points : list of CurvePoint
     k_directions : int
         Fewest markers meeting count and direction rows at every station (accuracy ignored);
-        in network mode, if the curve found that fewer cannot tie every station to the datum,
-        the fewest that do.
+        in network mode, if the curve found that fewer cannot tie every station to the datum
+        (and meet the local requirement), the fewest that do.
     k_feasible : int or None
         Fewest markers on the curve meeting the requirement at every station (``None``: no
         point does).
@@ -263,8 +280,11 @@ def tradeoff_curve(problem: PlanProblem, config, k_max: int | None = None,
             best, lo, proven = _minimax(mm, k, incumbent, lo, best_above, tol_m, exact,
                                         statuses)
             if best is None:
-                if proven:  # no k-subset meets the directions and (network mode) ties every
-                    k_dir = k + 1  # station to the datum; fewer markers cannot either
+                # no k-subset meets the directions and (network mode) ties every station to
+                # the datum and meets the local requirement; fewer markers cannot either
+                # (``local_markers``: fewer markers have fewer pairs, taken as no easier)
+                if proven:
+                    k_dir = k + 1
                 else:  # the time limit ran out before any k-subset was found
                     complete = False
                 break
@@ -274,7 +294,8 @@ def tradeoff_curve(problem: PlanProblem, config, k_max: int | None = None,
                                  sectors=check.sectors, ok=check.ok, lower_bound_m=float(lo),
                                  proven=bool(proven), n_solves=len(statuses),
                                  statuses=tuple(statuses), marker_error_m=check.marker_error_m,
-                                 markers_ok=check.markers_ok, pairs_ok=check.pairs_ok))
+                                 markers_ok=check.markers_ok, pairs_ok=check.pairs_ok,
+                                 marker_pairs_ok=check.marker_pairs_ok))
         best_above = check_worst(check) if proven and exact and mm.monotone else None
         previous = best
     points = _monotone(mm, points, allowed)
@@ -305,11 +326,12 @@ def _monotone(mm: MinimaxModel, points: list[CurvePoint], allowed: np.ndarray
             errs = [mm.worst(np.where(np.arange(sel.size) == j, True, sel)) for j in free]
             sel[free[int(np.argmin(errs))]] = True
         chk = mm.check(sel)
-        if not check_worst(chk) < big.worst_error_m:
+        if not (check_worst(chk) < big.worst_error_m and local_ok(chk)):
             continue
         out[i] = replace(big, selected=sel, error_m=chk.error_m, count=chk.count,
                          sectors=chk.sectors, ok=chk.ok, marker_error_m=chk.marker_error_m,
-                         markers_ok=chk.markers_ok, pairs_ok=chk.pairs_ok)
+                         markers_ok=chk.markers_ok, pairs_ok=chk.pairs_ok,
+                         marker_pairs_ok=chk.marker_pairs_ok)
     return out
 
 
@@ -373,7 +395,8 @@ def _minimax(mm: MinimaxModel, k: int, incumbent: np.ndarray | None, lo: float,
     best = incumbent
     mm.solve_cap_s = np.inf
     if best is not None and not np.isfinite(mm.worst(best)):
-        best = None  # network mode: the incumbent leaves a station untied to the datum
+        best = None  # network mode: the incumbent leaves a station untied to the datum or
+        # fails the local requirement
     if best is None:
         best, proven = mm.query(k, np.inf, statuses)
         if best is None:  # proven: no k-subset at all (network: none ties every station)

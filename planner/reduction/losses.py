@@ -3,8 +3,9 @@ shares.
 
 - :func:`drop_order`: remove one marker at a time, each time the one whose loss hurts least;
 - :func:`marker_losses`: for every marker, the layout without it (robustness);
-- :func:`layout_checker`, :func:`check_worst`, :func:`failure_reason`: a layout's per-station
-  check, its worst error and why a station fails; :func:`reduction_iv`: the input checks.
+- :func:`layout_checker`, :func:`check_worst`, :func:`local_ok`, :func:`failure_reason`: a
+  layout's per-station check, its worst error, its local verdict and why a station fails;
+  :func:`reduction_iv`: the input checks.
 """
 
 from __future__ import annotations
@@ -32,6 +33,12 @@ def check_worst(check: LayoutCheck) -> float:
     markers = worst_marker(check.marker_error_m)
     worst = float(check.error_m.max())
     return worst if markers is None else max(worst, markers)
+
+
+def local_ok(check: LayoutCheck) -> bool:
+    """Whether a :class:`~planner.accuracy.checks.LayoutCheck` meets the local requirement on
+    its station pairs and (``local_markers``) its marker pairs (True without one)."""
+    return bool(check.pairs_ok and check.marker_pairs_ok)
 
 
 @dataclass(frozen=True)
@@ -112,8 +119,8 @@ def drop_order(problem: PlanProblem, config, layout: np.ndarray) -> list[DropSte
 
     Markers in ``config.existing`` are kept; markers in ``config.forbidden`` are removed before
     the first step. At every step each remaining marker is tried (exact, by enumeration); the
-    removal chosen
-    keeps every station's count and directions if possible, then gives the lowest worst-station
+    removal chosen keeps every station's count and directions if possible, then (network mode)
+    the local requirement on station and marker pairs, then gives the lowest worst-station
     error, then the lowest mean error, then the lowest index. Stops when every removal would
     break a station's count or directions. A nested sequence: compare it with
     :func:`~planner.reduction.curve.tradeoff_curve`, whose subsets need not be nested.
@@ -142,7 +149,8 @@ def drop_order(problem: PlanProblem, config, layout: np.ndarray) -> list[DropSte
             chk = check(trial)
             directions = bool(np.all((chk.count >= config.min_markers)
                                      & (chk.sectors >= config.min_sectors)))
-            key = (not directions, check_worst(chk), float(chk.error_m.mean()), int(m))
+            key = (not directions, not local_ok(chk), check_worst(chk),
+                   float(chk.error_m.mean()), int(m))
             if best is None or key < best[0]:
                 best = (key, m, trial, chk)
         if best[0][0]:  # every removal breaks directions somewhere

@@ -27,6 +27,7 @@ import numpy as np
 from markerplan.errors import InfeasiblePlanError, PlanTimeLimitError
 from planner.accuracy.checks import LayoutCheck, evaluate_layout, station_infos
 from planner.accuracy.network import network_model
+from planner.accuracy.requirement import NetworkRequirement
 from planner.problem.usability import PlanProblem
 from planner.program import (
     Model,
@@ -37,7 +38,7 @@ from planner.program import (
     solve,
     with_tightening_rows,
 )
-from planner.reduction.losses import check_worst
+from planner.reduction.losses import check_worst, local_ok
 
 
 class MinimaxModel:
@@ -162,9 +163,11 @@ class MinimaxModel:
         return out
 
 
-#: Requirement standing for "none" when the network oracle is asked for any k-subset, m (as
-#: the planner's own "no requirement").
-_NO_REQUIREMENT_M = 1e9
+#: Requirement standing for "none" when the network oracle is asked for any k-subset, m: far
+#: above any station's error on a site tied to its datum, yet small enough that the program's
+#: information rows, which scale with its square, stay within what HiGHS accepts (1e15; at
+#: 1e9 m they did not, and every such query failed).
+_NO_REQUIREMENT_M = 1e3
 
 
 class NetworkMinimax(MinimaxModel):
@@ -195,12 +198,35 @@ class NetworkMinimax(MinimaxModel):
         return self._n_cuts
 
     def worst(self, selected: np.ndarray) -> float:
-        return check_worst(self.check(selected))
+        """The subset's worst error relative to the datum, m
+        (:func:`~planner.reduction.losses.check_worst`), with ``requirement_ppm`` scaled to the
+        constant part of the allowance (``requirement_m`` times the worst ratio of error to
+        allowance, so that "<= eps" is the requirement ``eps`` plus proportionally scaled
+        ppm); ``inf`` when it fails a local requirement (station or marker pairs, held as rows
+        by the program), so a subset failing them is never an incumbent; 0 when nothing is
+        judged relative to the datum (``datum_requirement`` false: then any subset meeting the
+        local requirement is optimal)."""
+        check = self.check(selected)
+        if not local_ok(check):
+            return np.inf
+        if not self.config.datum_requirement:
+            return 0.0
+        if not self.config.requirement_ppm:
+            return check_worst(check)
+        allowed, allowed_site = self.net.allowances(NetworkRequirement.of(self.config))
+        ratio = np.r_[check.error_m / allowed,
+                      (check.marker_error_m / allowed_site)[selected]]
+        return float(self.config.requirement_m * np.max(ratio))
 
     def floor(self, allowed: np.ndarray) -> float:
-        """The stations' worst error with every allowed site (a marker's own error may make a
-        larger set worse, never a station's)."""
-        return float(self.net.station_errors(allowed).max())
+        """The stations' worst error with every allowed site, scaled as :meth:`worst` (a
+        marker's own error may make a larger set worse, never a station's); 0 without a datum
+        requirement."""
+        if not self.config.datum_requirement:
+            return 0.0
+        station_allowed, _ = self.net.allowances(NetworkRequirement.of(self.config))
+        return float(self.config.requirement_m
+                     * np.max(self.net.station_errors(allowed) / station_allowed))
 
     def _exact_model(self, k: int, cfg) -> Model:
         """The planner's model for ``cfg`` with ``sum x = k`` and its tightening rows."""
@@ -218,9 +244,10 @@ class NetworkMinimax(MinimaxModel):
             statuses.append("time_limit")
             return None, False
         k = min(k, self.nx)
-        cfg = self.config.replace(
-            requirement_m=float(eps) if np.isfinite(eps) else _NO_REQUIREMENT_M, budget=k,
-            time_limit_s=float(limit))
+        eps = float(eps) if np.isfinite(eps) else _NO_REQUIREMENT_M
+        cfg = self.config.replace(  # the allowance scaled as a whole (:meth:`worst`)
+            requirement_m=eps, budget=k, time_limit_s=float(limit),
+            requirement_ppm=self.config.requirement_ppm * eps / self.config.requirement_m)
         t = time.perf_counter()
         try:
             result = plan_sites(self.problem, cfg, self._exact_model(k, cfg))
