@@ -131,3 +131,23 @@ def requirement_text(section: dict) -> str:
     '0.1 m'
     """
     return section.get("requirement_text", f"{section['requirement_m']:g} m")
+
+
+def requirement_record(config, redundant: bool = True) -> dict:
+    """The ``requirement`` section ``plan.json`` and ``reduce.json`` record of a
+    :class:`~planner.config.PlanConfig`: every kind judged (the allowance relative to the datum
+    and its text, the local requirement), the direction rule and the 95 % figure (and, with
+    ``redundant``, the redundant rule)."""
+    from planner.accuracy.figure import error_figure
+
+    return {"requirement_m": config.requirement_m, "requirement_ppm": config.requirement_ppm,
+            "requirement_text": NetworkRequirement.of(config).describe(),
+            "datum_requirement": config.datum_requirement,
+            "local_requirement_m": config.local_requirement_m,
+            "local_requirement_ppm": config.local_requirement_ppm,
+            "local_within_m": config.local_within_m, "local_kind": config.local_kind,
+            "n_sectors": config.n_sectors, "min_sectors": config.min_sectors,
+            "min_markers": config.min_markers, "working_radius_m": config.working_radius_m,
+            **({"redundant": config.redundant} if redundant else {}),
+            "error_figure": config.error_figure,
+            "error_figure_text": error_figure(config).describe()}

@@ -38,9 +38,9 @@ option                      meaning (and the value the command receives)
 ``--error-figure NAME``     how a 95 % error is computed: ``quantile`` of the worst error over
                             the working disc, or the ``ellipsoid`` figure (default)
                             (:mod:`planner.accuracy.figure`; ``str``)
-``--local-markers``         the local requirement also judges every pair of selected markers
-                            within ``--local-within-m`` (``local_markers``; ``True`` or
-                            ``None``: the config's; :mod:`planner.accuracy.local_markers`)
+``--requirement-m`` ...     the requirement kinds and pose aids of ``plan`` and ``reduce``
+                            (:func:`requirement_options`); ``--control FILE``: control points,
+                            network mode's datum (``plan``, ``reduce``, ``adjust``)
 ``--scheduler ADDRESS``     where the per-station tasks run: ``local`` (a LocalCluster sized to
                             the machine), ``none`` (in process) or a dask scheduler address
                             (``str``; :func:`planner.distributed.executor`)
@@ -601,8 +601,6 @@ def error_figure_option(f):
              f"else {DEFAULT_ERROR_FIGURE}).")(f)
 
 
-#: ``--local-markers``: the local requirement judges pairs of markers too (``None`` when not
-#: given: the config's ``local_markers``).
 #: ``--control FILE``: network mode's datum, control points (``plan``, ``adjust``).
 control_option = click.option(
     "--control", "control_path", type=FILE,
@@ -611,10 +609,63 @@ control_option = click.option(
          "station is fixed, and together they must fix position and heading.")
 
 
-local_markers_option = click.option(
-    "--local-markers", "local_markers", is_flag=True, default=None,
-    help="Network mode: the local requirement also judges every pair of selected markers at "
-         "most --local-within-m apart (their relative position, or distance, at 95 %).")
+def requirement_options(command):
+    """Add the requirement kinds and pose aids (``--requirement-m`` to ``--odometry-percent``)
+    to a command, which receives them as one ``requirement`` dict by configuration name
+    (:class:`planner.config.PlanConfig`; ``None``: not given), for :func:`with_options`."""
+    from planner.accuracy.aids import HEADING_AIDS
+    from planner.config import LOCAL_KINDS
+
+    names = ("requirement_m", "requirement_ppm", "local_requirement_m", "local_requirement_ppm",
+             "local_within_m", "local_kind", "local_markers", "no_datum_requirement",
+             "heading_aid", "odometry_percent")
+
+    @functools.wraps(command)
+    def with_requirement(*args, **kwargs):
+        given = {name: kwargs.pop(name) for name in names}
+        given["datum_requirement"] = False if given.pop("no_datum_requirement") else None
+        return command(*args, requirement=given, **kwargs)
+
+    for option in reversed([
+        click.option("--requirement-m", "requirement_m", type=REQUIREMENT_M,
+                     help="Required 95 % station error, m. Default: the config's "
+                          "requirement_m (reduce: the plan's), else 0.1; in network mode the "
+                          "constant part of the allowance (--requirement-ppm)."),
+        click.option("--requirement-ppm", "requirement_ppm", type=REQUIREMENT_PPM,
+                     help="Network mode: parts per million of each station's (and marker's) "
+                          "horizontal distance from the datum added to --requirement-m, e.g. "
+                          "--requirement-m 0.10 --requirement-ppm 200 (default 0: constant)."),
+        click.option("--local-requirement-m", "local_requirement_m", type=REQUIREMENT_M,
+                     help="Network mode: required 95 % relative error between every pair of "
+                          "stations at most --local-within-m apart (local accuracy), m; "
+                          "default none."),
+        click.option("--local-requirement-ppm", "local_requirement_ppm", type=REQUIREMENT_PPM,
+                     help="Parts per million of a pair's separation added to "
+                          "--local-requirement-m (default 0)."),
+        click.option("--local-within-m", "local_within_m", type=LOCAL_WITHIN_M,
+                     help="Largest separation of a station pair the local requirement judges, "
+                          "m (default 50)."),
+        click.option("--local-kind", "local_kind", type=click.Choice(LOCAL_KINDS),
+                     help="What the local requirement bounds: position (the relative position "
+                          "of any points of the two working discs, default) or distance (their "
+                          "edge length)."),
+        click.option("--local-markers", "local_markers", is_flag=True, default=None,
+                     help="Network mode: the local requirement also judges every pair of "
+                          "selected markers at most --local-within-m apart (their relative "
+                          "position, or distance, at 95 %)."),
+        click.option("--no-datum-requirement", "no_datum_requirement", is_flag=True,
+                     default=None,
+                     help="Network mode: judge only the local requirement, nothing relative "
+                          "to the datum."),
+        click.option("--heading-aid", "heading_aid", type=click.Choice(sorted(HEADING_AIDS)),
+                     help="Network mode: a heading reference on every station, by class "
+                          "(random and boresight-bias sigma: sun-sensor 0.1 and 0.05 deg, "
+                          "star-tracker 10 and 20 arcsec); the config's "
+                          "heading_prior_sigma_deg and heading_bias_sigma_deg override them."),
+        odometry_percent_option,
+    ]):
+        with_requirement = option(with_requirement)
+    return with_requirement
 
 
 #: ``--time-limit-s S`` (old spelling ``--time-limit``): the solver time limit, seconds.

@@ -7,12 +7,8 @@ import sys
 
 import click
 
-from planner.accuracy.aids import HEADING_AIDS
 from planner.cli._common import (
     FILE,
-    LOCAL_WITHIN_M,
-    REQUIREMENT_M,
-    REQUIREMENT_PPM,
     FiniteRange,
     boundary_option,
     config_option,
@@ -25,11 +21,9 @@ from planner.cli._common import (
     exclude_option,
     given_paths,
     json_option,
-    local_markers_option,
     marker_radius_option,
     network_option,
     network_settings,
-    odometry_percent_option,
     out_option,
     overwrite_option,
     reference_station_option,
@@ -38,6 +32,7 @@ from planner.cli._common import (
     reproject_option,
     require_dem,
     require_truth_terrain,
+    requirement_options,
     scheduler_options,
     site_option,
     site_seed_option,
@@ -47,7 +42,6 @@ from planner.cli._common import (
     time_limit_option,
     with_options,
 )
-from planner.config import LOCAL_KINDS
 
 #: Cell size of the stand maps, m: rounded to whole DEM cells (at least one), so any positive
 #: size up to 10 km (one cell over any site markerplan plans; a km site is 1 km across).
@@ -121,36 +115,7 @@ def _load_detection_model(ctx, param, path):
 @control_option
 @click.option("--budget", type=click.IntRange(1, 100_000),
               help="Largest number of markers allowed.")
-@click.option("--requirement-m", "requirement_m", type=REQUIREMENT_M,
-              help="Required 95 % station error, m. Default: the config's requirement_m, else "
-                   "0.1; in network mode the constant part of the allowance (--requirement-ppm).")
-@click.option("--requirement-ppm", "requirement_ppm", type=REQUIREMENT_PPM,
-              help="Network mode: parts per million of each station's (and marker's) "
-                   "horizontal distance from the datum added to --requirement-m, e.g. "
-                   "--requirement-m 0.10 --requirement-ppm 200 (default 0: constant).")
-@click.option("--local-requirement-m", "local_requirement_m", type=REQUIREMENT_M,
-              help="Network mode: required 95 % relative error between every pair of stations "
-                   "at most --local-within-m apart (local accuracy), m; default none.")
-@click.option("--local-requirement-ppm", "local_requirement_ppm", type=REQUIREMENT_PPM,
-              help="Parts per million of a pair's separation added to --local-requirement-m "
-                   "(default 0).")
-@click.option("--local-within-m", "local_within_m", type=LOCAL_WITHIN_M,
-              help="Largest separation of a station pair the local requirement judges, m "
-                   "(default 50).")
-@click.option("--local-kind", "local_kind", type=click.Choice(LOCAL_KINDS),
-              help="What the local requirement bounds: position (the relative position of "
-                   "any points of the two working discs, default) or distance (their edge "
-                   "length).")
-@local_markers_option
-@click.option("--no-datum-requirement", "no_datum_requirement", is_flag=True, default=None,
-              help="Network mode: judge only the local requirement, nothing relative to the "
-                   "datum.")
-@click.option("--heading-aid", "heading_aid", type=click.Choice(sorted(HEADING_AIDS)),
-              help="Network mode: a heading reference on every station, by class (random and "
-                   "boresight-bias sigma: sun-sensor 0.1 and 0.05 deg, star-tracker 10 and 20 "
-                   "arcsec); the config's heading_prior_sigma_deg and heading_bias_sigma_deg "
-                   "override them.")
-@odometry_percent_option
+@requirement_options
 @error_figure_option
 @network_option
 @reference_station_option
@@ -166,9 +131,7 @@ def command(site_name, site_seed, dem_path, reproject, terrain, dem_height_error
             stations_path, station_ids,
             boundary_path, exclude_paths, marker_radius_m, error_model, config_path,
             visibility_path, redundant, chance_epsilon, detection_model, existing, control_path,
-            budget, requirement_m, requirement_ppm, local_requirement_m, local_requirement_ppm,
-            local_within_m, local_kind, local_markers, no_datum_requirement, heading_aid,
-            odometry_percent, error_figure, network,
+            budget, requirement, error_figure, network,
             reference_station, time_limit_s, stand_map_cell_m, scheduler, workers, out,
             overwrite, as_json):
     """Plan the fewest marker sites so that every station meets the accuracy requirement.
@@ -230,15 +193,7 @@ def command(site_name, site_seed, dem_path, reproject, terrain, dem_height_error
                                 dem_height_error=dem_height_error, chance_epsilon=chance_epsilon,
                                 control_path=control_path,
                                 detection_model=detection_model, error_figure=error_figure,
-                                requirement=dict(
-                                    requirement_m=requirement_m,
-                                    requirement_ppm=requirement_ppm,
-                                    local_requirement_m=local_requirement_m,
-                                    local_requirement_ppm=local_requirement_ppm,
-                                    local_within_m=local_within_m, local_kind=local_kind,
-                                    local_markers=local_markers,
-                                    datum_requirement=False if no_datum_requirement else None,
-                                    heading_aid=heading_aid, odometry_percent=odometry_percent))
+                                requirement=requirement)
         doc = write_plan_files(outcome, stage)
         draw_plan_map(outcome, stage / "map.png")
         stand_s = {}

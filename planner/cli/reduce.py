@@ -9,8 +9,10 @@ import click
 from planner.cli._common import (
     boundary_option,
     config_option,
+    control_option,
     dem_option,
     emit_summary,
+    error_figure_option,
     error_model_option,
     exclude_option,
     given_paths,
@@ -26,6 +28,7 @@ from planner.cli._common import (
     report_timings,
     reproject_option,
     require_dem,
+    requirement_options,
     scheduler_options,
     seed_option,
     site_option,
@@ -60,6 +63,9 @@ from planner.cli._common import (
               help="Fewest markers on the curve (default: the fewest meeting the directions).")
 @network_option
 @reference_station_option
+@control_option
+@requirement_options
+@error_figure_option
 @time_limit_option
 @click.option("--verify", is_flag=True,
               help="Simulate + process the stations at chosen counts; achieved vs predicted.")
@@ -74,8 +80,9 @@ from planner.cli._common import (
 @json_option
 def command(layout_spec, site_name, site_seed, dem_path, reproject, stations_path, station_ids,
             boundary_path, exclude_paths, marker_radius_m, error_model, config_path, free,
-            keep_ids, drop_ids, k_min, network, reference_station, time_limit_s, verify, seed,
-            verify_k, offsets, scheduler, workers, out, overwrite, as_json):
+            keep_ids, drop_ids, k_min, network, reference_station, control_path, requirement,
+            error_figure, time_limit_s, verify, seed, verify_k, offsets, scheduler, workers, out,
+            overwrite, as_json):
     """Trade-off between the number of markers and the worst station's predicted error.
 
     INPUT is a plan.json from `markerplan plan`, a markers CSV (id,x_m,y_m[,z_m], site frame)
@@ -103,11 +110,26 @@ def command(layout_spec, site_name, site_seed, dem_path, reproject, stations_pat
     network's, relative to the reference station (--reference-station, else the plan's, else
     the first), as `plan --network` judges it; --verify is then refused (use
     `markerplan verify PLAN --network`).
+
+    A count passes when it meets every requirement kind, as `plan` judges a layout: in network
+    mode the allowance relative to the datum (--requirement-m, --requirement-ppm; none with
+    --no-datum-requirement), the local requirement between stations and, with
+    --local-markers, between kept markers (--local-requirement-m, --local-requirement-ppm,
+    --local-within-m, --local-kind), with the pose aids (--heading-aid, --odometry-percent)
+    and the datum (--control: control points, a lander's fiducials, kept in every subset). A
+    plan is judged by the kinds and datum it was made for: these options are refused with a
+    plan.json unless they repeat its settings (a --config replaces its configuration as a
+    whole); with a markers CSV or as-built they state the kinds to judge.
+
+    \b
+      markerplan reduce markers.csv --network --control lander.csv \\
+          --local-requirement-m 0.1 --local-markers --out reduce-lander/
     """
     from markerplan.output_folder import output_folder
     from planner.reduction.plot import plot_tradeoff
     from planner.reduction.report import (
         accuracy_mode,
+        kinds_text,
         reduce_timings,
         summary,
         write_reduce_files,
@@ -118,17 +140,18 @@ def command(layout_spec, site_name, site_seed, dem_path, reproject, stations_pat
     if not is_plan(layout_spec):  # a plan's --reproject applies to the DEM it records
         require_dem(reproject, dem_path)
     inputs_given = given_paths(dem_path, stations_path, boundary_path, error_model.path,
-                               config_path, *exclude_paths,
+                               config_path, control_path, *exclude_paths,
                                None if layout_spec == "as-built" else layout_spec)
     sources = {"site_name": site_name, "site_seed": site_seed, "dem_path": dem_path,
                "reproject": reproject, "stations_path": stations_path, "station_ids": station_ids,
                "boundary_path": boundary_path, "exclude_paths": exclude_paths,
-               "marker_radius_m": marker_radius_m}
+               "marker_radius_m": marker_radius_m, "control_path": control_path}
     with output_folder(out, overwrite, "reduce", inputs=inputs_given) as stage:
         study, doc, config = _study(
             layout_spec, sources, error_model, config_path, free, keep_ids, drop_ids, k_min,
             time_limit_s, verify, seed, verify_k, offsets, network, reference_station,
-            progress=not as_json or sys.stderr.isatty(), where=(scheduler, workers))
+            progress=not as_json or sys.stderr.isatty(), where=(scheduler, workers),
+            requirement={**requirement, "error_figure": error_figure})
         write_reduce_files(doc, stage)
         plot_tradeoff(doc, stage / "tradeoff.png")
     timings = reduce_timings(study)
@@ -138,7 +161,7 @@ def command(layout_spec, site_name, site_seed, dem_path, reproject, stations_pat
     least = "" if doc["k_feasible_minimal"] else "at least "
     human = (f"{least}{doc['markers_that_can_go']} of {doc['layout']['n_markers']} markers can "
              f"go: "
-             f"{kf} meet {config.requirement_m:g} m at every station"
+             f"{kf} meet {kinds_text(doc['requirement'], 'network' in doc)} at every station"
              if kf is not None else "no count meets the requirement at every station")
     human += ("" if doc["solver"]["proven_optimal"] else " (time limit: not proven optimal)")
     if "network" in doc:
@@ -148,11 +171,13 @@ def command(layout_spec, site_name, site_seed, dem_path, reproject, stations_pat
 
 def _study(layout_spec, sources, error_model, config_path, free, keep_ids, drop_ids, k_min,
            time_limit_s, verify, seed, verify_k, offsets, network, reference_station, progress,
-           where):
+           where, requirement):
     """Read the inputs, run the study (and ``--verify``); return ``(study, doc, config)``.
 
     ``sources`` holds the site options as :func:`planner.reduction.study.resolve_inputs`
-    takes them; ``where`` is ``(scheduler, workers)`` of ``--verify``'s station tasks."""
+    takes them; ``where`` is ``(scheduler, workers)`` of ``--verify``'s station tasks;
+    ``requirement`` the requirement-kind options and ``--error-figure`` by configuration name
+    (``None``: not given)."""
     from markerplan.errors import ConfigError
     from pipeline.rig import MountingOffsets
     from planner.config import load_config
@@ -172,6 +197,8 @@ def _study(layout_spec, sources, error_model, config_path, free, keep_ids, drop_
     config = with_options(config, existing=keep + tuple(c for c in control if c not in keep),
                           forbidden=dropped, time_limit_s=time_limit_s)
     config = network_settings(config, network, reference_station)
+    config = _requirement_settings(config, requirement, layout_spec)
+    _control_iv(config, layout, sources["control_path"])
     if config.network and verify:
         raise ConfigError("reduce --verify simulates known-control registration; in network "
                           "mode verify a plan with `markerplan verify PLAN --network` instead")
@@ -201,6 +228,44 @@ def _study(layout_spec, sources, error_model, config_path, free, keep_ids, drop_
                "verify_mounting_offsets": offsets.to_dict() if verify else None,
                "verify_k": None if ks is None else list(ks)}
     return study, reduce_record(study, layout, inputs, model_name, options, verified), config
+
+
+def _requirement_settings(config, requirement: dict, layout_spec: str):
+    """``config`` with the requirement-kind options; with a plan, an option that differs from
+    the plan's setting is refused (:class:`ConfigError`): a plan is judged by the kinds it was
+    made for."""
+    from markerplan.errors import ConfigError
+    from planner.reduction.study import is_plan
+
+    if not is_plan(layout_spec):
+        return with_options(config, **requirement)
+    for name, value in requirement.items():
+        if value is not None and value != getattr(config, name):
+            flag = "--no-datum-requirement" if name == "datum_requirement" \
+                else f"--{name.replace('_', '-')} {value}"
+            raise ConfigError(f"{flag} conflicts with INPUT {layout_spec}'s {name} "
+                              f"{getattr(config, name)}: a plan is reduced with the requirement "
+                              "it was made for; drop the option, or re-plan with it")
+    return config
+
+
+def _control_iv(config, layout, control_path) -> None:
+    """Refuse ``--control`` with a plan (which records its own datum), outside network mode or
+    with ``--reference-station`` (:class:`ConfigError`)."""
+    from markerplan.errors import ConfigError
+    from planner.reduction.study import is_plan
+
+    if control_path is None:
+        return
+    if is_plan(layout.source):
+        raise ConfigError(f"--control: INPUT {layout.source} records its own datum; drop "
+                          "--control, or reduce its markers CSV with it")
+    if not config.network:
+        raise ConfigError("--control gives network mode's datum; add --network or drop "
+                          "--control")
+    if config.reference_station is not None:
+        raise ConfigError("--control points are the datum and fix no station; drop "
+                          "--reference-station or --control")
 
 
 def _where_needs_verify(verify: bool) -> None:

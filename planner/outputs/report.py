@@ -44,11 +44,10 @@ import numpy as np
 
 from markerplan.provenance import provenance
 from markerplan.writing import write_gis_sidecars
-from planner.accuracy.figure import error_figure
 from planner.accuracy.requirement import (
-    NetworkRequirement,
     datum_clause,
     datum_text,
+    requirement_record,
     requirement_text,
 )
 from planner.outputs.chance_report import chance_markdown, chance_sections
@@ -150,18 +149,7 @@ def plan_record(outcome) -> dict:
                  "marker_radius_m": inp.marker_radius_m,
                  "boundary_xy_m": None if inp.boundary_xy is None
                  else np.asarray(inp.boundary_xy).tolist()},
-        "requirement": {"requirement_m": cfg.requirement_m,
-                        "requirement_ppm": cfg.requirement_ppm,
-                        "requirement_text": NetworkRequirement.of(cfg).describe(),
-                        "datum_requirement": cfg.datum_requirement,
-                        "local_requirement_m": cfg.local_requirement_m,
-                        "local_requirement_ppm": cfg.local_requirement_ppm,
-                        "local_within_m": cfg.local_within_m, "local_kind": cfg.local_kind,
-                        "n_sectors": cfg.n_sectors,
-                        "min_sectors": cfg.min_sectors, "min_markers": cfg.min_markers,
-                        "working_radius_m": cfg.working_radius_m, "redundant": cfg.redundant,
-                        "error_figure": cfg.error_figure,
-                        "error_figure_text": error_figure(cfg).describe()},
+        "requirement": requirement_record(cfg),
         "solver": solver,
         "n_markers": n_plan,
         "meets_requirement": bool(res.check.all_ok),

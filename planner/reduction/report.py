@@ -6,7 +6,10 @@
 - ``schema``, ``schema_version``, ``provenance`` (:func:`markerplan.provenance.provenance` of the
   resolved configuration, with the error model, solver statuses and inputs), ``frame``;
 - ``layout``: source, mode (``layout`` or ``free``), marker ids;
-- ``requirement``: requirement_m, sectors, markers, working radius;
+- ``requirement``: every kind judged, as ``plan.json`` records it
+  (:func:`planner.accuracy.requirement.requirement_record`: requirement_m, requirement_ppm and
+  its text, datum_requirement, the local requirement; sectors, markers, working radius, 95 %
+  figure), with ``local_markers`` and ``local_requirement_text``;
 - ``curve``: one record per count ``k`` (most markers first) — kept markers, worst and mean
   predicted station error, proven lower bound, per-station errors and directions, whether every
   station passes, whether the point is proven optimal and the status of every solve;
@@ -17,7 +20,10 @@
   inclinometer and heading prior). Every error is then relative to it, and each curve point
   also holds ``worst_station_error_m``, ``worst_marker_error_m`` and ``marker_errors_m`` (its
   ``worst_error_m`` is the worst of stations and kept markers, which the requirement applies
-  to); ``tradeoff.csv`` gains the two worst-error columns;
+  to), and ``local_pairs_ok`` / ``marker_pairs_ok`` (the local requirement on station and kept
+  marker pairs); ``tradeoff.csv`` gains the two worst-error columns. The datum record is
+  :meth:`planner.accuracy.network.NetworkModel.datum_record` (a control-point datum lists its
+  points) with the pose aids (:meth:`planner.config.PlanConfig.aids_record`);
 
 No file holds a timing (the same inputs give byte-identical files): :func:`reduce_timings`
 gives them to the command's stderr and ``--json`` summary.
@@ -34,8 +40,12 @@ import numpy as np
 
 from markerplan.provenance import provenance
 from markerplan.writing import write_csv
-from planner.accuracy.figure import error_figure
-from planner.accuracy.requirement import datum_clause, datum_text
+from planner.accuracy.requirement import (
+    datum_clause,
+    datum_text,
+    requirement_record,
+    requirement_text,
+)
 from planner.reduction.losses import check_worst, failure_reason
 
 SCHEMA = "markerplan-reduce"
@@ -64,13 +74,41 @@ def _stations(problem, check, config) -> list[dict]:
 
 
 def _failing(prob, check, cfg) -> dict[str, str]:
-    """Failing station id -> reason, and in network mode failing kept marker id -> its error."""
+    """Failing station id -> reason, and in network mode failing kept marker id -> its error
+    and ``"station pairs"`` / ``"marker pairs"`` when some fail the local requirement."""
     out = {prob.station_ids[t]: failure_reason(check, t, cfg) for t in np.flatnonzero(~check.ok)}
     if check.marker_error_m is not None:
         for j in np.flatnonzero(check.marker_error_m > cfg.requirement_m):
             out[prob.site_ids[j]] = (f"marker error {check.marker_error_m[j]:.4f} m > "
                                      f"{cfg.requirement_m:g} m")
+    for key, ok in (("station pairs", check.pairs_ok), ("marker pairs", check.marker_pairs_ok)):
+        if not ok:
+            out[key] = "beyond the local requirement"
     return out
+
+
+def _requirement(cfg) -> dict:
+    """``reduce.json``'s ``requirement``: every kind judged (as ``plan.json`` records it), with
+    ``local_markers`` and the local requirement in words (``None`` without one)."""
+    from planner.accuracy.local import LocalRequirement
+
+    local = LocalRequirement.of(cfg)
+    return {**requirement_record(cfg, redundant=False), "local_markers": cfg.local_markers,
+            "local_requirement_text": None if local is None else local.describe()}
+
+
+def kinds_text(req: dict, network: bool = True) -> str:
+    """The requirement kinds a ``reduce.json`` ``requirement`` section judges, in words, e.g.
+    ``"0.1 m relative to the datum; local 0.1 m between stations within 50 m (relative
+    position), and between kept markers"`` (known control: ``"a predicted error ≤ 10 cm"``)."""
+    if not network:
+        return f"a predicted error ≤ {100 * req['requirement_m']:g} cm"
+    parts = [f"{requirement_text(req)} relative to the datum"
+             if req.get("datum_requirement", True) else "nothing relative to the datum"]
+    if req.get("local_requirement_text"):
+        parts.append(f"local {req['local_requirement_text']}"
+                     + (", and between kept markers" if req.get("local_markers") else ""))
+    return "; ".join(parts)
 
 
 def _network(prob, cfg) -> dict:
@@ -94,7 +132,8 @@ def reduce_record(study, layout, inputs, model_name: str, options: dict,
             "worst_station_error_m": _num(p.worst_station_error_m),
             "worst_marker_error_m": _num(p.worst_marker_error_m),
             "marker_errors_m": {prob.site_ids[j]: _num(p.marker_error_m[j])
-                                for j in np.flatnonzero(p.selected)}}
+                                for j in np.flatnonzero(p.selected)},
+            "local_pairs_ok": p.pairs_ok, "marker_pairs_ok": p.marker_pairs_ok}
         points.append({
             "k": p.k, "markers": _ids(prob, p.selected), "worst_error_m": _num(p.worst_error_m),
             **network,
@@ -138,11 +177,7 @@ def reduce_record(study, layout, inputs, model_name: str, options: dict,
         "site": {"name": inputs.site_name, "seed": inputs.site_seed},
         "layout": {"source": layout.source, "mode": "free" if study.free else "layout",
                    "n_markers": study.n_layout, "markers": _ids(prob, study.layout)},
-        "requirement": {"requirement_m": cfg.requirement_m, "n_sectors": cfg.n_sectors,
-                        "min_sectors": cfg.min_sectors, "min_markers": cfg.min_markers,
-                        "working_radius_m": cfg.working_radius_m,
-                        "error_figure": cfg.error_figure,
-                        "error_figure_text": error_figure(cfg).describe()},
+        "requirement": _requirement(cfg),
         "solver": solver,
         "k_directions": curve.k_directions, "k_feasible": curve.k_feasible,
         "k_feasible_minimal": curve.k_feasible_minimal,
@@ -215,8 +250,8 @@ def report_markdown(doc: dict) -> str:
     head = (f"**{least}{go} of {lay['n_markers']} markers can go**: {kf} markers still give "
             "every "
             f"station ≥ {req['min_markers']} markers in ≥ {req['min_sectors']} of "
-            f"{req['n_sectors']} directions and a predicted error ≤ "
-            f"{100 * req['requirement_m']:g} cm." if kf is not None else
+            f"{req['n_sectors']} directions and "
+            f"{kinds_text(req, 'network' in doc)}." if kf is not None else
             "**No count meets the requirement at every station**, not even the full layout.")
     if kf is not None and not doc["k_feasible_minimal"]:
         head += (" Fewer markers were not ruled out: a smaller count hit the time limit or lies "

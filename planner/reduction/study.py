@@ -126,7 +126,8 @@ def read_layout(spec: str, inputs) -> Layout:
 def resolve_inputs(spec: str, site_name: str | None = None, site_seed: int | None = None,
                    dem_path=None, stations_path=None, station_ids=None, boundary_path=None,
                    exclude_paths=(), marker_radius_m: float | None = None,
-                   config=None, reproject: bool = False) -> tuple[object, Layout, object]:
+                   config=None, reproject: bool = False,
+                   control_path=None) -> tuple[object, Layout, object]:
     """Site inputs, layout and plan configuration of a reduction study.
 
     A ``plan.json`` supplies its own site, terrain seed, DEM and stations files, stations,
@@ -153,6 +154,10 @@ def resolve_inputs(spec: str, site_name: str | None = None, site_seed: int | Non
     reproject : bool
         As for :func:`~planner.problem.inputs.load_inputs` (default: as the plan's DEM was read).
         The DEM is read as far as the stations see (``config.max_range_m``).
+    control_path : path, optional
+        A layout other than a plan: control points CSV (``id,x_m,y_m,z_m,sigma_m``,
+        :func:`planner.problem.inputs.read_control_points`), network mode's datum, added to the
+        layout as its control points (:attr:`Layout.control_sigma_m`; a plan records its own).
 
     Returns
     -------
@@ -187,9 +192,11 @@ def resolve_inputs(spec: str, site_name: str | None = None, site_seed: int | Non
                          stations_path=stations_path, boundary_path=boundary_path,
                          exclude_paths=exclude_paths, marker_radius_m=marker_radius_m,
                          station_ids=None if own_stations else station_ids,
-                         reproject=bool(reproject), sight_radius_m=config.max_range_m)
+                         reproject=bool(reproject), sight_radius_m=config.max_range_m,
+                         control=None if plan is not None else control_path)
     if plan is None:
-        return inputs, read_layout(spec, inputs), config
+        layout = _with_control_points(read_layout(spec, inputs), inputs.control)
+        return replace(inputs, control=()), layout, config
     if own_stations:
         inputs = _planned_stations(plan, spec, inputs, station_ids, given_site)
     layout = _plan_layout(plan, spec)
@@ -249,6 +256,27 @@ def _planned_stations(plan: dict, spec, inputs, wanted, given_site: str | None):
             raise DataError(f"station {sid} of INPUT {spec} is planned at ({x:.2f}, {y:.2f}) m "
                             f"but {where} puts it at ({got[0]:.2f}, {got[1]:.2f}) m; {fix}")
     return inputs.with_stations(ids)
+
+
+def _with_control_points(layout: Layout, control) -> Layout:
+    """``layout`` with control points (:class:`pipeline.network.observations.ControlPoint`,
+    each with its largest sigma: the planner's prior is isotropic) appended as its control
+    points.
+
+    Raises
+    ------
+    InputFileError
+        A control point id the layout already uses.
+    """
+    if not control:
+        return layout
+    clash = sorted(set(layout.ids) & {c.marker_id for c in control})
+    if clash:
+        raise InputFileError(f"control point id(s) {', '.join(clash)} are also marker ids of "
+                             f"INPUT {layout.source}; rename them in one of the files")
+    return Layout(layout.ids + tuple(c.marker_id for c in control),
+                  np.vstack([layout.xyz] + [c.xyz_m[None] for c in control]), layout.source,
+                  {c.marker_id: float(c.sigma_m.max()) for c in control})
 
 
 def is_plan(spec: str) -> bool:
