@@ -9,7 +9,7 @@ one tile in the same run (a whole-site scene is not built). Finally one JSON obj
     .venv/bin/python -u benchmarks/km_plan.py [--grid-spacing 4] [--network-grid-spacing G]
         [--time-limit 120] [--network-time-limit 600] [--network-requirement 6] [--keep DIR]
         [--network-local 0.10] [--network-within 50] [--error-figure quantile]
-        [--heading-aid sun-sensor|star-tracker]
+        [--heading-aid sun-sensor|star-tracker] [--chance-epsilon none|0.05]
         [--plans plan,plan_network]
 
 The network plan's requirement is relative to the station nearest the centre, without a heading
@@ -89,6 +89,14 @@ def _probe(code: str, *args: str) -> dict:
     return json.loads(out.stdout.strip().splitlines()[-1])
 
 
+def _setting(text: str) -> float | str:
+    """A command-line value as a TOML setting: a number, else the string (``"none"``)."""
+    try:
+        return float(text)
+    except ValueError:
+        return text
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--grid-spacing", type=float, default=4.0,
@@ -110,6 +118,8 @@ def main() -> None:
     ap.add_argument("--error-figure", help="error_figure of the network plan (default the "
                                            "planner's)")
     ap.add_argument("--heading-aid", help="heading_aid of the network plan (default none)")
+    ap.add_argument("--chance-epsilon", help="chance_epsilon of the network plan (default the "
+                                             "planner's; none: the naive plan)")
     ap.add_argument("--plans", default="plan,plan_network",
                     help="plans to run, comma-separated: plan, plan_network")
     ap.add_argument("--keep", type=Path, help="Write the configuration and plans here.")
@@ -144,6 +154,8 @@ def main() -> None:
         lines.append(f'error_figure = "{args.error_figure}"')
     if args.heading_aid:
         lines.append(f'heading_aid = "{args.heading_aid}"')
+    if args.chance_epsilon:
+        lines.append(f"chance_epsilon = {json.dumps(_setting(args.chance_epsilon))}")
     network.write_text("\n".join(lines) + "\n")
     cli = str(Path(sys.executable).with_name("markerplan"))
     figures = {"site": site, "whole_mesh_mb": whole_mb, "whole_mesh_s": whole_s,

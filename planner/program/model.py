@@ -272,12 +272,15 @@ def build_model(problem: PlanProblem, config, information: bool = True) -> Model
         ``budget``, ``existing``, ``forbidden``.
     information : bool
         Include the ``info`` rows; without them the model is the directions-only relaxation
-        (same variables: rows of one fit the other).
+        (same variables: rows of one fit the other). They are sized for the requirement
+        relative to the datum, so a network plan that does not judge it
+        (``datum_requirement`` false) has none.
 
     Returns
     -------
     model : Model
     """
+    information = information and judges_datum(config)
     usable = problem.pair_usable
     existing = problem.site_mask(config.existing, "existing") | problem.site_existing
     forbidden = problem.site_mask(config.forbidden, "forbidden")
@@ -400,11 +403,12 @@ def with_tightening_rows(problem: PlanProblem, model: Model, config) -> Model:
     (:func:`planner.accuracy.known_control.heading_information_lower_bound`) and outer-approximation
     tangents at 9 rim points (families ``"heading"``, ``"oa0"``). Unlike the ``info:`` rows of
     :func:`build_model` they do not rescale with the requirement, so a model re-used for another
-    requirement level must leave them out.
+    requirement level must leave them out. None when the plan does not judge the datum
+    requirement (:func:`judges_datum`).
     """
     rows, lower, kinds = [], [], []
     reference = _reference_index(problem, config)
-    for s in range(problem.n_stations):
+    for s in range(problem.n_stations if judges_datum(config) else 0):
         idx = problem.usable_pairs(s)
         if idx.size == 0 or s == reference:
             continue
@@ -422,6 +426,14 @@ def with_tightening_rows(problem: PlanProblem, model: Model, config) -> Model:
     if not rows:
         return model
     return model.with_rows(sp.vstack(rows), lower, np.full(len(lower), np.inf), kinds)
+
+
+def judges_datum(config) -> bool:
+    """Whether the plan judges each station relative to the datum (always in known-control
+    mode; in network mode unless ``datum_requirement`` is false): the ``info``, ``heading`` and
+    ``oa0`` rows are necessary for that requirement only, and would cut off layouts that meet a
+    local requirement alone."""
+    return not config.network or bool(config.datum_requirement)
 
 
 def info_weights(problem: PlanProblem, pairs: np.ndarray, config

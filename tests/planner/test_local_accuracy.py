@@ -185,3 +185,17 @@ def test_a_local_requirement_no_layout_meets_is_refused_naming_the_pairs():
                      local_within_m=20.0, datum_requirement=False)
     with pytest.raises(InfeasiblePlanError, match=r"2 station pair\(s\).*S1-S2: .* m > 0.0001 m"):
         plan_sites(p, cfg)
+
+
+def test_a_local_plan_ignores_the_datum_requirement_it_does_not_judge():
+    """Without the datum requirement, ``requirement_m`` judges nothing: its information and
+    heading rows must not be in the program (at 1 mm they made the plan infeasible although
+    a 6-site layout meets the local requirement)."""
+    p = _line(4, n_sites=11, seed=2)
+    cfg = PlanConfig(network=True, min_markers=3, min_sectors=2, max_range_m=20,
+                     working_radius_m=RADIUS, time_limit_s=60, chance_epsilon=None,
+                     datum_requirement=False, local_requirement_m=0.3626,
+                     local_within_m=20.0, requirement_m=0.001)
+    r = plan_sites(p, cfg)
+    assert r.status == "optimal" and r.check.pairs_ok
+    assert r.selected.sum() == brute_force_optimum(p, cfg) == 6
