@@ -5,6 +5,7 @@ the truth datum-free)."""
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -149,7 +150,7 @@ def free_alignment(result, true_pose: np.ndarray, heading_observed: bool):
     adjustment's own inner constraints, ``d - G (B G)^-1 B d`` (``G`` the defect directions of
     :func:`pipeline.network.normals.defect_basis` at the true stations, ``B`` = ``G^T`` on their
     x, y, z and heading), the error the predicted datum-free covariance describes; the markers
-    move by the same rigid motion (first order).
+    are moved back by the same rigid motion.
 
     Parameters
     ----------
@@ -170,14 +171,21 @@ def free_alignment(result, true_pose: np.ndarray, heading_observed: bool):
     from pipeline.network.normals import defect_basis
 
     pose = np.asarray(result.pose, float)
-    markers = np.asarray(result.marker_xyz_m, float).reshape(-1, 3)
+    true_pose = np.asarray(true_pose, float)
     s = pose.shape[0]
     defects = list(Datum("free").constrained_defects(heading_observed))
-    g = defect_basis(np.asarray(true_pose, float), markers)[:, defects]
+    g = defect_basis(true_pose, np.zeros((0, 3)))[:, defects]
     d = pose - true_pose
     d[:, 3] = (d[:, 3] + np.pi) % (2 * np.pi) - np.pi
-    b = g[:6 * s].T * np.tile([1.0, 1.0, 1.0, 1.0, 0.0, 0.0], s)
-    alpha = np.linalg.solve(b @ g[:6 * s], b @ d.ravel())
-    shift = g @ alpha
-    return dataclasses.replace(result, pose=pose - shift[:6 * s].reshape(s, 6),
-                               marker_xyz_m=markers - shift[6 * s:].reshape(-1, 3))
+    b = g.T * np.tile([1.0, 1.0, 1.0, 1.0, 0.0, 0.0], s)
+    alpha = np.zeros(4)
+    alpha[defects] = np.linalg.solve(b @ g, b @ d.ravel())
+    # the markers: the inverse of the same motion (translation, then rotation by alpha[3]
+    # about the stations' centroid)
+    centre = true_pose[:, :2].mean(axis=0)
+    c, s_ = math.cos(alpha[3]), math.sin(alpha[3])
+    markers = np.asarray(result.marker_xyz_m, float).reshape(-1, 3) - alpha[:3]
+    xy = markers[:, :2] - centre
+    markers[:, :2] = centre + xy @ np.array([[c, -s_], [s_, c]])
+    return dataclasses.replace(result, pose=pose - (g @ alpha[defects]).reshape(s, 6),
+                               marker_xyz_m=markers)
