@@ -281,7 +281,7 @@ def _relative_to(datum: dict) -> str:
     """What the report's errors are relative to: the datum, or in a free network nothing (its
     per-station and per-marker figures are datum-free and not judged)."""
     if datum.get("kind") == "free":
-        return (f"a {datum_clause(datum)}; station and marker figures are datum-free, not "
+        return (f"{datum_clause(datum)}; station and marker figures are datum-free, not "
                 "judged against a requirement (only the local requirement is)")
     return f"every error is relative to the datum, {datum_clause(datum)}"
 
