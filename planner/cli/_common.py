@@ -592,9 +592,10 @@ def datum_choice(datum: tuple[str, str | None] | None, control_path: Path | None
     if reference_station is None:
         return kind, named
     if kind != "station":
+        other = "--control" if kind == "control" else "--datum free"
         raise ConfigError(f"--reference-station {reference_station} names the datum station of "
-                          f"the station datum; drop it with "
-                          f"{'--control' if kind == 'control' else '--datum free'}")
+                          f"the station datum; drop it with {other}, which fixes no station "
+                          f"(drop --reference-station, or {other})")
     if named is not None and named != reference_station:
         raise ConfigError(f"--datum station:{named} and --reference-station "
                           f"{reference_station} name two datum stations; give one")

@@ -151,6 +151,10 @@ def test_datum_record_says_nothing_is_fixed():
     assert datum_text(rec) == "free network (datum-free)"
     assert datum_clause(rec).startswith("a **free network (datum-free)**: nothing fixed")
     assert net.datum_text == "free network (datum-free)"
+    from planner.outputs.report import _relative_to
+
+    words = _relative_to(rec)
+    assert words.startswith("a **free network (datum-free)**") and "not judged" in words
 
 
 def test_free_alignment_removes_a_rigid_motion():
