@@ -222,11 +222,12 @@ class NetworkModel(NetworkTangents):
         fixed = np.zeros((s, 6), bool)
         if self.reference is not None:
             fixed[self.reference, :4] = True
-        #: bool: a heading reference observes every station's heading
-        self.heading_observed = heading_prior_sigma_rad is not None
+        #: bool: a heading reference observes every station's heading (odometry, relative only, does
+        #: not count: PlanConfig.heading_observed's other meaning)
+        self.heading_referenced = heading_prior_sigma_rad is not None
         self.datum_map = None
         if self.free_datum:  # fix the defect alone, internally (see the module doc)
-            defects = np.asarray(Datum("free").constrained_defects(self.heading_observed))
+            defects = np.asarray(Datum("free").constrained_defects(self.heading_referenced))
             fixed[0, defects] = True
             self.datum_map = _inner_constraint_map(problem.station_xyz, defects)
         if self.incl <= 0:
@@ -299,7 +300,7 @@ class NetworkModel(NetworkTangents):
         p = self.problem
         station = self.reference is not None
         if self.free_datum:
-            heading = "" if self.heading_observed else " and mean heading"
+            heading = "" if self.heading_referenced else " and mean heading"
             return {"kind": "free", "reference_station": None, "fixed": [], "control": [],
                     "datum_xyz_m": [float(v) for v in self.datum_xyz],
                     "description": (f"{self.datum_text}: nothing fixed; every figure is "
