@@ -126,6 +126,13 @@ class PlanConfig:
         reference station (:mod:`planner.accuracy.network`); default known control.
     reference_station : str or None
         Network mode: id of the datum station (x, y, z, heading fixed); ``None``: the first.
+    datum : {"station", "free"}
+        Network mode: what fixes the datum. ``"station"`` (default): the reference station
+        (or control points, when the site has them); ``"free"``: nothing, a free network
+        whose figures are datum-free (:mod:`planner.accuracy.network`): only the local
+        requirement can be judged (``datum_requirement = false``), and its ``"position"``
+        kind needs a heading reference (without one a rotation of the whole network is a
+        datum defect: only distances are estimable).
     heading_prior_sigma_deg : float or None
         Network mode: a heading reference on every station (a sun sensor, a star tracker), its
         random 1-sigma, degrees; ``None``: none (or the ``heading_aid`` class's); in (0, 10].
@@ -182,6 +189,7 @@ class PlanConfig:
     forbidden: tuple[str, ...] = field(default_factory=tuple)
     network: bool = False
     reference_station: str | None = None
+    datum: str = "station"
     heading_prior_sigma_deg: float | None = None
     heading_aid: str | None = None
     heading_bias_sigma_deg: float | None = None
@@ -211,7 +219,7 @@ class PlanConfig:
         """This configuration in known-control mode (and ``changes``): the network-only
         requirement kinds (ppm terms, the local requirement, no datum requirement) and pose
         aids (heading reference bias, odometry) dropped."""
-        return self.replace(**{"network": False, "requirement_ppm": 0.0,
+        return self.replace(**{"network": False, "datum": "station", "requirement_ppm": 0.0,
                                "datum_requirement": True, "local_requirement_m": None,
                                "local_requirement_ppm": 0.0, "local_markers": False,
                                "heading_aid": None,
@@ -326,6 +334,9 @@ _OPTIONAL = ("budget", "heading_prior_sigma_deg", "chance_epsilon", "max_bias_ef
              "odometry_heading_deg_per_m", "heading_aid")
 #: What a local requirement bounds (:mod:`planner.accuracy.local`).
 LOCAL_KINDS = ("position", "distance")
+#: What fixes a network's datum (:mod:`planner.accuracy.network`; control points come with
+#: the site's inputs, under ``"station"``).
+DATUMS = ("station", "free")
 #: Most ids accepted in ``existing`` / ``forbidden``.
 MAX_IDS = 100_000
 
@@ -380,6 +391,7 @@ def _plan_config_iv(c: PlanConfig) -> None:
         if not isinstance(getattr(c, name), bool):
             raise ConfigError(f"`{name}` must be true or false, got {getattr(c, name)!r:.40}")
     _requirement_kinds_iv(c)
+    _datum_iv(c)
     if c.error_figure not in ERROR_FIGURES:
         raise ConfigError(f"`error_figure` must be one of {', '.join(map(repr, ERROR_FIGURES))}, "
                           f"got {c.error_figure!r:.40}")
@@ -432,6 +444,35 @@ def _requirement_kinds_iv(c: PlanConfig) -> None:
     if not c.datum_requirement and not local:
         raise ConfigError("datum_requirement = false leaves no requirement: set "
                           "local_requirement_m or judge the datum requirement")
+
+
+def _datum_iv(c: PlanConfig) -> None:
+    """A free network fixes nothing: it needs network mode, no reference station, no
+    requirement relative to the datum, and a heading reference to judge relative positions."""
+    if c.datum not in DATUMS:
+        raise ConfigError(f"`datum` must be one of {', '.join(map(repr, DATUMS))}, "
+                          f"got {c.datum!r:.40}")
+    if c.datum != "free":
+        return
+    if not c.network:
+        raise ConfigError("`datum` = 'free' is a network-mode datum; plan in network mode "
+                          "(network = true) or drop datum")
+    if c.reference_station is not None:
+        raise ConfigError(f"a free network fixes no station, got `reference_station` "
+                          f"{c.reference_station!r:.40}; drop reference_station, or use the "
+                          "station datum (datum = 'station')")
+    if c.datum_requirement or c.requirement_ppm > 0:
+        raise ConfigError("a free network has no datum to be accurate relative to, so "
+                          "`datum_requirement` (and `requirement_ppm`) cannot be judged; set "
+                          "datum_requirement = false with a local requirement "
+                          "(local_requirement_m), or use the station datum (reference_station) "
+                          "or control points")
+    if c.local_kind == "position" and c.heading_sigmas_deg[0] is None:
+        raise ConfigError("a free network without a heading reference can rotate as a whole "
+                          "about the vertical (a datum defect), so relative positions "
+                          "(`local_kind` = 'position') are not estimable; add a heading aid "
+                          "(heading_aid or heading_prior_sigma_deg), or set local_kind = "
+                          "'distance'")
 
 
 def config_from_dict(values: dict[str, Any], base: PlanConfig | None = None,

@@ -142,6 +142,10 @@ def make_plan(inputs: PlanInputs, config, error_model, model_name: str = "defaul
         raise ConfigError("control points (`control_path`) are network mode's datum: plan in "
                           "network mode (network = true), or list the points as `existing` "
                           "markers")
+    if inputs.control and config.datum == "free":
+        raise ConfigError("control points (`control_path`) are a datum, and a free network "
+                          "(`datum` = 'free') fixes nothing; drop the control points, or "
+                          "`datum` = 'free'")
     if inputs.control and config.reference_station is not None:
         raise ConfigError("control points (`control_path`) are the datum and fix no station: "
                           "drop `reference_station`, or the control points")

@@ -29,7 +29,9 @@ For the integer program nothing changes in kind: ``g^T J^-1 g`` with ``g = (G(q)
 u)`` over the two stations' parameters is convex in the information and never grows when a
 marker is added, so a failing pair fails for every subset of its layout's tying sites (no-good
 rows), and tangents at any point are valid cuts (exact for the ellipsoid figure, the one-
-direction necessary condition for the quantile; :meth:`LocalAccuracy.tangents`).
+direction necessary condition for the quantile; :meth:`LocalAccuracy.tangents`). In a free network
+the pairs are judged in its datum-free covariance, a fixed linear map of the internal one
+(:meth:`planner.accuracy.network.NetworkModel.datum_free`), which keeps both properties.
 
 Pairs are screened before the grid of rim points is evaluated: the standard deviation of the
 difference of two errors in any direction is at most the sum of theirs, so ``s_k + s_l``
@@ -345,14 +347,17 @@ class LocalAccuracy:
         self.pairs = point_pairs(net.problem.station_xyz, requirement)
 
     def _blocks(self, cov, which: np.ndarray) -> np.ndarray:
-        return pair_blocks(cov.full, self.pairs.first[which], self.pairs.second[which])
+        """The pairs' joint pose covariances (datum-free in a free network:
+        :meth:`~planner.accuracy.network.NetworkModel.datum_free`)."""
+        return pair_blocks(self.net.datum_free(cov).full, self.pairs.first[which],
+                           self.pairs.second[which])
 
     def _determined(self, cov, which: np.ndarray) -> np.ndarray:
         return cov.determined[self.pairs.first[which]] & cov.determined[self.pairs.second[which]]
 
     def _station_spread(self, cov) -> np.ndarray:
         """(s,) ``max_q sqrt(lambda_max(Sigma_k(q)))`` of every station, m (the screen)."""
-        blocks = cov.station(np.arange(self.net.problem.n_stations))
+        blocks = self.net.datum_free(cov).station(np.arange(self.net.problem.n_stations))
         return ellipsoid_bound(blocks, self.net.radius) / np.sqrt(CHI2_3_95)
 
     def errors(self, cov, which=None) -> np.ndarray:
@@ -437,7 +442,9 @@ class LocalAccuracy:
         return np.flatnonzero(~self.within(cov))
 
     def gradients(self, cov, which) -> np.ndarray:
-        """(m, 6 s) ``g = (G(q)^T u, -G(q')^T u)`` at each pair's worst points and direction."""
+        """(m, 6 s) ``g = (G(q)^T u, -G(q')^T u)`` at each pair's worst points and direction
+        (of the internal covariance in a free network:
+        :meth:`~planner.accuracy.network.NetworkModel.datum_free_gradients`)."""
         which = np.asarray(which, np.int64)
         s6 = 6 * self.net.problem.n_stations
         g = np.zeros((which.size, s6))
@@ -451,7 +458,7 @@ class LocalAccuracy:
         second = 6 * self.pairs.second[which][:, None] + np.arange(6)
         g[rows[:, None], first] = np.einsum("mab,ma->mb", rim[qi], u)
         g[rows[:, None], second] = -np.einsum("mab,ma->mb", rim[qj], u)
-        return g
+        return self.net.datum_free_gradients(g)
 
     def tangents(self, cov, which) -> list[tuple[int, np.ndarray, float]]:
         """Tangent cuts ``(first station, coef (n,), rhs)`` of the pairs ``which`` at ``cov``

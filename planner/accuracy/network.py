@@ -10,7 +10,8 @@ inclinometer's prior ``0 +- inclinometer_sigma_rad``. The datum is either the re
 datum), or the problem's control points (a lander's fiducials,
 :attr:`~planner.problem.usability.PlanProblem.site_control`: existing sites with known
 coordinates ``+- sigma_c`` per axis, the adjustment's ``"control"`` datum), and then no station
-is fixed. Markers are unknowns. Station ``s`` measures the marker at candidate site ``j`` with
+is fixed, or nothing (a free network, the adjustment's ``"free"`` datum; below). Markers are
+unknowns. Station ``s`` measures the marker at candidate site ``j`` with
 per-axis weight ``w_sj = 3 / sigma_sj^2`` (:func:`pipeline.network.design.axis_weight`); its design
 block ``H_sj`` (3 x 6) is :func:`pipeline.network.design.pose_design_blocks` linearised at the
 nominal layout with heading and tilts 0, i.e. at the offset ``p = site - station`` along the
@@ -50,6 +51,23 @@ control point, its known coordinates): covariance ``I / T_j + M_j C M_j^T`` with
 ``M_j = (1 / T_j) sum_s w_s H_s`` (:meth:`NetworkModel.marker_errors`). Control points are not
 judged against the marker requirement: their accuracy is given.
 
+Free network
+------------
+A free network fixes nothing: its observations are invariant to a translation of the whole
+network and, without a heading reference, a rotation about the vertical (the datum defect,
+:data:`pipeline.network.observations.DATUM_DEFECTS`). Internally the defect alone is fixed, x,
+y, z of one station (the first) and its heading unless a heading reference observes it
+(:meth:`~pipeline.network.observations.Datum.constrained_defects`' rule; odometry observes
+relative headings only). Estimable quantities, a relative position with a heading reference or
+a distance between stations or markers, do not depend on which minimal constraints are chosen.
+Figures are reported datum-free: in the adjustment's free datum, the inner constraints on the
+stations' centroid (and mean heading), reached from the internal covariance ``C`` by the
+S-transformation ``C_free = P C P^T``, ``P = I - G (B G)^-1 B`` (``G`` the defect directions,
+:func:`pipeline.network.normals.defect_basis`, ``B`` the constraints: ``G^T`` on the stations'
+x, y, z and heading) (:meth:`NetworkModel.datum_free`). ``P`` is fixed by the geometry, so a
+figure ``g^T C_free g`` is ``(P^T g)^T C (P^T g)``: convex and monotone in the information as
+below, with the gradient ``P^T g`` (:meth:`NetworkModel.datum_free_gradients`).
+
 Convexity and monotonicity
 --------------------------
 ``h(J) = g^T J^-1 g`` is convex in ``J`` for every fixed ``g`` (``J -> J^-1`` is operator
@@ -81,7 +99,7 @@ from planner.accuracy.aids import Odometry, pose_aids
 from planner.accuracy.figure import ErrorFigure, error_figure
 from planner.accuracy.network_covariance import NetworkCovariance
 from planner.accuracy.network_tangents import NetworkTangents
-from planner.accuracy.requirement import NetworkRequirement, datum_distances
+from planner.accuracy.requirement import FREE_NETWORK, NetworkRequirement, datum_distances
 from planner.problem.usability import PlanProblem
 
 _CHUNK = 100_000
@@ -115,11 +133,19 @@ class NetworkModel(NetworkTangents):
         The heading reference's common boresight bias, 1-sigma, rad.
     odometry : Odometry, optional
         Odometry between consecutive stations (in the problem's station order).
+    free_datum : bool
+        A free network (see the module doc): nothing fixed, no control points and no
+        ``reference``.
 
     Attributes
     ----------
     reference : int or None
-        The datum station; ``None`` with control points.
+        The datum station; ``None`` with control points or a free datum.
+    free_datum : bool
+        A free network.
+    datum_map : (6 s, 6 s) float or None
+        ``P``, the S-transformation of the pose covariance to the free datum's inner
+        constraints (``None`` unless ``free_datum``).
     control : (n,) bool
         The control points among the sites.
     site_prior_weight : (n,) float
@@ -161,15 +187,19 @@ class NetworkModel(NetworkTangents):
                  figure: ErrorFigure | None = None,
                  requirement: NetworkRequirement | None = None,
                  heading_bias_sigma_rad: float = 0.0,
-                 odometry: Odometry | None = None) -> None:
+                 odometry: Odometry | None = None, free_datum: bool = False) -> None:
         self.control = problem.site_control
+        self.free_datum = bool(free_datum)
+        if self.free_datum and (self.control.any() or reference is not None):
+            raise ConfigError("a free network fixes nothing: drop the control points and "
+                              "`reference_station`, or use their datum (`datum` = 'station')")
         if self.control.any():
             if reference is not None:
                 raise ConfigError("control points are the datum and fix no station: drop "
                                   "`reference_station`, or the control points")
-        elif reference is None:
+        elif reference is None and not self.free_datum:
             reference = 0
-        elif not 0 <= reference < problem.n_stations:
+        elif reference is not None and not 0 <= reference < problem.n_stations:
             raise ConfigError(f"`reference` must index one of the {problem.n_stations} "
                               f"stations, got {reference!r}")
         self.problem = problem
@@ -181,8 +211,9 @@ class NetworkModel(NetworkTangents):
         sigma_c = np.where(self.control, problem.site_control_sigma_m
                            if problem.site_control_sigma_m is not None else 1.0, 1.0)
         self.site_prior_weight = np.where(self.control, 1.0 / sigma_c**2, 0.0)
-        self.datum_xyz = (problem.site_xyz[self.control].mean(axis=0) if self.reference is None
-                          else problem.station_xyz[self.reference])
+        self.datum_xyz = (problem.station_xyz.mean(axis=0) if self.free_datum
+                          else problem.site_xyz[self.control].mean(axis=0)
+                          if self.reference is None else problem.station_xyz[self.reference])
         #: (s,) and (n,) float: horizontal distances of the stations and sites from the datum, m
         self.station_distance_m = datum_distances(problem.station_xyz, self.datum_xyz)
         self.site_distance_m = datum_distances(problem.site_xyz, self.datum_xyz)
@@ -191,6 +222,14 @@ class NetworkModel(NetworkTangents):
         fixed = np.zeros((s, 6), bool)
         if self.reference is not None:
             fixed[self.reference, :4] = True
+        #: bool: a heading reference observes every station's heading (odometry, relative only, does
+        #: not count: PlanConfig.heading_observed's other meaning)
+        self.heading_referenced = heading_prior_sigma_rad is not None
+        self.datum_map = None
+        if self.free_datum:  # fix the defect alone, internally (see the module doc)
+            defects = np.asarray(Datum("free").constrained_defects(self.heading_referenced))
+            fixed[0, defects] = True
+            self.datum_map = _inner_constraint_map(problem.station_xyz, defects)
         if self.incl <= 0:
             fixed[:, 4:] = True
         self.free = np.flatnonzero(~fixed.ravel())
@@ -243,6 +282,8 @@ class NetworkModel(NetworkTangents):
         """The datum in words, for messages and reports: ``"station S1"`` or ``"the control
         points L1, L2, L3"``."""
         ids = self.problem.site_ids
+        if self.free_datum:
+            return FREE_NETWORK
         if self.reference is not None:
             return f"station {self.problem.station_ids[self.reference]}"
         names = [ids[j] for j in np.flatnonzero(self.control)]
@@ -251,11 +292,20 @@ class NetworkModel(NetworkTangents):
 
     def datum_record(self) -> dict:
         """The datum as ``plan.json`` and ``reduce.json`` record it (``network.datum``):
-        ``kind`` (``"station"`` or ``"control"``), ``reference_station``, the ``fixed``
-        parameters, the ``control`` points (id, site-frame xyz and sigma, m), ``datum_xyz_m``
-        (where distances are measured from) and ``description`` (:attr:`datum_text`)."""
+        ``kind`` (``"station"``, ``"control"`` or ``"free"``), ``reference_station``, the
+        ``fixed`` parameters, the ``control`` points (id, site-frame xyz and sigma, m),
+        ``datum_xyz_m`` (where distances are measured from: the stations' centroid in a free
+        network) and ``description`` (:attr:`datum_text`; a free network's says what is
+        fixed and how its figures are relative)."""
         p = self.problem
         station = self.reference is not None
+        if self.free_datum:
+            heading = "" if self.heading_referenced else " and mean heading"
+            return {"kind": "free", "reference_station": None, "fixed": [], "control": [],
+                    "datum_xyz_m": [float(v) for v in self.datum_xyz],
+                    "description": (f"{self.datum_text}: nothing fixed; every figure is "
+                                    f"relative, station figures in the inner constraints on "
+                                    f"the stations' centroid{heading}")}
         return {"kind": "station" if station else "control",
                 "reference_station": p.station_ids[self.reference] if station else None,
                 "fixed": list(POSE_PARAMETERS[:4]) if station else [],
@@ -358,6 +408,19 @@ class NetworkModel(NetworkTangents):
         full[np.ix_(self.free, self.free)] = 0.5 * (c + c.T)
         return NetworkCovariance(full=full, determined=determined)
 
+    def datum_free(self, cov: NetworkCovariance) -> NetworkCovariance:
+        """``cov`` in the free datum's inner constraints, ``P C P^T`` (see the module doc); the
+        covariance itself for the other datums."""
+        if self.datum_map is None:
+            return cov
+        full = self.datum_map @ cov.full @ self.datum_map.T
+        return NetworkCovariance(full=0.5 * (full + full.T), determined=cov.determined)
+
+    def datum_free_gradients(self, g: np.ndarray) -> np.ndarray:
+        """(m, 6 s) gradients ``g`` ((m, 6 s)) of figures of :meth:`datum_free`'s covariance
+        as gradients of the internal one, ``g P`` (``g`` itself for the other datums)."""
+        return g if self.datum_map is None else g @ self.datum_map
+
     def determined_by(self, null: np.ndarray) -> np.ndarray:
         """(s,) bool: the stations no null vector of the information moves (each pose
         parameter's row of ``null``, (P, d), has norm below ``1e-6``)."""
@@ -434,9 +497,10 @@ class NetworkModel(NetworkTangents):
             yield group, index, u.reshape(group.size, 6 * m, -1)
 
     def station_errors_from(self, cov: NetworkCovariance) -> np.ndarray:
-        """(s,) 95 % station errors of a covariance, m (``inf`` where undetermined)."""
-        err = self.figure.station_errors(cov.station(np.arange(self.problem.n_stations)),
-                                         self.radius)
+        """(s,) 95 % station errors of a covariance, m (``inf`` where undetermined; in a free
+        network datum-free, :meth:`datum_free`)."""
+        err = self.figure.station_errors(
+            self.datum_free(cov).station(np.arange(self.problem.n_stations)), self.radius)
         return np.where(cov.determined, err, np.inf)
 
     def stations_failing(self, errors_m: np.ndarray, allowed_m=None) -> np.ndarray:
@@ -552,8 +616,9 @@ class NetworkModel(NetworkTangents):
         return out
 
     def marker_errors(self, cov: NetworkCovariance, sites) -> np.ndarray:
-        """(m,) 95 % error of the markers at ``sites``, relative to the datum, m."""
-        return self.figure.point_errors(self.marker_covariances(cov, sites))
+        """(m,) 95 % error of the markers at ``sites``, relative to the datum, m (in a free
+        network datum-free, :meth:`datum_free`)."""
+        return self.figure.point_errors(self.marker_covariances(self.datum_free(cov), sites))
 
     # -- structure -----------------------------------------------------------------------------
     def ties(self, selected) -> np.ndarray:
@@ -568,35 +633,54 @@ class NetworkModel(NetworkTangents):
         return t
 
     def connected_to_reference(self, selected) -> np.ndarray:
-        """(s,) bool: stations linked to the datum (the reference station, or a station that
-        sees a control point) by a chain of shared selected sites or odometry."""
+        """(s,) bool: stations linked to the datum (the reference station, a station that
+        sees a control point, or in a free network the first station) by a chain of shared
+        selected sites or odometry."""
         t = self.ties(selected) > 0
         link = self.aids.links()
         t[link[:, 0], link[:, 1]] = t[link[:, 1], link[:, 0]] = True
         _, comp = connected_components(csr_array(t), directed=False)
-        if self.reference is not None:
-            return comp == comp[self.reference]
+        if self.reference is not None or self.free_datum:  # a free network: its first station
+            return comp == comp[self.reference or 0]
         sees = self.control[self.pair_site] & np.asarray(selected, bool)[self.pair_site]
         return np.isin(comp, comp[self.pair_station[sees]])
+
+
+def _inner_constraint_map(station_xyz: np.ndarray, defects: np.ndarray) -> np.ndarray:
+    """(6 s, 6 s) ``P = I - G (B G)^-1 B``: the S-transformation of a pose covariance to the
+    inner constraints ``B`` (``G^T`` on the stations' x, y, z and heading) of the datum
+    ``defects`` ((d,) int into :data:`pipeline.network.observations.DATUM_DEFECTS`), ``G`` the
+    defect directions of :func:`pipeline.network.normals.defect_basis` at ``station_xyz`` ((s,
+    3) m; headings 0, no markers)."""
+    from pipeline.network.normals import defect_basis
+
+    s = station_xyz.shape[0]
+    pose = np.zeros((s, 6))
+    pose[:, :3] = station_xyz
+    g = defect_basis(pose, np.zeros((0, 3)))[:, defects]
+    b = g.T * np.tile([1.0, 1.0, 1.0, 1.0, 0.0, 0.0], s)
+    return np.eye(6 * s) - g @ np.linalg.solve(b @ g, b)
 
 
 def network_model(problem: PlanProblem, config) -> NetworkModel:
     """The :class:`NetworkModel` of a problem for a :class:`~planner.config.PlanConfig`
     (``working_radius_m``, ``inclinometer_sigma_rad``, ``reference_station``,
     ``heading_prior_sigma_rad``, ``heading_bias_sigma_deg``, ``odometry_percent``,
-    ``odometry_heading_deg_per_m``, ``error_figure``, ``requirement_m``, ``requirement_ppm``).
+    ``odometry_heading_deg_per_m``, ``error_figure``, ``requirement_m``, ``requirement_ppm``,
+    ``datum``).
 
     Raises
     ------
     ConfigError
         ``reference_station`` names no station of the problem, or is given with control
-        points.
+        points; a free ``datum`` with control points.
     """
-    ref = None if problem.site_control.any() and config.reference_station is None \
+    free = config.datum == "free"
+    ref = None if (free or problem.site_control.any()) and config.reference_station is None \
         else Datum(reference_station=config.reference_station).resolve(problem.station_ids)
     return NetworkModel(problem, config.working_radius_m, config.inclinometer_sigma_rad,
                         reference=ref, heading_prior_sigma_rad=config.heading_prior_sigma_rad,
                         figure=error_figure(config),
                         requirement=NetworkRequirement.of(config),
                         heading_bias_sigma_rad=config.heading_bias_sigma_rad,
-                        odometry=config.odometry)
+                        odometry=config.odometry, free_datum=free)

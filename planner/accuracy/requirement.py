@@ -99,13 +99,23 @@ def datum_distances(xyz: np.ndarray, datum_xyz: np.ndarray) -> np.ndarray:
     return np.linalg.norm(xyz[:, :2] - np.asarray(datum_xyz, dtype=float)[:2], axis=1)
 
 
+#: How reports name a free network's datum (:meth:`planner.accuracy.network.NetworkModel.
+#: datum_record`).
+FREE_NETWORK = "free network (datum-free)"
+
+
 def datum_text(datum: dict) -> str:
-    """The datum of a plan's ``network.datum`` record in words: its ``description``, or for a
-    record written before control datums its reference station.
+    """The datum of a plan's ``network.datum`` record in words: its ``description`` (for a free
+    network its first clause), or for a record written before control datums its reference
+    station.
 
     >>> datum_text({"reference_station": "S1"})
     'station S1'
+    >>> datum_text({"kind": "free", "description": "free network (datum-free): nothing fixed"})
+    'free network (datum-free)'
     """
+    if datum.get("kind") == "free":
+        return FREE_NETWORK
     return datum.get("description") or f"station {datum['reference_station']}"
 
 
@@ -117,6 +127,8 @@ def datum_clause(datum: dict) -> str:
     """
     if datum.get("kind", "station") == "station":
         return f"station **{datum['reference_station']}** (x, y, z and heading fixed)"
+    if datum["kind"] == "free":
+        return f"a **{FREE_NETWORK}**: {datum['description'].split(': ', 1)[-1]}"
     points = ", ".join(f"{c['marker_id']} (+-{c['sigma_m']:g} m)" for c in datum["control"])
     return (f"the **control points** {points}, no station fixed; distances from their centroid "
             f"({datum['datum_xyz_m'][0]:.2f}, {datum['datum_xyz_m'][1]:.2f}) m")

@@ -35,6 +35,9 @@ option                      meaning (and the value the command receives)
                             the reference station (:mod:`planner.accuracy.network`)
 ``--reference-station ID``  the datum station of network mode (default the first station);
                             refused outside network mode (:func:`network_settings`)
+``--datum station|free``    network mode's datum kind (``("station" | "free", ID or None)`` or
+                            ``None``; ``station:ID`` is the old spelling of
+                            ``--reference-station ID``; :func:`datum_choice`)
 ``--error-figure NAME``     how a 95 % error is computed: ``quantile`` of the worst error over
                             the working disc, or the ``ellipsoid`` figure (default)
                             (:mod:`planner.accuracy.figure`; ``str``)
@@ -546,6 +549,57 @@ reference_station_option = click.option(
     "--reference-station", "reference_station", metavar="ID",
     help="The datum station in network mode (its x, y, z and heading fixed; every error is "
          "relative to it); default the first station. Only with network mode.")
+
+
+def _datum_text(ctx, param, text: str | None) -> tuple[str, str | None] | None:
+    """``station``, ``station:ID`` or ``free`` -> (kind, reference station or ``None``)."""
+    if text is None:
+        return None
+    kind, sep, sid = (t.strip() for t in text.partition(":"))
+    if kind == "free" and not sep:
+        return "free", None
+    if kind != "station" or (sep and not sid):
+        raise click.BadParameter(f"give station or free (the datum station: --reference-station "
+                                 f"ID); for control points use --control FILE; got {text!r}",
+                                 ctx, param)
+    if sid:
+        warn_deprecated(f"--datum station:{sid}", f"--reference-station {sid}")
+    return "station", sid or None
+
+
+#: ``--datum station|free``: network mode's datum (``plan``, ``adjust``).
+datum_option = click.option(
+    "--datum", "datum", metavar="station|free", callback=_datum_text,
+    help="Network mode's datum: station fixes the reference station's x, y, z and heading "
+         "(--reference-station; the default); free fixes nothing (a free network: minimal "
+         "constraints on the stations' centroid, and mean heading without a heading aid), "
+         "so its figures are datum-free and only relative ones (a local requirement) can be "
+         "judged.")
+
+
+def datum_choice(datum: tuple[str, str | None] | None, control_path: Path | None,
+                  reference_station: str | None) -> tuple[str, str | None]:
+    """The datum's kind (``"station"``, ``"control"`` or ``"free"``) and reference station
+    (or ``None``) from ``--datum`` (its option's value), ``--control`` and
+    ``--reference-station``; one-line :class:`ConfigError` for two datums."""
+    from markerplan.errors import ConfigError
+
+    if datum is not None and control_path is not None:
+        raise ConfigError("give one datum, got --datum and --control: --datum station "
+                          "(default; with --reference-station ID), --datum free, or --control "
+                          "FILE")
+    kind, named = ("control", None) if control_path is not None else datum or ("station", None)
+    if reference_station is None:
+        return kind, named
+    if kind != "station":
+        other = "--control" if kind == "control" else "--datum free"
+        raise ConfigError(f"--reference-station {reference_station} names the datum station of "
+                          f"the station datum; drop it with {other}, which fixes no station "
+                          f"(drop --reference-station, or {other})")
+    if named is not None and named != reference_station:
+        raise ConfigError(f"--datum station:{named} and --reference-station "
+                          f"{reference_station} name two datum stations; give one")
+    return kind, reference_station
 
 
 def require_network(reference_station: str | None, network: bool) -> None:

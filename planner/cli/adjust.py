@@ -17,6 +17,8 @@ from planner.cli._common import (
     REQUIREMENT_PPM,
     FiniteRange,
     control_option,
+    datum_choice,
+    datum_option,
     emit_summary,
     error_figure_option,
     error_model_option,
@@ -27,7 +29,6 @@ from planner.cli._common import (
     overwrite_option,
     renamed_option,
     report_timings,
-    warn_deprecated,
 )
 
 #: Bounds of the angle sigmas, degrees: above 10 deg an inclinometer or sun sensor measures
@@ -52,45 +53,6 @@ COVARIANCE_KINDS = ("auto", "dense", "sparse")
 ROBUST_K = FiniteRange(0.0, 10.0, min_open=True)
 
 
-def _datum_text(ctx, param, text: str | None) -> tuple[str, str | None] | None:
-    """``station``, ``station:ID`` or ``free`` -> (kind, reference station or ``None``)."""
-    if text is None:
-        return None
-    kind, sep, sid = (t.strip() for t in text.partition(":"))
-    if kind == "free" and not sep:
-        return "free", None
-    if kind != "station" or (sep and not sid):
-        raise click.BadParameter(f"give station or free (the datum station: --reference-station "
-                                 f"ID); for control points use --control FILE; got {text!r}",
-                                 ctx, param)
-    if sid:
-        warn_deprecated(f"--datum station:{sid}", f"--reference-station {sid}")
-    return "station", sid or None
-
-
-def _datum_choice(datum: tuple[str, str | None] | None, control_path: Path | None,
-                  reference_station: str | None) -> tuple[str, str | None]:
-    """The datum's kind and reference station from ``--datum``, ``--control`` and
-    ``--reference-station``."""
-    from markerplan.errors import ConfigError
-
-    if datum is not None and control_path is not None:
-        raise ConfigError("give one datum, got --datum and --control: --datum station "
-                          "(default; with --reference-station ID), --datum free, or --control "
-                          "FILE")
-    kind, named = ("control", None) if control_path is not None else datum or ("station", None)
-    if reference_station is None:
-        return kind, named
-    if kind != "station":
-        raise ConfigError(f"--reference-station {reference_station} names the datum station of "
-                          f"the station datum; drop it with "
-                          f"{'--control' if kind == 'control' else '--datum free'}")
-    if named is not None and named != reference_station:
-        raise ConfigError(f"--datum station:{named} and --reference-station "
-                          f"{reference_station} name two datum stations; give one")
-    return kind, reference_station
-
-
 @click.command("adjust")
 @click.argument("tables", nargs=-1, required=True, type=click.Path(path_type=Path))
 @out_option(required=True)
@@ -110,10 +72,7 @@ def _datum_choice(datum: tuple[str, str | None] | None, control_path: Path | Non
                    "(gates the association with --plan).")
 @click.option("--odometry-heading-sigma-deg", type=ODOMETRY_HEADING_SIGMA_DEG, default=2.0,
               show_default=True, help="1-sigma error of a station's planned heading, degrees.")
-@click.option("--datum", "datum", metavar="station|free", callback=_datum_text,
-              help="Datum: station fixes the reference station's x, y, z and heading "
-                   "(--reference-station); free puts minimal constraints on the stations' "
-                   "centroid and mean heading.")
+@datum_option
 @click.option("--reference-station", "reference_station", metavar="ID",
               help="The datum station of --datum station (its x, y, z and heading fixed; every "
                    "error is relative to it); default: the plan's reference station, else the "
@@ -232,7 +191,7 @@ def command(tables, out, overwrite, error_model, plan_path, identity, odometry_s
 
     from markerplan.output_folder import output_folder
 
-    kind, reference = _datum_choice(datum, control_path, reference_station)
+    kind, reference = datum_choice(datum, control_path, reference_station)
     snooping = _snooping_choice(snooping, robust)
     if identity is None:
         identity = "plan" if plan_path is not None else "geometry"

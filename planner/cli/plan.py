@@ -13,6 +13,8 @@ from planner.cli._common import (
     boundary_option,
     config_option,
     control_option,
+    datum_choice,
+    datum_option,
     dem_height_error_option,
     dem_option,
     emit_summary,
@@ -119,6 +121,7 @@ def _load_detection_model(ctx, param, path):
 @error_figure_option
 @network_option
 @reference_station_option
+@datum_option
 @time_limit_option
 @renamed_option("--stand-map-cell-m", "stand_map_cell_m", "--stand-map-cell", type=CELL_M,
                 help="Cell size (m, rounded to whole DEM cells) of usable_markers.tif and "
@@ -132,7 +135,7 @@ def command(site_name, site_seed, dem_path, reproject, terrain, dem_height_error
             boundary_path, exclude_paths, marker_radius_m, error_model, config_path,
             visibility_path, redundant, chance_epsilon, detection_model, existing, control_path,
             budget, requirement, error_figure, network,
-            reference_station, time_limit_s, stand_map_cell_m, scheduler, workers, out,
+            reference_station, datum, time_limit_s, stand_map_cell_m, scheduler, workers, out,
             overwrite, as_json):
     """Plan the fewest marker sites so that every station meets the accuracy requirement.
 
@@ -160,6 +163,8 @@ def command(site_name, site_seed, dem_path, reproject, terrain, dem_height_error
       markerplan plan --network --no-datum-requirement --local-requirement-m 0.10 \
           --local-within-m 50 --out p-local/
       markerplan plan --network --heading-aid star-tracker --odometry-percent 2 --out p-aids/
+      markerplan plan --network --datum free --no-datum-requirement --local-requirement-m 0.10 \
+          --local-kind distance --out p-free/
       markerplan plan --network --control lander.csv --out p-lander/
       markerplan plan --dem site.tif --stations stations.csv --exclude paths.geojson --out p/
       markerplan plan --dem site.tif --stations stations.csv --stand-map-cell-m 2 --out p/
@@ -177,6 +182,7 @@ def command(site_name, site_seed, dem_path, reproject, terrain, dem_height_error
 
     require_dem(reproject, dem_path)
     require_truth_terrain(terrain, dem_path)
+    kind, reference_station = datum_choice(datum, control_path, reference_station)
     inputs_given = given_paths(dem_path, stations_path, boundary_path, error_model.path,
                                config_path, visibility_path, *exclude_paths,
                                None if detection_model[1].startswith("default") else
@@ -193,7 +199,8 @@ def command(site_name, site_seed, dem_path, reproject, terrain, dem_height_error
                                 dem_height_error=dem_height_error, chance_epsilon=chance_epsilon,
                                 control_path=control_path,
                                 detection_model=detection_model, error_figure=error_figure,
-                                requirement=requirement)
+                                requirement={**requirement,
+                                             "datum": "free" if kind == "free" else None})
         doc = write_plan_files(outcome, stage)
         draw_plan_map(outcome, stage / "map.png")
         stand_s = {}

@@ -209,7 +209,7 @@ def _network_datum(plan_path, ids, datum):
     from planner.verify.network_datum import reference_station
 
     doc = read_plan(plan_path, "PLAN", full=True)
-    if ((doc.get("network") or {}).get("datum") or {}).get("kind") == "control":
+    if ((doc.get("network") or {}).get("datum") or {}).get("kind") in ("control", "free"):
         from planner.network.plan_geometry import plan_geometry
         from planner.verify.network_datum import verify_datum
 

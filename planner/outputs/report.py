@@ -265,6 +265,15 @@ def _write_markers_csv(doc: dict, path: Path) -> None:
     write_gis_sidecars(path, MARKER_TYPES, doc["site"]["crs_wkt"])
 
 
+def _relative_to(datum: dict) -> str:
+    """What the report's errors are relative to: the datum, or in a free network nothing (its
+    per-station and per-marker figures are datum-free and not judged)."""
+    if datum.get("kind") == "free":
+        return (f"{datum_clause(datum)}; station and marker figures are datum-free, not "
+                "judged against a requirement (only the local requirement is)")
+    return f"every error is relative to the datum, {datum_clause(datum)}"
+
+
 def _write_stations_csv(doc: dict, path: Path) -> None:
     """Network mode's ``stations.csv`` (header first; ``error_relative_to`` names the datum),
     its ``.csvt`` and, with a CRS, its ``.prj``."""
@@ -375,8 +384,8 @@ def report_markdown(doc: dict) -> str:
     if "network" in doc:
         net = doc["network"]
         lines += ["", "## Network", "",
-                  f"Network mode: markers are unknowns; every error is relative to the datum, "
-                  f"{datum_clause(net['datum'])}; roll and pitch from the inclinometer "
+                  f"Network mode: markers are unknowns; {_relative_to(net['datum'])}; roll and "
+                  f"pitch from the inclinometer "
                   f"({net['datum']['inclinometer_sigma_deg']:g} deg 1-sigma). "
                   f"{net['n_station_ties']} station pairs share markers; worst "
                   f"marker {_fmt(net['worst_marker_error_m'])}.", "",

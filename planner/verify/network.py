@@ -387,7 +387,7 @@ def adjust_and_compare(tables: list[Path], plan_path: Path, error_model,
     from planner.network.record import station_errors
     from planner.outputs.plan_file import read_plan
     from planner.verify.network_aids import plan_aids
-    from planner.verify.network_datum import verify_datum
+    from planner.verify.network_datum import free_alignment, verify_datum
     from planner.verify.station_rule import StationRule
 
     doc = read_plan(plan_path, "`plan_path`", full=True)
@@ -429,6 +429,10 @@ def adjust_and_compare(tables: list[Path], plan_path: Path, error_model,
                              aids=aids.readings(verified, np.stack(
                                  [truth[sid].pose for sid in verified]), seed))
     stations, identified, result = adjusted.stations, adjusted.identified, adjusted.result
+    if datum.kind == "free":  # compared with the truth datum-free
+        result = free_alignment(result, np.stack([truth[sid].pose for sid in
+                                                  result.observations.station_ids]),
+                                adjustment.heading_prior_sigma_rad is not None)
     radius = config["working_radius_m"]
     need = NetworkRequirement(config["requirement_m"],
                               float(doc["requirement"].get("requirement_ppm", 0.0)),

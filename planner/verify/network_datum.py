@@ -1,9 +1,11 @@
 """The datum of a network verification (:func:`verify_datum`): the plan's reference station,
-or the lander's control points, whose coordinates the simulated survey knows only to their
-sigma."""
+the lander's control points, whose coordinates the simulated survey knows only to their
+sigma, or none (a free network, whose adjusted solution :func:`free_alignment` compares with
+the truth datum-free)."""
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -21,11 +23,12 @@ class VerifyDatum:
 
     Attributes
     ----------
-    kind : {"station", "control"}
+    kind : {"station", "control", "free"}
         The plan's datum (``plan.json``'s ``network.datum.kind``).
     reference : str
         The datum station; with control points, the station the network is chained from (the
-        first verified station the plan gives a control point).
+        first verified station the plan gives a control point); in a free network the first
+        verified station (chaining only).
     control : tuple of ControlPoint
         The control points as the survey knows them: the simulated (true) centre plus one draw
         of their stated error, with their sigmas; empty for a station datum.
@@ -69,11 +72,18 @@ def verify_datum(doc: dict, plan, named: str | None, chosen, seed: int) -> Verif
     Raises
     ------
     ConfigError
-        A reference station named for a plan on control points, no verified station the plan
+        A reference station named for a plan on control points or a free network, no verified
+        station the plan
         gives a control point, or (station datum) the reference not verified
         (:func:`reference_station`).
     """
     datum = (doc.get("network") or {}).get("datum") or {}
+    if datum.get("kind") == "free":
+        if named is not None:
+            raise ConfigError(f"`reference_station` {named}: the plan is a free network (no "
+                              "station is fixed); drop `reference_station`")
+        first = next(sid for sid in plan.station_ids if sid in chosen)
+        return VerifyDatum("free", first, (), np.asarray(datum["datum_xyz_m"], float))
     if datum.get("kind", "station") != "control":
         ref = reference_station(named or plan.reference_station, plan.station_ids, chosen)
         return VerifyDatum("station", ref, (),
@@ -129,3 +139,53 @@ def reference_station(named: str | None, plan_stations, chosen) -> str:
                           f"mode) is not among the stations verified ({', '.join(chosen)}); "
                           "include it in `station_ids`")
     return reference
+
+
+def free_alignment(result, true_pose: np.ndarray, heading_observed: bool):
+    """A free network's adjusted solution with its datum motion against the truth removed.
+
+    The free datum holds the stations' centroid (and mean heading) at their initial values, not
+    the truth's, so the adjusted network differs from the truth by a rigid motion besides its
+    errors. The pose errors ``d`` (adjusted minus true; heading wrapped) are S-transformed to the
+    adjustment's own inner constraints, ``d - G (B G)^-1 B d`` (``G`` the defect directions of
+    :func:`pipeline.network.normals.defect_basis` at the true stations, ``B`` = ``G^T`` on their
+    x, y, z and heading), the error the predicted datum-free covariance describes; the markers
+    are moved back by the same rigid motion.
+
+    Parameters
+    ----------
+    result : pipeline.network.adjustment.NetworkAdjustment
+        A ``"free"`` datum adjustment.
+    true_pose : (s, 6) float
+        The true poses of its stations, in its order, m and rad.
+    heading_observed : bool
+        A heading prior observes the headings (only the translation is a defect).
+
+    Returns
+    -------
+    NetworkAdjustment
+        ``result`` with ``pose`` and ``marker_xyz_m`` aligned.
+    """
+    import dataclasses
+
+    from pipeline.network.normals import defect_basis
+
+    pose = np.asarray(result.pose, float)
+    true_pose = np.asarray(true_pose, float)
+    s = pose.shape[0]
+    defects = list(Datum("free").constrained_defects(heading_observed))
+    g = defect_basis(true_pose, np.zeros((0, 3)))[:, defects]
+    d = pose - true_pose
+    d[:, 3] = (d[:, 3] + np.pi) % (2 * np.pi) - np.pi
+    b = g.T * np.tile([1.0, 1.0, 1.0, 1.0, 0.0, 0.0], s)
+    alpha = np.zeros(4)
+    alpha[defects] = np.linalg.solve(b @ g, b @ d.ravel())
+    # the markers: the inverse of the same motion (translation, then rotation by alpha[3]
+    # about the stations' centroid)
+    centre = true_pose[:, :2].mean(axis=0)
+    c, s_ = math.cos(alpha[3]), math.sin(alpha[3])
+    markers = np.asarray(result.marker_xyz_m, float).reshape(-1, 3) - alpha[:3]
+    xy = markers[:, :2] - centre
+    markers[:, :2] = centre + xy @ np.array([[c, -s_], [s_, c]])
+    return dataclasses.replace(result, pose=pose - (g @ alpha[defects]).reshape(s, 6),
+                               marker_xyz_m=markers)

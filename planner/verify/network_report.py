@@ -135,6 +135,9 @@ def network_markdown(rec: dict) -> str:
 def _datum_words(config: dict) -> str:
     """The verification's datum in words (the record's ``datum``; the summary line keeps the
     part before the first parenthesis)."""
+    if config.get("datum") == "free":
+        return ("free network, datum-free (nothing fixed; the adjusted network is compared with "
+                "the truth after removing its datum motion, so only relative figures count)")
     if config.get("datum") != "control":
         return (f"station {config['reference_station']} (x, y, z, heading at its planned "
                 "pose)")
