@@ -10,6 +10,7 @@ one tile in the same run (a whole-site scene is not built). Finally one JSON obj
         [--time-limit 120] [--network-time-limit 600] [--network-requirement 6] [--keep DIR]
         [--network-local 0.10] [--network-within 50] [--error-figure quantile]
         [--heading-aid sun-sensor|star-tracker] [--chance-epsilon none|0.05]
+        [--pass-rate-samples N]
         [--plans plan,plan_network]
 
 The network plan's requirement is relative to the station nearest the centre, without a heading
@@ -120,6 +121,9 @@ def main() -> None:
     ap.add_argument("--heading-aid", help="heading_aid of the network plan (default none)")
     ap.add_argument("--chance-epsilon", help="chance_epsilon of the network plan (default the "
                                              "planner's; none: the naive plan)")
+    ap.add_argument("--pass-rate-samples", type=int,
+                    help="pass_rate_samples of the network plan (default the planner's 2,000; "
+                         "each judges the whole 311-station network)")
     ap.add_argument("--plans", default="plan,plan_network",
                     help="plans to run, comma-separated: plan, plan_network")
     ap.add_argument("--keep", type=Path, help="Write the configuration and plans here.")
@@ -154,6 +158,8 @@ def main() -> None:
         lines.append(f'error_figure = "{args.error_figure}"')
     if args.heading_aid:
         lines.append(f'heading_aid = "{args.heading_aid}"')
+    if args.pass_rate_samples is not None:
+        lines.append(f"pass_rate_samples = {args.pass_rate_samples}")
     if args.chance_epsilon:
         lines.append(f"chance_epsilon = {json.dumps(_setting(args.chance_epsilon))}")
     network.write_text("\n".join(lines) + "\n")

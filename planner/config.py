@@ -158,6 +158,11 @@ class PlanConfig:
     max_bias_effect_m : float or None
         Network mode: largest shift of any station that a bias of one observation at its
         minimal detectable size may cause, m; ``None``: not bounded; in (0, 10].
+    pass_rate_samples : int
+        Sampled detection outcomes the plan's pass rate is estimated from after the solve
+        (:func:`planner.accuracy.sampled_chance.sampled_chance`; its Wilson interval widens as
+        it shrinks); 0: none. Each sample judges the whole layout, which on a network of
+        hundreds of stations with a local requirement takes seconds; in [0, 100000].
     """
 
     requirement_m: float = 0.10
@@ -197,6 +202,7 @@ class PlanConfig:
     odometry_heading_deg_per_m: float | None = None
     chance_epsilon: float | None = 0.05
     max_bias_effect_m: float | None = None
+    pass_rate_samples: int = 2000
     error_figure: str = DEFAULT_ERROR_FIGURE
 
     def __post_init__(self) -> None:
@@ -324,8 +330,10 @@ BOUNDS: dict[str, tuple[float, bool, float, str]] = {
     "odometry_heading_deg_per_m": (0.0, False, 10.0, " deg/m"),
     "chance_epsilon": (0.0, False, 0.5, ""),
     "max_bias_effect_m": (0.0, False, 10.0, " m"),
+    "pass_rate_samples": (0, True, 100_000, ""),
 }
-_INTEGERS = ("n_sectors", "min_sectors", "min_markers", "rays_per_marker", "budget")
+_INTEGERS = ("n_sectors", "min_sectors", "min_markers", "rays_per_marker", "budget",
+             "pass_rate_samples")
 _FLAGS = ("exclude_crater_interiors", "allow_out_of_domain", "redundant", "network",
           "datum_requirement", "local_markers")
 #: Settings that may be ``None`` (not set).

@@ -103,14 +103,10 @@ def build_problem(inputs: PlanInputs, config, error_model, progress: bool = True
     return problem, cand, sight.visibility, timings
 
 
-#: Sampled detection outcomes a plan's pass rate is estimated from.
-PLAN_SAMPLES = 2000
-
-
 def make_plan(inputs: PlanInputs, config, error_model, model_name: str = "default",
               problem: PlanProblem | None = None, progress: bool = True,
               map_groups=map, detection_model=None, detection_name: str = "default",
-              samples: int = PLAN_SAMPLES) -> PlanOutcome:
+              samples: int | None = None) -> PlanOutcome:
     """Run the whole plan: candidates, visibility, integer program, baselines, as-built check.
 
     Parameters
@@ -133,8 +129,9 @@ def make_plan(inputs: PlanInputs, config, error_model, model_name: str = "defaul
         own or none); with ``config.chance_epsilon`` the plan holds with that chance.
     detection_name : str
         How the detection model is named in the outputs.
-    samples : int
-        Sampled detection outcomes for the plan's pass rate (0: none).
+    samples : int, optional
+        Sampled detection outcomes for the plan's pass rate (0: none); default the config's
+        ``pass_rate_samples``.
     """
     timings: dict = {}
     cand = vis = None
@@ -182,6 +179,7 @@ def make_plan(inputs: PlanInputs, config, error_model, model_name: str = "defaul
             whole = network_chance(problem, result.selected, config)
         baseline_chances = {b.name: certified(np.asarray(b.selected, bool))
                             for b in baselines if b.selected is not None}
+        samples = config.pass_rate_samples if samples is None else samples
         if samples:
             sampled = sampled_chance(problem, result.selected, config, samples)
         timings["chance"] = time.perf_counter() - t

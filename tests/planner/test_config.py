@@ -24,7 +24,8 @@ def test_toml_loads_and_unknown_keys_are_named(tmp_path):
 @pytest.mark.parametrize("bad", [{"requirement_m": 0}, {"min_sectors": 7},
                                  {"max_slope_deg": 95}, {"budget": 0},
                                  {"min_visible_fraction": 1.5}, {"redundant": "yes"},
-                                 {"existing": ["A"], "forbidden": ["A"]}])
+                                 {"existing": ["A"], "forbidden": ["A"]},
+                                 {"pass_rate_samples": -1}, {"pass_rate_samples": 2.5}])
 def test_invalid_values_are_refused(bad):
     with pytest.raises(ConfigError):
         config_from_dict(bad)

@@ -124,6 +124,7 @@ LANDER = ("id,x_m,y_m,z_m,sigma_m\nL1,8.000,-3.800,1.326,0.005\n"
 @pytest.fixture(scope="module")
 def lander_plan(tmp_path_factory):
     from error_model import default_model
+    from error_model.default import default_detection_model
     from planner.config import PlanConfig
     from planner.problem.inputs import load_inputs
     from planner.run import make_plan
@@ -132,8 +133,9 @@ def lander_plan(tmp_path_factory):
     path.write_text(LANDER)
     inputs = load_inputs("default", control=path)
     config = PlanConfig(network=True, heading_aid="star-tracker", chance_epsilon=None,
-                        time_limit_s=30.0)
-    return make_plan(inputs, config, default_model(), progress=False, samples=0)
+                        time_limit_s=30.0, pass_rate_samples=40)
+    return make_plan(inputs, config, default_model(), progress=False,
+                     detection_model=default_detection_model())
 
 
 def test_a_plan_on_the_landers_fiducials_meets_its_requirement_by_an_independent_check(
@@ -196,6 +198,8 @@ def test_the_lander_plans_files_name_the_control_datum(lander_plan, tmp_path):
     assert "the **control points** L1 (+-0.005 m)" in (tmp_path / "report.md").read_text()
     flagged = {m["id"]: m["control"] for m in doc["markers"]}
     assert flagged["L1"] and sum(flagged.values()) == 3
+    # the pass rate is sampled as often as the config's pass_rate_samples says
+    assert doc["chance"]["sampled"]["n_samples"] == 40 == lander_plan.sampled.n_samples
 
 
 def test_reduce_keeps_the_landers_fiducials_and_its_datum(lander_plan, tmp_path, capsys):
