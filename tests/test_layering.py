@@ -20,9 +20,9 @@ OURS = ("markerplan", "pipeline", "error_model", "visibility", "planner")
 ALLOWED = {
     "markerplan": {"markerplan"},
     "pipeline": {"markerplan", "pipeline"},
-    "error_model": {"markerplan", "error_model", "pipeline.marker_table", "pipeline.fate_table"},
-    "visibility": {"markerplan", "visibility", "pipeline.scan_format", "pipeline.rig",
-                   "pipeline.sensor_noise"},
+    "error_model": {"markerplan", "error_model", "pipeline.tables"},
+    "visibility": {"markerplan", "visibility", "pipeline.scans.scan_format", "pipeline.scans.rig",
+                   "pipeline.scans.sensor_noise"},
     "planner": set(OURS),
 }
 
@@ -57,7 +57,7 @@ def test_no_back_arrows(package):
 
 
 def test_a_back_arrow_is_seen():
-    src = "def f():\n    from planner.run import make_plan\n    import pipeline.process\n"
-    assert imported_modules(src) == {"planner.run", "pipeline.process"}
-    assert not allowed("visibility", "pipeline.process")
-    assert allowed("visibility", "pipeline.rig") and not allowed("pipeline", "planner.run")
+    src = "def f():\n    from planner.run import make_plan\n    import pipeline.chain.process\n"
+    assert imported_modules(src) == {"planner.run", "pipeline.chain.process"}
+    assert not allowed("visibility", "pipeline.chain.process")
+    assert allowed("visibility", "pipeline.scans.rig") and not allowed("pipeline", "planner.run")

@@ -154,7 +154,7 @@ def _study(layout_spec, sources, error_model, config_path, free, keep_ids, drop_
     ``sources`` holds the site options as :func:`planner.reduction.study.resolve_inputs`
     takes them; ``where`` is ``(scheduler, workers)`` of ``--verify``'s station tasks."""
     from markerplan.errors import ConfigError
-    from pipeline.rig import MountingOffsets
+    from pipeline.scans.rig import MountingOffsets
     from planner.config import load_config
     from planner.problem.inputs import known_ids
     from planner.reduction.report import reduce_record
