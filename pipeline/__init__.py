@@ -2,7 +2,7 @@
 sphere-centre estimation, quality gate and evaluation. Imports nothing of ours but the shared
 kernel :mod:`markerplan` (version, error roots).
 
-Each package imports only those listed before it (and :mod:`pipeline.kernels`):
+Each package imports only those listed before it (``tests/test_layering.py`` holds this):
 
 - :mod:`pipeline.kernels`: the compiled inner loops (numba) of the rig's frame transforms, the
   ground, the gate and the sphere fits;

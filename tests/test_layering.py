@@ -3,8 +3,9 @@
 ``markerplan`` imports nothing of ours; ``pipeline`` only ``markerplan``; ``error_model`` only
 ``markerplan`` and the marker- and fate-table schemas of ``pipeline``; ``visibility`` only
 ``markerplan`` and, of ``pipeline``, the scan format and the rig/noise contract; ``planner``
-anything. Read from the sources' import statements (including imports inside functions), so a
-lazy import cannot hide a back-arrow.
+anything. Inside ``pipeline``, each package imports only those before it in
+:data:`PIPELINE_ORDER` (the map of :mod:`pipeline`). Read from the sources' import statements
+(including imports inside functions), so a lazy import cannot hide a back-arrow.
 """
 
 from __future__ import annotations
@@ -25,6 +26,8 @@ ALLOWED = {
                    "pipeline.scans.sensor_noise"},
     "planner": set(OURS),
 }
+#: pipeline's packages (and its one top-level module), each importing only those before it.
+PIPELINE_ORDER = ("kernels", "tables", "scans", "sphere_centres", "chain", "surveys", "network")
 
 
 def imported_modules(source: str) -> set[str]:
@@ -54,6 +57,34 @@ def back_arrows(package: str) -> list[str]:
 @pytest.mark.parametrize("package", [p for p in OURS if p != "planner"])
 def test_no_back_arrows(package):
     assert back_arrows(package) == []
+
+
+def pipeline_back_arrows(root: Path) -> list[str]:
+    """Imports of a ``pipeline`` package, under ``root``, from one after it in the order."""
+    out = []
+    for f in sorted(root.rglob("*.py")):
+        parts = f.relative_to(root).with_suffix("").parts
+        if parts[0] == "__init__":
+            continue
+        rank = PIPELINE_ORDER.index(parts[0])
+        for module in sorted(imported_modules(f.read_text())):
+            names = module.split(".")
+            if names[0] == "pipeline" and len(names) > 1 and (
+                    names[1] not in PIPELINE_ORDER[:rank + 1]):
+                out.append(f"{f.relative_to(root)} imports {module}")
+    return out
+
+
+def test_pipeline_packages_import_only_earlier_ones():
+    assert pipeline_back_arrows(ROOT / "pipeline") == []
+
+
+def test_a_pipeline_back_arrow_is_seen(tmp_path):
+    (tmp_path / "scans").mkdir()
+    (tmp_path / "scans" / "rig.py").write_text("def f():\n    from pipeline.chain import gate\n")
+    (tmp_path / "chain").mkdir()
+    (tmp_path / "chain" / "gate.py").write_text("from pipeline.scans.rig import f\n")
+    assert pipeline_back_arrows(tmp_path) == ["scans/rig.py imports pipeline.chain"]
 
 
 def test_a_back_arrow_is_seen():
