@@ -6,7 +6,7 @@ shows it on the scan simulator's, through the code ``markerplan verify --network
 runs: :func:`planner.verify.network.scan_plan` (every station ray-cast by
 :func:`visibility.simulate.simulate_markers` at its planned pose, tilted by the local
 vertical's deflection ``d / R`` away from the datum station, :mod:`planner.verify.levelling`;
-then :func:`pipeline.process.process_station`) and :func:`planner.verify.network.verify_scan`
+then :func:`pipeline.chain.process.process_station`) and :func:`planner.verify.network.verify_scan`
 (association with the plan's markers, network adjustment, comparison with the truth), once
 with the adjustment's tilt prior on the plane (roll, pitch ``0 +- 0.01 deg``: earlier
 versions) and once on the same body as the simulator.

@@ -39,7 +39,7 @@ import time
 from pathlib import Path
 
 from error_model.default import default_model
-from pipeline.survey import ProcessingSettings, processing_config
+from pipeline.surveys.survey import ProcessingSettings, processing_config
 from planner.distributed import IN_PROCESS, LOCAL, executor
 from planner.outputs.plan_file import load_plan
 from planner.verify.known_control import check_station, map_stations

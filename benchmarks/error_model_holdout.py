@@ -47,10 +47,10 @@ def main() -> None:
 
     from error_model import default_model
     from error_model.model import ErrorModel
-    from pipeline.evaluation import reference_from_truth
-    from pipeline.process import process_station
-    from pipeline.rig import MountingOffsets
-    from pipeline.stages import build_config
+    from pipeline.chain.evaluation import reference_from_truth
+    from pipeline.chain.process import process_station
+    from pipeline.chain.stages import build_config
+    from pipeline.scans.rig import MountingOffsets
     from visibility.sensor import RigConfig
     from visibility.simulate import simulate_station, site_scene
     from visibility.sites import load_site

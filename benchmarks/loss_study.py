@@ -17,7 +17,7 @@ as ``verify`` processes it; each marker in range gets the stage that lost it (or
 and the planner's covariates for the pair. Printed: per bin of each covariate, the pairs, the
 detection rate (a candidate fitted on the marker), the acceptance rate and the losses per stage;
 then the quality gate's reasons and the false accepts (accepted candidates that are no marker).
-``--csv FILE`` also writes every row as a fate table (:mod:`pipeline.fate_table`, the
+``--csv FILE`` also writes every row as a fate table (:mod:`pipeline.tables.fate_table`, the
 input of a detection model). A study that prints: it
 asserts nothing about the figures.
 
@@ -34,7 +34,7 @@ import time
 
 import numpy as np
 
-from pipeline.fate_table import FATE_STAGES, write_fate_table
+from pipeline.tables.fate_table import FATE_STAGES, write_fate_table
 from planner.studies.loss_study import (
     level_layout,
     loss_jobs,

@@ -2,10 +2,11 @@
 study: centre errors with self-calibration, without it, and for an offset-free rig.
 
 The station is simulated first (not timed) with the mounting offsets given (default 0.3 deg,
-0.3 deg, 15 mm); then ``read_scan`` and every stage of :func:`pipeline.process.process_station`
-are timed. With ``--calibration-study`` the same station is also processed uncorrected
-(``calibrate.enabled = false``, zero offsets) and simulated and processed with an offset-free rig
-(same noise seed), and the mean / max centre errors of the accepted markers are compared.
+0.3 deg, 15 mm); then ``read_scan`` and every stage of
+:func:`pipeline.chain.process.process_station` are timed. With ``--calibration-study`` the same
+station is also processed uncorrected (``calibrate.enabled = false``, zero offsets) and simulated
+and processed with an offset-free rig (same noise seed), and the mean / max centre errors of the
+accepted markers are compared.
 
 Usage: ``python benchmarks/process.py [--station 0] [--frames 800] [--calibration-study]``
 """
@@ -46,12 +47,12 @@ def main() -> None:
     ap.add_argument("--calibration-study", action="store_true")
     args = ap.parse_args()
 
-    from pipeline.evaluation import read_reference
-    from pipeline.process import process_station
-    from pipeline.range_study import measure_markers
-    from pipeline.rig import MountingOffsets
-    from pipeline.scan_format import read_scan, write_scan, write_truth
-    from pipeline.stages import build_config, with_offsets
+    from pipeline.chain.evaluation import read_reference
+    from pipeline.chain.process import process_station
+    from pipeline.chain.stages import build_config, with_offsets
+    from pipeline.scans.rig import MountingOffsets
+    from pipeline.scans.scan_format import read_scan, write_scan, write_truth
+    from pipeline.surveys.range_study import measure_markers
     from visibility.sensor import RigConfig
     from visibility.simulate import simulate_station, site_scene
     from visibility.sites import load_site

@@ -2,7 +2,7 @@
 
 The station is simulated once (mounting offsets 0.3 deg, 0.3 deg, 15 mm, as in
 ``benchmarks/process.py``) and cached (``--scan``; reused when it exists). Each repeat then runs
-:func:`pipeline.process.process_station` on it in a fresh subprocess, once with the baseline's
+:func:`pipeline.chain.process.process_station` on it in a fresh subprocess, once with the baseline's
 code on ``PYTHONPATH`` and once with this tree's, alternating, so both see the same machine
 load. Each subprocess processes the station twice: the first run is the first station of a fresh
 process (it pays one-time start-ups, such as loading compiled kernels), the second is what every
@@ -17,9 +17,11 @@ is identical, and whether the offsets and the accepted markers' centres are with
 :data:`OFFSET_TOLERANCE` and :data:`CENTRE_TOLERANCE_M` (round-off of exact rewrites; rejected
 candidates' ill-conditioned fits are only printed).
 
-Make the baseline with ``git worktree add /tmp/base-6391827 6391827``.
+Make the baseline with ``git worktree add /tmp/base-<rev> <rev>``, a revision with pipeline's
+subpackages (``pipeline/chain/process.py``): the worker imports the baseline's modules by this
+tree's paths.
 
-Usage: ``python -u benchmarks/process_speed.py --base /tmp/base-6391827
+Usage: ``python -u benchmarks/process_speed.py --base /tmp/base-<rev>
 [--scan /tmp/mp-speed/station0.scan.npz] [--repeats 5]``
 """
 
@@ -56,8 +58,8 @@ def simulate(scan_path: Path, frames: int, station: int = 0) -> None:
     station : int
         Index into the default site's ``station_ids``.
     """
-    from pipeline.rig import MountingOffsets
-    from pipeline.scan_format import write_scan, write_truth
+    from pipeline.scans.rig import MountingOffsets
+    from pipeline.scans.scan_format import write_scan, write_truth
     from visibility.sensor import RigConfig
     from visibility.simulate import simulate_station
     from visibility.sites import load_site
@@ -78,10 +80,10 @@ def truth_path(scan_path: Path) -> Path:
 def _worker(scan_path: Path) -> None:
     """Process the scan with whichever ``pipeline`` is importable; print one JSON line."""
     import pipeline
-    from pipeline.evaluation import read_reference
-    from pipeline.marker_table import MarkerRow
-    from pipeline.process import process_station
-    from pipeline.scan_format import read_scan
+    from pipeline.chain.evaluation import read_reference
+    from pipeline.chain.process import process_station
+    from pipeline.scans.scan_format import read_scan
+    from pipeline.tables.marker_table import MarkerRow
 
     scan = read_scan(scan_path)
     ref = read_reference(truth_path(scan_path))
@@ -125,9 +127,9 @@ def main() -> None:
     if args.worker:
         _worker(args.worker)
         return
-    if args.base is None or not (args.base / "pipeline" / "process.py").is_file():
-        sys.exit("give --base, a checkout of the baseline "
-                 "(git worktree add /tmp/base-6391827 6391827)")
+    if args.base is None or not (args.base / "pipeline" / "chain" / "process.py").is_file():
+        sys.exit("give --base, a checkout of a baseline with pipeline/chain/process.py "
+                 "(git worktree add /tmp/base-<rev> <rev>)")
     if not args.scan.is_file():
         print(f"simulating the station into {args.scan} ...", flush=True)
         simulate(args.scan, args.frames)
@@ -167,7 +169,7 @@ def _compare(base: dict, new: dict) -> None:
     float columns are printed only (their fits, on few points or not on a sphere, are so
     ill-conditioned that round-off moves them by up to millimetres).
     """
-    from pipeline.marker_table import MarkerRow
+    from pipeline.tables.marker_table import MarkerRow
 
     names = [f.name for f in fields(MarkerRow)]
     centre = [names.index(c) for c in ("x_m", "y_m", "z_m")]

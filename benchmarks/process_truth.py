@@ -1,6 +1,6 @@
 """Station processing against simulator truth on several stations: a baseline against this tree.
 
-For changes to :func:`pipeline.process.process_station` that move results (not exact rewrites;
+For changes to :func:`pipeline.chain.process.process_station` that move results (not exact rewrites;
 ``benchmarks/process_speed.py`` checks those to round-off on one station). Stations 0..K-1 of
 the default site are simulated once each (800 frames, mounting offsets 0.3 deg, 0.3 deg, 15 mm,
 seed 0, as in ``process_speed.py``) and cached in ``--cache`` (``station<k>.scan.npz`` and
@@ -21,9 +21,11 @@ and matched on both sides, paired by station and ``marker_id``) and how many dif
 and the other does not; and the CPU ratio base / new (median of the per-station ratios, and the
 ratio of the sums). A study that prints: it asserts nothing about the figures.
 
-Make the baseline with ``git worktree add /tmp/base-6391827 6391827`` (or ``git archive``).
+Make the baseline with ``git worktree add /tmp/base-<rev> <rev>`` (or ``git archive``), a revision
+with pipeline's subpackages (``pipeline/chain/process.py``): the worker imports the baseline's
+modules by this tree's paths.
 
-Usage: ``python -u benchmarks/process_truth.py --base /tmp/base-6391827 [--stations 0,1]
+Usage: ``python -u benchmarks/process_truth.py --base /tmp/base-<rev> [--stations 0,1]
 [--cache /tmp/mp-truth]``
 """
 
@@ -40,7 +42,7 @@ import process_speed
 DEFAULT_STATIONS = 6
 
 EXAMPLE = """example:
-  OPENBLAS_NUM_THREADS=1 python -u benchmarks/process_truth.py --base /tmp/base-6391827 \\
+  OPENBLAS_NUM_THREADS=1 python -u benchmarks/process_truth.py --base /tmp/base-<rev> \\
       --stations 0,1 --cache /tmp/mp-truth
 """
 
@@ -67,7 +69,7 @@ def summarise(result: dict, truth: dict) -> dict:
     result : dict
         A ``process_speed`` worker's output (``columns``, ``rows``, ``offsets``, ``cpu_s``).
     truth : dict
-        The station's simulation truth (:func:`pipeline.scan_format.read_truth`).
+        The station's simulation truth (:func:`pipeline.scans.scan_format.read_truth`).
 
     Returns
     -------
@@ -149,10 +151,10 @@ def main() -> None:
                     help="folder of the simulated scans and truths, reused (default %(default)s)")
     ap.add_argument("--frames", type=int, default=800, help="frames per turn (default 800)")
     args = ap.parse_args()
-    if not (args.base / "pipeline" / "process.py").is_file():
-        sys.exit(f"--base {args.base} has no pipeline/process.py; give a checkout of the "
-                 "baseline (git worktree add /tmp/base-6391827 6391827)")
-    from pipeline.scan_format import read_truth
+    if not (args.base / "pipeline" / "chain" / "process.py").is_file():
+        sys.exit(f"--base {args.base} has no pipeline/chain/process.py; give a checkout of the "
+                 "baseline with pipeline's subpackages (git worktree add /tmp/base-<rev> <rev>)")
+    from pipeline.scans.scan_format import read_truth
     from visibility.sites import load_site
 
     site = load_site("default")

@@ -21,7 +21,7 @@ import numpy as np
 
 
 def _rays(dem, n_rays: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
-    from pipeline.rig import MountingOffsets, frame_poses
+    from pipeline.scans.rig import MountingOffsets, frame_poses
     from visibility.sensor import firing_pattern, sensor_directions
 
     laser, az = firing_pattern(600)

@@ -25,7 +25,7 @@ def main() -> None:
     ap.add_argument("--write", action="store_true", help="also time write_scan")
     args = ap.parse_args()
 
-    from pipeline.scan_format import write_scan
+    from pipeline.scans.scan_format import write_scan
     from visibility.simulate import simulate_station, site_scene
     from visibility.sites import load_site
 

@@ -92,7 +92,7 @@ def main() -> None:
     ap.add_argument("--repeat", type=int, default=3)
     args = ap.parse_args()
 
-    from pipeline.rig import MountingOffsets, frame_poses
+    from pipeline.scans.rig import MountingOffsets, frame_poses
     from visibility.horizon import HorizonBound, PatternBound
     from visibility.scene import RayScene
     from visibility.sensor import firing_pattern, sensor_directions

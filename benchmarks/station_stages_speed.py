@@ -7,11 +7,11 @@ stage runs alone, ``--inner`` times in one process, and its CPU time (all thread
 the minimum over every run of a side is the figure least inflated by load. The stages, on the
 cached scan of :mod:`benchmarks.process_speed`:
 
-- ``calibrate_angles``: :func:`pipeline.calibration.estimate_rotation_offsets` from zero
+- ``calibrate_angles``: :func:`pipeline.chain.calibration.estimate_rotation_offsets` from zero
   offsets (the chain's first call);
-- ``synthesis``: :func:`pipeline.synthesis.synthesize` with those angles and a 15 mm axis
+- ``synthesis``: :func:`pipeline.chain.synthesis.synthesize` with those angles and a 15 mm axis
   offset;
-- ``ground+cluster+gate``: :func:`pipeline.process.detect_candidates` on that cloud.
+- ``ground+cluster+gate``: :func:`pipeline.chain.process.detect_candidates` on that cloud.
 
 Each repeat runs a fresh subprocess per side (baseline code on ``PYTHONPATH``, then this
 tree's), alternating, so both see the same load. Printed: per stage, the minimum and median CPU
@@ -42,12 +42,12 @@ STAGES = ("calibrate_angles", "synthesis", "ground+cluster+gate")
 def _worker(scan_path: Path, inner: int) -> None:
     """Time the stages with whichever ``pipeline`` is importable; print one JSON line."""
     import pipeline
-    from pipeline.calibration import estimate_rotation_offsets
-    from pipeline.process import detect_candidates
-    from pipeline.rig import MountingOffsets
-    from pipeline.scan_format import read_scan
-    from pipeline.stages import build_config
-    from pipeline.synthesis import synthesize
+    from pipeline.chain.calibration import estimate_rotation_offsets
+    from pipeline.chain.process import detect_candidates
+    from pipeline.chain.stages import build_config
+    from pipeline.chain.synthesis import synthesize
+    from pipeline.scans.rig import MountingOffsets
+    from pipeline.scans.scan_format import read_scan
 
     scan = read_scan(scan_path)
     cfg = build_config()
@@ -87,9 +87,9 @@ def main() -> None:
     if args.worker:
         _worker(args.worker, args.inner)
         return
-    if args.base is None or not (args.base / "pipeline" / "process.py").is_file():
-        sys.exit("give --base, a checkout of the baseline (git -C <repo> archive <rev> | "
-                 "tar -x -C <dir>)")
+    if args.base is None or not (args.base / "pipeline" / "chain" / "process.py").is_file():
+        sys.exit("give --base, a checkout of a baseline with pipeline/chain/process.py "
+                 "(git -C <repo> archive <rev> | tar -x -C <dir>)")
     if not args.scan.is_file():
         sys.exit(f"no scan at {args.scan}: run benchmarks/process_speed.py once to simulate it")
     sides = {"base": args.base, "new": HERE}

@@ -1,8 +1,8 @@
 """Marker-centre error as a function of distance and angle: fitting (cvxpy), prediction,
 domain, serialisation and diagnostics; and the detection model (:mod:`error_model.detection`:
 the probability that a planned marker is detected and accepted, its calibration). Imports
-nothing of ours but :mod:`markerplan` and the table schemas of :mod:`pipeline.marker_table`
-and :mod:`pipeline.fate_table`.
+nothing of ours but :mod:`markerplan` and the table schemas of :mod:`pipeline.tables.marker_table`
+and :mod:`pipeline.tables.fate_table`.
 
 Loading and predicting do not import cvxpy (about 2 s); :func:`fit_error_model` does, on first
 use.

@@ -366,7 +366,7 @@ def fit_from_fate_tables(table, folds: int = 5, features: Sequence[Feature] = DE
 
     Parameters
     ----------
-    table : pipeline.fate_table.FateTable
+    table : pipeline.tables.fate_table.FateTable
         Rows of known markers and their fates.
     folds : int
         Held-out folds over the scans (each scan's rows kept together), >= 2.

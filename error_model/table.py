@@ -1,6 +1,6 @@
 """Marker tables: reading the CSV written by ``markerplan process`` / ``range-study`` (columns
-:data:`pipeline.marker_table.COLUMNS`), checking it, and extracting the rows an error-model fit
-uses.
+:data:`pipeline.tables.marker_table.COLUMNS`), checking it, and extracting the rows an error-model
+fit uses.
 
 A marker table has one row per (station, marker, replicate) with, among others, the
 marker's distance and elevation seen from the LiDAR centre (station frame), its point count
@@ -20,7 +20,7 @@ import numpy as np
 from markerplan.errors import DataError, InputFileError
 from markerplan.provenance import fingerprint_arrays
 from markerplan.reading import MAX_ABS_COORDINATE_M, finite_number, read_csv
-from pipeline.marker_table import COLUMNS, accepted_flags, refuse_repeated_rows
+from pipeline.tables.marker_table import COLUMNS, accepted_flags, refuse_repeated_rows
 
 #: Columns a fit cannot do without.
 REQUIRED_COLUMNS = ("distance_m", "elevation_deg", "error_m", "accepted")
@@ -105,7 +105,7 @@ def read_marker_tables(paths: Iterable[str | Path] | str | Path) -> MarkerTable:
     ----------
     paths : iterable of str or Path, or one str or Path
         CSV files with a header row; each must contain at least :data:`REQUIRED_COLUMNS`.
-        Columns of :data:`pipeline.marker_table.COLUMNS` other than :data:`TEXT_COLUMNS` are
+        Columns of :data:`pipeline.tables.marker_table.COLUMNS` other than :data:`TEXT_COLUMNS` are
         read as numbers (empty cell -> NaN), ``accepted`` as bool (``true`` / ``false``), any
         other column as text.
 
@@ -117,7 +117,7 @@ def read_marker_tables(paths: Iterable[str | Path] | str | Path) -> MarkerTable:
     ------
     InputFileError
         No file given; a missing or unreadable file, missing columns, unparsable cells, a row
-        that repeats another exactly (:func:`pipeline.marker_table.refuse_repeated_rows`).
+        that repeats another exactly (:func:`pipeline.tables.marker_table.refuse_repeated_rows`).
     """
     if isinstance(paths, str | Path):
         paths = [paths]

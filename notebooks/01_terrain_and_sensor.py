@@ -22,8 +22,8 @@ import numpy as np
 from matplotlib.colors import LightSource
 from nbsetup import plt, save
 
-from pipeline.rig import MountingOffsets, frame_poses
-from pipeline.synthesis import synthesize
+from pipeline.chain.synthesis import synthesize
+from pipeline.scans.rig import MountingOffsets, frame_poses
 from visibility.sensor import RigConfig, SensorConfig, firing_pattern, sensor_directions
 from visibility.simulate import simulate_station
 from visibility.sites import load_site

@@ -24,11 +24,11 @@ from collections import Counter
 import numpy as np
 from nbsetup import plt, save
 
-from pipeline.evaluation import reference_from_truth
-from pipeline.process import process_station
-from pipeline.rig import MountingOffsets
-from pipeline.stages import build_config
-from pipeline.synthesis import synthesize
+from pipeline.chain.evaluation import reference_from_truth
+from pipeline.chain.process import process_station
+from pipeline.chain.stages import build_config
+from pipeline.chain.synthesis import synthesize
+from pipeline.scans.rig import MountingOffsets
 from visibility.sensor import RigConfig, SensorConfig
 from visibility.simulate import simulate_station
 from visibility.sites import load_site

@@ -28,10 +28,10 @@ from error_model.diagnostics import plot_diagnostics, summary_text
 from error_model.fit import fit_error_model
 from error_model.table import EXTRA_COLUMNS, read_marker_tables
 from markerplan.constants import GOLDEN_ANGLE_RAD
-from pipeline.evaluation import reference_from_truth
-from pipeline.marker_table import write_marker_table
-from pipeline.process import process_station
-from pipeline.stages import build_config
+from pipeline.chain.evaluation import reference_from_truth
+from pipeline.chain.process import process_station
+from pipeline.chain.stages import build_config
+from pipeline.tables.marker_table import write_marker_table
 from visibility.dem import DEM
 from visibility.simulate import simulate_markers
 

@@ -339,7 +339,7 @@ def in_wanted_bins(range_m: np.ndarray, bin_m: float, wanted: np.ndarray
 def rise_over_cone(xyz_m: np.ndarray, queries: np.ndarray, max_slope: float, reach_m: float,
                    cell_m: float) -> np.ndarray:
     """Rise of each queried point over the steepest-ground cone under it
-    (:func:`pipeline.ground.rise_over_slope`, which checks the arguments).
+    (:func:`pipeline.chain.ground.rise_over_slope`, which checks the arguments).
 
     The lowest return of each ``cell_m`` cell is kept on a grid built only on the tiles of
     ``reach_m`` around the queries; each query takes the largest

@@ -55,7 +55,7 @@ sys.path.insert(0, str(ROOT))
 
 from error_model.default import DEFAULT_DETECTION_MODEL_PATH  # noqa: E402
 from error_model.detection import DEFAULT_FEATURES, fit_from_fate_tables  # noqa: E402
-from pipeline.fate_table import read_fate_tables, write_fate_table  # noqa: E402
+from pipeline.tables.fate_table import read_fate_tables, write_fate_table  # noqa: E402
 from planner.studies.loss_study import (  # noqa: E402
     level_layout,
     loss_jobs,

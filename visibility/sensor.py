@@ -20,11 +20,12 @@ format" and appendix "firing timing") and datasheet (63-9229):
   VLP-16 returns closer than 0.4 m (``VLP16_points.launch``), which we follow.
 
 Not modelled: the per-laser vertical offsets of the optical centres (a few mm; the scan format's
-sensor frame puts every beam through one origin, see :mod:`pipeline.rig`), intensity, dual returns.
+sensor frame puts every beam through one origin, see :mod:`pipeline.scans.rig`), intensity, dual
+returns.
 
 The rig (:class:`RigConfig`): the LiDAR tilted 90 deg on an L-bracket on a turntable, its centre
 ``lidar_height_m`` above the ground, ``frames_per_turn`` frames per turntable revolution, and the
-three mounting offsets of :class:`pipeline.rig.MountingOffsets`.
+three mounting offsets of :class:`pipeline.scans.rig.MountingOffsets`.
 """
 
 from __future__ import annotations
@@ -35,9 +36,9 @@ import numpy as np
 
 from markerplan.checks import require_non_negative
 from markerplan.errors import ConfigError
-from pipeline.rig import VLP16_ELEVATION_DEG, MountingOffsets
-from pipeline.scan_format import sensor_metadata
-from pipeline.sensor_noise import RangeNoise
+from pipeline.scans.rig import VLP16_ELEVATION_DEG, MountingOffsets
+from pipeline.scans.scan_format import sensor_metadata
+from pipeline.scans.sensor_noise import RangeNoise
 
 VLP16_ELEVATION_RAD = np.radians(VLP16_ELEVATION_DEG)
 #: Channel fired at each position of a firing sequence.
@@ -75,7 +76,7 @@ class SensorConfig:
     rpm : int
         Spin rate, 300-1200 in steps of 60.
     range_noise_m, range_noise_per_m, incidence_noise_m, range_resolution_m : float
-        The range noise of :class:`pipeline.sensor_noise.RangeNoise`: 1-sigma at short range
+        The range noise of :class:`pipeline.scans.sensor_noise.RangeNoise`: 1-sigma at short range
         and normal incidence (m), growth with range (m/m) and with ``tan(incidence)`` (m), and
         the rounding of reported ranges (m).
     min_range_m, max_range_m : float
@@ -162,7 +163,7 @@ class SensorConfig:
         return azimuth_step_rad(self.rpm)
 
     def to_metadata(self) -> dict:
-        """The ``sensor`` block of the scan metadata (:mod:`pipeline.scan_format`)."""
+        """The ``sensor`` block of the scan metadata (:mod:`pipeline.scans.scan_format`)."""
         return {**sensor_metadata(), **asdict(self),
                 "firing_order": list(FIRING_ORDER),
                 "azimuth_step_rad": self.azimuth_step_rad,
@@ -271,7 +272,7 @@ def firing_pattern(rpm: float, phase_rad: float = 0.0) -> tuple[np.ndarray, np.n
 
 
 def sensor_directions(laser_id: np.ndarray, azimuth_rad: np.ndarray) -> np.ndarray:
-    """Unit beam directions in the sensor frame (:mod:`pipeline.rig`), shape (n, 3)."""
+    """Unit beam directions in the sensor frame (:mod:`pipeline.scans.rig`), shape (n, 3)."""
     return beam_directions(VLP16_ELEVATION_RAD[np.asarray(laser_id, dtype=np.int64)],
                            azimuth_rad)
 

@@ -1,10 +1,10 @@
 """Simulated turntable scans: cast every VLP-16 beam of every frame into a :class:`RayScene`.
 
 For frame ``f`` at turntable angle ``theta_f`` the sensor pose in the station frame comes from
-:func:`pipeline.rig.frame_poses` (the geometry contract, true mounting offsets applied), and
+:func:`pipeline.scans.rig.frame_poses` (the geometry contract, true mounting offsets applied), and
 the station frame sits at ``position`` in the site frame, rotated by ``heading`` and, for a
 station levelled to a curved body's local vertical, by its ``roll`` and ``pitch``
-(:func:`pipeline.rig.station_to_site_matrix`; default level: zero roll and pitch). A beam of
+(:func:`pipeline.scans.rig.station_to_site_matrix`; default level: zero roll and pitch). A beam of
 channel ``i`` at spin azimuth ``alpha`` leaves the LiDAR centre along
 ``Rz(heading) Ry(pitch) Rx(roll) R_f d_S(i, alpha)``. Its first hit (terrain or marker sphere)
 gives the true range.
@@ -14,8 +14,8 @@ each term is off when its parameter is zero or false):
 
 Range noise (``SensorConfig.range_noise_m``, ``range_noise_per_m``, ``incidence_noise_m``,
 ``range_resolution_m``)
-    Gaussian with the standard deviation of :meth:`pipeline.sensor_noise.RangeNoise.sigma_m` at
-    the true range and incidence, then rounded to the 2 mm resolution (VLP-16 datasheet
+    Gaussian with the standard deviation of :meth:`pipeline.scans.sensor_noise.RangeNoise.sigma_m`
+    at the true range and incidence, then rounded to the 2 mm resolution (VLP-16 datasheet
     63-9229). Returns outside [min, max] range or lost to ``dropout_prob`` are discarded.
 Beam footprint and mixed returns (``SensorConfig.beam_divergence``, ``footprint_samples``)
     The VLP-16 beam diverges 3.0 mrad along the spin x 1.5 mrad across it
@@ -86,8 +86,8 @@ import numpy as np
 from markerplan.constants import GOLDEN_ANGLE_RAD
 from markerplan.errors import ConfigError
 from markerplan.provenance import provenance
-from pipeline.rig import frame_poses, rot_x, rot_y, rot_z, station_to_site_matrix
-from pipeline.scan_format import POINT_FIELDS, StationScan, write_scan, write_truth
+from pipeline.scans.rig import frame_poses, rot_x, rot_y, rot_z, station_to_site_matrix
+from pipeline.scans.scan_format import POINT_FIELDS, StationScan, write_scan, write_truth
 from visibility.dem import DEM
 from visibility.horizon import HorizonBound, PatternBound
 from visibility.scene import RayScene
@@ -505,9 +505,9 @@ def simulate_station(site: Site, station_index: int, sensor: SensorConfig | None
     Returns
     -------
     scan : StationScan
-        Metadata per :mod:`pipeline.scan_format` (no mounting offsets).
+        Metadata per :mod:`pipeline.scans.scan_format` (no mounting offsets).
     truth : dict
-        For :func:`pipeline.scan_format.write_truth`; markers carry ``centre_site_m``,
+        For :func:`pipeline.scans.scan_format.write_truth`; markers carry ``centre_site_m``,
         ``centre_station_m`` and the number of simulated points ``n_points``;
         ``turntable_frame_errors`` is ``None`` or {``frames``, ``angle_error_rad``,
         ``wobble_rad``} (:func:`turntable_errors` of the simulated frames).

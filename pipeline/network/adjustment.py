@@ -20,7 +20,7 @@ position and heading (a position error ``delta`` moves it by ``delta / R``: 0.6 
 on the Moon, 0.003 sigma of a 0.01 deg inclinometer). The prior's centre changes no
 covariance: the planner's predicted accuracy (:mod:`planner.accuracy.network`) is the same on
 every body. The rotation is exact
-(``pipeline.rig.station_to_site_matrix``) and linearised at each iterate. An optional heading
+(``pipeline.scans.rig.station_to_site_matrix``) and linearised at each iterate. An optional heading
 prior (sun sensor) observes each heading around its reading (or nominal value); odometry
 between consecutive stations and the heading's boresight bias are :mod:`pipeline.network.aids`.
 The observations, the datum
@@ -73,7 +73,7 @@ from pipeline.network.reliability import (
 )
 from pipeline.network.settings import SPARSE_ABOVE_PARAMETERS, AdjustmentSettings
 from pipeline.network.variance import VarianceComponent, observation_groups, variance_components
-from pipeline.rig import fit_heading_shift, rot_z
+from pipeline.scans.rig import fit_heading_shift, rot_z
 
 #: chi-square 95 % quantile, 3 degrees of freedom: the 95 % ellipsoid's scale.
 ELLIPSOID_CHI2_95 = float(chi2.ppf(0.95, 3))

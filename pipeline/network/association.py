@@ -44,7 +44,7 @@ from scipy.optimize import linear_sum_assignment
 from scipy.stats import chi2
 
 from markerplan.errors import ConfigError
-from pipeline.rig import fit_heading_shift, rot_z
+from pipeline.scans.rig import fit_heading_shift, rot_z
 
 #: Squared-distance margin of "clearly better": a match is kept only if no alternative is
 #: within ``2 ln(ambiguity_odds)``, i.e. the Gaussian likelihood of the best assignment beats
@@ -412,7 +412,7 @@ def associate_by_geometry(stations: Sequence[tuple[str, np.ndarray]],
     Examples
     --------
     >>> import numpy as np
-    >>> from pipeline.rig import rot_z
+    >>> from pipeline.scans.rig import rot_z
     >>> a = np.array([[0.0, 0, 0], [7, 1, 0.3], [2, 9, -0.2], [-6, 4, 0.1], [-3, -8, 0.4]])
     >>> b = a[[3, 0, 4, 1]] @ rot_z(0.8).T + [5.0, -2.0, 0.1]
     >>> res = associate_by_geometry([("S1", a), ("S2", b)], 0.01)

@@ -11,7 +11,7 @@ vector
 which leans *away from* the tangent point by ``atan(d / (R + z)) ~ d / R`` (``d`` the
 horizontal distance): 0.0126 deg at 381 m on the Moon, 1.26 sigma of a 0.01 deg inclinometer.
 A station levelled there has the levelled-station-to-site rotation
-``Rz(heading) Ry(pitch) Rx(roll)`` (:func:`pipeline.rig.station_to_site_matrix`) whose third
+``Rz(heading) Ry(pitch) Rx(roll)`` (:func:`pipeline.scans.rig.station_to_site_matrix`) whose third
 column is ``u``. With ``v = Rz(-heading) u``, that is
 
     roll = -asin(v_y),   pitch = atan2(v_x, v_z)
@@ -40,7 +40,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from markerplan.errors import ConfigError
-from pipeline.rig import rot_z
+from pipeline.scans.rig import rot_z
 
 #: Mean radii of the named bodies, m (the Moon: IAU/IAG 2015 mean radius 1737.4 km; Earth: the
 #: IUGG mean radius R1 6371.0 km). ``plane`` has none.

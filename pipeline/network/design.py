@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from pipeline.rig import rot_x, rot_y, rot_z
+from pipeline.scans.rig import rot_x, rot_y, rot_z
 
 
 def axis_weight(sigma_m):

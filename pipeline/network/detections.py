@@ -4,7 +4,7 @@ Three steps, each a function, which :func:`pipeline.network.run.adjust_tables` s
 together:
 
 1. :func:`read_detections` — the accepted detections of every station in the marker tables of
-   ``markerplan process`` (:func:`pipeline.marker_table.read_marker_table`), each with its
+   ``markerplan process`` (:func:`pipeline.tables.marker_table.read_marker_table`), each with its
    1-sigma 3D centre error from the error model at its distance and elevation (as ``verify``
    weighs them);
 2. marker identity, one of :data:`IDENTITIES`:
@@ -138,7 +138,7 @@ def read_detections(tables: list[Path], error_model) -> list[StationDetections]:
         accepted detection, a station in two tables, accepted detections of more than one
         centre estimator, or a non-finite or absurd number in an accepted row.
     """
-    from pipeline.marker_table import read_marker_table
+    from pipeline.tables.marker_table import read_marker_table
 
     seen: dict[Path, Path] = {}
     estimator: dict[str, tuple[Path, int]] = {}

@@ -7,7 +7,7 @@ import numpy as np
 
 from pipeline.network.design import station_rotations
 from pipeline.network.observations import NetworkObservations
-from pipeline.rig import fit_heading_shift, rot_z
+from pipeline.scans.rig import fit_heading_shift, rot_z
 
 
 def chained_initial(obs: NetworkObservations, order: list[int], reference_pose: np.ndarray

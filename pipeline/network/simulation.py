@@ -28,7 +28,7 @@ from markerplan.errors import ConfigError
 from pipeline.network.aids import OdometryReadings
 from pipeline.network.body import Body
 from pipeline.network.observations import NetworkObservations, NominalPoses
-from pipeline.rig import station_to_site_matrix
+from pipeline.scans.rig import station_to_site_matrix
 
 
 @dataclass(frozen=True)

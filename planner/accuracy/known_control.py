@@ -43,7 +43,7 @@ from scipy.stats import chi2
 
 from markerplan.errors import ConfigError
 from pipeline.network.design import pose_design_blocks
-from pipeline.rig import rot_z, station_to_site_matrix
+from pipeline.scans.rig import rot_z, station_to_site_matrix
 
 #: chi-square 95 % quantile with 3 degrees of freedom (3D position error).
 CHI2_3_95 = float(chi2.ppf(0.95, 3))

@@ -22,13 +22,14 @@ option                      meaning (and the value the command receives)
 ``--marker-radius-m M``     marker (sphere) radius, metres (``float``)
 ``--lidar-height-m M``      LiDAR centre above the ground at the station, metres (``float``)
 ``--error-model FILE``      error model (:class:`ErrorModelChoice`, the shipped one by default)
-``--estimator NAME``        sphere-centre estimator, from :data:`pipeline.sphere_fit.METHODS`
+``--estimator NAME``        sphere-centre estimator, from
+                            :data:`pipeline.sphere_centres.sphere_fit.METHODS`
 ``--sensor-profile NAME``   sensor, turntable and reference errors (a loaded
                             :class:`~visibility.sensor_profile.SensorProfile`; ``calibrated``
                             by default, ``datasheet``, or a JSON file from ``calibrate-sensor``)
 ``--vertical-axis-error-deg``, ``--lframe-tilt-deg``, ``--axis-offset-mm``
-                            the rig's mounting offsets (one :class:`~pipeline.rig.MountingOffsets`
-                            argument ``offsets``)
+                            the rig's mounting offsets (one
+                            :class:`~pipeline.scans.rig.MountingOffsets` argument ``offsets``)
 ``--config FILE``           TOML plan settings; ``--boundary``, ``--exclude``: GeoJSON polygons
 ``--time-limit-s S``        solver time limit, seconds
 ``--network``               network mode: markers and stations estimated together, tied to
@@ -70,8 +71,8 @@ from typing import Any, NamedTuple
 
 import click
 
-from pipeline.rig import MountingOffsets
-from pipeline.sphere_fit import METHODS
+from pipeline.scans.rig import MountingOffsets
+from pipeline.sphere_centres.sphere_fit import METHODS
 
 
 def out_option(default: str | None = None, required: bool = False):
@@ -488,7 +489,8 @@ error_model_option = click.option(
 def estimator_option(default: str | None = METHODS[0], help_text: str = "Sphere-centre "
                      "estimator: the ASTM E3125-17 line-of-sight fixed-radius fit, or the "
                      "published hemisphere ICP."):
-    """``--estimator NAME``: a sphere-centre estimator of :data:`pipeline.sphere_fit.METHODS`."""
+    """``--estimator NAME``: a sphere-centre estimator of
+    :data:`pipeline.sphere_centres.sphere_fit.METHODS`."""
     return click.option("--estimator", type=click.Choice(METHODS), default=default,
                         show_default=default is not None, help=help_text)
 

@@ -42,7 +42,7 @@ def command(tables: tuple[Path, ...], out: Path, folds: int, plot: bool,
     """
     from error_model.detection import fit_from_fate_tables, plot_calibration
     from markerplan.output_folder import output_folder
-    from pipeline.fate_table import read_fate_tables
+    from pipeline.tables.fate_table import read_fate_tables
 
     with output_folder(out, overwrite, "fit-detection-model", inputs=tables) as stage:
         table = read_fate_tables(tables)

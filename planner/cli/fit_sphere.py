@@ -36,8 +36,8 @@ def command(file: str, marker_radius_m: float | None, sensor: tuple[float, float
       markerplan fit-sphere SPH101.xyz --marker-radius-m 0.05 --json
     """
     require_option(marker_radius_m, "--marker-radius-m")
-    from pipeline.pointsets import read_points
-    from pipeline.sphere_fit import fit_sphere
+    from pipeline.scans.pointsets import read_points
+    from pipeline.sphere_centres.sphere_fit import fit_sphere
 
     points = read_points(file)
     fit = fit_sphere(points, marker_radius_m, sensor_m=sensor, method=estimator)

@@ -73,8 +73,8 @@ def command(capture: Path, log_path: Path | None, station_id: str | None, keep_p
     from markerplan.errors import DataError
     from markerplan.output_folder import output_folder
     from markerplan.provenance import provenance
-    from pipeline.pcap import decode_vlp16_pcap, read_turntable_log, scan_from_revolutions
-    from pipeline.scan_format import write_scan
+    from pipeline.scans.pcap import decode_vlp16_pcap, read_turntable_log, scan_from_revolutions
+    from pipeline.scans.scan_format import write_scan
 
     started = time.perf_counter()
     station = station_id or capture.name.split(".")[0]
@@ -120,7 +120,7 @@ def _note_capture(decoded, kept: list, log_path: Path | None) -> None:
     """Notes on stderr: a file cut short, a dual-return capture, a dropped partial revolution,
     revolutions with lost packets, no log.
 
-    ``decoded`` is the :class:`pipeline.pcap.Capture`; ``kept`` its revolutions without the
+    ``decoded`` is the :class:`pipeline.scans.pcap.Capture`; ``kept`` its revolutions without the
     partial last one when it was dropped."""
     revolutions = decoded.revolutions
     if decoded.cut_packet is not None:

@@ -123,10 +123,10 @@ def _site_crs(paths: tuple[Path, ...]) -> str | None:
 
 
 def _station_poses(truth_files: list[Path]) -> dict:
-    """{station id: :class:`~pipeline.point_cloud_io.StationPose`} of the truths among
+    """{station id: :class:`~pipeline.surveys.point_cloud_io.StationPose`} of the truths among
     ``truth_files`` (the references that are JSON) that record the station's position."""
-    from pipeline.point_cloud_io import StationPose
-    from pipeline.scan_format import read_truth
+    from pipeline.scans.scan_format import read_truth
+    from pipeline.surveys.point_cloud_io import StationPose
 
     truths = [read_truth(p) for p in truth_files if p.suffix.lower() == ".json"]
     return {t["station_id"]: StationPose.from_truth(t) for t in truths
@@ -188,10 +188,10 @@ def command(scans, out, overwrite, references, estimator, marker_radius_m, no_ca
     from markerplan.errors import InputFileError
     from markerplan.output_folder import output_folder
     from markerplan.provenance import provenance
-    from pipeline.evaluation import check_references, read_reference
-    from pipeline.point_cloud_io import check_formats, classify_cloud, write_station_clouds
-    from pipeline.results import write_results
-    from pipeline.survey import ProcessingSettings, process_scans, processing_config
+    from pipeline.chain.evaluation import check_references, read_reference
+    from pipeline.surveys.point_cloud_io import check_formats, classify_cloud, write_station_clouds
+    from pipeline.surveys.results import write_results
+    from pipeline.surveys.survey import ProcessingSettings, process_scans, processing_config
 
     scans_given = scans
     scans, truths = _scan_inputs(scans)

@@ -6,7 +6,7 @@ import sys
 
 import click
 
-from pipeline.range_study import EXTRACTIONS
+from pipeline.surveys.range_study import EXTRACTIONS
 from planner.cli._common import (
     FiniteRange,
     emit_summary,

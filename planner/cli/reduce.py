@@ -179,7 +179,7 @@ def _study(layout_spec, sources, error_model, config_path, free, keep_ids, drop_
     ``requirement`` the requirement-kind options and ``--error-figure`` by configuration name
     (``None``: not given)."""
     from markerplan.errors import ConfigError
-    from pipeline.rig import MountingOffsets
+    from pipeline.scans.rig import MountingOffsets
     from planner.config import load_config
     from planner.problem.inputs import known_ids
     from planner.reduction.report import reduce_record

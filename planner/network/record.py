@@ -191,7 +191,7 @@ def station_errors(pose_cov: np.ndarray, heading_rad: np.ndarray,
     >>> np.round(station_errors(cov, np.zeros(1), 10.0, "ellipsoid"), 4).tolist()
     [0.028]
     """
-    from pipeline.rig import rot_z
+    from pipeline.scans.rig import rot_z
     from planner.accuracy.figure import ErrorFigure
 
     cov = np.asarray(pose_cov, dtype=float).reshape(-1, 6, 6)

@@ -1,7 +1,7 @@
 """The chance that each station-site pair's marker is detected and accepted, for the planner.
 
-A plan is made before the field; what the field loses (:mod:`pipeline.fates`) is predicted by a
-detection model (:class:`error_model.detection.DetectionModel`, fitted on full-chain fate
+A plan is made before the field; what the field loses (:mod:`pipeline.surveys.fates`) is predicted
+by a detection model (:class:`error_model.detection.DetectionModel`, fitted on full-chain fate
 tables) from each pair's covariates. :func:`pair_covariates` computes exactly the covariates the
 loss study records (:mod:`planner.studies.loss_study`), from the planner's visibility matrix and
 terrain: distance, elevation, incidence on the local ground, ground slope, distance to the

@@ -72,7 +72,7 @@ def verify_points(study, inputs, ks, error_model, seed: int = 0, progress: bool 
     seed : int
         Simulation seed (the same for every count, so differences come from the markers).
     progress : bool
-    offsets : pipeline.rig.MountingOffsets, optional
+    offsets : pipeline.scans.rig.MountingOffsets, optional
         True mounting offsets of the simulated rig (default: none); see
         :func:`planner.verify.known_control.verify_plan`.
     executor : planner.distributed.Executor, optional

@@ -28,8 +28,8 @@ import numpy as np
 
 from markerplan.errors import DataError, InputFileError
 from markerplan.reading import finite_number, read_csv, unique_ids
-from pipeline.evaluation import edge_residuals, read_reference
-from pipeline.marker_table import read_marker_table
+from pipeline.chain.evaluation import edge_residuals, read_reference
+from pipeline.tables.marker_table import read_marker_table
 
 SUMMARY_COLUMNS = ("position", "distances_m", "mean_abs_edge_residual_m")
 #: Shipped summary of the published field experiment (three positions, 11 markers each).

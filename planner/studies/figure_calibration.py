@@ -27,7 +27,7 @@ import numpy as np
 
 from pipeline.network.adjustment import AdjustmentSettings, adjust
 from pipeline.network.simulation import simulated_network
-from pipeline.rig import station_to_site_matrix
+from pipeline.scans.rig import station_to_site_matrix
 from planner.accuracy import known_control
 from planner.accuracy.figure import N_DIRECTIONS, ErrorFigure
 from planner.accuracy.known_control import CHI2_3_95, registration_differences

@@ -3,11 +3,11 @@
 Markers are laid out on a terrain (a level field for the range sweep, or a site's relief),
 each station is scanned with them by the simulator (:func:`visibility.simulate.simulate_markers`,
 the sensor and turntable errors of a sensor profile, as ``verify`` scans a plan), the scan runs
-through the full chain (:func:`pipeline.process.process_station`, configured as ``verify``
+through the full chain (:func:`pipeline.chain.process.process_station`, configured as ``verify``
 configures it), and every marker within the sensor's range gets its fate
 (:func:`planner.verify.fates.station_fates`: the stage that lost it, or ``accepted``) beside the
 covariates a planner has for the pair before any scan (a row of the fate table,
-:mod:`pipeline.fate_table`):
+:mod:`pipeline.tables.fate_table`):
 
 =====================  ===================================================================
 column                 meaning
@@ -20,7 +20,7 @@ column                 meaning
 ``visible_fraction``   unoccluded fraction of the sensor-facing hemisphere (terrain only)
 ``expected_points``    returns the planner expects from one full scan
 ``n_points``           returns the simulator put on the marker
-``stage``, ``reason``  the fate (:data:`pipeline.fate_table.FATE_STAGES`)
+``stage``, ``reason``  the fate (:data:`pipeline.tables.fate_table.FATE_STAGES`)
 =====================  ===================================================================
 
 :func:`loss_table` aggregates the rows into detection and acceptance rates per bin of one
@@ -34,10 +34,10 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from pipeline.fate_table import FATE_COLUMNS, FATE_STAGES
-from pipeline.process import process_station
-from pipeline.range_study import RANGE_STUDY_DISTANCES_M, marker_layout
-from pipeline.survey import ProcessingSettings, processing_config
+from pipeline.chain.process import process_station
+from pipeline.surveys.range_study import RANGE_STUDY_DISTANCES_M, marker_layout
+from pipeline.surveys.survey import ProcessingSettings, processing_config
+from pipeline.tables.fate_table import FATE_COLUMNS, FATE_STAGES
 from planner.problem.detection_odds import rim_distance, terrain_normal
 from planner.verify.fates import station_fates
 from visibility.dem import DEM
@@ -83,7 +83,7 @@ def level_layout(distances_m: np.ndarray = RANGE_STUDY_DISTANCES_M, radius_m: fl
                  lidar_height_m: float = 1.0, cell_m: float = 0.1) -> LossLayout:
     """The range sweep: one station over a level field, one marker per distance.
 
-    The markers are those of the range study (:func:`pipeline.range_study.marker_layout`:
+    The markers are those of the range study (:func:`pipeline.surveys.range_study.marker_layout`:
     golden-angle azimuths, so none hides another), on a flat DEM reaching 2 m beyond the
     farthest.
 
@@ -154,7 +154,7 @@ def pair_covariates(layout: LossLayout, station: int, max_range_m: float,
     -------
     covariates : dict of (p,) arrays
         ``marker`` (index into the layout's markers) and the covariate columns of
-        :data:`pipeline.fate_table.FATE_COLUMNS` (``distance_m`` ... ``expected_points``).
+        :data:`pipeline.tables.fate_table.FATE_COLUMNS` (``distance_m`` ... ``expected_points``).
     """
     from visibility.scene import RayScene
     from visibility.visibility_matrix import AngularSampling, visibility_matrix
@@ -210,7 +210,7 @@ def station_losses(layout: LossLayout, job: LossJob) -> ScanLosses:
     Returns
     -------
     ScanLosses
-        Its rows are keyed by :data:`pipeline.fate_table.FATE_COLUMNS`.
+        Its rows are keyed by :data:`pipeline.tables.fate_table.FATE_COLUMNS`.
     """
     from visibility.simulate import simulate_markers
 
@@ -273,7 +273,7 @@ def loss_table(rows: Sequence[dict], column: str, edges: Sequence[float]) -> lis
     Parameters
     ----------
     rows : sequence of dict
-        Loss-study rows (:data:`pipeline.fate_table.FATE_COLUMNS`).
+        Loss-study rows (:data:`pipeline.tables.fate_table.FATE_COLUMNS`).
     column : str
         The covariate binned.
     edges : sequence of float
@@ -283,7 +283,7 @@ def loss_table(rows: Sequence[dict], column: str, edges: Sequence[float]) -> lis
     -------
     table : list of dict
         Per non-empty bin: ``lo``, ``hi``, ``n``, ``detected`` and ``accepted`` rates, and the
-        count lost at each stage of :data:`pipeline.fate_table.FATE_STAGES` but ``accepted``.
+        count lost at each stage of :data:`pipeline.tables.fate_table.FATE_STAGES` but ``accepted``.
 
     Examples
     --------

@@ -3,12 +3,12 @@ on level ground, scanned with the turntable rig and fitted with every estimator;
 variants, the same markers resting on a planar slope with the LiDAR 0.8-1.5 m up.
 
 The simulator (:func:`visibility.simulate.simulate_markers`) scans the markers laid out by
-:func:`pipeline.range_study.marker_layout` once per replicate (replicate ``r`` with seed
+:func:`pipeline.surveys.range_study.marker_layout` once per replicate (replicate ``r`` with seed
 ``seed + r``); the station chain of ``process`` and ``verify`` extracts and fits the markers
-(:func:`pipeline.range_study.chain_markers`; the ``truth-seeded`` diagnostic,
-:func:`pipeline.range_study.measure_markers`, re-searches each at its true position instead) and
-:func:`pipeline.range_study.summarise` aggregates the marker tables. :func:`write_range_study`
-writes the files of ``markerplan range-study``.
+(:func:`pipeline.surveys.range_study.chain_markers`; the ``truth-seeded`` diagnostic,
+:func:`pipeline.surveys.range_study.measure_markers`, re-searches each at its true position instead)
+and :func:`pipeline.surveys.range_study.summarise` aggregates the marker tables.
+:func:`write_range_study` writes the files of ``markerplan range-study``.
 """
 
 from __future__ import annotations
@@ -24,8 +24,8 @@ import numpy as np
 from markerplan.errors import ConfigError
 from markerplan.provenance import provenance
 from markerplan.writing import write_csv
-from pipeline.marker_table import MarkerRow, write_marker_table
-from pipeline.range_study import (
+from pipeline.chain.stages import RADIUS_SCALED
+from pipeline.surveys.range_study import (
     EXTRACTIONS,
     RANGE_STUDY_DISTANCES_M,
     SUMMARY_COLUMNS,
@@ -36,7 +36,7 @@ from pipeline.range_study import (
     summarise,
     unmatched_counts,
 )
-from pipeline.stages import RADIUS_SCALED
+from pipeline.tables.marker_table import MarkerRow, write_marker_table
 from visibility.dem import DEM
 from visibility.sensor_profile import SensorProfile, default_profile
 from visibility.simulate import simulate_markers
@@ -56,7 +56,7 @@ class RangeStudy:
     rows: list[MarkerRow]
     """Every marker of every replicate, with each estimator."""
     summary: list[dict]
-    """:func:`pipeline.range_study.summarise` of ``rows``."""
+    """:func:`pipeline.surveys.range_study.summarise` of ``rows``."""
     config: dict
     """Everything the result depends on (recorded in ``summary.json``)."""
 
@@ -97,7 +97,7 @@ def run_range_study(max_distance_m: float = 50.0, frames: int = 800, replicates:
     slope_deg : float
         Ground slope, degrees, in (-45, 45): the ground is a plane through the station's foot
         rising towards the station frame's +x; markers rest on it (see
-        :func:`pipeline.range_study.marker_layout`). 0 is the published level ground.
+        :func:`pipeline.surveys.range_study.marker_layout`). 0 is the published level ground.
     map_tasks : callable, optional
         ``map_tasks(fn, items)`` -> iterable of ``fn(item)`` in the items' order, running the
         replicates (one task each, e.g. a :class:`planner.distributed.Executor`); default the
@@ -105,7 +105,7 @@ def run_range_study(max_distance_m: float = 50.0, frames: int = 800, replicates:
     extraction : str
         ``full-chain`` (the station chain of ``process`` and ``verify``, once per estimator)
         or ``truth-seeded`` (the diagnostic re-search at each marker's true position), see
-        :mod:`pipeline.range_study`; recorded in ``config``.
+        :mod:`pipeline.surveys.range_study`; recorded in ``config``.
 
     Returns
     -------
@@ -114,7 +114,7 @@ def run_range_study(max_distance_m: float = 50.0, frames: int = 800, replicates:
     Raises
     ------
     ConfigError
-        An ``extraction`` not in :data:`pipeline.range_study.EXTRACTIONS`.
+        An ``extraction`` not in :data:`pipeline.surveys.range_study.EXTRACTIONS`.
     """
     if extraction not in EXTRACTIONS:
         raise ConfigError(f"`extraction` must be one of {EXTRACTIONS}, got {extraction!r}")

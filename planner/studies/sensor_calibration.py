@@ -5,7 +5,7 @@ edge-length residual of its markers against the reference (:mod:`planner.studies
 The simulator predicts it through the project's own chain: a level field with the position's
 markers at the observed distances (azimuths spread by the golden angle, since only the
 distances are known) is scanned with the profile (:func:`visibility.simulate.simulate_markers`),
-processed by :func:`pipeline.process.process_station` exactly as ``markerplan process`` does
+processed by :func:`pipeline.chain.process.process_station` exactly as ``markerplan process`` does
 (self-calibration, detection, fit, quality gate), and evaluated against a reference drawn with
 the profile's total-station error (:class:`visibility.total_station.TotalStationReference`).
 
@@ -46,10 +46,10 @@ import numpy as np
 from scipy.optimize import least_squares, nnls
 
 from markerplan.errors import ConfigError, DataError
-from pipeline.evaluation import Reference
-from pipeline.process import process_station
-from pipeline.range_study import marker_layout
-from pipeline.survey import ProcessingSettings, processing_config
+from pipeline.chain.evaluation import Reference
+from pipeline.chain.process import process_station
+from pipeline.surveys.range_study import marker_layout
+from pipeline.surveys.survey import ProcessingSettings, processing_config
 from planner.studies.field_summary import FieldPosition
 from planner.studies.range_experiment import ground_dem
 from visibility.sensor_profile import SensorProfile, parameter_names

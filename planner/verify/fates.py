@@ -1,5 +1,5 @@
 """The fate of every planned marker in a verification, against the simulator's truth (both
-modes): the stage of the chain that lost it (:mod:`pipeline.fates`: ``not_in_view``,
+modes): the stage of the chain that lost it (:mod:`pipeline.surveys.fates`: ``not_in_view``,
 ``ground``, ``cluster``, ``gate``, ``fit``, ``quality``) and why, or ``accepted``.
 
 :func:`station_fates` builds a station's :class:`StationFates` inside its task (small: it
@@ -16,10 +16,10 @@ from pathlib import Path
 import numpy as np
 
 from markerplan.writing import write_csv, write_gis_sidecars
-from pipeline.fates import false_accepts, marker_fates
-from pipeline.marker_table import line_of_sight
-from pipeline.process import StationResult
-from pipeline.stages import ProcessConfig
+from pipeline.chain.process import StationResult
+from pipeline.chain.stages import ProcessConfig
+from pipeline.surveys.fates import false_accepts, marker_fates
+from pipeline.tables.marker_table import line_of_sight
 
 #: ``fates.csv``: header and ``.csvt`` column types (both modes).
 FATES_COLUMNS = ("trial", "station_id", "marker_id", "distance_m", "elevation_deg", "n_points",
@@ -28,7 +28,7 @@ FATES_TYPES = ("Integer", "String", "String", "Real", "Real", "Integer", "String
                "String", "Real", "Integer")
 
 #: How a station's reason names the stage that lost a marker
-#: (:data:`pipeline.fate_table.FATE_STAGES`).
+#: (:data:`pipeline.tables.fate_table.FATE_STAGES`).
 LOST_AT = {"not_in_view": "out of view", "ground": "at ground removal",
            "cluster": "at clustering", "gate": "at the gate", "fit": "at the fit",
            "quality": "at quality"}
@@ -47,7 +47,7 @@ class FateRow:
     n_points : int
         Simulated returns on the marker.
     stage, reason : str
-        :func:`pipeline.fates.marker_fates`' stage and detail (``""`` when accepted).
+        :func:`pipeline.surveys.fates.marker_fates`' stage and detail (``""`` when accepted).
     accepted : bool
         ``stage == "accepted"``.
     error_m : float or None
@@ -91,7 +91,7 @@ def station_fates(result: StationResult, truth: dict, marker_ids, cfg: ProcessCo
     Parameters
     ----------
     result : StationResult
-        :func:`pipeline.process.process_station`'s.
+        :func:`pipeline.chain.process.process_station`'s.
     truth : dict
         :func:`visibility.simulate.simulate_markers`' truth: every simulated marker's
         ``centre_station_m`` and ``n_points``.

@@ -8,9 +8,9 @@ Per station:
    tile (the station ± the sensor's maximum range) with only the planned markers, at the
    planned station pose, with the sensor and turntable errors
    of a sensor profile (:mod:`visibility.sensor_profile`, ``calibrated`` by default);
-2. ``pipeline.process.process_station`` — the published chain, configured for the plan's marker
-   radius (:func:`pipeline.survey.processing_config`); detections are matched to the planned
-   markers projected into the station frame with the *planned* (nominal) pose;
+2. ``pipeline.chain.process.process_station`` — the published chain, configured for the plan's
+   marker radius (:func:`pipeline.surveys.survey.processing_config`); detections are matched to the
+   planned markers projected into the station frame with the *planned* (nominal) pose;
 3. weighted least squares (:func:`planner.accuracy.known_control.fit_pose`, 4 DoF: x, y, z,
    heading; roll and pitch are known, as from the inclinometer) from the accepted, matched
    markers, each weighted by the error model's sigma at its measured distance and elevation;
@@ -49,12 +49,12 @@ import numpy as np
 
 from markerplan.errors import DataError
 from markerplan.provenance import provenance
-from pipeline.evaluation import Reference
-from pipeline.process import process_station
-from pipeline.rig import MountingOffsets, station_to_site_matrix
-from pipeline.scan_format import StationScan
-from pipeline.stages import ProcessConfig
-from pipeline.survey import ProcessingSettings, processing_config
+from pipeline.chain.evaluation import Reference
+from pipeline.chain.process import process_station
+from pipeline.chain.stages import ProcessConfig
+from pipeline.scans.rig import MountingOffsets, station_to_site_matrix
+from pipeline.scans.scan_format import StationScan
+from pipeline.surveys.survey import ProcessingSettings, processing_config
 from planner import distributed
 from planner.accuracy import known_control
 from planner.distributed import Executor
@@ -114,7 +114,7 @@ def verify_plan(plan: SurveyPlan, error_model, seed: int = 0, progress: bool = T
         Simulation seed (the plan's station ``k`` uses ``seed + k``, whichever are verified).
     progress : bool
         Progress bar on stderr (when no ``executor`` is given).
-    offsets : pipeline.rig.MountingOffsets, optional
+    offsets : pipeline.scans.rig.MountingOffsets, optional
         True mounting offsets of the simulated rig (default: none). The pipeline self-calibrates
         them from each station's scan, as it would in the field.
     station_ids : list of str, optional
@@ -195,7 +195,7 @@ def check_station(ids: tuple[str, ...], centres: np.ndarray, cfg: ProcessConfig,
     centres : (m, 3) float
         Their centres, site frame, metres.
     cfg : ProcessConfig
-        Pipeline configuration (:func:`pipeline.survey.processing_config`).
+        Pipeline configuration (:func:`pipeline.surveys.survey.processing_config`).
     error_model : ErrorModel
     requirement_m, working_radius_m : float
         The plan's requirement and working radius, metres.

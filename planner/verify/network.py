@@ -8,7 +8,7 @@ The closed loop of ``markerplan verify --network``, in two steps:
    local vertical of a curved ``body``, :mod:`planner.verify.levelling`) with only the
    planned markers (:func:`planner.verify.known_control.map_stations`: the sensor profile and the
    mis-mounted rig of known-control ``verify``) and processed by the published chain
-   (:func:`pipeline.process.process_station`) *without* a reference, so the marker table's
+   (:func:`pipeline.chain.process.process_station`) *without* a reference, so the marker table's
    ``marker_id`` column is empty until the association of step 2 fills it
    (:func:`~planner.verify.network_identify.identified_rows`). The truth of every station (its
    pose and the markers' true centres) is kept apart, for the comparison only, and so are the
@@ -63,11 +63,11 @@ from pathlib import Path
 import numpy as np
 
 from markerplan.errors import ConfigError
-from pipeline.marker_table import MarkerRow
+from pipeline.chain.stages import ProcessConfig
 from pipeline.network.body import Body
 from pipeline.network.detections import Identified, StationDetections
-from pipeline.rig import MountingOffsets
-from pipeline.stages import ProcessConfig
+from pipeline.scans.rig import MountingOffsets
+from pipeline.tables.marker_table import MarkerRow
 from planner.accuracy import known_control
 from planner.accuracy.requirement import NetworkRequirement, datum_distances
 from planner.distributed import Executor
@@ -296,7 +296,7 @@ def scan_plans(plan: SurveyPlan, seeds: list[int], progress: bool = True,
     scans : list of Scanned
         Per seed, :func:`scan_plan`'s three values.
     """
-    from pipeline.survey import ProcessingSettings, processing_config
+    from pipeline.surveys.survey import ProcessingSettings, processing_config
     from planner.verify.known_control import map_plan_stations
     from planner.verify.levelling import levelled_tilts
 
@@ -314,9 +314,9 @@ def station_rows(cfg: ProcessConfig, seed: int, st, scan, truth: dict
                  ) -> tuple[list[MarkerRow], TrueStation, StationFates]:
     """One simulated station's marker-table rows (no reference: identification comes later),
     its truth and its planned markers' fates; ``cfg``
-    (:func:`pipeline.survey.processing_config`) and ``seed`` are the pipeline's (a
+    (:func:`pipeline.surveys.survey.processing_config`) and ``seed`` are the pipeline's (a
     :func:`planner.verify.known_control.station_task` ``process``)."""
-    from pipeline.process import process_station
+    from pipeline.chain.process import process_station
     from planner.verify.fates import station_fates
 
     result = process_station(scan, cfg, None, seed=seed)
@@ -518,7 +518,7 @@ def verify_scan(scanned: Scanned, table: Path, plan_path: Path, doc: dict, error
     -------
     NetworkVerification
     """
-    from pipeline.marker_table import write_marker_table
+    from pipeline.tables.marker_table import write_marker_table
 
     rows, truth, fates = scanned
     write_marker_table(table, rows)

@@ -14,8 +14,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from markerplan.errors import InputFileError
-from pipeline.marker_table import MarkerRow, read_marker_table
 from pipeline.network.detections import Identified
+from pipeline.tables.marker_table import MarkerRow, read_marker_table
 from planner.verify.fates import StationFates
 
 if TYPE_CHECKING:

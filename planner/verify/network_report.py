@@ -5,7 +5,7 @@ the summary line of ``markerplan verify --network`` (the check itself:
 from __future__ import annotations
 
 from markerplan.provenance import provenance
-from pipeline.rig import MountingOffsets
+from pipeline.scans.rig import MountingOffsets
 from planner.accuracy.requirement import requirement_text
 from planner.outputs.plan_file import SurveyPlan
 from planner.verify.fates import fates_record, losses_markdown, stage_counts

@@ -1,6 +1,6 @@
 """Each trial's rig: mounting offsets drawn from the user's tolerances.
 
-``verify --trials N`` may widen the rig's mounting offsets (:class:`pipeline.rig.
+``verify --trials N`` may widen the rig's mounting offsets (:class:`pipeline.scans.rig.
 MountingOffsets`) by 1-sigma tolerances (:class:`OffsetTolerance`): every trial draws its rig
 from N(given, tolerance) with its own seed, on a stream apart from the simulation's
 (:func:`draw_offsets`, :func:`trial_offsets`). Kept apart from :mod:`planner.verify.trials` so
@@ -16,7 +16,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from markerplan.errors import ConfigError
-from pipeline.rig import MountingOffsets
+from pipeline.scans.rig import MountingOffsets
 
 #: The :class:`numpy.random.SeedSequence` key that keeps a trial's rig-offset draw apart from
 #: its simulation seed's streams.
@@ -30,7 +30,7 @@ MAX_AXIS_TOLERANCE_MM = 100.0
 
 @dataclass(frozen=True)
 class OffsetTolerance:
-    """1-sigma tolerances of the rig's mounting offsets (:class:`pipeline.rig.MountingOffsets`).
+    """1-sigma tolerances of the rig's mounting offsets (a :class:`MountingOffsets`).
 
     Attributes
     ----------

@@ -42,7 +42,7 @@ from error_model.detection import wilson_interval
 from markerplan.errors import DataError, InputFileError
 from markerplan.provenance import provenance
 from markerplan.writing import write_csv, write_gis_sidecars
-from pipeline.rig import MountingOffsets
+from pipeline.scans.rig import MountingOffsets
 from planner.distributed import Executor
 from planner.outputs.plan_file import SurveyPlan
 from planner.verify.fates import losses_markdown, lost_by_stage, stage_counts

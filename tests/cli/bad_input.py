@@ -111,8 +111,8 @@ STATION_MARKERS = np.array([[3.0, 1.0, -0.9], [-2.5, 2.0, -0.9], [0.5, -4.0, -0.
 def write_synthetic_station(folder: Path, n_frames: int, azimuth_step_deg: float) -> None:
     """Write ``station_S1.scan.npz`` and ``station_S1.truth.json`` into ``folder``: a level,
     offset-free station seeing the four :data:`STATION_MARKERS` (0.10 m radius) out to 8 m."""
-    from pipeline.rig import MountingOffsets
-    from pipeline.scan_format import write_scan, write_truth
+    from pipeline.scans.rig import MountingOffsets
+    from pipeline.scans.scan_format import write_scan, write_truth
     from tests.pipeline.test_synthesis import synthetic_scan
 
     scan = synthetic_scan(MountingOffsets(), n_frames=n_frames, azimuth_step_deg=azimuth_step_deg,

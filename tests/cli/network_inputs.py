@@ -1,8 +1,8 @@
 """Inputs of ``markerplan adjust`` written from a simulated network (for the CLI tests).
 
 :func:`write_network_inputs` turns :func:`pipeline.network.simulation.simulated_network`'s
-observations into ``markers.csv`` tables (:func:`pipeline.marker_table.write_marker_table`), as
-``markerplan process`` writes them, with noise drawn from the error model's sigma at each
+observations into ``markers.csv`` tables (:func:`pipeline.tables.marker_table.write_marker_table`),
+as ``markerplan process`` writes them, with noise drawn from the error model's sigma at each
 detection's distance and elevation (the sigma ``adjust`` gives it), plus a ``plan.json`` whose
 markers sit at their true centres plus placement scatter and whose stations are the odometry's
 nominal poses.
@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from pipeline.marker_table import MarkerRow, line_of_sight, write_marker_table
+from pipeline.tables.marker_table import MarkerRow, line_of_sight, write_marker_table
 
 
 @dataclass

@@ -8,7 +8,7 @@ inside its first packet); the real capture's cases are in tests/cli/test_import_
 
 Scan files are corrupted in ``setup`` callables: the valid scan is read, one array or the
 metadata is changed, and the result is written into the case's working folder with
-:func:`pipeline.scan_format._write_npz` (bypassing the writer's own validation).
+:func:`pipeline.scans.scan_format._write_npz` (bypassing the writer's own validation).
 """
 
 from __future__ import annotations
@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from pipeline.scan_format import SCAN_FORMAT, _write_npz, read_scan
+from pipeline.scans.scan_format import SCAN_FORMAT, _write_npz, read_scan
 from tests import pcap_builder as pb
 from tests.cli.bad_input import Case, check_refused
 

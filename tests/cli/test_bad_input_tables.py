@@ -1,9 +1,9 @@
 """Bad marker tables and error-model domains are refused in one line naming the file, the row
 or the field, exit 1, nothing written (:mod:`tests.cli.bad_input`).
 
-The marker-table rules are the reader's (:mod:`pipeline.marker_table`), so ``fit-error-model``
-and ``adjust`` refuse alike: a row repeated exactly is one detection read twice, and
-``accepted`` is ``true`` or ``false``. An error model's domain must not be inverted; a command
+The marker-table rules are the reader's (:mod:`pipeline.tables.marker_table`), so
+``fit-error-model`` and ``adjust`` refuse alike: a row repeated exactly is one detection read twice,
+and ``accepted`` is ``true`` or ``false``. An error model's domain must not be inverted; a command
 that loads a model (``adjust --error-model``) refuses it before any work.
 """
 

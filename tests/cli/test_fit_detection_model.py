@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from error_model.detection import DetectionModel
-from pipeline.fate_table import FATE_COLUMNS, write_fate_table
+from pipeline.tables.fate_table import FATE_COLUMNS, write_fate_table
 from tests.cli.bad_input import Case, check_refused
 from tests.cli.invoke import run_cli
 

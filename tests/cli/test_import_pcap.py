@@ -14,7 +14,7 @@ import shutil
 import numpy as np
 import pytest
 
-from pipeline.scan_format import read_scan
+from pipeline.scans.scan_format import read_scan
 from tests.cli.bad_input import Case, check_refused
 from tests.cli.invoke import run_cli
 

@@ -4,9 +4,9 @@ import json
 import numpy as np
 import pytest
 
-from pipeline.marker_table import COLUMNS, read_marker_table
-from pipeline.rig import rot_z
-from pipeline.scan_format import SCAN_FORMAT, _write_npz
+from pipeline.scans.rig import rot_z
+from pipeline.scans.scan_format import SCAN_FORMAT, _write_npz
+from pipeline.tables.marker_table import COLUMNS, read_marker_table
 from tests.cli.bad_input import STATION_MARKERS, write_synthetic_station
 from tests.cli.invoke import run_cli
 

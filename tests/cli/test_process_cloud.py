@@ -10,10 +10,10 @@ import numpy as np
 import plyfile
 import pytest
 
-from pipeline.marker_table import read_marker_table
-from pipeline.point_cloud_io import MARKER_CLASS
-from pipeline.rig import MountingOffsets, station_to_site_matrix
-from pipeline.scan_format import read_scan, read_truth, write_truth
+from pipeline.scans.rig import MountingOffsets, station_to_site_matrix
+from pipeline.scans.scan_format import read_scan, read_truth, write_truth
+from pipeline.surveys.point_cloud_io import MARKER_CLASS
+from pipeline.tables.marker_table import read_marker_table
 from tests.cli.bad_input import STATION_MARKERS, write_synthetic_station
 from tests.cli.invoke import run_cli
 

@@ -4,7 +4,7 @@ import json
 import numpy as np
 import pytest
 
-from pipeline.marker_table import COLUMNS, read_marker_table
+from pipeline.tables.marker_table import COLUMNS, read_marker_table
 from tests.cli.invoke import run_cli
 
 pytest.importorskip("visibility.simulate")
@@ -73,19 +73,19 @@ def test_a_marker_the_detection_loses_is_rejected_only_under_full_chain(monkeypa
     """A ground removal that takes the 1 m marker for ground: the default table rejects it as
     not detected, the truth-seeded diagnostic still accepts it (it never asks the detection
     stages); the other markers keep rows either way. ``fit-error-model`` reads both tables."""
-    import pipeline.process
+    import pipeline.chain.process
     from error_model.table import fit_data, read_marker_tables
-    from pipeline.range_study import marker_layout
+    from pipeline.surveys.range_study import marker_layout
     from planner.studies.range_experiment import run_range_study, write_range_study
 
     lost_centre = marker_layout(np.array([1.0]))[0]
-    remove_ground = pipeline.process.remove_ground
+    remove_ground = pipeline.chain.process.remove_ground
 
     def ground_under_it(pts, *args, **kwargs):
         return remove_ground(pts, *args, **kwargs) & (
             np.linalg.norm(pts - lost_centre, axis=1) > 0.5)
 
-    monkeypatch.setattr(pipeline.process, "remove_ground", ground_under_it)
+    monkeypatch.setattr(pipeline.chain.process, "remove_ground", ground_under_it)
     chain = run_range_study(2.0, 40, 1)
     seeded = run_range_study(2.0, 40, 1, extraction="truth-seeded")
     assert chain.config["extraction"] == "full-chain"  # the default

@@ -5,7 +5,7 @@ import json
 import numpy as np
 import pytest
 
-from pipeline.scan_format import read_scan, read_truth
+from pipeline.scans.scan_format import read_scan, read_truth
 from tests.cli.invoke import run_cli
 
 

@@ -6,7 +6,7 @@ import json
 
 import pytest
 
-from pipeline.fate_table import FATE_STAGES
+from pipeline.tables.fate_table import FATE_STAGES
 from tests.cli.invoke import run_cli
 from tests.cli.network_inputs import plan_document
 

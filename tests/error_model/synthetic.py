@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 
 from markerplan import writing
-from pipeline.marker_table import COLUMNS
+from pipeline.tables.marker_table import COLUMNS
 
 SIGMA0_M = 0.002
 SLOPE_D = 0.0006  # m per m

@@ -7,7 +7,7 @@ import pytest
 
 from error_model.table import fit_data, read_marker_tables
 from markerplan.errors import DataError, InputFileError
-from pipeline.marker_table import COLUMNS
+from pipeline.tables.marker_table import COLUMNS
 from tests.error_model.synthetic import synthetic_table, write_csv
 
 

@@ -3,17 +3,17 @@ import pytest
 from scipy.spatial import cKDTree
 
 from markerplan.errors import ConfigError, DataError
-from pipeline.calibration import (
+from pipeline.chain.calibration import (
     CalibrationConfig,
     NearestNeighbours,
     direct_face,
     estimate_axis_offset,
     estimate_rotation_offsets,
 )
-from pipeline.gate import RangeIndex
-from pipeline.rig import MountingOffsets
-from pipeline.sphere_fit import fit_sphere
-from pipeline.synthesis import synthesize
+from pipeline.chain.gate import RangeIndex
+from pipeline.chain.synthesis import synthesize
+from pipeline.scans.rig import MountingOffsets
+from pipeline.sphere_centres.sphere_fit import fit_sphere
 from tests.pipeline.test_synthesis import synthetic_scan
 
 TRUE = MountingOffsets(np.radians(0.3), np.radians(0.3), (0.015, 0.0))

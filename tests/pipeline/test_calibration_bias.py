@@ -6,12 +6,12 @@ import numpy as np
 import pytest
 
 from markerplan.errors import ConfigError
-from pipeline.calibration import CalibrationConfig, largest_shift_m, resolved_axis_offset
-from pipeline.evaluation import Reference
-from pipeline.process import process_station
-from pipeline.rig import MountingOffsets
-from pipeline.stages import build_config
-from pipeline.synthesis import synthesize
+from pipeline.chain.calibration import CalibrationConfig, largest_shift_m, resolved_axis_offset
+from pipeline.chain.evaluation import Reference
+from pipeline.chain.process import process_station
+from pipeline.chain.stages import build_config
+from pipeline.chain.synthesis import synthesize
+from pipeline.scans.rig import MountingOffsets
 from tests.pipeline.test_synthesis import synthetic_scan
 
 # three markers 6 m out; one of them is seen by too few points of one face to count
@@ -113,7 +113,7 @@ def test_a_3_mm_offset_is_found_at_a_default_station():
 
 def test_the_replaced_redetection_option_names_its_successor():
     from markerplan.errors import ConfigError
-    from pipeline.stages import build_config
+    from pipeline.chain.stages import build_config
 
     with pytest.raises(ConfigError, match="was replaced by 'redetect_shift_m'"):
         build_config({"calibrate": {"redetect_axis_offset_m": 0.005}})

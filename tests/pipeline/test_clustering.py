@@ -2,7 +2,7 @@ import numpy as np
 import pytest
 
 from markerplan.errors import ConfigError
-from pipeline.clustering import euclidean_clusters
+from pipeline.chain.clustering import euclidean_clusters
 
 
 def test_two_blobs_and_noise():

@@ -9,9 +9,9 @@ sphere disappears (every 8th frame still leaves it past the old bounding-box gat
 import numpy as np
 import pytest
 
-from pipeline.fates import false_accepts, marker_fates
-from pipeline.process import process_station
-from pipeline.stages import build_config
+from pipeline.chain.process import process_station
+from pipeline.chain.stages import build_config
+from pipeline.surveys.fates import false_accepts, marker_fates
 
 simulate = pytest.importorskip("visibility.simulate")
 dem_mod = pytest.importorskip("visibility.dem")

@@ -5,9 +5,10 @@ import importlib
 
 import pytest
 
-MODULES = ["pipeline.sphere_fit", "pipeline.line_of_sight_fit", "pipeline.geometric_sphere_fit",
-           "pipeline.clustering", "pipeline.gate", "pipeline.ground", "pipeline.quality",
-           "pipeline.marker_table", "pipeline.stages", "pipeline.range_study"]
+MODULES = ["pipeline.sphere_centres.sphere_fit", "pipeline.sphere_centres.line_of_sight_fit",
+           "pipeline.sphere_centres.geometric_sphere_fit", "pipeline.chain.clustering",
+           "pipeline.chain.gate", "pipeline.chain.ground", "pipeline.chain.quality",
+           "pipeline.tables.marker_table", "pipeline.chain.stages", "pipeline.surveys.range_study"]
 
 
 @pytest.mark.parametrize("name", MODULES)

@@ -2,14 +2,14 @@ import numpy as np
 import pytest
 
 from markerplan.errors import DataError, InputFileError
-from pipeline.evaluation import (
+from pipeline.chain.evaluation import (
     edge_residuals,
     kabsch,
     match_nearest,
     read_reference,
     register_reference,
 )
-from pipeline.rig import rot_z
+from pipeline.scans.rig import rot_z
 
 
 def _layout(seed=0, n=8):

@@ -6,11 +6,11 @@ import numpy as np
 import pytest
 
 from markerplan.errors import ConfigError
-from pipeline.fate_table import FATE_STAGES
-from pipeline.fates import false_accepts, marker_fates
-from pipeline.process import process_station
-from pipeline.quality import quality_gate
-from pipeline.stages import build_config
+from pipeline.chain.process import process_station
+from pipeline.chain.quality import quality_gate
+from pipeline.chain.stages import build_config
+from pipeline.surveys.fates import false_accepts, marker_fates
+from pipeline.tables.fate_table import FATE_STAGES
 
 simulate = pytest.importorskip("visibility.simulate")
 dem_mod = pytest.importorskip("visibility.dem")

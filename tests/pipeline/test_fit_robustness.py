@@ -6,17 +6,17 @@ import numpy as np
 import pytest
 
 from markerplan.errors import ConfigError
-from pipeline.geometric_sphere_fit import fit_free_radius
-from pipeline.line_of_sight_fit import fit_line_of_sight
-from pipeline.quality import (
+from pipeline.chain.quality import (
     MarkerMetrics,
     QualityConfig,
     centre_height,
     marker_metrics,
     quality_gate,
 )
-from pipeline.sensor_noise import RangeNoise
-from pipeline.sphere_fit import fit_sphere
+from pipeline.scans.sensor_noise import RangeNoise
+from pipeline.sphere_centres.geometric_sphere_fit import fit_free_radius
+from pipeline.sphere_centres.line_of_sight_fit import fit_line_of_sight
+from pipeline.sphere_centres.sphere_fit import fit_sphere
 from tests.pipeline.test_sphere_fit import noisy_cap
 
 R = 0.1
@@ -173,9 +173,9 @@ def test_the_default_sites_marker_size_rock_is_refused():
     sites = pytest.importorskip("visibility.sites")
     simulate = pytest.importorskip("visibility.simulate")
     profile = pytest.importorskip("visibility.sensor_profile").default_profile()
-    from pipeline.evaluation import reference_from_truth
-    from pipeline.process import process_station
-    from pipeline.stages import build_config
+    from pipeline.chain.evaluation import reference_from_truth
+    from pipeline.chain.process import process_station
+    from pipeline.chain.stages import build_config
 
     site = sites.load_site("default")
     scan, truth = simulate.simulate_station(site, 4, sensor=profile.sensor_config(),

@@ -16,11 +16,11 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from markerplan.errors import MarkerPlanError
-from pipeline.evaluation import read_reference
-from pipeline.marker_table import COLUMNS, read_marker_table
-from pipeline.pointsets import read_points
-from pipeline.scan_format import StationScan, _write_npz, read_scan, read_truth, write_scan
-from pipeline.sphere_fit import fit_sphere
+from pipeline.chain.evaluation import read_reference
+from pipeline.scans.pointsets import read_points
+from pipeline.scans.scan_format import StationScan, _write_npz, read_scan, read_truth, write_scan
+from pipeline.sphere_centres.sphere_fit import fit_sphere
+from pipeline.tables.marker_table import COLUMNS, read_marker_table
 
 FUZZ = settings(max_examples=40, deadline=None,
                 suppress_health_check=[HealthCheck.function_scoped_fixture])

@@ -2,7 +2,7 @@ import numpy as np
 import pytest
 
 from markerplan.errors import ConfigError
-from pipeline.gate import RangeIndex, gate_verdicts, research, two_box_gate
+from pipeline.chain.gate import RangeIndex, gate_verdicts, research, two_box_gate
 
 
 def test_two_box_gate_keeps_marker_sized_clusters():

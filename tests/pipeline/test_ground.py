@@ -2,7 +2,7 @@ import numpy as np
 import pytest
 
 from markerplan.errors import ConfigError
-from pipeline.ground import (
+from pipeline.chain.ground import (
     GROUND_MAX_SLOPE,
     SUPPORT_CELL_M,
     SUPPORT_RADIUS_M,

@@ -4,10 +4,10 @@ import numpy as np
 import pytest
 
 from pipeline import kernels
-from pipeline.geometric_sphere_fit import lsq_fixed_radius
-from pipeline.ground import local_ground_height
-from pipeline.line_of_sight_fit import _MIN_COS_INCIDENCE, _los_solve
-from pipeline.sensor_noise import RangeNoise
+from pipeline.chain.ground import local_ground_height
+from pipeline.scans.sensor_noise import RangeNoise
+from pipeline.sphere_centres.geometric_sphere_fit import lsq_fixed_radius
+from pipeline.sphere_centres.line_of_sight_fit import _MIN_COS_INCIDENCE, _los_solve
 
 
 def _numpy_lsq_fixed_radius(points, radius, centre, max_iter=50, tol=1e-10):
@@ -118,7 +118,7 @@ def test_lowest_in_cells_is_the_grid_minimum():
 def test_points_without_a_position_get_no_ground_and_no_range_band():
     """A NaN x, y or range is left out (ground NaN, so never "above ground"; never in a band)
     instead of indexing the grid or the bins with an undefined integer."""
-    from pipeline.gate import within_range_bands
+    from pipeline.chain.gate import within_range_bands
 
     xyz = np.array([[0.1, 0.1, -1.0], [np.nan, 0.2, -3.0], [0.2, np.inf, -2.0], [0.3, 0.3, -0.5]])
     got = local_ground_height(xyz, 0.5)

@@ -7,7 +7,7 @@ from scipy.stats import chi2
 from markerplan.errors import ConfigError
 from pipeline.network.association import associate_by_geometry, associate_with_plan
 from pipeline.network.simulation import simulated_network
-from pipeline.rig import rot_z
+from pipeline.scans.rig import rot_z
 
 ODOMETRY_M = 0.5
 HEADING_RAD = math.radians(2.0)

@@ -2,7 +2,7 @@ import numpy as np
 import pytest
 
 from markerplan.errors import InputFileError
-from pipeline.marker_table import (
+from pipeline.tables.marker_table import (
     COLUMNS,
     MarkerRow,
     line_of_sight,

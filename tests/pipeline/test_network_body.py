@@ -13,7 +13,7 @@ from pipeline.network.adjustment import AdjustmentSettings, adjust
 from pipeline.network.body import BODY_RADIUS_M, Body
 from pipeline.network.observations import Datum
 from pipeline.network.simulation import simulated_network
-from pipeline.rig import station_to_site_matrix
+from pipeline.scans.rig import station_to_site_matrix
 
 MOON, EARTH = Body.named("moon"), Body.named("earth")
 

@@ -3,7 +3,7 @@
 import numpy as np
 
 from pipeline.network.design import pose_design_blocks
-from pipeline.rig import station_to_site_matrix
+from pipeline.scans.rig import station_to_site_matrix
 
 
 def _mapped(pose, p):

@@ -3,12 +3,12 @@
 import numpy as np
 import pytest
 
-from pipeline.line_of_sight_fit import fit_line_of_sight, radius_standard_error
-from pipeline.quality import QualityConfig, marker_metrics, quality_gate
-from pipeline.range_study import marker_layout, measure_markers
-from pipeline.sensor_noise import RangeNoise
-from pipeline.sphere_fit import fit_sphere
-from pipeline.stages import build_config, noise_widened
+from pipeline.chain.quality import QualityConfig, marker_metrics, quality_gate
+from pipeline.chain.stages import build_config, noise_widened
+from pipeline.scans.sensor_noise import RangeNoise
+from pipeline.sphere_centres.line_of_sight_fit import fit_line_of_sight, radius_standard_error
+from pipeline.sphere_centres.sphere_fit import fit_sphere
+from pipeline.surveys.range_study import marker_layout, measure_markers
 from tests.pipeline.test_sphere_fit import noisy_cap
 from tests.pipeline.test_synthesis import synthetic_scan
 

@@ -16,14 +16,14 @@ import numpy as np
 import pytest
 
 from markerplan.errors import DataError, InputFileError
-from pipeline.pcap import (
+from pipeline.scans.pcap import (
     TurntableLog,
     decode_vlp16_pcap,
     read_turntable_log,
     scan_from_revolutions,
 )
-from pipeline.rig import VLP16_ELEVATION_DEG
-from pipeline.scan_format import read_scan, write_scan
+from pipeline.scans.rig import VLP16_ELEVATION_DEG
+from pipeline.scans.scan_format import read_scan, write_scan
 from tests import pcap_builder as pb
 
 FIRST_PACKET_S = 1599213599.872340

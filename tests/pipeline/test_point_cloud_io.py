@@ -1,5 +1,5 @@
-"""Point clouds out (:mod:`pipeline.point_cloud_io`): LAS 1.4 and PLY read back with laspy and
-plyfile, classes checked against the chain and the scene's truth."""
+"""Point clouds out (:mod:`pipeline.surveys.point_cloud_io`): LAS 1.4 and PLY read back with laspy
+and plyfile, classes checked against the chain and the scene's truth."""
 
 import hashlib
 import json
@@ -10,8 +10,11 @@ import plyfile
 import pytest
 
 from markerplan.errors import ConfigError, DataError
-from pipeline.ground import remove_ground
-from pipeline.point_cloud_io import (
+from pipeline.chain.ground import remove_ground
+from pipeline.chain.process import process_station
+from pipeline.chain.stages import build_config
+from pipeline.scans.rig import station_to_site_matrix
+from pipeline.surveys.point_cloud_io import (
     GROUND_CLASS,
     LAS_CREATION_DATE,
     LAS_SCALE_M,
@@ -24,9 +27,6 @@ from pipeline.point_cloud_io import (
     write_ply,
     write_station_clouds,
 )
-from pipeline.process import process_station
-from pipeline.rig import station_to_site_matrix
-from pipeline.stages import build_config
 from tests.pipeline.test_synthesis import synthetic_scan
 
 MARKERS = np.array([[3.0, 1.0, -0.9], [-2.5, 2.0, -0.9], [0.5, -4.0, -0.9], [-3.0, -2.5, -0.9]])

@@ -16,7 +16,7 @@ from pipeline.network.reliability import (
     residual_blocks,
 )
 from pipeline.network.simulation import simulated_network
-from pipeline.rig import rot_z
+from pipeline.scans.rig import rot_z
 
 NO_SNOOPING = AdjustmentSettings(snooping=False)
 

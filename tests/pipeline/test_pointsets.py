@@ -2,7 +2,7 @@ import numpy as np
 import pytest
 
 from markerplan.errors import DataError, InputFileError
-from pipeline.pointsets import read_points
+from pipeline.scans.pointsets import read_points
 
 
 def test_reads_tab_xyz_and_csv_header(tmp_path):

@@ -2,10 +2,10 @@ import numpy as np
 import pytest
 
 from markerplan.errors import ConfigError
-from pipeline.evaluation import Reference
-from pipeline.process import detection_subset, process_station
-from pipeline.rig import MountingOffsets
-from pipeline.stages import build_config, with_offsets
+from pipeline.chain.evaluation import Reference
+from pipeline.chain.process import detection_subset, process_station
+from pipeline.chain.stages import build_config, with_offsets
+from pipeline.scans.rig import MountingOffsets
 from tests.pipeline.test_synthesis import synthetic_scan
 
 

@@ -3,11 +3,11 @@
 import numpy as np
 import pytest
 
-from pipeline.evaluation import Reference, reference_from_truth
-from pipeline.process import process_station
-from pipeline.range_study import measure_markers
-from pipeline.rig import MountingOffsets
-from pipeline.stages import build_config, with_offsets
+from pipeline.chain.evaluation import Reference, reference_from_truth
+from pipeline.chain.process import process_station
+from pipeline.chain.stages import build_config, with_offsets
+from pipeline.scans.rig import MountingOffsets
+from pipeline.surveys.range_study import measure_markers
 
 sites = pytest.importorskip("visibility.sites")
 simulate = pytest.importorskip("visibility.simulate")

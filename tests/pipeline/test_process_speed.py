@@ -11,9 +11,9 @@ import numpy as np
 import pytest
 
 from markerplan.errors import DataError
-from pipeline.gate import RangeIndex, within_range_bands
-from pipeline.process import detection_subset
-from pipeline.rig import MountingOffsets, frame_poses, sensor_to_station
+from pipeline.chain.gate import RangeIndex, within_range_bands
+from pipeline.chain.process import detection_subset
+from pipeline.scans.rig import MountingOffsets, frame_poses, sensor_to_station
 
 
 def test_range_bands_keep_every_research_point():
@@ -122,9 +122,9 @@ def test_chain_reproduces_the_baseline_marker_table():
     sites = pytest.importorskip("visibility.sites")
     simulate = pytest.importorskip("visibility.simulate")
     sensor = pytest.importorskip("visibility.sensor")
-    from pipeline.evaluation import reference_from_truth
-    from pipeline.process import process_station
-    from pipeline.stages import build_config
+    from pipeline.chain.evaluation import reference_from_truth
+    from pipeline.chain.process import process_station
+    from pipeline.chain.stages import build_config
 
     rig = sensor.RigConfig(offsets=MountingOffsets(np.radians(0.3), np.radians(0.3),
                                                    (0.015, 0.0)))

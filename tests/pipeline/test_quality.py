@@ -2,8 +2,8 @@ import numpy as np
 import pytest
 
 from markerplan.errors import ConfigError
-from pipeline.quality import QualityConfig, marker_metrics, quality_gate, visible_fraction
-from pipeline.sphere_fit import fit_sphere
+from pipeline.chain.quality import QualityConfig, marker_metrics, quality_gate, visible_fraction
+from pipeline.sphere_centres.sphere_fit import fit_sphere
 from tests.pipeline.test_sphere_fit import noisy_cap
 
 CENTRE = np.array([6.0, 0.0, -0.9])

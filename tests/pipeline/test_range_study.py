@@ -4,10 +4,9 @@ import numpy as np
 import pytest
 
 from markerplan.errors import ConfigError
-from pipeline.evaluation import reference_from_truth
-from pipeline.marker_table import MarkerRow
-from pipeline.process import process_station
-from pipeline.range_study import (
+from pipeline.chain.evaluation import reference_from_truth
+from pipeline.chain.process import process_station
+from pipeline.surveys.range_study import (
     NOT_DETECTED,
     RANGE_STUDY_DISTANCES_M,
     chain_markers,
@@ -16,7 +15,8 @@ from pipeline.range_study import (
     summarise,
     unmatched_counts,
 )
-from pipeline.survey import ProcessingSettings, processing_config
+from pipeline.surveys.survey import ProcessingSettings, processing_config
+from pipeline.tables.marker_table import MarkerRow
 from tests.pipeline.test_synthesis import synthetic_scan
 
 

@@ -1,7 +1,7 @@
 import numpy as np
 import pytest
 
-from pipeline.rig import MountingOffsets, frame_poses, sensor_to_station
+from pipeline.scans.rig import MountingOffsets, frame_poses, sensor_to_station
 
 
 def _sensor_dir(omega, alpha):

@@ -2,7 +2,7 @@ import numpy as np
 import pytest
 
 from markerplan.errors import DataError, InputFileError
-from pipeline.scan_format import StationScan, read_scan, write_scan
+from pipeline.scans.scan_format import StationScan, read_scan, write_scan
 
 
 def _scan(n=10, frames=2):

@@ -3,11 +3,11 @@ import pytest
 from scipy.optimize import least_squares
 
 from markerplan.errors import ConfigError, DataError
-from pipeline import sphere_fit
-from pipeline.geometric_sphere_fit import fit_free_radius
-from pipeline.pointsets import read_points
-from pipeline.sensor_noise import RangeNoise
-from pipeline.sphere_fit import METHODS, fit_sphere, hemisphere_model
+from pipeline.scans.pointsets import read_points
+from pipeline.scans.sensor_noise import RangeNoise
+from pipeline.sphere_centres import sphere_fit
+from pipeline.sphere_centres.geometric_sphere_fit import fit_free_radius
+from pipeline.sphere_centres.sphere_fit import METHODS, fit_sphere, hemisphere_model
 
 
 def noisy_cap(centre, radius, sensor, n, noise, rng, half_angle_deg=80.0):

@@ -4,13 +4,13 @@ import numpy as np
 import pytest
 
 from markerplan.errors import ConfigError
-from pipeline.evaluation import read_reference
-from pipeline.process import process_station
-from pipeline.rig import MountingOffsets
-from pipeline.scan_format import read_scan
-from pipeline.sensor_noise import RangeNoise
-from pipeline.stages import build_config, with_offsets
-from pipeline.survey import ProcessingSettings, process_scans, processing_config
+from pipeline.chain.evaluation import read_reference
+from pipeline.chain.process import process_station
+from pipeline.chain.stages import build_config, with_offsets
+from pipeline.scans.rig import MountingOffsets
+from pipeline.scans.scan_format import read_scan
+from pipeline.scans.sensor_noise import RangeNoise
+from pipeline.surveys.survey import ProcessingSettings, process_scans, processing_config
 from tests.cli.bad_input import write_synthetic_station
 
 

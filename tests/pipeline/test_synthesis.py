@@ -3,9 +3,9 @@
 import numpy as np
 import pytest
 
-from pipeline.rig import VLP16_ELEVATION_DEG, MountingOffsets, frame_poses
-from pipeline.scan_format import StationScan
-from pipeline.synthesis import synthesize
+from pipeline.chain.synthesis import synthesize
+from pipeline.scans.rig import VLP16_ELEVATION_DEG, MountingOffsets, frame_poses
+from pipeline.scans.scan_format import StationScan
 
 
 def sensor_directions(azimuth_step_deg):

@@ -2,7 +2,7 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from pipeline.rig import rot_z
+from pipeline.scans.rig import rot_z
 from planner.accuracy import known_control
 from planner.accuracy.figure import MONOTONE_TOLERANCE, ErrorFigure
 from planner.accuracy.known_control import CHI2_3_95, fit_pose, registration_error, station_error

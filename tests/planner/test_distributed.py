@@ -12,7 +12,7 @@ from pathlib import Path
 import pytest
 
 from markerplan.errors import ConfigError, DataError
-from pipeline.marker_table import read_marker_table
+from pipeline.tables.marker_table import read_marker_table
 from planner import distributed
 from planner.distributed import Executor, TaskError, executor
 from tests.cli.invoke import run_cli

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from pipeline.fate_table import FATE_COLUMNS
+from pipeline.tables.fate_table import FATE_COLUMNS
 from planner.problem.detection_odds import rim_distance
 from planner.studies.loss_study import (
     level_layout,

@@ -16,7 +16,7 @@ import pytest
 
 from pipeline.network.adjustment import AdjustmentSettings, adjust
 from pipeline.network.observations import Datum, NetworkObservations, NominalPoses
-from pipeline.rig import rot_z
+from pipeline.scans.rig import rot_z
 from planner.accuracy.checks import evaluate_layout
 from planner.accuracy.network import NetworkModel, network_model
 from planner.accuracy.reliability import (

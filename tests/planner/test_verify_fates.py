@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from error_model import default_model
-from pipeline.stages import build_config
+from pipeline.chain.stages import build_config
 from planner.outputs.plan_file import PlannedStation
 from planner.verify.fates import FATES_COLUMNS, FATES_TYPES, stage_counts, write_fates
 from planner.verify.known_control import check_station

@@ -12,7 +12,7 @@ import pytest
 import planner.verify.known_control as kc
 import planner.verify.network as net
 from markerplan.errors import ConfigError, DataError, InputFileError
-from pipeline.rig import MountingOffsets
+from pipeline.scans.rig import MountingOffsets
 from planner.outputs.plan_file import PlannedStation, SurveyPlan
 from planner.verify.fates import FateRow, StationFates
 from planner.verify.known_control import StationCheck

@@ -3,8 +3,8 @@ same with and without it."""
 
 import numpy as np
 
-from pipeline.rig import MountingOffsets, rot_x, rot_z
-from pipeline.scan_format import POINT_FIELDS
+from pipeline.scans.rig import MountingOffsets, rot_x, rot_z
+from pipeline.scans.scan_format import POINT_FIELDS
 from visibility.horizon import HorizonBound, PatternBound
 from visibility.scene import RayScene
 from visibility.sensor import (

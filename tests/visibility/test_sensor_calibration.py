@@ -96,7 +96,7 @@ def test_shipped_field_experiment_summary():
 
 def test_positions_from_marker_table(tmp_path):
     """Two stations whose marker D is 1 cm and 3 cm off along x: hand-computed statistics."""
-    from pipeline.marker_table import COLUMNS
+    from pipeline.tables.marker_table import COLUMNS
 
     ref = {"A": (0, 0, 0), "B": (4, 0, 0), "C": (0, 3, 0), "D": (4, 3, 0)}
     (tmp_path / "ref.csv").write_text("id,x_m,y_m,z_m\n" + "".join(

@@ -6,9 +6,9 @@ import json
 import numpy as np
 import pytest
 
-from pipeline.rig import MountingOffsets
-from pipeline.scan_format import read_scan, read_truth, write_scan
-from pipeline.sensor_noise import RangeNoise
+from pipeline.scans.rig import MountingOffsets
+from pipeline.scans.scan_format import read_scan, read_truth, write_scan
+from pipeline.scans.sensor_noise import RangeNoise
 from tests.cli.invoke import run_cli
 from tests.visibility.test_simulate import _flat, _frames_facing, _station_points
 from visibility.dem import DEM

@@ -1,11 +1,11 @@
-"""Scan simulation: geometry through pipeline.rig, analytic ranges and point counts, seeding."""
+"""Scan simulation: geometry through pipeline.scans.rig, analytic ranges, point counts, seeding."""
 
 import numpy as np
 import pytest
 
 from markerplan.errors import ConfigError, DataError
-from pipeline.rig import MountingOffsets, rot_z, sensor_to_station, station_to_site_matrix
-from pipeline.scan_format import read_truth, write_scan, write_truth
+from pipeline.scans.rig import MountingOffsets, rot_z, sensor_to_station, station_to_site_matrix
+from pipeline.scans.scan_format import read_truth, write_scan, write_truth
 from visibility.dem import DEM
 from visibility.sensor import VLP16_ELEVATION_RAD, RigConfig, SensorConfig, azimuth_step_rad
 from visibility.simulate import simulate_markers

@@ -19,16 +19,19 @@ radius_fit_m
     0.10 m spheres), held in ``[R / 4, 4 R]`` (:data:`RADIUS_BRACKET`): a cap that looks flat
     ends at ``4 R``, a finite mismatch, where the unbounded fit ran away to 0.2-1440 m at
     27-30 m. Without the noise: geometric least squares
-    (:func:`~pipeline.geometric_sphere_fit.fit_free_radius`, biased small by range noise); with it:
-    the line-of-sight fit (:func:`~pipeline.line_of_sight_fit.fit_line_of_sight`), unbiased, of the
-    points whose beams pass within ``R sin 60 deg`` of the centre
-    (:func:`~pipeline.line_of_sight_fit.beam_cap`; drops the ground an ICP fit may have used).
+    (:func:`~pipeline.sphere_centres.geometric_sphere_fit.fit_free_radius`, biased small by range
+    noise); with it: the line-of-sight fit
+    (:func:`~pipeline.sphere_centres.line_of_sight_fit.fit_line_of_sight`), unbiased, of the points
+    whose beams pass within ``R sin 60 deg`` of the centre
+    (:func:`~pipeline.sphere_centres.line_of_sight_fit.beam_cap`; drops the ground an ICP fit may
+    have used).
 radius_sigma_m
     Standard error that range noise gives ``radius_fit_m`` if the points were a marker of
-    radius ``R`` at the fitted centre (:func:`~pipeline.line_of_sight_fit.radius_standard_error`:
-    ``(J^T W J)^-1`` of the line-of-sight fit, weights ``1 / sigma_i^2``); 0 when the noise is
-    unknown. It grows as the points thin out with range (about 6 mm at 5 m, 12 mm at 14 m,
-    50 mm at 25 m for ``s = 45 mm``, ``R = 0.1 m``; measured spread 5, 16 and diverging).
+    radius ``R`` at the fitted centre
+    (:func:`~pipeline.sphere_centres.line_of_sight_fit.radius_standard_error`: ``(J^T W J)^-1`` of
+    the line-of-sight fit, weights ``1 / sigma_i^2``); 0 when the noise is unknown. It grows as the
+    points thin out with range (about 6 mm at 5 m, 12 mm at 14 m, 50 mm at 25 m for ``s = 45 mm``,
+    ``R = 0.1 m``; measured spread 5, 16 and diverging).
 centre_height_m
     Height of the fitted centre above the ground in front of it: the median height of the
     candidate's points (the re-search, ground included) nearer the sensor than the centre and
@@ -50,9 +53,9 @@ range_m
     Distance of the fitted centre from the sensor, metres.
 expected_rms_m
     The fit RMS a clean sphere gives under the sensor's noise
-    (:func:`~pipeline.line_of_sight_fit.expected_rms`): the RMS over the points used of
-    ``sigma_i cos i_i`` (range noise seen along the surface normal; ``sigma_i`` from
-    :class:`~pipeline.sensor_noise.RangeNoise` at the point's range and incidence ``i_i``).
+    (:func:`~pipeline.sphere_centres.line_of_sight_fit.expected_rms`): the RMS over the points used
+    of ``sigma_i cos i_i`` (range noise seen along the surface normal; ``sigma_i`` from
+    :class:`~pipeline.scans.sensor_noise.RangeNoise` at the point's range and incidence ``i_i``).
     NaN when the noise is unknown.
 
 Noise-scaled gate (the sensor's noise known): ``high_rms`` when the fit RMS exceeds
@@ -78,15 +81,15 @@ from dataclasses import dataclass
 import numpy as np
 
 from markerplan.errors import ConfigError
-from pipeline.geometric_sphere_fit import fit_free_radius
-from pipeline.line_of_sight_fit import (
+from pipeline.scans.sensor_noise import RangeNoise
+from pipeline.sphere_centres.geometric_sphere_fit import fit_free_radius
+from pipeline.sphere_centres.line_of_sight_fit import (
     beam_cap,
     expected_rms,
     fit_line_of_sight,
     radius_standard_error,
 )
-from pipeline.sensor_noise import RangeNoise
-from pipeline.sphere_fit import SphereFit
+from pipeline.sphere_centres.sphere_fit import SphereFit
 
 _POINTS_PER_CELL = 6
 _INNER = 0.8

@@ -5,13 +5,13 @@ Decoding is done by ``velodyne_decoder`` (model VLP-16): :func:`decode_vlp16_pca
 pcap itself (checking its structure: link type, whole packets in time order, one return mode,
 no packet recorded twice), hands the data packets to the decoder and returns the capture's
 spin revolutions (:class:`Capture`), :func:`scan_from_revolutions` turns the ones kept into a
-:class:`~pipeline.scan_format.StationScan` (one frame per revolution, or all of them as one
+:class:`~pipeline.scans.scan_format.StationScan` (one frame per revolution, or all of them as one
 frame at turntable angle 0), and :func:`read_turntable_log` reads the turntable's angles.
 
 Conversions made here:
 
 - ``velodyne_decoder`` returns ROS-convention points (x forward, y left, z up). Our sensor
-  frame is the Velodyne manual's (x right, y forward, z up; :mod:`pipeline.rig`), so
+  frame is the Velodyne manual's (x right, y forward, z up; :mod:`pipeline.scans.rig`), so
   ``x_S = -y_ros``, ``y_S = x_ros``, ``z_S = z_ros``.
 - Its ``ring`` is the laser index sorted by elevation; the scan format stores the VLP-16
   *channel* (firing order), recovered with :data:`VLP16_ELEVATION_DEG`.
@@ -44,8 +44,8 @@ import numpy as np
 
 from markerplan.errors import DataError, InputFileError
 from markerplan.reading import finite_number, read_csv
-from pipeline.rig import VLP16_ELEVATION_DEG
-from pipeline.scan_format import MAX_ABS_ANGLE_RAD, StationScan, sensor_metadata
+from pipeline.scans.rig import VLP16_ELEVATION_DEG
+from pipeline.scans.scan_format import MAX_ABS_ANGLE_RAD, StationScan, sensor_metadata
 
 #: channel of each decoder ring (ring k = k-th lowest elevation)
 _CHANNEL_OF_RING = np.argsort(VLP16_ELEVATION_DEG, kind="stable").astype(np.uint8)

@@ -9,20 +9,20 @@ markers out, extracts and fits each one, and aggregates the marker tables of the
 Two extractions (:data:`EXTRACTIONS`):
 
 - ``full-chain`` (the default, :func:`chain_markers`): the station chain of ``markerplan
-  process`` and ``verify`` (:func:`pipeline.process.process_station` configured by
-  :func:`pipeline.survey.processing_config`: self-calibration, ground removal, clustering,
+  process`` and ``verify`` (:func:`pipeline.chain.process.process_station` configured by
+  :func:`pipeline.surveys.survey.processing_config`: self-calibration, ground removal, clustering,
   two-box gate, re-search, fit, quality gate), once per estimator; its detections are matched
-  to the laid-out markers by their station-frame centres (:func:`pipeline.evaluation.
+  to the laid-out markers by their station-frame centres (:func:`pipeline.chain.evaluation.
   evaluate_rows`). A marker no detection matched is still a row, rejected as
   :data:`NOT_DETECTED`, so the table's acceptance rate is the chain's.
 - ``truth-seeded`` (a diagnostic, :func:`measure_markers`): each marker's points are
   re-searched within ``research_radius_m`` of its true position (as a total station would guide
   it), skipping ground removal, clustering and the gate; the fit starts from the points above
-  the marker's equator (:func:`pipeline.geometric_sphere_fit.cap_start`). It shows what the
-  fit and quality gate alone make of a marker, not what the chain delivers.
+  the marker's equator (:func:`pipeline.sphere_centres.geometric_sphere_fit.cap_start`). It shows
+  what the fit and quality gate alone make of a marker, not what the chain delivers.
 
 Given the sensor's range noise, the fit and the quality gate take their scales from it, as in
-:mod:`pipeline.process`.
+:mod:`pipeline.chain.process`.
 """
 
 from __future__ import annotations
@@ -31,18 +31,18 @@ import numpy as np
 
 from markerplan.constants import GOLDEN_ANGLE_RAD
 from markerplan.errors import ConfigError, DataError
-from pipeline.evaluation import reference_from_truth
-from pipeline.gate import RangeIndex
-from pipeline.geometric_sphere_fit import cap_start
-from pipeline.marker_table import MarkerRow, line_of_sight
-from pipeline.process import process_station
-from pipeline.quality import QualityConfig, marker_metrics, quality_gate
-from pipeline.rig import MountingOffsets
-from pipeline.scan_format import StationScan
-from pipeline.sensor_noise import RangeNoise
-from pipeline.sphere_fit import METHODS, fit_sphere
-from pipeline.survey import ProcessingSettings, processing_config
-from pipeline.synthesis import synthesize
+from pipeline.chain.evaluation import reference_from_truth
+from pipeline.chain.gate import RangeIndex
+from pipeline.chain.process import process_station
+from pipeline.chain.quality import QualityConfig, marker_metrics, quality_gate
+from pipeline.chain.synthesis import synthesize
+from pipeline.scans.rig import MountingOffsets
+from pipeline.scans.scan_format import StationScan
+from pipeline.scans.sensor_noise import RangeNoise
+from pipeline.sphere_centres.geometric_sphere_fit import cap_start
+from pipeline.sphere_centres.sphere_fit import METHODS, fit_sphere
+from pipeline.surveys.survey import ProcessingSettings, processing_config
+from pipeline.tables.marker_table import MarkerRow, line_of_sight
 
 #: Horizontal LiDAR-to-marker distances of the published range experiment, metres.
 RANGE_STUDY_DISTANCES_M = np.r_[np.arange(1.0, 16.0, 1.0), np.arange(17.0, 26.0, 2.0),

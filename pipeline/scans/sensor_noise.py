@@ -11,7 +11,7 @@ and the surface normal) has a Gaussian range error of standard deviation
 (``incidence_noise_m``) with incidence (the pulse is spread over a slanted footprint). The
 reported range is then rounded to ``resolution_m`` (2 mm for the VLP-16), which adds a uniform
 error of variance ``resolution^2 / 12``. The parameters are part of the scan's ``sensor``
-metadata block (:mod:`pipeline.scan_format`), so a scan carries the noise it was taken with.
+metadata block (:mod:`pipeline.scans.scan_format`), so a scan carries the noise it was taken with.
 """
 
 from __future__ import annotations

@@ -6,8 +6,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from pipeline.rig import MountingOffsets, sensor_to_station_with_range
-from pipeline.scan_format import StationScan
+from pipeline.scans.rig import MountingOffsets, sensor_to_station_with_range
+from pipeline.scans.scan_format import StationScan
 
 
 @dataclass(frozen=True)

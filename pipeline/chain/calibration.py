@@ -20,7 +20,7 @@ So (:func:`estimate_rotation_offsets`) ``e`` and ``t`` are found by a point-to-p
 between the faces whose unknowns are the two angles themselves (not a generic 6-DoF pose),
 and (:func:`estimate_axis_offset`) ``d`` by making the per-face fixed-radius sphere centres
 agree. Both are Gauss-Newton least squares with numeric Jacobians of the exact rig model
-(:mod:`pipeline.rig`); uncertainties are the formal ``s^2 (J^T J)^-1`` of the final step.
+(:mod:`pipeline.scans.rig`); uncertainties are the formal ``s^2 (J^T J)^-1`` of the final step.
 
 An axis-offset estimate is applied only when the spheres resolve it
 (:func:`resolved_axis_offset`): a few spheres at 10-20 m give per-face centre differences of
@@ -40,9 +40,9 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from markerplan.errors import ConfigError, DataError
-from pipeline.geometric_sphere_fit import lsq_fixed_radius
-from pipeline.rig import MountingOffsets, sensor_to_station, sensor_to_turntable_rotation
-from pipeline.scan_format import StationScan
+from pipeline.scans.rig import MountingOffsets, sensor_to_station, sensor_to_turntable_rotation
+from pipeline.scans.scan_format import StationScan
+from pipeline.sphere_centres.geometric_sphere_fit import lsq_fixed_radius
 
 
 @dataclass(frozen=True)
@@ -568,7 +568,7 @@ def largest_shift_m(a: MountingOffsets, b: MountingOffsets, range_m: float) -> f
     """Bound on how far a return moves between the clouds synthesised with ``a`` and ``b``.
 
     A return at sensor-frame ``p`` (``|p| <= range_m``) lands at
-    ``Rz(theta) (R(a) p + d(a))`` (:func:`pipeline.rig.frame_poses`), so it moves by at most
+    ``Rz(theta) (R(a) p + d(a))`` (:func:`pipeline.scans.rig.frame_poses`), so it moves by at most
     ``||R(b) - R(a)||_2 range_m + |d(b) - d(a)|``.
 
     Parameters

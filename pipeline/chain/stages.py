@@ -2,7 +2,7 @@
 
 Each stage is a small typed config; :func:`build_config` validates every option before anything
 runs and rejects unknown stages/options by name. The chain that runs them is
-:mod:`pipeline.process`.
+:mod:`pipeline.chain.process`.
 
 =============  ==========================================================================
 stage          job (module)
@@ -24,7 +24,7 @@ on the ground stands above it), cluster ``tolerance_m`` = 2 R, gate ``max_box_m`
 ``min_box_m`` = R / 2, research ``radius_m`` = 3 R. The class defaults are these values for the
 0.20 m markers of the published experiment (R = 0.1 m).
 
-Scales that follow the sensor's range noise (:class:`~pipeline.sensor_noise.RangeNoise`, from
+Scales that follow the sensor's range noise (:class:`~pipeline.scans.sensor_noise.RangeNoise`, from
 the scan's ``sensor`` block or the user's sensor profile; ``sigma`` = its total sigma at the
 ground stage's ``max_range_m``, the largest a candidate can have) are applied by
 :func:`noise_widened` when the chain knows the noise:
@@ -58,13 +58,13 @@ from typing import Any
 import numpy as np
 
 from markerplan.errors import ConfigError
-from pipeline.calibration import CalibrationConfig
-from pipeline.gate import GATE_SPILL_FRACTION
-from pipeline.ground import GROUND_MAX_SLOPE, STEEPNESS_TOLERANCE_M, SUPPORT_RADIUS_M
-from pipeline.quality import QualityConfig
-from pipeline.rig import MountingOffsets
-from pipeline.sensor_noise import RangeNoise
-from pipeline.sphere_fit import METHODS
+from pipeline.chain.calibration import CalibrationConfig
+from pipeline.chain.gate import GATE_SPILL_FRACTION
+from pipeline.chain.ground import GROUND_MAX_SLOPE, STEEPNESS_TOLERANCE_M, SUPPORT_RADIUS_M
+from pipeline.chain.quality import QualityConfig
+from pipeline.scans.rig import MountingOffsets
+from pipeline.scans.sensor_noise import RangeNoise
+from pipeline.sphere_centres.sphere_fit import METHODS
 
 
 @dataclass(frozen=True)
@@ -77,7 +77,7 @@ class CalibrateStage(CalibrationConfig):
     ``redetect_shift_m``: the first detection runs before the axis offset is known, on a
     cloud whose direct and reverse faces are ``2 |d|`` apart; when the first round's offsets
     move any return within the ground stage's ``max_range_m`` by more than this (metres,
-    :func:`pipeline.calibration.largest_shift_m`), the candidates are detected again on the
+    :func:`pipeline.chain.calibration.largest_shift_m`), the candidates are detected again on the
     corrected cloud (a marker on a crater rim, smeared into the rim's ground points, can fail
     the two-box gate on the first pass; so can one whose gate verdict was borderline). The
     default, 1 mm, is half the range resolution: any offset the spheres resolve re-detects.
@@ -117,7 +117,7 @@ class GroundStage:
     ``min_height_m`` defaults to 0.10 m, not the published 0.2 m: our markers sit on the ground
     (centre = ground + 0.10 m), so nothing of a 0.20 m sphere is 0.2 m above the ground.
     ``max_slope``, ``steepness_tolerance_m``, ``support_radius_m``: the steepness test
-    (:func:`pipeline.ground.remove_ground`): terrain up to ``max_slope`` (rise over run) is
+    (:func:`pipeline.chain.ground.remove_ground`): terrain up to ``max_slope`` (rise over run) is
     ground, so crater walls and rims do not chain a nearby marker into a rim cluster.
     """
 
@@ -162,7 +162,8 @@ class ClusterStage:
 class GateStage:
     """``gate``: edges of the large and the small cube, metres; widening of the large cube in
     range-noise sigmas (module docstring); the share of a cluster's points that may spill out
-    of the large cube (a near sphere's mixed-return tail, :func:`pipeline.gate.gate_verdicts`).
+    of the large cube (a near sphere's mixed-return tail,
+    :func:`pipeline.chain.gate.gate_verdicts`).
     """
 
     max_box_m: float = 0.30

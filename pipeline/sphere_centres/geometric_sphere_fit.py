@@ -2,11 +2,12 @@
 sphere-centre estimators share.
 
 - :func:`lsq_fixed_radius`: the fixed-radius fit of the ASTM E3125 steps
-  (:mod:`pipeline.sphere_fit`) and of the self-calibration;
+  (:mod:`pipeline.sphere_centres.sphere_fit`) and of the self-calibration;
 - :func:`fit_free_radius`: the free-radius fit of the quality gate's radius check when the
   sensor's noise is unknown. Biased small by range noise: 87 mm at ``s = 15 mm``, 62 mm at
   ``s = 45 mm`` for ``R = 0.1 m``; with the noise known,
-  :func:`pipeline.line_of_sight_fit.fit_line_of_sight` with ``free_radius=True`` is unbiased;
+  :func:`pipeline.sphere_centres.line_of_sight_fit.fit_line_of_sight` with ``free_radius=True`` is
+  unbiased;
 - :func:`cap_start`: an initial centre from points on the sphere's sensor-facing cap;
 - :func:`bounded_radius_step`: the Gauss-Newton step of a free-radius fit whose radius is held
   in a bracket (both free-radius fits): a cap too flat or too few points for its radius ends

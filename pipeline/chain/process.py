@@ -1,21 +1,21 @@
 """The processing chain of one station: synthesis, self-calibration, detection, measurement,
 evaluation.
 
-The chain runs the stages of :mod:`pipeline.stages` in order (calibrate, ground, cluster, gate,
-research, fit, quality, evaluate). The synthesis (:mod:`.synthesis`) runs after the angle
+The chain runs the stages of :mod:`pipeline.chain.stages` in order (calibrate, ground, cluster,
+gate, research, fit, quality, evaluate). The synthesis (:mod:`.synthesis`) runs after the angle
 calibration; once the axis offset has been estimated from the accepted spheres (and applied
-only if they resolve it, :func:`pipeline.calibration.resolved_axis_offset`), the candidates
+only if they resolve it, :func:`pipeline.chain.calibration.resolved_axis_offset`), the candidates
 are detected again when the new offsets move any return by more than the calibrate stage's
-``redetect_shift_m`` (:func:`pipeline.calibration.largest_shift_m`), else only their
+``redetect_shift_m`` (:func:`pipeline.chain.calibration.largest_shift_m`), else only their
 neighbourhoods are synthesised again and re-fitted. Detection (ground, cluster,
 gate) runs on a range-thinned copy of the cloud (:func:`detection_subset`); re-search and
 fitting use every point (indexed only within the candidates' range bands,
-:func:`pipeline.gate.within_range_bands`); :func:`pipeline.evaluation.evaluate_rows` evaluates
-the rows.
+:func:`pipeline.chain.gate.within_range_bands`); :func:`pipeline.chain.evaluation.evaluate_rows`
+evaluates the rows.
 
 When the range noise is known (recorded in the scan, or given), the gate and re-search are
-widened for it (:func:`pipeline.stages.noise_widened`) and the fit and quality gate take their
-scales from it (:mod:`pipeline.sphere_fit`, :mod:`pipeline.quality`).
+widened for it (:func:`pipeline.chain.stages.noise_widened`) and the fit and quality gate take their
+scales from it (:mod:`pipeline.sphere_centres.sphere_fit`, :mod:`pipeline.chain.quality`).
 """
 
 from __future__ import annotations
@@ -27,26 +27,26 @@ from typing import Any
 import numpy as np
 
 from markerplan.errors import DataError
-from pipeline.calibration import (
+from pipeline.chain.calibration import (
     estimate_axis_offset,
     estimate_rotation_offsets,
     largest_shift_m,
     resolved_axis_offset,
 )
-from pipeline.clustering import euclidean_clusters
-from pipeline.evaluation import Reference, evaluate_rows
-from pipeline.gate import RangeIndex, gate_verdicts, research, within_range_bands
-from pipeline.geometric_sphere_fit import cap_start
-from pipeline.ground import remove_ground
+from pipeline.chain.clustering import euclidean_clusters
+from pipeline.chain.evaluation import Reference, evaluate_rows
+from pipeline.chain.gate import RangeIndex, gate_verdicts, research, within_range_bands
+from pipeline.chain.ground import remove_ground
+from pipeline.chain.quality import MarkerMetrics, marker_metrics, quality_gate
+from pipeline.chain.stages import ProcessConfig, build_config, noise_widened
+from pipeline.chain.synthesis import StationCloud, synthesize
 from pipeline.kernels import range_thinned
-from pipeline.marker_table import MarkerRow, line_of_sight
-from pipeline.quality import MarkerMetrics, marker_metrics, quality_gate
-from pipeline.rig import MountingOffsets, sensor_to_station
-from pipeline.scan_format import StationScan
-from pipeline.sensor_noise import RangeNoise
-from pipeline.sphere_fit import SphereFit, fit_sphere
-from pipeline.stages import ProcessConfig, build_config, noise_widened
-from pipeline.synthesis import StationCloud, synthesize
+from pipeline.scans.rig import MountingOffsets, sensor_to_station
+from pipeline.scans.scan_format import StationScan
+from pipeline.scans.sensor_noise import RangeNoise
+from pipeline.sphere_centres.geometric_sphere_fit import cap_start
+from pipeline.sphere_centres.sphere_fit import SphereFit, fit_sphere
+from pipeline.tables.marker_table import MarkerRow, line_of_sight
 
 
 @dataclass
@@ -69,13 +69,13 @@ class Detection:
     ----------
     above : (n,) int
         Cloud indices of the detection subset's points in the ground stage's range band that
-        stand above the ground (:func:`pipeline.ground.remove_ground`: both its tests).
+        stand above the ground (:func:`pipeline.chain.ground.remove_ground`: both its tests).
     above_xyz_m : (n, 3) float
         Their station-frame coordinates, metres.
     labels : (n,) int
         Their cluster labels ``0..L-1`` (-1: in no cluster of ``min_points``).
     verdicts : (L,) str
-        The gate's verdict per cluster (:data:`pipeline.gate.GATE_VERDICTS`).
+        The gate's verdict per cluster (:data:`pipeline.chain.gate.GATE_VERDICTS`).
     clusters : list of (n_k,) int arrays
         Cloud indices of each passing cluster, by ascending label.
     """
@@ -92,7 +92,7 @@ class StationResult:
     """Everything the chain produced for one station.
 
     ``detection`` is the last detection the chain ran (after a re-detection, the second), on
-    the cloud synthesised with the offsets it then had; :mod:`pipeline.fates` reads it.
+    the cloud synthesised with the offsets it then had; :mod:`pipeline.surveys.fates` reads it.
     """
 
     station_id: str

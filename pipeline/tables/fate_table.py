@@ -45,7 +45,7 @@ COVARIATE_RANGES = {"distance_m": (0.0, 1e4), "elevation_deg": (-90.0, 90.0),
                     "rim_distance_m": (0.0, np.inf), "visible_fraction": (0.0, 1.0),
                     "expected_points": (0.0, 1e9)}
 
-_FIX = "write it with pipeline.fate_table.write_fate_table (as the loss study does)"
+_FIX = "write it with pipeline.tables.fate_table.write_fate_table (as the loss study does)"
 
 
 @dataclass(frozen=True)

@@ -1,13 +1,13 @@
 """Point clouds out: a station's synthesised, calibrated cloud as LAS 1.4 and PLY files.
 
-The cloud is the one the chain measured its markers in (:func:`pipeline.synthesis.synthesize`
+The cloud is the one the chain measured its markers in (:func:`pipeline.chain.synthesis.synthesize`
 with the station's self-calibrated mounting offsets), classified by what the chain made of each
 point (ASPRS classes):
 
 * :data:`MARKER_CLASS` (64, the first user-definable class): the points the sphere fit of an
   accepted marker used (its inliers);
 * :data:`GROUND_CLASS` (2): the rest of the points the chain's ground stage
-  (:func:`pipeline.ground.remove_ground`, the ``ground`` cell and minimum height) calls
+  (:func:`pipeline.chain.ground.remove_ground`, the ``ground`` cell and minimum height) calls
   ground, here over the whole cloud;
 * :data:`UNCLASSIFIED_CLASS` (1): everything else (rejected candidates, rocks, the rig).
 
@@ -28,12 +28,12 @@ from typing import Any
 import numpy as np
 
 from markerplan.errors import ConfigError, DataError
-from pipeline.ground import remove_ground
-from pipeline.process import StationResult
-from pipeline.rig import station_to_site_matrix
-from pipeline.scan_format import StationScan
-from pipeline.stages import GroundStage
-from pipeline.synthesis import synthesize
+from pipeline.chain.ground import remove_ground
+from pipeline.chain.process import StationResult
+from pipeline.chain.stages import GroundStage
+from pipeline.chain.synthesis import synthesize
+from pipeline.scans.rig import station_to_site_matrix
+from pipeline.scans.scan_format import StationScan
 
 #: ASPRS classes written.
 UNCLASSIFIED_CLASS, GROUND_CLASS, MARKER_CLASS = 1, 2, 64
@@ -62,7 +62,7 @@ class StationPose:
     Attributes
     ----------
     rotation : (3, 3) float
-        Station -> site rotation (:func:`pipeline.rig.station_to_site_matrix`).
+        Station -> site rotation (:func:`pipeline.scans.rig.station_to_site_matrix`).
     position_m : (3,) float
         Site coordinates of the station-frame origin, metres.
     """
@@ -72,7 +72,7 @@ class StationPose:
 
     @classmethod
     def from_truth(cls, truth: dict[str, Any]) -> StationPose:
-        """The pose a simulator truth records (:func:`pipeline.scan_format.read_truth`).
+        """The pose a simulator truth records (:func:`pipeline.scans.scan_format.read_truth`).
 
         Raises
         ------
@@ -134,7 +134,7 @@ def classify_cloud(scan: StationScan, result: StationResult,
     scan : StationScan
         The scan ``result`` was computed from.
     result : StationResult
-        :func:`pipeline.process.process_station`'s output (offsets and candidates).
+        :func:`pipeline.chain.process.process_station`'s output (offsets and candidates).
     ground : GroundStage, optional
         The ground stage of the configuration the chain ran with (default stage otherwise).
 

@@ -41,7 +41,7 @@ def gate_verdicts(xyz_m: np.ndarray, labels: np.ndarray, max_box_m: float = 0.30
     xyz_m : (N, 3) float
         Clustered points, metres.
     labels : (N,) int
-        Cluster labels ``0..L-1`` from :func:`pipeline.clustering.euclidean_clusters`
+        Cluster labels ``0..L-1`` from :func:`pipeline.chain.clustering.euclidean_clusters`
         (-1 = noise).
     max_box_m, min_box_m : float
         Edge of the large and the small cube, metres.
@@ -122,7 +122,7 @@ def two_box_gate(xyz_m: np.ndarray, labels: np.ndarray, max_box_m: float = 0.30,
     xyz_m : (N, 3) float
         Clustered points, metres.
     labels : (N,) int
-        Cluster labels from :func:`pipeline.clustering.euclidean_clusters` (-1 = noise).
+        Cluster labels from :func:`pipeline.chain.clustering.euclidean_clusters` (-1 = noise).
     max_box_m, min_box_m : float
         Edge of the large and the small cube, metres.
 

@@ -10,21 +10,21 @@ position of the scanner in that same frame, and return a :class:`SphereFit`.
     half a radius behind it are fitted with the radius fixed; (2) keep the points inside the
     cone of half-angle 60 deg about the centre->scanner line (apex at the centre) that also lie
     within the cylinder of radius ``R sin 60 deg`` about the scanner->centre line; (3) fit with
-    the radius fixed (:func:`~pipeline.geometric_sphere_fit.lsq_fixed_radius`), drop points
-    whose residual exceeds 3 standard deviations, fit again; repeat (2)-(3) from the new centre
-    until the centre moves less than ``tol_m`` (or ``max_iter`` times: a loop that does not
+    the radius fixed (:func:`~pipeline.sphere_centres.geometric_sphere_fit.lsq_fixed_radius`), drop
+    points whose residual exceeds 3 standard deviations, fit again; repeat (2)-(3) from the new
+    centre until the centre moves less than ``tol_m`` (or ``max_iter`` times: a loop that does not
     converge cycles through a few point sets, and is stopped where ``max_iter`` would leave it
     once the cycle has been seen twice). The centre is held within ``max_shift_m`` (default one
     diameter) of the initial estimate: a fit of a handful of trimmed points can otherwise jump
     metres (4.7 m from a start 2 cm off, 8 points at 24 m), and a fit held on that bound is
     reported not converged.
 
-    *With the sensor's range noise given* (``noise``, a :class:`~pipeline.sensor_noise.RangeNoise`)
-    the same procedure runs on line-of-sight residuals instead
-    (:func:`pipeline.line_of_sight_fit.astm_beam_steps`): (2) tests the cylinder on each beam,
-    (3) fits the measured ranges by weighted least squares and trims on the normalised range
-    residuals. This removes the pull toward the sensor that range noise gives the fit of
-    ``|p - c| - R`` (the docstring of :mod:`pipeline.line_of_sight_fit`).
+    *With the sensor's range noise given* (``noise``, a
+    :class:`~pipeline.scans.sensor_noise.RangeNoise`) the same procedure runs on line-of-sight
+    residuals instead (:func:`pipeline.sphere_centres.line_of_sight_fit.astm_beam_steps`): (2) tests
+    the cylinder on each beam, (3) fits the measured ranges by weighted least squares and trims on
+    the normalised range residuals. This removes the pull toward the sensor that range noise gives
+    the fit of ``|p - c| - R`` (the docstring of :mod:`pipeline.sphere_centres.line_of_sight_fit`).
 ``hemisphere-icp``
     The published marker method: point-to-point ICP of a known-radius hemisphere model (a
     dense point cloud of the sphere's half that faces the scanner) to the points, solving a
@@ -32,8 +32,8 @@ position of the scanner in that same frame, and return a :class:`SphereFit`.
     run as published, with or without ``noise``.
 
 The free-radius fits of the quality gate's radius check are
-:func:`pipeline.geometric_sphere_fit.fit_free_radius` and, with the noise known,
-:func:`pipeline.line_of_sight_fit.fit_line_of_sight`.
+:func:`pipeline.sphere_centres.geometric_sphere_fit.fit_free_radius` and, with the noise known,
+:func:`pipeline.sphere_centres.line_of_sight_fit.fit_line_of_sight`.
 """
 from __future__ import annotations
 
@@ -45,9 +45,9 @@ from scipy.spatial import cKDTree
 from markerplan.constants import GOLDEN_ANGLE_RAD
 from markerplan.errors import ConfigError, DataError
 from markerplan.reading import MAX_ABS_COORDINATE_M
-from pipeline.geometric_sphere_fit import ASTM_CONE_DEG, MIN_POINTS, lsq_fixed_radius
-from pipeline.line_of_sight_fit import astm_beam_steps
-from pipeline.sensor_noise import RangeNoise
+from pipeline.scans.sensor_noise import RangeNoise
+from pipeline.sphere_centres.geometric_sphere_fit import ASTM_CONE_DEG, MIN_POINTS, lsq_fixed_radius
+from pipeline.sphere_centres.line_of_sight_fit import astm_beam_steps
 
 METHODS = ("fixed-radius", "hemisphere-icp")
 DEFAULT_METHOD = "fixed-radius"
@@ -125,8 +125,8 @@ def fit_sphere(points_m: np.ndarray, radius_m: float, sensor_m=(0.0, 0.0, 0.0),
         the closest surface; give a start when ground in front of the sphere is included.
     noise : RangeNoise, optional
         The scanner's range noise. ``fixed-radius`` then fits line-of-sight residuals, which
-        removes the noise bias (:mod:`pipeline.line_of_sight_fit`); ``None`` (default): the
-        ASTM fit of ``|p - c| - R``. ``hemisphere-icp`` does not use it.
+        removes the noise bias (:mod:`pipeline.sphere_centres.line_of_sight_fit`); ``None``
+        (default): the ASTM fit of ``|p - c| - R``. ``hemisphere-icp`` does not use it.
     max_shift_m : float, optional
         ``fixed-radius`` only: the centre stays within this distance of the initial centre
         (the start or the closest-point estimate), metres; default ``2 radius_m`` (the

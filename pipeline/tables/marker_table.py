@@ -13,7 +13,7 @@ Columns, in this order (station frame = origin at the nominal LiDAR centre, z up
 - ``point_density_per_m2``: ``n_points / (pi R^2)``, points per m^2 of the projected
   sensor-facing hemisphere.
 - ``visible_fraction``: fraction of the projected disc covered by points
-  (:mod:`pipeline.quality`).
+  (:mod:`pipeline.chain.quality`).
 - ``fit_rms_m``: RMS of the fixed-radius residuals of the points used, metres.
 - ``radius_fit_m``: radius of a free-radius fit to the same points, metres.
 - ``estimator``: ``fixed-radius`` or ``hemisphere-icp``.

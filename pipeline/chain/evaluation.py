@@ -22,9 +22,9 @@ from scipy.optimize import linear_sum_assignment
 
 from markerplan.errors import ConfigError, DataError, InputFileError
 from markerplan.reading import MAX_ABS_COORDINATE_M, finite_number, read_csv, unique_ids
-from pipeline.marker_table import MarkerRow
-from pipeline.scan_format import read_truth
-from pipeline.stages import EvaluateStage
+from pipeline.chain.stages import EvaluateStage
+from pipeline.scans.scan_format import read_truth
+from pipeline.tables.marker_table import MarkerRow
 
 REFERENCE_CSV_COLUMNS = ("id", "x_m", "y_m", "z_m")
 
@@ -62,7 +62,7 @@ def read_reference(path: str | Path) -> Reference:
         Missing/unreadable/non-UTF-8 file, missing columns or keys, ragged rows, empty or
         repeated ids, coordinates that are not finite numbers (or beyond
         :data:`markerplan.reading.MAX_ABS_COORDINATE_M`); a truth JSON as in
-        :func:`pipeline.scan_format.read_truth`.
+        :func:`pipeline.scans.scan_format.read_truth`.
     DataError
         No markers in the file.
     """

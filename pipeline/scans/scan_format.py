@@ -12,7 +12,7 @@ member                 shape/dtype   meaning
 ``laser_id``           (N,) uint8    laser channel 0..15 (VLP-16 channel numbering)
 ``spin_azimuth_rad``   (N,) float32  LiDAR spin azimuth of the firing, radians, [0, 2 pi)
 ``range_m``            (N,) float32  measured range, metres
-``xyz_sensor_m``       (N, 3) float32 point in the sensor frame (:mod:`pipeline.rig`), metres
+``xyz_sensor_m``       (N, 3) float32 point in the sensor frame (:mod:`pipeline.scans.rig`), metres
 ``intensity``          (N,) uint8    optional reflectivity
 =====================  ============  =========================================================
 
@@ -23,7 +23,7 @@ list of 16 in channel order, ``firing_order``, ``range_noise_m``, ...), ``rig``
 ``turntable_errors`` the sigmas of the simulated turntable), ``sensor_profile`` (simulated
 scans: the name of the sensor profile, or ``null``), ``provenance``
 (:func:`markerplan.provenance.provenance`) and, for a scan imported from a packet capture
-(:mod:`pipeline.pcap`), ``source_file`` and ``capture`` (``revolution_time_s``: each frame's
+(:mod:`pipeline.scans.pcap`), ``source_file`` and ``capture`` (``revolution_time_s``: each frame's
 time, UNIX seconds on the capturing computer's clock). Mounting offsets are *not* stored here: the
 processor must estimate them (simulation truth goes to the truth file).
 
@@ -57,7 +57,7 @@ from markerplan.reading import (
     unique_ids,
 )
 from markerplan.writing import json_default
-from pipeline.rig import VLP16_ELEVATION_DEG
+from pipeline.scans.rig import VLP16_ELEVATION_DEG
 
 #: Version of the scan and truth formats this markerplan writes and reads (the ``/N`` suffix).
 FORMAT_VERSION = 1
@@ -436,7 +436,7 @@ def write_truth(path: str | Path, truth: dict[str, Any]) -> Path:
 
     ``truth`` keys: ``station_id``; ``station_pose`` {``position_m`` [x, y, z] site frame of
     the station-frame origin, ``heading_rad``, ``roll_rad``, ``pitch_rad``};
-    ``mounting_offsets`` (:meth:`pipeline.rig.MountingOffsets.to_dict`); ``marker_radius_m``;
+    ``mounting_offsets`` (:meth:`pipeline.scans.rig.MountingOffsets.to_dict`); ``marker_radius_m``;
     ``markers`` list of {``id``, ``centre_site_m``, ``centre_station_m``}; ``rocks`` list of
     {``centre_site_m``, ``radius_m``}; ``turntable_frame_errors`` (``null`` or {``frames``,
     ``angle_error_rad``, ``wobble_rad``}: the true per-frame turntable errors); ``provenance``.

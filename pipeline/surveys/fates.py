@@ -1,9 +1,9 @@
 """Where the chain lost each marker: the fate of every known marker of one processed station.
 
-Given a station's :class:`~pipeline.process.StationResult` and the true marker centres in its
+Given a station's :class:`~pipeline.chain.process.StationResult` and the true marker centres in its
 station frame (the simulator's truth, or a plan's markers projected with the station's pose),
 each marker gets the stage of the chain that lost it
-(:data:`pipeline.fate_table.FATE_STAGES`, in chain order):
+(:data:`pipeline.tables.fate_table.FATE_STAGES`, in chain order):
 
 =================  ===========================================================================
 stage              the marker ...
@@ -35,7 +35,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from markerplan.errors import ConfigError
-from pipeline.process import StationResult
+from pipeline.chain.process import StationResult
 
 #: How far outside the sphere a point still counts as the marker's, metres: its range noise
 #: (a few millimetres to 3 cm) but not the mixed-return tail behind it (decimetres).
@@ -50,7 +50,7 @@ class MarkerFate:
     ----------
     marker_id : str
     stage : str
-        One of :data:`pipeline.fate_table.FATE_STAGES`.
+        One of :data:`pipeline.tables.fate_table.FATE_STAGES`.
     reason : str
         The detail of the stage (the gate's verdict, the quality gate's reason); ``""`` when
         accepted.
@@ -78,7 +78,7 @@ def marker_fates(result: StationResult, centres_station_m: np.ndarray,
     Parameters
     ----------
     result : StationResult
-        From :func:`pipeline.process.process_station`.
+        From :func:`pipeline.chain.process.process_station`.
     centres_station_m : (m, 3) float
         The markers' true centres in the station frame, metres.
     marker_ids : sequence of str, length m

@@ -3,7 +3,7 @@ station loop over its scan files.
 
 :func:`processing_config` is the one place where the settings of a survey (marker radius,
 estimator, mounting offsets, quality gate, stage options) become the validated
-:class:`~pipeline.stages.ProcessConfig` of :func:`pipeline.process.process_station`;
+:class:`~pipeline.chain.stages.ProcessConfig` of :func:`pipeline.chain.process.process_station`;
 ``markerplan process``, ``verify`` (known control and network mode) and ``calibrate-sensor``
 all take their config from it. :func:`process_scans` runs the chain on every scan file of a
 survey, one after another, with each station's reference and range noise.
@@ -18,12 +18,12 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from pipeline.evaluation import Reference, pick_reference
-from pipeline.process import StationResult, process_station
-from pipeline.rig import MountingOffsets
-from pipeline.scan_format import StationScan, read_scan
-from pipeline.sensor_noise import RangeNoise
-from pipeline.stages import ProcessConfig, build_config, with_offsets
+from pipeline.chain.evaluation import Reference, pick_reference
+from pipeline.chain.process import StationResult, process_station
+from pipeline.chain.stages import ProcessConfig, build_config, with_offsets
+from pipeline.scans.rig import MountingOffsets
+from pipeline.scans.scan_format import StationScan, read_scan
+from pipeline.scans.sensor_noise import RangeNoise
 
 
 @dataclass(frozen=True)
@@ -36,8 +36,8 @@ class ProcessingSettings:
         Known marker radius, m (the fit's ``radius_m``; the radius-scaled lengths follow it).
         ``None``: the one ``stage_options`` gives, else the fit stage's default.
     estimator : str or None
-        Sphere-centre estimator (:data:`pipeline.sphere_fit.METHODS`); ``None``: the one
-        ``stage_options`` gives, else the fit stage's default.
+        Sphere-centre estimator (:data:`pipeline.sphere_centres.sphere_fit.METHODS`); ``None``: the
+        one ``stage_options`` gives, else the fit stage's default.
     offsets : MountingOffsets
         The rig's mounting offsets (rad, m): where self-calibration starts, or, with
         ``calibrate = False``, the known values applied.
@@ -50,7 +50,7 @@ class ProcessingSettings:
     min_visible_fraction : float or None
         Quality gate: minimum visible fraction of the sphere (``None``: the gate's).
     stage_options : mapping of str to mapping of str to object
-        Any other ``{stage: {option: value}}`` (:func:`pipeline.stages.build_config`); the
+        Any other ``{stage: {option: value}}`` (:func:`pipeline.chain.stages.build_config`); the
         fields above take precedence over them.
     """
 
@@ -121,7 +121,7 @@ def process_scans(scans: Sequence[Path], config: ProcessConfig, references: list
                   fallback_noise: RangeNoise, fallback_source: str, *,
                   each: Callable[[StationScan, StationResult], None] | None = None
                   ) -> SurveyResult:
-    """Read every scan file and run the chain on it (:func:`pipeline.process.process_station`).
+    """Read every scan file and run the chain (:func:`~pipeline.chain.process.process_station`).
 
     Only one scan is in memory at a time; a progress bar over the stations goes to stderr.
 
@@ -132,7 +132,7 @@ def process_scans(scans: Sequence[Path], config: ProcessConfig, references: list
     config : ProcessConfig
         The stations' configuration (:func:`processing_config`).
     references : list of Reference
-        Reference centres (:func:`pipeline.evaluation.pick_reference` picks each station's).
+        Reference centres (:func:`pipeline.chain.evaluation.pick_reference` picks each station's).
     fallback_noise : RangeNoise
         The range noise of a scan that records none (real scans: the user's sensor profile).
     fallback_source : str
@@ -148,7 +148,7 @@ def process_scans(scans: Sequence[Path], config: ProcessConfig, references: list
     Raises
     ------
     InputFileError
-        An unreadable or invalid scan file (:func:`pipeline.scan_format.read_scan`).
+        An unreadable or invalid scan file (:func:`pipeline.scans.scan_format.read_scan`).
     """
     from tqdm import tqdm
 

@@ -4,7 +4,7 @@ and its weighted least squares.
 A scanner measures range along a beam (the sensor -> point direction). These fits compare each
 measured range ``rho_i = |p_i - sensor|`` with the range ``t_i(c, R)`` at which that beam meets
 the sphere, weighted by ``1 / sigma_i^2`` from the sensor's noise
-(:class:`~pipeline.sensor_noise.RangeNoise`) at the point's range and incidence.
+(:class:`~pipeline.scans.sensor_noise.RangeNoise`) at the point's range and incidence.
 
 Why: range noise ``n`` along the beam moves a point off the sphere by
 ``|p - c| - R = -n cos i + n^2 sin^2 i / (2R) + ...``, whose mean ``s^2 sin^2 i / (2R)`` makes
@@ -18,12 +18,12 @@ Monte-Carlo test, ``tests/pipeline/test_noise_aware_fit.py``).
 
 - :func:`fit_line_of_sight`: the weighted least squares, fixed or free radius;
 - :func:`astm_beam_steps`: the steps of the ASTM E3125 loop of
-  :func:`pipeline.sphere_fit.fit_sphere` when the noise is given: (2) keeps the beams that pass
-  the centre closer than ``R sin 60 deg`` (the ASTM cylinder, tested on the beam, not on the
-  noisy point); (3) fits with the radius fixed and trims at 3 standard deviations of
+  :func:`pipeline.sphere_centres.sphere_fit.fit_sphere` when the noise is given: (2) keeps the beams
+  that pass the centre closer than ``R sin 60 deg`` (the ASTM cylinder, tested on the beam, not on
+  the noisy point); (3) fits with the radius fixed and trims at 3 standard deviations of
   ``(range - t) / sigma_i``;
 - :func:`beam_cap`, :func:`radius_standard_error`, :func:`expected_rms`: the points, the radius
-  scale and the RMS scale of the quality gate's checks (:mod:`pipeline.quality`).
+  scale and the RMS scale of the quality gate's checks (:mod:`pipeline.chain.quality`).
 """
 
 from __future__ import annotations
@@ -32,8 +32,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from pipeline.geometric_sphere_fit import ASTM_CONE_DEG, bounded_radius_step, cap_start
-from pipeline.sensor_noise import MAX_TAN_INCIDENCE, RangeNoise
+from pipeline.scans.sensor_noise import MAX_TAN_INCIDENCE, RangeNoise
+from pipeline.sphere_centres.geometric_sphere_fit import (
+    ASTM_CONE_DEG,
+    bounded_radius_step,
+    cap_start,
+)
 
 #: Line-of-sight fits: beams are treated as meeting the sphere at no more than this incidence
 #: (cos), so a beam that misses the current sphere still has a finite residual and gradient.
@@ -84,8 +88,8 @@ def fit_line_of_sight(points_m: np.ndarray, radius_m: float, noise: RangeNoise,
     radius_bounds_m : (float, float), optional
         ``free_radius`` only: ``(low, high)``, metres, ``0 < low <= radius_m <= high``; the
         radius is held in this bracket
-        (:func:`~pipeline.geometric_sphere_fit.bounded_radius_step`), so a flat-looking cap
-        ends on ``high`` instead of running away. ``None``: unbounded.
+        (:func:`~pipeline.sphere_centres.geometric_sphere_fit.bounded_radius_step`), so a
+        flat-looking cap ends on ``high`` instead of running away. ``None``: unbounded.
 
     Returns
     -------
@@ -196,7 +200,7 @@ def astm_beam_steps(p: np.ndarray, radius: float, sensor: np.ndarray, noise: Ran
     with its normalised range residuals ``(rho - t) / sigma``.
 
     The noise-aware steps (2) and (3) of the ASTM loop of
-    :func:`pipeline.sphere_fit.fit_sphere` (module docstring).
+    :func:`pipeline.sphere_centres.sphere_fit.fit_sphere` (module docstring).
 
     Parameters
     ----------
@@ -209,7 +213,7 @@ def astm_beam_steps(p: np.ndarray, radius: float, sensor: np.ndarray, noise: Ran
     noise : RangeNoise
     hold : callable, optional
         ``hold(centre) -> centre``, applied to each fitted centre (the loop's bound on how far
-        the centre may move, :func:`pipeline.sphere_fit.fit_sphere`); default: none.
+        the centre may move, :func:`pipeline.sphere_centres.sphere_fit.fit_sphere`); default: none.
 
     Returns
     -------
@@ -292,7 +296,7 @@ def _los_solve(rng, beam, centre, radius, noise, free_radius=False, max_iter=50,
     part of each point's variance) and ``J^T W J`` and ``J^T W r`` from one product
     (``V^T diag(w / h^2) [V, h r]`` with ``V = [t beam - c, R]``); a singular matrix ends the
     iterations. Each step is capped at half the radius; a free radius is held in
-    ``radius_bounds_m`` (:func:`~pipeline.geometric_sphere_fit.bounded_radius_step`).
+    ``radius_bounds_m`` (:func:`~pipeline.sphere_centres.geometric_sphere_fit.bounded_radius_step`).
 
     Returns the centre (3,), the radius and the covariance ((3, 3) or (4, 4) with the radius)
     of the estimate under the noise model.

@@ -11,8 +11,8 @@ from typing import Any
 import numpy as np
 
 from markerplan.writing import json_default, write_csv
-from pipeline.marker_table import write_marker_table
-from pipeline.process import StationResult
+from pipeline.chain.process import StationResult
+from pipeline.tables.marker_table import write_marker_table
 
 STATION_COLUMNS = ("station_id", "n_points", "n_frames", "n_candidates", "n_accepted",
                    "n_reference", "n_matched_accepted", "mean_error_m", "max_error_m",
