@@ -10,7 +10,7 @@ one tile in the same run (a whole-site scene is not built). Finally one JSON obj
         [--time-limit 120] [--network-time-limit 600] [--network-requirement 6] [--keep DIR]
         [--network-local 0.10] [--network-within 50] [--error-figure quantile]
         [--heading-aid sun-sensor|star-tracker] [--chance-epsilon none|0.05]
-        [--pass-rate-samples N]
+        [--pass-rate-samples N] [--datum station|free] [--set KEY=VALUE ...]
         [--plans plan,plan_network]
 
 The network plan's requirement is relative to the station nearest the centre, without a heading
@@ -124,6 +124,12 @@ def main() -> None:
     ap.add_argument("--pass-rate-samples", type=int,
                     help="pass_rate_samples of the network plan (default the planner's 2,000; "
                          "each judges the whole 311-station network)")
+    ap.add_argument("--datum", choices=("station", "free"), default="station",
+                    help="datum of the network plan: the station nearest the centre "
+                         "(default), or a free network (with --network-local only)")
+    ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                    help="another setting of the network plan, as a TOML line (repeatable), "
+                         "e.g. --set 'local_kind=\"distance\"'")
     ap.add_argument("--plans", default="plan,plan_network",
                     help="plans to run, comma-separated: plan, plan_network")
     ap.add_argument("--keep", type=Path, help="Write the configuration and plans here.")
@@ -158,6 +164,7 @@ def main() -> None:
         lines.append(f'error_figure = "{args.error_figure}"')
     if args.heading_aid:
         lines.append(f'heading_aid = "{args.heading_aid}"')
+    lines += args.set
     if args.pass_rate_samples is not None:
         lines.append(f"pass_rate_samples = {args.pass_rate_samples}")
     if args.chance_epsilon:
@@ -168,7 +175,8 @@ def main() -> None:
                "probe_mesh": mesh}
     runs = (("plan", config, args.time_limit, []),
             ("plan_network", network, args.network_time_limit,
-             ["--network", "--reference-station", site["centre_station"]]))
+             ["--network", "--datum", "free"] if args.datum == "free"
+             else ["--network", "--reference-station", site["centre_station"]]))
     for name, cfg, limit, extra in (r for r in runs if r[0] in args.plans.split(",")):
         out = root / name
         cmd = [cli, "plan", "--site", "km", "--config", str(cfg), "--time-limit-s", str(limit),
