@@ -4,7 +4,6 @@ of stations, judged by an independent route (the plain rule on the layout withou
 marker; the detected pairs marked unusable)."""
 
 import itertools
-from dataclasses import replace
 
 import numpy as np
 import pytest
