@@ -4,13 +4,16 @@ of stations, judged by an independent route (the plain rule on the layout withou
 marker; the detected pairs marked unusable)."""
 
 import itertools
+from dataclasses import replace
 
 import numpy as np
 import pytest
 
 from planner.accuracy.checks import evaluate_layout
 from planner.accuracy.local import LocalAccuracy, LocalRequirement
+from planner.accuracy.local_markers import LocalMarkerAccuracy
 from planner.accuracy.network import NetworkModel, network_model
+from planner.accuracy.network_chance import NetworkOdds
 from planner.config import PlanConfig
 from planner.program import plan_sites
 from planner.program.cuts_network import network_cuts
@@ -104,3 +107,97 @@ def test_a_layout_failing_the_local_requirement_after_a_loss_is_cut_off():
 def test_redundant_mode_accepts_a_local_requirement():
     cfg = PlanConfig(network=True, redundant=True, local_requirement_m=0.1, local_markers=True)
     assert cfg.redundant and cfg.local_markers
+
+
+def _chance_case(local_markers: bool = True):
+    """Two stations sharing five sites (ten pairs, detected with chance 0.93 to 0.995), no
+    datum requirement, a marker-pair requirement 1.2 times the worst pair's error with every
+    site selected (stations 12 m apart: no station pair within 11.5 m), epsilon 0.1."""
+    from tests.planner.test_network_chance import _two_stations
+
+    problem, config = _two_stations(0)
+    rng = np.random.default_rng(10)
+    problem = replace(problem, pair_detection_p=rng.uniform(0.93, 0.995,
+                                                            problem.pair_station.size))
+    config = config.replace(min_markers=2, min_sectors=1)
+    net = network_model(problem, config)
+    every = np.ones(problem.n_sites, bool)
+    probe = LocalMarkerAccuracy(net, LocalRequirement(1.0, within_m=11.5))
+    worst = probe.errors(net.covariance(net.information(every)), probe.pairs(every)).max()
+    return problem, config.replace(local_requirement_m=float(1.2 * worst), local_within_m=11.5,
+                                   local_markers=local_markers, chance_epsilon=0.1,
+                                   datum_requirement=False)
+
+
+def _outcome_passes(problem, config, pairs, kept_pairs):
+    """Whether every rule passes with only ``kept_pairs`` (bool over ``pairs``, the usable
+    pairs) detected, by another route: the problem with the others occluded, checked whole."""
+    from tests.planner.test_network_chance import _lost
+
+    every = np.ones(problem.n_sites, bool)
+    return evaluate_layout(_lost(problem, pairs[~kept_pairs]), every, config).all_ok
+
+
+def test_chance_judges_the_marker_pairs_left_in_each_outcome_exactly():
+    """The 1024 detection outcomes: the judge agrees with the whole check of the problem with
+    the lost pairs occluded (a marker with none detected drops its pairs; 160 outcomes), some
+    outcome passes only because a marker was lost whole (passing is not monotone), and the
+    enumeration's bounds are the brute-force chance of failing."""
+    problem, config = _chance_case()
+    odds = NetworkOdds(problem, np.ones(problem.n_sites, bool), config)
+    assert not odds.monotone and odds.q.size == 10
+    kept = np.array(list(itertools.product([False, True], repeat=odds.q.size)))
+    judged = odds.passes(kept)
+    some = np.random.default_rng(0).choice(len(kept), 160, replace=False)
+    direct = [_outcome_passes(problem, config, odds.net.pair_index, k) for k in kept[some]]
+    np.testing.assert_array_equal(judged[some], direct)
+    # a failing outcome with a passing one that lost more pairs
+    fails = np.flatnonzero(~judged)
+    assert any(judged[(kept <= kept[f]).all(axis=1) & (kept.sum(axis=1) < kept[f].sum())].any()
+               for f in fails)
+    brute = float(np.sum(np.prod(np.where(kept, odds.q, 1 - odds.q), axis=1)[~judged]))
+    c = odds.chance(1e-12)
+    assert c.max_losses >= 9 and 0.01 < brute < 0.99
+    assert c.fail_low - 1e-12 <= brute <= c.fail_high + 1e-12
+    assert c.fail_high - c.fail_low < 1e-9
+
+
+def test_chance_plan_with_marker_pairs_is_the_brute_force_optimum():
+    """The plan is the fewest sites of any layout that passes whole and whose exact chance of
+    failing (marker pairs judged in every outcome) meets epsilon; judging the marker pairs only
+    with every marker detected would accept more layouts. The whole-network no-good rows of every
+    failing layout keep every passing layout (valid despite marker pairs not being monotone)."""
+    from planner.accuracy.checks import station_infos
+    from planner.program.cuts_chance import chance_rule
+
+    problem, config = _chance_case()
+    rule = chance_rule(problem, config, station_infos(problem, config))
+    naive = chance_rule(problem, config.replace(local_markers=False),
+                        station_infos(problem, config))
+    net = network_model(problem, config)
+    layouts = _layouts(problem.n_sites)
+    whole = np.array([evaluate_layout(problem, sel, config, net=net).all_ok for sel in layouts])
+    meets = np.array([bool(w) and rule.layout_ok(sel) for w, sel in zip(whole, layouts)])
+    naive_meets = np.array([bool(w) and naive.layout_ok(sel) for w, sel in zip(whole, layouts)])
+    for sel in layouts[whole]:  # every layout decided by certified bounds, not by samples
+        assert rule.whole(sel).n_samples == 0
+    fewest = int(layouts[meets].sum(axis=1).min())
+    assert (naive_meets & ~meets).any()  # layouts the marker pairs' losses reject
+    r = plan_sites(problem, config)
+    assert r.status == "optimal" and int(r.selected.sum()) == fewest
+    assert meets[np.flatnonzero((layouts == r.selected).all(axis=1))[0]]
+    model = build_model(problem, config)
+    x = np.zeros((len(layouts), model.n_vars))
+    x[:, model.site_var] = layouts
+    n_rows = n_plain_invalid = 0
+    for sel in layouts[whole & ~meets]:
+        rows, lower, _ = rule.whole_cuts(problem, model, sel)
+        if rows is None:  # failing a station's own target, not the whole network's
+            continue
+        n_rows += 1
+        value = x @ rows.toarray().T
+        assert value[(layouts == sel).all(axis=1)][0, 0] < lower[0]
+        assert np.all(value[meets, 0] >= lower[0] - 1e-9)
+        # the monotone no-good "some site outside" would cut off a passing subset
+        n_plain_invalid += bool(np.any(meets & ~(layouts & ~sel).any(axis=1)))
+    assert n_rows and n_plain_invalid
