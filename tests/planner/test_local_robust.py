@@ -177,8 +177,9 @@ def test_chance_plan_with_marker_pairs_is_the_brute_force_optimum():
     net = network_model(problem, config)
     layouts = _layouts(problem.n_sites)
     whole = np.array([evaluate_layout(problem, sel, config, net=net).all_ok for sel in layouts])
-    meets = np.array([bool(w) and rule.layout_ok(sel) for w, sel in zip(whole, layouts)])
-    naive_meets = np.array([bool(w) and naive.layout_ok(sel) for w, sel in zip(whole, layouts)])
+    meets, naive_meets = (np.array([bool(w) and r.layout_ok(sel)
+                                    for w, sel in zip(whole, layouts, strict=True)])
+                          for r in (rule, naive))
     for sel in layouts[whole]:  # every layout decided by certified bounds, not by samples
         assert rule.whole(sel).n_samples == 0
     fewest = int(layouts[meets].sum(axis=1).min())
