@@ -202,3 +202,36 @@ def test_chance_plan_with_marker_pairs_is_the_brute_force_optimum():
         # the monotone no-good "some site outside" would cut off a passing subset
         n_plain_invalid += bool(np.any(meets & ~(layouts & ~sel).any(axis=1)))
     assert n_rows and n_plain_invalid
+
+
+def test_outputs_record_that_the_losses_judge_the_local_pairs():
+    """plan.json's ``local`` says the redundant errors are the worst after a single loss (and
+    they are: at least the plain ones, some larger), the report says so, and the chance
+    section's network record names the local pairs every outcome judges."""
+    from types import SimpleNamespace
+
+    from planner.outputs.chance_report import chance_markdown
+    from planner.outputs.local_report import local_markdown, local_record
+
+    p, cfg = _redundant_case(1, 1.5)
+    net = network_model(p, cfg)
+    sel = np.ones(p.n_sites, bool)
+
+    def record(config):
+        return local_record(SimpleNamespace(config=config, problem=p, result=SimpleNamespace(
+            selected=sel, check=evaluate_layout(p, sel, config, net=net))), net)
+
+    local, plain = record(cfg), record(cfg.replace(redundant=False))
+    assert local["after_any_single_loss"] and not plain["after_any_single_loss"]
+    worst = np.array([r["predicted_error_m"] for r in local["marker_pairs"]])
+    base = np.array([r["predicted_error_m"] for r in plain["marker_pairs"]])
+    assert np.all(worst >= base - 1e-15) and np.any(worst > base * 1.01)
+    doc = {"local": local, "requirement": {"error_figure_text": "ellipsoid"}}
+    assert any("after the loss of any one" in line for line in local_markdown(doc))
+    whole = {"fail_low": 0.01, "fail_high": 0.02, "pass_low": 0.98, "n_pairs": 10,
+             "max_losses": 10, "exact": True,
+             "judges_local": {"station_pairs": True, "marker_pairs": True}}
+    ch = {"epsilon": 0.05, "station_target": 0.025, "plan_pass_probability": 0.98,
+          "network": whole, "baselines": {}, "cuts": {"chance_undecided": 0}, "stations": {}}
+    text = "\n".join(chance_markdown({"chance": ch, "detection": {"model": {"name": "m"}}}))
+    assert "station pairs and the pairs of the selected markers" in text
