@@ -57,7 +57,8 @@ def _survives_every_loss(p, cfg, layouts):
     return out, ok
 
 
-@pytest.mark.parametrize(("seed", "factor"), [(1, 1.5), (3, 2.0)])
+@pytest.mark.parametrize(("seed", "factor"), [
+    (1, 1.5), pytest.param(3, 2.0, marks=pytest.mark.slow)])
 def test_redundant_plan_is_the_fewest_layout_surviving_every_loss(seed, factor):
     """The plan is the brute-force optimum of "the layout and each single loss pass the local
     requirement (station and marker pairs)", which needs more sites than the layouts that
