@@ -434,9 +434,6 @@ def _requirement_kinds_iv(c: PlanConfig) -> None:
                           "the distance from the datum, which known control does not have; plan "
                           "in network mode (network = true) or set requirement_ppm to 0")
     local = c.local_requirement_m is not None
-    if local and c.redundant:
-        raise ConfigError("redundant mode does not yet judge a local requirement after the loss "
-                          "of a marker; drop redundant or local_requirement_m")
     if not c.network and (local or not c.datum_requirement):
         raise ConfigError("a local requirement (local_requirement_m) or datum_requirement = "
                           "false is a network-mode requirement: known control judges each "

@@ -143,11 +143,12 @@ def _enumerate(odds: StationOdds, rows: np.ndarray, tail_tolerance: float,
 
 def enumerate_losses(q: np.ndarray, passes, tail_tolerance: float,
                      budget: int = MAX_LOSS_SETS, stop_above: float | None = None,
-                     stop_below: float | None = None) -> StationChance:
+                     stop_below: float | None = None, monotone: bool = True) -> StationChance:
     """Certified bounds on ``P(fail)`` when each of ``m`` items is kept with its chance ``q``.
 
     Loss sets are enumerated by size, smallest first; a set is judged only when none of its
-    subsets already fails (failing is closed upwards), until the chance of losing more items
+    subsets already fails (failing is closed upwards; with ``monotone`` false every set is
+    judged), until the chance of losing more items
     than enumerated is at most ``tail_tolerance``, the next size would pass ``budget`` sets,
     failure is proven above ``stop_above`` or below ``stop_below`` (a decision, not figures).
 
@@ -157,8 +158,8 @@ def enumerate_losses(q: np.ndarray, passes, tail_tolerance: float,
         Each item's chance of being kept (detected and accepted).
     passes : callable
         ``passes(kept) -> (k,) bool`` for ``kept``, (k, m) bool: whether each outcome passes;
-        it must be monotone (keeping more never fails).
-    tail_tolerance, budget, stop_above, stop_below
+        with ``monotone``, keeping more must never fail.
+    tail_tolerance, budget, stop_above, stop_below, monotone
         As above.
 
     Returns
@@ -167,10 +168,11 @@ def enumerate_losses(q: np.ndarray, passes, tail_tolerance: float,
         ``n_markers`` is ``m``.
     """
     m = q.size
-    if not passes(np.ones((1, m), bool))[0]:
+    whole_fails = not passes(np.ones((1, m), bool))[0]
+    if whole_fails and monotone:
         return StationChance(1.0, 1.0, m, m)
     tail = more_losses_than(q)  # tail[k] = P(more than k items lost)
-    low = 0.0
+    low = float(np.prod(q)) if whole_fails else 0.0
     failed = np.zeros(0, np.int64)  # colex ranks of the failing loss sets of the last size
     sizes = sizes_within(m, budget)
     k = 0
@@ -180,7 +182,7 @@ def enumerate_losses(q: np.ndarray, passes, tail_tolerance: float,
         k += 1
         lost = np.array(list(itertools.combinations(range(m), k)), np.int64)  # (c, k)
         fails = np.zeros(len(lost), bool)
-        if failed.size:
+        if failed.size and monotone:
             for drop in range(k):  # a subset one smaller failed
                 fails |= np.isin(_colex_rank(np.delete(lost, drop, axis=1)), failed)
         judge = np.flatnonzero(~fails)
@@ -188,7 +190,7 @@ def enumerate_losses(q: np.ndarray, passes, tail_tolerance: float,
             kept = np.ones((judge.size, m), bool)
             kept[np.arange(judge.size)[:, None], lost[judge]] = False
             fails[judge] = ~passes(kept)
-        if fails.all():  # every larger loss set holds one of these: all fail
+        if fails.all() and monotone:  # every larger loss set holds one of these: all fail
             low += float(_exactly_lost(q, lost[fails]).sum()) + float(tail[k])
             return StationChance(min(low, 1.0), min(low, 1.0), m, m)
         low += float(_exactly_lost(q, lost[fails]).sum())

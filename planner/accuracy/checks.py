@@ -323,12 +323,14 @@ class LayoutCheck:
     pair_error_m : (p,) float or None
         Network mode with a local requirement: the 95 % relative error of each station pair
         it judges (:class:`planner.accuracy.local.LocalAccuracy`; ``None`` for a verdict
-        only), m.
+        only), m; in redundant mode the worst with the layout and after each single loss.
     pairs_ok : bool
         Every judged station pair meets the local requirement (always True without one).
     marker_pair_error_m : (q,) float or None
         With ``local_markers``: the 95 % relative error of each judged pair of selected
-        markers (:meth:`planner.accuracy.local_markers.LocalMarkerAccuracy.pairs` order), m.
+        markers (:meth:`planner.accuracy.local_markers.LocalMarkerAccuracy.pairs` order), m;
+        in redundant mode the worst with the layout and after each single loss of a third
+        marker (a pair one of whose markers is lost no longer exists).
     marker_pairs_ok : bool
         Every judged marker pair meets the local requirement (always True without
         ``local_markers``).
@@ -464,8 +466,9 @@ def _evaluate_network(problem: PlanProblem, selected: np.ndarray, config, net,
         markers_ok = bool(np.all(merr[markers] <= allowed_site[markers]))
     ok = (count >= config.min_markers) & (sectors >= config.min_sectors) & within
     worst_err = worst_sec = None
+    lost, loss_covs = np.zeros(0, np.int64), []
     if config.redundant:
-        _, loss, _ = net.loss_station_errors(selected, j)
+        lost, loss, loss_covs = net.loss_station_errors(selected, j)
         worst_err = np.max(np.vstack([err[None], loss]), axis=0)
         worst_sec = _worst_loss_sectors(problem, selected, config, sectors)
         ok &= _survives_loss(count, worst_sec, worst_err, config, allowed)
@@ -481,13 +484,17 @@ def _evaluate_network(problem: PlanProblem, selected: np.ndarray, config, net,
         if verdict_only:
             pairs_ok = bool(local.within(cov).all())
         else:
-            pair_err = local.errors(cov)
+            pair_err = np.max([local.errors(c) for c in [cov, *loss_covs]], axis=0)
             pairs_ok = bool(np.all(pair_err <= local.pairs.allowed_m))
     marker_pair_err, marker_pairs_ok = None, True
     local_markers = local_marker_accuracy(net, config)
     if local_markers is not None:
         marker_pairs = local_markers.pairs(selected)
         marker_pair_err = local_markers.errors(cov, marker_pairs)
+        for m, c in zip(lost, loss_covs, strict=True):  # redundant: pairs the loss leaves
+            left = (marker_pairs.first != m) & (marker_pairs.second != m)
+            marker_pair_err = np.where(left, np.maximum(
+                marker_pair_err, local_markers.errors(c, marker_pairs)), marker_pair_err)
         marker_pairs_ok = bool(np.all(marker_pair_err <= marker_pairs.allowed_m))
     return LayoutCheck(count=count, sectors=sectors, error_m=err, worst_loss_error_m=worst_err,
                        worst_loss_sectors=worst_sec, ok=ok, marker_error_m=merr,

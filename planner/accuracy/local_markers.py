@@ -71,7 +71,7 @@ def marker_pairs(site_xyz: np.ndarray, sites, requirement: LocalRequirement) -> 
     return replace(pairs, first=sites[pairs.first], second=sites[pairs.second])
 
 
-def marker_maps(net, sites) -> sp.csr_array:
+def marker_maps(net, sites, weight: np.ndarray | None = None) -> sp.csr_array:
     """``M_j = (1 / W_j) sum_s w_s H_s`` of the markers at ``sites`` ((m,) int), stacked:
     (3 m, 6 s) sparse, rows ``3 i .. 3 i + 2`` the marker ``sites[i]``'s (zero for a site no
     station uses).
@@ -82,11 +82,15 @@ def marker_maps(net, sites) -> sp.csr_array:
         Its :meth:`~planner.accuracy.network.NetworkModel.pairs_of`, ``pair_station``,
         ``weight``, ``design`` and ``site_total_weight`` are used.
     sites : (m,) int
+    weight : (P,) float, optional
+        Each pair's weight when not ``net.weight`` (0 for a lost pair: the marker is the mean
+        of the measurements that were detected).
     """
     sites = np.asarray(sites, dtype=np.int64).reshape(-1)
+    weight = net.weight if weight is None else weight
     pairs, pos = net.pairs_of(sites)
-    w = net.site_total_weight[sites]
-    f = net.weight[pairs] / np.where(w > 0, w, 1.0)[pos]  # (q,)
+    w = total_weight(net, weight)[sites]
+    f = weight[pairs] / np.where(w > 0, w, 1.0)[pos]  # (q,)
     blocks = f[:, None, None] * net.design[pairs]  # (q, 3, 6)
     rows = 3 * pos[:, None, None] + np.arange(3)[None, :, None] + np.zeros((1, 1, 6), np.int64)
     cols = 6 * net.pair_station[pairs][:, None, None] + np.arange(6)[None, None, :] \
@@ -95,7 +99,14 @@ def marker_maps(net, sites) -> sp.csr_array:
                         shape=(3 * sites.size, 6 * net.problem.n_stations))
 
 
-def marker_cross_covariance(net, cov, sites) -> np.ndarray:
+def total_weight(net, weight: np.ndarray) -> np.ndarray:
+    """(n,) every site's total weight ``T_j`` (its pairs' ``weight``, (P,), plus its
+    coordinate prior)."""
+    return np.bincount(net.pair_site, weight, minlength=net.problem.n_sites) \
+        + net.site_prior_weight
+
+
+def marker_cross_covariance(net, cov, sites, weight: np.ndarray | None = None) -> np.ndarray:
     """(m, m, 3, 3) joint covariance of the markers at ``sites``, m^2: block ``(a, b)`` is
     ``cov(e_a, e_b) = delta_ab I / W_a + M_a C M_b^T`` (see the module doc); ``inf`` in the
     rows and columns of a marker no station uses or seen from an undetermined station.
@@ -105,12 +116,15 @@ def marker_cross_covariance(net, cov, sites) -> np.ndarray:
     net : planner.accuracy.network.NetworkModel
     cov : planner.accuracy.network_covariance.NetworkCovariance
     sites : (m,) int
+    weight : (P,) float, optional
+        As :func:`marker_maps`.
     """
     sites = np.asarray(sites, dtype=np.int64).reshape(-1)
-    m = marker_maps(net, sites)
+    weight = net.weight if weight is None else weight
+    m = marker_maps(net, sites, weight)
     mc = np.asarray(m @ cov.full)  # (3m, 6s)
     out = np.asarray(m @ mc.T).reshape(sites.size, 3, sites.size, 3).transpose(0, 2, 1, 3)
-    w = net.site_total_weight[sites]
+    w = total_weight(net, weight)[sites]
     idx = np.arange(sites.size)
     out[idx, idx] += (1.0 / np.where(w > 0, w, 1.0))[:, None, None] * np.eye(3)
     bad = (w <= 0) | net.undetermined_markers(cov, sites)
@@ -126,18 +140,27 @@ class LocalMarkerAccuracy:
     ----------
     net : planner.accuracy.network.NetworkModel
     requirement : LocalRequirement
+    weight : (P,) float, optional
+        Each pair's weight when some were lost (0; :class:`~planner.accuracy.network_chance.
+        NetworkOdds`): a marker is then the mean of its detected measurements, and one with
+        none detected is not estimated, so its pairs no longer exist (not judged). Default
+        ``net.weight`` (every usable pair detected).
     """
 
-    def __init__(self, net, requirement: LocalRequirement) -> None:
+    def __init__(self, net, requirement: LocalRequirement,
+                 weight: np.ndarray | None = None) -> None:
         self.net = net
         self.requirement = requirement
         self.kind = requirement.kind
+        self.weight = net.weight if weight is None else np.asarray(weight, float)
 
     def pairs(self, selected) -> PointPairs:
         """The judged pairs of the layout ``selected`` ((n,) bool): its markers some station
-        uses (a marker no station sees is not estimated by the network, and not judged), but
-        the control points (their accuracy is given, as for the network requirement)."""
-        seen = np.asarray(selected, bool) & (self.net.site_weight > 0) & ~self.net.control
+        uses (a marker no station sees, or whose every measurement was lost, is not estimated
+        by the network, and not judged), but the control points (their accuracy is given, as
+        for the network requirement)."""
+        seen = np.asarray(selected, bool) & (total_weight(self.net, self.weight) > 0) \
+            & ~self.net.control
         return marker_pairs(self.net.problem.site_xyz, np.flatnonzero(seen), self.requirement)
 
     def difference_covariances(self, cov, pairs: PointPairs) -> np.ndarray:
@@ -147,7 +170,7 @@ class LocalMarkerAccuracy:
             return np.zeros((0, 3, 3))
         sites, inv = np.unique(np.r_[pairs.first, pairs.second], return_inverse=True)
         a, b = inv[:pairs.size], inv[pairs.size:]
-        full = marker_cross_covariance(self.net, cov, sites)
+        full = marker_cross_covariance(self.net, cov, sites, self.weight)
         finite = np.isfinite(full[np.arange(sites.size), np.arange(sites.size)]).all(axis=(1, 2))
         full[~finite] = 0.0
         full[:, ~finite] = 0.0
@@ -184,8 +207,8 @@ class LocalMarkerAccuracy:
         ``u`` (the top eigenvector of ``Sigma_jk``, or the line for ``"distance"``)."""
         which = np.asarray(which, np.int64)
         first, second = pairs.first[which], pairs.second[which]
-        m1 = marker_maps(self.net, first).toarray().reshape(which.size, 3, -1)
-        m2 = marker_maps(self.net, second).toarray().reshape(which.size, 3, -1)
+        m1 = marker_maps(self.net, first, self.weight).toarray().reshape(which.size, 3, -1)
+        m2 = marker_maps(self.net, second, self.weight).toarray().reshape(which.size, 3, -1)
         if self.kind == "position":
             sigma = self.difference_covariances(cov, pairs.subset(which))
             u = np.linalg.eigh(sigma)[1][:, :, -1]
@@ -204,8 +227,8 @@ class LocalMarkerAccuracy:
         if which.size == 0:
             return []
         g, u = self.gradients(cov, pairs, which)
-        w1 = self.net.site_total_weight[pairs.first[which]]
-        w2 = self.net.site_total_weight[pairs.second[which]]
+        total = total_weight(self.net, self.weight)
+        w1, w2 = total[pairs.first[which]], total[pairs.second[which]]
         const = np.einsum("qa,qa->q", u, u) * (1.0 / w1 + 1.0 / w2)
         b = pairs.allowed_m[which] ** 2 / self.net.figure.cut_chi2
         return self.net.tangents(cov, list(g), [int(i) for i in which], b, const)
@@ -221,9 +244,14 @@ def local_marker_accuracy(net, config) -> LocalMarkerAccuracy | None:
 
 
 def pair_cut_rows(model, pairs: PointPairs, bad, tying_rest: np.ndarray, tangents,
-                  selected: np.ndarray) -> tuple[list, list[float], list[str]]:
+                  selected: np.ndarray, lost: int | None = None
+                  ) -> tuple[list, list[float], list[str]]:
     """The ``"cut-marker-pair"`` and ``"oa-marker-pair"`` rows (module doc) of the failing
-    pairs ``bad``.
+    pairs ``bad``; with ``lost``, the redundant rows ``"cut-loss-marker-pair"`` and
+    ``"oa-loss-marker-pair"`` of pairs that fail once the marker ``lost`` is lost (enforced
+    only when all three markers are selected: ``sum_{i tying, not selected} x_i >= x_lost +
+    x_j + x_k - 2``, valid as the plain row is, the information without ``lost`` being the
+    layout's with it, and the tangents at the covariance without it).
 
     Parameters
     ----------
@@ -237,6 +265,8 @@ def pair_cut_rows(model, pairs: PointPairs, bad, tying_rest: np.ndarray, tangent
         Sparse tangents normalised to ``sum coef x >= 1`` (:func:`~planner.program.
         cuts_network.sparse_tangent`).
     selected : (n,) bool
+    lost : int, optional
+        The lost marker's site (redundant mode).
 
     Returns
     -------
@@ -246,24 +276,27 @@ def pair_cut_rows(model, pairs: PointPairs, bad, tying_rest: np.ndarray, tangent
         Each row is ``row @ vars >= lower``.
     """
     rows, lower, kinds = [], [], []
+    extra = [] if lost is None else [lost]
+    cut, oa = ("cut-marker-pair", "oa-marker-pair") if lost is None \
+        else ("cut-loss-marker-pair", "oa-loss-marker-pair")
     for p in np.asarray(bad, np.int64):
-        implied, shift = _both(model, pairs.first[p], pairs.second[p])
+        implied, shift = _all_of(model, [pairs.first[p], pairs.second[p], *extra])
         rows.append(model.site_row(np.r_[tying_rest, implied],
                                    np.r_[np.ones(tying_rest.size), -np.ones(implied.size)]))
         lower.append(shift)
-        kinds.append("cut-marker-pair")
+        kinds.append(cut)
     for p, sites, coef in tangents:
-        implied, shift = _both(model, pairs.first[p], pairs.second[p])
+        implied, shift = _all_of(model, [pairs.first[p], pairs.second[p], *extra])
         rows.append(model.site_row(np.r_[sites, implied], np.r_[coef, -np.ones(implied.size)]))
         lower.append(shift)
-        kinds.append("oa-marker-pair")
+        kinds.append(oa)
     return rows, lower, kinds
 
 
-def _both(model, j: int, k: int) -> tuple[np.ndarray, float]:
-    """``x_j + x_k - 1`` as the variables among ``j, k`` and the lower bound of a row
-    ``(...) - (x_j + x_k) >= -1`` once a fixed site's ``x = 1`` is moved to it."""
-    sites = np.array([j, k], np.int64)
+def _all_of(model, sites) -> tuple[np.ndarray, float]:
+    """``sum_{i in sites} x_i - (|sites| - 1)`` as the variables among ``sites`` and the lower
+    bound of a row ``(...) - sum x_i >= 1 - |sites|`` once a fixed site's ``x = 1`` is moved
+    to it."""
+    sites = np.asarray(sites, np.int64)
     var = model.site_var[sites] >= 0
-    return sites[var], -1.0 + float(np.sum(~var))
-
+    return sites[var], 1.0 - sites.size + float(np.sum(~var))

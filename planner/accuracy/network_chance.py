@@ -16,6 +16,18 @@ either (its pairs are extra, independent observations), so a layout proven to fa
 layout with a subset of its sites fails: the chance-constrained planner's no-good rows
 (:mod:`planner.program.cuts_chance`).
 
+With ``local_markers`` each outcome also judges the pairs of selected markers
+(:mod:`planner.accuracy.local_markers`) among those it still estimates: a marker is the mean of
+its detected measurements, and a marker none of whose measurements was detected is not
+estimated, so its pairs no longer exist and are not judged. Passing is then not monotone in
+the detected pairs (losing a marker's last measurement drops its failing pairs), so every loss
+set is judged (``monotone=False``: no pruning, the bounds stay certified within the same
+budget). Across layouts only this holds: a layout ``S`` inside a failing ``C`` that keeps every
+marker of ``C``'s judged pairs (:meth:`NetworkOdds.paired_sites`) fails in every outcome in
+which ``C`` fails (the same pairs, each estimated from the same detected measurements, with
+less pose information), so the planner's no-good rows keep those markers in
+(:meth:`planner.program.cuts_chance.ChanceRule.whole_cuts`).
+
 A large network has thousands of pairs and expects many losses: no enumeration within its
 budget can bound the tail below the plan's epsilon. :meth:`NetworkOdds.decide` then judges
 ``SAMPLES_TO_DECIDE`` sampled outcomes with the same judge, and a layout meets the rule when
@@ -39,6 +51,7 @@ from planner.accuracy.chance import (
     sizes_within,
 )
 from planner.accuracy.local import local_accuracy
+from planner.accuracy.local_markers import LocalMarkerAccuracy, local_marker_accuracy
 from planner.accuracy.network import SINGULAR_PIVOT, NetworkCovariance, network_model
 from planner.problem.usability import PlanProblem, sector_index
 
@@ -112,7 +125,7 @@ class NetworkOdds:
     config : PlanConfig
         The network's datum and priors (:func:`~planner.accuracy.network.network_model`),
         ``min_markers``, ``min_sectors``, ``n_sectors``, ``requirement_m``,
-        ``requirement_ppm``.
+        ``requirement_ppm``, the local requirement (``local_markers``).
     """
 
     def __init__(self, problem: PlanProblem, selected: np.ndarray, config) -> None:
@@ -131,6 +144,8 @@ class NetworkOdds:
         self.min_markers = config.min_markers
         self.min_sectors = config.min_sectors
         self.local = local_accuracy(self.net, config)
+        self.local_markers = local_marker_accuracy(self.net, config)
+        self.selected = np.flatnonzero(np.asarray(selected, bool))
         # each tie's block H_a^T H_b scattered into the flattened (6 s)^2 pose matrix
         blocks, flat = self.net.tie_blocks(np.arange(self.net.tie_a.size))
         self._scatter = csr_array((blocks.ravel(), (np.repeat(np.arange(len(blocks)), 36),
@@ -140,7 +155,8 @@ class NetworkOdds:
     def passes(self, kept: np.ndarray) -> np.ndarray:
         """(k,) bool: whether every station passes with each row of ``kept`` ((k, p) bool over
         the network's pairs: detected or lost), and, with a local requirement, every station
-        pair it judges (each row that passes the rest inverted on its own)."""
+        pair it judges and (``local_markers``) every pair of markers still estimated (each row
+        that passes the rest inverted on its own)."""
         k = kept.astype(float)
         count = k @ self._station
         sectors = ((k @ self._sector) > 0).reshape(len(k), -1, self.n_sectors).sum(axis=2)
@@ -157,7 +173,32 @@ class NetworkOdds:
                 np.tile(self.net.allowed_station_m, at.size)).reshape(at.size, -1).all(axis=1)
             if self.local is not None:
                 ok[at] &= self.local.all_within(covariances)
+            if self.local_markers is not None:
+                ok[at] &= self._marker_pairs_pass(kept[at], covariances)
         return ok
+
+    @property
+    def monotone(self) -> bool:
+        """Whether passing is monotone in the detected pairs (not with ``local_markers``)."""
+        return self.local_markers is None
+
+    def _marker_pairs_pass(self, kept: np.ndarray, covariances: list[NetworkCovariance]
+                           ) -> np.ndarray:
+        """(k,) bool: whether every judged pair of the markers each row of ``kept`` ((k, p)
+        bool) still estimates passes, with that row's covariance."""
+        every = np.ones(self.net.problem.n_sites, bool)
+        req = self.local_markers.requirement
+        return np.array([LocalMarkerAccuracy(self.net, req, np.where(row, self.net.weight, 0.0))
+                         .failing(cov, every)[1].size == 0
+                         for row, cov in zip(kept, covariances, strict=True)], bool)
+
+    def paired_sites(self) -> np.ndarray:
+        """(m,) int: the layout's sites (indices into the whole problem) that some judged
+        marker pair holds with every pair detected (empty without ``local_markers``)."""
+        if self.local_markers is None:
+            return np.zeros(0, np.int64)
+        pairs = self.local_markers.pairs(np.ones(self.net.problem.n_sites, bool))
+        return self.selected[np.unique(np.r_[pairs.first, pairs.second])]
 
     def station_errors(self, kept: np.ndarray) -> np.ndarray:
         """(k, s) 95 % network error of every station with each row of ``kept`` ((k, p) bool),
@@ -220,7 +261,8 @@ class NetworkOdds:
         or after ``budget`` loss sets; with ``decide``, as soon as the bounds put the chance
         of failing above or below ``epsilon`` (the planner's question)."""
         stop = epsilon if decide else None
-        c = enumerate_losses(self.q, self.passes, TAIL_FRACTION * epsilon, budget, stop, stop)
+        c = enumerate_losses(self.q, self.passes, TAIL_FRACTION * epsilon, budget, stop, stop,
+                             self.monotone)
         return NetworkChance(c.fail_low, c.fail_high, c.n_markers, c.max_losses)
 
     def can_bound(self, epsilon: float, budget: int = MAX_LOSS_SETS) -> bool:

@@ -86,6 +86,6 @@ def sampled_chance(problem: PlanProblem, selected: np.ndarray, config, n_samples
         check = evaluate_layout(replace(sub, pair_reason=reason), all_sites, config,
                                 verdict_only=True)
         station_passed += check.ok
-        n_passed += bool(check.ok.all()) and check.pairs_ok
+        n_passed += bool(check.ok.all()) and check.pairs_ok and check.marker_pairs_ok
     return SampledChance(n_samples=int(n_samples), seed=int(seed), n_passed=n_passed,
                          station_passed=station_passed)

@@ -7,7 +7,9 @@ section gives each station's certified chance of passing (:mod:`planner.accuracy
 plan's (known control: their product, stations using their own pairs; network mode, where
 the stations' figures judge count and directions: the whole network's with its accuracy,
 :mod:`planner.accuracy.network_chance`), and the pass rate over sampled detection outcomes
-(:mod:`planner.accuracy.sampled_chance`), beside the constraint the plan was made for.
+(:mod:`planner.accuracy.sampled_chance`), beside the constraint the plan was made for. In
+network mode ``network.judges_local`` says whether each outcome also judged the local
+requirement's station pairs and (``local_markers``) marker pairs.
 """
 
 from __future__ import annotations
@@ -43,7 +45,10 @@ def chance_sections(outcome) -> dict:
                       for name, p in outcome.baseline_chances.items()},
     }
     if whole is not None:
-        section["network"] = whole.to_json()
+        cfg = outcome.config
+        section["network"] = {**whole.to_json(), "judges_local": {
+            "station_pairs": cfg.local_requirement_m is not None,
+            "marker_pairs": cfg.local_requirement_m is not None and bool(cfg.local_markers)}}
     if outcome.sampled is not None:
         section["sampled"] = outcome.sampled.to_json()
     return {"detection": {"model": outcome.detection, "pairs": pairs}, "chance": section}
@@ -73,6 +78,12 @@ def chance_markdown(doc: dict) -> list[str]:
                 "bounded)" if whole["max_losses"] else
                 f" (no certified bound: {whole['n_pairs']:,} pairs are too many to enumerate; "
                 "the sampled figure below is the plan's)")]
+    judges = (whole or {}).get("judges_local", {})
+    if judges.get("station_pairs"):
+        lines.append("- every outcome also judges the local requirement's station pairs"
+                     + (" and the pairs of the selected markers it still estimates (a marker "
+                        "none of whose measurements was detected drops its pairs)"
+                        if judges.get("marker_pairs") else ""))
     if "sampled" in ch:
         s = ch["sampled"]
         lines.append(f"- in {s['n_samples']} sampled detection outcomes: "

@@ -8,7 +8,9 @@ predicted 95 % relative error and allowance (m), and whether it meets it. With
 ``local_markers`` (:mod:`planner.accuracy.local_markers`) also ``n_marker_pairs``,
 ``markers_meet_requirement``, ``worst_marker_pair`` and ``marker_pairs`` (each pair of selected
 markers' site ids as ``markers``, the same fields), and ``marker_pairs.csv`` (the columns of
-``pairs.csv``).
+``pairs.csv``). ``after_any_single_loss`` (redundant mode): every predicted error is the
+worst with the plan and after the loss of any one selected marker (a marker pair one of whose
+markers is lost no longer exists and is not judged in that loss).
 """
 
 from __future__ import annotations
@@ -55,7 +57,8 @@ def local_record(outcome, net) -> dict | None:
            "local_requirement_ppm": req.ppm, "local_within_m": req.within_m,
            "local_kind": req.kind, "n_pairs": pairs.size,
            "meets_requirement": all(r["meets_requirement"] for r in rows),
-           "worst_pair": worst, "pairs": rows}
+           "worst_pair": worst, "pairs": rows,
+           "after_any_single_loss": bool(outcome.config.redundant)}
     return {**out, **_marker_pairs_record(outcome, net)}
 
 
@@ -116,6 +119,10 @@ def local_markdown(doc: dict) -> list[str]:
              f"({doc['requirement']['error_figure_text']}); {local['n_pairs']} station pairs "
              f"judged, {'all' if local['meets_requirement'] else 'not all'} within it "
              "(`pairs.csv`)."]
+    if local.get("after_any_single_loss"):
+        lines += ["", "Redundant mode: each predicted error is the worst with every marker and "
+                      "after the loss of any one selected marker (a marker pair whose marker is "
+                      "lost is not judged in that loss)."]
     ranked = sorted(local["pairs"], key=lambda r: -math.inf if r["predicted_error_m"] is None
                     else -r["predicted_error_m"] / r["allowed_error_m"])[:5]
     if ranked:

@@ -212,6 +212,27 @@ def _grid_passes(problem: PlanProblem, selected: np.ndarray, config, infos, net)
                                                 <= allowed_site[judged]))
 
 
+def _local_after_loss(net, local, local_markers, selected: np.ndarray, lost: np.ndarray,
+                      covariances: list):
+    """Redundant mode: the first loss of a selected tying marker (``lost``, with the pose
+    covariance without each, ``covariances``) after which a station pair of ``local``, or
+    (``local_markers``) a pair of the remaining selected markers, fails. Returns ``(cov,
+    bad station pairs (q,) int, marker pairs or None, bad marker pairs (r,) int)``, the
+    failing arrays empty (and ``cov`` None) when every loss passes."""
+    none = np.zeros(0, np.int64)
+    for m, cov in zip(lost, covariances, strict=True):
+        bad = none if local is None else local.failing(cov)
+        if bad.size:
+            return cov, bad, None, none
+        if local_markers is not None:
+            left = selected.copy()
+            left[m] = False
+            pairs, bad_m = local_markers.failing(cov, left)
+            if bad_m.size:
+                return cov, none, pairs, bad_m
+    return None, none, None, none
+
+
 def greedy_network(problem: PlanProblem, config, net=None, max_steps: int = 5000,
                    batch: int = 1, deadline: float | None = None) -> Baseline:
     """Greedy baseline in network mode.
@@ -228,7 +249,8 @@ def greedy_network(problem: PlanProblem, config, net=None, max_steps: int = 5000
     requirement; in redundant mode then also of the station that fails worst after losing one
     marker; with a local requirement (:mod:`planner.accuracy.local`) then of the first failing
     station pairs (their worst relative direction), and with ``local_markers`` of the first
-    failing marker pairs (:mod:`planner.accuracy.local_markers`). ``batch > 1`` adds, per
+    failing marker pairs (:mod:`planner.accuracy.local_markers`), and in redundant mode last
+    of the first pairs that fail after the loss of one marker. ``batch > 1`` adds, per
     step, a site for each of the ``batch`` first untied (then worst failing) stations (for
     large networks: fewer exact evaluations). The information and covariance grow with each
     added site (:class:`planner.accuracy.growing.GrowingCovariance`: a low-rank update per
@@ -294,9 +316,14 @@ def greedy_network(problem: PlanProblem, config, net=None, max_steps: int = 5000
             bad_pairs = np.zeros(0, np.int64) if local is None else local.failing(cov)
             if local_markers is not None and loss is None and bad_pairs.size == 0:
                 mpairs, bad_mpairs = local_markers.failing(cov, selected)
+            if config.redundant and loss is None and bad_pairs.size == 0 \
+                    and bad_mpairs.size == 0:  # the local pairs after each loss
+                cov, bad_pairs, mpairs, bad_mpairs = _local_after_loss(
+                    net, local, local_markers, selected, lost, loss_cov)
             if loss is None and bad_pairs.size == 0 and bad_mpairs.size == 0:
                 return Baseline("greedy", selected, True)
-        if bad_pairs.size:  # stations and markers pass: the first failing pairs
+        if bad_pairs.size:  # stations and markers pass: the first failing pairs (after a
+            # loss in redundant mode: the pose covariance without it)
             v = (local.gradients(cov, bad_pairs[:batch]) @ cov.full)[:, net.free]
             gains = list(net.site_coefficients(v))
         elif bad_mpairs.size:  # then the first failing marker pairs

@@ -9,8 +9,10 @@ bounds cannot decide (enumeration budget spent) gets the plain row on ``C`` as a
 ``"chance-undecided"`` row, counted in the plan, since it is not proven valid.
 
 In network mode the stations' rule judges count and directions; a layout that meets it is then
-judged as a whole, with the network's accuracy (:mod:`planner.accuracy.network_chance`), and
-a layout that fails gets a no-good row (:meth:`ChanceRule.whole_cuts`).
+judged as a whole, with the network's accuracy and local requirement
+(:mod:`planner.accuracy.network_chance`), and a layout that fails gets a no-good row
+(:meth:`ChanceRule.whole_cuts`), which with ``local_markers`` keeps the markers of the
+layout's judged marker pairs in (marker pairs are not monotone in the selection).
 
 :func:`chance_count_rows` are valid from the start: a station needs at least ``k`` markers
 when even its ``k - 1`` likeliest usable markers detect ``min_markers`` too rarely.
@@ -53,12 +55,17 @@ class ChanceRule:
         whole rule.
     epsilon : float or None
         The plan's allowed chance of failing (with ``whole``).
+    paired : callable or None
+        With ``whole`` and ``local_markers``: ``paired(selected) -> (m,) int``, the layout's
+        sites some judged marker pair holds (:meth:`~planner.accuracy.network_chance.
+        NetworkOdds.paired_sites`).
     """
 
     odds: list[StationOdds]
     target: float
     whole: Callable[[np.ndarray], NetworkChance] | None = None
     epsilon: float | None = None
+    paired: Callable[[np.ndarray], np.ndarray] | None = None
 
     def cuts(self, problem: PlanProblem, model: Model, selected: np.ndarray):
         """:func:`chance_cuts` of a layout."""
@@ -82,15 +89,23 @@ class ChanceRule:
 
     def whole_cuts(self, problem: PlanProblem, model: Model, selected: np.ndarray
                    ) -> tuple[sp.csr_array | None, list[float], list[RowKind]]:
-        """A no-good row for a layout whose whole network fails ``epsilon``: some site outside
-        it, ``sum_{j not in C} x_j >= 1`` (valid: a subset of a failing layout fails too),
-        ``"chance-network"`` when proven, ``"chance-undecided"`` when only sampled outcomes
-        decided it; ``(None, [], [])`` when it passes or without ``whole``."""
+        """A no-good row for a layout ``C`` whose whole network fails ``epsilon``: some site
+        outside it, ``sum_{j not in C} x_j >= 1`` (valid: a subset of a failing layout fails
+        too), or with ``local_markers`` some site outside it or one of the sites ``P`` of its
+        judged marker pairs left out, ``sum_{j not in C} x_j - sum_{j in P} x_j >= 1 - |P|``
+        (valid: a subset of ``C`` holding ``P`` fails in every outcome ``C`` fails in; fixed
+        sites of ``P`` drop out); ``"chance-network"`` when proven, ``"chance-undecided"``
+        when only sampled outcomes decided it; ``(None, [], [])`` when it passes or without
+        ``whole``."""
         if self.whole_ok(selected):
             return None, [], []
         proven = self.whole(selected).fail_low > self.epsilon
         rest = np.flatnonzero(~np.asarray(selected, bool) & (model.site_var >= 0))
-        return (sp.csr_array(model.site_row(rest)), [1.0],
+        paired = np.zeros(0, np.int64) if self.paired is None else self.paired(selected)
+        paired = paired[model.site_var[paired] >= 0]
+        row = model.site_row(np.r_[rest, paired], np.r_[np.ones(rest.size),
+                                                        -np.ones(paired.size)])
+        return (sp.csr_array(row), [1.0 - paired.size],
                 [RowKind("chance-network" if proven else "chance-undecided")])
 
 
@@ -103,16 +118,18 @@ def chance_rule(problem: PlanProblem, config, infos: list[StationInfo]) -> Chanc
     target = station_target(config.chance_epsilon, problem.n_stations)
     if not config.network:
         return ChanceRule(station_odds(problem, infos, config), target)
-    judged: dict[bytes, NetworkChance] = {}
+    judged: dict[bytes, tuple[NetworkChance, np.ndarray]] = {}
 
-    def whole(selected: np.ndarray) -> NetworkChance:
+    def judge(selected: np.ndarray) -> tuple[NetworkChance, np.ndarray]:
         key = np.packbits(np.asarray(selected, bool)).tobytes()
         if key not in judged:
-            judged[key] = NetworkOdds(problem, selected, config).decide(config.chance_epsilon)
+            odds = NetworkOdds(problem, selected, config)
+            judged[key] = odds.decide(config.chance_epsilon), odds.paired_sites()
         return judged[key]
 
-    return ChanceRule(station_odds(problem, infos, config), target, whole,
-                      config.chance_epsilon)
+    return ChanceRule(station_odds(problem, infos, config), target,
+                      lambda selected: judge(selected)[0], config.chance_epsilon,
+                      lambda selected: judge(selected)[1])
 
 
 def chance_preflight(problem: PlanProblem, config, rule: ChanceRule) -> dict[str, str]:

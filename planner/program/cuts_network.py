@@ -208,8 +208,8 @@ def network_cuts(problem: PlanProblem, model: Model, selected: np.ndarray, confi
     if failing.size == 0 and bad_markers.size == 0 and bad_pairs.size == 0 \
             and bad_marker_pairs.size == 0:
         if config.redundant:
-            loss = _network_loss_cuts(model, selected, j_sel, config, net, tying, in_model,
-                                      upper_bound)
+            loss = _network_loss_cuts(model, selected, j_sel, net, tying, in_model,
+                                      upper_bound, local, local_markers)
             if loss[0] is not None:
                 return loss
         return bias_cuts(model, selected, config, net, tying & in_model)
@@ -357,38 +357,72 @@ def bias_cuts(model: Model, selected: np.ndarray, config, net: NetworkModel,
     return sp.csr_array(row), [1.0 - inside.size], [RowKind("cut-bias", worst)]
 
 
-def _network_loss_cuts(model: Model, selected: np.ndarray, j_sel: np.ndarray, config,
+def _network_loss_cuts(model: Model, selected: np.ndarray, j_sel: np.ndarray,
                        net: NetworkModel, tying: np.ndarray, in_model: np.ndarray,
-                       upper_bound: int | None
+                       upper_bound: int | None, local=None, local_markers=None
                        ) -> tuple[sp.csr_array | None, list[float], list[RowKind]]:
     """Redundant network mode: valid cuts for a layout that passes whole but fails at some
-    station after losing one tying marker ``m``.
+    station, or (with a local requirement) some station pair or pair of the remaining selected
+    markers, after losing one tying marker ``m`` (losing a marker one station sees changes no
+    covariance and only removes marker pairs).
 
     ``"cut-loss"``: ``sum_{j tying, not selected} x_j - x_m >= 0`` (with ``m`` the layout needs a
     site outside the selected ones: every subset of the selected sites without ``m`` fails, by
     monotonicity); ``"oa-loss"``: the failing stations' tangents at the information without
     ``m``, enforced only when ``x_m = 1``: ``sum_{j != m} c_j x_j - x_m >= 0`` (normalised).
-    Arguments as :func:`network_cuts` (``j_sel``: the layout's information, ``tying``: open
-    tying sites, ``in_model``: sites that are variables). Returns ``(None, [], [])`` when
-    every loss passes.
+    A failing station pair (``local``, :class:`~planner.accuracy.local.LocalAccuracy`) gives
+    the same two rows, ``"cut-loss-pair"`` and ``"oa-loss-pair"`` (the pair is monotone as a
+    station is); a failing marker pair (``local_markers``) the rows of :func:`~planner.accuracy.
+    local_markers.pair_cut_rows` with ``lost=m``, enforced only when ``m`` and both markers
+    are selected. Arguments as :func:`network_cuts` (``j_sel``: the layout's information,
+    ``tying``: open tying sites, ``in_model``: sites that are variables). Returns ``(None,
+    [], [])`` when every loss passes.
     """
     markers, errors, covariances = net.loss_station_errors(selected, j_sel)
     rest = np.flatnonzero(tying & ~selected)
     rows, lower, kinds = [], [], []
-    for m, err, cov in zip(markers, errors, covariances, strict=True):
-        bad = np.flatnonzero(net.stations_failing(err))
-        if bad.size == 0:
-            continue
+
+    def implied(m, failing, tangents, cut, oa):
+        """The no-good and tangent rows "``x_m`` implies" of one loss."""
         rows.append(model.implied_row(m, rest))
         lower.append(0.0)
-        kinds.append(RowKind("cut-loss", int(bad[0])))
-        for k, coef, rhs in net.station_tangents(cov, bad):
+        kinds.append(RowKind(cut, failing))
+        for k, coef, rhs in tangents:
             coef = np.where(in_model, coef, 0.0)
             coef[m] = 0.0
             sites, c, _ = sparse_tangent(coef, rhs, upper_bound, MAX_TERMS)
             rows.append(model.implied_row(m, sites, c))
             lower.append(0.0)
-            kinds.append(RowKind("oa-loss", k))
+            kinds.append(RowKind(oa, k))
+
+    for m, err, cov in zip(markers, errors, covariances, strict=True):
+        bad = np.flatnonzero(net.stations_failing(err))
+        if bad.size:
+            implied(m, int(bad[0]), net.station_tangents(cov, bad), "cut-loss", "oa-loss")
+            continue
+        bad_pairs = np.zeros(0, np.int64) if local is None else local.failing(cov)
+        if bad_pairs.size:
+            implied(m, int(local.pairs.first[bad_pairs[0]]),
+                    local.tangents(cov, bad_pairs[:_MAX_OA_STATIONS]), "cut-loss-pair",
+                    "oa-loss-pair")
+        if local_markers is None:
+            continue
+        left = selected.copy()
+        left[m] = False
+        pairs, bad_mpairs = local_markers.failing(cov, left)
+        if bad_mpairs.size == 0:
+            continue
+        tangents = []
+        for p, coef, rhs in local_markers.tangents(cov, pairs, bad_mpairs[:_MAX_OA_STATIONS]):
+            coef = np.where(in_model, coef, 0.0)
+            coef[m] = 0.0
+            cut = sparse_tangent(coef, rhs, upper_bound, MAX_TERMS)
+            tangents.append((p, cut[0], cut[1]))
+        for row, lo, kind in zip(*pair_cut_rows(model, pairs, bad_mpairs, rest, tangents,
+                                                selected, lost=int(m)), strict=True):
+            rows.append(row)
+            lower.append(lo)
+            kinds.append(RowKind(kind))
     if not rows:
         return None, [], []
     return sp.csr_array(sp.vstack(rows)), lower, kinds

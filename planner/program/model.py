@@ -75,7 +75,8 @@ class RowKind:
         network mode: "upper-bound", "cut", "connect", "oa", "cut-marker", "oa-marker",
         "cut-pair", "oa-pair", "cut-marker-pair", "oa-marker-pair"
         (:func:`~planner.program.cuts_network.network_cuts`), redundant:
-        "cut-loss", "oa-loss" (:func:`~planner.program.cuts_network._network_loss_cuts`),
+        "cut-loss", "oa-loss", "cut-loss-pair", "oa-loss-pair", "cut-loss-marker-pair",
+        "oa-loss-marker-pair" (:func:`~planner.program.cuts_network._network_loss_cuts`),
         "cut-bias"
         (:func:`~planner.program.cuts_network.bias_cuts`); chance-constrained:
         "chance-count", "chance-critical", "chance", "chance-undecided"
