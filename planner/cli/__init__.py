@@ -1,7 +1,10 @@
 """The ``markerplan`` command: one click group, one module per sub-command.
 
 Sub-command modules are imported lazily so ``markerplan --help`` stays instant; each module
-imports its heavy dependencies inside the command function.
+imports its heavy dependencies inside the command function. The options several commands share
+are defined once: :mod:`planner.cli._common` (the vocabulary every command draws on),
+:mod:`planner.cli._network_options` (network mode's datum, requirement kinds and pose aids) and
+:mod:`planner.cli.verify_options` (options only ``verify --trials`` takes).
 """
 
 from __future__ import annotations

@@ -16,19 +16,21 @@ from planner.cli._common import (
     REQUIREMENT_M,
     REQUIREMENT_PPM,
     FiniteRange,
-    control_option,
-    datum_choice,
-    datum_option,
     emit_summary,
-    error_figure_option,
     error_model_option,
     given_paths,
     json_option,
-    odometry_percent_option,
     out_option,
     overwrite_option,
     renamed_option,
     report_timings,
+)
+from planner.cli._network_options import (
+    control_option,
+    datum_choice,
+    datum_option,
+    error_figure_option,
+    odometry_percent_option,
 )
 
 #: Bounds of the angle sigmas, degrees: above 10 deg an inclinometer or sun sensor measures

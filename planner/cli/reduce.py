@@ -9,10 +9,8 @@ import click
 from planner.cli._common import (
     boundary_option,
     config_option,
-    control_option,
     dem_option,
     emit_summary,
-    error_figure_option,
     error_model_option,
     exclude_option,
     given_paths,
@@ -20,15 +18,11 @@ from planner.cli._common import (
     json_option,
     marker_radius_option,
     mounting_offset_options,
-    network_option,
-    network_settings,
     out_option,
     overwrite_option,
-    reference_station_option,
     report_timings,
     reproject_option,
     require_dem,
-    requirement_options,
     scheduler_options,
     seed_option,
     site_option,
@@ -37,6 +31,14 @@ from planner.cli._common import (
     stations_option,
     time_limit_option,
     with_options,
+)
+from planner.cli._network_options import (
+    control_option,
+    error_figure_option,
+    network_option,
+    network_settings,
+    reference_station_option,
+    requirement_options,
 )
 
 

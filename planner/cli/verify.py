@@ -14,16 +14,14 @@ from planner.cli._common import (
     given_paths,
     json_option,
     mounting_offset_options,
-    network_option,
     out_option,
     overwrite_option,
-    reference_station_option,
-    require_network,
     scheduler_options,
     seed_option,
     sensor_profile_option,
     station_ids_option,
 )
+from planner.cli._network_options import network_option, reference_station_option, require_network
 from planner.cli.adjust import command as _adjust
 from planner.cli.verify_options import offset_tolerance_options
 
