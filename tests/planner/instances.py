@@ -44,6 +44,16 @@ def ring(centre, radius, bearings_deg):
     return np.asarray(centre, float) + radius * np.column_stack([np.cos(b), np.sin(b)])
 
 
+def station_line(n_stations=4, seed=5, n_sites=12, spacing=15.0):
+    """Stations ``spacing`` m apart on the x axis with ``n_sites`` random sites around them
+    (x from 10 m before the first to 10 m past the last, y within 12 m), 20 m range."""
+    rng = np.random.default_rng(seed)
+    st_xy = np.column_stack([np.arange(n_stations) * spacing, np.zeros(n_stations)])
+    x0, x1 = -10.0, (n_stations - 1) * spacing + 10.0
+    sites = np.column_stack([rng.uniform(x0, x1, n_sites), rng.uniform(-12, 12, n_sites)])
+    return make_problem(st_xy, sites, max_range_m=20.0)
+
+
 class AnalyticModel:
     """Tiny stand-in error model for tests only (sigma linear in distance, fixed domain)."""
 

@@ -21,7 +21,7 @@ from planner.accuracy.local import (
 from planner.accuracy.network import NetworkModel, network_model
 from planner.config import PlanConfig
 from planner.program import plan_sites
-from tests.planner.instances import brute_force_optimum, make_problem
+from tests.planner.instances import brute_force_optimum, station_line
 
 INCL = np.radians(0.01)
 RADIUS = 10.0
@@ -102,14 +102,6 @@ def test_station_pairs_and_requirement_bounds():
         PlanConfig(network=True, local_requirement_m=0.1, local_within_m=-5.0)
 
 
-def _line(n_stations=4, seed=5, n_sites=10, spacing=15.0):
-    rng = np.random.default_rng(seed)
-    st_xy = np.column_stack([np.arange(n_stations) * spacing, np.zeros(n_stations)])
-    x1 = (n_stations - 1) * spacing + 10.0
-    sites = np.column_stack([rng.uniform(-10.0, x1, n_sites), rng.uniform(-12, 12, n_sites)])
-    return make_problem(st_xy, sites, max_range_m=20.0)
-
-
 @pytest.mark.parametrize(("figure", "kind"), [("ellipsoid", "position"),
                                               ("ellipsoid", "distance"),
                                               ("quantile", "position")])
@@ -117,7 +109,7 @@ def test_pair_tangent_cuts_never_remove_a_passing_layout(figure, kind):
     """Brute force over every layout of a 10-site line of stations: every layout whose pairs
     all pass satisfies every pair tangent taken at any failing layout (the quantile on 8
     sites: its figure is the costly one)."""
-    p = _line(3, n_sites=8 if figure == "quantile" else 10)
+    p = station_line(3, n_sites=8 if figure == "quantile" else 10)
     net = NetworkModel(p, RADIUS, INCL, figure=ErrorFigure(figure))
     probe = LocalAccuracy(net, LocalRequirement(1.0, within_m=20.0, kind=kind))
     best = probe.errors(net.covariance(net.information(np.ones(p.n_sites, bool))))
@@ -140,7 +132,7 @@ def test_pair_tangent_cuts_never_remove_a_passing_layout(figure, kind):
 
 
 def test_within_agrees_with_the_computed_errors():
-    p = _line(4, n_sites=14, seed=3)
+    p = station_line(4, n_sites=14, seed=3)
     for figure in ("ellipsoid", "quantile"):
         net = NetworkModel(p, RADIUS, INCL, figure=ErrorFigure(figure))
         cov = net.covariance(net.information(np.ones(p.n_sites, bool)))
@@ -158,7 +150,8 @@ def test_a_local_plan_is_the_fewest_passing_layout(figure):
     """Local accuracy alone (no datum requirement): the plan equals the brute-force optimum,
     every pair's relative error recomputed here meets it, and it needs fewer markers than the
     same figure relative to the datum."""
-    p = _line(4, n_sites=11, seed=2) if figure == "ellipsoid" else _line(4, n_sites=9, seed=6)
+    p = station_line(4, n_sites=11, seed=2) if figure == "ellipsoid" \
+        else station_line(4, n_sites=9, seed=6)
     base = PlanConfig(network=True, min_markers=3, min_sectors=2, max_range_m=20,
                       working_radius_m=RADIUS, time_limit_s=60, error_figure=figure,
                       chance_epsilon=None)
@@ -179,7 +172,7 @@ def test_a_local_plan_is_the_fewest_passing_layout(figure):
 
 
 def test_a_local_requirement_no_layout_meets_is_refused_naming_the_pairs():
-    p = _line(3, n_sites=10)
+    p = station_line(3, n_sites=10)
     cfg = PlanConfig(network=True, min_markers=3, min_sectors=2, max_range_m=20,
                      working_radius_m=RADIUS, chance_epsilon=None, local_requirement_m=1e-4,
                      local_within_m=20.0, datum_requirement=False)
@@ -191,7 +184,7 @@ def test_a_local_plan_ignores_the_datum_requirement_it_does_not_judge():
     """Without the datum requirement, ``requirement_m`` judges nothing: its information and
     heading rows must not be in the program (at 1 mm they made the plan infeasible although
     a 6-site layout meets the local requirement)."""
-    p = _line(4, n_sites=11, seed=2)
+    p = station_line(4, n_sites=11, seed=2)
     cfg = PlanConfig(network=True, min_markers=3, min_sectors=2, max_range_m=20,
                      working_radius_m=RADIUS, time_limit_s=60, chance_epsilon=None,
                      datum_requirement=False, local_requirement_m=0.3626,

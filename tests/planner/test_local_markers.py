@@ -19,18 +19,10 @@ from planner.accuracy.local_markers import (
 from planner.accuracy.network import NetworkModel
 from planner.config import PlanConfig
 from planner.program import plan_sites
-from tests.planner.instances import brute_force_optimum, make_problem
+from tests.planner.instances import brute_force_optimum, station_line
 
 INCL = np.radians(0.01)
 RADIUS = 10.0
-
-
-def _line(n_stations=4, seed=5, n_sites=12, spacing=15.0):
-    rng = np.random.default_rng(seed)
-    st_xy = np.column_stack([np.arange(n_stations) * spacing, np.zeros(n_stations)])
-    x1 = (n_stations - 1) * spacing + 10.0
-    sites = np.column_stack([rng.uniform(-10.0, x1, n_sites), rng.uniform(-12, 12, n_sites)])
-    return make_problem(st_xy, sites, max_range_m=20.0)
 
 
 def _dense_marker_covariance(net, sites):
@@ -58,7 +50,7 @@ def _dense_marker_covariance(net, sites):
 
 @pytest.mark.parametrize("subset, control", [(False, False), (True, False), (False, True)])
 def test_marker_cross_covariance_is_the_full_normal_matrix_inverse(subset, control):
-    p = _line()
+    p = station_line()
     if control:  # two sites as control points (a lander's fiducials), no station fixed
         sigma = np.zeros(p.n_sites)
         sigma[[2, 7]] = 0.003
@@ -93,7 +85,7 @@ def test_marker_pairs_and_configuration():
 
 
 def test_a_pair_seen_from_an_undetermined_station_is_infinite():
-    p = _line(3, n_sites=10)
+    p = station_line(3, n_sites=10)
     net = NetworkModel(p, RADIUS, INCL)
     cov = net.covariance(net.information(np.zeros(p.n_sites, bool)))
     local = LocalMarkerAccuracy(net, LocalRequirement(1.0, within_m=100.0))
@@ -111,7 +103,7 @@ def _cut_value(row_sites, coef, first, second, lower, x):
 def test_marker_pair_cuts_never_remove_a_passing_layout(figure, kind):
     """Brute force over every layout of a 9-site line: every layout whose marker pairs all
     pass satisfies every no-good row and tangent taken at any layout with a failing pair."""
-    p = _line(3, n_sites=9, seed=4)
+    p = station_line(3, n_sites=9, seed=4)
     net = NetworkModel(p, RADIUS, INCL, figure=ErrorFigure(figure))
     every = np.ones(p.n_sites, bool)
     probe = LocalMarkerAccuracy(net, LocalRequirement(1.0, within_m=25.0, kind=kind))
@@ -146,7 +138,7 @@ def test_a_plan_with_local_markers_is_the_fewest_passing_layout():
     the brute-force optimum and its every marker pair passes, while the plan that judges the
     stations alone fails some marker pair."""
     radius, kind = 2.0, "distance"
-    p = _line(3, n_sites=10, seed=6)
+    p = station_line(3, n_sites=10, seed=6)
     net = NetworkModel(p, radius, INCL)
     every = np.ones(p.n_sites, bool)
     cov = net.covariance(net.information(every))
@@ -207,7 +199,7 @@ def test_plan_json_and_verify_record_the_marker_pairs(tmp_path):
     from planner.outputs.local_report import local_record, write_pairs_csv
     from planner.verify.local_pairs import marker_pair_outcomes, pairs_record
 
-    p = _line(3, n_sites=10, seed=6)
+    p = station_line(3, n_sites=10, seed=6)
     cfg = PlanConfig(network=True, working_radius_m=RADIUS, chance_epsilon=None,
                      datum_requirement=False, local_requirement_m=0.05, local_within_m=25.0,
                      local_markers=True)

@@ -18,7 +18,8 @@ from planner.config import PlanConfig
 from planner.program import plan_sites
 from planner.program.cuts_network import network_cuts
 from planner.program.model import build_model
-from tests.planner.test_local_markers import INCL, _line
+from tests.planner.instances import station_line
+from tests.planner.test_local_markers import INCL
 
 RADIUS = 2.0
 
@@ -26,7 +27,7 @@ RADIUS = 2.0
 def _redundant_case(seed: int, factor: float, local_markers: bool = True):
     """An 8-site line of three stations, a distance requirement ``factor`` times the worst
     station pair's error with every site selected."""
-    p = _line(3, n_sites=8, seed=seed)
+    p = station_line(3, n_sites=8, seed=seed)
     net = NetworkModel(p, RADIUS, INCL)
     cov = net.covariance(net.information(np.ones(p.n_sites, bool)))
     worst = LocalAccuracy(net, LocalRequirement(1.0, within_m=25.0, kind="distance")).errors(cov)

@@ -14,18 +14,9 @@ from planner.accuracy.network import NetworkModel, network_model
 from planner.accuracy.network_diagnosis import diagnose_network
 from planner.accuracy.requirement import NetworkRequirement
 from planner.config import PlanConfig
-from tests.planner.instances import make_problem, ring
+from tests.planner.instances import make_problem, ring, station_line
 
 INCL = np.radians(0.01)
-
-
-def _line(n_stations=3, spacing=15.0, seed=0, n_sites=14):
-    """Stations on a line with random sites around them."""
-    rng = np.random.default_rng(seed)
-    st_xy = np.column_stack([np.arange(n_stations) * spacing, np.zeros(n_stations)])
-    x0, x1 = -10.0, (n_stations - 1) * spacing + 10.0
-    sites = np.column_stack([rng.uniform(x0, x1, n_sites), rng.uniform(-12, 12, n_sites)])
-    return make_problem(st_xy, sites, max_range_m=20.0)
 
 
 def _full_adjustment(model, selected):
@@ -50,7 +41,7 @@ def _full_adjustment(model, selected):
 
 
 def test_schur_contribution_matches_the_full_adjustment():
-    p = _line()
+    p = station_line(3, seed=0, n_sites=14)
     model = NetworkModel(p, 10.0, INCL)
     sel = np.zeros(p.n_sites, bool)
     sel[:10] = True
@@ -138,7 +129,7 @@ def test_diagnose_names_disconnected_weak_and_far_stations():
 @given(seed=st.integers(0, 10_000), n_stations=st.integers(2, 4),
        figure=st.sampled_from(["quantile", "ellipsoid"]))
 def test_adding_a_site_never_worsens_any_station_or_marker(seed, n_stations, figure):
-    p = _line(n_stations, seed=seed, n_sites=12)
+    p = station_line(n_stations, seed=seed, n_sites=12)
     model = NetworkModel(p, 10.0, INCL, figure=ErrorFigure(figure))
     tol = MONOTONE_TOLERANCE if figure == "quantile" else 1e-9
     rng = np.random.default_rng(seed)
@@ -162,7 +153,7 @@ def test_tangent_cuts_never_remove_a_passing_layout(figure, ppm):
     every tangent cut taken at any failing layout (marker cuts when the marker is selected);
     for the quantile the cuts are its one-direction necessary condition. With a ppm term each
     station and marker is judged against its own allowance, and the cuts stay valid."""
-    p = _line(3, seed=5, n_sites=10)
+    p = station_line(3, seed=5, n_sites=10)
     probe = NetworkModel(p, 10.0, INCL, figure=ErrorFigure(figure))
     layouts = [np.array(b, bool) for b in itertools.product([0, 1], repeat=p.n_sites)]
     best = probe.covariance(probe.information(np.ones(p.n_sites, bool)))
@@ -193,7 +184,7 @@ def test_tangent_cuts_never_remove_a_passing_layout(figure, ppm):
 
 
 def test_site_factor_reproduces_each_sites_information():
-    net = NetworkModel(_line(4, seed=3, n_sites=20), 10.0, INCL)
+    net = NetworkModel(station_line(4, seed=3, n_sites=20), 10.0, INCL)
     pos = np.full(6 * 4, -1)
     pos[net.free] = np.arange(net.n_params)
     for j in range(net.problem.n_sites):
@@ -212,7 +203,7 @@ def test_site_factor_reproduces_each_sites_information():
 def test_growing_covariance_matches_a_fresh_inverse_at_every_step(refresh):
     # four stations tied one site at a time, from nothing: undetermined stations first (the
     # tracked null space must flag the same stations), then Woodbury updates
-    net = NetworkModel(_line(4, seed=5, n_sites=30), 10.0, INCL)
+    net = NetworkModel(station_line(4, seed=5, n_sites=30), 10.0, INCL)
     selected = np.zeros(net.problem.n_sites, bool)
     grow = GrowingCovariance(net, net.information(selected), refresh=refresh)
     seen_undetermined = seen_woodbury = False
@@ -244,7 +235,7 @@ def _null_dimension(j):
 def test_null_reductions_count_the_free_movements_each_site_removes():
     # five stations, two tying sites added: some stations still turn or slide freely; for
     # every site, the count equals the drop of the null dimension of a fresh information
-    net = NetworkModel(_line(5, seed=7, n_sites=40), 10.0, INCL)
+    net = NetworkModel(station_line(5, seed=7, n_sites=40), 10.0, INCL)
     selected = np.zeros(net.problem.n_sites, bool)
     selected[np.flatnonzero(net.tying)[:2]] = True
     grow = GrowingCovariance(net, net.information(selected))
@@ -264,7 +255,7 @@ def test_null_reductions_count_the_free_movements_each_site_removes():
 
 
 def test_scaled_covariances_match_each_fresh_inverse():
-    net = NetworkModel(_line(4, seed=5, n_sites=30), 10.0, INCL)
+    net = NetworkModel(station_line(4, seed=5, n_sites=30), 10.0, INCL)
     # a requirement no station meets: every tangent is active
     tight = NetworkModel(net.problem, 10.0, INCL, requirement=NetworkRequirement(1e-4))
     sites = net.site_information(net.tying)
