@@ -108,16 +108,30 @@ def defect_basis(pose: np.ndarray, markers: np.ndarray) -> np.ndarray:
     return g
 
 
+def inner_constraints(pose: np.ndarray, markers: np.ndarray, defects
+                      ) -> tuple[np.ndarray, np.ndarray]:
+    """The free datum's defect directions and inner constraints for the ``defects`` ((d,) int
+    into :data:`~pipeline.network.observations.DATUM_DEFECTS`).
+
+    Returns
+    -------
+    g : (u, d) float
+        The defect directions (:func:`defect_basis`).
+    b : (d, u) float
+        The minimal constraints ``B dx = 0``: ``g^T`` restricted to the stations' x, y, z and
+        heading.
+    """
+    g = defect_basis(pose, markers)[:, np.asarray(defects, dtype=np.int64)]
+    on_stations = np.zeros(g.shape[0], dtype=bool)
+    on_stations[: 6 * pose.shape[0]] = np.tile([1, 1, 1, 1, 0, 0], pose.shape[0]) > 0
+    return g, (g * on_stations[:, None]).T
+
+
 def constraints(problem: Problem, pose: np.ndarray, markers: np.ndarray) -> np.ndarray:
     """(d, u) minimal constraints ``B dx = 0`` of the free datum (d = 0 for the others): the
-    defect directions restricted to the stations' x, y, z and heading."""
-    u = pose.shape[0] * 6 + markers.shape[0] * 3
-    if not problem.free_defects.size:
-        return np.zeros((0, u))
-    g = defect_basis(pose, markers)[:, problem.free_defects]
-    on_stations = np.zeros(u, dtype=bool)
-    on_stations[: 6 * pose.shape[0]] = np.tile([1, 1, 1, 1, 0, 0], pose.shape[0]) > 0
-    return (g * on_stations[:, None]).T
+    defect directions restricted to the stations' x, y, z and heading
+    (:func:`inner_constraints`)."""
+    return inner_constraints(pose, markers, problem.free_defects)[1]
 
 
 def prior_misclosure(problem: Problem, params: np.ndarray) -> np.ndarray:

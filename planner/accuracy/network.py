@@ -650,15 +650,14 @@ def _inner_constraint_map(station_xyz: np.ndarray, defects: np.ndarray) -> np.nd
     """(6 s, 6 s) ``P = I - G (B G)^-1 B``: the S-transformation of a pose covariance to the
     inner constraints ``B`` (``G^T`` on the stations' x, y, z and heading) of the datum
     ``defects`` ((d,) int into :data:`pipeline.network.observations.DATUM_DEFECTS`), ``G`` the
-    defect directions of :func:`pipeline.network.normals.defect_basis` at ``station_xyz`` ((s,
-    3) m; headings 0, no markers)."""
-    from pipeline.network.normals import defect_basis
+    defect directions at ``station_xyz`` ((s, 3) m; headings 0, no markers;
+    :func:`pipeline.network.normals.inner_constraints`)."""
+    from pipeline.network.normals import inner_constraints
 
     s = station_xyz.shape[0]
     pose = np.zeros((s, 6))
     pose[:, :3] = station_xyz
-    g = defect_basis(pose, np.zeros((0, 3)))[:, defects]
-    b = g.T * np.tile([1.0, 1.0, 1.0, 1.0, 0.0, 0.0], s)
+    g, b = inner_constraints(pose, np.zeros((0, 3)), defects)
     return np.eye(6 * s) - g @ np.linalg.solve(b @ g, b)
 
 

@@ -147,10 +147,10 @@ def free_alignment(result, true_pose: np.ndarray, heading_observed: bool):
     The free datum holds the stations' centroid (and mean heading) at their initial values, not
     the truth's, so the adjusted network differs from the truth by a rigid motion besides its
     errors. The pose errors ``d`` (adjusted minus true; heading wrapped) are S-transformed to the
-    adjustment's own inner constraints, ``d - G (B G)^-1 B d`` (``G`` the defect directions of
-    :func:`pipeline.network.normals.defect_basis` at the true stations, ``B`` = ``G^T`` on their
-    x, y, z and heading), the error the predicted datum-free covariance describes; the markers
-    are moved back by the same rigid motion.
+    adjustment's own inner constraints, ``d - G (B G)^-1 B d`` (``G`` the defect directions at
+    the true stations, ``B`` = ``G^T`` on their x, y, z and heading:
+    :func:`pipeline.network.normals.inner_constraints`), the error the predicted datum-free
+    covariance describes; the markers are moved back by the same rigid motion.
 
     Parameters
     ----------
@@ -168,16 +168,15 @@ def free_alignment(result, true_pose: np.ndarray, heading_observed: bool):
     """
     import dataclasses
 
-    from pipeline.network.normals import defect_basis
+    from pipeline.network.normals import inner_constraints
 
     pose = np.asarray(result.pose, float)
     true_pose = np.asarray(true_pose, float)
     s = pose.shape[0]
     defects = list(Datum("free").constrained_defects(heading_observed))
-    g = defect_basis(true_pose, np.zeros((0, 3)))[:, defects]
+    g, b = inner_constraints(true_pose, np.zeros((0, 3)), defects)
     d = pose - true_pose
     d[:, 3] = (d[:, 3] + np.pi) % (2 * np.pi) - np.pi
-    b = g.T * np.tile([1.0, 1.0, 1.0, 1.0, 0.0, 0.0], s)
     alpha = np.zeros(4)
     alpha[defects] = np.linalg.solve(b @ g, b @ d.ravel())
     # the markers: the inverse of the same motion (translation, then rotation by alpha[3]
