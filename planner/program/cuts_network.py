@@ -382,16 +382,20 @@ def _network_loss_cuts(model: Model, selected: np.ndarray, j_sel: np.ndarray,
     rest = np.flatnonzero(tying & ~selected)
     rows, lower, kinds = [], [], []
 
+    def without(m, coef, rhs):
+        """A tangent at the information without ``m``, on the model's other sites, sparse:
+        ``(sites, coefficients)``."""
+        coef = np.where(in_model, coef, 0.0)
+        coef[m] = 0.0
+        return sparse_tangent(coef, rhs, upper_bound, MAX_TERMS)[:2]
+
     def implied(m, failing, tangents, cut, oa):
         """The no-good and tangent rows "``x_m`` implies" of one loss."""
         rows.append(model.implied_row(m, rest))
         lower.append(0.0)
         kinds.append(RowKind(cut, failing))
         for k, coef, rhs in tangents:
-            coef = np.where(in_model, coef, 0.0)
-            coef[m] = 0.0
-            sites, c, _ = sparse_tangent(coef, rhs, upper_bound, MAX_TERMS)
-            rows.append(model.implied_row(m, sites, c))
+            rows.append(model.implied_row(m, *without(m, coef, rhs)))
             lower.append(0.0)
             kinds.append(RowKind(oa, k))
 
@@ -412,12 +416,8 @@ def _network_loss_cuts(model: Model, selected: np.ndarray, j_sel: np.ndarray,
         pairs, bad_mpairs = local_markers.failing(cov, left)
         if bad_mpairs.size == 0:
             continue
-        tangents = []
-        for p, coef, rhs in local_markers.tangents(cov, pairs, bad_mpairs[:_MAX_OA_STATIONS]):
-            coef = np.where(in_model, coef, 0.0)
-            coef[m] = 0.0
-            cut = sparse_tangent(coef, rhs, upper_bound, MAX_TERMS)
-            tangents.append((p, cut[0], cut[1]))
+        tangents = [(p, *without(m, coef, rhs)) for p, coef, rhs in
+                    local_markers.tangents(cov, pairs, bad_mpairs[:_MAX_OA_STATIONS])]
         for row, lo, kind in zip(*pair_cut_rows(model, pairs, bad_mpairs, rest, tangents,
                                                 selected, lost=int(m)), strict=True):
             rows.append(row)
