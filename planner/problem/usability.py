@@ -180,6 +180,38 @@ class PlanProblem:
                        site_control_sigma_m=None if self.site_control_sigma_m is None
                        else self.site_control_sigma_m[idx])
 
+    def restrict_stations(self, stations) -> PlanProblem:
+        """The problem with only some of its stations (their pairs kept, re-indexed).
+
+        Parameters
+        ----------
+        stations : (k,) int
+            Indices of the stations to keep, in the order the sub-problem lists them.
+
+        Returns
+        -------
+        sub : PlanProblem
+            The kept stations in the given order; every site kept.
+        """
+        order = np.asarray(stations, dtype=np.int64).ravel()
+        if order.size and (order.min() < 0 or order.max() >= self.n_stations
+                           or np.unique(order).size != order.size):
+            raise ConfigError(f"`stations` must be distinct indices below {self.n_stations}")
+        new = np.full(self.n_stations, -1, dtype=np.int64)
+        new[order] = np.arange(order.size)
+        pairs = np.flatnonzero(new[self.pair_station] >= 0)
+        pairs = pairs[np.argsort(new[self.pair_station[pairs]], kind="stable")]
+        return replace(self, station_ids=tuple(self.station_ids[s] for s in order),
+                       station_xyz=self.station_xyz[order],
+                       pair_station=new[self.pair_station[pairs]],
+                       pair_site=self.pair_site[pairs],
+                       pair_distance_m=self.pair_distance_m[pairs],
+                       pair_bearing_rad=self.pair_bearing_rad[pairs],
+                       pair_sigma_m=self.pair_sigma_m[pairs],
+                       pair_reason=self.pair_reason[pairs],
+                       pair_detection_p=None if self.pair_detection_p is None
+                       else self.pair_detection_p[pairs])
+
 
 def _problem_iv(p: PlanProblem) -> None:
     s, n = len(p.station_ids), len(p.site_ids)

@@ -11,13 +11,15 @@ from planner.program.model import Model, RowKind, info_weights
 
 
 def accuracy_cuts(problem: PlanProblem, model: Model, selected: np.ndarray, config,
-                  infos: list[StationInfo], outer_approximation: bool = False
-                  ) -> tuple[sp.csr_array | None, list[float], list[RowKind]]:
+                  infos: list[StationInfo], outer_approximation: bool = False,
+                  stations=None) -> tuple[sp.csr_array | None, list[float], list[RowKind]]:
     """Valid cuts for every station whose predicted accuracy fails with ``selected``.
 
     By default only the combinatorial (no-good) cuts, which stay valid for any looser
     requirement; with ``outer_approximation`` also the tangent cuts (``"oa"``, ``"oa-loss"``,
     ``"info-loss"``, ``"heading-loss"`` rows), valid for ``config.requirement_m`` only.
+    ``stations`` (indices, default all) are the stations judged: a joint plan of stations and
+    markers (:mod:`planner.program.joint`) judges only those it chose.
 
     Returns
     -------
@@ -28,7 +30,7 @@ def accuracy_cuts(problem: PlanProblem, model: Model, selected: np.ndarray, conf
     kinds : list of RowKind
     """
     rows, lower, kinds = [], [], []
-    for s in range(problem.n_stations):
+    for s in range(problem.n_stations) if stations is None else stations:
         info = infos[s]
         chosen = info.sites[selected[info.sites]]
         if info.error(chosen) > config.requirement_m:

@@ -1,0 +1,395 @@
+"""The joint program: where the rover stops and where markers go, chosen together.
+
+:func:`plan_stations_and_sites` chooses, among candidate stations, the ones the rover stops at
+and, among candidate sites, the ones that get a marker, at the least stated cost, such that
+every cell of the area of interest is covered and every chosen station meets the marker
+program's rules (count, directions and, in known-control mode, accuracy).
+
+Formulation
+-----------
+The marker program of :func:`~planner.program.model.build_model` over every candidate
+station, plus a binary ``w_s`` per candidate station ("the rover stops at s"):
+
+- every row of station ``s`` is switched on by ``w_s`` (:func:`switched_rows`): a row
+  ``a x >= L`` becomes ``a x - (L + N) w_s >= -N``, with ``N`` the sum of the magnitudes of its
+  negative coefficients (the least ``a x`` can be over binary ``x``), so it reads ``a x >= L``
+  when ``w_s = 1`` and holds for every ``x`` when ``w_s = 0``; a row ``a x <= U`` likewise
+  with ``P``, the sum of its positive coefficients. The rows that bound a station's own
+  sector variables (``y <= sum x``: families "sector", "sector2", "sector21") need no switch:
+  with the station off, its sector variables are free to be 0;
+- coverage: ``sum_{s covers c} w_s >= k`` for every AOI cell ``c`` (cells with the same
+  covering stations share one row);
+- cost: ``station_cost sum_s w_s + marker_cost sum_j site_cost_j x_j``;
+- known control: the accuracy cuts of :func:`planner.program.cuts_known.accuracy_cuts` for the
+  chosen stations that fail, switched on by their ``w_s``: valid, since a station's predicted
+  accuracy depends only on its own markers;
+- stations that no layout can satisfy (:func:`planner.accuracy.checks.diagnose`) are fixed off.
+
+Network mode judges the network (every station's pose depends on the others), which this
+program does not model: there it chooses stations by coverage, count and directions, and the
+caller plans the network's markers for the chosen stations.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.sparse as sp
+
+from markerplan.errors import ConfigError, InfeasiblePlanError, PlanTimeLimitError
+from planner.accuracy.checks import diagnose, station_infos
+from planner.problem.usability import PlanProblem
+from planner.program.cuts_known import accuracy_cuts
+from planner.program.model import Model, RowKind, Solution, build_model, with_tightening_rows
+from planner.program.solving import solve
+
+#: Row families that bound a station's own sector variables and need no switch.
+_OWN_VARIABLE_FAMILIES = frozenset({"sector", "sector2", "sector21"})
+
+
+@dataclass(frozen=True)
+class StationCover:
+    """Which cells of the area of interest each candidate station covers.
+
+    Attributes
+    ----------
+    pair_station, pair_cell : (p,) int
+        Candidate-station index and cell index of every covering pair.
+    n_cells : int
+    min_stations : int
+        Stations that must cover every cell (1, or 2 for a double cover).
+    """
+
+    pair_station: np.ndarray
+    pair_cell: np.ndarray
+    n_cells: int
+    min_stations: int = 1
+
+    def counts(self, stations: np.ndarray) -> np.ndarray:
+        """(n_cells,) int: how many of the given stations ((s,) bool) cover each cell."""
+        on = np.asarray(stations, bool)[self.pair_station]
+        return np.bincount(self.pair_cell[on], minlength=self.n_cells)
+
+    def covered(self, stations: np.ndarray) -> bool:
+        """Whether the given stations ((s,) bool) cover every cell ``min_stations`` times."""
+        return bool(np.all(self.counts(stations) >= self.min_stations))
+
+
+@dataclass(frozen=True)
+class JointCosts:
+    """The stated cost the joint program minimises (any unit, the same for both; seconds of
+    mission time in :mod:`planner.joint_run`).
+
+    Attributes
+    ----------
+    station : float
+        Cost of one stop (scan and set-up), > 0.
+    marker : float
+        Cost of one marker placed, > 0.
+    """
+
+    station: float
+    marker: float
+
+    def __post_init__(self) -> None:
+        for name in ("station", "marker"):
+            v = getattr(self, name)
+            if not (np.isfinite(v) and v > 0):
+                raise ConfigError(f"the cost per {name} must be finite and > 0, got {v!r}")
+
+    def of(self, n_stations: int, n_markers: int) -> float:
+        """Cost of a layout with that many stations and (new) markers."""
+        return self.station * n_stations + self.marker * n_markers
+
+
+@dataclass(frozen=True)
+class JointModel:
+    """The joint program as data.
+
+    Attributes
+    ----------
+    model : Model
+        The marker program's variables first (``model.var_site`` maps them), then one ``w``
+        per candidate station.
+    station_var : (s,) int
+        Variable index of each candidate station's ``w``.
+    excluded : dict
+        Candidate stations fixed off, by id, with the reason no layout can satisfy them.
+    """
+
+    model: Model
+    station_var: np.ndarray
+    excluded: dict
+
+
+@dataclass(frozen=True)
+class JointResult:
+    """The joint plan.
+
+    Attributes
+    ----------
+    stations : (s,) bool
+        Candidate stations the rover stops at.
+    selected : (n,) bool
+        Candidate sites holding a marker.
+    solution : Solution
+        The final solve (status, objective, dual bound, gap), or the incumbent's record.
+    iterations, n_cuts : int
+    solve_time_s : float
+    excluded : dict
+        Candidate stations fixed off, by id, with the reason.
+    history : list of dict
+        Per solve: iteration, status, objective, dual bound, solve time, rows.
+    """
+
+    stations: np.ndarray
+    selected: np.ndarray
+    solution: Solution
+    iterations: int
+    n_cuts: int
+    solve_time_s: float
+    excluded: dict
+    history: list = field(default_factory=list)
+
+    @property
+    def status(self) -> str:
+        return self.solution.status
+
+
+def switched_rows(A: sp.csr_array, row_lb: np.ndarray, row_ub: np.ndarray,
+                  row_station: np.ndarray, station_var: np.ndarray, n_vars: int
+                  ) -> tuple[sp.csr_array, np.ndarray, np.ndarray]:
+    """Rows of stations switched on by their station variable (see the module docstring).
+
+    Parameters
+    ----------
+    A : (m, v0) sparse
+        The rows, over the first ``v0 <= n_vars`` variables.
+    row_lb, row_ub : (m,) float
+        Their bounds; a switched row has exactly one of them finite.
+    row_station : (m,) int
+        Candidate station of each row; -1 leaves the row as it is.
+    station_var : (s,) int
+        Variable index of each candidate station's switch.
+    n_vars : int
+        Columns of the result.
+
+    Returns
+    -------
+    A, row_lb, row_ub
+        ``(m, n_vars)`` rows and their bounds.
+
+    Examples
+    --------
+    >>> A = sp.csr_array(np.array([[1.0, 1.0, 0.0], [1.0, -1.0, 0.0]]))
+    >>> B, lb, ub = switched_rows(A, np.array([2.0, 0.0]), np.array([np.inf, np.inf]),
+    ...                           np.array([0, 0]), np.array([2]), 3)
+    >>> B.toarray().tolist(), lb.tolist()
+    [[1.0, 1.0, -2.0], [1.0, -1.0, -1.0]], [0.0, -1.0]
+    """
+    A = sp.csr_array(A)
+    m = A.shape[0]
+    A = sp.csr_array((A.data, A.indices, A.indptr), shape=(m, n_vars))
+    row_lb, row_ub = np.array(row_lb, float), np.array(row_ub, float)
+    on = np.asarray(row_station) >= 0
+    lower, upper = on & np.isfinite(row_lb), on & np.isfinite(row_ub)
+    if np.any(lower & upper):
+        raise ConfigError("a station's row bounded on both sides cannot be switched")
+    rows = np.repeat(np.arange(m), np.diff(A.indptr))
+    negative = np.bincount(rows, np.minimum(A.data, 0.0), minlength=m)  # <= 0
+    positive = np.bincount(rows, np.maximum(A.data, 0.0), minlength=m)
+    coef = np.zeros(m)
+    coef[lower] = -(row_lb[lower] - negative[lower])
+    row_lb[lower] = negative[lower]
+    coef[upper] = positive[upper] - row_ub[upper]
+    row_ub[upper] = positive[upper]
+    at = np.flatnonzero(on & (coef != 0))
+    switch = sp.csr_array((coef[at], (at, station_var[np.asarray(row_station)[at]])),
+                          shape=(m, n_vars))
+    return sp.csr_array(A + switch), row_lb, row_ub
+
+
+def joint_model(problem: PlanProblem, config, cover: StationCover, costs: JointCosts,
+                infos=None) -> JointModel:
+    """Build the joint program (see the module docstring).
+
+    Parameters
+    ----------
+    problem : PlanProblem
+        Every candidate station and every candidate site.
+    config : PlanConfig
+        The marker program's settings; in network mode no information or accuracy rows.
+    cover : StationCover
+        Over ``problem``'s stations.
+    costs : JointCosts
+    infos : list of StationInfo, optional
+        The stations' accuracy (default computed).
+
+    Raises
+    ------
+    InfeasiblePlanError
+        Some cell is covered by fewer than ``min_stations`` candidate stations that can
+        satisfy the marker rules.
+    """
+    known = not config.network
+    base = build_model(problem, config, information=known)
+    if known:
+        base = with_tightening_rows(problem, base, config)
+    infos = infos if infos is not None else station_infos(problem, config)
+    excluded = diagnose(problem, config, infos, accuracy_check=known)
+    ns, v0 = problem.n_stations, base.n_vars
+    station_var = v0 + np.arange(ns)
+    n_vars = v0 + ns
+    kinds = base.row_kind
+    row_station = np.array([-1 if k.family in _OWN_VARIABLE_FAMILIES else k.station
+                            for k in kinds], dtype=np.int64)
+    A, lb, ub = switched_rows(base.A, base.row_lb, base.row_ub, row_station, station_var,
+                              n_vars)
+    eligible = np.ones(ns, bool)
+    eligible[[problem.station_ids.index(sid) for sid in excluded]] = False
+    cover_rows, n_cover = _cover_rows(cover, eligible, station_var, n_vars)
+    x_cost = np.zeros(v0)
+    x_cost[:base.var_site.size] = costs.marker * problem.site_cost[base.var_site]
+    model = Model(
+        c=np.r_[x_cost, np.full(ns, costs.station)],
+        A=sp.csr_array(sp.vstack([A, cover_rows])),
+        row_lb=np.r_[lb, np.full(n_cover, float(cover.min_stations))],
+        row_ub=np.r_[ub, np.full(n_cover, np.inf)],
+        lb=np.r_[base.lb, np.zeros(ns)], ub=np.r_[base.ub, eligible.astype(float)],
+        integrality=np.r_[base.integrality, np.ones(ns, dtype=base.integrality.dtype)],
+        var_site=base.var_site, site_var=base.site_var,
+        row_kind=kinds + (RowKind("cover"),) * n_cover)
+    return JointModel(model=model, station_var=station_var, excluded=excluded)
+
+
+def _cover_rows(cover: StationCover, eligible: np.ndarray, station_var: np.ndarray,
+                n_vars: int) -> tuple[sp.csr_array, int]:
+    """One coverage row per distinct set of eligible covering stations; refuses a cell with
+    too few."""
+    keep = eligible[cover.pair_station]
+    cells, stations = cover.pair_cell[keep], cover.pair_station[keep]
+    incidence = sp.csr_array((np.ones(cells.size), (cells, stations)),
+                             shape=(cover.n_cells, station_var.size))
+    incidence.sum_duplicates()
+    short = np.flatnonzero(np.diff(incidence.indptr) < cover.min_stations)
+    if short.size:
+        raise InfeasiblePlanError(
+            f"{short.size} of {cover.n_cells} cells are covered by fewer than "
+            f"{cover.min_stations} candidate station(s) that can meet the marker rules "
+            f"(first: cell {short[0]}); add candidate stations or relax the coverage "
+            "requirement")
+    dense = incidence.toarray().astype(bool) if cover.n_cells * station_var.size < 5e7 \
+        else None
+    if dense is not None:
+        _, first = np.unique(dense, axis=0, return_index=True)
+        first = np.sort(first)
+    else:
+        first = np.arange(cover.n_cells)
+    rows = incidence[first]
+    rows = sp.csr_array((rows.data, station_var[rows.indices], rows.indptr),
+                        shape=(first.size, n_vars))
+    return rows, int(first.size)
+
+
+def plan_stations_and_sites(problem: PlanProblem, config, cover: StationCover,
+                            costs: JointCosts, incumbent: tuple | None = None
+                            ) -> JointResult:
+    """The joint cut loop: solve, check the chosen stations, cut, re-solve until all pass.
+
+    Parameters
+    ----------
+    problem : PlanProblem
+        Every candidate station and every candidate site.
+    config : PlanConfig
+        Uses ``time_limit_s`` (for the whole loop), ``mip_gap``, ``requirement_m`` and the
+        marker program's rules.
+    cover : StationCover
+    costs : JointCosts
+    incumbent : tuple of ((s,) bool, (n,) bool), optional
+        Stations and sites known to pass (a baseline's): the answer when the time limit stops
+        the loop first, with the best bound proved.
+
+    Returns
+    -------
+    result : JointResult
+
+    Raises
+    ------
+    InfeasiblePlanError
+        No layout covers the area and meets the rules; :class:`PlanTimeLimitError` when the
+        time limit ended the search before any layout passed and no incumbent was given.
+    """
+    t0 = time.perf_counter()
+    infos = station_infos(problem, config)
+    joint = joint_model(problem, config, cover, costs, infos)
+    model, station_var = joint.model, joint.station_var
+    bound, solve_time, n_cuts, history = -np.inf, 0.0, 0, []
+
+    def result(stations, selected, sol, iteration) -> JointResult:
+        return JointResult(stations=stations, selected=selected, solution=sol,
+                           iterations=iteration, n_cuts=n_cuts, solve_time_s=solve_time,
+                           excluded=joint.excluded, history=history)
+
+    def incumbent_result(iteration: int) -> JointResult:
+        stations, selected = incumbent
+        obj = costs.of(int(stations.sum()), int(problem.site_cost[selected].sum()))
+        gap = max(obj - bound, 0.0) / obj if np.isfinite(bound) else float("nan")
+        proven = np.isfinite(bound) and bound >= obj - 1e-9
+        sol = Solution(status="optimal" if proven else "time_limit", selected=selected,
+                       objective=obj, dual_bound=obj if proven else float(bound),
+                       gap=0.0 if proven else gap, solve_time_s=0.0,
+                       message="time limit: the baseline's layout, with the best proven bound")
+        return result(stations, selected, sol, iteration)
+
+    iteration = 0
+    while True:
+        iteration += 1
+        remaining = config.time_limit_s - (time.perf_counter() - t0)
+        if remaining <= 0:
+            if incumbent is not None:
+                return incumbent_result(iteration - 1)
+            raise PlanTimeLimitError(
+                f"time limit {config.time_limit_s:g} s reached after {iteration - 1} "
+                "iteration(s) before every chosen station met the requirement; raise "
+                "`time_limit_s`")
+        sol = solve(model, remaining, config.mip_gap)
+        solve_time += sol.solve_time_s
+        if np.isfinite(sol.dual_bound):
+            bound = max(bound, sol.dual_bound)
+        history.append({"iteration": iteration, "status": sol.status,
+                        "objective": sol.objective, "dual_bound": sol.dual_bound,
+                        "solve_time_s": sol.solve_time_s, "n_rows": int(model.A.shape[0])})
+        if sol.x is None:
+            if sol.status == "infeasible":
+                raise InfeasiblePlanError(
+                    "no choice of stations and markers covers the area and meets every "
+                    "chosen station's requirement; add candidate stations or relax the "
+                    "coverage or accuracy requirement")
+            if incumbent is not None:
+                return incumbent_result(iteration)
+            raise PlanTimeLimitError(f"solver found no layout ({sol.status}: {sol.message}); "
+                                     "raise `time_limit_s`")
+        stations = sol.x[station_var] > 0.5
+        rows = None
+        if not config.network:
+            rows, lower, kinds = accuracy_cuts(problem, model, sol.selected, config, infos,
+                                               outer_approximation=True,
+                                               stations=np.flatnonzero(stations))
+        if rows is None:
+            if incumbent is not None and \
+                    costs.of(int(incumbent[0].sum()),
+                             int(problem.site_cost[incumbent[1]].sum())) < sol.objective - 1e-9:
+                return incumbent_result(iteration)
+            return result(stations, sol.selected, sol, iteration)
+        row_station = np.array([k.station for k in kinds], dtype=np.int64)
+        A, lb, ub = switched_rows(rows, lower, np.full(len(lower), np.inf), row_station,
+                                  station_var, model.n_vars)
+        n_cuts += A.shape[0]
+        model = model.with_rows(A, lb, ub, kinds)
+
+
+def chosen_problem(problem: PlanProblem, result: JointResult) -> PlanProblem:
+    """The problem restricted to the chosen stations (in candidate order)."""
+    return problem.restrict_stations(np.flatnonzero(result.stations))
