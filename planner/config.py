@@ -163,6 +163,43 @@ class PlanConfig:
         (:func:`planner.accuracy.sampled_chance.sampled_chance`; its Wilson interval widens as
         it shrinks); 0: none. Each sample judges the whole layout, which on a network of
         hundreds of stations with a local requirement takes seconds; in [0, 100000].
+
+    The settings below serve a plan that chooses its stations over an area of interest
+    (``markerplan plan --aoi``, :mod:`planner.design`); other plans ignore them.
+
+    aoi_cell_m : float
+        Side of a cell of the area of interest, m (rounded to whole DEM cells); in [0.1, 100].
+    cover_max_range_m : float
+        Largest LiDAR centre to ground distance at which a cell counts as measured, m;
+        in (0, 100].
+    cover_max_incidence_deg : float
+        Largest angle between a ray and the ground's normal at which a cell counts as
+        measured, degrees (85 reaches 11.4 m on flat ground from a 1 m high LiDAR); in (0, 90].
+    cover_min_density_per_m2 : float
+        Smallest predicted point density of one full scan on a measured cell, points per m^2;
+        in [0, 1e7].
+    cover_min_stations : int
+        Stations that must measure every cell (2: each cell from two stations); in [1, 10].
+    rover_footprint_m : float
+        Side of the square over which the rover judges slope and roughness (its wheel base),
+        m; in (0, 100].
+    rover_max_slope_deg : float
+        Steepest ground the rover drives and stops on, degrees; in (0, 90).
+    rover_max_roughness_m : float
+        Largest RMS residual of the ground about its plane over the footprint, m; in [0, 10].
+    rover_hazard_standoff_m : float
+        Distance the rover keeps from any ground it cannot drive, m; in [0, 100].
+    traffic_grid_m : float
+        Node spacing of the trafficability map and of the drives' grid, m (whole DEM cells);
+        in [0.05, 100].
+    station_spacing_m : float
+        Spacing of the candidate stations, m; in [0.1, 1000].
+    station_time_s : float
+        Mission time of one stop (set-up, the turntable scan, packing up), s; in (0, 1e6].
+    marker_time_s : float
+        Mission time of placing one marker, s; in (0, 1e6].
+    drive_speed_m_s : float
+        The rover's mean speed between stops, m/s; in (0, 100].
     """
 
     requirement_m: float = 0.10
@@ -204,6 +241,20 @@ class PlanConfig:
     max_bias_effect_m: float | None = None
     pass_rate_samples: int = 2000
     error_figure: str = DEFAULT_ERROR_FIGURE
+    aoi_cell_m: float = 1.0
+    cover_max_range_m: float = 30.0
+    cover_max_incidence_deg: float = 85.0
+    cover_min_density_per_m2: float = 100.0
+    cover_min_stations: int = 1
+    rover_footprint_m: float = 1.5
+    rover_max_slope_deg: float = 15.0
+    rover_max_roughness_m: float = 0.06
+    rover_hazard_standoff_m: float = 0.5
+    traffic_grid_m: float = 0.5
+    station_spacing_m: float = 2.0
+    station_time_s: float = 300.0
+    marker_time_s: float = 300.0
+    drive_speed_m_s: float = 0.1
 
     def __post_init__(self) -> None:
         _plan_config_iv(self)
@@ -331,9 +382,23 @@ BOUNDS: dict[str, tuple[float, bool, float, str]] = {
     "chance_epsilon": (0.0, False, 0.5, ""),
     "max_bias_effect_m": (0.0, False, 10.0, " m"),
     "pass_rate_samples": (0, True, 100_000, ""),
+    "aoi_cell_m": (0.1, True, 100.0, " m"),
+    "cover_max_range_m": (0.0, False, 100.0, " m"),
+    "cover_max_incidence_deg": (0.0, False, 90.0, " deg"),
+    "cover_min_density_per_m2": (0.0, True, 1e7, " points/m^2"),
+    "cover_min_stations": (1, True, 10, ""),
+    "rover_footprint_m": (0.0, False, 100.0, " m"),
+    "rover_max_slope_deg": (0.0, False, 89.9, " deg"),
+    "rover_max_roughness_m": (0.0, True, 10.0, " m"),
+    "rover_hazard_standoff_m": (0.0, True, 100.0, " m"),
+    "traffic_grid_m": (0.05, True, 100.0, " m"),
+    "station_spacing_m": (0.1, True, 1000.0, " m"),
+    "station_time_s": (0.0, False, 1e6, " s"),
+    "marker_time_s": (0.0, False, 1e6, " s"),
+    "drive_speed_m_s": (0.0, False, 100.0, " m/s"),
 }
 _INTEGERS = ("n_sectors", "min_sectors", "min_markers", "rays_per_marker", "budget",
-             "pass_rate_samples")
+             "pass_rate_samples", "cover_min_stations")
 _FLAGS = ("exclude_crater_interiors", "allow_out_of_domain", "redundant", "network",
           "datum_requirement", "local_markers")
 #: Settings that may be ``None`` (not set).

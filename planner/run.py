@@ -65,7 +65,7 @@ class PlanOutcome:
 
 
 def build_problem(inputs: PlanInputs, config, error_model, progress: bool = True,
-                  map_groups=map, detection_model=None
+                  map_groups=map, detection_model=None, clear_of_stations: bool = True
                   ) -> tuple[PlanProblem, Candidates, object, dict]:
     """Candidates + visibility matrix + usability (:func:`planner.problem.sight.sight_problem`, its
     station groups mapped over by ``map_groups``) -> the program's input.
@@ -74,11 +74,14 @@ def build_problem(inputs: PlanInputs, config, error_model, progress: bool = True
     points (with their sigmas, :attr:`~planner.problem.usability.PlanProblem.
     site_control_sigma_m`), are appended to the candidate sites (ids as given) and fixed.
     With ``detection_model`` every pair gets its chance of being detected and accepted.
+    ``clear_of_stations`` false keeps the candidate sites near the stations (stations that are
+    only candidates, :mod:`planner.design`, keep their clearance in the program instead).
     """
     timings = {}
     t = time.perf_counter()
     cand = candidate_sites(inputs.dem, config, boundary=inputs.boundary_xy,
-                           exclusions=inputs.exclusions, station_xy=inputs.station_xyz,
+                           exclusions=inputs.exclusions,
+                           station_xy=inputs.station_xyz if clear_of_stations else None,
                            craters=inputs.craters, marker_radius_m=inputs.marker_radius_m)
     timings["candidates"] = time.perf_counter() - t
     control_ids = [c.marker_id for c in inputs.control]

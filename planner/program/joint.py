@@ -23,6 +23,8 @@ station, plus a binary ``w_s`` per candidate station ("the rover stops at s"):
 - known control: the accuracy cuts of :func:`planner.program.cuts_known.accuracy_cuts` for the
   chosen stations that fail, switched on by their ``w_s``: valid, since a station's predicted
   accuracy depends only on its own markers;
+- clearance: ``x_j + w_s <= 1`` for a site ``j`` too near candidate station ``s`` (the rover
+  does not stop on a marker);
 - stations that no layout can satisfy (:func:`planner.accuracy.checks.diagnose`) are fixed off.
 
 Network mode judges the network (every station's pose depends on the others), which this
@@ -212,7 +214,7 @@ def switched_rows(A: sp.csr_array, row_lb: np.ndarray, row_ub: np.ndarray,
 
 
 def joint_model(problem: PlanProblem, config, cover: StationCover, costs: JointCosts,
-                infos=None) -> JointModel:
+                infos=None, clashes: tuple[np.ndarray, np.ndarray] | None = None) -> JointModel:
     """Build the joint program (see the module docstring).
 
     Parameters
@@ -226,6 +228,8 @@ def joint_model(problem: PlanProblem, config, cover: StationCover, costs: JointC
     costs : JointCosts
     infos : list of StationInfo, optional
         The stations' accuracy (default computed).
+    clashes : ((q,) int, (q,) int), optional
+        Candidate station and site index of every pair too near to hold both.
 
     Raises
     ------
@@ -250,18 +254,36 @@ def joint_model(problem: PlanProblem, config, cover: StationCover, costs: JointC
     eligible = np.ones(ns, bool)
     eligible[[problem.station_ids.index(sid) for sid in excluded]] = False
     cover_rows, n_cover = _cover_rows(cover, eligible, station_var, n_vars)
+    clash_rows, clash_station = _clash_rows(base, clashes, station_var, n_vars)
+    n_clash = clash_station.size
     x_cost = np.zeros(v0)
     x_cost[:base.var_site.size] = costs.marker * problem.site_cost[base.var_site]
     model = Model(
         c=np.r_[x_cost, np.full(ns, costs.station)],
-        A=sp.csr_array(sp.vstack([A, cover_rows])),
-        row_lb=np.r_[lb, np.full(n_cover, float(cover.min_stations))],
-        row_ub=np.r_[ub, np.full(n_cover, np.inf)],
+        A=sp.csr_array(sp.vstack([A, cover_rows, clash_rows])),
+        row_lb=np.r_[lb, np.full(n_cover, float(cover.min_stations)), np.full(n_clash, -np.inf)],
+        row_ub=np.r_[ub, np.full(n_cover, np.inf), np.ones(n_clash)],
         lb=np.r_[base.lb, np.zeros(ns)], ub=np.r_[base.ub, eligible.astype(float)],
         integrality=np.r_[base.integrality, np.ones(ns, dtype=base.integrality.dtype)],
         var_site=base.var_site, site_var=base.site_var,
-        row_kind=kinds + (RowKind("cover"),) * n_cover)
+        row_kind=kinds + (RowKind("cover"),) * n_cover
+        + tuple(RowKind("clash", int(st)) for st in clash_station))
     return JointModel(model=model, station_var=station_var, excluded=excluded)
+
+
+def _clash_rows(base: Model, clashes, station_var: np.ndarray, n_vars: int
+                ) -> tuple[sp.csr_array, np.ndarray]:
+    """``x_j + w_s <= 1`` for every clashing pair whose site is a variable; the rows and
+    their stations."""
+    if clashes is None:
+        return sp.csr_array((0, n_vars)), np.zeros(0, np.int64)
+    st, site = (np.asarray(a, np.int64) for a in clashes)
+    keep = base.site_var[site] >= 0
+    st, site = st[keep], site[keep]
+    q = np.arange(st.size)
+    return sp.csr_array((np.ones(2 * st.size), (np.r_[q, q], np.r_[base.site_var[site],
+                                                                   station_var[st]])),
+                        shape=(st.size, n_vars)), st
 
 
 def _cover_rows(cover: StationCover, eligible: np.ndarray, station_var: np.ndarray,
@@ -294,7 +316,8 @@ def _cover_rows(cover: StationCover, eligible: np.ndarray, station_var: np.ndarr
 
 
 def plan_stations_and_sites(problem: PlanProblem, config, cover: StationCover,
-                            costs: JointCosts, incumbent: tuple | None = None
+                            costs: JointCosts, incumbent: tuple | None = None,
+                            clashes: tuple[np.ndarray, np.ndarray] | None = None
                             ) -> JointResult:
     """The joint cut loop: solve, check the chosen stations, cut, re-solve until all pass.
 
@@ -310,6 +333,8 @@ def plan_stations_and_sites(problem: PlanProblem, config, cover: StationCover,
     incumbent : tuple of ((s,) bool, (n,) bool), optional
         Stations and sites known to pass (a baseline's): the answer when the time limit stops
         the loop first, with the best bound proved.
+    clashes : ((q,) int, (q,) int), optional
+        Candidate station and site index of every pair too near to hold both.
 
     Returns
     -------
@@ -323,7 +348,7 @@ def plan_stations_and_sites(problem: PlanProblem, config, cover: StationCover,
     """
     t0 = time.perf_counter()
     infos = station_infos(problem, config)
-    joint = joint_model(problem, config, cover, costs, infos)
+    joint = joint_model(problem, config, cover, costs, infos, clashes)
     model, station_var = joint.model, joint.station_var
     bound, solve_time, n_cuts, history = -np.inf, 0.0, 0, []
 

@@ -147,3 +147,22 @@ def test_greedy_viewpoints_drops_a_station_the_others_make_redundant():
     cover = StationCover(st, cells, 6)
     chosen = greedy_viewpoints(cover, np.ones(3, bool))
     assert chosen.tolist() == [False, True, True]
+
+
+def test_a_site_too_near_a_chosen_station_holds_no_marker():
+    problem, cover = _instance(3)
+    costs = JointCosts(station=10.0, marker=1.0)
+    free = plan_stations_and_sites(problem, LOOSE, cover, costs)
+    # forbid, for every chosen station, the markers it was given: the optimum must move
+    st, site = [], []
+    for s in np.flatnonzero(free.stations):
+        for j in np.flatnonzero(free.selected):
+            st.append(s)
+            site.append(j)
+    r = plan_stations_and_sites(problem, LOOSE, cover, costs,
+                                clashes=(np.array(st), np.array(site)))
+    clash = np.zeros((problem.n_stations, problem.n_sites), bool)
+    clash[st, site] = True
+    assert not np.any(clash[np.ix_(r.stations, r.selected)])
+    assert r.solution.objective >= free.solution.objective - 1e-9
+    assert cover.covered(r.stations)
