@@ -253,8 +253,8 @@ class PlanConfig:
     traffic_grid_m: float = 0.5
     station_spacing_m: float = 2.0
     station_time_s: float = 300.0
-    marker_time_s: float = 300.0
-    drive_speed_m_s: float = 0.1
+    marker_time_s: float = 180.0
+    drive_speed_m_s: float = 0.05
 
     def __post_init__(self) -> None:
         _plan_config_iv(self)

@@ -41,6 +41,9 @@ class PlanOutcome:
     ``network_chance`` the whole network's certified chance with its accuracy
     (:func:`planner.accuracy.network_chance.network_chance`); ``baseline_chances`` each
     baseline's certified chance of passing (network mode: the whole network's), by its name.
+    ``design``: a plan whose stations were chosen over an area of interest
+    (:func:`planner.design.plan.design_plan`) carries the survey design
+    (:class:`planner.design.run.SurveyDesign`); ``None`` for given stations.
     """
 
     inputs: PlanInputs
@@ -58,6 +61,7 @@ class PlanOutcome:
     sampled: SampledChance | None = None
     baseline_chances: dict | None = None
     network_chance: NetworkChance | None = None
+    design: object | None = None
 
     @property
     def selected_ids(self) -> list[str]:

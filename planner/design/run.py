@@ -1,0 +1,432 @@
+"""Choose where the rover stops over an area of interest, its markers and its traverse.
+
+:func:`design_survey` runs the steps in order:
+
+1. the AOI's cells (:func:`planner.coverage.grid.aoi_grid`) and where the rover can drive
+   (:func:`planner.traverse.trafficability.trafficable_map`);
+2. candidate stations on trafficable ground within reach of the AOI
+   (:func:`planner.traverse.stations.candidate_stations`), and which cells each covers
+   (:func:`planner.coverage.sight.coverage_matrix`, ray cast on tiles, mapped like the marker
+   visibility);
+3. what each candidate station could do with each candidate marker site
+   (:func:`planner.run.build_problem`, the marker plan's own visibility and error model);
+4. the joint program (:func:`planner.program.joint.plan_stations_and_sites`), started from
+   the better of two baselines (:mod:`planner.program.joint_baselines`);
+5. the traverse through the chosen stations from the route start and back
+   (:func:`planner.traverse.route.plan_route`), and each baseline's;
+6. on a site preset, its published hand layout (stations and as-built markers) judged the same
+   way.
+
+The caller then plans the markers of the chosen stations, in route order, with the ordinary
+plan (:func:`planner.design.plan.design_plan`), so every output and ``verify`` treat the
+result like any other plan.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, replace
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from markerplan.errors import ConfigError, DataError, InfeasiblePlanError
+from planner.accuracy.checks import diagnose, evaluate_layout, station_infos
+from planner.coverage.grid import AoiGrid, aoi_grid
+from planner.coverage.raster import uncovered_summary
+from planner.coverage.sight import CoverageMatrix, CoverageSettings, coverage_matrix
+from planner.problem.inputs import PlanInputs
+from planner.problem.sight import sight_problem
+from planner.problem.usability import PlanProblem
+from planner.program.joint import JointCosts, JointResult, StationCover, plan_stations_and_sites
+from planner.program.joint_baselines import (
+    JointBaseline,
+    greedy_viewpoints,
+    grid_viewpoints,
+    joint_baseline,
+)
+from planner.run import build_problem
+from planner.traverse.route import MissionCosts, Route, mission_time_s, plan_route
+from planner.traverse.stations import candidate_stations
+from planner.traverse.trafficability import TrafficMap, TrafficSettings, trafficable_map
+
+
+@dataclass(frozen=True)
+class SurveyOption:
+    """One way to survey the AOI (the plan, a baseline, the hand layout), with its cost.
+
+    Attributes
+    ----------
+    name : str
+        "plan", "greedy", "grid" or "hand".
+    station_xy : (k, 2) float
+        Its stations in route order, site frame, m.
+    n_markers : int
+        New markers it places.
+    covered_fraction : float
+        Fraction of the AOI's cells covered ``cover_min_stations`` times.
+    meets_requirement : bool
+        Whether its markers meet every station's requirement (the marker program's rules).
+    route : Route or None
+        Its traverse (None when it has no station or the drive failed, see ``note``).
+    time_s : dict
+        Mission time: ``stations``, ``markers``, ``drive``, ``total``, s.
+    note : str or None
+        Why it falls short, when it does.
+    spacing_m : float or None
+        Grid spacing (grid baseline only), m.
+    """
+
+    name: str
+    station_xy: np.ndarray
+    n_markers: int
+    covered_fraction: float
+    meets_requirement: bool
+    route: Route | None
+    time_s: dict
+    note: str | None = None
+    spacing_m: float | None = None
+
+    @property
+    def n_stations(self) -> int:
+        return int(len(self.station_xy))
+
+
+@dataclass(frozen=True)
+class SurveyDesign:
+    """The stations, markers and traverse chosen over an AOI.
+
+    Attributes
+    ----------
+    aoi : shapely Polygon or MultiPolygon
+        Site frame.
+    grid : AoiGrid
+    traffic : TrafficMap
+    candidate_ids : tuple of str, (s,)
+    candidate_position_m : (s, 3) float
+        LiDAR centres of the candidate stations, m.
+    coverage : CoverageMatrix
+        Candidate stations x AOI cells.
+    problem : PlanProblem
+        Every candidate station and candidate marker site.
+    joint : JointResult
+    order : (k,) int
+        The chosen candidate stations in route order.
+    route : Route
+    route_start_xy : (2,) float
+        Where the traverse starts and ends, m.
+    route_start_source : str
+        Where that point came from.
+    options : tuple of SurveyOption
+        The plan first, then the baselines and (on a preset) the hand layout.
+    costs : MissionCosts
+    timings_s : dict
+    """
+
+    aoi: object
+    grid: AoiGrid
+    traffic: TrafficMap
+    candidate_ids: tuple
+    candidate_position_m: np.ndarray
+    coverage: CoverageMatrix
+    problem: PlanProblem
+    joint: JointResult
+    order: np.ndarray
+    route: Route
+    route_start_xy: np.ndarray
+    route_start_source: str
+    options: tuple
+    costs: MissionCosts
+    timings_s: dict
+
+    @property
+    def station_ids(self) -> list[str]:
+        """Ids of the chosen stations in route order: S1, S2, ..."""
+        return [f"S{k + 1}" for k in range(self.order.size)]
+
+    @property
+    def station_position_m(self) -> np.ndarray:
+        """(k, 3) LiDAR centres of the chosen stations in route order, m."""
+        return self.candidate_position_m[self.order]
+
+    @property
+    def station_heading_rad(self) -> np.ndarray:
+        """(k,) heading of the rover at each chosen station: the direction it arrived from the
+        previous stop (the first: from the route start), straight-line, rad."""
+        xy = np.vstack([self.route_start_xy, self.station_position_m[:, :2]])
+        step = np.diff(xy, axis=0)
+        return np.arctan2(step[:, 1], step[:, 0])
+
+
+def coverage_settings(config) -> CoverageSettings:
+    """The coverage requirement of a :class:`~planner.config.PlanConfig`."""
+    return CoverageSettings(cell_m=config.aoi_cell_m, max_range_m=config.cover_max_range_m,
+                            max_incidence_deg=config.cover_max_incidence_deg,
+                            min_density_per_m2=config.cover_min_density_per_m2,
+                            min_stations=config.cover_min_stations)
+
+
+def traffic_settings(config) -> TrafficSettings:
+    """The rover's trafficability limits of a :class:`~planner.config.PlanConfig`."""
+    return TrafficSettings(footprint_m=config.rover_footprint_m,
+                           max_slope_deg=config.rover_max_slope_deg,
+                           max_roughness_m=config.rover_max_roughness_m,
+                           hazard_standoff_m=config.rover_hazard_standoff_m,
+                           grid_m=config.traffic_grid_m)
+
+
+def mission_costs(config) -> MissionCosts:
+    """The mission-time costs of a :class:`~planner.config.PlanConfig`."""
+    return MissionCosts(station_s=config.station_time_s, marker_s=config.marker_time_s,
+                        drive_m_per_s=config.drive_speed_m_s)
+
+
+def flat_reach_m(config, lidar_height_m: float) -> float:
+    """How far from a station a cell of flat ground can count as covered, m: the incidence
+    limit's ``h tan(incidence)``, at most the range limit.
+
+    >>> from planner.config import PlanConfig
+    >>> round(flat_reach_m(PlanConfig(), 1.0), 2)
+    11.43
+    """
+    incidence = math.radians(min(config.cover_max_incidence_deg, 89.9))
+    return min(config.cover_max_range_m, lidar_height_m * math.tan(incidence))
+
+
+def design_survey(inputs: PlanInputs, config, error_model, aoi, keepouts=(),
+                  route_start_xy=None, route_start_source: str = "given",
+                  progress: bool = True, map_groups=map, detection_model=None,
+                  hand_layout: bool = True) -> SurveyDesign:
+    """Choose stations, markers and traverse over ``aoi`` (see the module docstring).
+
+    Parameters
+    ----------
+    inputs : PlanInputs
+        The terrain, marker-site boundary, exclusions, craters, LiDAR height and marker radius;
+        its stations are the hand layout (judged when ``hand_layout``), not candidates.
+    config : PlanConfig
+        The marker program's settings and the AOI plan's (``aoi_cell_m``, ``cover_*``,
+        ``rover_*``, ``traffic_grid_m``, ``station_spacing_m``, ``*_time_s``,
+        ``drive_speed_m_s``).
+    error_model : ErrorModel
+    aoi : shapely Polygon or MultiPolygon
+        The area of interest, site frame (:func:`planner.coverage.aoi.read_aoi`).
+    keepouts : sequence of shapely Polygon
+        Where the rover must not drive.
+    route_start_xy : (2,) float, optional
+        Where the traverse starts and ends (the lander); default the trafficable point
+        nearest the AOI's centroid.
+    route_start_source : str
+        How the report names where the start came from.
+    progress : bool
+    map_groups : callable
+        How the ray casting's station blocks are mapped (see
+        :func:`planner.problem.sight.sight_problem`).
+    detection_model : DetectionModel, optional
+    hand_layout : bool
+        Judge ``inputs``' stations and as-built markers as the "hand" option.
+
+    Returns
+    -------
+    design : SurveyDesign
+
+    Raises
+    ------
+    InfeasiblePlanError
+        Part of the AOI no trafficable candidate station covers (where, and why), or no
+        choice meets the requirement.
+    ConfigError
+        A route start on ground the rover cannot drive.
+    """
+    timings: dict = {}
+    t = time.perf_counter()
+    dem = inputs.dem
+    grid = aoi_grid(dem, aoi, config.aoi_cell_m)
+    traffic = trafficable_map(dem, traffic_settings(config), craters=inputs.craters,
+                              keepouts=keepouts)
+    if route_start_xy is None:
+        centroid = np.array(aoi.centroid.coords[0])
+        route_start_xy = traffic.nearest_trafficable(centroid[None])[0]
+        route_start_source = "the trafficable point nearest the AOI's centroid"
+    start = _route_start(traffic, route_start_xy)
+    reach = flat_reach_m(config, inputs.lidar_height_m)
+    ids, _, position = candidate_stations(traffic, aoi.buffer(reach), config.station_spacing_m,
+                                          inputs.lidar_height_m, dem, start_xy=start)
+    timings["candidate_stations"] = time.perf_counter() - t
+    cover_settings = coverage_settings(config)
+    coverage = coverage_matrix(dem, position, grid, cover_settings, map_groups=map_groups,
+                               progress=progress)
+    timings["coverage"] = coverage.elapsed_s
+    short = uncovered_summary(coverage, grid, position, cover_settings)
+    if len(short):
+        raise InfeasiblePlanError(f"no trafficable candidate station covers part of the AOI: "
+                                  f"{short.text}")
+    useful = np.unique(coverage.station)
+    ids, position, coverage = _only(useful, ids, position, coverage)
+
+    candidates = replace(inputs, station_ids=list(ids), station_xyz=position,
+                         station_heading_rad=np.zeros(len(ids)))
+    problem, _, _, sight_t = build_problem(candidates, config, error_model, progress,
+                                           map_groups, detection_model, clear_of_stations=False)
+    timings.update({f"marker_{k}": v for k, v in sight_t.items()})
+    cover = StationCover(coverage.station, coverage.cell, len(grid),
+                         config.cover_min_stations)
+    costs = mission_costs(config)
+    jcosts = JointCosts(station=costs.station_s, marker=costs.marker_s)
+    clashes = _clashes(problem, config.min_station_distance_m)
+    t = time.perf_counter()
+    infos = station_infos(problem, config)
+    eligible = np.ones(problem.n_stations, bool)
+    failing = diagnose(problem, config, infos, accuracy_check=not config.network)
+    eligible[[problem.station_ids.index(sid) for sid in failing]] = False
+    greedy = _baseline("greedy", greedy_viewpoints(cover, eligible), problem, config, cover,
+                       jcosts, clashes)
+    xmin, ymin, xmax, ymax = aoi.bounds
+    grid_stations, spacing = grid_viewpoints(cover, problem.station_xyz[:, :2], eligible,
+                                             (xmin, xmax, ymin, ymax),
+                                             _grid_spacings(reach, config.station_spacing_m))
+    gridded = _baseline("grid", grid_stations, problem, config, cover, jcosts, clashes, spacing)
+    timings["baselines"] = time.perf_counter() - t
+    passing = [b for b in (greedy, gridded) if b.covered and b.meets_requirement]
+    best = min(passing, key=lambda b: b.cost) if passing else None
+    joint = plan_stations_and_sites(problem, config, cover, jcosts,
+                                    incumbent=None if best is None
+                                    else (best.stations, best.selected),
+                                    clashes=clashes)
+    timings["joint_program"] = joint.solve_time_s
+    t = time.perf_counter()
+    chosen = np.flatnonzero(joint.stations)
+    route = plan_route(traffic, start, position[chosen, :2], [ids[k] for k in chosen], dem)
+    order = chosen[route.order]
+    plan_option = _option("plan", problem, cover, costs, joint.stations, joint.selected,
+                          True, route, None)
+    options = [plan_option]
+    for b in (greedy, gridded):
+        options.append(_baseline_option(b, problem, cover, costs, traffic, start, ids, dem))
+    if hand_layout and len(inputs.station_ids):
+        options.append(_hand_option(inputs, config, error_model, grid, cover_settings,
+                                    costs, traffic, start, map_groups))
+    timings["routes"] = time.perf_counter() - t
+    return SurveyDesign(aoi=aoi, grid=grid, traffic=traffic, candidate_ids=tuple(ids),
+                        candidate_position_m=position, coverage=coverage, problem=problem,
+                        joint=joint, order=order, route=route, route_start_xy=start,
+                        route_start_source=route_start_source, options=tuple(options),
+                        costs=costs, timings_s=timings)
+
+
+def _route_start(traffic: TrafficMap, xy) -> np.ndarray:
+    """The route start as a point on trafficable ground (else the route's one-line error)."""
+    start = np.asarray(xy, float).reshape(-1)
+    if start.shape != (2,) or not np.all(np.isfinite(start)):
+        raise ConfigError(f"`route_start` must be one finite (x, y) point, got {xy!r}")
+    if not traffic.trafficable_at(start[None])[0]:
+        why = traffic.why_not(start[None])[0]
+        near = traffic.nearest_trafficable(start[None])[0]
+        raise ConfigError(f"`route_start` ({start[0]:.2f}, {start[1]:.2f}) m is not on "
+                          f"trafficable ground ({why}); move `route_start` to trafficable "
+                          f"ground; the nearest trafficable point is ({near[0]:.2f}, "
+                          f"{near[1]:.2f}) m")
+    return start
+
+
+def _only(keep: np.ndarray, ids, position: np.ndarray, coverage: CoverageMatrix):
+    """The candidate stations ``keep`` (indices), their coverage re-indexed."""
+    new = np.full(len(ids), -1, np.int64)
+    new[keep] = np.arange(keep.size)
+    return ([ids[k] for k in keep], position[keep],
+            replace(coverage, station=new[coverage.station]))
+
+
+def _clashes(problem: PlanProblem, clearance_m: float) -> tuple[np.ndarray, np.ndarray]:
+    """(candidate station, site) pairs closer than ``clearance_m`` horizontally."""
+    tree = cKDTree(problem.site_xyz[:, :2])
+    hits = tree.query_ball_point(problem.station_xyz[:, :2], clearance_m)
+    st = np.repeat(np.arange(problem.n_stations), [len(h) for h in hits])
+    site = np.concatenate([np.asarray(h, np.int64) for h in hits] or [np.zeros(0, np.int64)])
+    order = np.lexsort((site, st))
+    return st[order], site[order]
+
+
+def _baseline(name: str, stations: np.ndarray, problem: PlanProblem, config,
+              cover: StationCover, costs: JointCosts, clashes, spacing_m=None
+              ) -> JointBaseline:
+    """A baseline's stations with their markers, no marker on a site too near one of them."""
+    st, site = clashes
+    near = {problem.site_ids[j] for j in site[stations[st]]}
+    config = config.replace(forbidden=tuple(sorted(set(config.forbidden) | near)))
+    return joint_baseline(name, problem, config, cover, costs, stations, spacing_m)
+
+
+def _grid_spacings(reach_m: float, station_spacing_m: float) -> np.ndarray:
+    """Grid spacings tried, widest first: from twice the flat reach down to the candidate
+    spacing, 10 % narrower each step, m."""
+    out, s = [], 2.0 * reach_m
+    while s > station_spacing_m:
+        out.append(s)
+        s *= 0.9
+    return np.array(out + [station_spacing_m])
+
+
+def _time(costs: MissionCosts, route: Route | None, n_stations: int, n_markers: int) -> dict:
+    if route is None:
+        return {"stations": costs.station_s * n_stations, "markers": costs.marker_s * n_markers,
+                "drive": None, "total": None}
+    t = mission_time_s(route, n_stations, n_markers, costs)
+    return {"stations": t.stations_s, "markers": t.markers_s, "drive": t.drive_s,
+            "total": t.total_s}
+
+
+def _option(name, problem, cover, costs, stations, selected, meets, route, note,
+            spacing_m=None) -> SurveyOption:
+    idx = np.flatnonzero(stations)
+    xy = problem.station_xyz[idx, :2]
+    if route is not None:
+        xy = xy[route.order]
+    n_markers = int(problem.site_cost[selected].sum())
+    frac = float(np.mean(cover.counts(stations) >= cover.min_stations)) if cover.n_cells else 1.0
+    return SurveyOption(name=name, station_xy=xy, n_markers=n_markers, covered_fraction=frac,
+                        meets_requirement=bool(meets), route=route,
+                        time_s=_time(costs, route, idx.size, n_markers), note=note,
+                        spacing_m=spacing_m)
+
+
+def _baseline_option(b: JointBaseline, problem, cover, costs, traffic, start, ids, dem
+                     ) -> SurveyOption:
+    idx = np.flatnonzero(b.stations)
+    route, note = None, b.note
+    if idx.size:
+        route = plan_route(traffic, start, problem.station_xyz[idx, :2],
+                           [ids[k] for k in idx], dem)
+    return _option(b.name, problem, cover, costs, b.stations, b.selected,
+                   b.meets_requirement, route, note, b.spacing_m)
+
+
+def _hand_option(inputs: PlanInputs, config, error_model, grid: AoiGrid,
+                 cover_settings: CoverageSettings, costs: MissionCosts, traffic, start,
+                 map_groups) -> SurveyOption:
+    """The inputs' own stations with the site's as-built markers, judged like the plan."""
+    position = inputs.station_xyz
+    cov = coverage_matrix(inputs.dem, position, grid, cover_settings, map_groups=map_groups)
+    counts = np.bincount(cov.cell, minlength=len(grid))
+    frac = float(np.mean(counts >= cover_settings.min_stations)) if len(grid) else 1.0
+    meets, note = False, None
+    if len(inputs.as_built_ids):
+        sight = sight_problem(inputs, list(inputs.as_built_ids), inputs.as_built_xyz, config,
+                              error_model, progress=False, map_groups=map_groups)
+        check = evaluate_layout(sight.problem, np.ones(len(inputs.as_built_ids), bool), config)
+        meets = bool(check.ok.all())
+        if not meets:
+            note = f"{int((~check.ok).sum())} of {len(check.ok)} stations fail the requirement"
+    else:
+        note = "no as-built markers known"
+    try:
+        route = plan_route(traffic, start, position[:, :2], list(inputs.station_ids),
+                           inputs.dem)
+    except (ConfigError, DataError) as exc:
+        route, note = None, (note + "; " if note else "") + str(exc)
+    xy = position[:, :2] if route is None else position[route.order, :2]
+    n_markers = len(inputs.as_built_ids)
+    return SurveyOption(name="hand", station_xy=xy, n_markers=n_markers, covered_fraction=frac,
+                        meets_requirement=meets, route=route,
+                        time_s=_time(costs, route, len(position), n_markers), note=note)
