@@ -180,6 +180,10 @@ class PlanConfig:
         in [0, 1e7].
     cover_min_stations : int
         Stations that must measure every cell (2: each cell from two stations); in [1, 10].
+    cover_min_fraction : float
+        Smallest fraction of the AOI's cells that must be coverable at all: cells no candidate
+        station can measure (behind a rock, deep in a crater) are reported and left out of the
+        requirement as long as the rest is at least this fraction; in (0, 1].
     rover_footprint_m : float
         Side of the square over which the rover judges slope and roughness (its wheel base),
         m; in (0, 100].
@@ -246,6 +250,7 @@ class PlanConfig:
     cover_max_incidence_deg: float = 85.0
     cover_min_density_per_m2: float = 100.0
     cover_min_stations: int = 1
+    cover_min_fraction: float = 0.99
     rover_footprint_m: float = 1.5
     rover_max_slope_deg: float = 15.0
     rover_max_roughness_m: float = 0.06
@@ -387,6 +392,7 @@ BOUNDS: dict[str, tuple[float, bool, float, str]] = {
     "cover_max_incidence_deg": (0.0, False, 90.0, " deg"),
     "cover_min_density_per_m2": (0.0, True, 1e7, " points/m^2"),
     "cover_min_stations": (1, True, 10, ""),
+    "cover_min_fraction": (0.0, False, 1.0, ""),
     "rover_footprint_m": (0.0, False, 100.0, " m"),
     "rover_max_slope_deg": (0.0, False, 89.9, " deg"),
     "rover_max_roughness_m": (0.0, True, 10.0, " m"),

@@ -34,7 +34,7 @@ from scipy.spatial import cKDTree
 from markerplan.errors import ConfigError, DataError, InfeasiblePlanError
 from planner.accuracy.checks import diagnose, evaluate_layout, station_infos
 from planner.coverage.grid import AoiGrid, aoi_grid
-from planner.coverage.raster import uncovered_summary
+from planner.coverage.raster import Uncovered, uncovered_summary
 from planner.coverage.sight import CoverageMatrix, CoverageSettings, coverage_matrix
 from planner.problem.inputs import PlanInputs
 from planner.problem.sight import sight_problem
@@ -118,6 +118,8 @@ class SurveyDesign:
         Where the traverse starts and ends, m.
     route_start_source : str
         Where that point came from.
+    uncoverable : planner.coverage.raster.Uncovered
+        AOI cells no candidate station can cover (left out of the requirement), and why.
     options : tuple of SurveyOption
         The plan first, then the baselines and (on a preset) the hand layout.
     costs : MissionCosts
@@ -136,6 +138,7 @@ class SurveyDesign:
     route: Route
     route_start_xy: np.ndarray
     route_start_source: str
+    uncoverable: Uncovered
     options: tuple
     costs: MissionCosts
     timings_s: dict
@@ -258,10 +261,14 @@ def design_survey(inputs: PlanInputs, config, error_model, aoi, keepouts=(),
     coverage = coverage_matrix(dem, position, grid, cover_settings, map_groups=map_groups,
                                progress=progress)
     timings["coverage"] = coverage.elapsed_s
-    short = uncovered_summary(coverage, grid, position, cover_settings)
-    if len(short):
-        raise InfeasiblePlanError(f"no trafficable candidate station covers part of the AOI: "
-                                  f"{short.text}")
+    uncoverable = uncovered_summary(coverage, grid, position, cover_settings)
+    if uncoverable.area_m2 > (1.0 - config.cover_min_fraction) * len(grid) * grid.cell_area_m2 \
+            + 1e-9:
+        raise InfeasiblePlanError(
+            f"no trafficable candidate station covers part of the AOI: {uncoverable.text}; "
+            f"more than `cover_min_fraction` ({config.cover_min_fraction:g}) of the AOI must "
+            "be coverable: move the AOI, relax the coverage or rover limits, or lower "
+            "`cover_min_fraction`")
     useful = np.unique(coverage.station)
     ids, position, coverage = _only(useful, ids, position, coverage)
 
@@ -270,8 +277,7 @@ def design_survey(inputs: PlanInputs, config, error_model, aoi, keepouts=(),
     problem, _, _, sight_t = build_problem(candidates, config, error_model, progress,
                                            map_groups, detection_model, clear_of_stations=False)
     timings.update({f"marker_{k}": v for k, v in sight_t.items()})
-    cover = StationCover(coverage.station, coverage.cell, len(grid),
-                         config.cover_min_stations)
+    cover = _required_cover(coverage, len(grid), uncoverable.cell, config.cover_min_stations)
     costs = mission_costs(config)
     jcosts = JointCosts(station=costs.station_s, marker=costs.marker_s)
     clashes = _clashes(problem, config.min_station_distance_m)
@@ -299,11 +305,12 @@ def design_survey(inputs: PlanInputs, config, error_model, aoi, keepouts=(),
     chosen = np.flatnonzero(joint.stations)
     route = plan_route(traffic, start, position[chosen, :2], [ids[k] for k in chosen], dem)
     order = chosen[route.order]
-    plan_option = _option("plan", problem, cover, costs, joint.stations, joint.selected,
+    plan_option = _option("plan", problem, cover, len(grid), costs, joint.stations, joint.selected,
                           True, route, None)
     options = [plan_option]
     for b in (greedy, gridded):
-        options.append(_baseline_option(b, problem, cover, costs, traffic, start, ids, dem))
+        options.append(_baseline_option(b, problem, cover, len(grid), costs, traffic, start,
+                                        ids, dem))
     if hand_layout and len(inputs.station_ids):
         options.append(_hand_option(inputs, config, error_model, grid, cover_settings,
                                     costs, traffic, start, map_groups))
@@ -311,7 +318,8 @@ def design_survey(inputs: PlanInputs, config, error_model, aoi, keepouts=(),
     return SurveyDesign(aoi=aoi, grid=grid, traffic=traffic, candidate_ids=tuple(ids),
                         candidate_position_m=position, coverage=coverage, problem=problem,
                         joint=joint, order=order, route=route, route_start_xy=start,
-                        route_start_source=route_start_source, options=tuple(options),
+                        route_start_source=route_start_source, uncoverable=uncoverable,
+                        options=tuple(options),
                         costs=costs, timings_s=timings)
 
 
@@ -336,6 +344,17 @@ def _only(keep: np.ndarray, ids, position: np.ndarray, coverage: CoverageMatrix)
     new[keep] = np.arange(keep.size)
     return ([ids[k] for k in keep], position[keep],
             replace(coverage, station=new[coverage.station]))
+
+
+def _required_cover(coverage: CoverageMatrix, n_cells: int, uncoverable: np.ndarray,
+                    min_stations: int) -> StationCover:
+    """The coverage rows' view: every AOI cell but the uncoverable ones (left out, reported)."""
+    required = np.ones(n_cells, bool)
+    required[uncoverable] = False
+    keep = required[coverage.cell]
+    new = np.cumsum(required) - 1
+    return StationCover(coverage.station[keep], new[coverage.cell[keep]], int(required.sum()),
+                        min_stations)
 
 
 def _clashes(problem: PlanProblem, clearance_m: float) -> tuple[np.ndarray, np.ndarray]:
@@ -377,28 +396,28 @@ def _time(costs: MissionCosts, route: Route | None, n_stations: int, n_markers: 
             "total": t.total_s}
 
 
-def _option(name, problem, cover, costs, stations, selected, meets, route, note,
+def _option(name, problem, cover, n_aoi_cells, costs, stations, selected, meets, route, note,
             spacing_m=None) -> SurveyOption:
     idx = np.flatnonzero(stations)
     xy = problem.station_xyz[idx, :2]
     if route is not None:
         xy = xy[route.order]
     n_markers = int(problem.site_cost[selected].sum())
-    frac = float(np.mean(cover.counts(stations) >= cover.min_stations)) if cover.n_cells else 1.0
+    frac = float(np.sum(cover.counts(stations) >= cover.min_stations) / max(n_aoi_cells, 1))
     return SurveyOption(name=name, station_xy=xy, n_markers=n_markers, covered_fraction=frac,
                         meets_requirement=bool(meets), route=route,
                         time_s=_time(costs, route, idx.size, n_markers), note=note,
                         spacing_m=spacing_m)
 
 
-def _baseline_option(b: JointBaseline, problem, cover, costs, traffic, start, ids, dem
-                     ) -> SurveyOption:
+def _baseline_option(b: JointBaseline, problem, cover, n_aoi_cells, costs, traffic, start,
+                     ids, dem) -> SurveyOption:
     idx = np.flatnonzero(b.stations)
     route, note = None, b.note
     if idx.size:
         route = plan_route(traffic, start, problem.station_xyz[idx, :2],
                            [ids[k] for k in idx], dem)
-    return _option(b.name, problem, cover, costs, b.stations, b.selected,
+    return _option(b.name, problem, cover, n_aoi_cells, costs, b.stations, b.selected,
                    b.meets_requirement, route, note, b.spacing_m)
 
 
