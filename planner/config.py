@@ -256,7 +256,7 @@ class PlanConfig:
     rover_max_roughness_m: float = 0.06
     rover_hazard_standoff_m: float = 0.5
     traffic_grid_m: float = 0.5
-    station_spacing_m: float = 2.0
+    station_spacing_m: float = 4.0
     station_time_s: float = 300.0
     marker_time_s: float = 180.0
     drive_speed_m_s: float = 0.05

@@ -296,15 +296,17 @@ def id_list(ctx, param, text: str | None) -> tuple[str, ...] | None:
     return ids
 
 
-def point_option(name: str, default: str, metavar: str, help_text: str,
+def point_option(name: str, default: str | None, metavar: str, help_text: str,
                  dest: str | None = None, old: str | None = None, *, limit: float):
-    """An option of as many comma-separated numbers as ``default`` has, each finite and within
-    ``+-limit`` (the option's unit), handed to the command as a tuple of floats (parameter
-    ``dest``, default from ``name``); ``old``: its former spelling, kept as a
-    :func:`deprecated_alias`."""
-    count = len(default.split(","))
+    """An option of as many comma-separated numbers as ``default`` has (or ``metavar``, when
+    there is no default: then ``None`` when not given), each finite and within ``+-limit``
+    (the option's unit), handed to the command as a tuple of floats (parameter ``dest``,
+    default from ``name``); ``old``: its former spelling, kept as a :func:`deprecated_alias`."""
+    count = len((default or metavar).split(","))
 
-    def parse(ctx, param, text: str) -> tuple[float, ...]:
+    def parse(ctx, param, text: str | None) -> tuple[float, ...] | None:
+        if text is None:
+            return None
         try:
             values = tuple(float(p) for p in text.split(","))
         except ValueError:
@@ -316,8 +318,8 @@ def point_option(name: str, default: str, metavar: str, help_text: str,
                                      ctx, param)
         return values
 
-    attrs = {"default": default, "show_default": True, "metavar": metavar, "callback": parse,
-             "help": help_text}
+    attrs = {"default": default, "show_default": default is not None, "metavar": metavar,
+             "callback": parse, "help": help_text}
     if old is None:
         return click.option(name, *([dest] if dest else []), **attrs)
     return renamed_option(name, dest, old, **attrs)

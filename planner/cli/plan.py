@@ -22,6 +22,7 @@ from planner.cli._common import (
     marker_radius_option,
     out_option,
     overwrite_option,
+    point_option,
     renamed_option,
     report_timings,
     reproject_option,
@@ -96,6 +97,16 @@ def _load_detection_model(ctx, param, path):
 @dem_height_error_option
 @stations_option
 @station_ids_option
+@click.option("--aoi", "aoi_path", type=FILE,
+              help="GeoJSON polygon of the area of interest: choose the stations too (where "
+                   "the rover stops to cover it), the markers and the traverse; instead of "
+                   "--stations.")
+@point_option("--route-start", None, "X,Y",
+              "With --aoi: where the traverse starts and ends (the lander), site frame m. "
+              "Default: the trafficable point nearest the AOI's centroid.",
+              "route_start", limit=1e7)
+@click.option("--keep-out", "keep_out_paths", type=FILE, multiple=True,
+              help="With --aoi: GeoJSON polygon(s) the rover must not drive into (repeatable).")
 @boundary_option
 @exclude_option
 @marker_radius_option(default_help=" Default: the preset's (0.1).")
@@ -133,7 +144,7 @@ def _load_detection_model(ctx, param, path):
 @overwrite_option
 @json_option
 def command(site_name, site_seed, dem_path, reproject, terrain, dem_height_error,
-            stations_path, station_ids,
+            stations_path, station_ids, aoi_path, route_start, keep_out_paths,
             boundary_path, exclude_paths, marker_radius_m, error_model, config_path,
             visibility_path, redundant, chance_epsilon, detection_model, existing, control_path,
             budget, requirement, error_figure, network,
@@ -148,6 +159,15 @@ def command(site_name, site_seed, dem_path, reproject, terrain, dem_height_error
     station_error.tif (its predicted error, m; not with --visibility). With --network also
     stations.csv: each station's error relative to the reference station and the stations it
     is tied to. With no arguments: the default site, into ./markerplan-out/.
+
+    With --aoi the plan also chooses the stations: the fewest-cost set of stops on trafficable
+    ground that covers every cell of the area of interest (seen within range and incidence
+    limits at a minimum point density) and meets the requirement, chosen together with the
+    markers, and the traverse through them from --route-start and back. It then also writes
+    stations.csv (in route order, with each leg), coverage.tif (stations seeing each cell,
+    and the best point density) and the route in plan.gpkg and on the map; the report
+    compares mission time with a greedy and a grid choice of stations (and, on a preset, its
+    published layout).
 
     Ray casting runs as one task per block of stations, each on its own DEM tile:
     --scheduler local (the default) starts a dask cluster on this machine when there is
@@ -174,6 +194,8 @@ def command(site_name, site_seed, dem_path, reproject, terrain, dem_height_error
       markerplan plan --terrain orbital --out plan-orbital/
       markerplan plan --dem nac.tif --dem-height-error 0.3,10 --stations s.csv --out p/
       markerplan plan --site km --scheduler tcp://10.0.0.5:8786 --out plan-km/
+      markerplan plan --aoi crater-field.geojson --route-start 0,0 --out plan-aoi/
+      markerplan plan --dem site.tif --aoi aoi.geojson --keep-out lander.geojson --out p/
     """
     from markerplan.output_folder import output_folder
     from planner.distributed import executor
@@ -184,12 +206,15 @@ def command(site_name, site_seed, dem_path, reproject, terrain, dem_height_error
 
     require_dem(reproject, dem_path)
     require_truth_terrain(terrain, dem_path)
+    _aoi_iv(aoi_path, stations_path, station_ids, visibility_path, route_start,
+            keep_out_paths)
     kind, reference_station = datum_choice(datum, control_path, reference_station)
     inputs_given = given_paths(dem_path, stations_path, boundary_path, error_model.path,
                                config_path, visibility_path, *exclude_paths,
                                None if detection_model[1].startswith("default") else
                                detection_model[1],
-                               None if existing == "as-built" else existing, control_path)
+                               None if existing == "as-built" else existing, control_path,
+                               aoi_path, *keep_out_paths)
     progress = not as_json or sys.stderr.isatty()
     with output_folder(out, overwrite, "plan", inputs=inputs_given) as stage, \
             executor(scheduler, workers, progress) as tasks:
@@ -199,7 +224,8 @@ def command(site_name, site_seed, dem_path, reproject, terrain, dem_height_error
                                 time_limit_s, as_json, network, reference_station,
                                 reproject, map_groups=tasks, terrain=terrain,
                                 dem_height_error=dem_height_error, chance_epsilon=chance_epsilon,
-                                control_path=control_path,
+                                control_path=control_path, aoi=(aoi_path, route_start,
+                                                                keep_out_paths),
                                 detection_model=detection_model, error_figure=error_figure,
                                 requirement={**requirement,
                                              "datum": "free" if kind == "free" else None})
@@ -284,7 +310,7 @@ def _plan(site_name, site_seed, dem_path, stations_path, station_ids, boundary_p
           existing, budget, time_limit_s, as_json, network=None, reference_station=None,
           reproject=False, map_groups=map, chance_epsilon=None, detection_model=None,
           terrain="truth", dem_height_error=None, error_figure=None, requirement=None,
-          control_path=None):
+          control_path=None, aoi=(None, None, ())):
     """Read the inputs and make the plan; return ``(outcome, config)``. A ``--dem`` is read
     only as far as the stations see (``config.max_range_m``); ``map_groups`` maps the ray
     casting's station blocks (:func:`visibility.visibility_matrix.tiled_visibility`).
@@ -292,7 +318,9 @@ def _plan(site_name, site_seed, dem_path, stations_path, station_ids, boundary_p
     ``detection_model``: ``(model, name)``, or ``None`` for none; ``error_figure``:
     ``--error-figure`` (``None``: not given); ``requirement``: the requirement and pose-aid
     options by their configuration names (``None``: not given); ``control_path``:
-    ``--control``."""
+    ``--control``; ``aoi``: ``(--aoi, --route-start, --keep-out)``, the stations chosen
+    over the area of interest (:func:`planner.design.plan.design_plan`) when ``--aoi`` is
+    given."""
     from markerplan.errors import ConfigError
     from planner.config import PlanConfig, load_config
     from planner.problem.inputs import load_inputs
@@ -312,7 +340,8 @@ def _plan(site_name, site_seed, dem_path, stations_path, station_ids, boundary_p
                          existing=existing, marker_radius_m=marker_radius_m,
                          station_ids=station_ids, reproject=reproject,
                          sight_radius_m=config.max_range_m, terrain=terrain,
-                         dem_height_error=dem_height_error, control=control_path)
+                         dem_height_error=dem_height_error, control=control_path,
+                         stations_chosen=aoi[0] is not None)
     if inputs.existing_ids:
         config = config.replace(existing=tuple(inputs.existing_ids))
     problem = None
@@ -327,7 +356,49 @@ def _plan(site_name, site_seed, dem_path, stations_path, station_ids, boundary_p
     else:
         model, model_name = error_model.model, error_model.name
     dmodel, dname = detection_model if detection_model is not None else (None, "none")
+    if aoi[0] is not None:
+        return _design_plan(inputs, config, model, model_name, aoi, as_json, map_groups,
+                            dmodel, dname), config
     outcome = make_plan(inputs, config, model, model_name, problem=problem,
                         progress=not as_json or sys.stderr.isatty(), map_groups=map_groups,
                         detection_model=dmodel, detection_name=dname)
     return outcome, config
+
+
+def _aoi_iv(aoi_path, stations_path, station_ids, visibility_path, route_start,
+            keep_out_paths) -> None:
+    """Refuse ``--aoi`` with the options that give the stations, and the AOI's options
+    without it."""
+    from markerplan.errors import ConfigError
+
+    if aoi_path is None:
+        if route_start is not None or keep_out_paths:
+            raise ConfigError("--route-start and --keep-out belong to a plan that chooses its "
+                              "stations: add --aoi AOI.geojson, or drop them")
+        return
+    given = [name for name, v in (("--stations", stations_path), ("--station-ids", station_ids),
+                                  ("--visibility", visibility_path)) if v]
+    if given:
+        raise ConfigError(f"--aoi chooses the stations, {' and '.join(given)} give(s) them: "
+                          "drop one")
+
+
+def _design_plan(inputs, config, model, model_name, aoi, as_json, map_groups, dmodel, dname):
+    """The plan of stations chosen over ``aoi`` = ``(--aoi, --route-start, --keep-out)``."""
+    from planner.coverage.aoi import read_aoi
+    from planner.design.plan import design_plan
+    from planner.problem.candidates import load_polygons
+    from planner.problem.inputs import polygons_on_dem
+
+    aoi_path, route_start, keep_out_paths = aoi
+    area = read_aoi(aoi_path, inputs.dem)
+    keepouts = []
+    for path in keep_out_paths:
+        keepouts += polygons_on_dem(load_polygons(path, "`keep_out_paths`"), inputs.dem)
+    return design_plan(inputs, config, model, area, model_name, keepouts=keepouts,
+                       route_start_xy=route_start,
+                       route_start_source="given (--route-start)",
+                       progress=not as_json or sys.stderr.isatty(), map_groups=map_groups,
+                       detection_model=dmodel, detection_name=dname,
+                       hand_layout=inputs.sources.get("stations") is None
+                       and "dem" not in inputs.sources)

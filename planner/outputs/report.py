@@ -51,6 +51,7 @@ from planner.accuracy.requirement import (
     requirement_text,
 )
 from planner.outputs.chance_report import chance_markdown, chance_sections
+from planner.outputs.design_report import design_markdown, design_record, station_route_fields
 from planner.outputs.gis import crs_name, geojson_crs_members, geojson_positions, write_plan_gpkg
 from planner.outputs.local_report import local_markdown, local_record, write_pairs_csv
 from planner.outputs.plan_file import SCHEMA, SCHEMA_VERSION, write_plan
@@ -169,6 +170,12 @@ def plan_record(outcome) -> dict:
     doc.update(chance_sections(outcome))
     for rec in doc["stations"] if "chance" in doc else ():
         rec["pass_probability"] = doc["chance"]["stations"][rec["id"]]["pass_probability"]
+    if outcome.design is not None:
+        doc["design"] = design_record(outcome.design,
+                                      int(np.sum(~prob.site_existing[res.selected])))
+        for rec, route in zip(doc["stations"], station_route_fields(outcome.design),
+                              strict=True):
+            rec.update(route)
     return doc
 
 
@@ -223,7 +230,8 @@ def write_plan_files(outcome, folder: Path) -> dict:
     """Write plan.json, markers.csv (with .csvt and, with a CRS, .prj), markers.geojson,
     plan.gpkg (:func:`planner.outputs.gis.write_plan_gpkg`) and report.md into ``folder``
     (network mode: also stations.csv and its sidecars, each station's error relative to the
-    datum and its ties).
+    datum and its ties; a plan that chose its stations: stations.csv with each station's
+    place on the route, and coverage.tif).
 
     Returns the ``plan.json`` document.
     """
@@ -235,9 +243,12 @@ def write_plan_files(outcome, folder: Path) -> dict:
         write_pairs_csv(doc, folder / "pairs.csv")
         if "marker_pairs" in doc["local"]:
             write_pairs_csv(doc, folder / "marker_pairs.csv", markers=True)
-    if "network" in doc:
+    if "network" in doc or "design" in doc:
         _write_stations_csv(doc, folder / "stations.csv")
+    if "network" in doc:
         _write_reliability_csv(outcome, folder / "reliability.csv")
+    if outcome.design is not None:
+        write_design_coverage(outcome.design, folder)
     _write_geojson(doc, outcome.inputs.dem.crs, folder / "markers.geojson")
     write_plan_gpkg(outcome, doc, folder / "plan.gpkg")
     (folder / "report.md").write_text(report_markdown(doc))
@@ -252,6 +263,13 @@ STATION_COLUMNS = ("id", "x_m", "y_m", "z_m", "network_error_m", "meets_requirem
                    "n_markers", "tied_to", "error_relative_to")
 STATION_TYPES = ("String", "Real", "Real", "Real", "Real", "Integer", "Integer", "String",
                  "String")
+#: ... of a known-control plan that chose its stations (the route's columns follow).
+KNOWN_STATION_COLUMNS = ("id", "x_m", "y_m", "z_m", "predicted_error_m", "meets_requirement",
+                         "n_markers")
+KNOWN_STATION_TYPES = ("String", "Real", "Real", "Real", "Real", "Integer", "Integer")
+#: ... and the route's columns of a plan that chose its stations.
+ROUTE_COLUMNS = ("route_order", "leg_m", "drive_m", "heading_deg", "cells_covered")
+ROUTE_TYPES = ("Integer", "Real", "Real", "Real", "Integer")
 
 
 def _write_markers_csv(doc: dict, path: Path) -> None:
@@ -275,19 +293,40 @@ def _relative_to(datum: dict) -> str:
 
 
 def _write_stations_csv(doc: dict, path: Path) -> None:
-    """Network mode's ``stations.csv`` (header first; ``error_relative_to`` names the datum),
-    its ``.csvt`` and, with a CRS, its ``.prj``."""
-    datum = datum_text(doc['network']['datum'])
+    """``stations.csv`` (header first), its ``.csvt`` and, with a CRS, its ``.prj``: network
+    mode's (``error_relative_to`` names the datum), then, for a plan that chose its stations,
+    each station's place on the route (:data:`ROUTE_COLUMNS`; rows in route order)."""
+    network = "network" in doc
+    route = "design" in doc
+    datum = datum_text(doc["network"]["datum"]) if network else None
+    columns = (STATION_COLUMNS if network else KNOWN_STATION_COLUMNS) \
+        + (ROUTE_COLUMNS if route else ())
+    types = (STATION_TYPES if network else KNOWN_STATION_TYPES) + (ROUTE_TYPES if route else ())
     with path.open("w", newline="") as fh:
         w = csv.writer(fh)
-        w.writerow(STATION_COLUMNS)
+        w.writerow(columns)
         for s in doc["stations"]:
             err = s["predicted_error_m"]
-            w.writerow([s["id"], f"{s['x_m']:.3f}", f"{s['y_m']:.3f}", f"{s['z_m']:.3f}",
-                        "inf" if err is None else f"{err:.4f}", int(s["meets_requirement"]),
-                        s["n_markers"], " ".join(f"{k}:{v}" for k, v in s["tied_to"].items()),
-                        datum])
-    write_gis_sidecars(path, STATION_TYPES, doc["site"]["crs_wkt"])
+            row = [s["id"], f"{s['x_m']:.3f}", f"{s['y_m']:.3f}", f"{s['z_m']:.3f}",
+                   "inf" if err is None else f"{err:.4f}", int(s["meets_requirement"]),
+                   s["n_markers"]]
+            if network:
+                row += [" ".join(f"{k}:{v}" for k, v in s["tied_to"].items()), datum]
+            if route:
+                row += [s["route_order"], f"{s['leg_m']:.3f}", f"{s['drive_m']:.3f}",
+                        f"{s['heading_deg']:.2f}", s["cells_covered"]]
+            w.writerow(row)
+    write_gis_sidecars(path, types, doc["site"]["crs_wkt"])
+
+
+def write_design_coverage(design, folder: Path) -> Path:
+    """``coverage.tif`` of a plan that chose its stations: per AOI cell, how many chosen
+    stations cover it and the best predicted point density
+    (:func:`planner.coverage.raster.write_coverage_raster`)."""
+    from planner.coverage.raster import coverage_raster, write_coverage_raster
+
+    raster = coverage_raster(design.coverage, design.grid, design.order)
+    return write_coverage_raster(raster, folder)
 
 
 def _write_reliability_csv(outcome, path: Path) -> None:
@@ -381,6 +420,7 @@ def report_markdown(doc: dict) -> str:
              if "note" in b]
     if notes:
         lines += ["", *notes]
+    lines += design_markdown(doc)
     if "network" in doc:
         net = doc["network"]
         lines += ["", "## Network", "",

@@ -161,7 +161,8 @@ def load_inputs(site: str = "default", site_seed: int | None = None, dem_path=No
                 existing: str | None = None, marker_radius_m: float | None = None,
                 station_ids=None, reproject: bool = False,
                 sight_radius_m: float | None = None, terrain: str = "truth",
-                dem_height_error: HeightError | None = None, control=None) -> PlanInputs:
+                dem_height_error: HeightError | None = None, control=None,
+                stations_chosen: bool = False) -> PlanInputs:
     """Assemble the inputs of a plan from a site preset and optional files.
 
     Parameters
@@ -209,6 +210,10 @@ def load_inputs(site: str = "default", site_seed: int | None = None, dem_path=No
         replacing the preset's grade (the orbital DEM is then drawn with it).
     control : path, optional
         Control points CSV (``id,x_m,y_m,z_m,sigma_m``, :func:`read_control_points`).
+    stations_chosen : bool
+        The plan chooses its stations (over an area of interest, :mod:`planner.design`): a
+        ``dem_path`` needs no ``stations_path`` (then no stations, and the whole DEM is read);
+        a preset keeps its own stations as the layout to compare with.
 
     Raises
     ------
@@ -221,7 +226,7 @@ def load_inputs(site: str = "default", site_seed: int | None = None, dem_path=No
         :func:`planner.problem.candidates.load_polygons`), a point outside the DEM or on nodata
         (off a preset's terrain, the message says so), or a given ``z_m`` below the ground.
     """
-    if dem_path is not None and stations_path is None:
+    if dem_path is not None and stations_path is None and not stations_chosen:
         raise ConfigError(f"`dem_path` {dem_path} needs `stations_path`: the preset's stations "
                           "belong to its own terrain, not to this DEM; give `stations_path` with "
                           "the stations on this DEM")
@@ -244,7 +249,7 @@ def load_inputs(site: str = "default", site_seed: int | None = None, dem_path=No
                       else read_points(stations_path, "`stations_path`", MAX_STATIONS))
     if dem_path is not None:
         window = None
-        if sight_radius_m is not None and not reproject:
+        if sight_radius_m is not None and not reproject and station_points is not None:
             window = sight_window([[p["x_m"], p["y_m"]] for p in station_points], sight_radius_m)
         dem, window = read_dem_by_window(dem_path, window, what=f"`dem_path` {dem_path}",
                                              reproject=reproject)
@@ -265,7 +270,9 @@ def load_inputs(site: str = "default", site_seed: int | None = None, dem_path=No
         f"the points are not on site preset {site!r}'s terrain (this DEM): choose the preset "
         f"whose terrain holds them ({', '.join(PRESETS)}) or give the DEM they stand on with "
         "`dem_path`")
-    if station_points is not None:
+    if station_points is None and dem_path is not None:  # stations chosen later
+        ids, xyz, heading = [], np.zeros((0, 3)), np.zeros(0)
+    elif station_points is not None:
         ids, xyz, heading = place_stations(station_points, dem, lidar_h, off_site)
         sources["stations"] = _absolute(stations_path)
         as_built_ids, as_built_xyz = [], np.zeros((0, 3))
