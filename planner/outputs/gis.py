@@ -190,7 +190,8 @@ def crs_urn(crs: str) -> str:
 
 def write_plan_gpkg(outcome, doc: dict, path: Path) -> Path:
     """Write ``plan.gpkg``: layers markers, stations, sight_lines and (when the site has one)
-    boundary, in the DEM's CRS (none without one).
+    boundary, in the DEM's CRS (none without one); a plan that chose its stations also the
+    layers route, aoi and candidate_stations (:func:`design_layers`).
 
     Parameters
     ----------
@@ -242,7 +243,38 @@ def write_plan_gpkg(outcome, doc: dict, path: Path) -> Path:
         layers["boundary"] = ("Polygon", shapely.polygons([np.asarray(outcome.inputs.boundary_xy,
                                                                      float)]),
                               {"site": np.array([doc["site"]["name"]], object)})
+    if outcome.design is not None:
+        layers.update(design_layers(outcome.design, outcome.inputs.dem))
     return write_gpkg_layers(path, layers, crs)
+
+
+def design_layers(design, dem) -> dict:
+    """The GeoPackage layers of a survey design (:class:`planner.design.run.SurveyDesign`):
+    ``route`` (the traverse over the ground, one 3D line from the start and back),
+    ``aoi`` (the area of interest) and ``candidate_stations`` (every candidate, whether
+    chosen and its place on the route), in :func:`write_gpkg_layers`' form."""
+    import shapely
+
+    line = np.column_stack([design.route.polyline, dem.height_at(design.route.polyline)])
+    n = len(design.candidate_ids)
+    order = np.zeros(n, np.int32)
+    order[design.order] = np.arange(1, design.order.size + 1)
+    covered = np.bincount(design.coverage.station, minlength=n).astype(np.int32)
+    ground = design.candidate_position_m.copy()
+    ground[:, 2] = dem.height_at(ground[:, :2])
+    return {
+        "route": ("LineString Z", shapely.linestrings([line]), {
+            "length_m": np.array([design.route.length_m]),
+            "n_stations": np.array([design.order.size], np.int32),
+            "start": np.array([design.route_start_source], object)}),
+        "aoi": ("MultiPolygon", np.array([shapely.multipolygons(
+            shapely.get_parts(design.aoi))]), {
+            "area_m2": np.array([design.aoi.area]),
+            "n_cells": np.array([len(design.grid)], np.int32)}),
+        "candidate_stations": ("Point Z", shapely.points(ground), {
+            "id": np.array(design.candidate_ids, object),
+            "chosen": order > 0, "route_order": order, "cells_covered": covered}),
+    }
 
 
 def write_gpkg_layers(path: Path, layers: dict, crs: str | None) -> Path:

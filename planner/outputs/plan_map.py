@@ -46,7 +46,7 @@ def draw_plan_map(outcome, path: Path, dpi: int = 150) -> Path:
 
     inp, prob, res, cfg = outcome.inputs, outcome.problem, outcome.result, outcome.config
     dem = inp.dem
-    xmin, xmax, ymin, ymax = _view(inp, prob)
+    xmin, xmax, ymin, ymax = _view(inp, prob, outcome.design)
     figsize, bar_at = figure_size(xmax - xmin, ymax - ymin)
     fig, ax = plt.subplots(figsize=figsize, dpi=dpi, layout="constrained")
     # hillshade of the DEM, cropped to the view
@@ -80,6 +80,7 @@ def draw_plan_map(outcome, path: Path, dpi: int = 150) -> Path:
     for poly in inp.exclusions:
         ax.add_patch(Polygon(np.asarray(poly.exterior.coords), closed=True, fc="#d62728",
                              alpha=0.15, ec="#d62728", lw=0.8))
+    design_handles = [] if outcome.design is None else draw_design(ax, outcome.design)
     # lines of sight each station uses
     for s in range(prob.n_stations):
         for j in prob.pair_site[prob.selected_pairs(s, res.selected)]:
@@ -133,6 +134,7 @@ def draw_plan_map(outcome, path: Path, dpi: int = 150) -> Path:
         handles.append(Line2D([], [], color="#1f77b4", ls=":", label="site boundary"))
     if nodata.any():
         handles.append(Patch(fc=NODATA_COLOUR, ec="none", label="DEM nodata"))
+    handles += design_handles
     fig.legend(handles=handles, loc="outside lower center", ncols=min(len(handles), 4),
                fontsize=8, frameon=False)
     sol = res.solution
@@ -144,6 +146,32 @@ def draw_plan_map(outcome, path: Path, dpi: int = 150) -> Path:
     fig.savefig(path, dpi=dpi, metadata={"Software": None})
     plt.close(fig)
     return path
+
+
+def draw_design(ax, design) -> list:
+    """Draw a survey design's area of interest, the cells no station could cover and the
+    traverse (with its start) on ``ax``; return their legend handles."""
+    from matplotlib.lines import Line2D
+    from matplotlib.patches import Patch, Polygon
+
+    for part in getattr(design.aoi, "geoms", [design.aoi]):
+        ax.add_patch(Polygon(np.asarray(part.exterior.coords), closed=True, fill=False,
+                             ec="#2ca02c", lw=1.4, ls="-", zorder=2))
+    handles = [Line2D([], [], color="#2ca02c", lw=1.4, label="area of interest")]
+    if len(design.uncoverable):
+        xy = design.grid.centre_xy_m[design.uncoverable.cell]
+        ax.scatter(xy[:, 0], xy[:, 1], marker="s", s=12, c="#9467bd", lw=0, zorder=2)
+        handles.append(Patch(fc="#9467bd", ec="none",
+                             label=f"cell no station can cover ({len(design.uncoverable)})"))
+    line = design.route.polyline
+    ax.plot(line[:, 0], line[:, 1], color="#08306b", lw=1.3, alpha=0.85, zorder=5)
+    ax.scatter(*design.route_start_xy, marker="*", s=180, c="#08306b", edgecolors="white",
+               zorder=11)
+    handles += [Line2D([], [], color="#08306b", lw=1.3,
+                       label=f"traverse ({design.route.length_m:.0f} m)"),
+                Line2D([], [], marker="*", ls="", mfc="#08306b", mec="white", ms=13,
+                       label="route start and end")]
+    return handles
 
 
 def axis_frame(crs: str | None) -> str:
@@ -370,8 +398,10 @@ def place_labels(fig, ax, labels: list[tuple], symbols: list, obstacles: list = 
     return placed
 
 
-def _view(inp, prob) -> tuple[float, float, float, float]:
+def _view(inp, prob, design=None) -> tuple[float, float, float, float]:
     pts = [prob.station_xyz[:, :2]]
+    if design is not None:
+        pts += [design.route.polyline, np.array(design.aoi.bounds).reshape(2, 2)]
     if inp.boundary_xy is not None:
         pts.append(np.asarray(inp.boundary_xy))
     else:
