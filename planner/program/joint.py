@@ -302,17 +302,44 @@ def _cover_rows(cover: StationCover, eligible: np.ndarray, station_var: np.ndarr
             f"{cover.min_stations} candidate station(s) that can meet the marker rules "
             f"(first: cell {short[0]}); add candidate stations or relax the coverage "
             "requirement")
-    dense = incidence.toarray().astype(bool) if cover.n_cells * station_var.size < 5e7 \
-        else None
-    if dense is not None:
-        _, first = np.unique(dense, axis=0, return_index=True)
-        first = np.sort(first)
-    else:
-        first = np.arange(cover.n_cells)
+    first = _undominated(incidence)
     rows = incidence[first]
     rows = sp.csr_array((rows.data, station_var[rows.indices], rows.indptr),
                         shape=(first.size, n_vars))
     return rows, int(first.size)
+
+
+#: Coverage rows are reduced to the undominated ones when there are at most this many cells.
+_DOMINANCE_MAX_CELLS = 20_000
+
+
+def _undominated(incidence: sp.csr_array) -> np.ndarray:
+    """Indices of the cells whose coverage row is implied by no other: one of each set of
+    cells with the same covering stations, and none whose set contains another cell's (that
+    cell's row asks for the same stations from fewer). Above :data:`_DOMINANCE_MAX_CELLS`
+    cells only duplicates are removed.
+
+    Examples
+    --------
+    >>> inc = sp.csr_array(np.array([[1, 1, 0], [1, 0, 0], [1, 0, 0], [0, 1, 1]]))
+    >>> _undominated(inc).tolist()
+    [1, 3]
+    """
+    inc = sp.csr_array(incidence, dtype=np.float64)
+    size = np.diff(inc.indptr)
+    if inc.shape[0] > _DOMINANCE_MAX_CELLS:
+        first: dict[bytes, int] = {}
+        for c in range(inc.shape[0]):
+            first.setdefault(np.sort(inc.indices[inc.indptr[c]:inc.indptr[c + 1]]).tobytes(), c)
+        return np.sort(np.fromiter(first.values(), np.int64))
+    shared = sp.csr_array(inc @ inc.T).tocoo()
+    a, b, n = shared.row, shared.col, shared.data
+    # row b is implied by row a when a's stations are all b's: strictly fewer, or the same set
+    # and a comes first
+    contains = (a != b) & (n == size[a]) & ((size[a] < size[b]) | (a < b))
+    keep = np.ones(inc.shape[0], bool)
+    keep[b[contains]] = False
+    return np.flatnonzero(keep)
 
 
 def plan_stations_and_sites(problem: PlanProblem, config, cover: StationCover,
