@@ -81,7 +81,8 @@ def solver_record(time_limit_s: float, mip_gap: float) -> dict:
 
 def run_highs(c: np.ndarray, a: sp.sparray, row_lb: np.ndarray, row_ub: np.ndarray,
               lb: np.ndarray, ub: np.ndarray, integrality: np.ndarray, time_limit_s: float,
-              gap: float, integral_objective: bool = False) -> HighsOutcome:
+              gap: float, integral_objective: bool = False,
+              start: np.ndarray | None = None) -> HighsOutcome:
     """Minimise ``c x`` subject to ``row_lb <= a x <= row_ub``, ``lb <= x <= ub`` in HiGHS.
 
     Parameters
@@ -100,6 +101,9 @@ def run_highs(c: np.ndarray, a: sp.sparray, row_lb: np.ndarray, row_ub: np.ndarr
         Every feasible objective value is an integer (integer costs on integer variables): then
         an incumbent less than 1 above the bound is optimal, and HiGHS stops there
         (``mip_abs_gap`` :data:`INTEGRAL_ABS_GAP`).
+    start : (v,) float, optional
+        Values to start from, NaN where not given: HiGHS completes a partial start into its
+        first incumbent when it can.
 
     Returns
     -------
@@ -111,6 +115,9 @@ def run_highs(c: np.ndarray, a: sp.sparray, row_lb: np.ndarray, row_ub: np.ndarr
     h.setOptionValue("mip_rel_gap", float(gap))
     if integral_objective:
         h.setOptionValue("mip_abs_gap", INTEGRAL_ABS_GAP)
+    if start is not None:
+        given = np.flatnonzero(np.isfinite(start)).astype(np.int32)
+        h.setSolution(int(given.size), given, np.ascontiguousarray(start[given], float))
     h.run()
     return _outcome(h, t0)
 

@@ -34,8 +34,9 @@ caller plans the network's markers for the chosen stations.
 
 from __future__ import annotations
 
+import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import scipy.sparse as sp
@@ -101,6 +102,18 @@ class JointCosts:
             if not (np.isfinite(v) and v > 0):
                 raise ConfigError(f"the cost per {name} must be finite and > 0, got {v!r}")
 
+    @property
+    def unit(self) -> float:
+        """The program's unit of cost: the greatest common divisor of the two costs when both
+        are whole numbers (every objective value is then a whole number of units, so HiGHS
+        proves an optimum once its bound is within one unit), else 1.
+
+        >>> JointCosts(300.0, 180.0).unit, JointCosts(1.5, 1.0).unit
+        (60.0, 1.0)
+        """
+        whole = all(float(v).is_integer() for v in (self.station, self.marker))
+        return float(math.gcd(int(self.station), int(self.marker))) if whole else 1.0
+
     def of(self, n_stations: int, n_markers: int) -> float:
         """Cost of a layout with that many stations and (new) markers."""
         return self.station * n_stations + self.marker * n_markers
@@ -114,7 +127,7 @@ class JointModel:
     ----------
     model : Model
         The marker program's variables first (``model.var_site`` maps them), then one ``w``
-        per candidate station.
+        per candidate station; costs in units of :attr:`JointCosts.unit`.
     station_var : (s,) int
         Variable index of each candidate station's ``w``.
     excluded : dict
@@ -189,7 +202,7 @@ def switched_rows(A: sp.csr_array, row_lb: np.ndarray, row_ub: np.ndarray,
     >>> B, lb, ub = switched_rows(A, np.array([2.0, 0.0]), np.array([np.inf, np.inf]),
     ...                           np.array([0, 0]), np.array([2]), 3)
     >>> B.toarray().tolist(), lb.tolist()
-    [[1.0, 1.0, -2.0], [1.0, -1.0, -1.0]], [0.0, -1.0]
+    ([[1.0, 1.0, -2.0], [1.0, -1.0, -1.0]], [0.0, -1.0])
     """
     A = sp.csr_array(A)
     m = A.shape[0]
@@ -257,9 +270,9 @@ def joint_model(problem: PlanProblem, config, cover: StationCover, costs: JointC
     clash_rows, clash_station = _clash_rows(base, clashes, station_var, n_vars)
     n_clash = clash_station.size
     x_cost = np.zeros(v0)
-    x_cost[:base.var_site.size] = costs.marker * problem.site_cost[base.var_site]
+    x_cost[:base.var_site.size] = costs.marker / costs.unit * problem.site_cost[base.var_site]
     model = Model(
-        c=np.r_[x_cost, np.full(ns, costs.station)],
+        c=np.r_[x_cost, np.full(ns, costs.station / costs.unit)],
         A=sp.csr_array(sp.vstack([A, cover_rows, clash_rows])),
         row_lb=np.r_[lb, np.full(n_cover, float(cover.min_stations)), np.full(n_clash, -np.inf)],
         row_ub=np.r_[ub, np.full(n_cover, np.inf), np.ones(n_clash)],
@@ -378,6 +391,7 @@ def plan_stations_and_sites(problem: PlanProblem, config, cover: StationCover,
     joint = joint_model(problem, config, cover, costs, infos, clashes)
     model, station_var = joint.model, joint.station_var
     bound, solve_time, n_cuts, history = -np.inf, 0.0, 0, []
+    start = None if incumbent is None else _start(model, station_var, *incumbent)
 
     def result(stations, selected, sol, iteration) -> JointResult:
         return JointResult(stations=stations, selected=selected, solution=sol,
@@ -406,7 +420,7 @@ def plan_stations_and_sites(problem: PlanProblem, config, cover: StationCover,
                 f"time limit {config.time_limit_s:g} s reached after {iteration - 1} "
                 "iteration(s) before every chosen station met the requirement; raise "
                 "`time_limit_s`")
-        sol = solve(model, remaining, config.mip_gap)
+        sol = _in_seconds(solve(model, remaining, config.mip_gap, start=start), costs.unit)
         solve_time += sol.solve_time_s
         if np.isfinite(sol.dual_bound):
             bound = max(bound, sol.dual_bound)
@@ -440,6 +454,21 @@ def plan_stations_and_sites(problem: PlanProblem, config, cover: StationCover,
                                   station_var, model.n_vars)
         n_cuts += A.shape[0]
         model = model.with_rows(A, lb, ub, kinds)
+
+
+def _in_seconds(sol: Solution, unit: float) -> Solution:
+    """A solve's objective and bound in the costs' own unit (the model's are in ``unit``)."""
+    return replace(sol, objective=sol.objective * unit, dual_bound=sol.dual_bound * unit)
+
+
+def _start(model: Model, station_var: np.ndarray, stations: np.ndarray, selected: np.ndarray
+           ) -> np.ndarray:
+    """A partial start for HiGHS: the stations and sites of a known layout, NaN for the
+    sector variables (HiGHS completes them)."""
+    start = np.full(model.n_vars, np.nan)
+    start[:model.var_site.size] = selected[model.var_site]
+    start[station_var] = stations
+    return start
 
 
 def chosen_problem(problem: PlanProblem, result: JointResult) -> PlanProblem:

@@ -14,7 +14,7 @@ from planner.program.model import Model, Solution, aggregate_columns
 
 
 def solve(model: Model, time_limit_s: float = 60.0, gap: float = 0.0,
-          priority: np.ndarray | None = None) -> Solution:
+          priority: np.ndarray | None = None, start: np.ndarray | None = None) -> Solution:
     """Solve ``model`` once with HiGHS (:func:`planner.program.highs.run_highs`).
 
     Parameters
@@ -30,6 +30,9 @@ def solve(model: Model, time_limit_s: float = 60.0, gap: float = 0.0,
         highest priority (then by variable order). Exact: ``A x`` and ``c x`` are unchanged.
         HiGHS gets the model as it is (merging the group into one integer column made its solve
         slower, see ``benchmarks/program_scale.py``).
+    start : (v,) float, optional
+        Values HiGHS starts from, NaN where not given (it completes a partial start when it
+        can).
 
     Returns
     -------
@@ -49,7 +52,7 @@ def solve(model: Model, time_limit_s: float = 60.0, gap: float = 0.0,
     integral = bool(np.all(integrality == 1) and np.all(np.abs(c - np.round(c)) < 1e-12))
     out = run_highs(c, model.A, model.row_lb, model.row_ub, model.lb, model.ub, integrality,
                     max(time_limit_s - (time.perf_counter() - t0), 1e-3), gap,
-                    integral_objective=integral)
+                    integral_objective=integral, start=start)
     # integer variables rounded (HiGHS returns them within its tolerance); continuous ones,
     # e.g. a linear relaxation's, as solved
     x = None if out.x is None else np.where(integrality == 1, np.round(out.x), out.x)
