@@ -253,7 +253,7 @@ class PlanConfig:
     cover_min_fraction: float = 0.99
     rover_footprint_m: float = 1.5
     rover_max_slope_deg: float = 15.0
-    rover_max_roughness_m: float = 0.06
+    rover_max_roughness_m: float = 0.03
     rover_hazard_standoff_m: float = 0.5
     traffic_grid_m: float = 0.5
     station_spacing_m: float = 4.0
