@@ -29,9 +29,10 @@ class RouteSettings:
     Attributes
     ----------
     max_iterations : int
-        PyVRP's stopping criterion (``pyvrp.stop.MaxIterations``). Default 2000: a 100-station
-        tour converges within it in about a second (a run-time limit would make the tour
-        depend on the machine).
+        PyVRP's stopping criterion (``pyvrp.stop.MaxIterations``). Default 2000: on random
+        instances of 30, 100 and 300 stations the tour is then within 0 %, 0.9 % and 2 % of the
+        best found with 25 times as many iterations, in about 0.5, 1 and 2 s (a run-time limit
+        would make the tour depend on the machine).
     seed : int
         PyVRP's random seed.
     units_per_m : int

@@ -28,6 +28,9 @@ def test_path_around_a_wall_is_the_analytic_detour():
     detour = 2 * np.hypot(5.4, 5.0) + 0.2
     grid = OPEN.grid_m
     assert detour <= p.distance_m[0, 1] <= detour + 4 * grid
+    # on the grid: diagonals to the free nodes beside the tip, (-0.5, 5) and (0.5, 5), and four
+    # side steps over it (the diagonal past the blocked tip node (0, 5) is not cut)
+    assert np.isclose(p.distance_m[0, 1], 2 * 5 * np.sqrt(2) + 4 * grid)
     line = p.polyline(0, 1)
     assert line[0].tolist() == a.tolist() and line[-1].tolist() == b.tolist()
     seg = np.hypot(*np.diff(line, axis=0).T)
