@@ -9,8 +9,9 @@ about that plane is at most ``max_roughness_m``, and at least ``hazard_standoff_
 node that fails one of these rules. Each non-trafficable node records its first failing reason
 (:data:`REASONS`, in that priority order).
 
-The plane is fitted by least squares over the square footprint window of DEM cells centred on
-the node (box filters of the window's moments, so the whole DEM is fitted at once).
+The plane is fitted by least squares over the square window of DEM cells centred on the node
+whose side is the odd number of cells nearest to ``footprint_m`` (box filters of the window's
+moments, so the whole DEM is fitted at once).
 """
 
 from __future__ import annotations
@@ -47,15 +48,18 @@ class TrafficSettings:
         stable stance.
     max_roughness_m : float
         Largest RMS residual of the DEM about the footprint's best-fit plane, metres. Default
-        0.06 m: a rock of 0.2 m standing out of a 1.5 m footprint raises the RMS to about that,
-        and 0.2 m is the obstacle height a 0.3 m wheel clears; the micro-relief of the presets
-        (2 cm RMS at 1 m) stays well below it, so open ground is trafficable and rock fields
-        are not.
+        0.03 m: a rock 0.3 m across, buried by 30 % (0.21 m high), alone in a 1.5 m footprint
+        gives 0.030 m (a spherical cap on a 0.1 m grid, fitted like here); 0.2 m is the obstacle
+        height a rover of this class is rated to cross (Yutu-2: 0.2 m). On the ``default``
+        preset (2 cm RMS micro-relief at 1 m) it leaves 1.7 % of the nodes too rough, those
+        among the rocks; 0.06 m would let 0.45 m rocks pass. On an orbital-grade DEM (height
+        error 0.3 m RMS) the error itself is that rough: raise it to about 0.2 m there.
     hazard_standoff_m : float
         Every node closer than this to a non-trafficable node is not trafficable either,
-        metres. Default 0.5 m: the rover's half-width plus margin for its localisation drift
-        between stops is left around hazards by the footprint already; the standoff adds the
-        planning DEM's horizontal uncertainty (a few cells).
+        metres. Default 0.5 m: the footprint already keeps the rover's body off the hazard;
+        the standoff adds the rover's localisation drift between stops and a few cells of the
+        planning DEM's horizontal error (planning on the 2 m posts of an orbital DEM needs
+        about 2 m).
     grid_m : float
         Node spacing of the map, metres; a whole number of DEM cells. Default 0.5 m: fine enough
         to thread between the metre-scale craters of the presets, coarse enough that the
@@ -64,7 +68,7 @@ class TrafficSettings:
 
     footprint_m: float = 1.5
     max_slope_deg: float = 15.0
-    max_roughness_m: float = 0.06
+    max_roughness_m: float = 0.03
     hazard_standoff_m: float = 0.5
     grid_m: float = 0.5
 
@@ -267,7 +271,7 @@ def _trafficable_iv(dem, settings: TrafficSettings) -> tuple[int, int]:
     if k < 1 or abs(k * cell - settings.grid_m) > 1e-6 * cell:
         raise ConfigError(f"`grid_m` {settings.grid_m:g} m must be a whole number of DEM cells "
                           f"({cell:g} m); use e.g. {max(k, 1) * cell:g}")
-    half = int(round(settings.footprint_m / cell / 2))
+    half = int(round((settings.footprint_m / cell - 1) / 2))  # window: 2 half + 1 cells
     if half < 1 or settings.footprint_m < settings.grid_m:
         raise ConfigError(f"`footprint_m` {settings.footprint_m:g} m must span at least 3 DEM "
                           f"cells ({3 * cell:g} m) and one node spacing (`grid_m` "
