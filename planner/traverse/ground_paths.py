@@ -20,6 +20,7 @@ from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import connected_components, dijkstra
 
 from markerplan.errors import DataError
+from planner.traverse.trafficability import LIMITS
 
 __all__ = ["GroundPaths", "ground_paths", "reachable_nodes"]
 
@@ -157,7 +158,7 @@ def ground_paths(traffic_map, xy, ids, dem=None, label: str = "point") -> Ground
     for k in np.flatnonzero(comp[node] != comp[node[0]]):
         raise DataError(f"{label} {ids[k]} at ({xy[k, 0]:.2f}, {xy[k, 1]:.2f}) m stands on a "
                         f"trafficable patch cut off from {ids[0]} (hazards all around it); "
-                        "drop it or relax the trafficability limits")
+                        f"drop it or relax {LIMITS}")
     step = np.hypot(*(xy - node_xy[node]).T)
     dist = np.empty((len(xy), len(xy)))
     chunk = max(1, _ROW_BYTES // (8 * max(len(node_xy), 1)))

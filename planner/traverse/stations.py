@@ -12,6 +12,7 @@ import numpy as np
 import shapely
 
 from markerplan.errors import ConfigError, DataError
+from planner.traverse.trafficability import LIMITS
 
 __all__ = ["MAX_STATION_CANDIDATES", "candidate_stations"]
 
@@ -77,7 +78,7 @@ def candidate_stations(traffic_map, area_polygon, spacing_m: float, lidar_height
         raise ConfigError(f"`spacing_m` {spacing_m:g} m lays {len(gx) * len(gy)} "
                           f"candidate stations over the {x1 - x0:.0f} x {y1 - y0:.0f} m area, "
                           f"more than the {MAX_STATION_CANDIDATES} accepted; raise "
-                          "spacing_m or shrink the area")
+                          "`spacing_m` or shrink the area")
     xx, yy = np.meshgrid(gx, gy)
     xy = np.column_stack([xx.ravel(), yy.ravel()])
     dropped = {}
@@ -98,7 +99,7 @@ def candidate_stations(traffic_map, area_polygon, spacing_m: float, lidar_height
         raise DataError("no candidate station is left (dropped: "
                         + ", ".join(f"{v} {k}" for k, v in dropped.items())
                         + "); enlarge the area, lower `spacing_m` or relax the "
-                        "trafficability limits")
+                        f"{LIMITS}")
     width = max(4, len(str(len(xy))))
     ids = [f"P{k + 1:0{width}d}" for k in range(len(xy))]
     z = dem.height_at(xy) + lidar_height_m

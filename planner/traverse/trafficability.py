@@ -24,7 +24,10 @@ from scipy import ndimage
 
 from markerplan.errors import ConfigError
 
-__all__ = ["REASONS", "TrafficMap", "TrafficSettings", "trafficable_map"]
+__all__ = ["LIMITS", "REASONS", "TrafficMap", "TrafficSettings", "trafficable_map"]
+
+#: The settings a message names when too little ground is trafficable.
+LIMITS = "`max_slope_deg`, `max_roughness_m` or `hazard_standoff_m`"
 
 #: Why a node is not trafficable, in priority order (a node records the first that applies);
 #: code ``k + 1`` in :attr:`TrafficMap.reason` is ``REASONS[k]``, 0 is trafficable.
@@ -171,8 +174,7 @@ class TrafficMap:
 
         nodes = self.node_xy()[self.trafficable.ravel()]
         if not len(nodes):
-            raise ConfigError("no ground is trafficable; relax `max_slope_deg`, "
-                              "`max_roughness_m` or `hazard_standoff_m`")
+            raise ConfigError(f"no ground is trafficable; relax {LIMITS}")
         return nodes[cKDTree(nodes).query(np.atleast_2d(xy))[1]]
 
     def counts(self) -> dict[str, int]:
@@ -275,7 +277,7 @@ def _trafficable_iv(dem, settings: TrafficSettings) -> tuple[int, int]:
     if half < 1 or settings.footprint_m < settings.grid_m:
         raise ConfigError(f"`footprint_m` {settings.footprint_m:g} m must span at least 3 DEM "
                           f"cells ({3 * cell:g} m) and one node spacing (`grid_m` "
-                          f"{settings.grid_m:g} m); raise footprint_m")
+                          f"{settings.grid_m:g} m); raise `footprint_m`")
     return k, half
 
 
