@@ -151,11 +151,15 @@ def ground_paths(traffic_map, xy, ids, dem=None, label: str = "point") -> Ground
     flat, on_grid = traffic_map.node_of(xy)
     node = index[flat]
     why = traffic_map.why_not(xy)
-    for k in np.flatnonzero(~on_grid | (node < 0)):
+    off = np.flatnonzero(~on_grid | (node < 0))
+    if len(off):
+        k = off[0]
         raise DataError(f"{label} {ids[k]} at ({xy[k, 0]:.2f}, {xy[k, 1]:.2f}) m is not on "
                         f"trafficable ground ({why[k]}); move it onto trafficable ground")
     _, comp = connected_components(graph, directed=False)
-    for k in np.flatnonzero(comp[node] != comp[node[0]]):
+    apart = np.flatnonzero(comp[node] != comp[node[0]])
+    if len(apart):
+        k = apart[0]
         raise DataError(f"{label} {ids[k]} at ({xy[k, 0]:.2f}, {xy[k, 1]:.2f}) m stands on a "
                         f"trafficable patch cut off from {ids[0]} (hazards all around it); "
                         f"drop it or relax {LIMITS}")
@@ -167,6 +171,6 @@ def ground_paths(traffic_map, xy, ids, dem=None, label: str = "point") -> Ground
         dist[s:s + chunk] = rows[:, node]
     dist += step[:, None] + step[None, :]
     np.fill_diagonal(dist, 0.0)
-    dist = np.minimum(dist, dist.T)
+    dist = np.minimum(dist, dist.T)  # exactly symmetric (sums along a path differ in rounding)
     return GroundPaths(ids=ids, xy=xy, distance_m=dist, _graph=graph, _node=node,
                        _node_xy=node_xy, _step_m=step)
