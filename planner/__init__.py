@@ -1,1 +1,2 @@
-"""Planning: candidate sites, the integer program, station accuracy, reduction studies, the CLI."""
+"""Planning: candidate sites, the integer program, station accuracy, the rover's traverse,
+reduction studies, the CLI."""
