@@ -47,7 +47,7 @@ from planner.program.joint_baselines import (
     joint_baseline,
 )
 from planner.run import build_problem
-from planner.traverse.route import MissionCosts, Route, mission_time_s, plan_route
+from planner.traverse.route import MissionCosts, Route, mission_time_s, plan_route, route_start
 from planner.traverse.stations import candidate_stations
 from planner.traverse.trafficability import TrafficMap, TrafficSettings, trafficable_map
 
@@ -252,7 +252,7 @@ def design_survey(inputs: PlanInputs, config, error_model, aoi, keepouts=(),
         centroid = np.array(aoi.centroid.coords[0])
         route_start_xy = traffic.nearest_trafficable(centroid[None])[0]
         route_start_source = "the trafficable point nearest the AOI's centroid"
-    start = _route_start(traffic, route_start_xy)
+    start = route_start(traffic, route_start_xy)
     reach = flat_reach_m(config, inputs.lidar_height_m)
     ids, _, position = candidate_stations(traffic, aoi.buffer(reach), config.station_spacing_m,
                                           inputs.lidar_height_m, dem, start_xy=start)
@@ -321,21 +321,6 @@ def design_survey(inputs: PlanInputs, config, error_model, aoi, keepouts=(),
                         route_start_source=route_start_source, uncoverable=uncoverable,
                         options=tuple(options),
                         costs=costs, timings_s=timings)
-
-
-def _route_start(traffic: TrafficMap, xy) -> np.ndarray:
-    """The route start as a point on trafficable ground (else the route's one-line error)."""
-    start = np.asarray(xy, float).reshape(-1)
-    if start.shape != (2,) or not np.all(np.isfinite(start)):
-        raise ConfigError(f"`route_start` must be one finite (x, y) point, got {xy!r}")
-    if not traffic.trafficable_at(start[None])[0]:
-        why = traffic.why_not(start[None])[0]
-        near = traffic.nearest_trafficable(start[None])[0]
-        raise ConfigError(f"`route_start` ({start[0]:.2f}, {start[1]:.2f}) m is not on "
-                          f"trafficable ground ({why}); move `route_start` to trafficable "
-                          f"ground; the nearest trafficable point is ({near[0]:.2f}, "
-                          f"{near[1]:.2f}) m")
-    return start
 
 
 def _only(keep: np.ndarray, ids, position: np.ndarray, coverage: CoverageMatrix):

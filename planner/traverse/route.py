@@ -19,7 +19,7 @@ import numpy as np
 from markerplan.errors import ConfigError
 
 __all__ = ["MissionCosts", "MissionTime", "Route", "RouteSettings", "mission_time_s",
-           "plan_route", "solve_tour"]
+           "plan_route", "route_start", "solve_tour"]
 
 
 @dataclass(frozen=True)
@@ -134,6 +134,38 @@ def solve_tour(distance_m: np.ndarray, settings: RouteSettings = RouteSettings()
                    "objective_m": objective / settings.units_per_m}
 
 
+def route_start(traffic_map, start_xy) -> np.ndarray:
+    """The route start as a point on trafficable ground.
+
+    Parameters
+    ----------
+    traffic_map : planner.traverse.trafficability.TrafficMap
+    start_xy : (2,) float
+        Site frame, metres.
+
+    Returns
+    -------
+    start : (2,) float
+
+    Raises
+    ------
+    ConfigError
+        Not one finite point, off the map or on ground that is not trafficable (naming the
+        reason and the nearest trafficable point).
+    """
+    start = np.asarray(start_xy, dtype=float).reshape(-1)
+    if start.shape != (2,) or not np.isfinite(start).all():
+        raise ConfigError(f"`route_start` must be one finite (x, y) point, got {start_xy!r}")
+    if not traffic_map.trafficable_at(start[None])[0]:
+        why = traffic_map.why_not(start[None])[0]
+        near = traffic_map.nearest_trafficable(start[None])[0]
+        raise ConfigError(f"`route_start` ({start[0]:.2f}, {start[1]:.2f}) m is not on "
+                          f"trafficable ground ({why}); move `route_start` to trafficable "
+                          f"ground; the nearest trafficable point is ({near[0]:.2f}, "
+                          f"{near[1]:.2f}) m")
+    return start
+
+
 def plan_route(traffic_map, start_xy, station_xy, station_ids, dem=None,
                settings: RouteSettings = RouteSettings()) -> Route:
     """The traverse from ``start_xy`` through every station and back, over trafficable ground.
@@ -165,16 +197,7 @@ def plan_route(traffic_map, start_xy, station_xy, station_ids, dem=None,
     """
     from planner.traverse.ground_paths import ground_paths
 
-    start = np.asarray(start_xy, dtype=float).reshape(-1)
-    if start.shape != (2,) or not np.isfinite(start).all():
-        raise ConfigError(f"`route_start` must be one finite (x, y) point, got {start_xy!r}")
-    if not traffic_map.trafficable_at(start[None])[0]:
-        why = traffic_map.why_not(start[None])[0]
-        near = traffic_map.nearest_trafficable(start[None])[0]
-        raise ConfigError(f"`route_start` ({start[0]:.2f}, {start[1]:.2f}) m is not on "
-                          f"trafficable ground ({why}); move `route_start` to trafficable "
-                          f"ground; the nearest trafficable point is ({near[0]:.2f}, "
-                          f"{near[1]:.2f}) m")
+    start = route_start(traffic_map, start_xy)
     xy = np.vstack([start, np.asarray(station_xy, dtype=float).reshape(-1, 2)])
     paths = ground_paths(traffic_map, xy, ["route_start", *station_ids], dem=dem,
                          label="station")
