@@ -75,7 +75,8 @@ def design_record(design: SurveyDesign, n_markers: int) -> dict:
                                "excluded": len(joint.excluded)},
         "joint_program": {
             "status": sol.status, "proven_optimal": sol.status == "optimal",
-            "objective_s": _num(sol.objective), "dual_bound_s": _num(sol.dual_bound),
+            "objective_s": _rounded(_num(sol.objective), 1),
+            "dual_bound_s": _rounded(_num(sol.dual_bound), 1),
             "gap": _num(sol.gap), "iterations": joint.iterations,
             "accuracy_cuts": joint.n_cuts, "n_stations": int(joint.stations.sum()),
             "n_markers": int(joint.selected.sum()),
@@ -120,16 +121,16 @@ def design_markdown(doc: dict) -> list[str]:
     lines = ["", "## Stations chosen over the area of interest", "",
              f"The area of interest ({aoi['area_m2']:g} m², {aoi['n_cells']} cells of "
              f"{aoi['cell_m']:g} m) is covered from {d['options']['plan']['n_stations']} "
-             f"stations chosen among {d['candidate_stations']['n']} candidates on trafficable "
+             f"station(s) chosen among {d['candidate_stations']['n']} candidates on trafficable "
              f"ground ({d['candidate_stations']['excluded']} of them could not meet the marker "
              "rules with every site).", "",
              f"- joint program of stations and markers: **{jp['status']}**"
              + (" (proven optimal)" if jp["proven_optimal"] else
                 f" — not proven optimal: no choice costs less than {jp['dual_bound_s']} s, gap "
                 f"{100 * (jp['gap'] or 0):.1f} %")
-             + f"; {jp['n_stations']} stations and {jp['n_markers']} markers, objective "
+             + f"; {jp['n_stations']} station(s) and {jp['n_markers']} marker(s), objective "
                f"{jp['objective_s']} s ({jp['objective']})",
-             f"- traverse from {route['start']} ({route['start_xy_m'][0]:g}, "
+             f"- traverse from the route start, {route['start']}, ({route['start_xy_m'][0]:g}, "
              f"{route['start_xy_m'][1]:g}) m and back: **{route['length_m']:g} m** over "
              f"trafficable ground ({route['solver']['name']} {route['solver']['version']}, "
              f"{route['solver']['stop']}; a heuristic tour, not proven shortest)"]
