@@ -1,0 +1,136 @@
+"""``markerplan plan --aoi``: the stations chosen over an area of interest, written like any
+plan plus the route (stations.csv in route order, the route layer, coverage.tif), the same
+bytes from the same inputs; and the bad inputs of the AOI plan, each refused in one line with
+nothing written (:func:`tests.cli.bad_input.check_refused`)."""
+
+import json
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from tests.cli.bad_input import Case, check_refused
+from tests.cli.invoke import run_cli
+from tests.cli.test_bad_input_model_dem import _tif
+
+AOI = ('{"type": "Polygon", "coordinates": [[[-6, -6], [6, -6], [6, 6], [-6, 6], '
+       '[-6, -6]]]}')
+RUN = ["plan", "--aoi", "aoi.geojson", "--route-start", "0,-3", "--chance-epsilon", "none"]
+
+
+def _plan(capsys, monkeypatch, folder, out="out"):
+    folder.mkdir(exist_ok=True)
+    (folder / "aoi.geojson").write_text(AOI)
+    monkeypatch.chdir(folder)
+    code, _, err = run_cli(capsys, RUN + ["--out", out, "--scheduler", "none"])
+    assert code == 0, err
+    return folder / out
+
+
+@pytest.fixture(scope="module")
+def aoi_plan(tmp_path_factory):
+    mp = pytest.MonkeyPatch()
+    capsys = _Capture()
+    out = _plan(capsys, mp, tmp_path_factory.mktemp("aoi"))
+    mp.undo()
+    return out
+
+
+class _Capture:
+    """``capsys`` for a module fixture: the CLI's output is not asserted on there."""
+
+    def readouterr(self):
+        return "", ""
+
+
+def test_aoi_plan_writes_the_route_and_coverage(aoi_plan):
+    doc = json.loads((aoi_plan / "plan.json").read_text())
+    design = doc["design"]
+    n = len(doc["stations"])
+    assert design["options"]["plan"]["n_stations"] == n
+    assert design["joint_program"]["proven_optimal"]
+    assert design["route"]["start_xy_m"] == [0.0, -3.0]
+    stations = pd.read_csv(aoi_plan / "stations.csv")
+    assert stations["route_order"].tolist() == list(range(1, n + 1))
+    assert stations["id"].tolist() == [f"S{k}" for k in range(1, n + 1)]
+    assert stations["drive_m"].iloc[-1] + design["route"]["legs_m"][-1] == \
+        pytest.approx(design["route"]["length_m"], abs=2e-3)
+
+
+def test_coverage_raster_matches_the_plan(aoi_plan):
+    import rasterio
+
+    doc = json.loads((aoi_plan / "plan.json").read_text())
+    with rasterio.open(aoi_plan / "coverage.tif") as src:
+        count, density = src.read(1), src.read(2)
+        assert src.count == 2
+    inside = np.isfinite(count)
+    assert inside.sum() == doc["design"]["aoi"]["n_cells"]
+    covered = (count[inside] >= 1).mean()
+    assert covered == pytest.approx(doc["design"]["options"]["plan"]["covered_fraction"])
+    assert np.all(density[inside][count[inside] >= 1] >= 100.0)  # the density limit
+
+
+def test_route_layer_in_the_geopackage(aoi_plan):
+    import pyogrio
+
+    layers = {name for name, _ in pyogrio.list_layers(aoi_plan / "plan.gpkg")}
+    assert {"route", "aoi", "candidate_stations", "stations", "markers"} <= layers
+    route = pyogrio.read_dataframe(aoi_plan / "plan.gpkg", layer="route", read_geometry=False) \
+        if hasattr(pyogrio, "read_dataframe") else None
+    if route is not None:
+        doc = json.loads((aoi_plan / "plan.json").read_text())
+        assert route["length_m"].iloc[0] == pytest.approx(doc["design"]["route"]["length_m"],
+                                                          abs=1e-3)
+
+
+@pytest.mark.slow
+def test_same_inputs_same_bytes(aoi_plan, capsys, monkeypatch, tmp_path):
+    again = _plan(capsys, monkeypatch, tmp_path)
+    for name in ("plan.json", "stations.csv", "coverage.tif", "plan.gpkg", "report.md",
+                 "markers.csv"):
+        assert (again / name).read_bytes() == (aoi_plan / name).read_bytes(), name
+
+
+def _nodata_block() -> np.ndarray:
+    """Flat 61 x 61 heights (1 m cells, -30..30 m) with nodata over -5..5 m."""
+    h = np.zeros((61, 61))
+    h[25:36, 25:36] = np.nan
+    return h
+
+
+def _cases():
+    files = {"aoi.geojson": AOI}
+    off = ('{"type": "Polygon", "coordinates": [[[20, 20], [45, 20], [45, 45], [20, 45], '
+           '[20, 20]]]}')
+    return [
+        Case("aoi-with-stations", RUN + ["--stations", "{inputs}/stations.csv", "--out", "out"],
+             "--aoi chooses the stations", files=files),
+        Case("route-start-without-aoi", ["plan", "--route-start", "0,0", "--out", "out"],
+             "add --aoi"),
+        Case("aoi-off-the-dem", ["plan", "--aoi", "off.geojson", "--out", "out"], "off.geojson",
+             files={"off.geojson": off}),
+        Case("route-start-in-a-crater", ["plan", "--aoi", "aoi.geojson", "--route-start",
+                                         "13.75,10", "--out", "out"],
+             "`route_start` (13.75, 10.00) m is not on trafficable ground (crater interior)",
+             files=files),
+        Case("aoi-nobody-can-cover", ["plan", "--aoi", "aoi.geojson", "--keep-out", "ko.geojson",
+                                      "--route-start", "-10,-3", "--out", "out"],
+             "covers part of the AOI",
+             files={"aoi.geojson": ('{"type": "Polygon", "coordinates": [[[-12, -6], [12, -6],'
+                                    ' [12, 6], [-12, 6], [-12, -6]]]}'),
+                    "ko.geojson": ('{"type": "Polygon", "coordinates": [[[-4, -30], [30, -30],'
+                                   ' [30, 30], [-4, 30], [-4, -30]]]}')}),
+        Case("aoi-on-nodata", ["plan", "--dem", "nd.tif", "--aoi", "aoi.geojson", "--out",
+                               "out"], "nodata", files=files, setup=_tif("nd.tif",
+                                                                         heights=_nodata_block(),
+                                                                         west_north=(-30.5,
+                                                                                     30.5))),
+        Case("aoi-not-a-polygon", ["plan", "--aoi", "pt.geojson", "--out", "out"], "pt.geojson",
+             files={"pt.geojson": '{"type": "Point", "coordinates": [0, 0]}'}),
+    ]
+
+
+@pytest.mark.parametrize("case", _cases(), ids=str)
+def test_refused(case, capsys, monkeypatch, tmp_path, valid_inputs):
+    check_refused(case, capsys, monkeypatch, tmp_path, valid_inputs)
