@@ -118,7 +118,7 @@ def _cases():
              files={"off.geojson": off}),
         Case("route-start-in-a-crater", ["plan", "--aoi", "aoi.geojson", "--route-start",
                                          "13.75,10", "--out", "out"],
-             "`route_start` (13.75, 10.00) m is not on trafficable ground (crater interior)",
+             "--route-start (13.75, 10.00) m is not on trafficable ground (crater interior)",
              files=files),
         Case("aoi-nobody-can-cover", ["plan", "--aoi", "aoi.geojson", "--keep-out", "ko.geojson",
                                       "--route-start", "-10,-3", "--out", "out"],
