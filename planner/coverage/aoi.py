@@ -1,0 +1,111 @@
+"""The area of interest (AOI): a GeoJSON polygon on the DEM, site frame.
+
+An AOI must lie inside the DEM's extent (the rectangle of its cell centres) and on measured
+terrain: coverage cannot be predicted on nodata. Each refusal is one
+:class:`~markerplan.errors.InputFileError` line naming `aoi_path`, the figures and the fix.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import shapely
+
+from markerplan.errors import InputFileError
+from planner.problem.candidates import load_polygons
+from planner.problem.inputs import polygons_on_dem
+
+#: How messages name the AOI file.
+AOI_OPTION = "`aoi_path`"
+
+
+def read_aoi(path, dem):
+    """Read the AOI from a GeoJSON file and place it on the DEM.
+
+    Parameters
+    ----------
+    path : str or Path
+        GeoJSON Polygon(s) or MultiPolygon(s) in the DEM file's CRS (site frame, m; a
+        reprojected DEM's source CRS, mapped like the other inputs by
+        :func:`planner.problem.inputs.polygons_on_dem`). Several polygons are joined.
+    dem : visibility.dem.DEM
+        Terrain, site frame.
+
+    Returns
+    -------
+    aoi : shapely Polygon or MultiPolygon
+        Site frame, m.
+
+    Raises
+    ------
+    InputFileError
+        A malformed file (:func:`planner.problem.candidates.load_polygons`), an AOI reaching
+        off the DEM's extent, or one with DEM cells on nodata.
+    """
+    what = f"{AOI_OPTION} {path}"
+    aoi = shapely.union_all(polygons_on_dem(load_polygons(path, AOI_OPTION), dem))
+    off_dem_problem(aoi, dem, what)
+    nodata_problem(aoi, dem, what)
+    return aoi
+
+
+def off_dem_problem(aoi, dem, what: str) -> None:
+    """Refuse an AOI (partly) outside the DEM's extent, with the area off it and both
+    bounds.
+
+    Parameters
+    ----------
+    aoi : shapely Polygon or MultiPolygon
+        Site frame, m.
+    dem : visibility.dem.DEM
+    what : str
+        How the message names the AOI.
+
+    Raises
+    ------
+    InputFileError
+    """
+    xmin, xmax, ymin, ymax = dem.extent()
+    off = aoi.difference(shapely.box(xmin, ymin, xmax, ymax)).area
+    if off > 0:
+        x0, y0, x1, y1 = aoi.bounds
+        share = off / aoi.area
+        raise InputFileError(
+            f"{what}: {off:.1f} m^2 of the AOI ({share:.0%}) lies off the DEM (AOI "
+            f"[{x0:.1f}, {x1:.1f}] x [{y0:.1f}, {y1:.1f}] m); draw it inside the DEM's extent "
+            f"[{xmin:.1f}, {xmax:.1f}] x [{ymin:.1f}, {ymax:.1f}] m (site frame) or use a DEM "
+            "covering it")
+
+
+def nodata_problem(aoi, dem, what: str) -> None:
+    """Refuse an AOI holding DEM cells on nodata (a cell centre inside the AOI whose cell is
+    not measured), with their number and share.
+
+    Parameters
+    ----------
+    aoi : shapely Polygon or MultiPolygon
+        Site frame, m, inside the DEM's extent.
+    dem : visibility.dem.DEM
+    what : str
+        How the message names the AOI.
+
+    Raises
+    ------
+    InputFileError
+    """
+    if dem.valid is None:
+        return
+    x, y = dem.grid_xy()
+    x0, y0, x1, y1 = aoi.bounds
+    cols = np.flatnonzero((x >= x0) & (x <= x1))
+    rows = np.flatnonzero((y >= y0) & (y <= y1))
+    gx, gy = np.meshgrid(x[cols], y[rows])
+    inside = shapely.contains_xy(aoi, gx, gy)
+    bad = inside & ~dem.valid[np.ix_(rows, cols)]
+    n_in, n_bad = int(inside.sum()), int(bad.sum())
+    if n_bad:
+        bx, by = gx[bad], gy[bad]
+        raise InputFileError(
+            f"{what}: {n_bad} of the AOI's {n_in} DEM cells ({n_bad / n_in:.0%}) lie on DEM "
+            f"nodata (in [{bx.min():.1f}, {bx.max():.1f}] x [{by.min():.1f}, {by.max():.1f}] "
+            "m), where coverage cannot be predicted; draw the AOI on measured terrain or use "
+            "a DEM with data there")
