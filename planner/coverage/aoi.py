@@ -77,8 +77,11 @@ def off_dem_problem(aoi, dem, what: str) -> None:
 
 
 def nodata_problem(aoi, dem, what: str) -> None:
-    """Refuse an AOI holding DEM cells on nodata (a cell centre inside the AOI whose cell is
-    not measured), with their number and share.
+    """Refuse an AOI over DEM cells on nodata, with their number and share.
+
+    A DEM cell counts as under the AOI when its centre lies within ``0.75`` cell of the AOI
+    (every cell whose footprint touches the AOI, and a few corner cells more), so that every
+    AOI grid cell's centre (:func:`planner.coverage.grid.aoi_grid`) falls in a checked cell.
 
     Parameters
     ----------
@@ -94,18 +97,19 @@ def nodata_problem(aoi, dem, what: str) -> None:
     """
     if dem.valid is None:
         return
+    under = aoi.buffer(0.75 * dem.cell_size_m)
     x, y = dem.grid_xy()
-    x0, y0, x1, y1 = aoi.bounds
+    x0, y0, x1, y1 = under.bounds
     cols = np.flatnonzero((x >= x0) & (x <= x1))
     rows = np.flatnonzero((y >= y0) & (y <= y1))
     gx, gy = np.meshgrid(x[cols], y[rows])
-    inside = shapely.contains_xy(aoi, gx, gy)
+    inside = shapely.contains_xy(under, gx, gy)
     bad = inside & ~dem.valid[np.ix_(rows, cols)]
     n_in, n_bad = int(inside.sum()), int(bad.sum())
     if n_bad:
         bx, by = gx[bad], gy[bad]
         raise InputFileError(
-            f"{what}: {n_bad} of the AOI's {n_in} DEM cells ({n_bad / n_in:.0%}) lie on DEM "
-            f"nodata (in [{bx.min():.1f}, {bx.max():.1f}] x [{by.min():.1f}, {by.max():.1f}] "
-            "m), where coverage cannot be predicted; draw the AOI on measured terrain or use "
-            "a DEM with data there")
+            f"{what}: {n_bad} of the {n_in} DEM cells under the AOI ({n_bad / n_in:.0%}) lie "
+            f"on DEM nodata (in [{bx.min():.1f}, {bx.max():.1f}] x [{by.min():.1f}, "
+            f"{by.max():.1f}] m), where coverage cannot be predicted; draw the AOI on measured "
+            "terrain or use a DEM with data there")

@@ -129,15 +129,30 @@ def aoi_grid(dem, aoi, cell_m: float) -> AoiGrid:
                         f"[{x0:.1f}, {x1:.1f}] x [{y0:.1f}, {y1:.1f}] m; lower `cell_m` or "
                         "draw a larger AOI")
     xy = np.column_stack([gx.ravel()[index], gy.ravel()[index]])
-    if not dem.valid_at(xy).all():
-        k_bad = int(np.flatnonzero(~dem.valid_at(xy))[0])
-        raise DataError(f"AOI cell centre ({xy[k_bad, 0]:.2f}, {xy[k_bad, 1]:.2f}) m lies off "
-                        "the DEM or on nodata; draw the AOI on the DEM's measured terrain "
-                        "(planner.coverage.aoi.read_aoi checks it)")
+    bad = np.flatnonzero(~_on_data(dem, xy))
+    if bad.size:
+        raise DataError(f"{bad.size} AOI cell centres, the first at ({xy[bad[0], 0]:.2f}, "
+                        f"{xy[bad[0], 1]:.2f}) m, lie off the DEM or on nodata; draw the AOI "
+                        "on the DEM's measured terrain (planner.coverage.aoi.read_aoi checks "
+                        "it)")
     normal = _cell_normals(dem, k, r0, r1, c0, c1).reshape(-1, 3)[index]
     return AoiGrid(inside=inside, cell_index=index, centre_xy_m=xy,
                    ground_z_m=dem.height_at(xy), normal=normal, transform=transform,
                    crs=dem.crs, cell_m=float(size))
+
+
+def _on_data(dem, xy: np.ndarray) -> np.ndarray:
+    """(n,) whether each point lies on the DEM's extent and in a valid cell (the cell whose
+    centre is nearest)."""
+    ok = dem.contains(xy)
+    if dem.valid is None:
+        return ok
+    ny, nx = dem.shape
+    i = np.clip(np.rint((xy[:, 0] - dem.origin_m[0]) / dem.cell_size_m).astype(np.int64), 0,
+                nx - 1)
+    j = np.clip(np.rint((xy[:, 1] - dem.origin_m[1]) / dem.cell_size_m).astype(np.int64), 0,
+                ny - 1)
+    return ok & dem.valid[j, i]
 
 
 def _span(lo: float, hi: float, n: int) -> tuple[int, int]:

@@ -51,10 +51,30 @@ def test_aoi_on_nodata_names_share(tmp_path):
     with pytest.raises(InputFileError) as e:
         read_aoi(p, dem)
     msg = str(e.value)
-    # DEM cells inside: x 10.5..19.5 (19 columns) x y 5.5..9.5 (9 rows); nodata x >= 15 (10)
-    assert "90 of the AOI's 171 DEM cells (53%) lie on DEM nodata" in msg
+    # DEM cells within 0.75 cell (0.375 m) of the AOI: x 10..20 (21 columns) x y 5..10
+    # (11 rows); on nodata x >= 15 (11 columns)
+    assert "121 of the 231 DEM cells under the AOI (52%) lie on DEM nodata" in msg
     assert "`aoi_path`" in msg and "draw the AOI on measured terrain" in msg
     assert read_aoi(write_polygons(tmp_path / "ok.geojson", square(1, 1, 14, 9)), dem).area > 0
+
+
+@pytest.mark.parametrize("cell_m", [0.5, 1.0, 1.5])
+def test_an_aoi_read_aoi_accepts_gives_a_grid(tmp_path, cell_m):
+    """Whatever AOI passes the nodata check, its grid's cell centres stand on valid cells
+    (AOIs ending 0..0.5 m short of a nodata strip at x >= 15 m)."""
+    valid = np.ones((41, 41), bool)
+    valid[:, 30:] = False
+    dem = DEM(np.zeros((41, 41)), (0.0, 0.0), 0.5, valid=valid)
+    accepted = 0
+    for k, x1 in enumerate(np.linspace(14.3, 15.0, 15)):
+        p = write_polygons(tmp_path / f"aoi{k}.geojson", square(3.0, 3.0, x1, 9.0))
+        try:
+            aoi = read_aoi(p, dem)
+        except InputFileError:
+            continue
+        accepted += 1
+        assert len(aoi_grid(dem, aoi, cell_m)) > 0
+    assert 3 < accepted < 15
 
 
 def test_malformed_aoi_names_setting(tmp_path):

@@ -165,3 +165,58 @@ def test_bad_stations_refused():
     grid = aoi_grid(dem, shapely.box(-5, -5, 5, 5), 1.0)
     with pytest.raises(ConfigError, match="`station_position_m`"):
         coverage_matrix(dem, np.zeros((2, 2)), grid)
+
+
+def _small_case():
+    dem = rough(seed=9)
+    grid = aoi_grid(dem, shapely.box(-20, -20, 20, 20), 1.0)
+    rng = np.random.default_rng(2)
+    xy = rng.uniform(-20, 20, (12, 2))
+    return dem, grid, np.column_stack([xy, dem.height_at(xy) + H])
+
+
+def assert_same(a, b):
+    for name in ("station", "cell", "distance_m", "incidence_rad", "density_per_m2"):
+        np.testing.assert_array_equal(getattr(a, name), getattr(b, name))
+    assert (a.n_rays, a.n_stations, a.n_cells) == (b.n_rays, b.n_stations, b.n_cells)
+
+
+def test_groups_survive_pickling_and_the_in_process_executor():
+    """What a cluster worker receives (a pickled group) gives the same pairs, and the
+    executor's ``map_groups`` form gives the built-in map's matrix."""
+    import pickle
+
+    from planner.coverage.sight import group_coverage
+    from planner.distributed import executor
+
+    dem, grid, st = _small_case()
+    s = CoverageSettings(max_range_m=10.0)
+    here = coverage_matrix(dem, st, grid, s, block_m=10.0)
+    seen = []
+
+    def spy(fn, items):
+        for item in items:
+            seen.append(item)
+            yield fn(pickle.loads(pickle.dumps(item)))
+
+    assert_same(coverage_matrix(dem, st, grid, s, block_m=10.0, map_groups=spy), here)
+    assert len(seen) > 3 and all(g.tile.shape[0] < dem.shape[0] for g in seen)
+    assert sum(len(group_coverage(g)) for g in seen) == len(here)
+    with executor("none", progress=False) as ex:
+        assert_same(coverage_matrix(dem, st, grid, s, block_m=10.0, map_groups=ex), here)
+
+
+def test_on_a_local_cluster_equals_in_process():
+    """Two worker processes (about 2 s) give the in-process matrix."""
+    from distributed import Client, LocalCluster
+
+    from planner.distributed import Executor
+
+    dem, grid, st = _small_case()
+    s = CoverageSettings(max_range_m=10.0)
+    here = coverage_matrix(dem, st, grid, s, block_m=10.0)
+    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                      dashboard_address=":0", silence_logs=40) as lc, Client(lc) as client:
+        there = coverage_matrix(dem, st, grid, s, block_m=10.0,
+                                map_groups=Executor(client, progress=False))
+    assert_same(there, here)
