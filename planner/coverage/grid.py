@@ -10,6 +10,7 @@ over the cell (central differences of the DEM averaged over the cell's DEM cells
 
 from __future__ import annotations
 
+import numbers
 from dataclasses import dataclass
 
 import numpy as np
@@ -106,7 +107,7 @@ def aoi_grid(dem, aoi, cell_m: float) -> AoiGrid:
     >>> g.cell_m, g.shape, len(g), g.centre_xy_m.tolist()
     (2.0, (2, 2), 2, [[2.5, 3.5], [4.5, 3.5]])
     """
-    if not (isinstance(cell_m, int | float) and np.isfinite(cell_m) and cell_m > 0):
+    if not (isinstance(cell_m, numbers.Real) and np.isfinite(cell_m) and cell_m > 0):
         raise ConfigError(f"`cell_m` must be a positive number of metres, got {cell_m!r}")
     k = max(1, round(cell_m / dem.cell_size_m))
     (size, _, left, _, _, top), rows, cols = aligned_grid(dem, k)

@@ -23,6 +23,7 @@ step holds a mesh of the whole site, and the blocks are mapped by ``map_groups``
 
 from __future__ import annotations
 
+import numbers
 import sys
 import time
 from dataclasses import dataclass
@@ -82,13 +83,13 @@ class CoverageSettings:
     def __post_init__(self) -> None:
         for name, hi in (("cell_m", 1000.0), ("max_range_m", 100.0)):
             v = getattr(self, name)
-            if not (isinstance(v, int | float) and 0 < v <= hi):
+            if not (_is_number(v) and 0 < v <= hi):
                 raise ConfigError(f"`{name}` must be a number in (0, {hi:g}] m, got {v!r}")
         v = self.max_incidence_deg
-        if not (isinstance(v, int | float) and 0 < v <= 90):
+        if not (_is_number(v) and 0 < v <= 90):
             raise ConfigError(f"`max_incidence_deg` must be in (0, 90] degrees, got {v!r}")
         v = self.min_density_per_m2
-        if not (isinstance(v, int | float) and 0 <= v < np.inf):
+        if not (_is_number(v) and 0 <= v < np.inf):
             raise ConfigError(f"`min_density_per_m2` must be a finite number >= 0 points per "
                               f"m^2, got {v!r}")
         v = self.min_stations
@@ -98,6 +99,11 @@ class CoverageSettings:
     @property
     def max_incidence_rad(self) -> float:
         return float(np.radians(self.max_incidence_deg))
+
+
+def _is_number(v) -> bool:
+    """A real number (numpy's included), not a bool."""
+    return isinstance(v, numbers.Real) and not isinstance(v, bool)
 
 
 @dataclass(frozen=True)
