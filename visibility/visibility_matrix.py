@@ -400,11 +400,22 @@ def reach_tiles(dem, groups: list[np.ndarray], station_xy_m: np.ndarray,
         its stations when none does).
     """
     tree = cKDTree(target_xy_m) if len(target_xy_m) else None
+    # nearest-neighbour queries up to just past the reach (their bound is strict), no lists
+    bound = reach_m * (1.0 + 1e-9) + 1e-12
     for g in groups:
-        near = [] if tree is None else tree.query_ball_point(station_xy_m[g], r=reach_m)
-        targets = np.unique(np.concatenate([np.asarray(n, np.int64) for n in near])) \
-            if len(near) else np.zeros(0, np.int64)
-        seeing = [k for k, n in zip(g, near, strict=True) if len(n)] or list(g)
+        sxy = station_xy_m[g]
+        targets, seeing = np.zeros(0, np.int64), g
+        if tree is not None:
+            lo, hi = sxy.min(axis=0), sxy.max(axis=0)
+            box = tree.query_ball_point(0.5 * (lo + hi), 0.5 * float(np.hypot(*(hi - lo)))
+                                        + reach_m)
+            box = np.sort(np.asarray(box, np.int64))
+            if box.size:
+                near = cKDTree(sxy).query(target_xy_m[box], distance_upper_bound=bound)[0]
+                targets = box[near <= reach_m]
+            if targets.size:
+                nearest = cKDTree(target_xy_m[targets]).query(sxy, distance_upper_bound=bound)[0]
+                seeing = g[nearest <= reach_m]
         xy = np.vstack([station_xy_m[seeing], target_xy_m[targets]])
         yield g, targets, dem.crop(*tile_rectangle(xy, margin_m))
 

@@ -41,8 +41,11 @@ from visibility.visibility_matrix import AngularSampling, reach_tiles, station_g
 #: stopped by the cell's own surface.
 HAIR_M = 0.02
 
-#: Most AOI cells x stations in range one coverage matrix may test (about 50 bytes each).
-MAX_PAIRS = 50_000_000
+#: Most station x cell pairs one coverage matrix (or one station block of it) keeps (about
+#: 50 bytes each).
+MAX_PAIRS = 20_000_000
+#: Station x cell pairs in range handled at once (about 150 bytes each while in hand).
+PAIRS_PER_CHUNK = 1_000_000
 
 
 @dataclass(frozen=True)
@@ -193,8 +196,12 @@ class Geometry:
 
 
 def pair_geometry(station_position_m: np.ndarray, ground_m: np.ndarray, normal: np.ndarray,
-                  settings: CoverageSettings, sampling: AngularSampling) -> Geometry:
-    """Range, incidence and density of every station x cell pair within ``max_range_m``.
+                  settings: CoverageSettings, sampling: AngularSampling,
+                  dense_only: bool = False) -> Geometry:
+    """Range, incidence and density of the station x cell pairs within ``max_range_m``.
+
+    Stations are taken in chunks of about :data:`PAIRS_PER_CHUNK` pairs in range, so memory
+    holds one chunk's pairs and the pairs kept.
 
     Parameters
     ----------
@@ -206,34 +213,61 @@ def pair_geometry(station_position_m: np.ndarray, ground_m: np.ndarray, normal: 
         Cells' unit ground normals.
     settings : CoverageSettings
     sampling : AngularSampling
+    dense_only : bool
+        Keep only the pairs passing the incidence and density limits.
 
     Returns
     -------
     geometry : Geometry
         Pairs ordered by station, then cell (indices into the arrays given).
+
+    Raises
+    ------
+    ConfigError
+        More than :data:`MAX_PAIRS` pairs kept.
     """
-    empty = np.zeros(0, np.int64)
-    if not len(station_position_m) or not len(ground_m):
-        z = np.zeros(0)
-        return Geometry(empty, empty, z, z, z, z.astype(bool), z.astype(bool))
-    lists = cKDTree(ground_m).query_ball_point(station_position_m, r=settings.max_range_m)
-    counts = np.array([len(li) for li in lists], np.int64)
-    if counts.sum() > MAX_PAIRS:
-        raise ConfigError(f"{counts.sum():.3g} station x AOI cell pairs within `max_range_m` "
-                          f"{settings.max_range_m:g} m, more than the {MAX_PAIRS} accepted; "
-                          "raise `cell_m`, lower `max_range_m` or give fewer stations")
-    st = np.repeat(np.arange(len(lists), dtype=np.int64), counts)
-    ce = np.concatenate([np.sort(np.asarray(li, np.int64)) for li in lists] + [empty])
-    ray = ground_m[ce] - station_position_m[st]
+    st = np.asarray(station_position_m, dtype=float).reshape(-1, 3)
+    parts = []
+    if len(st) and len(ground_m):
+        cells = cKDTree(ground_m)
+        n = cells.query_ball_point(st, r=settings.max_range_m, return_length=True)
+        targets = PAIRS_PER_CHUNK * np.arange(1, n.sum() // PAIRS_PER_CHUNK + 1)
+        cut = np.searchsorted(np.cumsum(n), targets)
+        kept = 0
+        for a, b in zip(np.r_[0, cut], np.r_[cut, len(st)], strict=True):
+            if b > a:
+                part = _chunk_geometry(st, a, b, cells, ground_m, normal, settings, sampling)
+                if dense_only:
+                    part = Geometry(*(np.asarray(v)[part.dense] for v in vars(part).values()))
+                kept += part.station.size
+                if kept > MAX_PAIRS:
+                    raise ConfigError(f"more than {MAX_PAIRS} station x AOI cell pairs within "
+                                      f"`max_range_m` {settings.max_range_m:g} m; raise "
+                                      "`cell_m`, lower `max_range_m` or give fewer stations")
+                parts.append(part)
+    if not parts:
+        e, z = np.zeros(0, np.int64), np.zeros(0)
+        return Geometry(e, e, z, z, z, z.astype(bool), z.astype(bool))
+    return Geometry(*(np.concatenate([vars(p)[k] for p in parts]) for k in vars(parts[0])))
+
+
+def _chunk_geometry(st: np.ndarray, a: int, b: int, cells, ground_m: np.ndarray,
+                    normal: np.ndarray, settings: CoverageSettings, sampling) -> Geometry:
+    """:func:`pair_geometry` of stations ``a..b-1`` (station indices into ``st``)."""
+    pairs = cKDTree(st[a:b]).sparse_distance_matrix(cells, settings.max_range_m,
+                                                    output_type="ndarray")
+    order = np.lexsort((pairs["j"], pairs["i"]))
+    sta, ce = pairs["i"][order].astype(np.int64) + a, pairs["j"][order].astype(np.int64)
+    ray = ground_m[ce] - st[sta]
     dist = np.linalg.norm(ray, axis=1)
     ok = dist > 0
-    st, ce, ray, dist = st[ok], ce[ok], ray[ok], dist[ok]
+    sta, ce, ray, dist = sta[ok], ce[ok], ray[ok], dist[ok]
     cos_i = -np.einsum("ij,ij->i", ray, normal[ce]) / dist
     incidence = np.arccos(np.clip(cos_i, -1.0, 1.0))
     elevation = np.arctan2(ray[:, 2], np.hypot(ray[:, 0], ray[:, 1]))
     density = ground_density_per_m2(dist, elevation, cos_i, sampling)
     within = incidence <= settings.max_incidence_rad
-    return Geometry(st, ce, dist, incidence, density, within,
+    return Geometry(sta, ce, dist, incidence, density, within,
                     within & (density >= settings.min_density_per_m2))
 
 
@@ -280,9 +314,9 @@ def group_coverage(group: CoverageGroup) -> CoverageMatrix:
         ``n_cells`` 0.
     """
     geo = pair_geometry(group.station_position_m, group.ground_m, group.normal,
-                        group.settings, group.sampling)
-    k = np.flatnonzero(geo.dense)
-    st, ce = geo.station[k], geo.cell[k]
+                        group.settings, group.sampling, dense_only=True)
+    k = np.arange(geo.station.size)
+    st, ce = geo.station, geo.cell
     elapsed, n_rays = 0.0, 0
     if k.size:
         from visibility.scene import RayScene
