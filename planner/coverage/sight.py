@@ -8,8 +8,9 @@ centre to the cell's ground point,
   ``max_incidence_deg``,
 - the predicted point density of one full scan (:mod:`planner.coverage.density`) is at least
   ``min_density_per_m2``, and
-- the line of sight to a point :data:`HAIR_M` above the ground point is clear of terrain
-  (Embree, :meth:`visibility.scene.RayScene.line_of_sight`) and, on a DEM with nodata, its
+- the line of sight to a point :data:`HAIR_M` above the terrain mesh at the cell centre
+  (:func:`mesh_ground_m`) is clear of terrain (Embree,
+  :meth:`visibility.scene.RayScene.line_of_sight`) and, on a DEM with nodata, its
   ground track crosses no nodata (:func:`planner.problem.sight.crosses_nodata`: unknown terrain
   could hide the cell).
 
@@ -36,9 +37,8 @@ from planner.coverage.density import ground_density_per_m2
 from planner.problem.sight import angular_sampling, crosses_nodata
 from visibility.visibility_matrix import AngularSampling, reach_tiles, station_groups
 
-#: The line of sight ends this far above the cell's ground point, m: the bilinear ground height
-#: and the mesh's triangles differ by millimetres, and a ray grazing the ground must not be
-#: stopped by the cell's own surface.
+#: The line of sight ends this far above the terrain mesh at the cell centre, m, so that a ray
+#: grazing the ground is not stopped by the cell's own surface (Embree's float32 rounding).
 HAIR_M = 0.02
 
 #: Most station x cell pairs one coverage matrix (or one station block of it) keeps (about
@@ -128,7 +128,7 @@ class CoverageMatrix:
     n_stations, n_cells : int
         Matrix size.
     n_rays : int
-        Lines of sight cast.
+        Rays cast: the lines of sight and one vertical ray per cell to find the mesh under it.
     elapsed_s : float
         Ray casting, summed over groups, s.
     """
@@ -322,11 +322,13 @@ def group_coverage(group: CoverageGroup) -> CoverageMatrix:
         from visibility.scene import RayScene
 
         scene = RayScene(group.tile)
-        origin = group.station_position_m[st]
-        target = group.ground_m[ce] + [0.0, 0.0, HAIR_M]
         t0 = time.perf_counter()
+        used, at = np.unique(ce, return_inverse=True)
+        ground = mesh_ground_m(scene, group.ground_m[used])
+        origin = group.station_position_m[st]
+        target = ground[at] + [0.0, 0.0, HAIR_M]
         clear = scene.line_of_sight(origin, target)
-        elapsed, n_rays = time.perf_counter() - t0, int(k.size)
+        elapsed, n_rays = time.perf_counter() - t0, int(k.size + used.size)
         if group.tile.valid is not None:
             clear &= ~crosses_nodata(group.tile, origin[:, :2], target[:, :2])
         k, st, ce = k[clear], st[clear], ce[clear]
@@ -334,6 +336,30 @@ def group_coverage(group: CoverageGroup) -> CoverageMatrix:
                           distance_m=geo.distance_m[k], incidence_rad=geo.incidence_rad[k],
                           density_per_m2=geo.density_per_m2[k], n_stations=0, n_cells=0,
                           n_rays=n_rays, elapsed_s=elapsed)
+
+
+def mesh_ground_m(scene, ground_m: np.ndarray) -> np.ndarray:
+    """The points of the scene's terrain mesh under the given ground points (a vertical ray
+    each): the mesh's triangles and the DEM's bilinear height differ by centimetres on rough
+    ground, enough to bury a sight line's end :data:`HAIR_M` above the bilinear height.
+
+    Parameters
+    ----------
+    scene : visibility.scene.RayScene
+    ground_m : (c, 3) float
+        Ground points, site frame, m.
+
+    Returns
+    -------
+    on_mesh : (c, 3) float
+        The same x, y; z on the mesh (the given z where the vertical ray misses it), m.
+    """
+    top = float(scene.dem.heights_m.max()) + 1.0
+    origin = np.column_stack([ground_m[:, :2], np.full(len(ground_m), top)])
+    down = np.broadcast_to(np.array([0.0, 0.0, -1.0]), origin.shape)
+    hits = scene.intersect(origin, np.ascontiguousarray(down))
+    z = np.where(np.isfinite(hits.distance_m), top - hits.distance_m, ground_m[:, 2])
+    return np.column_stack([ground_m[:, :2], z])
 
 
 def coverage_matrix(dem, station_position_m, grid, settings: CoverageSettings | None = None,

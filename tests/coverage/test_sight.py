@@ -220,3 +220,30 @@ def test_on_a_local_cluster_equals_in_process():
         there = coverage_matrix(dem, st, grid, s, block_m=10.0,
                                 map_groups=Executor(client, progress=False))
     assert_same(there, here)
+
+
+def test_chunked_pairs_equal_one_chunk_and_too_many_pairs_refused(monkeypatch):
+    from planner.coverage import sight
+
+    dem, grid, st = _small_case()
+    whole = coverage_matrix(dem, st, grid)
+    monkeypatch.setattr(sight, "PAIRS_PER_CHUNK", 700)  # about one station per chunk
+    assert_same(coverage_matrix(dem, st, grid), whole)
+    monkeypatch.setattr(sight, "MAX_PAIRS", len(whole) // 2)
+    with pytest.raises(ConfigError, match="raise `cell_m`, lower `max_range_m`"):
+        coverage_matrix(dem, st, grid)
+
+
+def test_sight_line_ends_on_the_mesh_not_the_bilinear_height():
+    """20 cm bumps on every other DEM node of both axes (0.5 m cells): at the centre of a 1 m
+    cell (a DEM quad's centre) the bilinear height is 5 cm, the mesh's 10 cm (its diagonal
+    runs through the bump). Every cell near the station is in plain view; a sight line
+    ending 2 cm above the bilinear height would end buried."""
+    i, j = np.meshgrid(np.arange(121), np.arange(121))
+    dem = flat(heights=0.2 * (i % 2) * (j % 2))
+    grid = aoi_grid(dem, shapely.box(-4, -4, 4, 4), 1.0)
+    np.testing.assert_allclose(grid.ground_z_m, 0.05)
+    m = coverage_matrix(dem, np.array([[0.1, 0.2, 1.5]]), grid,
+                        CoverageSettings(min_density_per_m2=0.0))
+    near = np.hypot(*(grid.centre_xy_m - [0.1, 0.2]).T) < 4.0
+    assert np.all(np.isin(np.flatnonzero(near), m.cell))
