@@ -162,17 +162,16 @@ def uncovered_summary(matrix, grid, station_position_m, settings, sampling=None)
     x1, y1 = xy.max(axis=0) + 0.5 * grid.cell_m
     cx, cy = xy.mean(axis=0)
     far = nearest[reason == 0]
-    limits = (f"the nearest candidate station {far.min() if far.size else np.inf:.1f} m away "
-              f"across, `max_range_m` {settings.max_range_m:g} m",
+    limits = (f"at least {far.min() if far.size else np.inf:.1f} m across from every "
+              f"candidate station, beyond `max_range_m` {settings.max_range_m:g} m",
               f"`max_incidence_deg` {settings.max_incidence_deg:g}",
               f"`min_density_per_m2` {settings.min_density_per_m2:g}",
-              "the terrain hides it from every station in reach")
+              "the terrain, or nodata on the way, hides it from every station in reach")
     why = "; ".join(f"{n} {REASONS[r]} ({limits[r]})"
                     for r, n in enumerate(np.bincount(reason, minlength=len(REASONS))) if n)
-    seen = f"by {need} stations " if need > 1 else ""
+    by = "any candidate station" if need == 1 else f"{need} candidate stations"
     text = (f"{short.size} AOI cells ({area:g} m^2) in [{x0:.1f}, {x1:.1f}] x [{y0:.1f}, "
-            f"{y1:.1f}] m (centroid ({cx:.1f}, {cy:.1f}) m) cannot be covered {seen}from any "
-            f"candidate station: {why}")
+            f"{y1:.1f}] m (centroid ({cx:.1f}, {cy:.1f}) m) cannot be covered by {by}: {why}")
     return Uncovered(cell=short, reason=reason, nearest_m=nearest, area_m2=float(area),
                      text=text)
 
