@@ -1,6 +1,6 @@
 """The area of interest (AOI): a GeoJSON polygon on the DEM, site frame.
 
-An AOI must lie inside the DEM's extent (the rectangle of its cell centres) and on measured
+An AOI must lie inside the DEM's extent (the outer edges of its cells) and on measured
 terrain: coverage cannot be predicted on nodata. Each refusal is one
 :class:`~markerplan.errors.InputFileError` line naming `aoi_path`, the figures and the fix.
 """
@@ -49,8 +49,8 @@ def read_aoi(path, dem):
 
 
 def off_dem_problem(aoi, dem, what: str) -> None:
-    """Refuse an AOI (partly) outside the DEM's extent, with the area off it and both
-    bounds.
+    """Refuse an AOI (partly) outside the DEM's extent (its cells' outer edges, as a GeoTIFF's
+    bounds), with the area off it and both bounds.
 
     Parameters
     ----------
@@ -64,7 +64,8 @@ def off_dem_problem(aoi, dem, what: str) -> None:
     ------
     InputFileError
     """
-    xmin, xmax, ymin, ymax = dem.extent()
+    h = 0.5 * dem.cell_size_m
+    xmin, xmax, ymin, ymax = np.add(dem.extent(), [-h, h, -h, h])
     off = aoi.difference(shapely.box(xmin, ymin, xmax, ymax)).area
     if off > 0:
         x0, y0, x1, y1 = aoi.bounds

@@ -39,8 +39,19 @@ def test_aoi_off_dem_names_area_and_extent(tmp_path):
         read_aoi(p, DEM20)
     msg = str(e.value)
     assert "`aoi_path`" in msg and "\n" not in msg
-    assert "25.0 m^2 of the AOI (50%) lies off the DEM" in msg
-    assert "[0.0, 20.0] x [0.0, 20.0] m" in msg and "draw it inside" in msg
+    # the DEM's cells reach 0.25 m beyond their centres' rectangle [0, 20] m
+    assert "23.8 m^2 of the AOI (48%) lies off the DEM" in msg
+    assert "extent [-0.2, 20.2] x [-0.2, 20.2] m" in msg and "draw it inside" in msg
+
+
+@pytest.mark.parametrize("cell_m", [0.5, 1.0, 1.5])
+def test_aoi_on_the_dem_edges_is_accepted(tmp_path, cell_m):
+    """An AOI drawn on the DEM's outer edges (a GeoTIFF's bounds) is on the DEM, and so are
+    its grid's cell centres."""
+    aoi = read_aoi(write_polygons(tmp_path / "aoi.geojson", square(-0.25, -0.25, 20.25, 20.25)),
+                   DEM20)
+    g = aoi_grid(DEM20, aoi, cell_m)
+    assert DEM20.contains(g.centre_xy_m).all() and len(g) * g.cell_area_m2 > 390
 
 
 def test_aoi_on_nodata_names_share(tmp_path):
