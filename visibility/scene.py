@@ -189,7 +189,10 @@ class RayScene:
         t = np.asarray(targets_m, dtype=float)
         delta = t - o
         length = np.linalg.norm(delta, axis=1)
-        hits = self.intersect(o, delta, threads=threads)
+        # nothing beyond the longest segment matters: Embree stops there (a grazing ray would
+        # otherwise walk the terrain's hierarchy to the site's edge)
+        reach = float(length.max()) + 1.0 if len(length) else np.inf
+        hits = self.intersect(o, delta, max_range_m=reach, threads=threads)
         return hits.distance_m >= length - clearance_m
 
     def _intersect_chunk(self, o: np.ndarray, d: np.ndarray, max_range_m: float,

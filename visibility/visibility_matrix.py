@@ -369,6 +369,57 @@ def station_groups(station_xy_m: np.ndarray, block_m: float) -> list[np.ndarray]
     return np.split(order, cuts)
 
 
+def reach_tiles(dem, groups: list[np.ndarray], station_xy_m: np.ndarray,
+                target_xy_m: np.ndarray, reach_m: float, margin_m: float):
+    """For each station group, the targets within its reach and the DEM tile its rays cross
+    (made lazily, one group at a time).
+
+    Parameters
+    ----------
+    dem : visibility.dem.DEM
+        Terrain, site frame.
+    groups : list of (g,) int
+        Station indices of each group (:func:`station_groups`).
+    station_xy_m : (s, 2) float
+        Stations, site frame, m.
+    target_xy_m : (n, 2) float
+        What the rays go to (marker sites, AOI cells), site frame, m.
+    reach_m : float
+        Targets within this horizontal distance of some station of a group are its targets, m.
+    margin_m : float
+        How far beyond the stations and targets a ray may pass, m (:func:`tile_rectangle`).
+
+    Yields
+    ------
+    group : (g,) int
+        The group's stations.
+    targets : (k,) int
+        Its targets within reach, ascending.
+    tile : visibility.dem.DEM
+        The terrain around the group's stations that reach a target and those targets (all
+        its stations when none does).
+    """
+    tree = cKDTree(target_xy_m) if len(target_xy_m) else None
+    # nearest-neighbour queries up to just past the reach (their bound is strict), no lists
+    bound = reach_m * (1.0 + 1e-9) + 1e-12
+    for g in groups:
+        sxy = station_xy_m[g]
+        targets, seeing = np.zeros(0, np.int64), g
+        if tree is not None:
+            lo, hi = sxy.min(axis=0), sxy.max(axis=0)
+            box = tree.query_ball_point(0.5 * (lo + hi), 0.5 * float(np.hypot(*(hi - lo)))
+                                        + reach_m)
+            box = np.sort(np.asarray(box, np.int64))
+            if box.size:
+                near = cKDTree(sxy).query(target_xy_m[box], distance_upper_bound=bound)[0]
+                targets = box[near <= reach_m]
+            if targets.size:
+                nearest = cKDTree(target_xy_m[targets]).query(sxy, distance_upper_bound=bound)[0]
+                seeing = g[nearest <= reach_m]
+        xy = np.vstack([station_xy_m[seeing], target_xy_m[targets]])
+        yield g, targets, dem.crop(*tile_rectangle(xy, margin_m))
+
+
 def tiled_visibility(dem, station_position_m, site_centre_m, marker_radius_m: float = 0.10,
                      max_range_m: float = 30.0, rays_per_marker: int = 24,
                      sampling: AngularSampling | None = None, block_m: float | None = None,
@@ -418,19 +469,12 @@ def tiled_visibility(dem, station_position_m, site_centre_m, marker_radius_m: fl
     from tqdm import tqdm
 
     groups = station_groups(st[:, :2], block_m or 4.0 * max_range_m) if len(st) else []
-    tree = cKDTree(si[:, :2]) if len(si) else None
-    margin = marker_radius_m + dem.cell_size_m
 
     def tasks():
-        for g in groups:
-            near = [] if tree is None else tree.query_ball_point(st[g, :2], r=max_range_m)
-            sites = np.unique(np.concatenate([np.asarray(n, np.int64) for n in near])) \
-                if len(near) else np.zeros(0, np.int64)
-            seeing = [k for k, n in zip(g, near, strict=True) if len(n)] or list(g)
-            xy = np.vstack([st[seeing, :2], si[sites, :2]])
-            yield VisibilityGroup(dem.crop(*tile_rectangle(xy, margin)), g, st[g],
-                                  sites, si[sites], marker_radius_m, max_range_m,
-                                  rays_per_marker, sampling)
+        for g, sites, tile in reach_tiles(dem, groups, st[:, :2], si[:, :2], max_range_m,
+                                          marker_radius_m + dem.cell_size_m):
+            yield VisibilityGroup(tile, g, st[g], sites, si[sites], marker_radius_m,
+                                  max_range_m, rays_per_marker, sampling)
 
     answers = list(tqdm(map_groups(group_visibility, tasks()), total=len(groups),
                         desc=desc, unit="group", file=sys.stderr,

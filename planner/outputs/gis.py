@@ -325,25 +325,53 @@ def write_gpkg_layers(path: Path, layers: dict, crs: str | None) -> Path:
 
 def write_stand_map(stand, folder: Path) -> list[Path]:
     """Write a :class:`planner.outputs.stand_map.StandMap` as ``usable_markers.tif`` and
-    ``station_error.tif`` (float32, one band, nodata NaN, DEM's CRS) into ``folder``.
+    ``station_error.tif`` (float32, one band, nodata NaN, DEM's CRS) into ``folder``
+    (:func:`write_float_geotiff`)."""
+    out = []
+    for name, band in zip(STAND_MAP_FILES, (stand.usable, stand.error_m), strict=True):
+        description = ("usable markers" if name.startswith("usable")
+                       else "predicted 95 % station error (m)")
+        out.append(write_float_geotiff(Path(folder) / name, [band], [description],
+                                       stand.transform, stand.crs))
+    return out
 
-    Each GeoTIFF is made in memory and written by Python, so a failing disk raises its own
+
+def write_float_geotiff(path: Path, bands, descriptions, transform: tuple,
+                        crs: str | None) -> Path:
+    """Write float32 bands as one GeoTIFF (nodata NaN).
+
+    The GeoTIFF is made in memory and written by Python, so a failing disk raises its own
     :class:`OSError` (its errno) rather than GDAL's "Write failed" and libtiff's lines on
-    stderr."""
+    stderr.
+
+    Parameters
+    ----------
+    path : Path
+        The file (inside an output folder's staging folder).
+    bands : sequence of (ny, nx) float
+        The bands, row 0 the northern one.
+    descriptions : sequence of str
+        One per band.
+    transform : tuple of 6 float
+        GDAL-order affine of the grid, m.
+    crs : str or None
+        WKT of the grid's CRS.
+
+    Returns
+    -------
+    path : Path
+    """
     from rasterio.io import MemoryFile
     from rasterio.transform import Affine
 
-    out = []
-    for name, band in zip(STAND_MAP_FILES, (stand.usable, stand.error_m), strict=True):
-        path = Path(folder) / name
-        ny, nx = band.shape
-        with MemoryFile() as memory:
-            with memory.open(driver="GTiff", height=ny, width=nx, count=1, dtype="float32",
-                             crs=stand.crs, nodata=np.nan,
-                             transform=Affine(*stand.transform)) as dst:
-                dst.write(band.astype(np.float32), 1)
-                dst.set_band_description(1, "usable markers" if name.startswith("usable")
-                                         else "predicted 95 % station error (m)")
-            path.write_bytes(memory.read())
-        out.append(path)
-    return out
+    path = Path(path)
+    ny, nx = bands[0].shape
+    with MemoryFile() as memory:
+        with memory.open(driver="GTiff", height=ny, width=nx, count=len(bands),
+                         dtype="float32", crs=crs, nodata=np.nan,
+                         transform=Affine(*transform)) as dst:
+            for k, (band, text) in enumerate(zip(bands, descriptions, strict=True), start=1):
+                dst.write(np.asarray(band, np.float32), k)
+                dst.set_band_description(k, text)
+        path.write_bytes(memory.read())
+    return path

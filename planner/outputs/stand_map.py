@@ -107,16 +107,42 @@ def stand_grid(dem, k: int) -> tuple[np.ndarray, tuple]:
     transform : tuple of 6 float
         GDAL-order affine of the grid (see :class:`StandMap`).
     """
+    transform, rows, cols = aligned_grid(dem, k)
+    size, _, left, _, _, top = transform
+    x = left + size * (np.arange(cols) + 0.5)
+    y = top - size * (np.arange(rows) + 0.5)
+    gx, gy = np.meshgrid(x, y)
+    return np.stack([gx, gy], axis=-1), transform
+
+
+def aligned_grid(dem, k: int) -> tuple[tuple, int, int]:
+    """The grid of ``k`` x ``k`` DEM cells per cell that covers the DEM, aligned with it: its
+    upper-left corner is the DEM's, so a GeoTIFF of it lies exactly over the DEM's.
+
+    Parameters
+    ----------
+    dem : visibility.dem.DEM
+    k : int
+
+    Returns
+    -------
+    transform : tuple of 6 float
+        GDAL-order affine (see :class:`StandMap`), DEM CRS (site frame) m.
+    rows, cols : int
+        Its size; the last row and column may reach beyond the DEM.
+
+    Examples
+    --------
+    >>> from visibility.dem import DEM
+    >>> aligned_grid(DEM(np.zeros((5, 4)), (0.0, 0.0), 1.0), 2)
+    ((2.0, 0.0, -0.5, 0.0, -2.0, 4.5), 3, 2)
+    """
     ny, nx = dem.shape
     c = dem.cell_size_m
     left = dem.origin_m[0] - 0.5 * c
     top = dem.origin_m[1] + (ny - 0.5) * c
     size = k * c
-    cols, rows = math.ceil(nx / k), math.ceil(ny / k)
-    x = left + size * (np.arange(cols) + 0.5)
-    y = top - size * (np.arange(rows) + 0.5)
-    gx, gy = np.meshgrid(x, y)
-    return np.stack([gx, gy], axis=-1), (size, 0.0, left, 0.0, -size, top)
+    return (size, 0.0, left, 0.0, -size, top), math.ceil(ny / k), math.ceil(nx / k)
 
 
 def stand_map(outcome, error_model, cell_m: float | None = None, progress: bool = False,

@@ -283,12 +283,12 @@ def load_inputs(site: str = "default", site_seed: int | None = None, dem_path=No
                                dem.height_at(preset.station_xy_m) + lidar_h])
         heading = np.asarray(preset.station_heading_rad, float)
     if boundary_path is not None:
-        boundary = _boundary_iv(_polygons_on_dem(load_polygons(boundary_path, "`boundary_path`"),
+        boundary = _boundary_iv(polygons_on_dem(load_polygons(boundary_path, "`boundary_path`"),
                                                  dem), boundary_path)
         sources["boundary"] = _absolute(boundary_path)
     exclusions = []
     for p in exclude_paths:
-        exclusions += _polygons_on_dem(load_polygons(p, "`exclude_paths`"), dem)
+        exclusions += polygons_on_dem(load_polygons(p, "`exclude_paths`"), dem)
     if exclude_paths:
         sources["exclude"] = [_absolute(p) for p in exclude_paths]
     ex_ids, ex_xyz = [], np.zeros((0, 3))
@@ -397,7 +397,7 @@ def sight_window(station_xy, sight_radius_m: float) -> tuple[float, float, float
             float(xy[:, 1].min() - r), float(xy[:, 1].max() + r))
 
 
-def _polygons_on_dem(polygons: list, dem) -> list:
+def polygons_on_dem(polygons: list, dem) -> list:
     """Polygons read in the DEM file's CRS, in the DEM's (:func:`visibility.dem.to_dem_xy`,
     corner by corner)."""
     if dem.source_crs is None:
