@@ -116,9 +116,9 @@ def aoi_grid(dem, aoi, cell_m: float) -> AoiGrid:
     r0, r1 = _span((top - y1) / size, (top - y0) / size, rows)
     n = (r1 - r0) * (c1 - c0)
     if n > MAX_AOI_CELLS:
-        raise ConfigError(f"`cell_m` {cell_m:g} m gives {n:.3g} cells over the AOI's "
+        raise ConfigError(f"`aoi_cell_m` {cell_m:g} m gives {n:.3g} cells over the AOI's "
                           f"{x1 - x0:.0f} x {y1 - y0:.0f} m bounding box, more than the "
-                          f"{MAX_AOI_CELLS} accepted; raise `cell_m` or shrink the AOI")
+                          f"{MAX_AOI_CELLS} accepted; raise `aoi_cell_m` or shrink the AOI")
     transform = (size, 0.0, left + c0 * size, 0.0, -size, top - r0 * size)
     x = transform[2] + size * (np.arange(c1 - c0) + 0.5)
     y = transform[5] - size * (np.arange(r1 - r0) + 0.5)
@@ -127,7 +127,7 @@ def aoi_grid(dem, aoi, cell_m: float) -> AoiGrid:
     index = np.flatnonzero(inside)
     if not index.size:
         raise DataError(f"no {size:g} m cell centre lies inside the AOI "
-                        f"[{x0:.1f}, {x1:.1f}] x [{y0:.1f}, {y1:.1f}] m; lower `cell_m` or "
+                        f"[{x0:.1f}, {x1:.1f}] x [{y0:.1f}, {y1:.1f}] m; lower `aoi_cell_m` or "
                         "draw a larger AOI")
     xy = np.column_stack([gx.ravel()[index], gy.ravel()[index]])
     bad = np.flatnonzero(~_on_data(dem, xy))

@@ -163,9 +163,9 @@ def uncovered_summary(matrix, grid, station_position_m, settings, sampling=None)
     cx, cy = xy.mean(axis=0)
     far = nearest[reason == 0]
     limits = (f"at least {far.min() if far.size else np.inf:.1f} m across from every "
-              f"candidate station, beyond `max_range_m` {settings.max_range_m:g} m",
-              f"`max_incidence_deg` {settings.max_incidence_deg:g}",
-              f"`min_density_per_m2` {settings.min_density_per_m2:g}",
+              f"candidate station, beyond `cover_max_range_m` {settings.max_range_m:g} m",
+              f"`cover_max_incidence_deg` {settings.max_incidence_deg:g}",
+              f"`cover_min_density_per_m2` {settings.min_density_per_m2:g}",
               "the terrain, or nodata on the way, hides it from every station in reach")
     why = "; ".join(f"{n} {REASONS[r]} ({limits[r]})"
                     for r, n in enumerate(np.bincount(reason, minlength=len(REASONS))) if n)

@@ -242,8 +242,9 @@ def pair_geometry(station_position_m: np.ndarray, ground_m: np.ndarray, normal: 
                 kept += part.station.size
                 if kept > MAX_PAIRS:
                     raise ConfigError(f"more than {MAX_PAIRS} station x AOI cell pairs within "
-                                      f"`max_range_m` {settings.max_range_m:g} m; raise "
-                                      "`cell_m`, lower `max_range_m` or give fewer stations")
+                                      f"`cover_max_range_m` {settings.max_range_m:g} m; "
+                                      "raise `aoi_cell_m`, lower `cover_max_range_m` or give "
+                                      "fewer stations")
                 parts.append(part)
     if not parts:
         e, z = np.zeros(0, np.int64), np.zeros(0)

@@ -75,10 +75,10 @@ def candidate_stations(traffic_map, area_polygon, spacing_m: float, lidar_height
     gx = spacing_m * np.arange(np.ceil(x0 / spacing_m), np.floor(x1 / spacing_m) + 1)
     gy = spacing_m * np.arange(np.ceil(y0 / spacing_m), np.floor(y1 / spacing_m) + 1)
     if len(gx) * len(gy) > MAX_STATION_CANDIDATES:
-        raise ConfigError(f"`spacing_m` {spacing_m:g} m lays {len(gx) * len(gy)} "
+        raise ConfigError(f"`station_spacing_m` {spacing_m:g} m lays {len(gx) * len(gy)} "
                           f"candidate stations over the {x1 - x0:.0f} x {y1 - y0:.0f} m area, "
                           f"more than the {MAX_STATION_CANDIDATES} accepted; raise "
-                          "`spacing_m` or shrink the area")
+                          "`station_spacing_m` or shrink the area")
     xx, yy = np.meshgrid(gx, gy)
     xy = np.column_stack([xx.ravel(), yy.ravel()])
     dropped = {}
@@ -98,7 +98,7 @@ def candidate_stations(traffic_map, area_polygon, spacing_m: float, lidar_height
     if not len(xy):
         raise DataError("no candidate station is left (dropped: "
                         + ", ".join(f"{v} {k}" for k, v in dropped.items())
-                        + "); enlarge the area, lower `spacing_m` or relax the "
+                        + "); enlarge the area, lower `station_spacing_m` or relax the "
                         f"{LIMITS}")
     width = max(4, len(str(len(xy))))
     ids = [f"P{k + 1:0{width}d}" for k in range(len(xy))]

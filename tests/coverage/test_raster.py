@@ -100,7 +100,7 @@ def test_uncovered_summary_reasons():
     assert np.all(u.reason[(r > 11.5) & (np.hypot(r, 1.0) < 15) & (cx < 500_020)] == 1)
     assert "\n" not in u.text
     assert "86 out of range (at least 15.0 m across from every candidate station" in u.text
-    assert "`max_range_m` 15 m" in u.text and "`max_incidence_deg` 85" in u.text
+    assert "`cover_max_range_m` 15 m" in u.text and "`cover_max_incidence_deg` 85" in u.text
     assert "occluded (the terrain, or nodata on the way, hides it" in u.text
     # cell edges: the AOI's cells run from 500001.25 - 0.5 to 500038.25 + 0.5 m
     assert (f"{len(u)} AOI cells ({len(u):g} m^2) in [500000.8, 500038.8] x [4000015.2, "

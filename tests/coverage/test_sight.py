@@ -230,7 +230,7 @@ def test_chunked_pairs_equal_one_chunk_and_too_many_pairs_refused(monkeypatch):
     monkeypatch.setattr(sight, "PAIRS_PER_CHUNK", 700)  # about one station per chunk
     assert_same(coverage_matrix(dem, st, grid), whole)
     monkeypatch.setattr(sight, "MAX_PAIRS", len(whole) // 2)
-    with pytest.raises(ConfigError, match="raise `cell_m`, lower `max_range_m`"):
+    with pytest.raises(ConfigError, match="raise `aoi_cell_m`, lower `cover_max_range_m`"):
         coverage_matrix(dem, st, grid)
 
 

@@ -48,7 +48,8 @@ def test_huge_grid_and_empty_result_are_one_line_errors():
     dem = _tilted()
     tm = trafficable_map(dem, OPEN)
     assert 201 ** 2 > MAX_STATION_CANDIDATES
-    with pytest.raises(ConfigError, match=r"^`spacing_m` 0\.1 m lays 40401 candidate stations"):
+    with pytest.raises(ConfigError,
+                       match=r"^`station_spacing_m` 0\.1 m lays 40401 candidate stations"):
         candidate_stations(tm, shapely.box(0, 0, 20, 20), 0.1, 1.0, dem)
     with pytest.raises(DataError, match=r"no candidate station is left \(dropped: 0 outside "
                                         r"the area, 1 not trafficable\)"):
