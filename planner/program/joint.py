@@ -83,7 +83,7 @@ class StationCover:
 @dataclass(frozen=True)
 class JointCosts:
     """The stated cost the joint program minimises (any unit, the same for both; seconds of
-    mission time in :mod:`planner.joint_run`).
+    mission time in :mod:`planner.design.run`).
 
     Attributes
     ----------
