@@ -23,7 +23,15 @@ Per station ``k`` (the same three steps as ``markerplan simulate`` then ``marker
 
 A station **covers** a cell when it puts at least ``min_density_per_m2 * cell_m**2`` ground
 points into it: the density is per m² of horizontal cell area (on ground sloping by ``s`` the
-surface density is lower by ``cos s``: 1 % at 8 deg, 21 % on a 38 deg crater wall).
+surface density is lower by ``cos s``: 1 % at 8 deg, 21 % on a 38 deg crater wall). With
+``max_range_m`` and ``max_incidence_rad`` (the prediction's range and incidence limits,
+``planner.coverage.sight.CoverageSettings``) the station must also see the cell within
+them, judged from its own points in the cell, not from the DEM: the range is the LiDAR centre's
+distance to their centroid, the incidence the angle between that ray and the normal of the plane
+fitted to them (least squares: the smallest principal axis of their scatter).
+A marker's lower half (within the ground stage's 0.1 m of the local ground) counts as ground
+unless the chain accepted the marker: a few hundred points at most, as in the chain's own
+classified cloud.
 
 Densities are stated for a full turn of ``full_turn_frames`` frames (800, the rig's turn and
 :class:`visibility.visibility_matrix.AngularSampling`'s). A scan of fewer ``frames_per_turn``
@@ -77,14 +85,14 @@ class AchievedCoverage:
         The largest single-station ground-point density in the cell, points per m² of
         horizontal area, for a full turn (module docstring).
     station_density_per_m2 : scipy.sparse.csr_matrix, (s, c) float
-        Each station's ground-point density in each cell (full turn; the cells it puts no point
-        into are not stored), for judging other minimum densities
+        Each station's ground-point density in each cell (full turn; 0, not stored, where it puts
+        no point or misses the range or incidence limit), for judging other minimum densities
         (:meth:`stations_covering_at`).
     station_ids : tuple of str
     n_points : (s,) int
         Returns in each station's scan.
     n_ground : (s,) int
-        Of them, the ground points (within ``max_range_m`` when given).
+        Of them, the ground points.
     n_in_cells : (s,) int
         Of those, the ones that fall into an AOI cell.
     timings_s : list of dict
@@ -141,7 +149,8 @@ def achieved_coverage(dem: DEM, station_position_m: np.ndarray, station_heading_
                       marker_radius_m: float = MARKER_RADIUS_M,
                       frames_per_turn: int | None = None,
                       full_turn_frames: int = FULL_TURN_FRAMES,
-                      max_range_m: float | None = None, profile: SensorProfile | None = None,
+                      max_range_m: float | None = None, max_incidence_rad: float | None = None,
+                      profile: SensorProfile | None = None,
                       station_ids: Sequence[str] | None = None, threads: int | None = None,
                       progress: Callable[[int], None] | None = None) -> AchievedCoverage:
     """Scan, process and rasterise every station over the AOI cells (module docstring).
@@ -171,8 +180,11 @@ def achieved_coverage(dem: DEM, station_position_m: np.ndarray, station_heading_
     full_turn_frames : int
         Frames of the full turn the densities are stated for.
     max_range_m : float, optional
-        Count only ground points measured within this range of the LiDAR, metres (default: all
-        the sensor returns).
+        A station covers only cells whose points' centroid lies within this range of its LiDAR
+        centre, metres (default: no limit but the sensor's).
+    max_incidence_rad : float, optional
+        ... and whose fitted plane it sees at an incidence of at most this, radians (default:
+        no limit).
     profile : SensorProfile, optional
         Sensor and turntable errors (default the shipped ``calibrated`` profile), 600 rpm.
     station_ids : sequence of str, optional
@@ -190,11 +202,11 @@ def achieved_coverage(dem: DEM, station_position_m: np.ndarray, station_heading_
     ------
     ConfigError
         Arrays of the wrong shape, cells off a regular grid of ``cell_m``, a non-positive
-        density, cell or range, or too many frames.
+        density, cell, range or incidence limit, or too many frames.
     """
     position, heading, cells, ids, frames = _achieved_iv(
         station_position_m, station_heading_rad, cell_xy, cell_m, min_density_per_m2,
-        frames_per_turn, full_turn_frames, max_range_m, station_ids)
+        frames_per_turn, full_turn_frames, max_range_m, max_incidence_rad, station_ids)
     profile = profile or default_profile()
     sensor = profile.sensor_config()
     rig = profile.rig_config(frames_per_turn=frames)
@@ -214,14 +226,12 @@ def achieved_coverage(dem: DEM, station_position_m: np.ndarray, station_heading_
         t1 = time.perf_counter()
         cloud = classify_cloud(scan, process_station(scan, cfg, seed=seed + k), cfg.ground)
         t2 = time.perf_counter()
-        ground = cloud.classification == GROUND_CLASS
-        if max_range_m is not None:
-            ground &= np.einsum("ij,ij->i", cloud.xyz_m, cloud.xyz_m) <= max_range_m ** 2
-        xy = StationPose.from_truth(truth).to_site(cloud.xyz_m[ground])[:, :2]
-        counts = grid.counts(xy)
-        density.append(sparse.csr_matrix(counts * (scale / cell_m ** 2)))
+        ground = np.flatnonzero(cloud.classification == GROUND_CLASS)
+        xyz = StationPose.from_truth(truth).to_site(np.take(cloud.xyz_m, ground, axis=0))
+        counts, seen = grid.counts(xyz, position[k], max_range_m, max_incidence_rad)
+        density.append(sparse.csr_matrix(np.where(seen, counts * (scale / cell_m ** 2), 0.0)))
         n_points.append(scan.n_points)
-        n_ground.append(int(ground.sum()))
+        n_ground.append(len(ground))
         n_in.append(int(counts.sum()))
         timings.append({"simulate": t1 - t0, "process": t2 - t1,
                         "rasterise": time.perf_counter() - t2})
@@ -229,6 +239,7 @@ def achieved_coverage(dem: DEM, station_position_m: np.ndarray, station_heading_
               "full_turn_frames": int(full_turn_frames), "seed": int(seed),
               "station_seeds": "seed + k", "min_density_per_m2": float(min_density_per_m2),
               "cell_m": float(cell_m), "max_range_m": max_range_m,
+              "max_incidence_rad": max_incidence_rad,
               "n_markers": len(markers), "marker_radius_m": float(marker_radius_m),
               "points": "ground class of pipeline.surveys.point_cloud_io.classify_cloud",
               "pose": "simulator truth", "density_area": "horizontal cell area"}
@@ -253,16 +264,57 @@ class _CellGrid:
         self.lookup[ij[:, 0], ij[:, 1]] = np.arange(len(cell_xy))
         self.n = len(cell_xy)
 
-    def counts(self, xy: np.ndarray) -> np.ndarray:
-        """(c,) float: how many of the (N, 2) site-frame points fall into each cell."""
-        ij = np.floor((xy - self.origin) / self.cell_m).astype(np.int64)
-        inside = np.all((ij >= 0) & (ij < self.lookup.shape), axis=1)
+    def counts(self, xyz: np.ndarray, lidar_m: np.ndarray, max_range_m: float | None,
+               max_incidence_rad: float | None) -> tuple[np.ndarray, np.ndarray]:
+        """Points per cell, and the cells the LiDAR sees within the limits.
+
+        Parameters
+        ----------
+        xyz : (N, 3) float
+            One station's ground points, site frame, metres.
+        lidar_m : (3,) float
+            Its LiDAR centre, site frame, metres.
+        max_range_m, max_incidence_rad : float or None
+            As :func:`achieved_coverage` (None: no limit).
+
+        Returns
+        -------
+        counts : (c,) float
+        seen : (c,) bool
+            Cells holding points whose centroid (and fitted plane) meet the limits.
+        """
+        ij = np.floor((xyz[:, :2] - self.origin) / self.cell_m).astype(np.int64)
+        inside = np.flatnonzero(np.all((ij >= 0) & (ij < self.lookup.shape), axis=1))
         cell = self.lookup[ij[inside, 0], ij[inside, 1]]
-        return np.bincount(cell[cell >= 0], minlength=self.n).astype(float)
+        mine = cell >= 0
+        cell, rows = cell[mine], inside[mine]
+        counts = np.bincount(cell, minlength=self.n).astype(float)
+        seen = counts > 0
+        if max_range_m is None and max_incidence_rad is None:
+            return counts, seen
+        p = np.take(xyz, rows, axis=0) - lidar_m
+        centroid = np.column_stack([np.bincount(cell, p[:, a], self.n) for a in range(3)])
+        centroid /= np.maximum(counts, 1.0)[:, None]
+        distance = np.linalg.norm(centroid, axis=1)
+        if max_range_m is not None:
+            seen &= distance <= max_range_m
+        if max_incidence_rad is not None:
+            d = p - centroid[cell]  # two passes: the scatter about the centroid
+            scatter = np.empty((self.n, 3, 3))
+            for a in range(3):
+                for b in range(a, 3):
+                    scatter[:, a, b] = scatter[:, b, a] = np.bincount(cell, d[:, a] * d[:, b],
+                                                                      self.n)
+            normal = np.linalg.eigh(scatter)[1][:, :, 0]  # the smallest principal axis
+            cos_i = np.abs(np.einsum("ij,ij->i", normal, centroid)) / np.maximum(distance,
+                                                                               1e-12)
+            seen &= (counts >= 3) & (cos_i >= np.cos(max_incidence_rad))
+        return counts, seen
 
 
 def _achieved_iv(station_position_m, station_heading_rad, cell_xy, cell_m, min_density_per_m2,
-                 frames_per_turn, full_turn_frames, max_range_m, station_ids):
+                 frames_per_turn, full_turn_frames, max_range_m, max_incidence_rad,
+                 station_ids):
     position = np.asarray(station_position_m, dtype=float)
     if position.ndim != 2 or position.shape[1] != 3 or not np.all(np.isfinite(position)):
         raise ConfigError(f"`station_position_m` must be finite with shape (s, 3), got shape "
@@ -289,6 +341,9 @@ def _achieved_iv(station_position_m, station_heading_rad, cell_xy, cell_m, min_d
                           f"{full_turn_frames}], got {frames}")
     if max_range_m is not None and not max_range_m > 0:
         raise ConfigError(f"`max_range_m` must be > 0 metres, got {max_range_m}")
+    if max_incidence_rad is not None and not 0 < max_incidence_rad <= np.pi / 2:
+        raise ConfigError(f"`max_incidence_rad` must be in (0, pi/2] radians, got "
+                          f"{max_incidence_rad}")
     ids = ([f"S{k + 1}" for k in range(len(position))] if station_ids is None
            else [str(s) for s in station_ids])
     if len(ids) != len(position):
