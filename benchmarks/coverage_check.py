@@ -4,13 +4,16 @@ Each station is simulated (full turn by default), processed and its ground point
 over the AOI's 1 m cells (:func:`planner.coverage.achieved.achieved_coverage`) once; the
 per-cell densities are then judged at every ``--density`` (points per m², full turn). Prints per
 station its time (simulate, process, rasterise) and points, then per density the covered
-fraction and the cells covered by two or more stations; with ``--predicted FILE.npy`` (the
-predicted number of stations covering each cell, in the AOI's cell order: x-major, then y,
-cell centres ``-19.5 .. 19.5``) also the agreement (:func:`planner.coverage.achieved.
-compare_coverage`). ``--save FILE.npz`` keeps the achieved counts per density.
+fraction and the cells covered by two or more stations. ``--max-range-m`` and
+``--max-incidence-deg`` add the prediction's range and incidence limits (judged from the
+points). With ``--predicted FILE.npz`` (``cell_xy`` (c, 2): the predicted grid's cell centres,
+which then replace the AOI's own 1 m cells; ``count_<density>`` (c,) per ``--density``, e.g.
+``count_100``, or one ``count``: the predicted number of stations covering each cell) also
+the agreement for one and two stations (:func:`planner.coverage.achieved.compare_coverage`).
+``--save FILE.npz`` keeps the achieved counts per density and the best density.
 
 Usage: ``python benchmarks/coverage_check.py [--frames 800] [--density 100 1000]
-[--predicted pred.npy] [--save achieved.npz]``
+[--max-range-m 30 --max-incidence-deg 85] [--predicted pred.npz] [--save achieved.npz]``
 """
 
 from __future__ import annotations
@@ -40,7 +43,9 @@ def main() -> None:
     ap.add_argument("--density", type=float, nargs="+", default=[100.0, 1000.0],
                     help="minimum ground points per m², full turn")
     ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--predicted", help=".npy of predicted stations per cell (1600,)")
+    ap.add_argument("--max-range-m", type=float)
+    ap.add_argument("--max-incidence-deg", type=float)
+    ap.add_argument("--predicted", help=".npz with cell_xy and count_<density> (or count)")
     ap.add_argument("--save", help="write the achieved counts per density to this .npz")
     args = ap.parse_args()
 
@@ -48,17 +53,20 @@ def main() -> None:
     from visibility.sites import load_site
 
     site = load_site("default")
-    cells = aoi_cells()
+    predicted = None if args.predicted is None else dict(np.load(args.predicted))
+    cells = aoi_cells() if predicted is None else predicted["cell_xy"]
+    incidence = None if args.max_incidence_deg is None else np.radians(args.max_incidence_deg)
     densities = sorted(args.density)
     t0 = time.perf_counter()
     cov = achieved_coverage(
         site.dem, site.station_position_m, site.station_heading_rad, cells, CELL_M,
         densities[0], args.seed, marker_xyz_m=site.marker_centres_m,
         marker_radius_m=site.marker_radius_m, frames_per_turn=args.frames,
-        station_ids=site.station_ids)
+        max_range_m=args.max_range_m, max_incidence_rad=incidence, station_ids=site.station_ids)
     wall = time.perf_counter() - t0
     print(f"default site, {len(site.station_ids)} stations, {args.frames} frames, AOI "
-          f"{2 * AOI_HALF_M:g} m square at {CELL_M:g} m ({len(cells)} cells); {os.cpu_count()} "
+          f"{2 * AOI_HALF_M:g} m square at {CELL_M:g} m ({len(cells)} cells), range limit "
+          f"{args.max_range_m}, incidence limit {args.max_incidence_deg}; {os.cpu_count()} "
           f"cores, load {os.getloadavg()[0]:.1f}; {wall:.1f} s in all, peak RSS "
           f"{resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e6:.2f} GB")
     for sid, t, n, g, c in zip(cov.station_ids, cov.timings_s, cov.n_points, cov.n_ground,
@@ -68,7 +76,6 @@ def main() -> None:
     mean = cov.summary()["mean_time_per_station_s"]
     print(f"  mean per station: {sum(mean.values()):.1f} s ("
           + ", ".join(f"{k} {v:.1f}" for k, v in mean.items()) + ")")
-    predicted = None if args.predicted is None else np.load(args.predicted)
     saved = {}
     for density in densities:
         count = cov.stations_covering_at(density)
@@ -77,8 +84,9 @@ def main() -> None:
               f"({np.sum(count >= 2)} cells)")
         saved[f"stations_covering_{density:g}"] = count
         if predicted is not None:
+            expected = predicted.get(f"count_{density:g}", predicted.get("count"))
             for k in (1, 2):
-                agree = compare_coverage(predicted, count, k, cells, site.station_xy_m)
+                agree = compare_coverage(expected, count, k, cells, site.station_xy_m)
                 print(f"  against --predicted, >= {k} station(s): "
                       + json.dumps(agree.to_dict()))
     saved["best_density_per_m2"] = cov.best_density_per_m2

@@ -29,9 +29,9 @@ surface density is lower by ``cos s``: 1 % at 8 deg, 21 % on a 38 deg crater wal
 them, judged from its own points in the cell, not from the DEM: the range is the LiDAR centre's
 distance to their centroid, the incidence the angle between that ray and the normal of the plane
 fitted to them (least squares: the smallest principal axis of their scatter).
-A marker's lower half (within the ground stage's 0.1 m of the local ground) counts as ground
-unless the chain accepted the marker: a few hundred points at most, as in the chain's own
-classified cloud.
+A marker's lowest returns (within the ground stage's 0.1 m of the local ground) count as
+ground unless the chain accepted the marker (its fit inliers are marker points), as in the
+chain's own classified cloud.
 
 Densities are stated for a full turn of ``full_turn_frames`` frames (800, the rig's turn and
 :class:`visibility.visibility_matrix.AngularSampling`'s). A scan of fewer ``frames_per_turn``
@@ -40,11 +40,14 @@ proportional to the frames, :meth:`~visibility.visibility_matrix.AngularSampling
 so its counts are scaled by ``full_turn_frames / frames_per_turn`` before the comparison: the
 same as comparing the reduced scan against the reduced density. This holds while the lines of
 the reduced scan stay finer than a cell (the turntable step of 100 frames, 3.6 deg, is 0.6 m at
-10 m), and the counts' Poisson scatter grows by the same factor's square root.
+10 m but 1.4 m at 22 m), and the counts' Poisson scatter grows by the same factor's square root.
+On flat ground with 0.5 m cells the radius covered at 1000 points per m² is 10.54 m at 100
+frames and 10.56 m at 800 (analytic 10.51 m); at 100 points per m², 22.4 m and 23.1 m
+(analytic 22.7 m).
 
-Cost (``default`` site, a full 800-frame turn, 11 M returns, 2 cores): about 4 s to simulate,
-2 s to process and 1 s to classify and rasterise per station, 1.8 GB peak
-(``benchmarks/coverage_check.py``).
+Cost (``default`` site, one 800-frame turn: 11.3 M returns; 2 cores shared with other work):
+per station 3-8 s to simulate, 2-6 s to process and classify, 2-6 s to rasterise, 10-15 s in
+all; 2.5-3 GB peak for its 7 stations (``benchmarks/coverage_check.py``).
 """
 
 from __future__ import annotations
@@ -100,7 +103,7 @@ class AchievedCoverage:
         seconds.
     config : dict
         What produced it: sensor profile, frames, full-turn frames, seed, minimum density,
-        cell size, range limit, markers, ground class and pose source.
+        cell size, range and incidence limits, markers, ground class and pose source.
     """
 
     stations_covering: np.ndarray
@@ -316,9 +319,10 @@ def _achieved_iv(station_position_m, station_heading_rad, cell_xy, cell_m, min_d
                  frames_per_turn, full_turn_frames, max_range_m, max_incidence_rad,
                  station_ids):
     position = np.asarray(station_position_m, dtype=float)
-    if position.ndim != 2 or position.shape[1] != 3 or not np.all(np.isfinite(position)):
-        raise ConfigError(f"`station_position_m` must be finite with shape (s, 3), got shape "
-                          f"{position.shape}")
+    if (position.ndim != 2 or position.shape[1] != 3 or len(position) == 0
+            or not np.all(np.isfinite(position))):
+        raise ConfigError(f"`station_position_m` must be finite with shape (s, 3), s >= 1, got "
+                          f"shape {position.shape}")
     heading = np.asarray(station_heading_rad, dtype=float).reshape(-1)
     if heading.shape != (len(position),):
         raise ConfigError(f"`station_heading_rad` must have one heading per station "
