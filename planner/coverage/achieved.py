@@ -286,9 +286,11 @@ class _CellGrid:
         seen : (c,) bool
             Cells holding points whose centroid (and fitted plane) meet the limits.
         """
-        ij = np.floor((xyz[:, :2] - self.origin) / self.cell_m).astype(np.int64)
-        inside = np.flatnonzero(np.all((ij >= 0) & (ij < self.lookup.shape), axis=1))
-        cell = self.lookup[ij[inside, 0], ij[inside, 1]]
+        nx, ny = self.lookup.shape
+        i = np.floor((xyz[:, 0] - self.origin[0]) / self.cell_m).astype(np.int64)
+        j = np.floor((xyz[:, 1] - self.origin[1]) / self.cell_m).astype(np.int64)
+        inside = np.flatnonzero((i >= 0) & (i < nx) & (j >= 0) & (j < ny))
+        cell = self.lookup.ravel()[i[inside] * ny + j[inside]]
         mine = cell >= 0
         cell, rows = cell[mine], inside[mine]
         counts = np.bincount(cell, minlength=self.n).astype(float)

@@ -142,6 +142,21 @@ def test_same_seed_same_coverage():
     assert not np.array_equal(a.best_density_per_m2, c.best_density_per_m2)
 
 
+def test_points_fall_into_their_cells():
+    """The rasterisation against numpy's 2-D histogram, on an AOI of every third 0.5 m cell
+    (not a rectangle) with points beyond its edges."""
+    from planner.coverage.achieved import _CellGrid
+
+    xyz = np.random.default_rng(0).uniform(-7.0, 7.0, (20_000, 3))
+    full = _cells(5.0, 0.5)
+    counts, seen = _CellGrid(full[::3], 0.5).counts(xyz, np.zeros(3), None, None)
+    edges = np.arange(-5.0, 5.001, 0.5)
+    histogram = np.histogram2d(xyz[:, 0], xyz[:, 1], bins=[edges, edges])[0]
+    ij = np.rint((full[::3] + 4.75) / 0.5).astype(int)
+    assert np.array_equal(counts, histogram[ij[:, 0], ij[:, 1]])
+    assert np.array_equal(seen, counts > 0)
+
+
 def test_compare_coverage_counts_and_distances():
     cells = np.array([[0.0, 0], [1, 0], [2, 0], [3, 0], [4, 0], [10, 0]])
     agree = compare_coverage([2, 2, 1, 0, 1, 0], [2, 1, 1, 1, 0, 0], 2, cells,
