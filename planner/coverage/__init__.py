@@ -11,6 +11,6 @@
   settings;
 - :mod:`planner.coverage.raster`: the predicted coverage of chosen stations per cell (count and
   best density), its GeoTIFF, and the summary of cells no candidate station covers;
-- ``planner.coverage.achieved``: the coverage achieved by simulated and processed scans of
+- :mod:`planner.coverage.achieved`: the coverage achieved by simulated and processed scans of
   chosen stations, rasterised over the AOI grid.
 """

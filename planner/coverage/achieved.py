@@ -25,7 +25,7 @@ A station **covers** a cell when it puts at least ``min_density_per_m2 * cell_m*
 points into it: the density is per m² of horizontal cell area (on ground sloping by ``s`` the
 surface density is lower by ``cos s``: 1 % at 8 deg, 21 % on a 38 deg crater wall). With
 ``max_range_m`` and ``max_incidence_rad`` (the prediction's range and incidence limits,
-``planner.coverage.sight.CoverageSettings``) the station must also see the cell within
+:class:`planner.coverage.sight.CoverageSettings`) the station must also see the cell within
 them, judged from its own points in the cell, not from the DEM: the range is the LiDAR centre's
 distance to their centroid, the incidence the angle between that ray and the normal of the plane
 fitted to them (least squares: the smallest principal axis of their scatter).
