@@ -141,14 +141,12 @@ def _check(outcome, config, frames: int | None) -> dict:
                                  config.cover_min_stations, d.grid.centre_xy_m,
                                  d.station_position_m[:, :2])
     rec = agreement.to_dict()
-    k = config.cover_min_stations
     print(f"coverage check ({len(d.order)} stations simulated and processed"
           + (f", {frames} frames each" if frames else "") + f", {time.perf_counter() - t:.0f} s):"
-          f" predicted covered {100 * np.mean(predicted >= k):.1f} %, achieved "
-          f"{100 * np.mean(achieved.stations_covering >= k):.1f} %, cells agreeing "
-          f"{100 * rec['agreement']:.1f} % ({json.dumps(rec)})")
-    return {**rec, "predicted_covered": float(np.mean(predicted >= k)),
-            "achieved_covered": float(np.mean(achieved.stations_covering >= k))}
+          f" predicted covered {100 * rec['predicted_covered_fraction']:.1f} %, achieved "
+          f"{100 * rec['achieved_covered_fraction']:.1f} %, cells agreeing "
+          f"{100 * rec['agreement_fraction']:.1f} % ({json.dumps(rec)})")
+    return rec
 
 
 if __name__ == "__main__":
