@@ -10,8 +10,8 @@ and smallest uncovered cell-centre distance from one station, against ``h tan(85
 
 Example::
 
-    python benchmarks/coverage.py                      # default site, 40 m AOI, 400 stations
-    python benchmarks/coverage.py --site large --aoi-m 100   # 2500 stations
+    python benchmarks/coverage_speed.py                      # default site, 40 m AOI, 400 stations
+    python benchmarks/coverage_speed.py --site large --aoi-m 100   # 2500 stations
 """
 
 from __future__ import annotations
