@@ -141,12 +141,41 @@ def _check(outcome, config, frames: int | None) -> dict:
                                  config.cover_min_stations, d.grid.centre_xy_m,
                                  d.station_position_m[:, :2])
     rec = agreement.to_dict()
+    rec.update(_pairs(d, achieved, config.cover_min_density_per_m2))
     print(f"coverage check ({len(d.order)} stations simulated and processed"
           + (f", {frames} frames each" if frames else "") + f", {time.perf_counter() - t:.0f} s):"
           f" predicted covered {100 * rec['predicted_covered_fraction']:.1f} %, achieved "
           f"{100 * rec['achieved_covered_fraction']:.1f} %, cells agreeing "
-          f"{100 * rec['agreement_fraction']:.1f} % ({json.dumps(rec)})")
+          f"{100 * rec['agreement_fraction']:.1f} %; cells whose count of covering stations "
+          f"agrees {100 * rec['count_agreement']:.1f} %; station-cell pairs: "
+          f"{rec['pairs_both']} both, {rec['pairs_predicted_only']} predicted only, "
+          f"{rec['pairs_achieved_only']} achieved only; achieved/predicted density in pairs "
+          f"both count: median {rec['density_ratio_median']:.3f} ({json.dumps(rec)})")
     return rec
+
+
+def _pairs(design, achieved, min_density: float) -> dict:
+    """Station x cell pairs covered in the prediction and in the scans, and the density ratio
+    of the pairs both cover."""
+    cov = design.coverage
+    rank = np.full(len(design.candidate_ids), -1)
+    rank[design.order] = np.arange(design.order.size)
+    on = rank[cov.station] >= 0
+    n_cells = len(design.grid)
+    predicted = dict(zip(rank[cov.station[on]] * n_cells + cov.cell[on],
+                         cov.density_per_m2[on], strict=True))
+    dens = achieved.station_density_per_m2.tocoo()
+    hit = dens.data >= min_density
+    scanned = dict(zip(dens.row[hit] * n_cells + dens.col[hit], dens.data[hit], strict=True))
+    both = sorted(set(predicted) & set(scanned))
+    ratio = np.array([scanned[k] / predicted[k] for k in both])
+    counts = np.bincount(cov.cell[on], minlength=n_cells)
+    return {"count_agreement": float(np.mean(counts == achieved.stations_covering)),
+            "pairs_both": len(both), "pairs_predicted_only": len(set(predicted) - set(scanned)),
+            "pairs_achieved_only": len(set(scanned) - set(predicted)),
+            "density_ratio_median": float(np.median(ratio)) if ratio.size else float("nan"),
+            "density_ratio_p10_p90": [float(v) for v in np.percentile(ratio, [10, 90])]
+            if ratio.size else None}
 
 
 if __name__ == "__main__":
