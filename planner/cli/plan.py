@@ -385,6 +385,9 @@ def _aoi_iv(aoi_path, stations_path, station_ids, visibility_path, route_start,
 
 def _design_plan(inputs, config, model, model_name, aoi, as_json, map_groups, dmodel, dname):
     """The plan of stations chosen over ``aoi`` = ``(--aoi, --route-start, --keep-out)``."""
+    from dataclasses import replace
+    from pathlib import Path
+
     from planner.coverage.aoi import read_aoi
     from planner.design.plan import design_plan
     from planner.problem.candidates import load_polygons
@@ -392,6 +395,10 @@ def _design_plan(inputs, config, model, model_name, aoi, as_json, map_groups, dm
 
     aoi_path, route_start, keep_out_paths = aoi
     area = read_aoi(aoi_path, inputs.dem)
+    inputs = replace(inputs, sources={**inputs.sources, "aoi": str(Path(aoi_path).resolve()),
+                                      **({"keep_out": [str(Path(p).resolve())
+                                                       for p in keep_out_paths]}
+                                         if keep_out_paths else {})})
     keepouts = []
     for path in keep_out_paths:
         keepouts += polygons_on_dem(load_polygons(path, "`keep_out_paths`"), inputs.dem)

@@ -40,7 +40,7 @@ def design_plan(inputs: PlanInputs, config, error_model, aoi, model_name: str = 
     chosen = replace(inputs, station_ids=design.station_ids,
                      station_xyz=design.station_position_m,
                      station_heading_rad=design.station_heading_rad,
-                     sources={**inputs.sources, "stations": "chosen over the AOI (--aoi)"})
+                     sources={**inputs.sources, "stations_chosen": True})
     outcome = make_plan(chosen, config, error_model, model_name, progress=progress,
                         map_groups=map_groups, detection_model=detection_model,
                         detection_name=detection_name)

@@ -167,6 +167,8 @@ def resolve_inputs(spec: str, site_name: str | None = None, site_seed: int | Non
     """
     plan = _read_plan(Path(spec)) if is_plan(spec) else None
     own_stations = plan is not None and stations_path is None and "stations" in plan
+    chosen = own_stations and bool(plan.get("provenance", {}).get("inputs", {})
+                                   .get("stations_chosen"))
     given_site = site_name
     if plan is not None:
         recorded = plan.get("provenance", {}).get("inputs", {})
@@ -192,12 +194,16 @@ def resolve_inputs(spec: str, site_name: str | None = None, site_seed: int | Non
                          stations_path=stations_path, boundary_path=boundary_path,
                          exclude_paths=exclude_paths, marker_radius_m=marker_radius_m,
                          station_ids=None if own_stations else station_ids,
-                         reproject=bool(reproject), sight_radius_m=config.max_range_m,
-                         control=None if plan is not None else control_path)
+                         reproject=bool(reproject),
+                         sight_radius_m=None if chosen else config.max_range_m,
+                         control=None if plan is not None else control_path,
+                         stations_chosen=chosen)
     if plan is None:
         layout = _with_control_points(read_layout(spec, inputs), inputs.control)
         return replace(inputs, control=()), layout, config
-    if own_stations:
+    if chosen:
+        inputs = _chosen_stations(plan, inputs, station_ids)
+    elif own_stations:
         inputs = _planned_stations(plan, spec, inputs, station_ids, given_site)
     layout = _plan_layout(plan, spec)
     _inside_site_iv(layout, inputs)
@@ -207,6 +213,19 @@ def resolve_inputs(spec: str, site_name: str | None = None, site_seed: int | Non
 #: How far a plan's station may stand from where its site puts it, m (a plan records them as
 #: read; this only absorbs rounding).
 STATION_MATCH_M = 1e-3
+
+
+def _chosen_stations(plan: dict, inputs, wanted):
+    """``inputs`` with the stations a plan chose over its area of interest (``plan --aoi``),
+    as the plan has them (``wanted`` of them; default all): no site or file holds them."""
+    planned = {s["id"]: s for s in plan["stations"]}
+    ids = list(known_ids(wanted, planned, "`station_ids`", "planned station") if wanted
+               else planned)
+    xyz = np.array([[planned[i]["x_m"], planned[i]["y_m"], planned[i]["z_m"]] for i in ids],
+                   float).reshape(-1, 3)
+    heading = np.array([planned[i].get("heading_rad") or 0.0 for i in ids], float)
+    return replace(inputs, station_ids=ids, station_xyz=xyz, station_heading_rad=heading,
+                   sources={**inputs.sources, "station_ids": ids})
 
 
 def _planned_stations(plan: dict, spec, inputs, wanted, given_site: str | None):

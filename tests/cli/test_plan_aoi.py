@@ -90,9 +90,18 @@ def test_route_layer_in_the_geopackage(aoi_plan):
     assert line.coords[-1][:2] == pytest.approx(start, abs=0.5)
 
 
+def test_reduce_takes_the_aoi_plan_unchanged(aoi_plan, capsys, monkeypatch, tmp_path):
+    monkeypatch.chdir(tmp_path)
+    code, _, err = run_cli(capsys, ["reduce", str(aoi_plan / "plan.json"), "--out", "r"])
+    assert code == 0, err
+    doc = json.loads((aoi_plan / "plan.json").read_text())
+    per_station = pd.read_csv(tmp_path / "r" / "per_station.csv")
+    assert set(per_station["station"]) == {s["id"] for s in doc["stations"]}
+
+
 @pytest.mark.slow
-def test_same_inputs_same_bytes(aoi_plan, capsys, monkeypatch, tmp_path):
-    again = _plan(capsys, monkeypatch, tmp_path)
+def test_same_inputs_same_bytes(aoi_plan, capsys, monkeypatch):
+    again = _plan(capsys, monkeypatch, aoi_plan.parent, out="again")
     for name in ("plan.json", "stations.csv", "coverage.tif", "plan.gpkg", "report.md",
                  "markers.csv"):
         assert (again / name).read_bytes() == (aoi_plan / name).read_bytes(), name
