@@ -8,8 +8,11 @@
   report's "Chance to work";
 - :mod:`planner.outputs.local_report`: a network plan's local accuracy: ``plan.json``'s
   ``local`` section, ``pairs.csv`` and the report's "Local accuracy";
+- :mod:`planner.outputs.design_report`: a plan that chose its stations over an area of
+  interest: ``plan.json``'s ``design`` section, each station's place on the route and the
+  report's "Stations chosen over the area of interest";
 - :mod:`planner.outputs.plan_map`: the placement map ``map.png``;
 - :mod:`planner.outputs.stand_map`: where the rover can stand, cell by cell over the DEM;
-- :mod:`planner.outputs.gis`: ``plan.gpkg``, the stand-map GeoTIFFs and GeoJSON coordinates, in
-  the DEM's CRS.
+- :mod:`planner.outputs.gis`: ``plan.gpkg`` (with a survey design's route, AOI and candidate
+  stations), the stand-map and coverage GeoTIFFs and GeoJSON coordinates, in the DEM's CRS.
 """

@@ -16,7 +16,11 @@
   (solve, check every station exactly, cut, re-solve until all pass);
 - :mod:`planner.program.baselines`: greedy and regular-grid layouts to compare against;
 - :mod:`planner.program.local_search`: the network greedy's layout pruned of the sites it does
-  not need (the large-problem search's incumbent).
+  not need (the large-problem search's incumbent);
+- :mod:`planner.program.joint`: the joint program of stations and markers over an area of
+  interest (stations switch their rows on, coverage and clearance rows, its cut loop);
+- :mod:`planner.program.joint_baselines`: stations chosen for coverage first (weighted greedy
+  of viewpoints, regular grid), then their markers.
 """
 
 from planner.program.cuts_known import accuracy_cuts
