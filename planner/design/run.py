@@ -103,6 +103,8 @@ class SurveyDesign:
         Site frame.
     grid : AoiGrid
     traffic : TrafficMap
+        Where the rover drives: the site's trafficability cut to the drives' window
+        (:data:`DRIVE_MARGIN_M`).
     candidate_ids : tuple of str, (s,)
     candidate_position_m : (s, 3) float
         LiDAR centres of the candidate stations, m.
@@ -254,6 +256,7 @@ def design_survey(inputs: PlanInputs, config, error_model, aoi, keepouts=(),
         route_start_source = "the trafficable point nearest the AOI's centroid"
     start = route_start(traffic, route_start_xy)
     reach = flat_reach_m(config, inputs.lidar_height_m)
+    traffic = _drive_window(traffic, aoi, reach, start)
     ids, _, position = candidate_stations(traffic, aoi.buffer(reach), config.station_spacing_m,
                                           inputs.lidar_height_m, dem, start_xy=start)
     timings["candidate_stations"] = time.perf_counter() - t
@@ -321,6 +324,20 @@ def design_survey(inputs: PlanInputs, config, error_model, aoi, keepouts=(),
                         route_start_source=route_start_source, uncoverable=uncoverable,
                         options=tuple(options),
                         costs=costs, timings_s=timings)
+
+
+#: Drives stay within the candidate stations' area (the AOI buffered by the reach) and the
+#: route start, widened by this much, m: room to go round obstacles at the edge, while the
+#: ground-path graph stays small on a large site.
+DRIVE_MARGIN_M = 20.0
+
+
+def _drive_window(traffic: TrafficMap, aoi, reach_m: float, start: np.ndarray) -> TrafficMap:
+    """The trafficability map cut to where the rover drives (see :data:`DRIVE_MARGIN_M`)."""
+    xmin, ymin, xmax, ymax = aoi.buffer(reach_m + DRIVE_MARGIN_M).bounds
+    m = DRIVE_MARGIN_M
+    return traffic.window(min(xmin, start[0] - m), max(xmax, start[0] + m),
+                          min(ymin, start[1] - m), max(ymax, start[1] + m))
 
 
 def _only(keep: np.ndarray, ids, position: np.ndarray, coverage: CoverageMatrix):

@@ -16,7 +16,7 @@ moments, so the whole DEM is fitted at once).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import shapely
@@ -124,6 +124,31 @@ class TrafficMap:
         xx, yy = np.meshgrid(self.origin_m[0] + self.grid_m * np.arange(nc),
                              self.origin_m[1] + self.grid_m * np.arange(nr))
         return np.column_stack([xx.ravel(), yy.ravel()])
+
+    def window(self, xmin: float, xmax: float, ymin: float, ymax: float) -> TrafficMap:
+        """The map's nodes within a rectangle (site frame, metres; at least one node).
+
+        Drives over the window stay inside it: a window around the area the rover works in
+        keeps the ground-path graph small on a large site.
+
+        Examples
+        --------
+        >>> tm = TrafficMap(np.ones((5, 6), bool), np.zeros((5, 6), np.uint8), (0.0, 0.0), 1.0,
+        ...                 TrafficSettings())
+        >>> w = tm.window(1.2, 3.0, 0.0, 1.4)
+        >>> w.shape, w.origin_m
+        ((2, 3), (1.0, 0.0))
+        """
+        nr, nc = self.shape
+        c0, c1 = (int(np.clip(np.rint((v - self.origin_m[0]) / self.grid_m), 0, nc - 1))
+                  for v in (xmin, xmax))
+        r0, r1 = (int(np.clip(np.rint((v - self.origin_m[1]) / self.grid_m), 0, nr - 1))
+                  for v in (ymin, ymax))
+        rows, cols = slice(r0, r1 + 1), slice(c0, c1 + 1)
+        return replace(self, trafficable=self.trafficable[rows, cols],
+                       reason=self.reason[rows, cols],
+                       origin_m=(self.origin_m[0] + c0 * self.grid_m,
+                                 self.origin_m[1] + r0 * self.grid_m))
 
     def node_of(self, xy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The nearest node of each point and whether the point lies on the grid.
