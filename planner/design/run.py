@@ -441,11 +441,18 @@ def _hand_option(inputs: PlanInputs, config, error_model, grid: AoiGrid,
             note = f"{int((~check.ok).sum())} of {len(check.ok)} stations fail the requirement"
     else:
         note = "no as-built markers known"
-    try:
-        route = plan_route(traffic, start, position[:, :2], list(inputs.station_ids),
-                           inputs.dem)
-    except (ConfigError, DataError) as exc:
-        route, note = None, (note + "; " if note else "") + str(exc)
+    route = None
+    outside = ~traffic.node_of(position[:, :2])[1]
+    if outside.any():
+        note = (note + "; " if note else "") + (
+            f"{int(outside.sum())} of its stations lie beyond the drive window around the AOI: "
+            "no route")
+    else:
+        try:
+            route = plan_route(traffic, start, position[:, :2], list(inputs.station_ids),
+                               inputs.dem)
+        except (ConfigError, DataError) as exc:
+            note = (note + "; " if note else "") + str(exc)
     xy = position[:, :2] if route is None else position[route.order, :2]
     n_markers = len(inputs.as_built_ids)
     return SurveyOption(name="hand", station_xy=xy, n_markers=n_markers, covered_fraction=frac,
