@@ -226,51 +226,72 @@ def candidate_sites(dem, config, boundary=None, exclusions=(), station_xy=None, 
                                     x1 - x0, y1 - y0))
     gx = np.arange(x0 + s / 2, x1, s)
     gy = np.arange(y0 + s / 2, y1, s)
-    xx, yy = np.meshgrid(gx, gy)
-    xy = np.column_stack([xx.ravel(), yy.ravel()])
-    dropped = {}
-
-    def drop(mask, reason):
-        nonlocal xy
-        dropped[reason] = int(mask.sum())
-        xy = xy[~mask]
+    points = GridPoints(gx, gy)
+    drop = points.drop
 
     # keep a slope baseline's margin inside the DEM so height_at never leaves it
     h = max(SLOPE_BASELINE_M, dem.cell_size_m)
     inner = shapely.box(dem.extent()[0] + h, dem.extent()[2] + h, dem.extent()[1] - h,
                         dem.extent()[3] - h)
-    drop(~shapely.contains_xy(region.intersection(inner), xy[:, 0], xy[:, 1]),
+    drop(~shapely.contains_xy(region.intersection(inner), points.xy[:, 0], points.xy[:, 1]),
          "outside boundary")
     if dem.valid is not None:
-        drop(~on_terrain(dem, xy, h), "on nodata")
+        drop(~on_terrain(dem, points.xy, h), "on nodata")
         area = valid_area(dem, edge_margin_m(dem, marker_radius_m))
-        drop(~shapely.contains_xy(area, xy[:, 0], xy[:, 1]), "near nodata")
+        drop(~shapely.contains_xy(area, points.xy[:, 0], points.xy[:, 1]), "near nodata")
     if excl:
         union = shapely.union_all(excl)
-        drop(shapely.intersects_xy(union, xy[:, 0], xy[:, 1]), "excluded zone")
-    if len(st) and len(xy):
-        d = cKDTree(st).query(xy)[0]
+        drop(shapely.intersects_xy(union, points.xy[:, 0], points.xy[:, 1]), "excluded zone")
+    if len(st) and len(points.xy):
+        d = cKDTree(st).query(points.xy)[0]
         far = d > config.max_range_m + marker_radius_m
         drop(d < config.min_station_distance_m, "near station")
         drop(far[d >= config.min_station_distance_m], "out of range")
-    if len(xy) > MAX_GRID_POINTS:
-        raise ConfigError(_too_many(s, len(xy), "candidate sites in range of a station",
+    if len(points.xy) > MAX_GRID_POINTS:
+        raise ConfigError(_too_many(s, len(points.xy), "candidate sites in range of a station",
                                     MAX_GRID_POINTS, x1 - x0, y1 - y0))
-    if config.exclude_crater_interiors and len(craters) and len(xy):
-        inside = np.zeros(len(xy), bool)
+    if config.exclude_crater_interiors and len(craters) and len(points.xy):
+        inside = np.zeros(len(points.xy), bool)
         for c in craters:
             cx, cy = c.centre_xy_m
-            inside |= np.hypot(xy[:, 0] - cx, xy[:, 1] - cy) < 0.5 * c.diameter_m
+            inside |= np.hypot(points.xy[:, 0] - cx, points.xy[:, 1] - cy) < 0.5 * c.diameter_m
         drop(inside, "crater interior")
-    if len(xy):
-        drop(ground_slope_rad(dem, xy, h) > config.max_slope_rad, "too steep")
-    if len(xy) == 0:
+    if len(points.xy):
+        drop(ground_slope_rad(dem, points.xy, h) > config.max_slope_rad, "too steep")
+    if len(points.xy) == 0:
         raise DataError("no candidate marker site is left (dropped: "
-                        + ", ".join(f"{v} {k}" for k, v in dropped.items())
+                        + points.dropped_text()
                         + "); enlarge the boundary, shrink exclusions or relax max_slope_deg")
-    z = dem.height_at(xy) + marker_radius_m
-    ids = tuple(f"C{k:05d}" for k in range(len(xy)))
-    return Candidates(ids=ids, centre_m=np.column_stack([xy, z]), dropped=dropped)
+    z = dem.height_at(points.xy) + marker_radius_m
+    ids = tuple(f"C{k:05d}" for k in range(len(points.xy)))
+    return Candidates(ids=ids, centre_m=np.column_stack([points.xy, z]), dropped=points.dropped)
+
+
+class GridPoints:
+    """Points of a grid filtered step by step, each step's count of dropped points kept by
+    its reason (for the message when none is left).
+
+    Examples
+    --------
+    >>> p = GridPoints(np.arange(3.0), np.arange(2.0))
+    >>> p.drop(p.xy[:, 0] > 1.5, "east")
+    >>> len(p.xy), p.dropped_text()
+    (4, '2 east')
+    """
+
+    def __init__(self, gx: np.ndarray, gy: np.ndarray) -> None:
+        xx, yy = np.meshgrid(gx, gy)
+        self.xy = np.column_stack([xx.ravel(), yy.ravel()])
+        self.dropped: dict[str, int] = {}
+
+    def drop(self, mask: np.ndarray, reason: str) -> None:
+        """Drop the points where ``mask`` ((n,) bool) holds, counting them under ``reason``."""
+        self.dropped[reason] = int(np.sum(mask))
+        self.xy = self.xy[~np.asarray(mask, bool)]
+
+    def dropped_text(self) -> str:
+        """``"3 outside boundary, 0 on nodata, ..."``."""
+        return ", ".join(f"{v} {k}" for k, v in self.dropped.items())
 
 
 def _too_many(spacing_m: float, n: float, what: str, limit: int, width_m: float,

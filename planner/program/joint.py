@@ -36,7 +36,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.sparse as sp
@@ -46,7 +46,7 @@ from planner.accuracy.checks import diagnose, station_infos
 from planner.problem.usability import PlanProblem
 from planner.program.cuts_known import accuracy_cuts
 from planner.program.model import Model, RowKind, Solution, build_model, with_tightening_rows
-from planner.program.solving import solve
+from planner.program.solving import logged_solve
 
 #: Row families that bound a station's own sector variables and need no switch.
 _OWN_VARIABLE_FAMILIES = frozenset({"sector", "sector2", "sector21"})
@@ -420,13 +420,11 @@ def plan_stations_and_sites(problem: PlanProblem, config, cover: StationCover,
                 f"time limit {config.time_limit_s:g} s reached after {iteration - 1} "
                 "iteration(s) before every chosen station met the requirement; raise "
                 "`time_limit_s`")
-        sol = _in_seconds(solve(model, remaining, config.mip_gap, start=start), costs.unit)
+        sol = logged_solve(model, remaining, config.mip_gap, history, iteration, start=start,
+                           unit=costs.unit)
         solve_time += sol.solve_time_s
         if np.isfinite(sol.dual_bound):
             bound = max(bound, sol.dual_bound)
-        history.append({"iteration": iteration, "status": sol.status,
-                        "objective": sol.objective, "dual_bound": sol.dual_bound,
-                        "solve_time_s": sol.solve_time_s, "n_rows": int(model.A.shape[0])})
         if sol.x is None:
             if sol.status == "infeasible":
                 raise InfeasiblePlanError(
@@ -454,11 +452,6 @@ def plan_stations_and_sites(problem: PlanProblem, config, cover: StationCover,
                                   station_var, model.n_vars)
         n_cuts += A.shape[0]
         model = model.with_rows(A, lb, ub, kinds)
-
-
-def _in_seconds(sol: Solution, unit: float) -> Solution:
-    """A solve's objective and bound in the costs' own unit (the model's are in ``unit``)."""
-    return replace(sol, objective=sol.objective * unit, dual_bound=sol.dual_bound * unit)
 
 
 def _start(model: Model, station_var: np.ndarray, stations: np.ndarray, selected: np.ndarray

@@ -38,7 +38,7 @@ from planner.program.model import (
     build_model,
     with_tightening_rows,
 )
-from planner.program.solving import solve
+from planner.program.solving import logged_solve, solve
 
 #: Network mode: problems with more tying sites than this get sparse cut rows, under the
 #: upper bound of the greedy layout's count.
@@ -540,13 +540,10 @@ def _cut_loop(problem: PlanProblem, config, model: Model, cuts, check,
                 f"time limit {config.time_limit_s:g} s reached after {iteration - 1} "
                 "iteration(s) before every station met the accuracy requirement; "
                 "raise `time_limit_s`")
-        sol = solve(model, remaining, config.mip_gap)
+        sol = logged_solve(model, remaining, config.mip_gap, history, iteration)
         solve_time += sol.solve_time_s
         if np.isfinite(sol.dual_bound):
             bound = max(bound, sol.dual_bound)
-        history.append({"iteration": iteration, "status": sol.status,
-                        "objective": sol.objective, "dual_bound": sol.dual_bound,
-                        "solve_time_s": sol.solve_time_s, "n_rows": int(model.A.shape[0])})
         if sol.selected is None:
             if sol.status == "infeasible" and improving:
                 iteration += 1  # no cheaper layout exists: the incumbent is optimal

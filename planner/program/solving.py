@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import math
 import time
+from dataclasses import replace
 
 import numpy as np
 
@@ -82,6 +83,20 @@ def solve(model: Model, time_limit_s: float = 60.0, gap: float = 0.0,
     return Solution(status=status, selected=selected, objective=obj, dual_bound=dual, gap=mgap,
                     solve_time_s=time.perf_counter() - t0, message=out.message, x=x)
 
+
+
+def logged_solve(model: Model, time_limit_s: float, gap: float, history: list, iteration: int,
+                 start: np.ndarray | None = None, unit: float = 1.0) -> Solution:
+    """One :func:`solve` of a cut loop, its objective and bound in ``unit`` (the model's cost
+    unit, e.g. 60 s), and its record (iteration, status, objective, dual bound, solve time,
+    rows) appended to ``history``."""
+    sol = solve(model, time_limit_s, gap, start=start)
+    if unit != 1.0:
+        sol = replace(sol, objective=sol.objective * unit, dual_bound=sol.dual_bound * unit)
+    history.append({"iteration": iteration, "status": sol.status,
+                    "objective": sol.objective, "dual_bound": sol.dual_bound,
+                    "solve_time_s": sol.solve_time_s, "n_rows": int(model.A.shape[0])})
+    return sol
 
 
 def _disaggregate(x: np.ndarray, group: np.ndarray, n_groups: int, nx: int,

@@ -12,6 +12,7 @@ import numpy as np
 import shapely
 
 from markerplan.errors import ConfigError, DataError
+from planner.problem.candidates import GridPoints
 from planner.traverse.trafficability import LIMITS
 
 __all__ = ["MAX_STATION_CANDIDATES", "candidate_stations"]
@@ -79,25 +80,20 @@ def candidate_stations(traffic_map, area_polygon, spacing_m: float, lidar_height
                           f"candidate stations over the {x1 - x0:.0f} x {y1 - y0:.0f} m area, "
                           f"more than the {MAX_STATION_CANDIDATES} accepted; raise "
                           "`station_spacing_m` or shrink the area")
-    xx, yy = np.meshgrid(gx, gy)
-    xy = np.column_stack([xx.ravel(), yy.ravel()])
-    dropped = {}
-
-    def drop(mask, reason):
-        nonlocal xy
-        dropped[reason] = int(mask.sum())
-        xy = xy[~mask]
-
-    drop(~shapely.contains_xy(area_polygon, xy[:, 0], xy[:, 1]), "outside the area")
-    drop(~(dem.valid_at(xy) & traffic_map.trafficable_at(xy)), "not trafficable")
-    if start_xy is not None and len(xy):
+    points = GridPoints(gx, gy)
+    points.drop(~shapely.contains_xy(area_polygon, points.xy[:, 0], points.xy[:, 1]),
+                "outside the area")
+    points.drop(~(dem.valid_at(points.xy) & traffic_map.trafficable_at(points.xy)),
+                "not trafficable")
+    if start_xy is not None and len(points.xy):
         from planner.traverse.ground_paths import reachable_nodes
 
-        flat, _ = traffic_map.node_of(xy)
-        drop(~reachable_nodes(traffic_map, start_xy).ravel()[flat], "cut off from the start")
+        flat, _ = traffic_map.node_of(points.xy)
+        points.drop(~reachable_nodes(traffic_map, start_xy).ravel()[flat],
+                    "cut off from the start")
+    xy = points.xy
     if not len(xy):
-        raise DataError("no candidate station is left (dropped: "
-                        + ", ".join(f"{v} {k}" for k, v in dropped.items())
+        raise DataError("no candidate station is left (dropped: " + points.dropped_text()
                         + "); enlarge the area, lower `station_spacing_m` or relax the "
                         f"{LIMITS}")
     width = max(4, len(str(len(xy))))
