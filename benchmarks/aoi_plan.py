@@ -46,6 +46,7 @@ def main() -> None:
     from error_model.default import default_detection_model, default_model
     from planner.config import PlanConfig
     from planner.design.plan import design_plan
+    from planner.design.run import mission_time_record
     from planner.distributed import executor
     from planner.problem.inputs import load_inputs
 
@@ -93,9 +94,8 @@ def main() -> None:
     rows = []
     for o in d.options:
         n_markers = n_new if o.name == "plan" else o.n_markers
-        t_total = o.time_s["total"]
-        if o.name == "plan":
-            t_total = o.time_s["stations"] + d.costs.marker_s * n_new + o.time_s["drive"]
+        t_total = (mission_time_record(d.costs, o.route, o.n_stations, n_new)
+                   if o.name == "plan" else o.time_s)["total"]
         rows.append({"name": o.name, "stations": o.n_stations, "markers": n_markers,
                      "covered": round(o.covered_fraction, 4), "meets": o.meets_requirement,
                      "route_m": None if o.route is None else round(o.route.length_m, 1),

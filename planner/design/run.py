@@ -32,14 +32,20 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from markerplan.errors import ConfigError, DataError, InfeasiblePlanError
-from planner.accuracy.checks import diagnose, evaluate_layout, station_infos
+from planner.accuracy.checks import evaluate_layout, station_infos
 from planner.coverage.grid import AoiGrid, aoi_grid
 from planner.coverage.raster import Uncovered, uncovered_summary
 from planner.coverage.sight import CoverageMatrix, CoverageSettings, coverage_matrix
 from planner.problem.inputs import PlanInputs
 from planner.problem.sight import sight_problem
 from planner.problem.usability import PlanProblem
-from planner.program.joint import JointCosts, JointResult, StationCover, plan_stations_and_sites
+from planner.program.joint import (
+    JointCosts,
+    JointResult,
+    StationCover,
+    eligible_stations,
+    plan_stations_and_sites,
+)
 from planner.program.joint_baselines import (
     JointBaseline,
     greedy_viewpoints,
@@ -286,9 +292,7 @@ def design_survey(inputs: PlanInputs, config, error_model, aoi, keepouts=(),
     clashes = _clashes(problem, config.min_station_distance_m)
     t = time.perf_counter()
     infos = station_infos(problem, config)
-    eligible = np.ones(problem.n_stations, bool)
-    failing = diagnose(problem, config, infos, accuracy_check=not config.network)
-    eligible[[problem.station_ids.index(sid) for sid in failing]] = False
+    eligible, _ = eligible_stations(problem, config, infos)
     greedy = _baseline("greedy", greedy_viewpoints(cover, eligible), problem, config, cover,
                        jcosts, clashes)
     xmin, ymin, xmax, ymax = aoi.bounds
@@ -302,7 +306,7 @@ def design_survey(inputs: PlanInputs, config, error_model, aoi, keepouts=(),
     joint = plan_stations_and_sites(problem, config, cover, jcosts,
                                     incumbent=None if best is None
                                     else (best.stations, best.selected),
-                                    clashes=clashes)
+                                    clashes=clashes, infos=infos)
     timings["joint_program"] = joint.solve_time_s
     t = time.perf_counter()
     chosen = np.flatnonzero(joint.stations)
@@ -389,7 +393,10 @@ def _grid_spacings(reach_m: float, station_spacing_m: float) -> np.ndarray:
     return np.array(out + [station_spacing_m])
 
 
-def _time(costs: MissionCosts, route: Route | None, n_stations: int, n_markers: int) -> dict:
+def mission_time_record(costs: MissionCosts, route: Route | None, n_stations: int,
+                        n_markers: int) -> dict:
+    """Mission time of a way to survey, by part: ``stations``, ``markers``, ``drive``,
+    ``total``, s (drive and total ``None`` without a route)."""
     if route is None:
         return {"stations": costs.station_s * n_stations, "markers": costs.marker_s * n_markers,
                 "drive": None, "total": None}
@@ -408,7 +415,7 @@ def _option(name, problem, cover, n_aoi_cells, costs, stations, selected, meets,
     frac = float(np.sum(cover.counts(stations) >= cover.min_stations) / max(n_aoi_cells, 1))
     return SurveyOption(name=name, station_xy=xy, n_markers=n_markers, covered_fraction=frac,
                         meets_requirement=bool(meets), route=route,
-                        time_s=_time(costs, route, idx.size, n_markers), note=note,
+                        time_s=mission_time_record(costs, route, idx.size, n_markers), note=note,
                         spacing_m=spacing_m)
 
 
@@ -456,5 +463,5 @@ def _hand_option(inputs: PlanInputs, config, error_model, grid: AoiGrid,
     xy = position[:, :2] if route is None else position[route.order, :2]
     n_markers = len(inputs.as_built_ids)
     return SurveyOption(name="hand", station_xy=xy, n_markers=n_markers, covered_fraction=frac,
-                        meets_requirement=meets, route=route,
-                        time_s=_time(costs, route, len(position), n_markers), note=note)
+                        meets_requirement=meets, route=route, note=note,
+                        time_s=mission_time_record(costs, route, len(position), n_markers))

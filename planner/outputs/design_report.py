@@ -10,10 +10,11 @@ status and bound, the traverse, the mission time and the other ways to survey th
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 
-from planner.design.run import SurveyDesign, SurveyOption
+from planner.design.run import SurveyDesign, SurveyOption, mission_time_record
 
 
 def _num(v) -> float | None:
@@ -51,15 +52,9 @@ def design_record(design: SurveyDesign, n_markers: int) -> dict:
     joint, route, grid = design.joint, design.route, design.grid
     sol = joint.solution
     costs = design.costs
-    plan = option_record(design.options[0])
-    n_st = design.order.size
-    drive_s = route.length_m / costs.drive_m_per_s
-    plan["n_markers"] = int(n_markers)
-    plan["mission_time_s"] = {"stations": round(costs.station_s * n_st, 1),
-                              "markers": round(costs.marker_s * n_markers, 1),
-                              "drive": round(drive_s, 1),
-                              "total": round(costs.station_s * n_st + costs.marker_s * n_markers
-                                             + drive_s, 1)}
+    plan = option_record(replace(
+        design.options[0], n_markers=int(n_markers),
+        time_s=mission_time_record(costs, route, design.order.size, n_markers)))
     counts = design.traffic.counts()
     total_nodes = int(sum(counts.values()))
     unc = design.uncoverable

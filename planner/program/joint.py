@@ -226,6 +226,22 @@ def switched_rows(A: sp.csr_array, row_lb: np.ndarray, row_ub: np.ndarray,
     return sp.csr_array(A + switch), row_lb, row_ub
 
 
+def eligible_stations(problem: PlanProblem, config, infos) -> tuple[np.ndarray, dict]:
+    """The candidate stations some layout could satisfy (:func:`planner.accuracy.checks.
+    diagnose`; its accuracy check in known-control mode only), and the others by id with the
+    reason.
+
+    Returns
+    -------
+    eligible : (s,) bool
+    excluded : dict
+    """
+    excluded = diagnose(problem, config, infos, accuracy_check=not config.network)
+    eligible = np.ones(problem.n_stations, bool)
+    eligible[[problem.station_ids.index(sid) for sid in excluded]] = False
+    return eligible, excluded
+
+
 def joint_model(problem: PlanProblem, config, cover: StationCover, costs: JointCosts,
                 infos=None, clashes: tuple[np.ndarray, np.ndarray] | None = None) -> JointModel:
     """Build the joint program (see the module docstring).
@@ -255,7 +271,7 @@ def joint_model(problem: PlanProblem, config, cover: StationCover, costs: JointC
     if known:
         base = with_tightening_rows(problem, base, config)
     infos = infos if infos is not None else station_infos(problem, config)
-    excluded = diagnose(problem, config, infos, accuracy_check=known)
+    eligible, excluded = eligible_stations(problem, config, infos)
     ns, v0 = problem.n_stations, base.n_vars
     station_var = v0 + np.arange(ns)
     n_vars = v0 + ns
@@ -264,8 +280,6 @@ def joint_model(problem: PlanProblem, config, cover: StationCover, costs: JointC
                             for k in kinds], dtype=np.int64)
     A, lb, ub = switched_rows(base.A, base.row_lb, base.row_ub, row_station, station_var,
                               n_vars)
-    eligible = np.ones(ns, bool)
-    eligible[[problem.station_ids.index(sid) for sid in excluded]] = False
     cover_rows, n_cover = _cover_rows(cover, eligible, station_var, n_vars)
     clash_rows, clash_station = _clash_rows(base, clashes, station_var, n_vars)
     n_clash = clash_station.size
@@ -357,8 +371,8 @@ def _undominated(incidence: sp.csr_array) -> np.ndarray:
 
 def plan_stations_and_sites(problem: PlanProblem, config, cover: StationCover,
                             costs: JointCosts, incumbent: tuple | None = None,
-                            clashes: tuple[np.ndarray, np.ndarray] | None = None
-                            ) -> JointResult:
+                            clashes: tuple[np.ndarray, np.ndarray] | None = None,
+                            infos=None) -> JointResult:
     """The joint cut loop: solve, check the chosen stations, cut, re-solve until all pass.
 
     Parameters
@@ -375,6 +389,8 @@ def plan_stations_and_sites(problem: PlanProblem, config, cover: StationCover,
         the loop first, with the best bound proved.
     clashes : ((q,) int, (q,) int), optional
         Candidate station and site index of every pair too near to hold both.
+    infos : list of StationInfo, optional
+        The stations' accuracy, when the caller has it (default computed).
 
     Returns
     -------
@@ -387,11 +403,13 @@ def plan_stations_and_sites(problem: PlanProblem, config, cover: StationCover,
         time limit ended the search before any layout passed and no incumbent was given.
     """
     t0 = time.perf_counter()
-    infos = station_infos(problem, config)
+    infos = station_infos(problem, config) if infos is None else infos
     joint = joint_model(problem, config, cover, costs, infos, clashes)
     model, station_var = joint.model, joint.station_var
     bound, solve_time, n_cuts, history = -np.inf, 0.0, 0, []
     start = None if incumbent is None else _start(model, station_var, *incumbent)
+    incumbent_cost = None if incumbent is None else \
+        costs.of(int(incumbent[0].sum()), int(problem.site_cost[incumbent[1]].sum()))
 
     def result(stations, selected, sol, iteration) -> JointResult:
         return JointResult(stations=stations, selected=selected, solution=sol,
@@ -400,7 +418,7 @@ def plan_stations_and_sites(problem: PlanProblem, config, cover: StationCover,
 
     def incumbent_result(iteration: int) -> JointResult:
         stations, selected = incumbent
-        obj = costs.of(int(stations.sum()), int(problem.site_cost[selected].sum()))
+        obj = incumbent_cost
         gap = max(obj - bound, 0.0) / obj if np.isfinite(bound) else float("nan")
         proven = np.isfinite(bound) and bound >= obj - 1e-9
         sol = Solution(status="optimal" if proven else "time_limit", selected=selected,
@@ -442,9 +460,7 @@ def plan_stations_and_sites(problem: PlanProblem, config, cover: StationCover,
                                                outer_approximation=True,
                                                stations=np.flatnonzero(stations))
         if rows is None:
-            if incumbent is not None and \
-                    costs.of(int(incumbent[0].sum()),
-                             int(problem.site_cost[incumbent[1]].sum())) < sol.objective - 1e-9:
+            if incumbent is not None and incumbent_cost < sol.objective - 1e-9:
                 return incumbent_result(iteration)
             return result(stations, sol.selected, sol, iteration)
         row_station = np.array([k.station for k in kinds], dtype=np.int64)
@@ -462,8 +478,3 @@ def _start(model: Model, station_var: np.ndarray, stations: np.ndarray, selected
     start[:model.var_site.size] = selected[model.var_site]
     start[station_var] = stations
     return start
-
-
-def chosen_problem(problem: PlanProblem, result: JointResult) -> PlanProblem:
-    """The problem restricted to the chosen stations (in candidate order)."""
-    return problem.restrict_stations(np.flatnonzero(result.stations))
