@@ -9,7 +9,8 @@ fallback for numpy values.
   CRS, ``name.prj``, its WKT in the ESRI dialect. The header is always a CSV's first line, so
   pandas, QGIS and spreadsheets read it with their default settings.
 - JSON (:func:`json_default`, the ``default=`` of :func:`json.dumps`): numpy arrays as lists,
-  numpy scalars as Python numbers, a non-finite numpy float as ``null``.
+  numpy scalars as Python numbers, a non-finite numpy float as ``null``; :func:`json_float`
+  a number as a JSON-safe float (``None`` for NaN and infinity).
 """
 
 from __future__ import annotations
@@ -37,6 +38,16 @@ def csv_cell(value: Any) -> str:
     if isinstance(value, float | np.floating):
         return f"{float(value):.6f}" if np.isfinite(value) else ""
     return str(value)
+
+
+def json_float(value) -> float | None:
+    """A number as a Python float, ``None`` (JSON ``null``) for NaN and infinity.
+
+    >>> json_float(np.float32(0.5)), json_float(float("inf"))
+    (0.5, None)
+    """
+    value = float(value)
+    return value if np.isfinite(value) else None
 
 
 def json_default(obj: Any) -> Any:

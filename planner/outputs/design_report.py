@@ -9,17 +9,12 @@ status and bound, the traverse, the mission time and the other ways to survey th
 
 from __future__ import annotations
 
-import math
 from dataclasses import replace
 
 import numpy as np
 
+from markerplan.writing import json_float
 from planner.design.run import SurveyDesign, SurveyOption, mission_time_record
-
-
-def _num(v) -> float | None:
-    v = float(v)
-    return v if math.isfinite(v) else None
 
 
 def _rounded(v, digits: int = 3) -> float | None:
@@ -70,9 +65,9 @@ def design_record(design: SurveyDesign, n_markers: int) -> dict:
                                "excluded": len(joint.excluded)},
         "joint_program": {
             "status": sol.status, "proven_optimal": sol.status == "optimal",
-            "objective_s": _rounded(_num(sol.objective), 1),
-            "dual_bound_s": _rounded(_num(sol.dual_bound), 1),
-            "gap": _num(sol.gap), "iterations": joint.iterations,
+            "objective_s": _rounded(json_float(sol.objective), 1),
+            "dual_bound_s": _rounded(json_float(sol.dual_bound), 1),
+            "gap": json_float(sol.gap), "iterations": joint.iterations,
             "accuracy_cuts": joint.n_cuts, "n_stations": int(joint.stations.sum()),
             "n_markers": int(joint.selected.sum()),
             "objective": "station_time_s x stations + marker_time_s x markers (the drive is "

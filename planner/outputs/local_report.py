@@ -21,17 +21,13 @@ from pathlib import Path
 
 import numpy as np
 
-from markerplan.writing import write_gis_sidecars
+from markerplan.writing import json_float, write_gis_sidecars
 
 #: ``pairs.csv``: header and ``.csvt`` column types.
 PAIR_COLUMNS = ("first", "second", "separation_m", "predicted_error_m", "allowed_error_m",
                 "meets_requirement", "kind")
 PAIR_TYPES = ("String", "String", "Real", "Real", "Real", "Integer", "String")
 
-
-def _num(v) -> float | None:
-    v = float(v)
-    return v if math.isfinite(v) else None
 
 
 def local_record(outcome, net) -> dict | None:
@@ -85,7 +81,7 @@ def _pair_rows(key: str, ids, pairs, errors: np.ndarray) -> tuple[list[dict], di
     separation, predicted error ``errors`` ((p,) m) and allowance, and the worst of them
     relative to its allowance (None without pairs)."""
     rows = [{key: [ids[a], ids[b]], "separation_m": round(float(d), 3),
-             "predicted_error_m": _num(e), "allowed_error_m": float(allowed),
+             "predicted_error_m": json_float(e), "allowed_error_m": float(allowed),
              "meets_requirement": bool(e <= allowed)}
             for a, b, d, e, allowed in zip(pairs.first, pairs.second, pairs.separation_m,
                                            errors, pairs.allowed_m, strict=True)]

@@ -43,7 +43,7 @@ from pathlib import Path
 import numpy as np
 
 from markerplan.provenance import provenance
-from markerplan.writing import write_gis_sidecars
+from markerplan.writing import json_float, write_gis_sidecars
 from planner.accuracy.requirement import (
     datum_clause,
     datum_text,
@@ -74,11 +74,6 @@ def frame_note(crs: str | None) -> str:
     return f"the DEM's CRS, {crs_name(crs)}: x, y in metres of that CRS, z up (DEM heights, m)"
 
 
-def _num(v):
-    """JSON-safe float (None for nan/inf)."""
-    v = float(v)
-    return v if math.isfinite(v) else None
-
 
 def plan_record(outcome) -> dict:
     """The ``plan.json`` document of a :class:`~planner.run.PlanOutcome`."""
@@ -92,21 +87,21 @@ def plan_record(outcome) -> dict:
         for j in prob.pair_site[idx]:
             used_by[int(j)].append(prob.station_ids[s])
         rec = {"id": prob.station_ids[s],
-               "x_m": _num(prob.station_xyz[s, 0]), "y_m": _num(prob.station_xyz[s, 1]),
-               "z_m": _num(prob.station_xyz[s, 2]),
-               "heading_rad": _num(inp.station_heading_rad[s]),
-               "predicted_error_m": _num(res.check.error_m[s]),
+               "x_m": json_float(prob.station_xyz[s, 0]), "y_m": json_float(prob.station_xyz[s, 1]),
+               "z_m": json_float(prob.station_xyz[s, 2]),
+               "heading_rad": json_float(inp.station_heading_rad[s]),
+               "predicted_error_m": json_float(res.check.error_m[s]),
                "n_markers": int(res.check.count[s]), "n_sectors": int(res.check.sectors[s]),
                "markers": [prob.site_ids[j] for j in prob.pair_site[idx]],
                "sectors": sorted({int(k) for k in sector_index(prob.pair_bearing_rad[idx],
                                                                  cfg.n_sectors)}),
                "meets_requirement": bool(res.check.ok[s])}
         if res.check.worst_loss_error_m is not None:
-            rec["worst_loss_error_m"] = _num(res.check.worst_loss_error_m[s])
+            rec["worst_loss_error_m"] = json_float(res.check.worst_loss_error_m[s])
             rec["worst_loss_sectors"] = int(res.check.worst_loss_sectors[s])
         stations.append(rec)
-    markers = [{"id": prob.site_ids[j], "x_m": _num(prob.site_xyz[j, 0]),
-                "y_m": _num(prob.site_xyz[j, 1]), "z_m": _num(prob.site_xyz[j, 2]),
+    markers = [{"id": prob.site_ids[j], "x_m": json_float(prob.site_xyz[j, 0]),
+                "y_m": json_float(prob.site_xyz[j, 1]), "z_m": json_float(prob.site_xyz[j, 2]),
                 "existing": bool(prob.site_existing[j]), "stations": used_by[int(j)],
                 **({"control": bool(prob.site_control[j])}
                    if prob.site_control_sigma_m is not None else {})}
@@ -127,11 +122,11 @@ def plan_record(outcome) -> dict:
         baselines["as_built"] = {
             "n_markers": len(inp.as_built_ids), "meets_requirement": ab.all_ok,
             "saved_by_plan": len(inp.as_built_ids) - n_plan,
-            "station_error_m": [_num(v) for v in ab.error_m],
+            "station_error_m": [json_float(v) for v in ab.error_m],
             "station_sectors": [int(v) for v in ab.sectors]}
     solver = {**solver_record(cfg.time_limit_s, cfg.mip_gap), "status": sol.status,
-              "objective": _num(sol.objective), "dual_bound": _num(sol.dual_bound),
-              "gap": _num(sol.gap),
+              "objective": json_float(sol.objective), "dual_bound": json_float(sol.dual_bound),
+              "gap": json_float(sol.gap),
               "iterations": res.iterations, "accuracy_cuts": res.n_cuts,
               "proven_optimal": sol.status == "optimal",
               "local_search": None if res.pruning is None else res.pruning.record(),
@@ -193,12 +188,12 @@ def _network_record(outcome, stations: list[dict], markers: list[dict]
     ties = net.ties(res.selected)
     bias = station_bias_record(net, layout_reliability(net, res.selected))
     for k, rec in enumerate(stations):
-        rec["allowed_error_m"] = _num(net.allowed_station_m[k])
+        rec["allowed_error_m"] = json_float(net.allowed_station_m[k])
         rec["tied_to"] = {prob.station_ids[o]: int(ties[k, o]) for o in np.flatnonzero(ties[k])}
         rec.update(bias[rec["id"]])
     for rec, j in zip(markers, np.flatnonzero(res.selected), strict=True):
-        rec["predicted_error_m"] = _num(res.check.marker_error_m[j])
-        rec["allowed_error_m"] = _num(net.allowed_site_m[j])
+        rec["predicted_error_m"] = json_float(res.check.marker_error_m[j])
+        rec["allowed_error_m"] = json_float(net.allowed_site_m[j])
     allowed = net.allowed_station_m
     relative = np.where(np.isfinite(allowed), res.check.error_m / allowed, res.check.error_m)
     order = np.argsort(-np.nan_to_num(relative, posinf=1e300), kind="stable")
@@ -207,9 +202,9 @@ def _network_record(outcome, stations: list[dict], markers: list[dict]
     worst_bias = stations[int(np.argmax(effect))] if stations else None
     return {"datum": {**net.datum_record(), **cfg.aids_record()},
             "weakest_stations": [{"id": prob.station_ids[k],
-                                  "predicted_error_m": _num(res.check.error_m[k])}
+                                  "predicted_error_m": json_float(res.check.error_m[k])}
                                  for k in order[:5]],
-            "worst_marker_error_m": _num(np.nanmax(res.check.marker_error_m))
+            "worst_marker_error_m": json_float(np.nanmax(res.check.marker_error_m))
             if res.selected.any() else None,
             "n_station_ties": int((np.triu(ties) > 0).sum()),
             "reliability": {"max_bias_effect_m": cfg.max_bias_effect_m,

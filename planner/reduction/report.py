@@ -32,14 +32,13 @@ gives them to the command's stderr and ``--json`` summary.
 from __future__ import annotations
 
 import json
-import math
 from collections import Counter
 from pathlib import Path
 
 import numpy as np
 
 from markerplan.provenance import provenance
-from markerplan.writing import write_csv
+from markerplan.writing import json_float, write_csv
 from planner.accuracy.requirement import (
     datum_clause,
     datum_text,
@@ -57,17 +56,13 @@ NETWORK_SOLVER = ("HiGHS via highspy (network mode: descent on the worst station
                   "kept-marker error, each query the planner's network program)")
 
 
-def _num(v):
-    v = float(v)
-    return v if math.isfinite(v) else None
-
 
 def _ids(problem, mask) -> list[str]:
     return [problem.site_ids[j] for j in np.flatnonzero(mask)]
 
 
 def _stations(problem, check, config) -> list[dict]:
-    return [{"id": sid, "error_m": _num(check.error_m[s]), "n_markers": int(check.count[s]),
+    return [{"id": sid, "error_m": json_float(check.error_m[s]), "n_markers": int(check.count[s]),
              "n_sectors": int(check.sectors[s]), "meets_requirement": bool(check.ok[s]),
              "reason": failure_reason(check, s, config)}
             for s, sid in enumerate(problem.station_ids)]
@@ -129,15 +124,17 @@ def reduce_record(study, layout, inputs, model_name: str, options: dict,
     points = []
     for p in curve.points:
         network = {} if p.marker_error_m is None else {
-            "worst_station_error_m": _num(p.worst_station_error_m),
-            "worst_marker_error_m": _num(p.worst_marker_error_m),
-            "marker_errors_m": {prob.site_ids[j]: _num(p.marker_error_m[j])
+            "worst_station_error_m": json_float(p.worst_station_error_m),
+            "worst_marker_error_m": json_float(p.worst_marker_error_m),
+            "marker_errors_m": {prob.site_ids[j]: json_float(p.marker_error_m[j])
                                 for j in np.flatnonzero(p.selected)},
             "local_pairs_ok": p.pairs_ok, "marker_pairs_ok": p.marker_pairs_ok}
         points.append({
-            "k": p.k, "markers": _ids(prob, p.selected), "worst_error_m": _num(p.worst_error_m),
+            "k": p.k, "markers": _ids(prob, p.selected),
+            "worst_error_m": json_float(p.worst_error_m),
             **network,
-            "mean_error_m": _num(p.mean_error_m), "lower_bound_m": _num(p.lower_bound_m),
+            "mean_error_m": json_float(p.mean_error_m),
+            "lower_bound_m": json_float(p.lower_bound_m),
             "meets_requirement": p.meets_requirement,
             "directions_ok": bool(np.all((p.count >= cfg.min_markers)
                                          & (p.sectors >= cfg.min_sectors))),
@@ -146,18 +143,19 @@ def reduce_record(study, layout, inputs, model_name: str, options: dict,
             "stations": _stations(prob, p, cfg)})
         if study.layout_curve is not None:
             same = [q for q in study.layout_curve.points if q.k == p.k]
-            points[-1]["layout_only_worst_error_m"] = _num(same[0].worst_error_m) if same \
+            points[-1]["layout_only_worst_error_m"] = json_float(same[0].worst_error_m) if same \
                 else None
     drop = []
     for i, s in enumerate(study.drop, start=1):
         best = next((p for p in curve.points if p.k == s.k), None)
         drop.append({"step": i, "removed": prob.site_ids[s.removed], "k": s.k,
-                     "worst_error_m": _num(s.worst_error_m), "mean_error_m": _num(s.mean_error_m),
+                     "worst_error_m": json_float(s.worst_error_m),
+                     "mean_error_m": json_float(s.mean_error_m),
                      "meets_requirement": bool(s.check.all_ok),
-                     "optimal_worst_error_m": _num(best.worst_error_m) if best else None,
+                     "optimal_worst_error_m": json_float(best.worst_error_m) if best else None,
                      "failing": _failing(prob, s.check, cfg)})
-    losses = [{"marker": prob.site_ids[m.marker], "worst_error_m": _num(check_worst(m.check)),
-               "mean_error_m": _num(m.check.error_m.mean()),
+    losses = [{"marker": prob.site_ids[m.marker], "worst_error_m": json_float(check_worst(m.check)),
+               "mean_error_m": json_float(m.check.error_m.mean()),
                "failing": _failing(prob, m.check, cfg)} for m in study.losses]
     name = NETWORK_SOLVER if cfg.network else SOLVER
     solver = {"name": name, "statuses": dict(statuses), "proven_optimal": curve.proven,

@@ -28,6 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from markerplan.errors import InfeasiblePlanError, PlanTimeLimitError
+from markerplan.writing import json_float
 from planner.accuracy.checks import evaluate_layout
 from planner.problem.usability import PlanProblem
 from planner.program import plan_sites
@@ -39,11 +40,6 @@ STUDIES = {"a": "known control vs network", "b": "error vs distance from the ref
 #: The key of each study's result in :func:`run_studies`'s document.
 _KEYS = {"modes": "a", "distance": "b", "tradeoff": "c", "heading_prior": "d", "baselines": "e"}
 
-
-def _num(x) -> float | None:
-    """JSON-safe float: ``None`` for nan and inf."""
-    x = float(x)
-    return x if math.isfinite(x) else None
 
 
 def run_plan(problem: PlanProblem, config) -> tuple[dict, np.ndarray | None]:
@@ -70,9 +66,9 @@ def run_plan(problem: PlanProblem, config) -> tuple[dict, np.ndarray | None]:
     sol = r.solution
     merr = r.check.marker_error_m
     rec = {"markers": int(r.selected.sum()), "status": sol.status,
-           "objective": _num(sol.objective), "dual_bound": _num(sol.dual_bound),
-           "gap": _num(sol.gap), "worst_station_error_m": _num(r.check.error_m.max()),
-           "worst_marker_error_m": None if merr is None else _num(np.nanmax(merr)),
+           "objective": json_float(sol.objective), "dual_bound": json_float(sol.dual_bound),
+           "gap": json_float(sol.gap), "worst_station_error_m": json_float(r.check.error_m.max()),
+           "worst_marker_error_m": None if merr is None else json_float(np.nanmax(merr)),
            "iterations": r.iterations, "time_s": round(time.perf_counter() - t, 2)}
     return rec, r.selected
 
@@ -104,11 +100,11 @@ def judge_as_network(problem: PlanProblem, selected: np.ndarray, config, net) ->
     selected = np.asarray(selected, bool)
     merr = check.marker_error_m[selected & (net.n_stations_seeing > 0)]
     serr = check.error_m
-    return {"worst_station_error_m": _num(serr.max()),
-            "worst_marker_error_m": _num(merr.max()) if merr.size else None,
-            "worst_determined_station_error_m": _num(serr[np.isfinite(serr)].max())
+    return {"worst_station_error_m": json_float(serr.max()),
+            "worst_marker_error_m": json_float(merr.max()) if merr.size else None,
+            "worst_determined_station_error_m": json_float(serr[np.isfinite(serr)].max())
             if np.isfinite(serr).any() else None,
-            "worst_determined_marker_error_m": _num(merr[np.isfinite(merr)].max())
+            "worst_determined_marker_error_m": json_float(merr[np.isfinite(merr)].max())
             if np.isfinite(merr).any() else None,
             "stations_failing": int(np.sum(serr > req)),
             "markers_failing": int(np.sum(merr > req)),
@@ -173,7 +169,7 @@ def error_vs_distance(problem: PlanProblem, net, layouts: dict) -> dict:
         if np.unique(np.round(dist[fin], 6)).size >= 2:
             b, a = np.polyfit(dist[fin], err[fin], 1)
             slope, intercept = float(b) * 1e4, float(a)
-        out["layouts"][name] = {"error_m": [_num(e) for e in err],
+        out["layouts"][name] = {"error_m": [json_float(e) for e in err],
                                 "slope_cm_per_100m": slope, "intercept_m": intercept}
     return out
 
@@ -206,7 +202,7 @@ def heading_prior(problem: PlanProblem, config, sigmas_deg, requirements_m=None,
                                  heading_prior_sigma_deg=None if s is None else float(s))
             rec, _ = run_plan(problem, cfg)
             if layout is not None:
-                rec["same_layout_worst_station_error_m"] = _num(
+                rec["same_layout_worst_station_error_m"] = json_float(
                     network_model(problem, cfg).station_errors(layout).max())
             out.append({"requirement_m": float(req), "heading_prior_sigma_deg": s, **rec})
     return out
