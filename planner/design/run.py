@@ -10,10 +10,14 @@
    visibility);
 3. what each candidate station could do with each candidate marker site
    (:func:`planner.run.build_problem`, the marker plan's own visibility and error model);
-4. the joint program (:func:`planner.program.joint.plan_stations_and_sites`), started from
-   the better of two baselines (:mod:`planner.program.joint_baselines`);
-5. the traverse through the chosen stations from the route start and back
-   (:func:`planner.traverse.route.plan_route`), and each baseline's;
+4. the drive lengths over trafficable ground between the route start and every candidate
+   station (:func:`planner.traverse.ground_paths.ground_paths`, one graph for every drive of
+   the design), and the joint program of stations, markers and the tour, the drive priced
+   at ``1 / drive_speed_m_s`` s/m (:func:`planner.program.joint.plan_stations_and_sites`),
+   started from the better of two baselines (:mod:`planner.program.joint_baselines`);
+5. the traverse through the chosen stations from the route start and back: the program's tour
+   or PyVRP's (:func:`planner.traverse.route.plan_route`), whichever is shorter, and each
+   baseline's;
 6. on a site preset, its published hand layout (stations and as-built markers) judged the same
    way.
 
@@ -45,6 +49,8 @@ from planner.program.joint import (
     StationCover,
     eligible_stations,
     plan_stations_and_sites,
+    shortest_tour,
+    tour_units,
 )
 from planner.program.joint_baselines import (
     JointBaseline,
@@ -53,6 +59,7 @@ from planner.program.joint_baselines import (
     joint_baseline,
 )
 from planner.run import build_problem
+from planner.traverse.ground_paths import ground_graph, ground_paths
 from planner.traverse.route import MissionCosts, Route, mission_time_s, plan_route, route_start
 from planner.traverse.stations import candidate_stations
 from planner.traverse.trafficability import TrafficMap, TrafficSettings, trafficable_map
@@ -263,6 +270,7 @@ def design_survey(inputs: PlanInputs, config, error_model, aoi, keepouts=(),
     start = route_start(traffic, route_start_xy)
     reach = flat_reach_m(config, inputs.lidar_height_m)
     traffic = _drive_window(traffic, aoi, reach, start)
+    graph = ground_graph(traffic, dem)
     ids, _, position = candidate_stations(traffic, aoi.buffer(reach), config.station_spacing_m,
                                           inputs.lidar_height_m, dem, start_xy=start)
     timings["candidate_stations"] = time.perf_counter() - t
@@ -287,8 +295,13 @@ def design_survey(inputs: PlanInputs, config, error_model, aoi, keepouts=(),
                                            map_groups, detection_model, clear_of_stations=False)
     timings.update({f"marker_{k}": v for k, v in sight_t.items()})
     cover = _required_cover(coverage, len(grid), uncoverable.cell, config.cover_min_stations)
+    t = time.perf_counter()
+    drive = ground_paths(traffic, np.vstack([start, position[:, :2]]), ["route_start", *ids],
+                         dem, label="candidate station", graph=graph).distance_m
+    timings["drive_lengths"] = time.perf_counter() - t
     costs = mission_costs(config)
-    jcosts = JointCosts(station=costs.station_s, marker=costs.marker_s)
+    jcosts = JointCosts(station=costs.station_s, marker=costs.marker_s,
+                        drive_per_m=1.0 / costs.drive_m_per_s)
     clashes = _clashes(problem, config.min_station_distance_m)
     t = time.perf_counter()
     infos = station_infos(problem, config)
@@ -302,25 +315,25 @@ def design_survey(inputs: PlanInputs, config, error_model, aoi, keepouts=(),
     gridded = _baseline("grid", grid_stations, problem, config, cover, jcosts, clashes, spacing)
     timings["baselines"] = time.perf_counter() - t
     passing = [b for b in (greedy, gridded) if b.covered and b.meets_requirement]
-    best = min(passing, key=lambda b: b.cost) if passing else None
+    best = min(passing, key=lambda b: b.cost + jcosts.unit * tour_units(
+        drive, shortest_tour(drive, b.stations), jcosts)) if passing else None
     joint = plan_stations_and_sites(problem, config, cover, jcosts,
                                     incumbent=None if best is None
                                     else (best.stations, best.selected),
-                                    clashes=clashes, infos=infos)
+                                    clashes=clashes, infos=infos, drive_m=drive)
     timings["joint_program"] = joint.solve_time_s
     t = time.perf_counter()
-    chosen = np.flatnonzero(joint.stations)
-    route = plan_route(traffic, start, position[chosen, :2], [ids[k] for k in chosen], dem)
-    order = chosen[route.order]
+    route = _plan_route(joint, traffic, start, position, ids, dem, graph, drive)
+    order = np.flatnonzero(joint.stations)[route.order]
     plan_option = _option("plan", problem, cover, len(grid), costs, joint.stations, joint.selected,
                           True, route, None)
     options = [plan_option]
     for b in (greedy, gridded):
         options.append(_baseline_option(b, problem, cover, len(grid), costs, traffic, start,
-                                        ids, dem))
+                                        ids, dem, graph))
     if hand_layout and len(inputs.station_ids):
         options.append(_hand_option(inputs, config, error_model, grid, cover_settings,
-                                    costs, traffic, start, map_groups))
+                                    costs, traffic, start, map_groups, graph))
     timings["routes"] = time.perf_counter() - t
     return SurveyDesign(aoi=aoi, grid=grid, traffic=traffic, candidate_ids=tuple(ids),
                         candidate_position_m=position, coverage=coverage, problem=problem,
@@ -419,20 +432,43 @@ def _option(name, problem, cover, n_aoi_cells, costs, stations, selected, meets,
                         spacing_m=spacing_m)
 
 
+def _plan_route(joint: JointResult, traffic: TrafficMap, start: np.ndarray,
+                position: np.ndarray, ids, dem, graph, drive_m: np.ndarray) -> Route:
+    """The traverse of the chosen stations: PyVRP's tour, or the joint program's when it is
+    shorter (proven shortest for those stations when the program proved its optimum over
+    every edge, up to the rounding of each leg's cost)."""
+    chosen = np.flatnonzero(joint.stations)
+    xy, names = position[chosen, :2], [ids[k] for k in chosen]
+    route = plan_route(traffic, start, xy, names, dem, graph=graph)
+    if joint.tour is None:
+        return route
+    nodes = np.r_[0, joint.tour + 1, 0]
+    length = float(drive_m[nodes[:-1], nodes[1:]].sum())
+    proven = joint.status == "optimal" and bool(joint.tour_complete)
+    if length < route.length_m - 1e-6:
+        return plan_route(traffic, start, xy, names, dem, graph=graph,
+                          order=np.searchsorted(chosen, joint.tour),
+                          order_solver={"name": "joint program (HiGHS)",
+                                        "proven_optimal": proven})
+    if proven:
+        route = replace(route, solver={**route.solver, "proven_optimal": True})
+    return route
+
+
 def _baseline_option(b: JointBaseline, problem, cover, n_aoi_cells, costs, traffic, start,
-                     ids, dem) -> SurveyOption:
+                     ids, dem, graph) -> SurveyOption:
     idx = np.flatnonzero(b.stations)
     route, note = None, b.note
     if idx.size:
         route = plan_route(traffic, start, problem.station_xyz[idx, :2],
-                           [ids[k] for k in idx], dem)
+                           [ids[k] for k in idx], dem, graph=graph)
     return _option(b.name, problem, cover, n_aoi_cells, costs, b.stations, b.selected,
                    b.meets_requirement, route, note, b.spacing_m)
 
 
 def _hand_option(inputs: PlanInputs, config, error_model, grid: AoiGrid,
                  cover_settings: CoverageSettings, costs: MissionCosts, traffic, start,
-                 map_groups) -> SurveyOption:
+                 map_groups, graph) -> SurveyOption:
     """The inputs' own stations with the site's as-built markers, judged like the plan."""
     position = inputs.station_xyz
     cov = coverage_matrix(inputs.dem, position, grid, cover_settings, map_groups=map_groups)
@@ -457,7 +493,7 @@ def _hand_option(inputs: PlanInputs, config, error_model, grid: AoiGrid,
     else:
         try:
             route = plan_route(traffic, start, position[:, :2], list(inputs.station_ids),
-                               inputs.dem)
+                               inputs.dem, graph=graph)
         except (ConfigError, DataError) as exc:
             note = (note + "; " if note else "") + str(exc)
     xy = position[:, :2] if route is None else position[route.order, :2]

@@ -70,8 +70,11 @@ def design_record(design: SurveyDesign, n_markers: int) -> dict:
             "gap": json_float(sol.gap), "iterations": joint.iterations,
             "accuracy_cuts": joint.n_cuts, "n_stations": int(joint.stations.sum()),
             "n_markers": int(joint.selected.sum()),
-            "objective": "station_time_s x stations + marker_time_s x markers (the drive is "
-                         "routed after, not in the objective)"},
+            "objective": "station_time_s x stations + marker_time_s x markers + the drive "
+                         "time of the program's closed tour (each leg rounded to the second)",
+            "tour_edges": "every pair of candidates" if joint.tour_complete else
+                          "each candidate's nearest neighbours and the route start (the bound "
+                          "holds for tours over those edges)"},
         "route": {"start_xy_m": [_rounded(v) for v in design.route_start_xy],
                   "start": design.route_start_source,
                   "length_m": _rounded(route.length_m),
@@ -101,6 +104,15 @@ def _minutes(seconds) -> str:
     return "—" if seconds is None else f"{seconds / 60:.0f} min"
 
 
+def _route_solver(solver: dict) -> str:
+    """How the tour was found, for the report."""
+    name = " ".join(str(solver[k]) for k in ("name", "version") if k in solver)
+    if "stop" in solver:
+        name += f", {solver['stop']}"
+    return name + ("; proven shortest for these stations" if solver.get("proven_optimal")
+                   else "; a heuristic tour, not proven shortest")
+
+
 def design_markdown(doc: dict) -> list[str]:
     """The report's "Stations chosen over the area of interest" section (no lines without
     a design)."""
@@ -122,8 +134,7 @@ def design_markdown(doc: dict) -> list[str]:
                f"{jp['objective_s']} s ({jp['objective']})",
              f"- traverse from the route start, {route['start']}, ({route['start_xy_m'][0]:g}, "
              f"{route['start_xy_m'][1]:g}) m and back: **{route['length_m']:g} m** over "
-             f"trafficable ground ({route['solver']['name']} {route['solver']['version']}, "
-             f"{route['solver']['stop']}; a heuristic tour, not proven shortest)"]
+             f"trafficable ground ({_route_solver(route['solver'])})"]
     if cov["uncoverable_cells"]:
         lines.append(f"- left out of the coverage requirement: {cov['uncoverable']}")
     lines += ["", "| way to survey | stations | markers | AOI covered | meets requirement | "

@@ -36,7 +36,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import scipy.sparse as sp
@@ -45,6 +45,16 @@ from markerplan.errors import ConfigError, InfeasiblePlanError, PlanTimeLimitErr
 from planner.accuracy.checks import diagnose, station_infos
 from planner.problem.usability import PlanProblem
 from planner.program.cuts_known import accuracy_cuts
+from planner.program.joint_tour import (
+    TourBlock,
+    leg_cost_units,
+    max_stations,
+    tour_block,
+    tour_graph,
+    tour_order,
+    tour_start,
+)
+from planner.program.joint_tour_cuts import connectivity_cuts
 from planner.program.model import Model, RowKind, Solution, build_model, with_tightening_rows
 from planner.program.solving import logged_solve
 
@@ -82,7 +92,7 @@ class StationCover:
 
 @dataclass(frozen=True)
 class JointCosts:
-    """The stated cost the joint program minimises (any unit, the same for both; seconds of
+    """The stated cost the joint program minimises (any unit, the same for all; seconds of
     mission time in :mod:`planner.design.run`).
 
     Attributes
@@ -91,32 +101,46 @@ class JointCosts:
         Cost of one stop (scan and set-up), > 0.
     marker : float
         Cost of one marker placed, > 0.
+    drive_per_m : float
+        Cost of one metre driven, >= 0 (0: the drive is not in the program; with it, the
+        program also chooses the tour, :mod:`planner.program.joint_tour`).
     """
 
     station: float
     marker: float
+    drive_per_m: float = 0.0
 
     def __post_init__(self) -> None:
         for name in ("station", "marker"):
             v = getattr(self, name)
             if not (np.isfinite(v) and v > 0):
                 raise ConfigError(f"the cost per {name} must be finite and > 0, got {v!r}")
+        if not (np.isfinite(self.drive_per_m) and self.drive_per_m >= 0):
+            raise ConfigError(f"the cost per metre driven must be finite and >= 0, got "
+                              f"{self.drive_per_m!r}")
 
     @property
     def unit(self) -> float:
-        """The program's unit of cost: the greatest common divisor of the two costs when both
-        are whole numbers (every objective value is then a whole number of units, so HiGHS
-        proves an optimum once its bound is within one unit), else 1.
+        """The program's unit of cost: the greatest common divisor of the station and marker
+        costs when both are whole numbers and nothing is driven (every objective value is then
+        a whole number of units, so HiGHS proves an optimum once its bound is within one unit);
+        else 1 (with a drive, each leg's cost is rounded to whole units,
+        :func:`~planner.program.joint_tour.leg_cost_units`).
 
         >>> JointCosts(300.0, 180.0).unit, JointCosts(1.5, 1.0).unit
         (60.0, 1.0)
+        >>> JointCosts(300.0, 180.0, drive_per_m=20.0).unit
+        1.0
         """
         whole = all(float(v).is_integer() for v in (self.station, self.marker))
-        return float(math.gcd(int(self.station), int(self.marker))) if whole else 1.0
+        if not whole or self.drive_per_m > 0:
+            return 1.0
+        return float(math.gcd(int(self.station), int(self.marker)))
 
-    def of(self, n_stations: int, n_markers: int) -> float:
-        """Cost of a layout with that many stations and (new) markers."""
-        return self.station * n_stations + self.marker * n_markers
+    def of(self, n_stations: int, n_markers: int, drive_units: float = 0.0) -> float:
+        """Cost of a layout with that many stations and (new) markers, and a drive costing
+        ``drive_units`` units of :attr:`unit`."""
+        return self.station * n_stations + self.marker * n_markers + drive_units * self.unit
 
 
 @dataclass(frozen=True)
@@ -132,11 +156,14 @@ class JointModel:
         Variable index of each candidate station's ``w``.
     excluded : dict
         Candidate stations fixed off, by id, with the reason no layout can satisfy them.
+    tour : TourBlock or None
+        The tour's columns and rows (after the ``w``), when the drive is priced.
     """
 
     model: Model
     station_var: np.ndarray
     excluded: dict
+    tour: TourBlock | None = None
 
 
 @dataclass(frozen=True)
@@ -157,6 +184,12 @@ class JointResult:
         Candidate stations fixed off, by id, with the reason.
     history : list of dict
         Per solve: iteration, status, objective, dual bound, solve time, rows.
+    tour : (k,) int or None
+        With the drive priced: the chosen candidate stations in the program's driving order.
+    tour_complete : bool or None
+        With the drive priced: whether the tour could use every edge (the bound then holds
+        for every tour; else for tours over the kept edges,
+        :func:`~planner.program.joint_tour.tour_graph`).
     """
 
     stations: np.ndarray
@@ -167,6 +200,8 @@ class JointResult:
     solve_time_s: float
     excluded: dict
     history: list = field(default_factory=list)
+    tour: np.ndarray | None = None
+    tour_complete: bool | None = None
 
     @property
     def status(self) -> str:
@@ -243,7 +278,9 @@ def eligible_stations(problem: PlanProblem, config, infos) -> tuple[np.ndarray, 
 
 
 def joint_model(problem: PlanProblem, config, cover: StationCover, costs: JointCosts,
-                infos=None, clashes: tuple[np.ndarray, np.ndarray] | None = None) -> JointModel:
+                infos=None, clashes: tuple[np.ndarray, np.ndarray] | None = None,
+                drive_m: np.ndarray | None = None, max_stations: int | None = None,
+                tour_edges=()) -> JointModel:
     """Build the joint program (see the module docstring).
 
     Parameters
@@ -259,6 +296,14 @@ def joint_model(problem: PlanProblem, config, cover: StationCover, costs: JointC
         The stations' accuracy (default computed).
     clashes : ((q,) int, (q,) int), optional
         Candidate station and site index of every pair too near to hold both.
+    drive_m : (s + 1, s + 1) float, optional
+        Ground-path drive lengths between the route start (0) and the candidate stations, m;
+        with ``costs.drive_per_m > 0`` the program chooses the tour too.
+    max_stations : int, optional
+        The tour's ``M`` (:func:`~planner.program.joint_tour.tour_block`); default every
+        eligible station.
+    tour_edges : iterable of (int, int)
+        Node pairs the tour graph keeps whatever its size (a baseline's tour).
 
     Raises
     ------
@@ -274,7 +319,12 @@ def joint_model(problem: PlanProblem, config, cover: StationCover, costs: JointC
     eligible, excluded = eligible_stations(problem, config, infos)
     ns, v0 = problem.n_stations, base.n_vars
     station_var = v0 + np.arange(ns)
-    n_vars = v0 + ns
+    tour = None
+    if drive_m is not None and costs.drive_per_m > 0:
+        graph = tour_graph(drive_m, eligible, tour_edges)
+        m = int(eligible.sum()) if max_stations is None else max_stations
+        tour = tour_block(graph, station_var, v0 + ns, costs.drive_per_m, costs.unit, m)
+    n_vars = v0 + ns + (0 if tour is None else tour.c.size)
     kinds = base.row_kind
     row_station = np.array([-1 if k.family in _OWN_VARIABLE_FAMILIES else k.station
                             for k in kinds], dtype=np.int64)
@@ -285,17 +335,26 @@ def joint_model(problem: PlanProblem, config, cover: StationCover, costs: JointC
     n_clash = clash_station.size
     x_cost = np.zeros(v0)
     x_cost[:base.var_site.size] = costs.marker / costs.unit * problem.site_cost[base.var_site]
+    if tour is None:
+        tour_cols = [np.zeros(0)] * 4
+        tour_rows = (sp.csr_array((0, n_vars)), np.zeros(0), np.zeros(0), ())
+    else:
+        tour_cols = [tour.c, tour.lb, tour.ub, tour.integrality]
+        tour_rows = (tour.A, tour.row_lb, tour.row_ub, tour.kinds)
     model = Model(
-        c=np.r_[x_cost, np.full(ns, costs.station / costs.unit)],
-        A=sp.csr_array(sp.vstack([A, cover_rows, clash_rows])),
-        row_lb=np.r_[lb, np.full(n_cover, float(cover.min_stations)), np.full(n_clash, -np.inf)],
-        row_ub=np.r_[ub, np.full(n_cover, np.inf), np.ones(n_clash)],
-        lb=np.r_[base.lb, np.zeros(ns)], ub=np.r_[base.ub, eligible.astype(float)],
-        integrality=np.r_[base.integrality, np.ones(ns, dtype=base.integrality.dtype)],
+        c=np.r_[x_cost, np.full(ns, costs.station / costs.unit), tour_cols[0]],
+        A=sp.csr_array(sp.vstack([A, cover_rows, clash_rows, tour_rows[0]])),
+        row_lb=np.r_[lb, np.full(n_cover, float(cover.min_stations)), np.full(n_clash, -np.inf),
+                     tour_rows[1]],
+        row_ub=np.r_[ub, np.full(n_cover, np.inf), np.ones(n_clash), tour_rows[2]],
+        lb=np.r_[base.lb, np.zeros(ns), tour_cols[1]],
+        ub=np.r_[base.ub, eligible.astype(float), tour_cols[2]],
+        integrality=np.r_[base.integrality, np.ones(ns), tour_cols[3]].astype(
+            base.integrality.dtype),
         var_site=base.var_site, site_var=base.site_var,
         row_kind=kinds + (RowKind("cover"),) * n_cover
-        + tuple(RowKind("clash", int(st)) for st in clash_station))
-    return JointModel(model=model, station_var=station_var, excluded=excluded)
+        + tuple(RowKind("clash", int(st)) for st in clash_station) + tour_rows[3])
+    return JointModel(model=model, station_var=station_var, excluded=excluded, tour=tour)
 
 
 def _clash_rows(base: Model, clashes, station_var: np.ndarray, n_vars: int
@@ -372,7 +431,7 @@ def _undominated(incidence: sp.csr_array) -> np.ndarray:
 def plan_stations_and_sites(problem: PlanProblem, config, cover: StationCover,
                             costs: JointCosts, incumbent: tuple | None = None,
                             clashes: tuple[np.ndarray, np.ndarray] | None = None,
-                            infos=None) -> JointResult:
+                            infos=None, drive_m: np.ndarray | None = None) -> JointResult:
     """The joint cut loop: solve, check the chosen stations, cut, re-solve until all pass.
 
     Parameters
@@ -386,11 +445,16 @@ def plan_stations_and_sites(problem: PlanProblem, config, cover: StationCover,
     costs : JointCosts
     incumbent : tuple of ((s,) bool, (n,) bool), optional
         Stations and sites known to pass (a baseline's): the answer when the time limit stops
-        the loop first, with the best bound proved.
+        the loop first, with the best bound proved. With the drive priced, its tour is
+        PyVRP's over ``drive_m`` (:func:`planner.traverse.route.solve_tour`).
     clashes : ((q,) int, (q,) int), optional
         Candidate station and site index of every pair too near to hold both.
     infos : list of StationInfo, optional
         The stations' accuracy, when the caller has it (default computed).
+    drive_m : (s + 1, s + 1) float, optional
+        Drive lengths between the route start (0) and the candidate stations, m: with
+        ``costs.drive_per_m > 0`` the program chooses the tour too
+        (:mod:`planner.program.joint_tour`).
 
     Returns
     -------
@@ -404,17 +468,33 @@ def plan_stations_and_sites(problem: PlanProblem, config, cover: StationCover,
     """
     t0 = time.perf_counter()
     infos = station_infos(problem, config) if infos is None else infos
-    joint = joint_model(problem, config, cover, costs, infos, clashes)
+    priced = drive_m is not None and costs.drive_per_m > 0
+    incumbent_cost, incumbent_tour = None, None
+    if incumbent is not None:
+        if priced:
+            incumbent_tour = shortest_tour(drive_m, incumbent[0])
+        incumbent_cost = costs.of(int(incumbent[0].sum()),
+                                  int(problem.site_cost[incumbent[1]].sum()),
+                                  tour_units(drive_m, incumbent_tour, costs) if priced else 0.0)
+    joint = joint_model(problem, config, cover, costs, infos, clashes,
+                        drive_m=drive_m if priced else None,
+                        max_stations=max_stations(incumbent_cost, costs.station,
+                                                  problem.n_stations),
+                        tour_edges=_legs(incumbent_tour))
     model, station_var = joint.model, joint.station_var
     bound, solve_time, n_cuts, history = -np.inf, 0.0, 0, []
-    start = None if incumbent is None else _start(model, station_var, *incumbent)
-    incumbent_cost = None if incumbent is None else \
-        costs.of(int(incumbent[0].sum()), int(problem.site_cost[incumbent[1]].sum()))
+    start = None if incumbent is None else _start(model, station_var, *incumbent, joint.tour,
+                                                  incumbent_tour)
+    complete = None if joint.tour is None else joint.tour.graph.complete
+    if joint.tour is not None:
+        model, n_cuts = _tighten_tour(model, joint, config.time_limit_s * ROOT_TIME_SHARE,
+                                      history)
 
-    def result(stations, selected, sol, iteration) -> JointResult:
+    def result(stations, selected, sol, iteration, tour) -> JointResult:
         return JointResult(stations=stations, selected=selected, solution=sol,
                            iterations=iteration, n_cuts=n_cuts, solve_time_s=solve_time,
-                           excluded=joint.excluded, history=history)
+                           excluded=joint.excluded, history=history, tour=tour,
+                           tour_complete=complete)
 
     def incumbent_result(iteration: int) -> JointResult:
         stations, selected = incumbent
@@ -425,7 +505,7 @@ def plan_stations_and_sites(problem: PlanProblem, config, cover: StationCover,
                        objective=obj, dual_bound=obj if proven else float(bound),
                        gap=0.0 if proven else gap, solve_time_s=0.0,
                        message="time limit: the baseline's layout, with the best proven bound")
-        return result(stations, selected, sol, iteration)
+        return result(stations, selected, sol, iteration, incumbent_tour)
 
     iteration = 0
     while True:
@@ -462,7 +542,8 @@ def plan_stations_and_sites(problem: PlanProblem, config, cover: StationCover,
         if rows is None:
             if incumbent is not None and incumbent_cost < sol.objective - 1e-9:
                 return incumbent_result(iteration)
-            return result(stations, sol.selected, sol, iteration)
+            tour = None if joint.tour is None else tour_order(joint.tour, sol.x)
+            return result(stations, sol.selected, sol, iteration, tour)
         row_station = np.array([k.station for k in kinds], dtype=np.int64)
         A, lb, ub = switched_rows(rows, lower, np.full(len(lower), np.inf), row_station,
                                   station_var, model.n_vars)
@@ -470,11 +551,78 @@ def plan_stations_and_sites(problem: PlanProblem, config, cover: StationCover,
         model = model.with_rows(A, lb, ub, kinds)
 
 
-def _start(model: Model, station_var: np.ndarray, stations: np.ndarray, selected: np.ndarray
-           ) -> np.ndarray:
-    """A partial start for HiGHS: the stations and sites of a known layout, NaN for the
-    sector variables (HiGHS completes them)."""
+#: Share of the time limit the tour's root cuts may take.
+ROOT_TIME_SHARE = 0.4
+#: Most rounds of root cuts.
+ROOT_ROUNDS = 40
+
+
+def _tighten_tour(model: Model, joint: JointModel, time_limit_s: float, history: list
+                  ) -> tuple[Model, int]:
+    """The model with the tour's connectivity cuts (:mod:`planner.program.joint_tour_cuts`)
+    separated on its linear relaxation, round after round until none is violated, the
+    rounds or the time run out; and how many were added."""
+    t0 = time.perf_counter()
+    cover = np.array([k.family == "cover" for k in model.row_kind])
+    rows = model.A[np.flatnonzero(cover)]
+    first = int(joint.station_var[0])
+    cover_sets = [rows.indices[rows.indptr[r]:rows.indptr[r + 1]] - first
+                  for r in range(rows.shape[0])]
+    n_cuts = 0
+    for _ in range(ROOT_ROUNDS):
+        remaining = time_limit_s - (time.perf_counter() - t0)
+        if remaining <= 0:
+            break
+        relaxed = replace(model, integrality=np.zeros_like(model.integrality))
+        sol = logged_solve(relaxed, remaining, 0.0, history, 0)
+        if sol.x is None:
+            break
+        cuts = connectivity_cuts(joint.tour, sol.x, joint.station_var, cover_sets,
+                                 model.n_vars)
+        if cuts is None:
+            break
+        model = model.with_rows(*cuts)
+        n_cuts += cuts[0].shape[0]
+    return model, n_cuts
+
+
+def shortest_tour(drive_m: np.ndarray, stations: np.ndarray) -> np.ndarray:
+    """(k,) int: the stations ``stations`` ((s,) bool) in the order of PyVRP's closed tour
+    from the route start over ``drive_m`` ((s + 1, s + 1), route start 0)
+    (:func:`planner.traverse.route.solve_tour`)."""
+    from planner.traverse.route import solve_tour
+
+    idx = np.flatnonzero(stations)
+    nodes = np.r_[0, idx + 1]
+    order, _ = solve_tour(np.asarray(drive_m, float)[np.ix_(nodes, nodes)])
+    return idx[np.asarray(order, np.int64) - 1]
+
+
+def tour_units(drive_m: np.ndarray, order: np.ndarray, costs: JointCosts) -> float:
+    """The program's cost of the closed tour through ``order`` (candidate indices) from the
+    route start, in units of ``costs.unit`` (each leg rounded as the program rounds it)."""
+    nodes = np.r_[0, np.asarray(order, np.int64) + 1, 0]
+    legs = np.asarray(drive_m, float)[nodes[:-1], nodes[1:]]
+    return float(leg_cost_units(legs, costs.drive_per_m, costs.unit).sum())
+
+
+def _legs(order: np.ndarray | None) -> list[tuple[int, int]]:
+    """The tour graph's node pairs of a closed tour through ``order`` (candidate indices)."""
+    if order is None:
+        return []
+    nodes = np.r_[0, np.asarray(order, np.int64) + 1, 0]
+    return [(int(a), int(b)) for a, b in zip(nodes[:-1], nodes[1:], strict=True)]
+
+
+def _start(model: Model, station_var: np.ndarray, stations: np.ndarray, selected: np.ndarray,
+           tour: TourBlock | None = None, order: np.ndarray | None = None) -> np.ndarray:
+    """A partial start for HiGHS: the stations and sites of a known layout and, with a tour
+    block, its tour through ``order``; NaN for the sector variables (HiGHS completes them)."""
     start = np.full(model.n_vars, np.nan)
     start[:model.var_site.size] = selected[model.var_site]
     start[station_var] = stations
+    if tour is not None and order is not None:
+        values = tour_start(tour, order)
+        if values is not None:
+            start[np.r_[tour.edge_var, tour.flow_var.ravel()]] = values
     return start

@@ -22,7 +22,7 @@ from scipy.sparse.csgraph import connected_components, dijkstra
 from markerplan.errors import DataError
 from planner.traverse.trafficability import LIMITS
 
-__all__ = ["GroundPaths", "ground_paths", "reachable_nodes"]
+__all__ = ["GroundGraph", "GroundPaths", "ground_graph", "ground_paths", "reachable_nodes"]
 
 #: Bytes of Dijkstra distance rows held at once (sources are taken in chunks of this size).
 _ROW_BYTES = 64 * 2 ** 20
@@ -62,6 +62,35 @@ class GroundPaths:
             path.append(int(pred[path[-1]]))
         line = np.vstack([self.xy[i], self._node_xy[path[::-1]], self.xy[j]])
         return line[np.r_[True, np.any(np.diff(line, axis=0) != 0, axis=1)]]
+
+
+@dataclass(frozen=True)
+class GroundGraph:
+    """The trafficable nodes' graph of a trafficability map (build it once with
+    :func:`ground_graph` and hand it to every :func:`ground_paths` on that map).
+
+    Attributes
+    ----------
+    graph : (N, N) scipy.sparse.csr_matrix
+        Edge lengths, m.
+    index : (nr * nc,) int64
+        Graph node of each grid node, -1 where not trafficable.
+    node_xy : (N, 2) float
+        Site coordinates of the graph's nodes, m.
+    with_heights : bool
+        Whether the edge lengths include the height change (built with a DEM).
+    """
+
+    graph: csr_matrix
+    index: np.ndarray
+    node_xy: np.ndarray
+    with_heights: bool
+
+
+def ground_graph(traffic_map, dem=None) -> GroundGraph:
+    """The trafficable nodes' graph (see the module docstring); with ``dem`` the edges are
+    3-D lengths."""
+    return GroundGraph(*_graph(traffic_map, dem), with_heights=dem is not None)
 
 
 def _graph(traffic_map, dem=None) -> tuple[csr_matrix, np.ndarray, np.ndarray]:
@@ -108,7 +137,8 @@ def reachable_nodes(traffic_map, start_xy) -> np.ndarray:
     return out
 
 
-def ground_paths(traffic_map, xy, ids, dem=None, label: str = "point") -> GroundPaths:
+def ground_paths(traffic_map, xy, ids, dem=None, label: str = "point",
+                 graph: GroundGraph | None = None) -> GroundPaths:
     """Shortest drives between every pair of points over trafficable ground.
 
     Parameters
@@ -122,6 +152,8 @@ def ground_paths(traffic_map, xy, ids, dem=None, label: str = "point") -> Ground
         With it, edge lengths include the height change between nodes; without, horizontal.
     label : str
         What the points are, for messages (``"station"``).
+    graph : GroundGraph, optional
+        ``traffic_map``'s graph, built with the same ``dem`` (default built here).
 
     Returns
     -------
@@ -147,7 +179,12 @@ def ground_paths(traffic_map, xy, ids, dem=None, label: str = "point") -> Ground
     if xy.ndim != 2 or xy.shape[1] != 2 or len(ids) != len(xy):
         raise DataError(f"`xy` must have shape (k, 2) with one id per point, got {xy.shape} "
                         f"and {len(ids)} ids")
-    graph, index, node_xy = _graph(traffic_map, dem)
+    if graph is None:
+        graph = ground_graph(traffic_map, dem)
+    elif graph.with_heights != (dem is not None):
+        raise DataError("`graph` was built with" + ("" if graph.with_heights else "out")
+                        + " a DEM, but the drive lengths are asked for the other way")
+    graph, index, node_xy = graph.graph, graph.index, graph.node_xy
     flat, on_grid = traffic_map.node_of(xy)
     node = index[flat]
     why = traffic_map.why_not(xy)

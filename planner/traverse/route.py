@@ -167,7 +167,8 @@ def route_start(traffic_map, start_xy) -> np.ndarray:
 
 
 def plan_route(traffic_map, start_xy, station_xy, station_ids, dem=None,
-               settings: RouteSettings = RouteSettings()) -> Route:
+               settings: RouteSettings = RouteSettings(), graph=None,
+               order: np.ndarray | None = None, order_solver: dict | None = None) -> Route:
     """The traverse from ``start_xy`` through every station and back, over trafficable ground.
 
     Parameters
@@ -182,6 +183,13 @@ def plan_route(traffic_map, start_xy, station_xy, station_ids, dem=None,
         With it, drive lengths include the height change
         (:func:`planner.traverse.ground_paths.ground_paths`).
     settings : RouteSettings
+    graph : planner.traverse.ground_paths.GroundGraph, optional
+        ``traffic_map``'s graph, built with ``dem`` (default built here).
+    order : (n,) int, optional
+        The driving order (indices into the stations), when already chosen; default PyVRP's
+        tour (:func:`solve_tour`).
+    order_solver : dict, optional
+        The route's solver record when ``order`` is given (who chose it, whether proven).
 
     Returns
     -------
@@ -200,8 +208,12 @@ def plan_route(traffic_map, start_xy, station_xy, station_ids, dem=None,
     start = route_start(traffic_map, start_xy)
     xy = np.vstack([start, np.asarray(station_xy, dtype=float).reshape(-1, 2)])
     paths = ground_paths(traffic_map, xy, ["route_start", *station_ids], dem=dem,
-                         label="station")
-    order, solver = solve_tour(paths.distance_m, settings)
+                         label="station", graph=graph)
+    if order is None:
+        order, solver = solve_tour(paths.distance_m, settings)
+    else:
+        order = np.asarray(order, np.int64) + 1
+        solver = order_solver or {"name": "given", "proven_optimal": False}
     stops = np.r_[0, order, 0]
     legs = paths.distance_m[stops[:-1], stops[1:]]
     lines = [paths.polyline(a, b) for a, b in zip(stops[:-1], stops[1:], strict=True)]

@@ -15,7 +15,7 @@ from planner.design.plan import design_plan
 from planner.design.run import design_survey, flat_reach_m
 from planner.problem.inputs import load_inputs
 
-CONFIG = PlanConfig(chance_epsilon=None, time_limit_s=60.0)
+CONFIG = PlanConfig(chance_epsilon=None, time_limit_s=30.0)
 
 
 @pytest.fixture(scope="module")
@@ -46,12 +46,28 @@ def test_chosen_stations_meet_the_marker_rules(design):
 
 
 def test_joint_cost_is_no_higher_than_the_baselines(design):
+    """Stops, markers and drive: the program's optimum against each baseline's mission time
+    (its PyVRP route), up to the program's rounding of each leg to the second."""
     plan = design.joint.solution.objective
     for option in design.options[1:3]:
         assert option.covered_fraction > 0.99 and option.meets_requirement, option.note
-        cost = option.time_s["stations"] + option.time_s["markers"]
-        assert plan <= cost + 1e-6, option.name
+        legs = option.n_stations + 1
+        assert plan <= option.time_s["total"] + 0.5 * legs + 1e-6, option.name
     assert design.options[3].name == "hand"
+    # the plan's own mission time is its objective up to the rounding of its legs
+    total = design.options[0].time_s["total"]
+    assert abs(total - plan) <= 0.5 * (design.order.size + 1) + 1e-6
+
+
+def test_drive_is_the_program_tour_or_shorter(design):
+    tour = design.joint.tour
+    assert sorted(tour.tolist()) == sorted(design.order.tolist())
+    xy = np.vstack([design.route_start_xy, design.candidate_position_m[tour, :2],
+                    design.route_start_xy])
+    straight = np.linalg.norm(np.diff(xy, axis=0), axis=1).sum()
+    assert straight - 1e-6 <= design.route.length_m
+    assert design.route.solver["proven_optimal"] == (design.joint.status == "optimal"
+                                                     and design.joint.tour_complete)
 
 
 def test_route_is_closed_at_the_start_and_visits_every_station(design):
@@ -71,9 +87,11 @@ def test_design_plan_keeps_the_route_order_and_its_marker_count(inputs, design):
                           route_start_xy=(0.0, -3.0), progress=False)
     assert outcome.problem.station_ids == tuple(f"S{k + 1}" for k in range(design.order.size))
     np.testing.assert_allclose(outcome.problem.station_xyz, design.station_position_m)
-    # the joint program proved its layout optimal, so the stations' own plan needs no fewer
-    assert design.joint.status == "optimal"
-    assert outcome.result.selected.sum() == design.joint.selected.sum()
+    # the stations' own plan needs no more markers than the joint layout, and no fewer when
+    # the joint program proved its layout optimal
+    assert outcome.result.selected.sum() <= design.joint.selected.sum()
+    if design.joint.status == "optimal":
+        assert outcome.result.selected.sum() == design.joint.selected.sum()
     assert outcome.result.check.ok.all()
 
 
