@@ -7,7 +7,7 @@ candidate station covers the AOI and why.
   the DEM's CRS (:func:`planner.outputs.gis.write_float_geotiff`: made in memory, written into
   the output folder's staging folder, :func:`markerplan.output_folder.output_folder`);
 - :func:`uncovered_summary`: the cells the candidate stations leave short of
-  ``min_stations``, where they are and which limit stops them.
+  ``min_stations``, in connected patches: where they are and which limit stops them.
 """
 
 from __future__ import annotations
@@ -97,6 +97,30 @@ REASONS = ("out of range", "beyond the incidence limit", "below the density limi
            "occluded")
 
 
+#: The uncovered summary's text names this many patches, largest first, and sums the rest.
+MAX_NAMED_PATCHES = 3
+
+
+@dataclass(frozen=True)
+class UncoveredPatch:
+    """One connected patch of uncovered cells (8-connected on the AOI grid).
+
+    Attributes
+    ----------
+    n_cells : int
+    area_m2 : float
+    bounds_m : tuple of 4 float
+        ``(x0, y0, x1, y1)``: the edges of its cells' bounding box, m.
+    reason_count : (len(REASONS),) int
+        How many of its cells each limit stops (index into :data:`REASONS`).
+    """
+
+    n_cells: int
+    area_m2: float
+    bounds_m: tuple
+    reason_count: np.ndarray
+
+
 @dataclass(frozen=True)
 class Uncovered:
     """The AOI cells the candidate stations cover fewer than ``min_stations`` times.
@@ -110,15 +134,24 @@ class Uncovered:
         than ``min_stations`` stations.
     nearest_m : (u,) float
         Horizontal distance to its nearest candidate station, m.
+    patch : (u,) int
+        The connected patch (8-neighbours on the AOI grid) each belongs to, an index into
+        ``patches``: 0 the largest (ties: the first in row order, north first).
+    patches : tuple of UncoveredPatch, (p,)
+        The patches, largest first.
     area_m2 : float
     text : str
-        One line: how many cells, their area, where (bounding box and centroid) and why (count
-        per reason with the setting that binds); empty when every cell is covered.
+        One line: how many cells and their area, then where (bounding box and centroid) and
+        why (count per reason with the setting that binds); with several patches, where and
+        why per patch for the :data:`MAX_NAMED_PATCHES` largest, the number and area of the
+        rest, and the count per reason over all. Empty when every cell is covered.
     """
 
     cell: np.ndarray
     reason: np.ndarray
     nearest_m: np.ndarray
+    patch: np.ndarray
+    patches: tuple
     area_m2: float
     text: str
 
@@ -148,7 +181,8 @@ def uncovered_summary(matrix, grid, station_position_m, settings, sampling=None)
     short = np.flatnonzero(matrix.count() < need)
     st = np.asarray(station_position_m, float).reshape(-1, 3)
     if not short.size:
-        return Uncovered(short, short, np.zeros(0), 0.0, "")
+        return Uncovered(cell=short, reason=short, nearest_m=np.zeros(0), patch=short,
+                         patches=(), area_m2=0.0, text="")
     geo = pair_geometry(st, grid.ground_m()[short], grid.normal[short], settings,
                         sampling or angular_sampling())
     passing = np.stack([np.bincount(geo.cell[m], minlength=short.size) for m in
@@ -157,10 +191,9 @@ def uncovered_summary(matrix, grid, station_position_m, settings, sampling=None)
     reason = np.argmax(np.vstack([passing < need, np.ones((1, short.size), bool)]), axis=0)
     nearest = _nearest_m(st, grid.centre_xy_m[short])
     xy = grid.centre_xy_m[short]
+    patch = _patch_labels(grid, short)
+    patches = _patches(patch, reason, xy, grid.cell_m)
     area = short.size * grid.cell_area_m2
-    x0, y0 = xy.min(axis=0) - 0.5 * grid.cell_m
-    x1, y1 = xy.max(axis=0) + 0.5 * grid.cell_m
-    cx, cy = xy.mean(axis=0)
     far = nearest[reason == 0]
     limits = (f"at least {far.min() if far.size else np.inf:.1f} m across from every "
               f"candidate station, beyond `cover_max_range_m` {settings.max_range_m:g} m",
@@ -170,10 +203,63 @@ def uncovered_summary(matrix, grid, station_position_m, settings, sampling=None)
     why = "; ".join(f"{n} {REASONS[r]} ({limits[r]})"
                     for r, n in enumerate(np.bincount(reason, minlength=len(REASONS))) if n)
     by = "any candidate station" if need == 1 else f"{need} candidate stations"
-    text = (f"{short.size} AOI cells ({area:g} m^2) in [{x0:.1f}, {x1:.1f}] x [{y0:.1f}, "
-            f"{y1:.1f}] m (centroid ({cx:.1f}, {cy:.1f}) m) cannot be covered by {by}: {why}")
-    return Uncovered(cell=short, reason=reason, nearest_m=nearest, area_m2=float(area),
-                     text=text)
+    head = f"{short.size} AOI cells ({area:g} m^2)"
+    if len(patches) == 1:
+        cx, cy = xy.mean(axis=0)
+        text = (f"{head} {_where(patches[0])} (centroid ({cx:.1f}, {cy:.1f}) m) cannot be "
+                f"covered by {by}: {why}")
+    else:
+        named = "; ".join(
+            f"patch {k + 1}: {p.n_cells} cells ({p.area_m2:g} m^2) {_where(p)}, "
+            + ", ".join(f"{n} {REASONS[r]}" for r, n in enumerate(p.reason_count) if n)
+            for k, p in enumerate(patches[:MAX_NAMED_PATCHES]))
+        rest = patches[MAX_NAMED_PATCHES:]
+        more = (f"; and {len(rest)} more patch{'es' if len(rest) > 1 else ''} "
+                f"({sum(p.area_m2 for p in rest):g} m^2)" if rest else "")
+        text = (f"{head} in {len(patches)} separate patches cannot be covered by {by}: "
+                f"{named}{more}; over all patches: {why}")
+    return Uncovered(cell=short, reason=reason, nearest_m=nearest, patch=patch,
+                     patches=patches, area_m2=float(area), text=text)
+
+
+def _patch_labels(grid, short: np.ndarray) -> np.ndarray:
+    """(u,) the 8-connected patch of each of the AOI cells ``short`` on the grid's (ny, nx)
+    layout, numbered from 0 by size, largest first (ties: the first in row order)."""
+    from scipy import ndimage
+
+    flat = grid.cell_index[short]
+    mask = np.zeros(grid.shape, bool)
+    mask.flat[flat] = True
+    labels, n = ndimage.label(mask, structure=np.ones((3, 3), bool))
+    label = labels.flat[flat] - 1
+    rank = np.empty(n, int)
+    rank[np.argsort(-np.bincount(label, minlength=n), kind="stable")] = np.arange(n)
+    return rank[label]
+
+
+def _patches(patch: np.ndarray, reason: np.ndarray, xy: np.ndarray,
+             cell_m: float) -> tuple[UncoveredPatch, ...]:
+    """The patches of cells labelled ``patch`` (0..p-1) with centres ``xy`` (u, 2) m."""
+    n = int(patch.max()) + 1
+    lo = np.full((n, 2), np.inf)
+    hi = np.full((n, 2), -np.inf)
+    np.minimum.at(lo, patch, xy)
+    np.maximum.at(hi, patch, xy)
+    lo -= 0.5 * cell_m
+    hi += 0.5 * cell_m
+    size = np.bincount(patch, minlength=n)
+    counts = np.bincount(patch * len(REASONS) + reason,
+                         minlength=n * len(REASONS)).reshape(n, len(REASONS))
+    return tuple(UncoveredPatch(n_cells=int(size[k]), area_m2=float(size[k] * cell_m ** 2),
+                                bounds_m=(*map(float, lo[k]), *map(float, hi[k])),
+                                reason_count=counts[k])
+                 for k in range(n))
+
+
+def _where(p: UncoveredPatch) -> str:
+    """``in [x0, x1] x [y0, y1] m``: a patch's bounding box."""
+    x0, y0, x1, y1 = p.bounds_m
+    return f"in [{x0:.1f}, {x1:.1f}] x [{y0:.1f}, {y1:.1f}] m"
 
 
 def _nearest_m(station_position_m: np.ndarray, xy: np.ndarray) -> np.ndarray:

@@ -1,9 +1,9 @@
 """A plan that chose its stations (``plan --aoi``): its ``plan.json`` section and report.
 
 :func:`design_record` is the ``"design"`` section of ``plan.json`` (the area of interest, the
-coverage requirement and what could not be covered, the rover's limits, the joint program's
-status and bound, the traverse, the mission time and the other ways to survey the area);
-:func:`station_route_fields` adds each station's place on the route to its record, and
+coverage requirement and what could not be covered, patch by patch, the rover's limits, the
+joint program's status and bound, the traverse, the mission time and the other ways to survey
+the area); :func:`station_route_fields` adds each station's place on the route to its record, and
 :func:`design_markdown` is the report's section.
 """
 
@@ -14,11 +14,20 @@ from dataclasses import replace
 import numpy as np
 
 from markerplan.writing import json_float
+from planner.coverage.raster import REASONS, UncoveredPatch
 from planner.design.run import SurveyDesign, SurveyOption, mission_time_record
 
 
 def _rounded(v, digits: int = 3) -> float | None:
     return None if v is None else round(float(v), digits)
+
+
+def _patch_record(patch: UncoveredPatch) -> dict:
+    """One connected patch of uncoverable cells for ``plan.json``: cells, area, bounding box
+    ``[x0, y0, x1, y1]`` m and how many cells each limit stops."""
+    return {"n_cells": patch.n_cells, "area_m2": _rounded(patch.area_m2),
+            "bounds_m": [_rounded(v) for v in patch.bounds_m],
+            "reasons": {REASONS[r]: int(n) for r, n in enumerate(patch.reason_count) if n}}
 
 
 def option_record(option: SurveyOption) -> dict:
@@ -59,6 +68,7 @@ def design_record(design: SurveyDesign, n_markers: int) -> dict:
                 "bounds_m": [_rounded(v) for v in design.aoi.bounds]},
         "coverage": {"uncoverable_cells": len(unc), "uncoverable_area_m2": _rounded(unc.area_m2),
                      "uncoverable": unc.text or None,
+                     "uncoverable_patches": [_patch_record(p) for p in unc.patches],
                      "n_pairs": int(design.coverage.station.size)},
         "trafficability": {"nodes": total_nodes, "not_trafficable": counts},
         "candidate_stations": {"n": len(design.candidate_ids),

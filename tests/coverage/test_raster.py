@@ -102,9 +102,21 @@ def test_uncovered_summary_reasons():
     assert "86 out of range (at least 15.0 m across from every candidate station" in u.text
     assert "`cover_max_range_m` 15 m" in u.text and "`cover_max_incidence_deg` 85" in u.text
     assert "occluded (the terrain, or nodata on the way, hides it" in u.text
-    # cell edges: the AOI's cells run from 500001.25 - 0.5 to 500038.25 + 0.5 m
-    assert (f"{len(u)} AOI cells ({len(u):g} m^2) in [500000.8, 500038.8] x [4000015.2, "
-            "4000025.2] m") in u.text
+    # two patches, west (no wall) and east (the wall): their cells, reasons and bounding boxes
+    assert u.text.startswith(f"{len(u)} AOI cells ({len(u):g} m^2) in 2 separate patches ")
+    assert len(u.patches) == 2 and u.patches[0].n_cells >= u.patches[1].n_cells
+    west = u.patch[np.argmin(cx)]
+    assert np.all((u.patch == west) == (cx < 500_020))
+    for k, p in enumerate(u.patches):
+        np.testing.assert_array_equal(p.reason_count,
+                                      np.bincount(u.reason[u.patch == k], minlength=4))
+        xy = grid.centre_xy_m[u.cell[u.patch == k]]
+        assert p.bounds_m == pytest.approx((*(xy.min(axis=0) - 0.5), *(xy.max(axis=0) + 0.5)))
+    assert u.patches[west].reason_count[REASONS.index("occluded")] == 0
+    # the AOI's cells run from 500001.25 - 0.5 to 500038.25 + 0.5 m, y 4000015.75 +- 5 m
+    assert u.patches[west].bounds_m[:2] == pytest.approx((500_000.75, 4_000_015.25))
+    assert u.patches[1 - west].bounds_m[1:] == pytest.approx((4_000_015.25, 500_038.75,
+                                                              4_000_025.25))
 
 
 def test_uncovered_summary_min_stations_and_all_covered():
@@ -116,3 +128,78 @@ def test_uncovered_summary_min_stations_and_all_covered():
     two = uncovered_summary(m, grid, st, CoverageSettings(min_stations=2))
     assert len(two) == len(grid) and "cannot be covered by 2 candidate stations: " in two.text
     assert np.all(two.reason == 0)
+
+
+#: A 1.5 m AOI grid on :func:`site`: cell column i spans x from ``X0 + 1.5 i``, row j spans y
+#: down from ``Y0 - 1.5 j`` (row 0 north).
+X0, Y0, CELL = 499_999.75, 4_000_040.25, 1.5
+
+
+def cells(c0, c1, r0, r1):
+    """The polygon of grid columns c0..c1-1 and rows r0..r1-1 (edges on cell edges)."""
+    return shapely.box(X0 + CELL * c0, Y0 - CELL * r1, X0 + CELL * c1, Y0 - CELL * r0)
+
+
+def nobody_covers(*parts):
+    """The uncovered summary of an AOI made of ``parts``, every cell 10 m or more out of reach
+    of the only station (near the site's south-west corner, range 2 m)."""
+    grid = aoi_grid(site(), shapely.union_all(parts), CELL)
+    # the window is cut from the lattice of X0, Y0
+    assert ((grid.transform[2] - X0) / CELL) % 1 == 0 and ((Y0 - grid.transform[5]) / CELL) % 1 == 0
+    st = np.array([[500_000.5, 4_000_000.5, 1.0]])
+    s = CoverageSettings(max_range_m=2.0)
+    u = uncovered_summary(coverage_matrix(site(), st, grid, s), grid, st, s)
+    assert len(u) == len(grid) and np.all(u.reason == 0)
+    return grid, u
+
+
+def box_text(b):
+    return f"in [{b[0]:.1f}, {b[2]:.1f}] x [{b[1]:.1f}, {b[3]:.1f}] m"
+
+
+def test_separate_patches_are_named_largest_first():
+    small, large = cells(2, 4, 1, 3), cells(8, 12, 6, 9)  # 4 cells to the north, 12 south
+    grid, u = nobody_covers(small, large)
+    assert [p.n_cells for p in u.patches] == [12, 4]
+    assert [p.area_m2 for p in u.patches] == [12 * CELL ** 2, 4 * CELL ** 2] == [27.0, 9.0]
+    assert u.patches[0].bounds_m == pytest.approx(large.bounds)
+    assert u.patches[1].bounds_m == pytest.approx(small.bounds)
+    in_large = shapely.contains_xy(large, *grid.centre_xy_m[u.cell].T)
+    np.testing.assert_array_equal(u.patch, np.where(in_large, 0, 1))
+    assert u.text.startswith("16 AOI cells (36 m^2) in 2 separate patches cannot be covered by "
+                             f"any candidate station: patch 1: 12 cells (27 m^2) "
+                             f"{box_text(large.bounds)}, 12 out of range; patch 2: 4 cells "
+                             f"(9 m^2) {box_text(small.bounds)}, 4 out of range; over all "
+                             "patches: 16 out of range (at least ")
+    assert "\n" not in u.text and "more patch" not in u.text
+
+
+def test_cells_touching_at_a_corner_are_one_patch():
+    a = cells(2, 4, 2, 4)
+    _, u = nobody_covers(a, cells(4, 6, 4, 6))
+    assert len(u.patches) == 1 and np.all(u.patch == 0)
+    x0, y0, x1, y1 = u.patches[0].bounds_m
+    assert (x0, y1, x1, y0) == pytest.approx((*a.bounds[::3], X0 + 6 * CELL, Y0 - 6 * CELL))
+    # as one patch the text reads as before: where, centroid, why
+    assert u.text.startswith(f"8 AOI cells (18 m^2) {box_text(u.patches[0].bounds_m)} "
+                             f"(centroid ({X0 + 4 * CELL:.1f}, {Y0 - 4 * CELL:.1f}) m) cannot "
+                             "be covered by any candidate station: 8 out of range (at least ")
+    # a cell further apart: two patches
+    _, apart = nobody_covers(a, cells(5, 7, 5, 7))
+    assert len(apart.patches) == 2 and "in 2 separate patches" in apart.text
+
+
+def test_more_than_three_patches_name_the_largest_and_sum_the_rest():
+    # one-row strips two rows apart, not in size order: 2, 6, 1, 5 and 4 cells
+    sizes = [2, 6, 1, 5, 4]
+    _, u = nobody_covers(*(cells(3, 3 + n, 2 * k + 1, 2 * k + 2) for k, n in enumerate(sizes)))
+    assert [p.n_cells for p in u.patches] == [6, 5, 4, 2, 1]
+    np.testing.assert_array_equal(np.bincount(u.patch), [6, 5, 4, 2, 1])
+    for k, n in enumerate(sizes):
+        rank = sorted(sizes, reverse=True).index(n)
+        assert u.patches[rank].bounds_m == pytest.approx(cells(3, 3 + n, 2 * k + 1,
+                                                               2 * k + 2).bounds)
+    assert "patch 3: 4 cells (9 m^2)" in u.text and "patch 4" not in u.text
+    assert "; and 2 more patches (6.75 m^2); over all patches: 18 out of range" in u.text
+    assert u.text.startswith("18 AOI cells (40.5 m^2) in 5 separate patches")
+    assert "\n" not in u.text and len(u.text) < 700

@@ -13,6 +13,7 @@ from planner.accuracy.checks import evaluate_layout
 from planner.config import PlanConfig
 from planner.design.plan import design_plan
 from planner.design.run import design_survey, flat_reach_m
+from planner.outputs.design_report import design_record
 from planner.problem.inputs import load_inputs
 
 CONFIG = PlanConfig(chance_epsilon=None, time_limit_s=30.0)
@@ -130,3 +131,16 @@ def test_an_uncoverable_part_within_the_allowance_is_left_out_and_reported(input
     assert np.all(d.candidate_position_m[:, 0] < -4.0)
     assert np.all(d.station_position_m[:, 0] < -4.0)
     assert d.options[0].covered_fraction == pytest.approx(1 - len(left_out) / len(d.grid))
+    # plan.json lists its patches: together every left-out cell, each box round its cells
+    cov = design_record(d, 0)["coverage"]
+    assert cov["uncoverable"] == d.uncoverable.text
+    patches = cov["uncoverable_patches"]
+    assert sum(p["n_cells"] for p in patches) == cov["uncoverable_cells"] == len(left_out)
+    assert sum(p["area_m2"] for p in patches) == pytest.approx(cov["uncoverable_area_m2"])
+    assert sum(sum(p["reasons"].values()) for p in patches) == len(left_out)
+    for k, p in enumerate(patches):
+        xy = left_out[d.uncoverable.patch == k]
+        half = 0.5 * d.grid.cell_m
+        assert p["n_cells"] == len(xy)
+        assert p["bounds_m"] == pytest.approx([*(xy.min(axis=0) - half),
+                                               *(xy.max(axis=0) + half)], abs=1e-3)
