@@ -271,3 +271,19 @@ def test_the_loop_is_a_setting_of_network_odometry_and_is_recorded():
         OdometryReadings([0, 1], [[1.0, 0, 0]] * 2, [0.0] * 2, -1.0)
     with pytest.raises(ConfigError, match=r"\(2, 3\)"):
         OdometryReadings([0, 1], [[1.0, 0, 0]], [0.0], 5.0)
+
+
+def test_reduce_keeps_the_plans_loop_for_the_stations_it_studies():
+    """A study of some of a closed plan's stations closes over the plan's loop plus the steps
+    to the stations left out at the ends; stations out of the plan's drive order (or not the
+    plan's) are an open traverse."""
+    from planner.reduction.study import _closing_of
+
+    plan = {"stations": [{"id": f"S{i + 1}", "x_m": x, "y_m": y, "z_m": z}
+                         for i, (x, y, z) in enumerate(PATH)]}
+    ids = [f"S{i + 1}" for i in range(5)]
+    steps = np.linalg.norm(np.diff(PATH, axis=0), axis=1)
+    assert _closing_of(plan, ids, 30.0) == pytest.approx(30.0)
+    assert _closing_of(plan, ids[1:4], 30.0) == pytest.approx(30.0 + steps[0] + steps[3])
+    assert _closing_of(plan, ["S2", "S1", "S3"], 30.0) is None
+    assert _closing_of(plan, ["S1", "X9"], 30.0) is None
