@@ -150,6 +150,12 @@ class PlanConfig:
     odometry_heading_deg_per_m : float or None
         Network mode: 1-sigma of the odometry's relative heading, degrees per metre driven;
         ``None``: not observed; in (0, 10].
+    odometry_loop_m : float or None
+        Network mode with odometry: the traverse is closed, and this is the distance the rover
+        drives from the last station back through the route start (the lander) to the first,
+        m: one more odometry reading, of the first station from the last, with the sigmas
+        above over this distance (:mod:`planner.accuracy.aids`); ``None``: an open traverse
+        (default). A plan over an area of interest sets it from its route; in (0, 1e6].
     chance_epsilon : float or None
         Largest probability that the plan fails because planned markers are not detected and
         accepted (each station-marker pair with its detection model probability, independent
@@ -241,6 +247,7 @@ class PlanConfig:
     heading_bias_sigma_deg: float | None = None
     odometry_percent: float | None = None
     odometry_heading_deg_per_m: float | None = None
+    odometry_loop_m: float | None = None
     chance_epsilon: float | None = 0.05
     max_bias_effect_m: float | None = None
     pass_rate_samples: int = 2000
@@ -286,7 +293,8 @@ class PlanConfig:
                                "local_requirement_ppm": 0.0, "local_markers": False,
                                "heading_aid": None,
                                "heading_bias_sigma_deg": None, "odometry_percent": None,
-                               "odometry_heading_deg_per_m": None, **changes})
+                               "odometry_heading_deg_per_m": None, "odometry_loop_m": None,
+                               **changes})
 
     @property
     def max_slope_rad(self) -> float:
@@ -317,22 +325,24 @@ class PlanConfig:
 
     @property
     def odometry(self) -> Odometry:
-        """The odometry between consecutive stations (:class:`planner.accuracy.aids.
-        Odometry`; empty without one)."""
+        """The odometry between consecutive stations, and the closing reading of a closed
+        traverse (:class:`planner.accuracy.aids.Odometry`; empty without one)."""
         return Odometry(
             None if self.odometry_percent is None else self.odometry_percent / 100.0,
             None if self.odometry_heading_deg_per_m is None
-            else math.radians(self.odometry_heading_deg_per_m))
+            else math.radians(self.odometry_heading_deg_per_m), self.odometry_loop_m)
 
     def aids_record(self) -> dict[str, Any]:
         """The pose aids as used (``plan.json``'s and ``reduce.json``'s ``network.datum``):
-        inclinometer, heading reference (class, random and bias sigma) and odometry."""
+        inclinometer, heading reference (class, random and bias sigma) and odometry (with the
+        closing legs' distance of a closed traverse, ``None``: open)."""
         random, bias = self.heading_sigmas_deg
         return {"inclinometer_sigma_deg": self.inclinometer_sigma_deg,
                 "heading_prior_sigma_deg": random, "heading_aid": self.heading_aid,
                 "heading_bias_sigma_deg": bias if random is not None else None,
                 "odometry_percent": self.odometry_percent,
-                "odometry_heading_deg_per_m": self.odometry_heading_deg_per_m}
+                "odometry_heading_deg_per_m": self.odometry_heading_deg_per_m,
+                "odometry_loop_m": self.odometry_loop_m}
 
     @property
     def heading_observed(self) -> bool:
@@ -384,6 +394,7 @@ BOUNDS: dict[str, tuple[float, bool, float, str]] = {
     "heading_bias_sigma_deg": (0.0, False, 10.0, " deg"),
     "odometry_percent": (0.0, False, 100.0, " %"),
     "odometry_heading_deg_per_m": (0.0, False, 10.0, " deg/m"),
+    "odometry_loop_m": (0.0, False, 1e6, " m"),
     "chance_epsilon": (0.0, False, 0.5, ""),
     "max_bias_effect_m": (0.0, False, 10.0, " m"),
     "pass_rate_samples": (0, True, 100_000, ""),
@@ -410,7 +421,7 @@ _FLAGS = ("exclude_crater_interiors", "allow_out_of_domain", "redundant", "netwo
 #: Settings that may be ``None`` (not set).
 _OPTIONAL = ("budget", "heading_prior_sigma_deg", "chance_epsilon", "max_bias_effect_m",
              "local_requirement_m", "heading_bias_sigma_deg", "odometry_percent",
-             "odometry_heading_deg_per_m", "heading_aid")
+             "odometry_heading_deg_per_m", "odometry_loop_m", "heading_aid")
 #: What a local requirement bounds (:mod:`planner.accuracy.local`).
 LOCAL_KINDS = ("position", "distance")
 #: What fixes a network's datum (:mod:`planner.accuracy.network`; control points come with
@@ -484,11 +495,16 @@ def _aids_iv(c: PlanConfig) -> None:
     """The pose aids beyond the inclinometer need network mode; a bias needs its sensor."""
     heading_aid_sigmas_deg(c.heading_aid)  # a known class
     given = [name for name in ("heading_aid", "heading_bias_sigma_deg", "odometry_percent",
-                               "odometry_heading_deg_per_m") if getattr(c, name) is not None]
+                               "odometry_heading_deg_per_m", "odometry_loop_m")
+             if getattr(c, name) is not None]
     if given and not c.network:
         raise ConfigError(f"`{given[0]}` is a pose aid of network mode (known control registers "
                           "each station on its own); plan in network mode (network = true) or "
                           f"drop {given[0]}")
+    if c.odometry_loop_m is not None and not c.odometry.any:
+        raise ConfigError("`odometry_loop_m` is the distance of the odometry's closing reading, "
+                          "and no odometry is set; set odometry_percent and/or "
+                          "odometry_heading_deg_per_m, or drop odometry_loop_m")
     if c.heading_bias_sigma_deg is not None and c.heading_sigmas_deg[0] is None:
         raise ConfigError("`heading_bias_sigma_deg` is the bias of a heading reference, and none "
                           "is set; set heading_prior_sigma_deg or heading_aid, or drop "

@@ -10,7 +10,11 @@ reference with a common boresight bias, as observations of the station poses.
       wrap(psi_(k+1) - psi_k - dpsi) = e_psi,   e_psi ~ N(0, (rate d)^2)
 
   with ``d = |dp|`` the distance the odometry measured (m), ``ratio`` and ``rate`` the
-  settings' ``odometry_ratio`` and ``odometry_heading_rad_per_m``. The position rows'
+  settings' ``odometry_ratio`` and ``odometry_heading_rad_per_m``. A **closed** traverse (the
+  rover drives from the last station back through the route start to the first) adds one
+  more reading of the same form, the pose of the first station in the levelled frame of the
+  last, whose ``d`` is the distance driven along the closing legs
+  (:attr:`OdometryReadings.loop_driven_m`, longer than the straight ``|dp|``). The position rows'
   derivatives are ``Rz(psi_k)^T`` (t_(k+1)), ``-Rz(psi_k)^T`` (t_k) and
   ``Rz(psi_k)^T S^T (t_(k+1) - t_k)`` (psi_k, ``S`` the 90-degree turn about z): the position
   error is isotropic, so the information ``A^T W A`` does not depend on the frame and equals
@@ -29,6 +33,7 @@ reference with a common boresight bias, as observations of the station poses.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -49,22 +54,29 @@ def wrap(angle_rad):
 
 @dataclass(frozen=True)
 class OdometryReadings:
-    """Relative poses measured by the rover's odometry between consecutive stations.
+    """Relative poses measured by the rover's odometry between consecutive stations, and on a
+    closed traverse from the last station back to the first.
 
     Attributes
     ----------
     order : (s,) int
         Station indices (into ``NetworkObservations.station_ids``) in drive order; each station
         at most once (a subset of the stations is allowed).
-    delta_xyz_m : (s - 1, 3) float
-        Position of station ``order[i + 1]`` in the levelled frame of ``order[i]``, m.
-    delta_heading_rad : (s - 1,) float
-        Its heading less that of ``order[i]``, rad.
+    delta_xyz_m : (p, 3) float
+        Row ``i < s - 1``: position of station ``order[i + 1]`` in the levelled frame of
+        ``order[i]``, m; on a closed traverse row ``s - 1`` (``p = s``): position of
+        ``order[0]`` in the levelled frame of ``order[-1]`` (the closing reading).
+    delta_heading_rad : (p,) float
+        Its heading less that of the station it is read from, rad.
+    loop_driven_m : float or None
+        Distance the rover drove for the closing reading (from ``order[-1]`` back through the
+        route start to ``order[0]``), m; ``None``: an open traverse (``p = s - 1``).
     """
 
     order: np.ndarray
     delta_xyz_m: np.ndarray
     delta_heading_rad: np.ndarray
+    loop_driven_m: float | None = None
 
     def __post_init__(self):
         order = np.asarray(self.order)
@@ -75,23 +87,53 @@ class OdometryReadings:
                               f"{order.shape} {order.dtype}")
         if np.unique(order).size != order.size:
             raise ConfigError("odometry `order` lists a station twice; give each station once")
-        if dp.shape != (order.size - 1, 3) or dpsi.shape != (order.size - 1,):
-            raise ConfigError(f"odometry needs `delta_xyz_m` ({order.size - 1}, 3) and "
-                              f"`delta_heading_rad` ({order.size - 1},), got {dp.shape} and "
-                              f"{dpsi.shape}")
+        loop = self.loop_driven_m
+        if loop is not None and not (isinstance(loop, int | float | np.number)
+                                     and not isinstance(loop, bool) and math.isfinite(loop)
+                                     and loop > 0):
+            raise ConfigError(f"odometry `loop_driven_m` must be a finite distance > 0 m, got "
+                              f"{loop!r:.40}")
+        p = order.size - (loop is None)
+        if dp.shape != (p, 3) or dpsi.shape != (p,):
+            raise ConfigError(f"odometry needs `delta_xyz_m` ({p}, 3) and `delta_heading_rad` "
+                              f"({p},), got {dp.shape} and {dpsi.shape}")
         if not (np.isfinite(dp).all() and np.isfinite(dpsi).all()):
             raise ConfigError("odometry relative poses must be finite")
-        if np.any(np.linalg.norm(dp, axis=1) <= 0):
-            i = int(np.flatnonzero(np.linalg.norm(dp, axis=1) <= 0)[0])
+        step = np.linalg.norm(dp[:order.size - 1], axis=1)
+        if np.any(step <= 0):
+            i = int(np.flatnonzero(step <= 0)[0])
             raise ConfigError(f"odometry step {i} (stations {order[i]} and {order[i + 1]}) "
                               "drove no distance, so its sigma is 0; drop the repeated station")
         object.__setattr__(self, "order", order.astype(np.int64))
         object.__setattr__(self, "delta_xyz_m", dp)
         object.__setattr__(self, "delta_heading_rad", dpsi)
+        object.__setattr__(self, "loop_driven_m", None if loop is None else float(loop))
+
+    @property
+    def pairs(self) -> np.ndarray:
+        """(p, 2) int: the stations ``(from, to)`` of each reading.
+
+        >>> OdometryReadings([2, 0, 1], [[1.0, 0, 0]] * 3, [0.0] * 3, 5.0).pairs.tolist()
+        [[2, 0], [0, 1], [1, 2]]
+        """
+        to = np.roll(self.order, -1)[:self.delta_xyz_m.shape[0]]
+        return np.column_stack([self.order[:to.size], to])
+
+    @property
+    def driven_m(self) -> np.ndarray:
+        """(p,) float: the distance driven for each reading, m: the measured ``|dp|`` between
+        consecutive stations (the least the rover drives), ``loop_driven_m`` for the closing
+        reading."""
+        d = np.linalg.norm(self.delta_xyz_m, axis=1)
+        if self.loop_driven_m is not None:
+            d[-1] = self.loop_driven_m
+        return d
 
     @classmethod
-    def from_poses(cls, order, position_m, heading_rad) -> OdometryReadings:
-        """The relative poses between consecutive dead-reckoned poses.
+    def from_poses(cls, order, position_m, heading_rad,
+                   loop_driven_m: float | None = None) -> OdometryReadings:
+        """The relative poses between consecutive dead-reckoned poses (and with
+        ``loop_driven_m``, the closing reading from the last pose to the first).
 
         Parameters
         ----------
@@ -99,19 +141,27 @@ class OdometryReadings:
         position_m : (s, 3) float
             Dead-reckoned positions in drive order (row ``i`` is station ``order[i]``), m.
         heading_rad : (s,) float
+        loop_driven_m : float, optional
+            The closing legs' distance driven, m; ``None``: an open traverse.
 
         Examples
         --------
         >>> r = OdometryReadings.from_poses([0, 1], [[0, 0, 0], [0, 2, 0]], [np.pi / 2, np.pi])
         >>> np.round(r.delta_xyz_m, 12).tolist(), round(float(r.delta_heading_rad[0]), 6)
         ([[2.0, 0.0, 0.0]], 1.570796)
+        >>> r = OdometryReadings.from_poses([0, 1], [[0, 0, 0], [0, 2, 0]], [np.pi / 2, np.pi],
+        ...                                 loop_driven_m=3.0)
+        >>> np.round(r.delta_xyz_m[1], 12).tolist(), r.driven_m.tolist()
+        ([-0.0, 2.0, 0.0], [2.0, 3.0])
         """
         p = np.asarray(position_m, dtype=float)
         h = np.asarray(heading_rad, dtype=float)
+        if loop_driven_m is not None:
+            p, h = np.vstack([p, p[:1]]), np.append(h, h[:1])
         d = np.diff(p, axis=0)
         c, s = np.cos(h[:-1]), np.sin(h[:-1])
         local = np.column_stack([c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1], d[:, 2]])
-        return cls(np.asarray(order), local, wrap(np.diff(h)))
+        return cls(np.asarray(order), local, wrap(np.diff(h)), loop_driven_m)
 
 
 @dataclass(frozen=True)
@@ -135,7 +185,8 @@ class AidModel:
     ----------
     n_stations : int
     pairs : (p, 2) int
-        Consecutive stations ``(k, k + 1)`` of the odometry (empty without).
+        The stations ``(from, to)`` of each odometry reading (:attr:`OdometryReadings.pairs`;
+        empty without).
     delta_xyz_m, delta_heading_rad : (p, 3), (p,) float
         Their measured relative poses.
     position_sigma_m, heading_sigma_rad : (p,) float or None
@@ -228,9 +279,8 @@ def aid_model(n_stations: int, odometry: OdometryReadings | None,
         if odometry_ratio is None and odometry_heading_rad_per_m is None:
             raise ConfigError("odometry readings need their sigmas: set odometry_ratio and/or "
                               "odometry_heading_rad_per_m")
-        pairs = np.column_stack([odometry.order[:-1], odometry.order[1:]])
+        pairs, driven = odometry.pairs, odometry.driven_m
         dp, dpsi = odometry.delta_xyz_m, odometry.delta_heading_rad
-        driven = np.linalg.norm(dp, axis=1)
         if odometry_ratio is not None:
             pos_sig = np.maximum(odometry_ratio * driven, MIN_SIGMA)
             sigmas.append(np.repeat(pos_sig, 3))

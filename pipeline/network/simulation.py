@@ -44,8 +44,9 @@ class NetworkTruth:
     nominal : NominalPoses
         Odometry: the first station exact, the others with accumulated errors.
     odometry : OdometryReadings or None
-        Measured relative poses between consecutive stations (station order), when asked for
-        (``odometry_ratio`` or ``odometry_heading_rad_per_m``).
+        Measured relative poses between consecutive stations (station order), and the closing
+        reading with ``odometry_loop_m``, when asked for (``odometry_ratio`` or
+        ``odometry_heading_rad_per_m``).
     heading_reading_rad : (s,) float or None
         The heading reference's readings (true heading + one common bias + per-station
         noise), when asked for (``heading_sigma_rad``).
@@ -70,7 +71,8 @@ def simulated_network(n_stations: int = 10, spacing_m: float = 15.0,
                       turn_sigma_rad: float = 0.4, body: Body = Body(),  # noqa: B008 (frozen)
                       odometry_ratio: float | None = None,
                       odometry_heading_rad_per_m: float | None = None,
-                      heading_sigma_rad: float | None = None, heading_bias_sigma_rad: float = 0.0
+                      heading_sigma_rad: float | None = None, heading_bias_sigma_rad: float = 0.0,
+                      odometry_loop_m: float | None = None
                       ) -> tuple[NetworkObservations, NetworkTruth]:
     """A random traverse network, its observations and its truth.
 
@@ -114,6 +116,12 @@ def simulated_network(n_stations: int = 10, spacing_m: float = 15.0,
         ``heading_bias_sigma_rad``) + independent noise (``heading_sigma_rad``); None: no
         readings. All these draws come after the others, so asking for them changes nothing
         else.
+    odometry_loop_m : float or None
+        With odometry readings: the traverse is closed, the rover driving this far from the
+        last station back to the first (> 0 m); the closing reading (the first station's true
+        pose in the last's levelled frame) gets noise of ``odometry_ratio * odometry_loop_m``
+        per axis and ``odometry_heading_rad_per_m * odometry_loop_m`` on the heading, drawn
+        last of all (so closing the traverse changes no other draw).
 
     Returns
     -------
@@ -143,6 +151,10 @@ def simulated_network(n_stations: int = 10, spacing_m: float = 15.0,
                         ("heading_bias_sigma_rad", heading_bias_sigma_rad)):
         if not (np.isfinite(value) and value >= 0):
             raise ConfigError(f"`{name}` must be a finite number >= 0, got {value!r}")
+    if odometry_loop_m is not None and odometry_ratio is None \
+            and odometry_heading_rad_per_m is None:
+        raise ConfigError("`odometry_loop_m` closes the odometry, and none is read; set "
+                          "odometry_ratio and/or odometry_heading_rad_per_m, or drop it")
     if not isinstance(body, Body):
         raise ConfigError(f"`body` must be a Body (Body.named('moon'|'earth'|'plane')), got "
                           f"{body!r:.40}")
@@ -188,15 +200,22 @@ def simulated_network(n_stations: int = 10, spacing_m: float = 15.0,
                               tuple(f"M{j + 1:03d}" for j in seen), station, marker, xyz, sigma)
     odometry = reading = None
     bias = 0.0
-    if (odometry_ratio is not None or odometry_heading_rad_per_m is not None) and s > 1:
+    measured = (odometry_ratio is not None or odometry_heading_rad_per_m is not None) and s > 1
+    if measured:
         driven = np.linalg.norm(np.diff(pose[:, :3], axis=0), axis=1)
-        exact = OdometryReadings.from_poses(np.arange(s), pose[:, :3], pose[:, 3])
-        dp = exact.delta_xyz_m + noise.normal(size=(s - 1, 3)) * (
-            (odometry_ratio or 0.0) * driven[:, None])
-        dpsi = exact.delta_heading_rad + noise.normal(size=s - 1) * (
-            (odometry_heading_rad_per_m or 0.0) * driven)
-        odometry = OdometryReadings(np.arange(s), dp, dpsi)
+        exact = OdometryReadings.from_poses(np.arange(s), pose[:, :3], pose[:, 3],
+                                            odometry_loop_m)
+        dp = exact.delta_xyz_m.copy()
+        dpsi = exact.delta_heading_rad.copy()
+        dp[:s - 1] += noise.normal(size=(s - 1, 3)) * ((odometry_ratio or 0.0) * driven[:, None])
+        dpsi[:s - 1] += noise.normal(size=s - 1) * ((odometry_heading_rad_per_m or 0.0) * driven)
     if heading_sigma_rad is not None:
         bias = float(noise.normal(0.0, heading_bias_sigma_rad))
         reading = pose[:, 3] + bias + noise.normal(0.0, heading_sigma_rad, s)
+    if measured:
+        if odometry_loop_m is not None:  # the closing reading, drawn last
+            dp[s - 1] += noise.normal(size=3) * ((odometry_ratio or 0.0) * odometry_loop_m)
+            dpsi[s - 1] += noise.normal() * ((odometry_heading_rad_per_m or 0.0)
+                                             * odometry_loop_m)
+        odometry = OdometryReadings(np.arange(s), dp, dpsi, odometry_loop_m)
     return obs, NetworkTruth(pose, markers, nominal, odometry, reading, bias)

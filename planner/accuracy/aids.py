@@ -21,7 +21,18 @@ POSE_PARAMETERS` of every station, site frame), linear at the nominal layout (he
   heading), ``d`` the straight distance between the two stations (the least the rover drives).
   Linearised at ``psi_k = 0`` the position rows are ``dt_(k+1) - dt_k + (d_y, -d_x, 0) dpsi_k``
   with ``(d_x, d_y)`` the offset between them; the error is isotropic per axis, so the frame
-  the odometry reports in does not change the information.
+  the odometry reports in does not change the information;
+- on a **closed traverse** (:attr:`Odometry.loop_m`: the rover drives from the last station
+  back to the route start, the lander, and leaves it for the first) one more reading of the
+  same form, the pose of the first station in the levelled frame of the last, its 1-sigma
+  growing with the distance driven along the two closing legs (last station -> start ->
+  first station). The lander is no station of the network (nothing else observes it, and the
+  datum is the reference station or control points), so the two legs are one relative
+  reading: the rover's dead reckoning carried through the lander. Like a leg between
+  consecutive stations it is one drive whose error grows with its length (``ratio * d`` on
+  the whole of it: as conservative as the consecutive rows, which take one leg's drift as
+  independent of the next's), and the closing legs are the route's driven distance, not the
+  straight distance from the last station to the first.
 
 The odometry and heading-reference rows are the adjustment's own
 (:func:`pipeline.network.aids.aid_model`, at noise-free readings of the nominal layout), so the
@@ -64,10 +75,15 @@ class Odometry:
         ``None``: no position rows.
     heading_rad_per_m : float or None
         1-sigma of the relative heading, rad per metre driven; ``None``: no heading row.
+    loop_m : float or None
+        A closed traverse: the distance driven from the last station back to the first (through
+        the route start), m, whose reading of the first station from the last closes the
+        network; ``None``: an open traverse.
     """
 
     position_ratio: float | None = None
     heading_rad_per_m: float | None = None
+    loop_m: float | None = None
 
     @property
     def any(self) -> bool:
@@ -86,7 +102,8 @@ class PoseAids:
         ``W``: their weight matrix (block diagonal; the heading block dense when it has a
         boresight bias), 1/m^2 and 1/rad^2.
     position_links : (p, 2) int
-        Consecutive stations the odometry ties in position (empty without position rows).
+        Stations the odometry ties in position: consecutive ones, and the last with the first
+        on a closed traverse (empty without position rows).
     """
 
     design: sp.csr_array
@@ -150,6 +167,8 @@ def pose_aids(station_xyz: np.ndarray, inclinometer_sigma_rad: float,
     heading_bias_sigma_rad : float
         1-sigma of the heading reference's common boresight bias, rad.
     odometry : Odometry, optional
+        With :attr:`Odometry.loop_m`, the closing reading too (from the last station to the
+        first; none with a single station).
 
     Returns
     -------
@@ -175,7 +194,7 @@ def pose_aids(station_xyz: np.ndarray, inclinometer_sigma_rad: float,
             raise ConfigError(f"stations {k} and {k + 1} (in the order given) stand at one "
                               "position, so the odometry has no distance driven; remove the "
                               "duplicate station or drop the odometry")
-        readings = OdometryReadings.from_poses(np.arange(s), xyz, np.zeros(s))
+        readings = OdometryReadings.from_poses(np.arange(s), xyz, np.zeros(s), odo.loop_m)
     heading = heading_sigma_rad is not None
     model = aid_model(s, readings, odo.position_ratio, odo.heading_rad_per_m,
                       np.zeros(s) if heading else None, heading_sigma_rad,
@@ -198,6 +217,37 @@ def pose_aids(station_xyz: np.ndarray, inclinometer_sigma_rad: float,
         return PoseAids(sp.csr_array((0, 6 * s)), sp.csr_array((0, 0)), links)
     return PoseAids(sp.csr_array(sp.vstack(designs, format="csr")),
                     sp.csr_array(sp.block_diag(weights, format="csr")), links)
+
+
+def closing_distance_m(position_m: np.ndarray, loop_m: float, kept) -> float:
+    """The closing legs' distance of a closed traverse that keeps only some of its stations:
+    the rover still drives every stop, so the reading from the last kept station to the first
+    spans ``loop_m`` plus the straight steps between the stations left out at either end (the
+    least the rover drives, as between consecutive stations).
+
+    Parameters
+    ----------
+    position_m : (s, 3) float
+        The traverse's stations in drive order, m.
+    loop_m : float
+        Its closing legs' distance (last station -> start -> first station), m.
+    kept : (k,) int
+        Indices of the stations kept, increasing, ``k >= 2``.
+
+    Returns
+    -------
+    float
+        m.
+
+    Examples
+    --------
+    >>> xyz = np.array([[0.0, 0, 0], [3, 0, 0], [3, 4, 0], [0, 4, 0]])
+    >>> closing_distance_m(xyz, 10.0, [0, 1, 2, 3]), closing_distance_m(xyz, 10.0, [1, 2])
+    (10.0, 16.0)
+    """
+    kept = np.asarray(kept)
+    step = np.linalg.norm(np.diff(np.asarray(position_m, dtype=float), axis=0), axis=1)
+    return float(loop_m + step[kept[-1]:].sum() + step[:kept[0]].sum())
 
 
 def heading_aid_sigmas_deg(aid: str | None) -> tuple[float, float] | None:

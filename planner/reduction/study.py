@@ -181,7 +181,8 @@ def resolve_inputs(spec: str, site_name: str | None = None, site_seed: int | Non
         if marker_radius_m is None:
             marker_radius_m = plan.get("site", {}).get("marker_radius_m")
         recorded = plan.get("provenance", {}).get("config", {})
-        if config is None:
+        own_config = config is None
+        if own_config:
             config = config_from_dict(recorded, where=f"INPUT {spec} (its configuration)")
         elif recorded.get("network") is True and not config.network:
             datum = {k: recorded[k] for k in ("reference_station", "heading_prior_sigma_deg")
@@ -205,6 +206,9 @@ def resolve_inputs(spec: str, site_name: str | None = None, site_seed: int | Non
         inputs = _chosen_stations(plan, inputs, station_ids)
     elif own_stations:
         inputs = _planned_stations(plan, spec, inputs, station_ids, given_site)
+    if own_config and config.odometry_loop_m is not None:
+        config = config.replace(odometry_loop_m=_closing_of(plan, inputs.station_ids,
+                                                            config.odometry_loop_m))
     layout = _plan_layout(plan, spec)
     _inside_site_iv(layout, inputs)
     return inputs, layout, config
@@ -213,6 +217,23 @@ def resolve_inputs(spec: str, site_name: str | None = None, site_seed: int | Non
 #: How far a plan's station may stand from where its site puts it, m (a plan records them as
 #: read; this only absorbs rounding).
 STATION_MATCH_M = 1e-3
+
+
+def _closing_of(plan: dict, station_ids, loop_m: float) -> float | None:
+    """The closing legs' distance of the plan's closed traverse for the stations studied
+    (:func:`planner.accuracy.aids.closing_distance_m`: longer when stations at its ends are
+    left out); ``None`` (an open traverse) for stations that are not the plan's in its drive
+    order, whose traverse the plan did not close."""
+    from planner.accuracy.aids import closing_distance_m
+
+    planned = [s["id"] for s in plan["stations"]]
+    if not set(station_ids) <= set(planned):
+        return None
+    kept = np.array([planned.index(i) for i in station_ids])
+    if kept.size < 2 or np.any(np.diff(kept) <= 0):
+        return None
+    xyz = np.array([[s["x_m"], s["y_m"], s["z_m"]] for s in plan["stations"]], float)
+    return closing_distance_m(xyz, loop_m, kept)
 
 
 def _chosen_stations(plan: dict, inputs, wanted):

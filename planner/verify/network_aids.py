@@ -3,20 +3,26 @@
 A plan records its aids in ``provenance.config`` (:meth:`planner.config.PlanConfig.
 aids_record`): a heading reference (``heading_prior_sigma_deg`` or the ``heading_aid`` class,
 with a boresight bias ``heading_bias_sigma_deg``) and odometry between consecutive stations
-(``odometry_percent``, ``odometry_heading_deg_per_m``). Verification reads them from the truth
-the scans were simulated at, with the plan's sigmas:
+(``odometry_percent``, ``odometry_heading_deg_per_m``), closed from the last station back to the
+first on a closed traverse (``odometry_loop_m``). Verification reads them from the truth the
+scans were simulated at, with the plan's sigmas:
 
 - odometry: between consecutive adjusted stations in the plan's order, the true relative pose
   (:meth:`pipeline.network.aids.OdometryReadings.from_poses`) plus noise of 1-sigma
   ``odometry_percent / 100 * d`` per axis and ``odometry_heading_deg_per_m * d`` on the heading
   (``d`` the true 3D distance between the two). A station left out of the adjustment is skipped:
   its neighbours are then one reading apart, of their own distance;
+- the closing reading of a closed traverse: the first adjusted station's true pose in the
+  levelled frame of the last, with the same noise over the closing legs' distance
+  (``odometry_loop_m``, plus the straight steps to stations left out at either end:
+  :func:`planner.accuracy.aids.closing_distance_m`);
 - heading reference: each station's true heading plus one bias common to all (drawn once) plus
   independent noise.
 
 The draws come from their own generator seeded by verify's seed (the same seed: the same
 readings and outputs), in a fixed order over the stations verified (plan order): the bias, one
-heading noise per station, then four odometry noises per station.
+heading noise per station, then four odometry noises per station (a reading takes those of the
+station it is read from: the closing reading those of the last adjusted station).
 """
 
 from __future__ import annotations
@@ -44,12 +50,15 @@ class PlanAids:
         Its boresight bias, 1-sigma (0: none).
     odometry_percent, odometry_heading_deg_per_m : float or None
         Odometry sigmas per metre driven; None: not observed.
+    odometry_loop_m : float or None
+        A closed traverse's closing legs' distance, m; None: an open traverse.
     """
 
     heading_sigma_deg: float | None = None
     heading_bias_sigma_deg: float = 0.0
     odometry_percent: float | None = None
     odometry_heading_deg_per_m: float | None = None
+    odometry_loop_m: float | None = None
 
     @property
     def odometry(self) -> bool:
@@ -71,7 +80,8 @@ class PlanAids:
         return {"heading_prior_sigma_deg": self.heading_sigma_deg,
                 "heading_bias_sigma_deg": self.heading_bias_sigma_deg,
                 "odometry_percent": self.odometry_percent,
-                "odometry_heading_deg_per_m": self.odometry_heading_deg_per_m}
+                "odometry_heading_deg_per_m": self.odometry_heading_deg_per_m,
+                "odometry_loop_m": self.odometry_loop_m}
 
     def readings(self, station_ids: list[str], pose: np.ndarray, seed: int):
         """An :func:`pipeline.network.run.adjust_tables` ``aids``: the simulated readings of
@@ -92,6 +102,7 @@ class PlanAids:
             ``aids(observations)`` -> ``(OdometryReadings or None, HeadingReadings or None)``.
         """
         from pipeline.network.aids import HeadingReadings, OdometryReadings
+        from planner.accuracy.aids import closing_distance_m
 
         s = len(station_ids)
         rng = np.random.default_rng([_STREAM, int(seed)])
@@ -109,16 +120,18 @@ class PlanAids:
             odometry = None
             chain = sorted(kept)
             if self.odometry and len(chain) > 1:
+                loop = (None if self.odometry_loop_m is None
+                        else closing_distance_m(pose[:, :3], self.odometry_loop_m, chain))
                 exact = OdometryReadings.from_poses(
-                    np.arange(len(chain)), pose[chain, :3], pose[chain, 3])
-                d = np.linalg.norm(exact.delta_xyz_m, axis=1)
-                noise = odometry_noise[chain[:-1]]
+                    np.arange(len(chain)), pose[chain, :3], pose[chain, 3], loop)
+                d = exact.driven_m
+                noise = odometry_noise[chain[:d.size]]
                 ratio = (self.odometry_percent or 0.0) / 100.0
                 rate = math.radians(self.odometry_heading_deg_per_m or 0.0)
                 order = np.array([obs.station_ids.index(station_ids[i]) for i in chain])
                 odometry = OdometryReadings(order,
                                             exact.delta_xyz_m + noise[:, :3] * (ratio * d)[:, None],
-                                            exact.delta_heading_rad + noise[:, 3] * rate * d)
+                                            exact.delta_heading_rad + noise[:, 3] * rate * d, loop)
             return odometry, heading
 
         return aids
@@ -137,7 +150,7 @@ def plan_aids(doc: dict, plan_path, heading_sigma_deg: float | None) -> PlanAids
 
     cfg = doc["provenance"].get("config", {})
     keys = ("heading_aid", "heading_bias_sigma_deg", "odometry_percent",
-            "odometry_heading_deg_per_m")
+            "odometry_heading_deg_per_m", "odometry_loop_m")
     try:
         config = PlanConfig(network=True, **{k: cfg.get(k) for k in keys},
                             heading_prior_sigma_deg=heading_sigma_deg)
@@ -145,4 +158,4 @@ def plan_aids(doc: dict, plan_path, heading_sigma_deg: float | None) -> PlanAids
     except (ConfigError, TypeError) as exc:
         raise InputFileError(f"`plan_path` {plan_path}: provenance config: {exc}") from exc
     return PlanAids(heading_sigma_deg, float(bias), config.odometry_percent,
-                    config.odometry_heading_deg_per_m)
+                    config.odometry_heading_deg_per_m, config.odometry_loop_m)

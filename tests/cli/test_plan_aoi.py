@@ -143,9 +143,32 @@ def _cases():
                                                                                      30.5))),
         Case("aoi-not-a-polygon", ["plan", "--aoi", "pt.geojson", "--out", "out"], "pt.geojson",
              files={"pt.geojson": '{"type": "Point", "coordinates": [0, 0]}'}),
+        Case("aoi-loop-given", RUN + ["--config", "loop.toml", "--out", "out"],
+             "`odometry_loop_m` (25 m) of a plan over an area of interest",
+             files={**files, "loop.toml": ("network = true\nodometry_percent = 2.0\n"
+                                           "odometry_loop_m = 25.0\n")}),
     ]
 
 
 @pytest.mark.parametrize("case", _cases(), ids=str)
 def test_refused(case, capsys, monkeypatch, tmp_path, valid_inputs):
     check_refused(case, capsys, monkeypatch, tmp_path, valid_inputs)
+
+
+@pytest.mark.slow
+def test_a_network_aoi_plan_closes_its_route(capsys, monkeypatch, tmp_path):
+    """In network mode with odometry the route's last and first legs are the odometry's
+    closing legs: ``plan.json`` records them in its configuration and its aids (about 50 s)."""
+    (tmp_path / "aoi.geojson").write_text(
+        '{"type": "Polygon", "coordinates": [[[-20, -6], [20, -6], [20, 6], [-20, 6], '
+        '[-20, -6]]]}')
+    monkeypatch.chdir(tmp_path)
+    code, _, err = run_cli(capsys, RUN + ["--network", "--odometry-percent", "2", "--out", "out",
+                                          "--scheduler", "none"])
+    assert code == 0, err
+    doc = json.loads((tmp_path / "out" / "plan.json").read_text())
+    legs = doc["design"]["route"]["legs_m"]
+    assert len(doc["stations"]) >= 2
+    loop = doc["provenance"]["config"]["odometry_loop_m"]
+    assert loop == pytest.approx(legs[-1] + legs[0], abs=2e-3)
+    assert doc["network"]["datum"]["odometry_loop_m"] == loop

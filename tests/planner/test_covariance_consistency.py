@@ -100,28 +100,31 @@ def test_planner_predicts_the_adjustments_covariance(seed, reference, heading_pr
         _assert_same_covariance(predicted[j], result.marker_covariance(j))
 
 
-@pytest.mark.parametrize("seed, reference, heading, bias, odometry", [
-    (1, 0, None, None, (0.02, math.radians(0.05))),
-    (3, 2, math.radians(0.1), math.radians(0.05), None),
-    (5, 1, math.radians(0.1), math.radians(0.05), (0.01, None)),
-    (7, 4, math.radians(0.2), None, (None, math.radians(0.1))),
+@pytest.mark.parametrize("seed, reference, heading, bias, odometry, loop", [
+    (1, 0, None, None, (0.02, math.radians(0.05)), None),
+    (3, 2, math.radians(0.1), math.radians(0.05), None, None),
+    (5, 1, math.radians(0.1), math.radians(0.05), (0.01, None), None),
+    (7, 4, math.radians(0.2), None, (None, math.radians(0.1)), None),
+    (9, 0, None, None, (0.02, math.radians(0.05)), 70.0),
+    (11, 2, math.radians(0.1), None, (0.01, None), 50.0),
 ])
 def test_planner_predicts_the_adjustments_covariance_with_pose_aids(seed, reference, heading,
-                                                                    bias, odometry):
-    """Odometry between consecutive stations and a heading reference with a boresight bias:
-    the planner's constant information (linearised at headings 0) and the adjustment's
-    non-linear observations (at the true headings) give the same covariance."""
+                                                                    bias, odometry, loop):
+    """Odometry between consecutive stations (on a closed traverse also from the last station
+    back to the first, over ``loop`` m) and a heading reference with a boresight bias: the
+    planner's constant information (linearised at headings 0) and the adjustment's non-linear
+    observations (at the true headings) give the same covariance."""
     obs, truth, problem = _network(seed)
     ratio, rate = odometry or (None, None)
     net = NetworkModel(problem, 10.0, INCL, reference=reference,
                        heading_prior_sigma_rad=heading, heading_bias_sigma_rad=bias or 0.0,
-                       odometry=Odometry(ratio, rate) if odometry else None)
+                       odometry=Odometry(ratio, rate, loop) if odometry else None)
     cov = net.covariance(net.information(np.ones(problem.n_sites, bool)))
     assert cov.determined.all()
 
     s = problem.n_stations
-    readings = (OdometryReadings.from_poses(np.arange(s), truth.pose[:, :3], truth.pose[:, 3])
-                if odometry else None)
+    readings = (OdometryReadings.from_poses(np.arange(s), truth.pose[:, :3], truth.pose[:, 3],
+                                            loop) if odometry else None)
     result = adjust(obs, Datum(reference_station=obs.station_ids[reference]),
                     AdjustmentSettings(inclinometer_sigma_rad=INCL,
                                        heading_prior_sigma_rad=heading,

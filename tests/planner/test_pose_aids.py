@@ -168,4 +168,4 @@ def test_the_aids_are_recorded_as_used():
     assert cfg.aids_record() == {
         "inclinometer_sigma_deg": 0.01, "heading_prior_sigma_deg": 0.1,
         "heading_aid": "sun-sensor", "heading_bias_sigma_deg": 0.05, "odometry_percent": 2.0,
-        "odometry_heading_deg_per_m": None}
+        "odometry_heading_deg_per_m": None, "odometry_loop_m": None}

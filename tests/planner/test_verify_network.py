@@ -207,3 +207,24 @@ def test_a_plan_with_bad_aids_is_refused_in_one_line(network, tmp_path):
     with pytest.raises(InputFileError, match="odometry_percent") as err:
         _compare_with(inputs, truth, bad, 0)
     assert "\n" not in str(err.value)
+
+
+def test_a_closed_traverse_is_verified_with_its_closing_reading(network, tmp_path):
+    """A plan whose odometry closes the traverse (``odometry_loop_m``): verify records the
+    loop, reads the closing reading too, and the adjustment's stated error of the last station,
+    far from the datum along the open chain, shrinks while the achieved errors stay within
+    reach of the stated."""
+    inputs, truth = network
+    first, last = (truth[inputs.station_ids[i]].pose[:3] for i in (0, -1))
+    loop = 1.2 * float(np.linalg.norm(last - first))
+    aids = dict(odometry_percent=0.1, odometry_heading_deg_per_m=0.002)  # strong enough to matter
+    opened = _compare_with(inputs, truth, _plan_with_aids(inputs, tmp_path, **aids), 7)
+    closed = _compare_with(inputs, truth, _plan_with_aids(inputs, tmp_path, **aids,
+                                                          odometry_loop_m=loop), 7)
+    assert opened.config["odometry_loop_m"] is None
+    assert closed.config["odometry_loop_m"] == loop
+    stated = np.array([[s.stated_error_m for s in c.stations] for c in (opened, closed)])
+    assert stated[1, -1] < 0.98 * stated[0, -1]
+    assert np.all(stated[1, 1:] <= stated[0, 1:] * (1 + 1e-9))
+    achieved = np.array([s.achieved_error_m for s in closed.stations])
+    assert np.all(achieved < 2.0 * stated[1]) and closed.passed
