@@ -14,7 +14,9 @@
    station (:func:`planner.traverse.ground_paths.ground_paths`, one graph for every drive of
    the design), and the joint program of stations, markers and the tour, the drive priced
    at ``1 / drive_speed_m_s`` s/m (:func:`planner.program.joint.plan_stations_and_sites`),
-   started from the better of two baselines (:mod:`planner.program.joint_baselines`);
+   started from the best of three layouts, each costed with its PyVRP tour: two baselines
+   (:mod:`planner.program.joint_baselines`) and the program of stops and markers alone
+   (:data:`STOPS_TIME_SHARE` of the time limit, started from the better baseline);
 5. the traverse through the chosen stations from the route start and back: the program's tour
    or PyVRP's (:func:`planner.traverse.route.plan_route`), whichever is shorter, and each
    baseline's;
@@ -314,14 +316,22 @@ def design_survey(inputs: PlanInputs, config, error_model, aoi, keepouts=(),
                                              _grid_spacings(reach, config.station_spacing_m))
     gridded = _baseline("grid", grid_stations, problem, config, cover, jcosts, clashes, spacing)
     timings["baselines"] = time.perf_counter() - t
-    passing = [b for b in (greedy, gridded) if b.covered and b.meets_requirement]
-    best = min(passing, key=lambda b: b.cost + jcosts.unit * tour_units(
-        drive, shortest_tour(drive, b.stations), jcosts)) if passing else None
-    joint = plan_stations_and_sites(problem, config, cover, jcosts,
-                                    incumbent=None if best is None
-                                    else (best.stations, best.selected),
-                                    clashes=clashes, infos=infos, drive_m=drive)
-    timings["joint_program"] = joint.solve_time_s
+    passing = [(b.stations, b.selected) for b in (greedy, gridded)
+               if b.covered and b.meets_requirement]
+    # stops and markers first (the program without the drive solves fast), its layout a
+    # third candidate start of the full program
+    t = time.perf_counter()
+    stops = plan_stations_and_sites(
+        problem, config.replace(time_limit_s=config.time_limit_s * STOPS_TIME_SHARE), cover,
+        JointCosts(jcosts.station, jcosts.marker), clashes=clashes, infos=infos,
+        incumbent=min(passing, key=lambda b: _cost(b, problem, jcosts)) if passing else None)
+    passing.append((stops.stations, stops.selected))
+    best = min(passing, key=lambda b: _cost(b, problem, jcosts, drive))
+    remaining = config.time_limit_s - (time.perf_counter() - t)
+    joint = plan_stations_and_sites(problem, config.replace(time_limit_s=max(remaining, 1.0)),
+                                    cover, jcosts, incumbent=best, clashes=clashes, infos=infos,
+                                    drive_m=drive)
+    timings["joint_program"] = stops.solve_time_s + joint.solve_time_s
     t = time.perf_counter()
     route = _plan_route(joint, traffic, start, position, ids, dem, graph, drive)
     order = np.flatnonzero(joint.stations)[route.order]
@@ -430,6 +440,20 @@ def _option(name, problem, cover, n_aoi_cells, costs, stations, selected, meets,
                         meets_requirement=bool(meets), route=route,
                         time_s=mission_time_record(costs, route, idx.size, n_markers), note=note,
                         spacing_m=spacing_m)
+
+
+#: Share of ``time_limit_s`` the program of stops and markers alone may take before the full
+#: program (drive priced) starts from its layout.
+STOPS_TIME_SHARE = 0.5
+
+
+def _cost(layout: tuple, problem: PlanProblem, costs: JointCosts, drive_m=None) -> float:
+    """Stated cost of a layout ``(stations, selected)``: its stops and markers and, with
+    ``drive_m``, PyVRP's closed tour through its stations, in the program's rounding."""
+    stations, selected = layout
+    units = 0.0 if drive_m is None else tour_units(drive_m, shortest_tour(drive_m, stations),
+                                                   costs)
+    return costs.of(int(stations.sum()), int(problem.site_cost[selected].sum()), units)
 
 
 def _plan_route(joint: JointResult, traffic: TrafficMap, start: np.ndarray,
