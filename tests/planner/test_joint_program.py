@@ -40,7 +40,9 @@ def _instance(seed=3, n_stations=5, n_sites=16, n_cells=8):
     return make_problem(st, sites), StationCover(ps, pc, n_cells)
 
 
-def _brute_force(problem, cover, costs, config):
+def _brute_force(problem, cover, costs, config, drive_units=lambda combo: 0.0):
+    """Cheapest covering subset with its fewest markers and, with ``drive_units``, its
+    drive."""
     best = np.inf
     for k in range(1, problem.n_stations + 1):
         for combo in itertools.combinations(range(problem.n_stations), k):
@@ -52,7 +54,7 @@ def _brute_force(problem, cover, costs, config):
                 r = plan_sites(problem.restrict_stations(np.array(combo)), config)
             except InfeasiblePlanError:
                 continue
-            best = min(best, costs.of(k, int(r.selected.sum())))
+            best = min(best, costs.of(k, int(r.selected.sum()), drive_units(combo)))
     return best
 
 

@@ -7,11 +7,10 @@ import itertools
 import numpy as np
 import pytest
 
-from markerplan.errors import InfeasiblePlanError
 from planner.program import joint_tour, plan_sites
 from planner.program.joint import JointCosts, plan_stations_and_sites, tour_units
 from planner.program.joint_tour import tour_block, tour_graph, tour_order, tour_start
-from tests.planner.test_joint_program import LOOSE, _instance
+from tests.planner.test_joint_program import LOOSE, _brute_force, _instance
 
 
 def _drive(problem, start_xy):
@@ -26,23 +25,6 @@ def _best_tour_units(drive_m, combo, costs):
     return best
 
 
-def _brute_force(problem, cover, costs, drive_m, config):
-    best = np.inf
-    for k in range(1, problem.n_stations + 1):
-        for combo in itertools.combinations(range(problem.n_stations), k):
-            on = np.zeros(problem.n_stations, bool)
-            on[list(combo)] = True
-            if not cover.covered(on):
-                continue
-            try:
-                r = plan_sites(problem.restrict_stations(np.array(combo)), config)
-            except InfeasiblePlanError:
-                continue
-            best = min(best, costs.of(k, int(r.selected.sum()),
-                                      _best_tour_units(drive_m, combo, costs)))
-    return best
-
-
 @pytest.mark.parametrize("seed,costs,start", [
     (3, JointCosts(10.0, 1.0, drive_per_m=0.5), (-20.0, 5.0)),
     (4, JointCosts(2.0, 1.0, drive_per_m=1.0), (40.0, -10.0)),
@@ -51,7 +33,8 @@ def _brute_force(problem, cover, costs, drive_m, config):
 def test_joint_optimum_with_drive_equals_brute_force(seed, costs, start):
     problem, cover = _instance(seed)
     drive = _drive(problem, start)
-    expected = _brute_force(problem, cover, costs, drive, LOOSE)
+    expected = _brute_force(problem, cover, costs, LOOSE,
+                            lambda combo: _best_tour_units(drive, combo, costs))
     r = plan_stations_and_sites(problem, LOOSE, cover, costs, drive_m=drive)
     assert r.status == "optimal" and r.tour_complete
     assert r.solution.objective == pytest.approx(expected)
