@@ -444,7 +444,7 @@ def _option(name, problem, cover, n_aoi_cells, costs, stations, selected, meets,
 
 #: Share of ``time_limit_s`` the program of stops and markers alone may take before the full
 #: program (drive priced) starts from its layout.
-STOPS_TIME_SHARE = 0.5
+STOPS_TIME_SHARE = 0.4
 
 
 def _cost(layout: tuple, problem: PlanProblem, costs: JointCosts, drive_m=None) -> float:

@@ -98,7 +98,8 @@ class JointCosts:
     Attributes
     ----------
     station : float
-        Cost of one stop (scan and set-up), > 0.
+        Cost of one stop (scan and set-up), >= 0 (0: the program counts markers only, e.g. for
+        the fewest markers any layout needs).
     marker : float
         Cost of one marker placed, > 0.
     drive_per_m : float
@@ -111,10 +112,12 @@ class JointCosts:
     drive_per_m: float = 0.0
 
     def __post_init__(self) -> None:
-        for name in ("station", "marker"):
-            v = getattr(self, name)
-            if not (np.isfinite(v) and v > 0):
-                raise ConfigError(f"the cost per {name} must be finite and > 0, got {v!r}")
+        if not (np.isfinite(self.marker) and self.marker > 0):
+            raise ConfigError(f"the cost per marker must be finite and > 0, got "
+                              f"{self.marker!r}")
+        if not (np.isfinite(self.station) and self.station >= 0):
+            raise ConfigError(f"the cost per station must be finite and >= 0, got "
+                              f"{self.station!r}")
         if not (np.isfinite(self.drive_per_m) and self.drive_per_m >= 0):
             raise ConfigError(f"the cost per metre driven must be finite and >= 0, got "
                               f"{self.drive_per_m!r}")
@@ -132,10 +135,15 @@ class JointCosts:
         >>> JointCosts(300.0, 180.0, drive_per_m=20.0).unit
         1.0
         """
-        whole = all(float(v).is_integer() for v in (self.station, self.marker))
-        if not whole or self.drive_per_m > 0:
+        if not self.integral or self.drive_per_m > 0:
             return 1.0
         return float(math.gcd(int(self.station), int(self.marker)))
+
+    @property
+    def integral(self) -> bool:
+        """Whether every objective value is a whole number of :attr:`unit` (the station and
+        marker costs are whole numbers; each leg's cost is rounded to whole units)."""
+        return all(float(v).is_integer() for v in (self.station, self.marker))
 
     def of(self, n_stations: int, n_markers: int, drive_units: float = 0.0) -> float:
         """Cost of a layout with that many stations and (new) markers, and a drive costing
@@ -454,7 +462,10 @@ def plan_stations_and_sites(problem: PlanProblem, config, cover: StationCover,
     drive_m : (s + 1, s + 1) float, optional
         Drive lengths between the route start (0) and the candidate stations, m: with
         ``costs.drive_per_m > 0`` the program chooses the tour too
-        (:mod:`planner.program.joint_tour`).
+        (:mod:`planner.program.joint_tour`). The result's bound is then at least the bound of
+        the stops and the drive (the root cuts' relaxation, :func:`_tighten_tour`) plus the
+        bound of the markers (:func:`fewest_markers_bound`): two parts of one cost, each
+        bounded on its own.
 
     Returns
     -------
@@ -487,8 +498,26 @@ def plan_stations_and_sites(problem: PlanProblem, config, cover: StationCover,
                                                   incumbent_tour)
     complete = None if joint.tour is None else joint.tour.graph.complete
     if joint.tour is not None:
-        model, n_cuts = _tighten_tour(model, joint, config.time_limit_s * ROOT_TIME_SHARE,
-                                      history)
+        model, n_cuts, tour_bound, relaxed_w = _tighten_tour(
+            model, joint, costs, config.time_limit_s * ROOT_TIME_SHARE, history)
+        if relaxed_w is not None and cover.covered(relaxed_w > 0.5) and np.all(
+                np.abs(relaxed_w - np.round(relaxed_w)) < 1e-6):
+            # the relaxation's stops are whole: HiGHS completes them (markers, tour) first
+            start = np.full(model.n_vars, np.nan)
+            start[station_var] = np.round(relaxed_w)
+        if np.isfinite(tour_bound):
+            # stops and drive at least the tour's bound, markers at least the fewest any
+            # station needs; a whole number of units when every cost is
+            bound = tour_bound + costs.unit * fewest_markers_bound(model, station_var)
+            if costs.integral:
+                bound = math.ceil(bound / costs.unit - 1e-6) * costs.unit
+            # the bound as a row (valid: no layout costs less), so HiGHS stops once it
+            # holds a layout that meets it
+            nz = np.flatnonzero(model.c)
+            model = model.with_rows(
+                sp.csr_array((model.c[nz], (np.zeros(nz.size, np.int64), nz)),
+                             shape=(1, model.n_vars)),
+                [bound / costs.unit], [np.inf], [RowKind("objective-bound")])
 
     def result(stations, selected, sol, iteration, tour) -> JointResult:
         return JointResult(stations=stations, selected=selected, solution=sol,
@@ -523,6 +552,8 @@ def plan_stations_and_sites(problem: PlanProblem, config, cover: StationCover,
         solve_time += sol.solve_time_s
         if np.isfinite(sol.dual_bound):
             bound = max(bound, sol.dual_bound)
+        if sol.x is not None and bound > sol.dual_bound:
+            sol = _with_bound(sol, bound, costs.unit if costs.integral else 0.0)
         if sol.x is None:
             if sol.status == "infeasible":
                 raise InfeasiblePlanError(
@@ -557,33 +588,115 @@ ROOT_TIME_SHARE = 0.4
 ROOT_ROUNDS = 40
 
 
-def _tighten_tour(model: Model, joint: JointModel, time_limit_s: float, history: list
-                  ) -> tuple[Model, int]:
-    """The model with the tour's connectivity cuts (:mod:`planner.program.joint_tour_cuts`)
-    separated on its linear relaxation, round after round until none is violated, the
-    rounds or the time run out; and how many were added."""
+def _tighten_tour(model: Model, joint: JointModel, costs: JointCosts, time_limit_s: float,
+                  history: list) -> tuple[Model, int, float, np.ndarray | None]:
+    """The model with the tour's connectivity cuts (:mod:`planner.program.joint_tour_cuts`),
+    how many were added, the best bound the relaxation proved on the stops and the drive
+    (``-inf`` when none solved), in the costs' own unit, and the stations' ``w`` of its last
+    solution ((s,) float, None when none solved).
+
+    They are separated on the linear relaxation of the tour's own part of the program (the
+    station and edge variables and the rows over them alone: coverage and the degrees; the
+    cuts take the flow's place), round after round until none is violated or the rounds or
+    the time run out: that relaxation solves in a fraction of the whole program's, and its
+    cuts are valid for the whole program.
+    """
     t0 = time.perf_counter()
-    cover = np.array([k.family == "cover" for k in model.row_kind])
-    rows = model.A[np.flatnonzero(cover)]
-    first = int(joint.station_var[0])
-    cover_sets = [rows.indices[rows.indptr[r]:rows.indptr[r + 1]] - first
-                  for r in range(rows.shape[0])]
-    n_cuts = 0
+    keep = np.r_[joint.station_var, joint.tour.edge_var]
+    sub, rows_kept = _restricted(model, keep)
+    cover = np.array([model.row_kind[r].family == "cover" for r in rows_kept])
+    rows = sub.A[np.flatnonzero(cover)]
+    cover_sets = [rows.indices[rows.indptr[r]:rows.indptr[r + 1]]
+                  for r in range(rows.shape[0])]  # station columns come first in ``sub``
+    added, bound, w = [], -np.inf, None
     for _ in range(ROOT_ROUNDS):
         remaining = time_limit_s - (time.perf_counter() - t0)
         if remaining <= 0:
             break
-        relaxed = replace(model, integrality=np.zeros_like(model.integrality))
-        sol = logged_solve(relaxed, remaining, 0.0, history, 0)
+        sol = logged_solve(sub, remaining, 0.0, history, 0, unit=costs.unit)
         if sol.x is None:
             break
-        cuts = connectivity_cuts(joint.tour, sol.x, joint.station_var, cover_sets,
-                                 model.n_vars)
+        bound = max(bound, sol.objective)
+        w = sol.x[:joint.station_var.size]
+        x = np.zeros(model.n_vars)
+        x[keep] = sol.x
+        cuts = connectivity_cuts(joint.tour, x, joint.station_var, cover_sets, model.n_vars)
         if cuts is None:
             break
+        added.append(cuts)
+        sub = sub.with_rows(cuts[0][:, keep], *cuts[1:])
+    for cuts in added:
         model = model.with_rows(*cuts)
-        n_cuts += cuts[0].shape[0]
-    return model, n_cuts
+    return model, sum(c[0].shape[0] for c in added), bound, w
+
+
+def fewest_markers_bound(model: Model, station_var: np.ndarray) -> float:
+    """A lower bound on the markers' cost of every layout, in the model's units.
+
+    Every layout has a station, and a station's count row (family "count", switched on by its
+    ``w``: ``a x >= L`` when on) alone costs at least its fractional knapsack: the sites of
+    least cost per unit of ``a`` filled up to ``L``. The least of those over the stations that
+    may be chosen bounds the markers of any layout (0 when a row has a negative entry).
+
+    Parameters
+    ----------
+    model : Model
+        The joint program (its marker costs on the first ``model.var_site.size`` variables).
+    station_var : (s,) int
+
+    Returns
+    -------
+    bound : float
+    """
+    nx = model.var_site.size
+    column_station = np.full(model.n_vars, -1, np.int64)
+    column_station[station_var] = np.arange(station_var.size)
+    best = np.inf
+    A = sp.csr_array(model.A)
+    for r in (r for r, k in enumerate(model.row_kind) if k.family == "count"):
+        s = model.row_kind[r].station
+        if model.ub[station_var[s]] < 0.5:
+            continue  # fixed off
+        cols, vals = A.indices[A.indptr[r]:A.indptr[r + 1]], A.data[A.indptr[r]:A.indptr[r + 1]]
+        on_x = cols < nx
+        switch = cols == station_var[s]
+        if np.any(vals[on_x] < 0) or not switch.any():
+            return 0.0
+        need = model.row_lb[r] - vals[switch][0]  # L = row_lb - coef_w
+        a, c = vals[on_x], model.c[cols[on_x]]
+        order = np.argsort(c / a, kind="stable")
+        filled = np.cumsum(a[order])
+        k = int(np.searchsorted(filled, need - 1e-9))
+        if k >= a.size:
+            continue  # this station cannot meet its count: no layout holds it
+        before = filled[k - 1] if k else 0.0
+        cost = float(c[order][:k].sum() + c[order][k] * (need - before) / a[order][k])
+        best = min(best, cost)
+    return 0.0 if not np.isfinite(best) else best
+
+
+def _with_bound(sol: Solution, bound: float, step: float) -> Solution:
+    """``sol`` with a better dual bound proved elsewhere: its gap, and "optimal" once the
+    bound is within less than ``step`` of the objective (the objective's granularity: one
+    unit when it is a whole number of units, else 0)."""
+    gap = max(sol.objective - bound, 0.0) / max(abs(sol.objective), 1e-9)
+    proven = sol.objective - bound < max(step, 0.0) - 1e-6 or sol.objective - bound <= 1e-9
+    return replace(sol, dual_bound=float(bound), gap=0.0 if proven else gap,
+                   status="optimal" if proven else sol.status)
+
+
+def _restricted(model: Model, keep: np.ndarray) -> tuple[Model, np.ndarray]:
+    """The linear relaxation of ``model`` over the variables ``keep`` ((k,) int) and the rows
+    that involve no other, with no marker variable; and those rows' indices."""
+    outside = np.ones(model.n_vars, bool)
+    outside[keep] = False
+    A = sp.csr_array(model.A)
+    rows = np.flatnonzero((abs(A) @ outside.astype(float)) == 0)
+    A = sp.csr_array(A[rows][:, keep])
+    return Model(c=model.c[keep], A=A, row_lb=model.row_lb[rows], row_ub=model.row_ub[rows],
+                 lb=model.lb[keep], ub=model.ub[keep], integrality=np.zeros(keep.size, np.int64),
+                 var_site=np.zeros(0, np.int64), site_var=np.full(model.site_var.size, -1),
+                 row_kind=tuple(model.row_kind[r] for r in rows)), rows
 
 
 def shortest_tour(drive_m: np.ndarray, stations: np.ndarray) -> np.ndarray:

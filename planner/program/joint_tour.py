@@ -262,6 +262,6 @@ def max_stations(incumbent_cost: float | None, station_cost: float, n_eligible: 
     >>> max_stations(1000.0, 300.0, 50), max_stations(None, 300.0, 50)
     (3, 50)
     """
-    if incumbent_cost is None:
+    if incumbent_cost is None or station_cost <= 0:
         return int(n_eligible)
     return int(min(n_eligible, math.floor(incumbent_cost / station_cost + 1e-9)))

@@ -129,3 +129,18 @@ def test_sparse_graph_keeps_neighbours_start_edges_and_extra_edges(monkeypatch):
     assert (2, 4) not in edges and (1, 7) not in edges
     assert (2, 7) in edges  # the extra edge
     assert np.allclose(g.length_m, d[g.edge[:, 0], g.edge[:, 1]])
+
+
+def test_fewest_markers_bound_is_the_count_rule_and_never_above_brute_force():
+    """Every site costs one marker, so the bound is the count rule's ``min_markers``; no
+    single station, hence no layout, needs fewer (brute force over each station alone)."""
+    from planner.program.joint import fewest_markers_bound, joint_model
+
+    problem, cover = _instance(5, n_sites=20)
+    costs = JointCosts(3.0, 1.0)
+    jm = joint_model(problem, LOOSE, cover, costs)
+    bound = fewest_markers_bound(jm.model, jm.station_var)
+    assert bound == pytest.approx(LOOSE.min_markers)
+    alone = [plan_sites(problem.restrict_stations(np.array([s])), LOOSE).selected.sum()
+             for s in range(problem.n_stations)]
+    assert bound <= min(alone) + 1e-9
