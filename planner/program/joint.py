@@ -583,9 +583,11 @@ def plan_stations_and_sites(problem: PlanProblem, config, cover: StationCover,
 
 
 #: Share of the time limit the tour's root cuts may take.
-ROOT_TIME_SHARE = 0.4
+ROOT_TIME_SHARE = 0.5
 #: Most rounds of root cuts.
 ROOT_ROUNDS = 40
+#: The linear rounds stop when their bound grew by less than this share over this many rounds.
+STALL_GAIN, STALL_ROUNDS = 0.01, 3
 
 
 def _tighten_tour(model: Model, joint: JointModel, costs: JointCosts, time_limit_s: float,
@@ -595,10 +597,13 @@ def _tighten_tour(model: Model, joint: JointModel, costs: JointCosts, time_limit
     (``-inf`` when none solved), in the costs' own unit, and the stations' ``w`` of its last
     solution ((s,) float, None when none solved).
 
-    They are separated on the linear relaxation of the tour's own part of the program (the
-    station and edge variables and the rows over them alone: coverage and the degrees; the
-    cuts take the flow's place), round after round until none is violated or the rounds or
-    the time run out: that relaxation solves in a fraction of the whole program's, and its
+    They are separated on the relaxation of the tour's own part of the program (the station
+    and edge variables and the rows over them alone: coverage and the degrees; the cuts take
+    the flow's place), round after round: first its linear relaxation until no cut is
+    violated or its bound stalls (:data:`STALL_GAIN`), then with whole stations and edges
+    (subtours cut from each solution) until the solution is one tour, the rounds or the time
+    run out. That relaxation solves in a
+    fraction of the whole program's time, its bound is one on the stops and the drive, and its
     cuts are valid for the whole program.
     """
     t0 = time.perf_counter()
@@ -608,23 +613,37 @@ def _tighten_tour(model: Model, joint: JointModel, costs: JointCosts, time_limit
     rows = sub.A[np.flatnonzero(cover)]
     cover_sets = [rows.indices[rows.indptr[r]:rows.indptr[r + 1]]
                   for r in range(rows.shape[0])]  # station columns come first in ``sub``
-    added, bound, w = [], -np.inf, None
+    added, bound, w, bounds = [], -np.inf, None, []
+    integral = False
     for _ in range(ROOT_ROUNDS):
         remaining = time_limit_s - (time.perf_counter() - t0)
         if remaining <= 0:
             break
         sol = logged_solve(sub, remaining, 0.0, history, 0, unit=costs.unit)
+        if np.isfinite(sol.dual_bound):
+            bound = max(bound, sol.dual_bound)
         if sol.x is None:
             break
-        bound = max(bound, sol.objective)
         w = sol.x[:joint.station_var.size]
         x = np.zeros(model.n_vars)
         x[keep] = sol.x
         cuts = connectivity_cuts(joint.tour, x, joint.station_var, cover_sets, model.n_vars)
         if cuts is None:
-            break
+            if integral:
+                break  # one tour: the stops and drive are optimal
+            # no cut left for the relaxation: go on with whole stops and edges (still a
+            # relaxation of the tour, its bound valid; each solution's subtours are cut)
+            integral = True
+            sub = replace(sub, integrality=np.ones_like(sub.integrality))
+            continue
         added.append(cuts)
         sub = sub.with_rows(cuts[0][:, keep], *cuts[1:])
+        bounds.append(bound)
+        if not integral and len(bounds) > STALL_ROUNDS and \
+                bounds[-1] - bounds[-1 - STALL_ROUNDS] < STALL_GAIN * abs(bounds[-1]):
+            # the relaxation's bound creeps: go on with whole stops and edges
+            integral = True
+            sub = replace(sub, integrality=np.ones_like(sub.integrality))
     for cuts in added:
         model = model.with_rows(*cuts)
     return model, sum(c[0].shape[0] for c in added), bound, w
