@@ -19,6 +19,10 @@
   not need (the large-problem search's incumbent);
 - :mod:`planner.program.joint`: the joint program of stations and markers over an area of
   interest (stations switch their rows on, coverage and clearance rows, its cut loop);
+- :mod:`planner.program.joint_tour`: the traverse inside the joint program (the tour's edges,
+  degree and flow rows, its graph, reading the tour back);
+- :mod:`planner.program.joint_tour_cuts`: the tour's connectivity cuts separated by maximum
+  flow at the root, and the two-part bound of stops and drive plus markers;
 - :mod:`planner.program.joint_baselines`: stations chosen for coverage first (weighted greedy
   of viewpoints, regular grid), then their markers.
 """

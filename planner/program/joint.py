@@ -25,7 +25,11 @@ station, plus a binary ``w_s`` per candidate station ("the rover stops at s"):
   accuracy depends only on its own markers;
 - clearance: ``x_j + w_s <= 1`` for a site ``j`` too near candidate station ``s`` (the rover
   does not stop on a marker);
-- stations that no layout can satisfy (:func:`planner.accuracy.checks.diagnose`) are fixed off.
+- stations that no layout can satisfy (:func:`planner.accuracy.checks.diagnose`) are fixed off;
+- with a drive priced (``JointCosts.drive_per_m`` and the drive lengths), the closed tour from
+  the route start through the chosen stations (:mod:`planner.program.joint_tour`), its drive
+  in the cost, tightened at the root by connectivity cuts whose relaxation, with the fewest
+  markers any station needs, bounds the whole cost (:mod:`planner.program.joint_tour_cuts`).
 
 Network mode judges the network (every station's pose depends on the others), which this
 program does not model: there it chooses stations by coverage, count and directions, and the
@@ -54,7 +58,7 @@ from planner.program.joint_tour import (
     tour_order,
     tour_start,
 )
-from planner.program.joint_tour_cuts import connectivity_cuts
+from planner.program.joint_tour_cuts import fewest_markers_bound, tighten_tour
 from planner.program.model import Model, RowKind, Solution, build_model, with_tightening_rows
 from planner.program.solving import logged_solve
 
@@ -463,8 +467,10 @@ def plan_stations_and_sites(problem: PlanProblem, config, cover: StationCover,
         Drive lengths between the route start (0) and the candidate stations, m: with
         ``costs.drive_per_m > 0`` the program chooses the tour too
         (:mod:`planner.program.joint_tour`). The result's bound is then at least the bound of
-        the stops and the drive (the root cuts' relaxation, :func:`_tighten_tour`) plus the
-        bound of the markers (:func:`fewest_markers_bound`): two parts of one cost, each
+        the stops and the drive (the root cuts' relaxation,
+        :func:`~planner.program.joint_tour_cuts.tighten_tour`) plus the
+        bound of the markers
+        (:func:`~planner.program.joint_tour_cuts.fewest_markers_bound`): two parts of one cost, each
         bounded on its own.
 
     Returns
@@ -498,8 +504,9 @@ def plan_stations_and_sites(problem: PlanProblem, config, cover: StationCover,
                                                   incumbent_tour)
     complete = None if joint.tour is None else joint.tour.graph.complete
     if joint.tour is not None:
-        model, n_cuts, tour_bound, relaxed_w = _tighten_tour(
-            model, joint, costs, config.time_limit_s * ROOT_TIME_SHARE, history)
+        model, n_cuts, tour_bound, relaxed_w = tighten_tour(
+            model, station_var, joint.tour, costs.unit, config.time_limit_s * ROOT_TIME_SHARE,
+            history)
         if relaxed_w is not None and cover.covered(relaxed_w > 0.5) and np.all(
                 np.abs(relaxed_w - np.round(relaxed_w)) < 1e-6):
             # the relaxation's stops are whole: HiGHS completes them (markers, tour) first
@@ -584,114 +591,6 @@ def plan_stations_and_sites(problem: PlanProblem, config, cover: StationCover,
 
 #: Share of the time limit the tour's root cuts may take.
 ROOT_TIME_SHARE = 0.5
-#: Most rounds of root cuts.
-ROOT_ROUNDS = 40
-#: The linear rounds stop when their bound grew by less than this share over this many rounds.
-STALL_GAIN, STALL_ROUNDS = 0.01, 3
-
-
-def _tighten_tour(model: Model, joint: JointModel, costs: JointCosts, time_limit_s: float,
-                  history: list) -> tuple[Model, int, float, np.ndarray | None]:
-    """The model with the tour's connectivity cuts (:mod:`planner.program.joint_tour_cuts`),
-    how many were added, the best bound the relaxation proved on the stops and the drive
-    (``-inf`` when none solved), in the costs' own unit, and the stations' ``w`` of its last
-    solution ((s,) float, None when none solved).
-
-    They are separated on the relaxation of the tour's own part of the program (the station
-    and edge variables and the rows over them alone: coverage and the degrees; the cuts take
-    the flow's place), round after round: first its linear relaxation until no cut is
-    violated or its bound stalls (:data:`STALL_GAIN`), then with whole stations and edges
-    (subtours cut from each solution) until the solution is one tour, the rounds or the time
-    run out. That relaxation solves in a
-    fraction of the whole program's time, its bound is one on the stops and the drive, and its
-    cuts are valid for the whole program.
-    """
-    t0 = time.perf_counter()
-    keep = np.r_[joint.station_var, joint.tour.edge_var]
-    sub, rows_kept = _restricted(model, keep)
-    cover = np.array([model.row_kind[r].family == "cover" for r in rows_kept])
-    rows = sub.A[np.flatnonzero(cover)]
-    cover_sets = [rows.indices[rows.indptr[r]:rows.indptr[r + 1]]
-                  for r in range(rows.shape[0])]  # station columns come first in ``sub``
-    added, bound, w, bounds = [], -np.inf, None, []
-    integral = False
-    for _ in range(ROOT_ROUNDS):
-        remaining = time_limit_s - (time.perf_counter() - t0)
-        if remaining <= 0:
-            break
-        sol = logged_solve(sub, remaining, 0.0, history, 0, unit=costs.unit)
-        if np.isfinite(sol.dual_bound):
-            bound = max(bound, sol.dual_bound)
-        if sol.x is None:
-            break
-        w = sol.x[:joint.station_var.size]
-        x = np.zeros(model.n_vars)
-        x[keep] = sol.x
-        cuts = connectivity_cuts(joint.tour, x, joint.station_var, cover_sets, model.n_vars)
-        if cuts is None:
-            if integral:
-                break  # one tour: the stops and drive are optimal
-            # no cut left for the relaxation: go on with whole stops and edges (still a
-            # relaxation of the tour, its bound valid; each solution's subtours are cut)
-            integral = True
-            sub = replace(sub, integrality=np.ones_like(sub.integrality))
-            continue
-        added.append(cuts)
-        sub = sub.with_rows(cuts[0][:, keep], *cuts[1:])
-        bounds.append(bound)
-        if not integral and len(bounds) > STALL_ROUNDS and \
-                bounds[-1] - bounds[-1 - STALL_ROUNDS] < STALL_GAIN * abs(bounds[-1]):
-            # the relaxation's bound creeps: go on with whole stops and edges
-            integral = True
-            sub = replace(sub, integrality=np.ones_like(sub.integrality))
-    for cuts in added:
-        model = model.with_rows(*cuts)
-    return model, sum(c[0].shape[0] for c in added), bound, w
-
-
-def fewest_markers_bound(model: Model, station_var: np.ndarray) -> float:
-    """A lower bound on the markers' cost of every layout, in the model's units.
-
-    Every layout has a station, and a station's count row (family "count", switched on by its
-    ``w``: ``a x >= L`` when on) alone costs at least its fractional knapsack: the sites of
-    least cost per unit of ``a`` filled up to ``L``. The least of those over the stations that
-    may be chosen bounds the markers of any layout (0 when a row has a negative entry).
-
-    Parameters
-    ----------
-    model : Model
-        The joint program (its marker costs on the first ``model.var_site.size`` variables).
-    station_var : (s,) int
-
-    Returns
-    -------
-    bound : float
-    """
-    nx = model.var_site.size
-    column_station = np.full(model.n_vars, -1, np.int64)
-    column_station[station_var] = np.arange(station_var.size)
-    best = np.inf
-    A = sp.csr_array(model.A)
-    for r in (r for r, k in enumerate(model.row_kind) if k.family == "count"):
-        s = model.row_kind[r].station
-        if model.ub[station_var[s]] < 0.5:
-            continue  # fixed off
-        cols, vals = A.indices[A.indptr[r]:A.indptr[r + 1]], A.data[A.indptr[r]:A.indptr[r + 1]]
-        on_x = cols < nx
-        switch = cols == station_var[s]
-        if np.any(vals[on_x] < 0) or not switch.any():
-            return 0.0
-        need = model.row_lb[r] - vals[switch][0]  # L = row_lb - coef_w
-        a, c = vals[on_x], model.c[cols[on_x]]
-        order = np.argsort(c / a, kind="stable")
-        filled = np.cumsum(a[order])
-        k = int(np.searchsorted(filled, need - 1e-9))
-        if k >= a.size:
-            continue  # this station cannot meet its count: no layout holds it
-        before = filled[k - 1] if k else 0.0
-        cost = float(c[order][:k].sum() + c[order][k] * (need - before) / a[order][k])
-        best = min(best, cost)
-    return 0.0 if not np.isfinite(best) else best
 
 
 def _with_bound(sol: Solution, bound: float, step: float) -> Solution:
@@ -702,20 +601,6 @@ def _with_bound(sol: Solution, bound: float, step: float) -> Solution:
     proven = sol.objective - bound < max(step, 0.0) - 1e-6 or sol.objective - bound <= 1e-9
     return replace(sol, dual_bound=float(bound), gap=0.0 if proven else gap,
                    status="optimal" if proven else sol.status)
-
-
-def _restricted(model: Model, keep: np.ndarray) -> tuple[Model, np.ndarray]:
-    """The linear relaxation of ``model`` over the variables ``keep`` ((k,) int) and the rows
-    that involve no other, with no marker variable; and those rows' indices."""
-    outside = np.ones(model.n_vars, bool)
-    outside[keep] = False
-    A = sp.csr_array(model.A)
-    rows = np.flatnonzero((abs(A) @ outside.astype(float)) == 0)
-    A = sp.csr_array(A[rows][:, keep])
-    return Model(c=model.c[keep], A=A, row_lb=model.row_lb[rows], row_ub=model.row_ub[rows],
-                 lb=model.lb[keep], ub=model.ub[keep], integrality=np.zeros(keep.size, np.int64),
-                 var_site=np.zeros(0, np.int64), site_var=np.full(model.site_var.size, -1),
-                 row_kind=tuple(model.row_kind[r] for r in rows)), rows
 
 
 def shortest_tour(drive_m: np.ndarray, stations: np.ndarray) -> np.ndarray:

@@ -14,21 +14,32 @@ close much of that:
 
 :func:`connectivity_cuts` finds, for each station with ``w_i > 0`` and each coverage row, the
 least cut between the route start and it; a cut lighter than its right-hand side gives a row.
+:func:`tighten_tour` separates them round after round on the tour's own relaxation and returns
+its bound on the stops and the drive; :func:`fewest_markers_bound` bounds the markers, the
+other part of the joint program's cost.
 """
 
 from __future__ import annotations
+
+import time
+from dataclasses import replace
 
 import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import breadth_first_order, maximum_flow
 
 from planner.program.joint_tour import TourBlock
-from planner.program.model import RowKind
+from planner.program.model import Model, RowKind
+from planner.program.solving import logged_solve
 
 #: Edge values are scaled to integer capacities by this factor.
 _SCALE = 10_000
 #: A cut is added when it is lighter than its right-hand side by more than this.
 _TOLERANCE = 1e-3
+#: Most rounds of root cuts.
+ROOT_ROUNDS = 40
+#: The linear rounds stop when their bound grew by less than this share over this many rounds.
+STALL_GAIN, STALL_ROUNDS = 0.01, 3
 
 
 def connectivity_cuts(block: TourBlock, x: np.ndarray, station_var: np.ndarray,
@@ -132,3 +143,135 @@ def _sink_side(graph: sp.csr_array, source: int, sink: int) -> np.ndarray:
 def _weight(side: np.ndarray, edge: np.ndarray, z: np.ndarray) -> float:
     """The cut's weight ``z(delta(S))``."""
     return float(z[side[edge[:, 0]] != side[edge[:, 1]]].sum())
+
+
+def tighten_tour(model: Model, station_var: np.ndarray, tour: TourBlock, unit: float,
+                 time_limit_s: float, history: list
+                 ) -> tuple[Model, int, float, np.ndarray | None]:
+    """The model with the tour's connectivity cuts (:mod:`planner.program.joint_tour_cuts`),
+    how many were added, the best bound the relaxation proved on the stops and the drive
+    (``-inf`` when none solved; the model's costs times ``unit``), and the stations' ``w`` of
+    its last solution ((s,) float, None when none solved).
+
+    They are separated on the relaxation of the tour's own part of the program (the station
+    and edge variables and the rows over them alone: coverage and the degrees; the cuts take
+    the flow's place), round after round: first its linear relaxation until no cut is
+    violated or its bound stalls (:data:`STALL_GAIN`), then with whole stations and edges
+    (subtours cut from each solution) until the solution is one tour, the rounds or the time
+    run out. That relaxation solves in a
+    fraction of the whole program's time, its bound is one on the stops and the drive, and its
+    cuts are valid for the whole program.
+
+    Parameters
+    ----------
+    model : Model
+        The joint program with its tour block.
+    station_var : (s,) int
+        Variable index of each candidate station's ``w``.
+    tour : TourBlock
+    unit : float
+        The costs' unit (the model's costs are in it).
+    time_limit_s : float
+    history : list
+        Each solve's record is appended (iteration 0).
+    """
+    t0 = time.perf_counter()
+    keep = np.r_[station_var, tour.edge_var]
+    sub, rows_kept = _restricted(model, keep)
+    cover = np.array([model.row_kind[r].family == "cover" for r in rows_kept])
+    rows = sub.A[np.flatnonzero(cover)]
+    cover_sets = [rows.indices[rows.indptr[r]:rows.indptr[r + 1]]
+                  for r in range(rows.shape[0])]  # station columns come first in ``sub``
+    added, bound, w, bounds = [], -np.inf, None, []
+    integral = False
+    for _ in range(ROOT_ROUNDS):
+        remaining = time_limit_s - (time.perf_counter() - t0)
+        if remaining <= 0:
+            break
+        sol = logged_solve(sub, remaining, 0.0, history, 0, unit=unit)
+        if np.isfinite(sol.dual_bound):
+            bound = max(bound, sol.dual_bound)
+        if sol.x is None:
+            break
+        w = sol.x[:station_var.size]
+        x = np.zeros(model.n_vars)
+        x[keep] = sol.x
+        cuts = connectivity_cuts(tour, x, station_var, cover_sets, model.n_vars)
+        if cuts is None:
+            if integral:
+                break  # one tour: the stops and drive are optimal
+            # no cut left for the relaxation: go on with whole stops and edges (still a
+            # relaxation of the tour, its bound valid; each solution's subtours are cut)
+            integral = True
+            sub = replace(sub, integrality=np.ones_like(sub.integrality))
+            continue
+        added.append(cuts)
+        sub = sub.with_rows(cuts[0][:, keep], *cuts[1:])
+        bounds.append(bound)
+        if not integral and len(bounds) > STALL_ROUNDS and \
+                bounds[-1] - bounds[-1 - STALL_ROUNDS] < STALL_GAIN * abs(bounds[-1]):
+            # the relaxation's bound creeps: go on with whole stops and edges
+            integral = True
+            sub = replace(sub, integrality=np.ones_like(sub.integrality))
+    for cuts in added:
+        model = model.with_rows(*cuts)
+    return model, sum(c[0].shape[0] for c in added), bound, w
+
+
+def fewest_markers_bound(model: Model, station_var: np.ndarray) -> float:
+    """A lower bound on the markers' cost of every layout, in the model's units.
+
+    Every layout has a station, and a station's count row (family "count", switched on by its
+    ``w``: ``a x >= L`` when on) alone costs at least its fractional knapsack: the sites of
+    least cost per unit of ``a`` filled up to ``L``. The least of those over the stations that
+    may be chosen bounds the markers of any layout (0 when a row has a negative entry).
+
+    Parameters
+    ----------
+    model : Model
+        The joint program (its marker costs on the first ``model.var_site.size`` variables).
+    station_var : (s,) int
+
+    Returns
+    -------
+    bound : float
+    """
+    nx = model.var_site.size
+    column_station = np.full(model.n_vars, -1, np.int64)
+    column_station[station_var] = np.arange(station_var.size)
+    best = np.inf
+    A = sp.csr_array(model.A)
+    for r in (r for r, k in enumerate(model.row_kind) if k.family == "count"):
+        s = model.row_kind[r].station
+        if model.ub[station_var[s]] < 0.5:
+            continue  # fixed off
+        cols, vals = A.indices[A.indptr[r]:A.indptr[r + 1]], A.data[A.indptr[r]:A.indptr[r + 1]]
+        on_x = cols < nx
+        switch = cols == station_var[s]
+        if np.any(vals[on_x] < 0) or not switch.any():
+            return 0.0
+        need = model.row_lb[r] - vals[switch][0]  # L = row_lb - coef_w
+        a, c = vals[on_x], model.c[cols[on_x]]
+        order = np.argsort(c / a, kind="stable")
+        filled = np.cumsum(a[order])
+        k = int(np.searchsorted(filled, need - 1e-9))
+        if k >= a.size:
+            continue  # this station cannot meet its count: no layout holds it
+        before = filled[k - 1] if k else 0.0
+        cost = float(c[order][:k].sum() + c[order][k] * (need - before) / a[order][k])
+        best = min(best, cost)
+    return 0.0 if not np.isfinite(best) else best
+
+
+def _restricted(model: Model, keep: np.ndarray) -> tuple[Model, np.ndarray]:
+    """The linear relaxation of ``model`` over the variables ``keep`` ((k,) int) and the rows
+    that involve no other, with no marker variable; and those rows' indices."""
+    outside = np.ones(model.n_vars, bool)
+    outside[keep] = False
+    A = sp.csr_array(model.A)
+    rows = np.flatnonzero((abs(A) @ outside.astype(float)) == 0)
+    A = sp.csr_array(A[rows][:, keep])
+    return Model(c=model.c[keep], A=A, row_lb=model.row_lb[rows], row_ub=model.row_ub[rows],
+                 lb=model.lb[keep], ub=model.ub[keep], integrality=np.zeros(keep.size, np.int64),
+                 var_site=np.zeros(0, np.int64), site_var=np.full(model.site_var.size, -1),
+                 row_kind=tuple(model.row_kind[r] for r in rows)), rows
