@@ -42,7 +42,8 @@ def test_network_plan_records_the_mode_datum_ties_and_errors(network_plan):
                                        "inclinometer_sigma_deg": 0.01,
                                        "heading_prior_sigma_deg": None, "heading_aid": None,
                                        "heading_bias_sigma_deg": None, "odometry_percent": None,
-                                       "odometry_heading_deg_per_m": None}
+                                       "odometry_heading_deg_per_m": None,
+                                       "odometry_loop_m": None}
     for s in doc["stations"]:
         assert s["predicted_error_m"] <= 0.10 and s["tied_to"]
     for m in doc["markers"]:
