@@ -60,6 +60,7 @@ from planner.program.joint_baselines import (
     grid_viewpoints,
     joint_baseline,
 )
+from planner.program.joint_tour import leg_lengths_m
 from planner.run import build_problem
 from planner.traverse.ground_paths import ground_graph, ground_paths
 from planner.traverse.route import MissionCosts, Route, mission_time_s, plan_route, route_start
@@ -451,32 +452,27 @@ def _cost(layout: tuple, problem: PlanProblem, costs: JointCosts, drive_m=None) 
     """Stated cost of a layout ``(stations, selected)``: its stops and markers and, with
     ``drive_m``, PyVRP's closed tour through its stations, in the program's rounding."""
     stations, selected = layout
-    units = 0.0 if drive_m is None else tour_units(drive_m, shortest_tour(drive_m, stations),
+    units = 0.0 if drive_m is None else tour_units(drive_m, shortest_tour(drive_m, stations)[0],
                                                    costs)
     return costs.of(int(stations.sum()), int(problem.site_cost[selected].sum()), units)
 
 
 def _plan_route(joint: JointResult, traffic: TrafficMap, start: np.ndarray,
                 position: np.ndarray, ids, dem, graph, drive_m: np.ndarray) -> Route:
-    """The traverse of the chosen stations: PyVRP's tour, or the joint program's when it is
-    shorter (proven shortest for those stations when the program proved its optimum over
-    every edge, up to the rounding of each leg's cost)."""
+    """The traverse of the chosen stations: PyVRP's tour over the candidates' drive lengths
+    ``drive_m``, or the joint program's when it is shorter (proven shortest for those stations
+    when the program proved its optimum over every edge, up to the rounding of each leg's
+    cost)."""
     chosen = np.flatnonzero(joint.stations)
-    xy, names = position[chosen, :2], [ids[k] for k in chosen]
-    route = plan_route(traffic, start, xy, names, dem, graph=graph)
-    if joint.tour is None:
-        return route
-    nodes = np.r_[0, joint.tour + 1, 0]
-    length = float(drive_m[nodes[:-1], nodes[1:]].sum())
-    proven = joint.status == "optimal" and bool(joint.tour_complete)
-    if length < route.length_m - 1e-6:
-        return plan_route(traffic, start, xy, names, dem, graph=graph,
-                          order=np.searchsorted(chosen, joint.tour),
-                          order_solver={"name": "joint program (HiGHS)",
-                                        "proven_optimal": proven})
-    if proven:
-        route = replace(route, solver={**route.solver, "proven_optimal": True})
-    return route
+    tour, solver = shortest_tour(drive_m, joint.stations)
+    if joint.tour is not None:
+        proven = joint.status == "optimal" and bool(joint.tour_complete)
+        if leg_lengths_m(drive_m, joint.tour).sum() < leg_lengths_m(drive_m, tour).sum() - 1e-6:
+            tour, solver = joint.tour, {"name": "joint program (HiGHS)", "proven_optimal": proven}
+        elif proven:
+            solver = {**solver, "proven_optimal": True}
+    return plan_route(traffic, start, position[chosen, :2], [ids[k] for k in chosen], dem,
+                      graph=graph, order=np.searchsorted(chosen, tour), order_solver=solver)
 
 
 def _baseline_option(b: JointBaseline, problem, cover, n_aoi_cells, costs, traffic, start,

@@ -52,9 +52,11 @@ from planner.program.cuts_known import accuracy_cuts
 from planner.program.joint_tour import (
     TourBlock,
     leg_cost_units,
+    leg_lengths_m,
     max_stations,
     tour_block,
     tour_graph,
+    tour_legs,
     tour_order,
     tour_start,
 )
@@ -489,7 +491,7 @@ def plan_stations_and_sites(problem: PlanProblem, config, cover: StationCover,
     incumbent_cost, incumbent_tour = None, None
     if incumbent is not None:
         if priced:
-            incumbent_tour = shortest_tour(drive_m, incumbent[0])
+            incumbent_tour, _ = shortest_tour(drive_m, incumbent[0])
         incumbent_cost = costs.of(int(incumbent[0].sum()),
                                   int(problem.site_cost[incumbent[1]].sum()),
                                   tour_units(drive_m, incumbent_tour, costs) if priced else 0.0)
@@ -497,7 +499,7 @@ def plan_stations_and_sites(problem: PlanProblem, config, cover: StationCover,
                         drive_m=drive_m if priced else None,
                         max_stations=max_stations(incumbent_cost, costs.station,
                                                   problem.n_stations),
-                        tour_edges=_legs(incumbent_tour))
+                        tour_edges=() if incumbent_tour is None else tour_legs(incumbent_tour))
     model, station_var = joint.model, joint.station_var
     bound, solve_time, n_cuts, history = -np.inf, 0.0, 0, []
     start = None if incumbent is None else _start(model, station_var, *incumbent, joint.tour,
@@ -603,32 +605,23 @@ def _with_bound(sol: Solution, bound: float, step: float) -> Solution:
                    status="optimal" if proven else sol.status)
 
 
-def shortest_tour(drive_m: np.ndarray, stations: np.ndarray) -> np.ndarray:
-    """(k,) int: the stations ``stations`` ((s,) bool) in the order of PyVRP's closed tour
-    from the route start over ``drive_m`` ((s + 1, s + 1), route start 0)
-    (:func:`planner.traverse.route.solve_tour`)."""
+def shortest_tour(drive_m: np.ndarray, stations: np.ndarray) -> tuple[np.ndarray, dict]:
+    """The stations ``stations`` ((s,) bool) in the order of PyVRP's closed tour from the
+    route start over ``drive_m`` ((s + 1, s + 1), route start 0), (k,) int candidate indices,
+    and the solver's record (:func:`planner.traverse.route.solve_tour`)."""
     from planner.traverse.route import solve_tour
 
     idx = np.flatnonzero(stations)
     nodes = np.r_[0, idx + 1]
-    order, _ = solve_tour(np.asarray(drive_m, float)[np.ix_(nodes, nodes)])
-    return idx[np.asarray(order, np.int64) - 1]
+    order, record = solve_tour(np.asarray(drive_m, float)[np.ix_(nodes, nodes)])
+    return idx[np.asarray(order, np.int64) - 1], record
 
 
 def tour_units(drive_m: np.ndarray, order: np.ndarray, costs: JointCosts) -> float:
     """The program's cost of the closed tour through ``order`` (candidate indices) from the
     route start, in units of ``costs.unit`` (each leg rounded as the program rounds it)."""
-    nodes = np.r_[0, np.asarray(order, np.int64) + 1, 0]
-    legs = np.asarray(drive_m, float)[nodes[:-1], nodes[1:]]
-    return float(leg_cost_units(legs, costs.drive_per_m, costs.unit).sum())
-
-
-def _legs(order: np.ndarray | None) -> list[tuple[int, int]]:
-    """The tour graph's node pairs of a closed tour through ``order`` (candidate indices)."""
-    if order is None:
-        return []
-    nodes = np.r_[0, np.asarray(order, np.int64) + 1, 0]
-    return [(int(a), int(b)) for a, b in zip(nodes[:-1], nodes[1:], strict=True)]
+    return float(leg_cost_units(leg_lengths_m(drive_m, order), costs.drive_per_m,
+                                costs.unit).sum())
 
 
 def _start(model: Model, station_var: np.ndarray, stations: np.ndarray, selected: np.ndarray,

@@ -237,15 +237,32 @@ def tour_order(block: TourBlock, x: np.ndarray) -> np.ndarray:
     return np.array(order, np.int64) - 1
 
 
+def tour_legs(order: np.ndarray) -> np.ndarray:
+    """(k + 1, 2) int: the node pairs of the closed tour from the route start (node 0) through
+    the candidate stations ``order`` ((k,) int, candidate indices) and back.
+
+    >>> tour_legs(np.array([4, 2])).tolist()
+    [[0, 5], [5, 3], [3, 0]]
+    """
+    nodes = np.r_[0, np.asarray(order, np.int64) + 1, 0]
+    return np.c_[nodes[:-1], nodes[1:]]
+
+
+def leg_lengths_m(drive_m: np.ndarray, order: np.ndarray) -> np.ndarray:
+    """(k + 1,) float: the drive length of each leg of the closed tour through ``order``
+    (:func:`tour_legs`) over ``drive_m`` ((s + 1, s + 1), route start 0), m."""
+    legs = tour_legs(order)
+    return np.asarray(drive_m, float)[legs[:, 0], legs[:, 1]]
+
+
 def tour_start(block: TourBlock, order: np.ndarray) -> np.ndarray | None:
     """The tour's values (edges then flows, the block's columns) for stations driven in
     ``order`` (candidate indices), or None when a leg is not an edge of the graph."""
-    nodes = np.r_[0, np.asarray(order, np.int64) + 1, 0]
     index = {(int(a), int(b)): k for k, (a, b) in enumerate(block.graph.edge)}
     e = len(block.graph.edge)
     z, f = np.zeros(e), np.zeros((e, 2))
     remaining = len(order)
-    for a, b in zip(nodes[:-1], nodes[1:], strict=True):
+    for a, b in tour_legs(order):
         k = index.get((min(a, b), max(a, b)))
         if k is None:
             return None
